@@ -1,0 +1,73 @@
+"""A rasterized wettability map with its scale, and the exact shape when known.
+
+Conventions (used everywhere in selfalign):
+
+* Physical frame: micrometres, origin at the nominal pattern centre, x right, y up,
+  twist counter-clockwise positive, in degrees at the user boundary.
+* Image frame: ``data[row, col]``, row 0 at the *top* (largest y). Pixel ``(r, c)``
+  covers x in ``[(c - W/2) s, (c + 1 - W/2) s]`` and y in ``[(H/2 - r - 1) s, (H/2 - r) s]``
+  with ``s = um_per_px``: the image centre is the physical origin. For even W and H
+  the origin is a pixel corner, so shapes whose edges sit on whole micrometres at
+  1 um/px rasterize exactly.
+* Values are in [0, 1]: 1 = fully wettable pad, 0 = substrate; intermediate values are
+  area coverage (anti-aliased edges) or graded wettability read from grey PNGs.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from patterns.errors import InputError, positive
+
+
+@dataclass(frozen=True, eq=False)
+class Mask:
+    """A float mask in [0, 1] with its scale.
+
+    Attributes:
+        data: (H, W) float64 array in [0, 1], row 0 at the top (largest y).
+        um_per_px: pixel size in micrometres.
+        geometry: the exact shapely geometry (micrometres, centred) when known, else None.
+        params: the parameters that generated it (design name, sizes), for provenance.
+    """
+
+    data: np.ndarray
+    um_per_px: float
+    geometry: Any = None
+    params: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        data = np.asarray(self.data, dtype=np.float64)
+        if data.ndim != 2 or min(data.shape) < 1:
+            raise InputError(f"mask must be a 2-D image, got shape {data.shape}")
+        if not np.all(np.isfinite(data)):
+            raise InputError("mask contains NaN or infinite values; give an image with finite values in [0, 1]")
+        if data.min() < 0 or data.max() > 1:
+            raise InputError(f"mask values must lie in [0, 1], got [{data.min():g}, {data.max():g}]")
+        object.__setattr__(self, "data", data)
+        object.__setattr__(self, "um_per_px", positive("um_per_px", self.um_per_px, "um per px"))
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.data.shape  # type: ignore[return-value]
+
+    @property
+    def area_um2(self) -> float:
+        """Wettable area: sum of the mask times the pixel area (um^2)."""
+        return float(self.data.sum()) * self.um_per_px**2
+
+    @property
+    def extent_um(self) -> tuple[float, float, float, float]:
+        """(xmin, xmax, ymin, ymax) of the image in the physical frame, for imshow."""
+        h, w = self.shape
+        s = self.um_per_px
+        return (-w / 2 * s, w / 2 * s, -h / 2 * s, h / 2 * s)
+
+    def require_nonempty(self, name: str) -> Mask:
+        """Raise InputError if the mask has no wettable pixel."""
+        if not np.any(self.data > 0):
+            raise InputError(f"{name}: the mask is all black (no wettable area); white marks the wettable area, or use --invert")
+        return self
