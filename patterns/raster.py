@@ -1,0 +1,151 @@
+"""Exact anti-aliased rasterization: polygon -> float mask by area coverage.
+
+Each pixel's value is the exact fraction of its area covered by the geometry
+(signed-area accumulation over the polygon's edges, see :func:`_coverage`), so
+``mask.sum() * um_per_px**2`` equals the polygon's area up to float round-off
+whenever the geometry lies inside the canvas. Cost grows with the perimeter in
+pixels plus one cumulative sum over the canvas (about 25 ms for a 912 x 912 px
+canvas holding a rotated 730 px square).
+
+Frame conventions are those of :mod:`patterns.mask`: the image centre is the
+physical origin, row 0 is the top (largest y), x grows with the column.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import shapely
+from shapely import affinity
+from shapely.geometry.base import BaseGeometry
+
+from patterns.errors import InputError, positive
+from patterns.mask import Mask
+
+
+def canvas_shape(geometry: BaseGeometry, um_per_px: float, margin_um: float = 0.0) -> tuple[int, int]:
+    """Smallest even (H, W) in pixels, symmetric about the origin, holding geometry + margin."""
+    s = positive("um_per_px", um_per_px, "um per px")
+    if geometry.is_empty:
+        raise InputError("geometry is empty; nothing to rasterize")
+    xmin, ymin, xmax, ymax = geometry.bounds
+    half_w = max(abs(xmin), abs(xmax)) + margin_um
+    half_h = max(abs(ymin), abs(ymax)) + margin_um
+    # Round to whole pixels with a tolerance so that 365.0000000001 um stays 365 px.
+    w = 2 * max(1, math.ceil(half_w / s - 1e-9))
+    h = 2 * max(1, math.ceil(half_h / s - 1e-9))
+    return h, w
+
+
+def to_pixel_frame(geometry: BaseGeometry, um_per_px: float, shape: tuple[int, int]) -> BaseGeometry:
+    """Map physical coordinates (um, y up, origin at centre) to (column, row) pixel units."""
+    h, w = shape
+    s = float(um_per_px)
+    return affinity.affine_transform(geometry, [1 / s, 0.0, 0.0, -1 / s, w / 2, h / 2])
+
+
+def _directed_edges(geom_px: BaseGeometry) -> np.ndarray:
+    """(n, 4) array of edges (x0, y0, x1, y1) of every ring, consistently oriented."""
+    geom_px = shapely.orient_polygons(geom_px)
+    rings = []
+    for poly in shapely.get_parts(geom_px):
+        rings.append(shapely.get_exterior_ring(poly))
+        rings.extend(shapely.get_interior_ring(poly, range(shapely.get_num_interior_rings(poly))))
+    segs = [np.concatenate([c[:-1], c[1:]], axis=1) for c in map(shapely.get_coordinates, rings)]
+    return np.concatenate(segs) if segs else np.zeros((0, 4))
+
+
+def _integer_crossings(a0: np.ndarray, a1: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(edge index, parameter t, integer value k) of every crossing of a line a = k."""
+    lo = np.floor(np.minimum(a0, a1)) + 1
+    hi = np.ceil(np.maximum(a0, a1)) - 1
+    n = np.maximum(hi - lo + 1, 0).astype(np.int64)
+    eid = np.repeat(np.arange(a0.size), n)
+    k = lo[eid] + (np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n))
+    t = (k - a0[eid]) / (a1[eid] - a0[eid])  # n > 0 implies a1 != a0
+    return eid, t, k
+
+
+def _coverage(geom_px: BaseGeometry, shape: tuple[int, int]) -> np.ndarray:
+    """Exact area coverage of pixels [c, c+1] x [r, r+1] by ``geom_px`` (pixel units).
+
+    Signed-area accumulation (the scan-line method of exact font rasterizers): every
+    edge is cut at each integer x and y, so each piece lies in one pixel. A piece
+    with vertical extent dy adds dy * (fraction of its pixel to its right) to that
+    pixel and dy to every pixel further right in its row; a cumulative sum along the
+    row turns these increments into coverage. Exact for any polygon with holes.
+    """
+    h, w = shape
+    e = _directed_edges(geom_px)
+    e = e[e[:, 1] != e[:, 3]]  # horizontal edges enclose no area in a row
+    x0, y0, x1, y1 = e.T
+    m = x0.size
+    dx, dy_edge = x1 - x0, y1 - y0
+    # Cut points: the ends, and every crossing of an integer x or y. A crossing's
+    # integer coordinate is stored exactly, so pixel-aligned edges give exact pieces.
+    ex, tx, kx = _integer_crossings(x0, x1)
+    ey, ty, ky = _integer_crossings(y0, y1)
+    eid = np.concatenate([np.arange(m), np.arange(m), ex, ey])
+    t = np.concatenate([np.zeros(m), np.ones(m), tx, ty])
+    px = np.concatenate([x0, x1, kx, x0[ey] + ty * dx[ey]])
+    py = np.concatenate([y0, y1, y0[ex] + tx * dy_edge[ex], ky])
+    order = np.lexsort((t, eid))
+    eid, px, py = eid[order], px[order], py[order]
+    same = eid[1:] == eid[:-1]
+    xm = 0.5 * (px[:-1] + px[1:])[same]
+    ym = 0.5 * (py[:-1] + py[1:])[same]
+    dy = (py[1:] - py[:-1])[same]
+    r, c = np.floor(ym).astype(np.int64), np.floor(xm).astype(np.int64)
+    ok = (r >= 0) & (r < h) & (c < w) & (dy != 0)
+    r, c, dy, xm = r[ok], c[ok], dy[ok], xm[ok]
+    left = c < 0  # pieces left of the canvas cover their whole row
+    here = np.where(left, dy, dy * (c + 1 - xm))
+    c = np.maximum(c, 0)
+    acc = np.zeros((h, w + 1))
+    np.add.at(acc, (r, c), here)
+    np.add.at(acc, (r, c + 1), dy - here)
+    cov = np.cumsum(acc[:, :w], axis=1)
+    # Orientation in the y-down pixel frame decides the overall sign.
+    return np.clip(np.abs(cov) if cov.sum() < 0 else cov, 0.0, 1.0)
+
+
+def rasterize(
+    geometry: BaseGeometry,
+    um_per_px: float,
+    shape: tuple[int, int] | None = None,
+    margin_um: float = 0.0,
+) -> np.ndarray:
+    """Area-coverage raster of ``geometry`` (um, centred) at ``um_per_px``.
+
+    Args:
+        geometry: shapely (Multi)Polygon in micrometres, origin at the nominal centre.
+        um_per_px: pixel size in micrometres (> 0).
+        shape: (H, W) of the canvas; default :func:`canvas_shape` (even, symmetric).
+        margin_um: border added around the geometry when ``shape`` is None.
+
+    Returns:
+        (H, W) float64 array in [0, 1]; row 0 at the top. Geometry outside the canvas
+        is cut off.
+    """
+    s = positive("um_per_px", um_per_px, "um per px")
+    if shape is None:
+        shape = canvas_shape(geometry, s, margin_um)
+    h, w = int(shape[0]), int(shape[1])
+    if h < 1 or w < 1:
+        raise InputError(f"canvas shape must be positive, got {shape}")
+    if geometry.is_empty:
+        return np.zeros((h, w), dtype=np.float64)
+    return _coverage(to_pixel_frame(geometry, s, (h, w)), (h, w))
+
+
+def mask_from_geometry(
+    geometry: BaseGeometry,
+    um_per_px: float,
+    margin_um: float = 0.0,
+    params: dict | None = None,
+    shape: tuple[int, int] | None = None,
+) -> Mask:
+    """Rasterize ``geometry`` into a :class:`Mask` that keeps the exact geometry."""
+    data = rasterize(geometry, um_per_px, shape=shape, margin_um=margin_um)
+    return Mask(data=data, um_per_px=um_per_px, geometry=geometry, params=dict(params or {}))
