@@ -1,0 +1,115 @@
+"""Options and parsing shared by the commands that build a scene."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+from pathlib import Path
+from typing import Any
+
+from patterns.errors import InputError, atomic_output
+from simulator.scene import Scene
+
+
+def add_scene_args(p: argparse.ArgumentParser) -> None:
+    """Pattern, chip, scale, materials and pose-grid options (a TOML scene may give them)."""
+    p.add_argument("scene", nargs="?", help="optional TOML scene file; flags given here override it")
+    g = p.add_argument_group("inputs")
+    g.add_argument("--pattern", help="pattern PNG (white = wettable pad)")
+    g.add_argument("--chip", help="chip footprint PNG (white = wettable)")
+    g.add_argument("--chip-size", help="rectangular chip W[xH] in um, e.g. 730 or 730x500")
+    g.add_argument("--um-per-px", type=float, help="pixel size in um (default: the PNG's pHYs scale)")
+    m = p.add_argument_group("materials")
+    m.add_argument("--surface-tension", type=float, help="liquid surface tension in mN/m (default 72.8, water)")
+    m.add_argument("--pad-angle", type=float, help="contact angle on the pads in degrees (default 30)")
+    m.add_argument("--substrate-angle", type=float, help="contact angle on the substrate in degrees (default 60)")
+    m.add_argument("--allow-repulsive", action="store_true", help="allow a pad that wets worse than the substrate")
+    n = p.add_argument_group("pose grid and numerics")
+    n.add_argument("--twist-step", type=float, help="twist grid step in degrees (default 1)")
+    n.add_argument("--no-twist", action="store_true", help="keep the chip untwisted (computes one rotation)")
+    n.add_argument("--window", type=float, help="translation half-width of the pose grid in um (default: full reach)")
+    n.add_argument("--dtype", choices=("float32", "float64"), help="landscape precision (default float32)")
+    n.add_argument("--memory-budget", type=float, help="landscape memory budget in MB")
+
+
+def parse_chip_size(text: str) -> tuple[float, float]:
+    try:
+        parts = [float(v) for v in text.lower().split("x")]
+    except ValueError:
+        parts = []
+    if len(parts) not in (1, 2) or not all(math.isfinite(v) and v > 0 for v in parts):
+        raise InputError(f"--chip-size must be W or WxH in um with positive numbers, got {text!r}")
+    return (parts[0], parts[-1])
+
+
+def parse_pose(text: str, flag: str) -> tuple[float, float, float]:
+    """'X,Y,TWIST' (um, um, degrees) -> floats."""
+    try:
+        vals = [float(v) for v in text.split(",")]
+    except ValueError:
+        vals = []
+    if len(vals) != 3 or not all(math.isfinite(v) for v in vals):
+        raise InputError(f"{flag} must be X,Y,TWIST (um, um, degrees), got {text!r}")
+    return vals[0], vals[1], vals[2]
+
+
+def scene_from_args(args: argparse.Namespace) -> Scene:
+    """Build the scene from an optional TOML file and the flags (flags win).
+
+    Flags are merged into the TOML document under the TOML keys (see
+    :mod:`simulator.scene`), so a file and the command line mean the same thing.
+    """
+    doc: dict[str, Any] = {}
+    base = Path(".")
+    if args.scene:
+        doc = read_toml(args.scene)
+        base = Path(args.scene).parent
+    if args.pattern:
+        doc["pattern"] = str(Path(args.pattern).resolve())
+    if args.chip:
+        doc["chip"] = str(Path(args.chip).resolve())
+        doc.pop("chip_size_um", None)
+    if args.chip_size:
+        doc["chip_size_um"] = list(parse_chip_size(args.chip_size))
+        doc.pop("chip", None)
+    if "pattern" not in doc:
+        raise InputError("no pattern given: pass --pattern P.png (or a TOML scene with pattern = ...)")
+    if "chip" not in doc and "chip_size_um" not in doc:
+        raise InputError("no chip given: pass --chip C.png or --chip-size W[xH] (um)")
+    flags = {
+        ("materials", "surface_tension_mN_m"): args.surface_tension,
+        ("materials", "pad_angle_deg"): args.pad_angle,
+        ("materials", "substrate_angle_deg"): args.substrate_angle,
+        ("materials", "allow_repulsive"): True if args.allow_repulsive else None,
+        ("twist", "step_deg"): args.twist_step,
+        ("effects", "twist"): False if args.no_twist else None,
+        (None, "um_per_px"): args.um_per_px,
+        (None, "window_um"): args.window,
+        (None, "dtype"): args.dtype,
+        (None, "memory_budget_mb"): args.memory_budget,
+    }
+    for (table, key), value in flags.items():
+        if value is not None:
+            (doc.setdefault(table, {}) if table else doc)[key] = value
+    return Scene.from_dict(doc, base=base)
+
+
+def read_toml(path: str | os.PathLike) -> dict[str, Any]:
+    """Parse a TOML scene file, with one-line errors."""
+    import tomllib
+
+    path = Path(path)
+    try:
+        return tomllib.loads(path.read_text())
+    except FileNotFoundError:
+        raise InputError(f"scene file {path} does not exist") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError, IsADirectoryError) as err:
+        raise InputError(f"scene file {path} is not valid TOML: {err}") from None
+
+
+def write_json(path: str | os.PathLike, obj: Any) -> None:
+    """Write JSON atomically (no half-written file on failure)."""
+    with atomic_output(path) as tmp:
+        tmp.write_text(json.dumps(obj, indent=2) + "\n")

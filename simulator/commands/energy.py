@@ -1,0 +1,106 @@
+"""``selfalign energy``: overlap, energy, force and torque at poses, and 1-D curves."""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+from patterns.errors import InputError
+from simulator.commands._common import add_scene_args, parse_pose, scene_from_args, write_json
+from simulator.landscape import build_landscape, twists_around
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "energy",
+        help="energy, force and torque at poses; energy curves with plateaus",
+        description=(
+            "Overlap area (um^2), energy (J), force (N) and torque (N m) of the chip at the "
+            "poses given with --at, and optionally a curve along x, y (um) or twist (deg) "
+            "through the first pose. Only the twists these queries need are computed."
+        ),
+    )
+    add_scene_args(p)
+    p.add_argument("--at", action="append", default=[], metavar="X,Y,TWIST", help="pose in um, um, degrees (repeatable)")
+    p.add_argument("--curve", choices=("x", "y", "twist"), help="also sample a curve along this axis through the first --at pose")
+    p.add_argument("--from", dest="start", type=float, help="curve start (um, or degrees for twist)")
+    p.add_argument("--to", dest="stop", type=float, help="curve end (um, or degrees for twist)")
+    p.add_argument("--json", help="write the results as JSON to this file")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    poses = [parse_pose(a, "--at") for a in args.at] or ([(0.0, 0.0, 0.0)] if args.curve else [])
+    if not poses:
+        raise InputError("give at least one pose with --at X,Y,TWIST (um, um, degrees), or a --curve")
+    if args.curve and (args.start is None or args.stop is None):
+        raise InputError("--curve needs --from A --to B (um for x/y, degrees for twist)")
+    scene = scene_from_args(args)
+    twists = [p[2] for p in poses]
+    if args.curve == "twist":
+        twists += [args.start, args.stop]
+    ls = build_landscape(scene, twists=twists_around(scene, twists))
+    x, y, t = (np.array(v) for v in zip(*poses, strict=True))
+    energy = ls.energy_at(x, y, t)
+    fx, fy = ls.force_at(x, y, t)
+    torque = ls.torque_at(x, y, t)
+    area = ls.overlap_um2(energy)
+    fx, fy, torque = fx + 0.0, fy + 0.0, torque + 0.0  # no "-0" in the output
+    rows = []
+    for i, (px, py, pt) in enumerate(poses):
+        rows.append(
+            {
+                "x_um": px,
+                "y_um": py,
+                "twist_deg": pt,
+                "overlap_um2": float(area[i]),
+                "energy_J": float(energy[i]),
+                "force_N": [float(fx[i]), float(fy[i])],
+                "torque_Nm": float(torque[i]),
+            }
+        )
+        print(
+            f"pose ({px:g} um, {py:g} um, {pt:g} deg): overlap {area[i]:,.1f} um^2, energy {energy[i]:.6e} J, "
+            f"force ({fx[i]:.4e}, {fy[i]:.4e}) N, torque {torque[i]:.4e} N m"
+        )
+    result = {
+        "poses": rows,
+        "delta_gamma_N_m": ls.delta_gamma,
+        "um_per_px": ls.um_per_px,
+        "twist_step_deg": ls.twist_step_deg if len(ls.twist_deg) > 1 else None,
+        "noise_floor_J": ls.noise_floor_J,
+        "dtype": scene.dtype,
+    }
+    if args.curve:
+        cur = ls.curve(args.curve, poses[0], args.start, args.stop)
+        unit = "deg" if args.curve == "twist" else "um"
+        funit = "Nm" if args.curve == "twist" else "N"
+        result["curve"] = {
+            "axis": args.curve,
+            f"values_{unit}": cur["values"].tolist(),
+            "energy_J": cur["energy_J"].tolist(),
+            "overlap_um2": ls.overlap_um2(cur["energy_J"]).tolist(),
+            f"force_{funit}": cur["force"].tolist(),
+            f"plateaus_{unit}": cur["plateaus"],
+        }
+        print(f"curve along {args.curve} through the first pose, {cur['values'][0]:g} to {cur['values'][-1]:g} {unit}, {len(cur['values'])} samples")
+        for v, e, f in _sampled(cur):
+            print(f"  {args.curve} = {v:10.3f} {unit}: energy {e:.6e} J, {'torque' if unit == 'deg' else 'force'} {f:.4e} {funit.replace('Nm', 'N m')}")
+        if cur["plateaus"]:
+            print("plateaus (|force| below the noise floor): " + ", ".join(f"[{a:g}, {b:g}] {unit}" for a, b in cur["plateaus"]))
+        else:
+            print("plateaus: none")
+    if args.json:
+        write_json(args.json, result)
+        print(f"wrote {args.json}")
+    return 0
+
+
+def _sampled(cur: dict, most: int = 21):
+    """At most ``most`` evenly spaced rows of a curve for the terminal (the JSON has all)."""
+    n = len(cur["values"])
+    idx = np.unique(np.linspace(0, n - 1, min(n, most)).round().astype(int))
+    return zip(cur["values"][idx], cur["energy_J"][idx], cur["force"][idx], strict=True)
+
+

@@ -1,0 +1,622 @@
+"""The energy landscape E[twist, y, x] by FFT cross-correlation.
+
+Model (PHYSICS.md 3.2): ``E(x, y, a) = Delta_gamma * sum_p chip_a(p - (x, y)) * w(p)``
+with ``w`` the pattern mask (1 on pads, grey levels graded, 0 on substrate), so that
+``E = Delta_gamma * A_ol`` in joules. For each twist the whole translation plane is
+one linear (zero-padded, never circular) cross-correlation.
+
+Conventions:
+
+* Landscape arrays are indexed ``[twist, y, x]`` with y *ascending* (physics frame,
+  y up); ``x_um[ix] = (ix - rx) * um_per_px``, ``y_um[iy] = (iy - ry) * um_per_px``.
+  The chip pose is its centre relative to the pattern's nominal centre (the image
+  centre), twist counter-clockwise positive, in degrees.
+* A chip given as exact geometry is rasterized anew at every twist (exact area
+  coverage); a chip PNG is rotated by bilinear resampling (OpenCV ``warpAffine``),
+  which keeps its area to within 0.5 % (tested).
+* The twist axis covers one rotational-symmetry period of the chip by default
+  (90 degrees for a square) and is then periodic (``wrap=True``).
+
+Engine: the pattern spectrum is computed once; twists are processed in chunks so
+that peak memory stays under the scene's budget. The transform runs in SciPy's
+pocketfft on a CPU (measured faster than XLA's FFT on this 2-core machine, see
+README) and in JAX when JAX sees a GPU; ``backend=`` overrides. Forward chip
+transforms skip the rows that are zero, and only the translation window asked for
+is transformed back along x.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.fft as sfft
+from shapely import affinity
+
+from patterns.errors import InputError
+from patterns.mask import Mask
+from patterns.raster import rasterize
+from simulator.scene import Scene
+
+UM2_TO_M2 = 1e-12
+BACKENDS = ("auto", "scipy", "jax")
+#: Noise floor = NOISE_FACTOR * eps(dtype) * max|E|: a bound on FFT round-off
+#: (measured worst case about 3 eps * max|E| in float32 on library patterns).
+NOISE_FACTOR = 32.0
+
+
+# --------------------------------------------------------------------- symmetry
+def chip_symmetry(chip: Mask) -> tuple[float, bool]:
+    """(rotational period in degrees, mirror-symmetric about the x axis) of a chip.
+
+    From the exact geometry when known, else from the raster (exact comparison).
+    """
+    if chip.geometry is not None:
+        g = chip.geometry
+        tol = 1e-9 * max(g.area, 1e-12)
+
+        def same(other) -> bool:
+            return g.symmetric_difference(other).area <= tol
+
+        period = next((p for p in (90.0, 180.0) if same(affinity.rotate(g, p, origin=(0, 0)))), 360.0)
+        return period, same(affinity.scale(g, 1.0, -1.0, origin=(0, 0)))
+    d = chip.data
+    if d.shape[0] == d.shape[1] and np.array_equal(np.rot90(d), d):
+        period = 90.0
+    elif np.array_equal(d[::-1, ::-1], d):
+        period = 180.0
+    else:
+        period = 360.0
+    return period, bool(np.array_equal(d[::-1], d))
+
+
+def twist_axis(scene: Scene) -> tuple[np.ndarray, bool, float]:
+    """(twists in degrees, periodic?, chip symmetry period) for the scene's grid."""
+    period, _ = chip_symmetry(scene.chip)
+    if not scene.effects.twist:
+        return np.zeros(1), False, period
+    tg = scene.twist
+    step = tg.step_deg
+    n_period = period / step
+    divides = abs(n_period - round(n_period)) < 1e-9
+    if tg.min_deg is None or (divides and tg.max_deg - tg.min_deg + step >= period - 1e-9):
+        if divides:
+            n = round(n_period)  # one period, centred on and always containing 0
+            return step * (np.arange(n) - n // 2), True, period
+        n = int(math.floor(period / step / 2 + 1e-9))
+        return step * np.arange(-n, n + 1), False, period
+    n = int(math.floor((tg.max_deg - tg.min_deg) / step + 1e-9)) + 1
+    return tg.min_deg + step * np.arange(n), False, period
+
+
+# --------------------------------------------------------------------- rotation
+def _nonzero_box(data: np.ndarray) -> tuple[int, int, int, int]:
+    rows = np.flatnonzero(data.any(axis=1))
+    cols = np.flatnonzero(data.any(axis=0))
+    return rows[0], rows[-1] + 1, cols[0], cols[-1] + 1
+
+
+def _chip_reach_px(chip: Mask, twist: bool) -> tuple[float, float]:
+    """Half-extent (x, y) in px of the chip's wettable area about its centre, over all twists."""
+    h, w = chip.shape
+    r0, r1, c0, c1 = _nonzero_box(chip.data > 0)
+    xs = np.array([c0, c1]) - w / 2
+    ys = np.array([r0, r1]) - h / 2
+    if not twist:
+        return float(np.abs(xs).max()), float(np.abs(ys).max())
+    if chip.geometry is not None:
+        from shapely.geometry import Point
+
+        rad = chip.geometry.hausdorff_distance(Point(0, 0)) / chip.um_per_px
+    else:
+        rad = math.hypot(np.abs(xs).max(), np.abs(ys).max())
+    return rad, rad
+
+
+class ChipRotator:
+    """Rotated chip rasters on one fixed canvas, y-up, with the pattern's pixel parity."""
+
+    def __init__(self, chip: Mask, twist: bool, parity: tuple[int, int]):
+        self.chip = chip
+        rx, ry = _chip_reach_px(chip, twist)
+        # Canvas (H, W) with W % 2 == parity so chip and pattern pixel grids coincide.
+        self.shape = tuple(2 * math.ceil(r - 1e-9) + 2 + p for r, p in ((ry, parity[0]), (rx, parity[1])))
+        self.count = 0  # rotations computed (the engine's "exactly one" check reads this)
+
+    def __call__(self, twist_deg: float) -> np.ndarray:
+        self.count += 1
+        c = self.chip
+        if c.geometry is not None:
+            g = c.geometry if twist_deg == 0 else affinity.rotate(c.geometry, twist_deg, origin=(0, 0))
+            img = rasterize(g, c.um_per_px, shape=self.shape)
+        else:
+            img = self._resample(twist_deg)
+        return img[::-1]  # y up
+
+    def _resample(self, twist_deg: float) -> np.ndarray:
+        import cv2
+
+        h, w = self.chip.shape
+        ho, wo = self.shape
+        a = math.radians(twist_deg)
+        ca, sa = math.cos(a), math.sin(a)
+        # Output pixel centre (u, v) in y-down image coords -> physical (x, y) -> input.
+        # Rotation by +a (CCW, y up) is (x, y) -> (x ca - y sa, x sa + y ca); inverse map:
+        # x_in = x ca + y sa, y_in = -x sa + y ca, with y = -(v - cy).
+        cxo, cyo, cxi, cyi = wo / 2 - 0.5, ho / 2 - 0.5, w / 2 - 0.5, h / 2 - 0.5
+        m = np.array([[ca, -sa, 0.0], [sa, ca, 0.0]])
+        m[0, 2] = cxi - ca * cxo + sa * cyo
+        m[1, 2] = cyi - sa * cxo - ca * cyo
+        out = cv2.warpAffine(
+            self.chip.data, m, (wo, ho), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_CONSTANT, borderValue=0.0
+        )
+        return np.clip(out, 0.0, 1.0)
+
+
+# --------------------------------------------------------------------- correlation
+def _default_backend() -> str:
+    try:
+        import jax
+
+        return "jax" if jax.default_backend() != "cpu" else "scipy"
+    except Exception:  # pragma: no cover - jax is a dependency
+        return "scipy"
+
+
+@dataclass(frozen=True)
+class Window:
+    """Output translations X in [-rx, rx], Y in [-ry, ry] px, with pattern/chip offsets."""
+
+    rx: int
+    ry: int
+    dx: int  # pattern column of chip column 0 at X = 0
+    dy: int
+
+
+class Correlator:
+    """Linear cross-correlation of one fixed pattern with a stack of chips, windowed.
+
+    ``corr[b, Y + ry, X + rx] = sum_{k,l} chip[b, k, l] * pattern[k + Y + dy, l + X + dx]``
+    for the arrays as given (both in the same row orientation).
+    """
+
+    def __init__(self, pattern: np.ndarray, chip_shape: tuple[int, int], window: Window, dtype: str, backend: str = "auto"):
+        if backend not in BACKENDS:
+            raise InputError(f"backend must be one of {BACKENDS}, got {backend!r}")
+        self.backend = _default_backend() if backend == "auto" else backend
+        self.dtype = np.dtype(dtype)
+        self.window = window
+        hp, wp = pattern.shape
+        hc, wc = chip_shape
+        # Alias-free sizes for the window (see module docstring): N >= extent + window.
+        need_y = max(hp, hc, hp - (window.dy - window.ry), window.dy + window.ry + hc)
+        need_x = max(wp, wc, wp - (window.dx - window.rx), window.dx + window.rx + wc)
+        self.ny = sfft.next_fast_len(need_y, real=False)
+        self.nx = sfft.next_fast_len(need_x, real=True)
+        self.chip_shape = (hc, wc)
+        self.rows = (window.dy + np.arange(-window.ry, window.ry + 1)) % self.ny
+        self.cols = (window.dx + np.arange(-window.rx, window.rx + 1)) % self.nx
+        spec = self._forward(np.asarray(pattern, dtype=self.dtype)[None])[0]
+        self.pattern_spectrum = spec
+        self.workers = os.cpu_count() or 1
+        if self.backend == "jax":
+            self._jax_fn = self._make_jax()
+
+    def bytes_per_twist(self) -> int:
+        complex_item = 2 * self.dtype.itemsize
+        return self.ny * (self.nx // 2 + 1) * complex_item * 2 + len(self.rows) * self.nx * self.dtype.itemsize
+
+    def _forward(self, x: np.ndarray) -> np.ndarray:
+        # Real FFT along x over the rows given (zero rows beyond need no transform),
+        # then along y with zero padding to ny.
+        a = sfft.rfft(x, n=self.nx, axis=2, workers=os.cpu_count())
+        return sfft.fft(a, n=self.ny, axis=1, workers=os.cpu_count())
+
+    def __call__(self, chips: np.ndarray) -> np.ndarray:
+        """(B, hc, wc) chips -> (B, 2 ry + 1, 2 rx + 1) correlation window."""
+        chips = np.asarray(chips, dtype=self.dtype)
+        if self.backend == "jax":
+            return np.asarray(self._jax_fn(chips))
+        r0, r1, _, _ = _nonzero_box(chips.any(axis=0)) if chips.any() else (0, 1, 0, 1)
+        # corr = IFFT(P * conj(C)); the chip rows start at r0, shifting its spectrum.
+        spec = self._forward(chips[:, r0:r1])
+        if r0:
+            spec *= np.exp(-2j * np.pi * r0 * np.fft.fftfreq(self.ny)).astype(spec.dtype)[None, :, None]
+        np.conjugate(spec, out=spec)
+        spec *= self.pattern_spectrum
+        a = sfft.ifft(spec, axis=1, workers=self.workers)[:, self.rows]
+        out = sfft.irfft(a, n=self.nx, axis=2, workers=self.workers)
+        return out[:, :, self.cols]
+
+    def _make_jax(self):
+        import jax
+        import jax.numpy as jnp
+
+        ps = jnp.asarray(self.pattern_spectrum)
+        rows, cols, nx, ny = jnp.asarray(self.rows), jnp.asarray(self.cols), self.nx, self.ny
+
+        @jax.jit
+        def run(chips):
+            spec = jnp.fft.fft(jnp.fft.rfft(chips, n=nx, axis=2), n=ny, axis=1)
+            a = jnp.fft.ifft(ps * jnp.conj(spec), axis=1)[:, rows]
+            return jnp.fft.irfft(a, n=nx, axis=2)[:, :, cols]
+
+        return run
+
+
+def correlate_stack(pattern: np.ndarray, chips: np.ndarray, dtype: str = "float32", backend: str = "auto") -> np.ndarray:
+    """Full linear cross-correlation of ``pattern`` (H, W) with each of ``chips`` (T, h, w).
+
+    ``out[t, m + h - 1, n + w - 1] = sum_{k,l} chips[t, k, l] * pattern[k + m, l + n]``,
+    i.e. what ``cv2.matchTemplate(TM_CCORR)`` gives on a pattern zero-padded by the chip
+    size, for every shift. Chips that repeat exactly (a symmetric chip at twists one
+    period apart) are transformed once.
+    """
+    pattern, chips = np.asarray(pattern), np.asarray(chips)
+    (hp, wp), (_, hc, wc) = pattern.shape, chips.shape
+    # Centre the window on shift ((hp - hc)/2, (wp - wc)/2); a zero row/column makes it whole.
+    py, px = (hp - hc) % 2, (wp - wc) % 2
+    hq, wq = hp + py, wp + px
+    win = Window(rx=(wq + wc) // 2 - 1, ry=(hq + hc) // 2 - 1, dx=(wq - wc) // 2, dy=(hq - hc) // 2)
+    cor = Correlator(np.pad(pattern, ((0, py), (0, px))), (hc, wc), win, dtype, backend)
+    keys = [hash(np.ascontiguousarray(c).tobytes()) for c in chips]
+    uniq = list(dict.fromkeys(keys))  # first occurrence of each distinct chip, in order
+    first = [keys.index(k) for k in uniq]
+    out = np.concatenate([cor(chips[first[i : i + 16]]) for i in range(0, len(first), 16)])
+    pos = {k: n for n, k in enumerate(uniq)}
+    return out[[pos[k] for k in keys], : hp + hc - 1, : wp + wc - 1]
+
+
+# --------------------------------------------------------------------- landscape
+@dataclass(frozen=True, eq=False)
+class Landscape:
+    """Energy on the pose grid, with the grid and what it cost.
+
+    Attributes:
+        energy: (T, Ny, Nx) joules, ``[twist, y, x]``, y ascending.
+        x_um, y_um: (Nx,), (Ny,) translations of the chip centre (um), ascending.
+        twist_deg: (T,) twists (degrees), ascending, evenly spaced.
+        wrap: the twist axis covers one full symmetry period and is periodic.
+        period_deg: the chip's rotational symmetry period (degrees).
+        um_per_px: translation step (um).
+        delta_gamma: pad minus substrate wetting energy (N/m, negative).
+        full_reach: the window covers every pose where the chip touches the pattern
+            (outside it the energy is exactly 0).
+        stats: what the build did (rotations, seconds, bytes, backend, FFT size).
+    """
+
+    energy: np.ndarray
+    x_um: np.ndarray
+    y_um: np.ndarray
+    twist_deg: np.ndarray
+    wrap: bool
+    period_deg: float
+    um_per_px: float
+    delta_gamma: float
+    full_reach: bool
+    stats: dict = field(default_factory=dict)
+
+    # -- scales
+    @property
+    def joules_per_px2(self) -> float:
+        return self.delta_gamma * self.um_per_px**2 * UM2_TO_M2
+
+    @property
+    def twist_step_deg(self) -> float:
+        return float(self.twist_deg[1] - self.twist_deg[0]) if len(self.twist_deg) > 1 else 1.0
+
+    @property
+    def noise_floor_J(self) -> float:
+        """Energy differences below this are round-off: steppers treat them as ties."""
+        eps = np.finfo(self.energy.dtype).eps
+        return float(NOISE_FACTOR * eps * max(float(np.abs(self.energy).max()), np.finfo(float).tiny))
+
+    def overlap_um2(self, energy_J: np.ndarray | float) -> np.ndarray | float:
+        """Overlap area (um^2) for an energy (J): A = E / Delta_gamma."""
+        return np.asarray(energy_J) / (self.delta_gamma * UM2_TO_M2)
+
+    # -- grid coordinates
+    def fractional_index(self, x_um, y_um, twist_deg) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Continuous (it, iy, ix) grid coordinates of poses (twist wrapped if periodic)."""
+        ix = (np.asarray(x_um, float) - self.x_um[0]) / self.um_per_px
+        iy = (np.asarray(y_um, float) - self.y_um[0]) / self.um_per_px
+        it = (np.asarray(twist_deg, float) - self.twist_deg[0]) / self.twist_step_deg
+        if self.wrap:
+            it = np.mod(it, len(self.twist_deg))
+        return it, iy, ix
+
+    def energy_at(self, x_um, y_um, twist_deg) -> np.ndarray:
+        """Energy (J) at continuous poses by trilinear interpolation on the grid.
+
+        Along a periodic twist axis the interpolation wraps. Outside the window the
+        energy is 0 (no contact) when the window has full reach, else InputError.
+        """
+        it, iy, ix = self.fractional_index(x_um, y_um, twist_deg)
+        return trilinear(self.energy, it, iy, ix, self.wrap, self._outside_ok())
+
+    def _outside_ok(self) -> bool:
+        return self.full_reach
+
+    def gradient_at(self, x_um, y_um, twist_deg) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(dE/dx, dE/dy) in J/m and dE/dtwist in J/rad, by central differences of one grid step.
+
+        Energy differences below the noise floor are round-off and give exactly 0
+        (a plateau is flat, not noisy).
+        """
+        s, dt = self.um_per_px, self.twist_step_deg
+        e, floor = self.energy_at, self.noise_floor_J
+        x, y, t = (np.asarray(v, float) for v in (x_um, y_um, twist_deg))
+
+        def diff(a, b, h):
+            d = a - b
+            return np.where(np.abs(d) <= floor, 0.0, d) / h
+
+        gx = diff(e(x + s, y, t), e(x - s, y, t), 2 * s * 1e-6)
+        gy = diff(e(x, y + s, t), e(x, y - s, t), 2 * s * 1e-6)
+        if len(self.twist_deg) > 1:
+            gt = diff(e(x, y, t + dt), e(x, y, t - dt), 2 * math.radians(dt))
+        else:
+            gt = np.zeros_like(gx)
+        return gx, gy, gt
+
+    def force_at(self, x_um, y_um, twist_deg) -> tuple[np.ndarray, np.ndarray]:
+        """Restoring force (Fx, Fy) in N: F = -grad E (PHYSICS.md 3.4)."""
+        gx, gy, _ = self.gradient_at(x_um, y_um, twist_deg)
+        return -gx, -gy
+
+    def torque_at(self, x_um, y_um, twist_deg) -> np.ndarray:
+        """Restoring torque about z in N m: tau = -dE/dtwist (twist in radians, CCW +)."""
+        return -self.gradient_at(x_um, y_um, twist_deg)[2]
+
+    def global_minimum(self) -> tuple[float, float, float, float]:
+        """(x_um, y_um, twist_deg, energy_J) of the lowest grid pose (first in index order on ties)."""
+        it, iy, ix = np.unravel_index(int(np.argmin(self.energy)), self.energy.shape)
+        return float(self.x_um[ix]), float(self.y_um[iy]), float(self.twist_deg[it]), float(self.energy[it, iy, ix])
+
+    def curve(self, axis: str, through: tuple[float, float, float], start: float, stop: float) -> dict:
+        """Energy, force and plateaus along one axis through a pose.
+
+        Args:
+            axis: "x", "y" (um) or "twist" (degrees).
+            through: the pose (x_um, y_um, twist_deg) the line passes through.
+            start, stop: range along the axis, sampled at the grid step.
+
+        Returns:
+            dict with ``values`` (the axis samples), ``energy_J``, ``force`` (N along x/y,
+            N m for twist: minus the derivative along the axis) and ``plateaus``
+            (list of [start, end] ranges where the force is zero: energy differences below
+            the noise floor, see :meth:`gradient_at`).
+        """
+        if axis not in ("x", "y", "twist"):
+            raise InputError(f"curve axis must be x, y or twist, got {axis!r}")
+        step = self.twist_step_deg if axis == "twist" else self.um_per_px
+        if not (math.isfinite(start) and math.isfinite(stop) and stop > start):
+            raise InputError(f"curve range must be finite with --to > --from, got {start} .. {stop}")
+        n = int(math.floor((stop - start) / step + 1e-9)) + 1
+        v = start + step * np.arange(n)
+        x, y, t = (np.full(n, float(c)) for c in through)
+        {"x": x, "y": y, "twist": t}[axis][:] = v
+        e = self.energy_at(x, y, t)
+        gx, gy, gt = self.gradient_at(x, y, t)
+        force = -{"x": gx, "y": gy, "twist": gt}[axis]
+        return {"axis": axis, "values": v, "energy_J": e, "force": force, "plateaus": plateaus(v, force, 0.0)}
+
+
+def plateaus(values: np.ndarray, force: np.ndarray, floor: float, min_points: int = 3) -> list[list[float]]:
+    """[start, end] ranges of ``values`` where |force| <= floor over >= ``min_points`` samples."""
+    flat = np.abs(force) <= floor
+    out, i, n = [], 0, len(values)
+    while i < n:
+        if flat[i]:
+            j = i
+            while j + 1 < n and flat[j + 1]:
+                j += 1
+            if j - i + 1 >= min_points:
+                out.append([float(values[i]), float(values[j])])
+            i = j + 1
+        else:
+            i += 1
+    return out
+
+
+def trilinear(e: np.ndarray, it, iy, ix, wrap: bool, outside_zero: bool) -> np.ndarray:
+    """Trilinear interpolation of ``e[t, y, x]`` at fractional indices (numpy, host side)."""
+    nt, ny, nx = e.shape
+    it, iy, ix = np.broadcast_arrays(*(np.asarray(a, float) for a in (it, iy, ix)))
+    inside = (iy >= 0) & (iy <= ny - 1) & (ix >= 0) & (ix <= nx - 1)
+    if not wrap:
+        inside &= (it >= -1e-9) & (it <= nt - 1 + 1e-9)
+    if not np.all(inside) and not outside_zero:
+        raise InputError("pose outside the landscape's pose grid; widen the window (window_um) or the twist range")
+    x0 = np.clip(np.floor(ix), 0, max(nx - 2, 0)).astype(int)
+    y0 = np.clip(np.floor(iy), 0, max(ny - 2, 0)).astype(int)
+    fx, fy = np.clip(ix - x0, 0, 1), np.clip(iy - y0, 0, 1)
+    x1, y1 = np.minimum(x0 + 1, nx - 1), np.minimum(y0 + 1, ny - 1)
+    if nt == 1:
+        t0 = t1 = np.zeros_like(x0)
+        ft = np.zeros_like(fx)
+    elif wrap:
+        t0 = np.floor(it).astype(int) % nt
+        ft = it - np.floor(it)
+        t1 = (t0 + 1) % nt
+    else:
+        t0 = np.clip(np.floor(it), 0, nt - 2).astype(int)
+        ft = np.clip(it - t0, 0, 1)
+        t1 = t0 + 1
+
+    def plane(t):
+        return (
+            e[t, y0, x0] * (1 - fx) * (1 - fy)
+            + e[t, y0, x1] * fx * (1 - fy)
+            + e[t, y1, x0] * (1 - fx) * fy
+            + e[t, y1, x1] * fx * fy
+        )
+
+    val = plane(t0) * (1 - ft) + plane(t1) * ft
+    return np.where(inside, val, 0.0)
+
+
+def _window(scene: Scene, pat_origin: tuple[float, float], pat_reach: tuple[float, float], rot: ChipRotator) -> Window:
+    """Translation window in px and the pattern offset of the chip canvas."""
+    hc, wc = rot.shape
+    cx, cy = _chip_reach_px(scene.chip, scene.effects.twist)
+    rx = math.ceil(pat_reach[0] + cx - 1e-9)
+    ry = math.ceil(pat_reach[1] + cy - 1e-9)
+    if scene.window_um is not None:
+        w = math.ceil(scene.window_um / scene.um_per_px - 1e-9)
+        rx, ry = min(rx, w), min(ry, w)
+    dx = pat_origin[0] - wc / 2
+    dy = pat_origin[1] - hc / 2
+    assert dx == int(dx) and dy == int(dy), "pixel grids of chip and pattern must coincide"
+    return Window(rx=rx, ry=ry, dx=int(dx), dy=int(dy))
+
+
+def estimate_bytes(scene: Scene, twists: np.ndarray | None = None) -> int:
+    """Bytes the landscape array of ``scene`` would take (before building it)."""
+    return plan(scene, twists)["landscape_bytes"]
+
+
+def plan(scene: Scene, twists: np.ndarray | None = None) -> dict:
+    """Everything the build will do, computed without allocating the landscape."""
+    all_twists, wrap, period = twist_axis(scene)
+    if twists is None:
+        twists = all_twists
+    pat = scene.pattern.data
+    r0, r1, c0, c1 = _nonzero_box(pat > 0)
+    h, w = pat.shape
+    # Cropped pattern, y-up; origin (physical 0, 0) in pixel-corner coordinates.
+    origin = (w / 2 - c0, r1 - h / 2)
+    reach = (max(w / 2 - c0, c1 - w / 2), max(h / 2 - r0, r1 - h / 2))
+    parity = (int((2 * origin[1]) % 2), int((2 * origin[0]) % 2))
+    rot = ChipRotator(scene.chip, scene.effects.twist, parity)
+    win = _window(scene, origin, reach, rot)
+    pat_up = pat[r0:r1, c0:c1][::-1]
+    # Keep only the pattern rows/columns some chip pose in the window can reach.
+    hc, wc = rot.shape
+    ya, yb = max(0, win.dy - win.ry), min(pat_up.shape[0], win.dy + win.ry + hc)
+    xa, xb = max(0, win.dx - win.rx), min(pat_up.shape[1], win.dx + win.rx + wc)
+    pat_up = pat_up[ya:yb, xa:xb]
+    win = Window(rx=win.rx, ry=win.ry, dx=win.dx - xa, dy=win.dy - ya)
+    itemsize = np.dtype(scene.dtype).itemsize
+    full_reach = scene.window_um is None or (
+        win.rx >= math.ceil(reach[0] + _chip_reach_px(scene.chip, scene.effects.twist)[0] - 1e-9)
+    )
+    nbytes = len(twists) * (2 * win.ry + 1) * (2 * win.rx + 1) * itemsize
+    return {
+        "twists": np.asarray(twists, float),
+        "all_twists": all_twists,
+        "wrap": wrap and len(twists) == len(all_twists),
+        "period": period,
+        "pattern_up": pat_up,
+        "rotator": rot,
+        "window": win,
+        "full_reach": bool(full_reach),
+        "landscape_bytes": int(nbytes),
+    }
+
+
+def build_landscape(
+    scene: Scene,
+    twists: np.ndarray | None = None,
+    backend: str = "auto",
+    chunk: int = 8,
+    progress: bool = False,
+) -> Landscape:
+    """Compute E[twist, y, x] (J) for the scene, or for a subset of its twists.
+
+    Args:
+        scene: what to simulate.
+        twists: twist values (degrees) to compute; default the scene's whole twist axis.
+            A twist-free scene computes exactly one rotation.
+        backend: "auto" (SciPy on CPU, JAX on GPU), "scipy" or "jax".
+        chunk: twists transformed together (memory per chunk is reported in stats).
+        progress: show a progress bar over twist chunks.
+
+    Raises:
+        InputError: the landscape would exceed ``scene.memory_budget_mb``.
+    """
+    t_start = time.perf_counter()
+    p = plan(scene, twists)
+    win, rot = p["window"], p["rotator"]
+    cor = Correlator(p["pattern_up"], rot.shape, win, scene.dtype, backend)
+    budget = scene.memory_budget_mb * 2**20
+    chunk = max(1, min(chunk, len(p["twists"])))
+    need = p["landscape_bytes"] + chunk * cor.bytes_per_twist()
+    if need > budget:
+        raise InputError(
+            f"the landscape needs about {need / 2**20:,.0f} MB ({len(p['twists'])} twists x "
+            f"{2 * win.ry + 1} x {2 * win.rx + 1} poses, {scene.dtype}) but the memory budget is "
+            f"{scene.memory_budget_mb:,.0f} MB; use a coarser scale (--um-per-px), a larger twist step "
+            "or narrower twist range, a smaller translation window (window_um), or raise memory_budget_mb"
+        )
+    twists_deg = p["twists"]
+    scale = scene.materials.delta_gamma_N_m * scene.um_per_px**2 * UM2_TO_M2
+    energy = np.empty((len(twists_deg), 2 * win.ry + 1, 2 * win.rx + 1), dtype=scene.dtype)
+    for i in _progress(range(0, len(twists_deg), chunk), progress, len(twists_deg), chunk):
+        stack = np.stack([rot(t) for t in twists_deg[i : i + chunk]])
+        energy[i : i + len(stack)] = cor(stack) * scale
+    s = scene.um_per_px
+    return Landscape(
+        energy=energy,
+        x_um=(np.arange(2 * win.rx + 1) - win.rx) * s,
+        y_um=(np.arange(2 * win.ry + 1) - win.ry) * s,
+        twist_deg=twists_deg,
+        wrap=p["wrap"],
+        period_deg=p["period"],
+        um_per_px=s,
+        delta_gamma=scene.materials.delta_gamma_N_m,
+        full_reach=p["full_reach"],
+        stats={
+            "rotations": rot.count,
+            "seconds": time.perf_counter() - t_start,
+            "bytes": energy.nbytes,
+            "backend": cor.backend,
+            "fft_shape": (cor.ny, cor.nx),
+            "chip_canvas": rot.shape,
+        },
+    )
+
+
+def _progress(it: range, show: bool, total: int, chunk: int) -> Iterator[int]:
+    if not show:
+        yield from it
+        return
+    from tqdm import tqdm
+
+    with tqdm(total=total, desc="landscape", unit="twist") as bar:
+        for i in it:
+            yield i
+            bar.update(min(chunk, total - i))
+
+
+def twists_around(scene: Scene, twist_values, margin_steps: int = 1) -> np.ndarray:
+    """The contiguous part of the scene's twist axis that queries at ``twist_values`` need.
+
+    Interpolation needs the two grid twists around a value, and a torque (central
+    difference) one step more on each side. Returns the whole axis when the needed
+    part wraps around a periodic axis.
+    """
+    axis, wrap, period = twist_axis(scene)
+    if len(axis) == 1:
+        return axis
+    step = axis[1] - axis[0]
+    vals = np.atleast_1d(np.asarray(twist_values, float))
+    if wrap:
+        vals = (vals - axis[0]) % period + axis[0]
+    k = (vals - axis[0]) / step
+    lo = int(math.floor(k.min() + 1e-9)) - margin_steps
+    hi = int(math.ceil(k.max() - 1e-9)) + margin_steps
+    if lo < 0 or hi > len(axis) - 1:
+        if wrap:
+            return axis
+        lo, hi = max(lo, 0), min(hi, len(axis) - 1)
+        if not (axis[0] - 1e-9 <= vals.min() and vals.max() <= axis[-1] + 1e-9):
+            raise InputError(
+                f"twist {vals.min():g}..{vals.max():g} deg is outside the scene's twist range "
+                f"{axis[0]:g}..{axis[-1]:g} deg; widen the twist range"
+            )
+    return axis[lo : hi + 1]

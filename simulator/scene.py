@@ -1,0 +1,235 @@
+"""What to simulate: chip, pattern, materials, pose grid and the effects called for.
+
+A :class:`Scene` is frozen and validated at construction; everything downstream
+(landscape, steppers, Monte Carlo) reads it and never changes it. Build one in
+Python (:meth:`Scene.from_inputs`) or from a TOML file (:meth:`Scene.from_toml`).
+
+TOML keys (all optional except ``pattern`` and one of ``chip`` / ``chip_size_um``)::
+
+    pattern = "patterns/library/fourpad_730_50.png"   # PNG path (scale from pHYs)
+    um_per_px = 1.0                 # overrides the PNG's scale
+    chip = "chip.png"               # chip footprint PNG, or:
+    chip_size_um = [730, 730]       # rectangular chip, exact geometry
+    dtype = "float32"               # or "float64"
+    window_um = 800                 # translation half-width of the pose grid
+    memory_budget_mb = 4096
+
+    [materials]
+    surface_tension_mN_m = 72.8
+    pad_angle_deg = 30
+    substrate_angle_deg = 60
+    allow_repulsive = false
+
+    [twist]
+    step_deg = 1.0
+    min_deg = -45                   # default: one symmetry period of the chip
+    max_deg = 45
+
+    [effects]
+    twist = true
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from shapely.geometry import box
+
+from patterns.errors import InputError, positive, require
+from patterns.mask import Mask
+from patterns.raster import mask_from_geometry
+from simulator.materials import Materials
+
+DTYPES = ("float32", "float64")
+
+
+def default_memory_budget_mb() -> float:
+    """Half of the machine's available memory, at most 8 GiB."""
+    try:
+        avail = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        avail = 8 * 2**30
+    return float(min(8192.0, avail / 2**20 / 2))
+
+
+@dataclass(frozen=True)
+class TwistGrid:
+    """Twists on the pose grid, in degrees (CCW positive).
+
+    ``min_deg``/``max_deg`` of None mean one full rotational-symmetry period of the
+    chip, centred on zero (e.g. [-45, 45) for a square chip, [-90, 90) for a
+    rectangle), which the steppers treat as periodic.
+    """
+
+    step_deg: float = 1.0
+    min_deg: float | None = None
+    max_deg: float | None = None
+
+    def __post_init__(self) -> None:
+        positive("twist step_deg", self.step_deg, "degrees")
+        require(self.step_deg <= 90, f"twist step_deg must be <= 90 degrees, got {self.step_deg}")
+        if (self.min_deg is None) != (self.max_deg is None):
+            raise InputError("twist min_deg and max_deg must be given together (or neither)")
+        if self.min_deg is not None:
+            for name, v in (("min_deg", self.min_deg), ("max_deg", self.max_deg)):
+                require(math.isfinite(v) and abs(v) <= 3600, f"twist {name} must be a finite angle within +-3600 degrees, got {v}")
+            require(self.max_deg >= self.min_deg, f"twist max_deg ({self.max_deg}) must be >= min_deg ({self.min_deg})")
+
+
+@dataclass(frozen=True)
+class Effects:
+    """The physics a scene calls for; the engine computes nothing else.
+
+    twist: rotate the chip (False: one rotation, twist fixed at 0).
+    """
+
+    twist: bool = True
+
+
+@dataclass(frozen=True, eq=False)
+class Scene:
+    """One validated description of what to simulate.
+
+    Attributes:
+        pattern: the pattern's wettability mask (values in [0, 1], grey = graded).
+        chip: the chip's wettable footprint at the pattern's scale; its ``geometry``
+            is kept when known, so rotations are rasterized exactly.
+        materials: surface tension and contact angles (Young weights).
+        twist: the twist axis of the pose grid.
+        effects: which terms are computed.
+        window_um: translation half-width of the pose grid (um); None = every
+            translation at which the chip can touch the pattern.
+        dtype: "float32" (default) or "float64" for the landscape.
+        memory_budget_mb: the landscape build refuses to exceed this.
+    """
+
+    pattern: Mask
+    chip: Mask
+    materials: Materials = field(default_factory=Materials)
+    twist: TwistGrid = field(default_factory=TwistGrid)
+    effects: Effects = field(default_factory=Effects)
+    window_um: float | None = None
+    dtype: str = "float32"
+    memory_budget_mb: float = field(default_factory=default_memory_budget_mb)
+
+    def __post_init__(self) -> None:
+        self.pattern.require_nonempty("pattern")
+        self.chip.require_nonempty("chip")
+        require(self.dtype in DTYPES, f"dtype must be one of {DTYPES}, got {self.dtype!r}")
+        if self.window_um is not None:
+            positive("window_um", self.window_um, "um")
+        positive("memory_budget_mb", self.memory_budget_mb, "MB")
+        ps, cs = self.pattern.um_per_px, self.chip.um_per_px
+        require(
+            math.isclose(ps, cs, rel_tol=1e-9),
+            f"chip scale {cs} um/px differs from pattern scale {ps} um/px; "
+            "give both at one scale (Scene.from_inputs resamples a chip PNG for you)",
+        )
+
+    @property
+    def um_per_px(self) -> float:
+        return self.pattern.um_per_px
+
+    def replace(self, **changes: Any) -> Scene:
+        """A copy with some fields changed (validated again)."""
+        return replace(self, **changes)
+
+    # ----------------------------------------------------------------- builders
+    @classmethod
+    def from_inputs(
+        cls,
+        pattern: Mask | str | os.PathLike,
+        chip: Mask | str | os.PathLike | None = None,
+        chip_size_um: tuple[float, float] | float | None = None,
+        um_per_px: float | None = None,
+        **kwargs: Any,
+    ) -> Scene:
+        """Scene from a pattern (Mask or PNG path) and a chip (Mask, PNG path or size).
+
+        A chip PNG at another scale than the pattern is resampled by area averaging
+        (OpenCV INTER_AREA) to the pattern's scale. ``chip_size_um`` gives an exact
+        rectangle (width, height) or a square (one number).
+        """
+        from patterns.io import read_mask
+
+        if not isinstance(pattern, Mask):
+            pattern = read_mask(pattern, um_per_px=um_per_px)
+        elif um_per_px is not None:
+            pattern = Mask(pattern.data, um_per_px, pattern.geometry, pattern.params)
+        require((chip is None) != (chip_size_um is None), "give exactly one of a chip image (--chip) or a chip size (--chip-size)")
+        s = pattern.um_per_px
+        if chip_size_um is not None:
+            w, h = (chip_size_um, chip_size_um) if np.isscalar(chip_size_um) else chip_size_um
+            w, h = positive("chip width", w, "um"), positive("chip height", h, "um")
+            chip = mask_from_geometry(box(-w / 2, -h / 2, w / 2, h / 2), s, params={"design": "rectangle", "width_um": w, "height_um": h})
+        else:
+            if not isinstance(chip, Mask):
+                chip = read_mask(chip, um_per_px=um_per_px)
+            chip = resample_to_scale(chip, s)
+        return cls(pattern=pattern, chip=chip, **kwargs)
+
+    @classmethod
+    def from_toml(cls, path: str | os.PathLike, **overrides: Any) -> Scene:
+        """Scene from a TOML file (keys in the module docstring); paths are relative to it."""
+        from simulator.commands._common import read_toml
+
+        return cls.from_dict(read_toml(path), base=Path(path).parent, **overrides)
+
+    @classmethod
+    def from_dict(cls, doc: dict, base: Path = Path("."), **overrides: Any) -> Scene:
+        known = {"pattern", "chip", "chip_size_um", "um_per_px", "dtype", "window_um", "memory_budget_mb", "materials", "twist", "effects"}
+        unknown = set(doc) - known - {"start", "method", "simulate", "montecarlo"}
+        require(not unknown, f"unknown scene keys {sorted(unknown)}; allowed: {sorted(known)}")
+        require("pattern" in doc, "scene needs a 'pattern' (PNG path)")
+        try:
+            return cls._from_dict(doc, base, overrides)
+        except TypeError as err:  # an unknown key inside a TOML table
+            raise InputError(f"scene: {err}") from None
+
+    @classmethod
+    def _from_dict(cls, doc: dict, base: Path, overrides: dict) -> Scene:
+        def resolve(p: Any) -> Any:
+            return p if isinstance(p, Mask) else base / p
+
+        kw: dict[str, Any] = {}
+        if "materials" in doc:
+            m = dict(doc["materials"])
+            if "surface_tension_mN_m" in m:
+                m["surface_tension_N_m"] = float(m.pop("surface_tension_mN_m")) / 1000
+            kw["materials"] = Materials(**m)
+        if "twist" in doc:
+            kw["twist"] = TwistGrid(**doc["twist"])
+        if "effects" in doc:
+            kw["effects"] = Effects(**doc["effects"])
+        for key in ("dtype", "window_um", "memory_budget_mb"):
+            if key in doc:
+                kw[key] = doc[key]
+        kw.update({k: v for k, v in overrides.items() if v is not None})
+        chip = doc.get("chip")
+        return cls.from_inputs(
+            pattern=resolve(doc["pattern"]),
+            chip=resolve(chip) if chip is not None else None,
+            chip_size_um=doc.get("chip_size_um"),
+            um_per_px=doc.get("um_per_px"),
+            **kw,
+        )
+
+
+def resample_to_scale(mask: Mask, um_per_px: float) -> Mask:
+    """``mask`` at another pixel size, by area averaging (sum x pixel area preserved)."""
+    if math.isclose(mask.um_per_px, um_per_px, rel_tol=1e-9):
+        return mask
+    if mask.geometry is not None:
+        return mask_from_geometry(mask.geometry, um_per_px, params=mask.params)
+    import cv2
+
+    f = mask.um_per_px / um_per_px
+    h, w = mask.shape
+    nh, nw = max(1, round(h * f)), max(1, round(w * f))
+    data = cv2.resize(mask.data, (nw, nh), interpolation=cv2.INTER_AREA if f < 1 else cv2.INTER_LINEAR)
+    return Mask(np.clip(data, 0, 1), um_per_px, None, mask.params)

@@ -1,0 +1,89 @@
+"""``selfalign energy`` end to end: values, JSON keys with units, bad input."""
+
+import json
+
+import pytest
+
+from patterns.geometry import four_pad, square
+from patterns.io import write_mask
+from patterns.raster import mask_from_geometry
+from simulator.cli import main
+from simulator.materials import Materials
+
+
+@pytest.fixture(scope="module")
+def fourpad_png(tmp_path_factory):
+    path = tmp_path_factory.mktemp("pat") / "fourpad.png"
+    write_mask(path, mask_from_geometry(four_pad(200, 20), 1.0, margin_um=8))
+    return path
+
+
+@pytest.fixture(scope="module")
+def chip_png(tmp_path_factory):
+    path = tmp_path_factory.mktemp("chip") / "chip.png"
+    write_mask(path, mask_from_geometry(square(200), 1.0))
+    return path
+
+
+def test_poses_and_json_keys(fourpad_png, tmp_path, capsys):
+    out = tmp_path / "e.json"
+    rc = main(["energy", "--pattern", str(fourpad_png), "--chip-size", "200", "--at", "40,25,0", "--at", "95,0,0", "--json", str(out)])
+    assert rc == 0
+    doc = json.loads(out.read_text())
+    first, second = doc["poses"]
+    assert set(first) == {"x_um", "y_um", "twist_deg", "overlap_um2", "energy_J", "force_N", "torque_Nm"}
+    assert first["overlap_um2"] == pytest.approx(21700, abs=0.05)  # C2
+    assert second["overlap_um2"] == pytest.approx(16200, abs=0.05)
+    dg = Materials().delta_gamma_N_m
+    assert first["energy_J"] == pytest.approx(dg * 21700e-12, rel=1e-5)
+    assert first["force_N"][0] == pytest.approx(dg * (180 - 25) * 1e-6, rel=1e-4)  # C4 with y-bias
+    assert "21,700.0 um^2" in capsys.readouterr().out
+
+
+def test_chip_png_equals_chip_size(fourpad_png, chip_png, tmp_path):
+    a, b = tmp_path / "a.json", tmp_path / "b.json"
+    assert main(["energy", "--pattern", str(fourpad_png), "--chip", str(chip_png), "--at", "30,-70,4", "--json", str(a)]) == 0
+    assert main(["energy", "--pattern", str(fourpad_png), "--chip-size", "200x200", "--at", "30,-70,4", "--json", str(b)]) == 0
+    ea, eb = (json.loads(p.read_text())["poses"][0]["overlap_um2"] for p in (a, b))
+    assert ea == pytest.approx(eb, rel=2e-3)  # bilinear resampling vs exact rotation
+
+
+def test_curve_reports_plateau(fourpad_png, tmp_path):
+    out = tmp_path / "c.json"
+    rc = main(["energy", "--pattern", str(fourpad_png), "--chip-size", "200", "--no-twist", "--at", "0,0,0", "--curve", "x", "--from", "0", "--to", "150", "--json", str(out)])
+    assert rc == 0
+    cur = json.loads(out.read_text())["curve"]
+    assert len(cur["values_um"]) == 151 and len(cur["energy_J"]) == 151
+    (start, end), = cur["plateaus_um"]
+    assert abs(start - 90) <= 1 and abs(end - 110) <= 1
+
+
+def test_twist_curve(fourpad_png, tmp_path):
+    out = tmp_path / "t.json"
+    assert main(["energy", "--pattern", str(fourpad_png), "--chip-size", "200", "--at", "0,0,0", "--curve", "twist", "--from", "-10", "--to", "10", "--json", str(out)]) == 0
+    cur = json.loads(out.read_text())["curve"]
+    e = cur["energy_J"]
+    assert cur["values_deg"][10] == 0 and e[10] == min(e)  # minimum at zero twist
+    assert e[0] == pytest.approx(e[-1], rel=1e-6)  # even in twist
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--pattern", "missing.png", "--chip-size", "200", "--at", "0,0,0"], "missing.png"),
+        (["--pattern", "{pat}", "--at", "0,0,0"], "no chip given"),
+        (["--pattern", "{pat}", "--chip-size", "200", "--at", "1,2"], "--at must be X,Y,TWIST"),
+        (["--pattern", "{pat}", "--chip-size", "-5", "--at", "0,0,0"], "--chip-size"),
+        (["--pattern", "{pat}", "--chip-size", "200", "--at", "0,0,0", "--pad-angle", "70"], "Delta_gamma"),
+        (["--pattern", "{pat}", "--chip-size", "200", "--at", "0,0,0", "--memory-budget", "1"], "memory budget"),
+        (["--pattern", "{pat}", "--chip-size", "200", "--curve", "x"], "--from"),
+        (["--pattern", "{pat}", "--chip-size", "200", "--at", "0,0,0", "--window", "20", "--curve", "x", "--from", "0", "--to", "100"], "outside"),
+    ],
+)
+def test_bad_input_one_line_exit_2_no_output(fourpad_png, tmp_path, capsys, args, message):
+    out = tmp_path / "bad.json"
+    args = [a.replace("{pat}", str(fourpad_png)) for a in args]
+    assert main(["energy", *args, "--json", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert message in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    assert not out.exists()
