@@ -17,8 +17,15 @@ from patterns.errors import InputError
 COMMANDS = ("pattern", "energy")
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """Usage errors as one line (the command and the fix), exit code 2."""
+
+    def error(self, message: str):  # type: ignore[override]
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="selfalign",
         description="Capillary self-alignment of microchips: patterns, energy landscapes, trajectories.",
     )

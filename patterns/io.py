@@ -1,0 +1,175 @@
+"""Pattern images on disk: read any Pillow-readable image into a Mask, write 16-bit PNGs.
+
+Reading (:func:`read_mask`):
+
+* White is wettable (1.0), black is substrate (0.0); grey levels are kept as values in
+  [0, 1]: 8-bit / 255, 16-bit / 65535, 1-bit as 0 or 1. Colour images use the luminance
+  ``(299 R + 587 G + 114 B) / 1000`` (ITU-R 601, as Pillow's ``convert('L')``).
+* Transparency (an alpha channel, or a tRNS chunk in palette/grey/RGB images) multiplies the
+  value: a transparent pixel is never wettable. ``invert=True`` takes ``1 - value`` *before*
+  the alpha is applied, so inverting a drawing on a transparent background keeps the
+  background non-wettable.
+* Scale: an explicit ``um_per_px`` wins. Otherwise the PNG's pHYs chunk (pixels per metre,
+  unit "metre") gives ``um_per_px = 1e6 / px_per_m``; a pHYs with unit "unknown" only states
+  an aspect ratio and is ignored. pHYs stores whole pixels per metre, so a file written by
+  :func:`write_mask` also records the exact scale in its ``selfalign`` text chunk, which
+  refines the pHYs value when both agree.
+* The ``selfalign`` text chunk (JSON), when present, becomes ``Mask.params``.
+
+Writing (:func:`write_mask`): 16-bit greyscale (coverage survives to 1/65535), pHYs in
+pixels per metre, the ``selfalign`` JSON text chunk, written atomically.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import struct
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from PIL import Image, PngImagePlugin
+
+from patterns.errors import InputError, atomic_output, positive
+from patterns.mask import Mask
+
+__all__ = ["TEXT_KEY", "read_mask", "write_mask"]
+
+#: Key of the PNG text chunk holding the generating parameters as JSON.
+TEXT_KEY = "selfalign"
+
+_UM_PER_M = 1e6
+_SIXTEEN_BIT = {"I;16", "I;16L", "I;16B", "I;16N", "I"}
+
+
+def _luminance(rgb: np.ndarray) -> np.ndarray:
+    """8-bit RGB (..., 3) -> luminance in [0, 1], exact 1.0 for white."""
+    r, g, b = (rgb[..., i].astype(np.int64) for i in range(3))
+    return (299 * r + 587 * g + 114 * b) / (1000.0 * 255.0)
+
+
+def _values(im: Image.Image, path: Path) -> tuple[np.ndarray, np.ndarray | None]:
+    """Image -> (grey value in [0, 1], alpha in [0, 1] or None)."""
+    mode, trns = im.mode, im.info.get("transparency")
+    if mode in _SIXTEEN_BIT:
+        raw = np.asarray(im).astype(np.int64)
+        if raw.min() < 0 or raw.max() > 65535:
+            raise InputError(f"{path}: 32-bit integer image with values outside 0..65535; save it as 8- or 16-bit grey")
+        alpha = None if trns is None else (raw != trns).astype(np.float64)
+        return raw / 65535.0, alpha
+    if mode == "F":
+        return np.asarray(im, dtype=np.float64), None
+    if mode == "1" and trns is None:
+        return np.asarray(im, dtype=np.float64), None
+    if mode == "L" and trns is None:
+        return np.asarray(im, dtype=np.float64) / 255.0, None
+    if mode in ("1", "L", "LA", "La") and (mode in ("LA", "La") or trns is not None):
+        la = np.asarray(im.convert("LA"), dtype=np.float64) / 255.0
+        return la[..., 0], la[..., 1]
+    if mode == "RGB" and trns is None:
+        return _luminance(np.asarray(im)), None
+    # Palette, RGBA, RGB with tRNS, CMYK, YCbCr, LAB, HSV, ...: go through RGBA.
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # Pillow's note on palette transparency in bytes
+        rgba = np.asarray(im.convert("RGBA"))
+    return _luminance(rgba[..., :3]), rgba[..., 3] / 255.0
+
+
+def _scale_from_file(info: dict, params: dict, path: Path) -> float:
+    """um per px from the pHYs chunk (refined by the text chunk's exact value), or InputError."""
+    dpi = info.get("dpi")  # Pillow sets 'dpi' only for pHYs with unit = metre (as px_per_m * 0.0254)
+    if dpi is None:
+        raise InputError(f"{path} has no scale (pHYs chunk); pass --um-per-px")
+    px_per_m = [round(float(v) / 0.0254) for v in dpi]
+    if px_per_m[0] <= 0 or px_per_m[1] <= 0:
+        raise InputError(f"{path}: its pHYs chunk gives a non-positive scale ({px_per_m[0]} x {px_per_m[1]} px/m); pass --um-per-px")
+    if px_per_m[0] != px_per_m[1]:
+        raise InputError(f"{path}: its pHYs chunk gives non-square pixels ({px_per_m[0]} x {px_per_m[1]} px/m); "
+                         "resample to square pixels or pass --um-per-px")
+    exact = params.get("um_per_px")
+    if isinstance(exact, int | float) and exact > 0 and round(_UM_PER_M / exact) == px_per_m[0]:
+        return float(exact)
+    return _UM_PER_M / px_per_m[0]
+
+
+def read_mask(path: str | os.PathLike, um_per_px: float | None = None, invert: bool = False) -> Mask:
+    """Read an image file as a :class:`~patterns.mask.Mask` (see the module notes for the rules).
+
+    Args:
+        path: any Pillow-readable image (PNG expected); the first frame of multi-frame files.
+        um_per_px: pixel size in micrometres; overrides the file's pHYs scale.
+        invert: take ``1 - value`` (for images where black marks the pad).
+
+    Raises:
+        InputError: missing or unreadable file, or no usable scale.
+    """
+    path = Path(path)
+    if um_per_px is not None:
+        um_per_px = positive("--um-per-px", um_per_px, "um per px")
+    if not path.exists():
+        raise InputError(f"{path}: file does not exist")
+    if path.is_dir():
+        raise InputError(f"{path}: is a directory, not an image file")
+    try:
+        with Image.open(path) as im:
+            im.load()
+            value, alpha = _values(im, path)
+            info = dict(im.info)
+    except InputError:
+        raise
+    except Image.DecompressionBombError as err:
+        raise InputError(f"{path}: image too large to read safely ({err})") from None
+    except (OSError, SyntaxError, ValueError, EOFError, struct.error) as err:
+        raise InputError(f"{path}: not a readable image ({type(err).__name__}: {err}); give a PNG file") from None
+    params = _read_params(info)
+    scale = um_per_px if um_per_px is not None else _scale_from_file(info, params, path)
+    if invert:
+        value = 1.0 - value
+    if alpha is not None:
+        value = value * alpha
+    if value.min() < 0 or value.max() > 1 or not np.all(np.isfinite(value)):
+        raise InputError(f"{path}: float image with values outside [0, 1]; save it as 8- or 16-bit grey")
+    return Mask(data=value, um_per_px=scale, params=params)
+
+
+def _read_params(info: dict) -> dict:
+    text = info.get(TEXT_KEY)
+    if not isinstance(text, str):
+        return {}
+    try:
+        params = json.loads(text)
+    except json.JSONDecodeError:
+        return {}  # provenance only: a damaged note does not make the image unusable
+    return params if isinstance(params, dict) else {}
+
+
+def write_mask(path: str | os.PathLike, mask: Mask, params: dict[str, Any] | None = None) -> Path:
+    """Write ``mask`` as a 16-bit grey PNG with its scale (pHYs) and parameters (text chunk).
+
+    Values are stored as ``round(65535 * value)``. ``params`` (default ``mask.params``) is
+    stored as JSON under the ``selfalign`` key, with ``um_per_px`` set to the mask's scale.
+    The file appears only once fully written. Returns the path.
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise InputError(f"output {path}: is a directory; give a file name ending in .png")
+    if path.suffix.lower() != ".png":
+        raise InputError(f"output {path}: the file name must end in .png")
+    record = dict(mask.params if params is None else params)
+    record["um_per_px"] = mask.um_per_px
+    px_per_m = round(_UM_PER_M / mask.um_per_px)
+    if px_per_m < 1 or px_per_m > 2**31 - 1:
+        raise InputError(f"um_per_px={mask.um_per_px:g} cannot be stored in a PNG pHYs chunk "
+                         f"(1 to 2^31-1 px per metre); use {_UM_PER_M / (2**31 - 1):.3g} <= um_per_px <= 1e6")
+    info = PngImagePlugin.PngInfo()
+    info.add_text(TEXT_KEY, json.dumps(record, sort_keys=True))
+    pixels = np.round(mask.data * 65535.0).astype(np.uint16)
+    with atomic_output(path) as tmp:
+        try:
+            Image.fromarray(pixels).save(tmp, format="PNG", pnginfo=info, compress_level=9,
+                                         dpi=(px_per_m * 0.0254, px_per_m * 0.0254))  # Pillow writes pHYs from dpi
+        except OSError as err:
+            raise InputError(f"output {path}: cannot write ({err.strerror or err})") from None
+    return path
