@@ -182,6 +182,14 @@ class Correlator:
 
     ``corr[b, Y + ry, X + rx] = sum_{k,l} chip[b, k, l] * pattern[k + Y + dy, l + X + dx]``
     for the arrays as given (both in the same row orientation).
+
+    How the passes are kept few (the transforms are memory-bound): the chip is
+    flipped before its forward transform, so its spectrum already is the conjugate
+    the correlation needs; the phase ramps of that flip, and the roll that puts the
+    window at index 0 (so the window is a plain slice, not a gather), are folded
+    once into the stored pattern spectrum ``kernel``. Zero rows and columns around
+    each chunk of chips are cut before the forward transform, their offset applied
+    as a ramp on the (small) per-chunk kernel copy. One multiply per twist remains.
     """
 
     def __init__(self, pattern: np.ndarray, chip_shape: tuple[int, int], window: Window, dtype: str, backend: str = "auto"):
@@ -198,77 +206,129 @@ class Correlator:
         self.ny = sfft.next_fast_len(need_y, real=False)
         self.nx = sfft.next_fast_len(need_x, real=True)
         self.chip_shape = (hc, wc)
-        self.rows = (window.dy + np.arange(-window.ry, window.ry + 1)) % self.ny
-        self.cols = (window.dx + np.arange(-window.rx, window.rx + 1)) % self.nx
-        spec = self._forward(np.asarray(pattern, dtype=self.dtype)[None])[0]
-        self.pattern_spectrum = spec
+        self.out_shape = (2 * window.ry + 1, 2 * window.rx + 1)
         self.workers = os.cpu_count() or 1
+        # corr[m] = sum_k c[k] p[k + m]. With the flipped chip f[k] = c[hc - 1 - k],
+        # F(f) = e^{-i w (hc - 1)} conj(C); the window starts at m0 = dy - ry.
+        # kernel = P * e^{+i w (hc - 1)} * e^{+i w m0} so that corr[m0 + j] = IFFT(kernel F(f))[j].
+        ky = np.exp(2j * np.pi * np.fft.fftfreq(self.ny) * (hc - 1 + window.dy - window.ry))
+        kx = np.exp(2j * np.pi * np.fft.rfftfreq(self.nx) * (wc - 1 + window.dx - window.rx))
+        spec = sfft.fft(sfft.rfft(np.asarray(pattern, self.dtype), n=self.nx, axis=1, workers=self.workers), n=self.ny, axis=0, workers=self.workers)
+        cdt = spec.dtype
+        self.kernel = (spec * ky[:, None] * kx[None, :]).astype(cdt)
+        self._fy = np.fft.fftfreq(self.ny)
+        self._fx = np.fft.rfftfreq(self.nx)
         if self.backend == "jax":
             self._jax_fn = self._make_jax()
 
     def bytes_per_twist(self) -> int:
         complex_item = 2 * self.dtype.itemsize
-        return self.ny * (self.nx // 2 + 1) * complex_item * 2 + len(self.rows) * self.nx * self.dtype.itemsize
+        return self.ny * (self.nx // 2 + 1) * complex_item * 2 + self.out_shape[0] * self.nx * self.dtype.itemsize
 
-    def _forward(self, x: np.ndarray) -> np.ndarray:
-        # Real FFT along x over the rows given (zero rows beyond need no transform),
-        # then along y with zero padding to ny.
-        a = sfft.rfft(x, n=self.nx, axis=2, workers=os.cpu_count())
-        return sfft.fft(a, n=self.ny, axis=1, workers=os.cpu_count())
-
-    def __call__(self, chips: np.ndarray) -> np.ndarray:
-        """(B, hc, wc) chips -> (B, 2 ry + 1, 2 rx + 1) correlation window."""
+    def __call__(self, chips: np.ndarray, out: np.ndarray | None = None, scale: float = 1.0) -> np.ndarray:
+        """(B, hc, wc) chips -> ``scale`` * correlation window (B, 2 ry + 1, 2 rx + 1), into ``out``."""
         chips = np.asarray(chips, dtype=self.dtype)
+        if out is None:
+            out = np.empty((len(chips),) + self.out_shape, self.dtype)
         if self.backend == "jax":
-            return np.asarray(self._jax_fn(chips))
-        r0, r1, _, _ = _nonzero_box(chips.any(axis=0)) if chips.any() else (0, 1, 0, 1)
-        # corr = IFFT(P * conj(C)); the chip rows start at r0, shifting its spectrum.
-        spec = self._forward(chips[:, r0:r1])
-        if r0:
-            spec *= np.exp(-2j * np.pi * r0 * np.fft.fftfreq(self.ny)).astype(spec.dtype)[None, :, None]
-        np.conjugate(spec, out=spec)
-        spec *= self.pattern_spectrum
-        a = sfft.ifft(spec, axis=1, workers=self.workers)[:, self.rows]
-        out = sfft.irfft(a, n=self.nx, axis=2, workers=self.workers)
-        return out[:, :, self.cols]
+            out[...] = np.asarray(self._jax_fn(chips)) * scale
+            return out
+        flipped = chips[:, ::-1, ::-1]
+        nz = flipped.any(axis=0)
+        if not nz.any():
+            out[...] = 0
+            return out
+        r0, r1, c0, c1 = _nonzero_box(nz)
+        b = len(chips)
+        spec = self._buffer(b)
+        spec[:, : r1 - r0] = sfft.rfft(flipped[:, r0:r1, c0:c1], n=self.nx, axis=2, workers=self.workers)
+        spec[:, r1 - r0 :] = 0
+        spec = sfft.fft(spec, axis=1, workers=self.workers, overwrite_x=True)
+        spec *= self._shifted_kernel(r0, c0)
+        spec = sfft.ifft(spec, axis=1, workers=self.workers, overwrite_x=True)
+        res = sfft.irfft(spec[:, : self.out_shape[0]], n=self.nx, axis=2, workers=self.workers)
+        np.multiply(res[:, :, : self.out_shape[1]], scale, out=out, casting="unsafe")
+        return out
+
+    def _buffer(self, b: int) -> np.ndarray:
+        """A reused complex work array (B, ny, nx/2 + 1): no fresh pages per chunk."""
+        buf = getattr(self, "_buf", None)
+        if buf is None or buf.shape[0] < b:
+            cdt = np.result_type(self.dtype, np.complex64)
+            self._buf = buf = np.empty((b, self.ny, self.nx // 2 + 1), cdt)
+        return buf[:b]
+
+    def _shifted_kernel(self, r0: int, c0: int) -> np.ndarray:
+        """The kernel for chips cut by (r0, c0) leading zeros: a phase ramp, cached per offset."""
+        if not (r0 or c0):
+            return self.kernel
+        cache = self.__dict__.setdefault("_kcache", {})
+        if (r0, c0) not in cache:
+            if len(cache) >= 4:
+                cache.pop(next(iter(cache)))
+            cdt = self.kernel.dtype
+            py = np.exp(-2j * np.pi * self._fy * r0).astype(cdt)
+            px = np.exp(-2j * np.pi * self._fx * c0).astype(cdt)
+            k = self.kernel * py[:, None]
+            k *= px[None, :]
+            cache[(r0, c0)] = k
+        return cache[(r0, c0)]
 
     def _make_jax(self):
         import jax
         import jax.numpy as jnp
 
-        ps = jnp.asarray(self.pattern_spectrum)
-        rows, cols, nx, ny = jnp.asarray(self.rows), jnp.asarray(self.cols), self.nx, self.ny
+        kern = jnp.asarray(self.kernel)
+        nx, ny = self.nx, self.ny
+        nr, nc = self.out_shape
 
         @jax.jit
         def run(chips):
-            spec = jnp.fft.fft(jnp.fft.rfft(chips, n=nx, axis=2), n=ny, axis=1)
-            a = jnp.fft.ifft(ps * jnp.conj(spec), axis=1)[:, rows]
-            return jnp.fft.irfft(a, n=nx, axis=2)[:, :, cols]
+            spec = jnp.fft.fft(jnp.fft.rfft(chips[:, ::-1, ::-1], n=nx, axis=2), n=ny, axis=1)
+            a = jnp.fft.ifft(kern * spec, axis=1)[:, :nr]
+            return jnp.fft.irfft(a, n=nx, axis=2)[:, :, :nc]
 
         return run
 
 
-def correlate_stack(pattern: np.ndarray, chips: np.ndarray, dtype: str = "float32", backend: str = "auto") -> np.ndarray:
+def correlate_stack(pattern: np.ndarray, chips: np.ndarray, dtype: str = "float32", backend: str = "auto", chunk: int = 8) -> np.ndarray:
     """Full linear cross-correlation of ``pattern`` (H, W) with each of ``chips`` (T, h, w).
 
     ``out[t, m + h - 1, n + w - 1] = sum_{k,l} chips[t, k, l] * pattern[k + m, l + n]``,
     i.e. what ``cv2.matchTemplate(TM_CCORR)`` gives on a pattern zero-padded by the chip
-    size, for every shift. Chips that repeat exactly (a symmetric chip at twists one
-    period apart) are transformed once.
+    size, for every shift. Chips that repeat (a symmetric chip at twists one period
+    apart, equal within 1e-9) are transformed once.
     """
     pattern, chips = np.asarray(pattern), np.asarray(chips)
-    (hp, wp), (_, hc, wc) = pattern.shape, chips.shape
-    # Centre the window on shift ((hp - hc)/2, (wp - wc)/2); a zero row/column makes it whole.
+    (hp, wp), (t, hc, wc) = pattern.shape, chips.shape
+    # Window m in [-(hc - 1), hp - 1]: centre dy = (hp - hc)/2, half-width ry = (hp + hc)/2 - 1;
+    # a zero row/column appended to the pattern makes both whole.
     py, px = (hp - hc) % 2, (wp - wc) % 2
     hq, wq = hp + py, wp + px
     win = Window(rx=(wq + wc) // 2 - 1, ry=(hq + hc) // 2 - 1, dx=(wq - wc) // 2, dy=(hq - hc) // 2)
     cor = Correlator(np.pad(pattern, ((0, py), (0, px))), (hc, wc), win, dtype, backend)
-    keys = [hash(np.ascontiguousarray(c).tobytes()) for c in chips]
-    uniq = list(dict.fromkeys(keys))  # first occurrence of each distinct chip, in order
-    first = [keys.index(k) for k in uniq]
-    out = np.concatenate([cor(chips[first[i : i + 16]]) for i in range(0, len(first), 16)])
-    pos = {k: n for n, k in enumerate(uniq)}
-    return out[[pos[k] for k in keys], : hp + hc - 1, : wp + wc - 1]
+    # A repeat: equal to an earlier chip within 1e-9 (rasters of a symmetric chip one
+    # period apart differ by float round-off only). Keyed on values rounded to 1e-7,
+    # then checked, so a near miss is just computed again.
+    keys = [hash(np.round(c, 7).tobytes()) for c in chips]
+    first: dict[int, int] = {}
+    src = list(range(t))
+    for i, k in enumerate(keys):
+        j = first.setdefault(k, i)
+        if j != i and np.abs(chips[i] - chips[j]).max() <= 1e-9:
+            src[i] = j
+    uniq = [i for i in range(t) if src[i] == i]
+    out = np.empty((t, 2 * win.ry + 1, 2 * win.rx + 1), cor.dtype)
+    for i in range(0, len(uniq), chunk):
+        sel = uniq[i : i + chunk]
+        if sel == list(range(sel[0], sel[-1] + 1)):
+            cor(chips[sel[0] : sel[-1] + 1], out=out[sel[0] : sel[-1] + 1])
+        else:
+            out[sel] = cor(chips[sel])
+    for i, j in enumerate(src):
+        if j != i:
+            out[i] = out[j]
+    return out[:, : hp + hc - 1, : wp + wc - 1]
 
 
 # --------------------------------------------------------------------- landscape
@@ -558,7 +618,7 @@ def build_landscape(
     energy = np.empty((len(twists_deg), 2 * win.ry + 1, 2 * win.rx + 1), dtype=scene.dtype)
     for i in _progress(range(0, len(twists_deg), chunk), progress, len(twists_deg), chunk):
         stack = np.stack([rot(t) for t in twists_deg[i : i + chunk]])
-        energy[i : i + len(stack)] = cor(stack) * scale
+        cor(stack, out=energy[i : i + len(stack)], scale=scale)
     s = scene.um_per_px
     return Landscape(
         energy=energy,

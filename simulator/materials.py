@@ -1,0 +1,498 @@
+"""Materials, liquid, chip body, damping and the closed-form checks of PHYSICS.md.
+
+Units (one convention for the whole module):
+
+* SI inside and out for material constants: surface tension and surface energy in
+  N/m (= J/m^2; water is 0.0728 N/m = 72.8 mN/m), viscosity in Pa s, density in
+  kg/m^3, mass in kg, force in N, damping in N s/m (translation) and N m s
+  (rotation), energy in J.
+* Lengths in micrometres (um), areas in um^2, droplet volumes in nanolitres
+  (1 nl = 1e6 um^3), as everywhere else in selfalign.
+* Angles in degrees at every public boundary; radians only inside.
+
+Wetting weights follow Young's equation (PHYSICS.md section 2): covering a unit
+area of solid with liquid changes the energy by ``gamma_wet = -gamma_LA cos(theta)``,
+and the overlap model only needs the pad/substrate difference ``Delta_gamma``. The
+overlap energy of a pose is ``E = Delta_gamma * A_ol`` (section 3.2); with
+``Delta_gamma < 0`` minimum energy is maximum overlap.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from patterns.errors import InputError, positive
+
+#: m^2 per um^2: multiply an area in um^2 (an overlap in px^2 at 1 um/px) by
+#: ``Delta_gamma * UM2`` to get joules.
+UM2 = 1e-12
+UM = 1e-6
+UM3_PER_NL = 1e6
+
+WATER_SURFACE_TENSION_N_M = 0.0728
+WATER_VISCOSITY_PA_S = 1.0e-3
+WATER_DENSITY_KG_M3 = 998.0
+SU8_DENSITY_KG_M3 = 1200.0
+
+#: Multiplier on the Couette (uncoupled, linear-profile) damping estimate.
+#:
+#: Why a calibration factor exists: the Couette estimate ``c = mu A / h`` treats
+#: the liquid as a sheared film with a fixed linear velocity profile. For water it
+#: makes the chip a very lightly damped oscillator. For the source's two set-ups
+#: (PHYSICS.md section 11) a 1-D model with the parallelepiped force of section 3.3
+#: gives:
+#:
+#: ==========================================  =========  ==========  ===========
+#: set-up (SU-8 chip, water)                   zeta       factor 1    factor 30
+#: ==========================================  =========  ==========  ===========
+#: 200x200x50 um chip, 0.5 nl (h 12.5 um)      0.021      5 ms        0.2 ms
+#: 730x730x50 um chip, 20 nl (h 37.5 um)       0.024      24 ms       1.7 ms
+#: ==========================================  =========  ==========  ===========
+#:
+#: ``zeta = c / (2 sqrt(k0 m))`` is the damping ratio near alignment with
+#: ``k0 = 2 gamma L / h``. The times are for settling within 1 um, starting
+#: 40 um (small set-up) or 300 um (large set-up) off. With factor 1 the chip rings
+#: for tens of periods (period 0.2 ms and 0.7 ms).
+#:
+#: Measured water alignments of sub-millimetre chips are reported to take tens to
+#: hundreds of ms, so they are far slower than this estimate. Some known reasons:
+#: chip motion and internal flow are strongly coupled, and coupled models give much
+#: larger damping than uncoupled ones (PHYSICS.md section 4); contact lines dissipate
+#: energy and pin (hysteresis); the meniscus first has to spread over the chip; and
+#: the analytic stiffness overestimates the measured one (section 3.3). None of
+#: these is modelled, so one scalar multiplies the Couette value.
+#:
+#: The default of 30 brings both set-ups to ``zeta ~ 0.65-0.7``: moderately
+#: underdamped, with a visible overshoot that dies within about one period. This
+#: is a choice for readable trajectories. It is not fitted to a measurement and
+#: does *not* give tens of ms: that needs factors of order 10^3 (overdamped
+#: creep). Treat it as a tunable parameter and fit it to a measured alignment time
+#: when you have one. It does not change where the chip ends up in the
+#: quasi-static simulator, which has no time scale (PHYSICS.md section 3.2, limit 4).
+DAMPING_CALIBRATION = 30.0
+
+
+# --------------------------------------------------------------------------- checks
+
+
+def _angle(name: str, value: float) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"{name} must be a number of degrees, got {value!r}") from None
+    if not (0.0 <= v <= 180.0):
+        raise InputError(f"{name} must be a contact angle in [0, 180] degrees, got {value!r}")
+    return v
+
+
+def _cos_deg(theta_deg: float) -> float:
+    # Exact at the angles users type most (90 deg gives 0, not 6e-17).
+    return 0.0 if theta_deg == 90.0 else math.cos(math.radians(theta_deg))
+
+
+# --------------------------------------------------------------------- Young weights
+
+
+def gamma_wet(theta_deg: float, gamma_la: float = WATER_SURFACE_TENSION_N_M) -> float:
+    """Energy per unit area of wetting a solid, ``-gamma_LA cos(theta)`` (PHYSICS.md 2.2).
+
+    Args:
+        theta_deg: static contact angle of the liquid on the solid, degrees in [0, 180].
+        gamma_la: liquid/air surface tension, N/m.
+
+    Returns:
+        ``gamma_SL - gamma_SA`` in N/m (J/m^2), with the dry solid as zero.
+    """
+    return -positive("surface tension", gamma_la, "N/m") * _cos_deg(
+        _angle("contact angle", theta_deg)
+    )
+
+
+def delta_gamma(gamma_la: float, theta_pad_deg: float, theta_substrate_deg: float) -> float:
+    """``Delta_gamma = gamma_p - gamma_s = gamma_LA (cos theta_s - cos theta_p)`` in N/m.
+
+    Negative when the pad wets better than the substrate (``theta_p < theta_s``),
+    which is the case where the overlap model pulls the chip onto the pad.
+    Water at 30/60 degrees gives -0.02665 N/m (PHYSICS.md C14).
+    """
+    g = positive("surface tension", gamma_la, "N/m")
+    tp = _angle("pad contact angle", theta_pad_deg)
+    ts = _angle("substrate contact angle", theta_substrate_deg)
+    return g * (_cos_deg(ts) - _cos_deg(tp))
+
+
+@dataclass(frozen=True)
+class Materials:
+    """Liquid surface tension and the pad and substrate contact angles.
+
+    Frozen and hashable, so it can be a static argument. The mask grey level
+    ``v`` in [0, 1] is *graded wettability*: a pixel of grey ``v`` has the energy
+    weight ``v * Delta_gamma`` per unit area, which is the weight of a pad with
+    ``cos(theta) = cos(theta_s) + v (cos(theta_p) - cos(theta_s))`` (linear in
+    ``cos theta``, not in ``theta``; see :meth:`equivalent_angle_deg`).
+    Anti-aliased edge pixels use the same rule, so for them ``v`` is the covered
+    fraction of the pixel.
+
+    Attributes:
+        surface_tension_N_m: liquid/air surface tension, N/m (water 0.0728).
+        pad_angle_deg: contact angle on the pad (white), degrees in [0, 180].
+        substrate_angle_deg: contact angle on the substrate (black), degrees in [0, 180].
+        allow_repulsive: accept ``Delta_gamma >= 0`` (pad no more wettable than the
+            substrate). The overlap simulator then *minimises* overlap or feels no
+            force (PHYSICS.md C14), so it is rejected unless you ask for it.
+    """
+
+    surface_tension_N_m: float = WATER_SURFACE_TENSION_N_M
+    pad_angle_deg: float = 30.0
+    substrate_angle_deg: float = 60.0
+    allow_repulsive: bool = False
+
+    def __post_init__(self) -> None:
+        set_ = object.__setattr__
+        set_(
+            self,
+            "surface_tension_N_m",
+            positive("surface tension", self.surface_tension_N_m, "N/m"),
+        )
+        set_(self, "pad_angle_deg", _angle("pad contact angle", self.pad_angle_deg))
+        set_(
+            self, "substrate_angle_deg", _angle("substrate contact angle", self.substrate_angle_deg)
+        )
+        set_(self, "allow_repulsive", bool(self.allow_repulsive))
+        dg = self.delta_gamma_N_m
+        if dg >= 0 and not self.allow_repulsive:
+            raise InputError(
+                f"pad contact angle {self.pad_angle_deg:g} deg must be smaller than substrate contact angle "
+                f"{self.substrate_angle_deg:g} deg: Delta_gamma = {dg * 1e3:+.2f} mN/m >= 0 would push the chip "
+                "off the pad; swap the angles, or pass allow_repulsive=True to study that case"
+            )
+
+    @property
+    def delta_gamma_N_m(self) -> float:
+        """``gamma_LA (cos theta_s - cos theta_p)`` in N/m; < 0 for an attracting pad."""
+        return delta_gamma(self.surface_tension_N_m, self.pad_angle_deg, self.substrate_angle_deg)
+
+    @property
+    def joules_per_um2(self) -> float:
+        """Energy of one um^2 of overlap, ``Delta_gamma * 1e-12`` J (E = this * A_ol[um^2])."""
+        return self.delta_gamma_N_m * UM2
+
+    def weight(self, v: float | np.ndarray) -> float | np.ndarray:
+        """Energy per unit area (N/m) of mask grey level ``v`` in [0, 1]: ``v * Delta_gamma``."""
+        return (
+            np.asarray(v) * self.delta_gamma_N_m if np.ndim(v) else float(v) * self.delta_gamma_N_m
+        )
+
+    def equivalent_angle_deg(self, v: float) -> float:
+        """Contact angle (degrees) of a uniform pad with the weight of grey level ``v``.
+
+        ``arccos(cos theta_s + v (cos theta_p - cos theta_s))``: 0 gives the substrate
+        angle, 1 the pad angle.
+        """
+        v = float(v)
+        if not (0.0 <= v <= 1.0):
+            raise InputError(f"grey level must lie in [0, 1], got {v!r}")
+        cs, cp = _cos_deg(self.substrate_angle_deg), _cos_deg(self.pad_angle_deg)
+        return math.degrees(math.acos(min(1.0, max(-1.0, cs + v * (cp - cs)))))
+
+
+# ------------------------------------------------------------------- liquid and chip
+
+
+def meniscus_height_um(volume_nl: float, area_um2: float) -> float:
+    """Flat-slab meniscus height ``h = V / A`` in um (PHYSICS.md 7.1).
+
+    20 nl on 730 x 730 um gives 37.53 um; 0.5 nl on 200 x 200 um gives 12.5 um.
+    """
+    v = positive("droplet volume", volume_nl, "nl")
+    a = positive("wetted area", area_um2, "um^2")
+    return v * UM3_PER_NL / a
+
+
+@dataclass(frozen=True)
+class Liquid:
+    """The alignment liquid (water by default) and its volume.
+
+    Attributes:
+        name: a label for reports.
+        surface_tension_N_m: liquid/air surface tension, N/m.
+        viscosity_Pa_s: dynamic viscosity, Pa s (water at 20 C: 1.0e-3).
+        density_kg_m3: density, kg/m^3.
+        volume_nl: droplet volume, nl. The default 20 nl is the source's four-pad
+            volume (730 um pattern); the defect/jaggedness tests on 200 um used 0.5 nl.
+    """
+
+    name: str = "water"
+    surface_tension_N_m: float = WATER_SURFACE_TENSION_N_M
+    viscosity_Pa_s: float = WATER_VISCOSITY_PA_S
+    density_kg_m3: float = WATER_DENSITY_KG_M3
+    volume_nl: float = 20.0
+
+    def __post_init__(self) -> None:
+        set_ = object.__setattr__
+        set_(self, "name", str(self.name))
+        set_(
+            self,
+            "surface_tension_N_m",
+            positive("surface tension", self.surface_tension_N_m, "N/m"),
+        )
+        set_(self, "viscosity_Pa_s", positive("viscosity", self.viscosity_Pa_s, "Pa s"))
+        set_(self, "density_kg_m3", positive("liquid density", self.density_kg_m3, "kg/m^3"))
+        set_(self, "volume_nl", positive("droplet volume", self.volume_nl, "nl"))
+
+    def meniscus_height_um(self, area_um2: float) -> float:
+        """``h = V / A`` in um for this droplet spread over ``area_um2``."""
+        return meniscus_height_um(self.volume_nl, area_um2)
+
+
+@dataclass(frozen=True)
+class Chip:
+    """A rectangular chip body (a cuboid), for mass and moment of inertia.
+
+    Attributes:
+        width_um, height_um: footprint along x and y, um.
+        thickness_um: along z, um (the source's SU-8 chips: 50 um).
+        density_kg_m3: body density, kg/m^3 (SU-8 about 1200, a value from outside the source).
+    """
+
+    width_um: float
+    height_um: float
+    thickness_um: float = 50.0
+    density_kg_m3: float = SU8_DENSITY_KG_M3
+
+    def __post_init__(self) -> None:
+        set_ = object.__setattr__
+        set_(self, "width_um", positive("chip width", self.width_um, "um"))
+        set_(self, "height_um", positive("chip height", self.height_um, "um"))
+        set_(self, "thickness_um", positive("chip thickness", self.thickness_um, "um"))
+        set_(self, "density_kg_m3", positive("chip density", self.density_kg_m3, "kg/m^3"))
+
+    @property
+    def area_um2(self) -> float:
+        """Footprint area, um^2."""
+        return self.width_um * self.height_um
+
+    @property
+    def mass_kg(self) -> float:
+        """``rho w h t``, kg (200 x 200 x 50 um SU-8: 2.4e-9 kg)."""
+        return self.density_kg_m3 * self.width_um * self.height_um * self.thickness_um * UM**3
+
+    @property
+    def moment_of_inertia_kg_m2(self) -> float:
+        """About the vertical axis through the centre, ``m (w^2 + h^2) / 12``, kg m^2."""
+        return self.mass_kg * (self.width_um**2 + self.height_um**2) * UM2 / 12.0
+
+    @property
+    def polar_moment_um4(self) -> float:
+        """Polar second moment of the footprint about its centre, ``A (w^2 + h^2) / 12``, um^4."""
+        return rectangle_polar_moment_um4(self.width_um, self.height_um)
+
+
+# ----------------------------------------------------------------------------- damping
+
+
+def rectangle_polar_moment_um4(width_um: float, height_um: float) -> float:
+    """``J = integral of r^2 dA = A (w^2 + h^2) / 12`` of a centred rectangle, um^4."""
+    w = positive("width", width_um, "um")
+    h = positive("height", height_um, "um")
+    return w * h * (w * w + h * h) / 12.0
+
+
+def couette_damping(viscosity_Pa_s: float, wetted_area_um2: float, h_um: float) -> float:
+    """Translational Couette damping ``c = mu A / h`` in N s/m (uncalibrated; PHYSICS.md 4).
+
+    Multiply by :data:`DAMPING_CALIBRATION` (or your own factor) before use.
+    """
+    mu = positive("viscosity", viscosity_Pa_s, "Pa s")
+    a = positive("wetted area", wetted_area_um2, "um^2")
+    h = positive("meniscus height", h_um, "um")
+    return mu * a * UM2 / (h * UM)
+
+
+def couette_torsional_damping(viscosity_Pa_s: float, polar_moment_um4: float, h_um: float) -> float:
+    """Rotational Couette damping ``c_t = mu J / h`` in N m s, any footprint (uncalibrated).
+
+    ``J`` is the polar second moment of the wetted footprint about the rotation axis, um^4.
+    """
+    mu = positive("viscosity", viscosity_Pa_s, "Pa s")
+    j = positive("polar moment", polar_moment_um4, "um^4")
+    h = positive("meniscus height", h_um, "um")
+    return mu * j * UM2 * UM2 / (h * UM)
+
+
+def couette_rotational_damping(
+    viscosity_Pa_s: float, width_um: float, height_um: float, h_um: float
+) -> float:
+    """Rotational Couette damping of a rectangular footprint, ``mu A (w^2 + h^2) / (12 h)``, N m s."""
+    return couette_torsional_damping(
+        viscosity_Pa_s, rectangle_polar_moment_um4(width_um, height_um), h_um
+    )
+
+
+# ------------------------------------------------------------------ analytic formulas
+
+
+def parallelepiped_force(
+    x_um: float | np.ndarray, h_um: float, L_um: float, gamma: float = WATER_SURFACE_TENSION_N_M
+) -> float | np.ndarray:
+    """Restoring force of the sheared-block meniscus, ``-2 gamma L x / sqrt(x^2 + h^2)`` in N.
+
+    PHYSICS.md 3.3 [Eq. 6] and C13: tends to ``-2 gamma L`` for ``x >> h``, has slope
+    ``-2 gamma L / h`` at 0 (:func:`parallelepiped_stiffness`) and equals
+    ``-sqrt(2) gamma L`` at ``x = h``.
+
+    Args:
+        x_um: bias along the axis, um (scalar or array).
+        h_um: meniscus height, um (> 0).
+        L_um: edge length perpendicular to the shift, um.
+        gamma: liquid/air surface tension, N/m.
+    """
+    h = positive("meniscus height", h_um, "um")
+    length = positive("edge length", L_um, "um")
+    g = positive("surface tension", gamma, "N/m")
+    x = np.asarray(x_um, dtype=np.float64)
+    f = -2.0 * g * length * UM * x / np.hypot(x, h)
+    return float(f) if f.ndim == 0 else f
+
+
+def parallelepiped_stiffness(
+    h_um: float, L_um: float, gamma: float = WATER_SURFACE_TENSION_N_M
+) -> float:
+    """Small-bias stiffness ``k0 = 2 gamma L / h`` of the sheared-block meniscus, N/m."""
+    h = positive("meniscus height", h_um, "um")
+    length = positive("edge length", L_um, "um")
+    return 2.0 * positive("surface tension", gamma, "N/m") * length / h
+
+
+def overflow_angle_deg(theta_edge_deg: float, theta_adv_pad_deg: float) -> float:
+    """Apparent angle at which liquid spills over a pad edge, ``(180 - theta_edge) + theta_adv_pad``.
+
+    PHYSICS.md 9.2 [Eq. 22]; ``theta_edge`` is the solid wedge angle (90 = vertical wall).
+    """
+    te = _angle("edge angle", theta_edge_deg)
+    ta = _angle("pad advancing angle", theta_adv_pad_deg)
+    return 180.0 - te + ta
+
+
+def overflow_bias_um(h_um: float, theta_edge_deg: float, theta_adv_pad_deg: float) -> float:
+    """Bias beyond which liquid overflows a protruding pad, ``h / tan(theta_edge - theta_adv_pad)``, um.
+
+    PHYSICS.md 9.4 [Eq. 23] and C12 (h 12.5 um, 90 deg, 60 deg -> 21.65 um). Returns
+    ``math.inf`` when ``theta_edge <= theta_adv_pad`` (the overflow angle is >= 180
+    and cannot be reached: condition 1), and 0 when ``theta_edge - theta_adv_pad >= 90``
+    (the flat-face meniscus is already past the pinning window at zero bias).
+    """
+    h = positive("meniscus height", h_um, "um")
+    diff = _angle("edge angle", theta_edge_deg) - _angle("pad advancing angle", theta_adv_pad_deg)
+    if diff <= 0:
+        return math.inf
+    if diff >= 90:
+        return 0.0
+    return h / math.tan(math.radians(diff))
+
+
+@dataclass(frozen=True)
+class OverflowConditions:
+    """Which of the three no-overflow conditions of PHYSICS.md 9.4 hold.
+
+    Attributes:
+        edge_confines: (1) ``theta_edge <= theta_adv_pad``: the edge can never be overrun.
+        chip_dewets: (2) ``theta_edge < theta_adv_pad + theta_chip``: the chip de-wets
+            before the liquid reaches the overflow angle.
+        bias_below_overflow: (3) ``|bias| < overflow_bias_um``.
+        overflow_bias_um: the bias of condition (3), um (inf under condition 1).
+    """
+
+    edge_confines: bool
+    chip_dewets: bool
+    bias_below_overflow: bool
+    overflow_bias_um: float
+
+    @property
+    def holding(self) -> tuple[int, ...]:
+        """Numbers (1, 2, 3) of the conditions that hold."""
+        flags = (self.edge_confines, self.chip_dewets, self.bias_below_overflow)
+        return tuple(i + 1 for i, f in enumerate(flags) if f)
+
+    @property
+    def overflows(self) -> bool:
+        """True when none of the conditions holds: the liquid overflows, alignment fails."""
+        return not self.holding
+
+
+def overflow_conditions(
+    theta_edge_deg: float,
+    theta_adv_pad_deg: float,
+    theta_chip_deg: float,
+    bias_um: float,
+    h_um: float,
+) -> OverflowConditions:
+    """Evaluate the no-overflow conditions (1)-(3) of PHYSICS.md 9.4 for one placement.
+
+    Args:
+        theta_edge_deg: solid wedge angle of the pad edge, degrees (90 = vertical wall).
+        theta_adv_pad_deg: advancing contact angle on the pad, degrees.
+        theta_chip_deg: the chip's *advancing* angle when the chip is placed with a
+            bias, or its *receding* angle when it is placed without bias and then
+            dragged sideways (the stricter case), degrees.
+        bias_um: lateral bias, um (its magnitude is used).
+        h_um: meniscus height, um (e.g. :func:`meniscus_height_um`).
+    """
+    te = _angle("edge angle", theta_edge_deg)
+    ta = _angle("pad advancing angle", theta_adv_pad_deg)
+    tc = _angle("chip contact angle", theta_chip_deg)
+    x = abs(float(bias_um))
+    if not math.isfinite(x):
+        raise InputError(f"bias must be a finite number of um, got {bias_um!r}")
+    xo = overflow_bias_um(h_um, te, ta)
+    return OverflowConditions(
+        edge_confines=te <= ta,
+        chip_dewets=te < ta + tc,
+        bias_below_overflow=x < xo,
+        overflow_bias_um=xo,
+    )
+
+
+def critical_volume_nl(v_nd: float, area_um2: float) -> float:
+    """Critical droplet volume ``V_crit = (V_ND A)^(3/2)`` of a segmented pattern, nl.
+
+    PHYSICS.md 8.3 [Eq. 17]. ``V_ND`` is dimensionless and comes from a fit for the
+    contact angles and relative gap in question (not reproduced here); ``A`` is the
+    pattern area in um^2, so ``(V_ND A)^(3/2)`` is in um^3 and is divided by 1e6.
+    """
+    v = positive("dimensionless volume V_ND", v_nd)
+    a = positive("pattern area", area_um2, "um^2")
+    return (v * a) ** 1.5 / UM3_PER_NL
+
+
+def dimensionless_volume(volume_nl: float, area_um2: float) -> float:
+    """Inverse of :func:`critical_volume_nl`: ``V_ND = V^(2/3) / A`` with V in um^3."""
+    v = positive("droplet volume", volume_nl, "nl")
+    a = positive("pattern area", area_um2, "um^2")
+    return (v * UM3_PER_NL) ** (2.0 / 3.0) / a
+
+
+__all__ = [
+    "DAMPING_CALIBRATION",
+    "Chip",
+    "Liquid",
+    "Materials",
+    "OverflowConditions",
+    "couette_damping",
+    "couette_rotational_damping",
+    "couette_torsional_damping",
+    "critical_volume_nl",
+    "delta_gamma",
+    "dimensionless_volume",
+    "gamma_wet",
+    "meniscus_height_um",
+    "overflow_angle_deg",
+    "overflow_bias_um",
+    "overflow_conditions",
+    "parallelepiped_force",
+    "parallelepiped_stiffness",
+    "rectangle_polar_moment_um4",
+]
