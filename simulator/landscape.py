@@ -344,8 +344,14 @@ class Landscape:
         period_deg: the chip's rotational symmetry period (degrees).
         um_per_px: translation step (um).
         delta_gamma: pad minus substrate wetting energy (N/m, negative).
-        full_reach: the window covers every pose where the chip touches the pattern
-            (outside it the energy is exactly 0).
+        energy_scale_J: the largest |E| the scene can reach, |Delta_gamma| min(|P|, |C|)
+            (PHYSICS.md C8); the noise floor scales with it, so every box or band of one
+            scene shares one floor (0 = take max|E| of this grid).
+        cut: ((t_lo, t_hi), (y_lo, y_hi), (x_lo, x_hi)): True where the grid was cut
+            short on that side (a box or band of a larger grid), so the energy beyond it
+            is unknown. Beyond an uncut x/y side the chip no longer touches the pattern
+            and the energy is exactly 0; beyond an uncut end of a non-periodic twist
+            axis lies the end of the twist range the scene asked for.
         stats: what the build did (rotations, seconds, bytes, backend, FFT size).
     """
 
@@ -357,8 +363,14 @@ class Landscape:
     period_deg: float
     um_per_px: float
     delta_gamma: float
-    full_reach: bool
+    cut: tuple = ((False, False), (False, False), (False, False))
+    energy_scale_J: float = 0.0
     stats: dict = field(default_factory=dict)
+
+    @property
+    def full_reach(self) -> bool:
+        """The translation window holds every pose where the chip touches the pattern."""
+        return not any(self.cut[1] + self.cut[2])
 
     # -- scales
     @property
@@ -371,9 +383,15 @@ class Landscape:
 
     @property
     def noise_floor_J(self) -> float:
-        """Energy differences below this are round-off: steppers treat them as ties."""
+        """Energy differences at or below this are round-off: steppers treat them as ties.
+
+        ``NOISE_FACTOR * eps(dtype) * energy_scale_J``: FFT round-off is bounded by a few
+        eps times the largest value (measured 3.3 eps in float32), so 32 eps leaves a
+        10x margin while staying far below any real one-pixel energy change.
+        """
         eps = np.finfo(self.energy.dtype).eps
-        return float(NOISE_FACTOR * eps * max(float(np.abs(self.energy).max()), np.finfo(float).tiny))
+        scale = self.energy_scale_J or float(np.abs(self.energy).max())
+        return float(NOISE_FACTOR * eps * max(scale, np.finfo(float).tiny))
 
     def overlap_um2(self, energy_J: np.ndarray | float) -> np.ndarray | float:
         """Overlap area (um^2) for an energy (J): A = E / Delta_gamma."""
@@ -396,10 +414,7 @@ class Landscape:
         energy is 0 (no contact) when the window has full reach, else InputError.
         """
         it, iy, ix = self.fractional_index(x_um, y_um, twist_deg)
-        return trilinear(self.energy, it, iy, ix, self.wrap, self._outside_ok())
-
-    def _outside_ok(self) -> bool:
-        return self.full_reach
+        return trilinear(self.energy, it, iy, ix, self.wrap, self.cut)
 
     def gradient_at(self, x_um, y_um, twist_deg) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(dE/dx, dE/dy) in J/m and dE/dtwist in J/rad, by central differences of one grid step.
@@ -483,14 +498,19 @@ def plateaus(values: np.ndarray, force: np.ndarray, floor: float, min_points: in
     return out
 
 
-def trilinear(e: np.ndarray, it, iy, ix, wrap: bool, outside_zero: bool) -> np.ndarray:
-    """Trilinear interpolation of ``e[t, y, x]`` at fractional indices (numpy, host side)."""
+def trilinear(e: np.ndarray, it, iy, ix, wrap: bool, cut=((False, False),) * 3) -> np.ndarray:
+    """Trilinear interpolation of ``e[t, y, x]`` at fractional indices (numpy, host side).
+
+    Beyond an uncut x/y side the value is 0 (no contact); beyond a cut side, or past
+    the ends of a non-periodic twist axis, InputError.
+    """
     nt, ny, nx = e.shape
     it, iy, ix = np.broadcast_arrays(*(np.asarray(a, float) for a in (it, iy, ix)))
     inside = (iy >= 0) & (iy <= ny - 1) & (ix >= 0) & (ix <= nx - 1)
-    if not wrap:
-        inside &= (it >= -1e-9) & (it <= nt - 1 + 1e-9)
-    if not np.all(inside) and not outside_zero:
+    unknown = (cut[1][0] & (iy < 0)) | (cut[1][1] & (iy > ny - 1)) | (cut[2][0] & (ix < 0)) | (cut[2][1] & (ix > nx - 1))
+    if not wrap and nt > 1:
+        unknown |= (it < -1e-9) | (it > nt - 1 + 1e-9)
+    if np.any(unknown):
         raise InputError("pose outside the landscape's pose grid; widen the window (window_um) or the twist range")
     x0 = np.clip(np.floor(ix), 0, max(nx - 2, 0)).astype(int)
     y0 = np.clip(np.floor(iy), 0, max(ny - 2, 0)).astype(int)
@@ -520,19 +540,28 @@ def trilinear(e: np.ndarray, it, iy, ix, wrap: bool, outside_zero: bool) -> np.n
     return np.where(inside, val, 0.0)
 
 
-def _window(scene: Scene, pat_origin: tuple[float, float], pat_reach: tuple[float, float], rot: ChipRotator) -> Window:
-    """Translation window in px and the pattern offset of the chip canvas."""
-    hc, wc = rot.shape
-    cx, cy = _chip_reach_px(scene.chip, scene.effects.twist)
-    rx = math.ceil(pat_reach[0] + cx - 1e-9)
-    ry = math.ceil(pat_reach[1] + cy - 1e-9)
-    if scene.window_um is not None:
-        w = math.ceil(scene.window_um / scene.um_per_px - 1e-9)
-        rx, ry = min(rx, w), min(ry, w)
-    dx = pat_origin[0] - wc / 2
-    dy = pat_origin[1] - hc / 2
-    assert dx == int(dx) and dy == int(dy), "pixel grids of chip and pattern must coincide"
-    return Window(rx=rx, ry=ry, dx=int(dx), dy=int(dy))
+def _axis_box(full: int, limit: int | None, center: int, half: int | None) -> tuple[int, int, bool, bool]:
+    """(centre, half-width, cut below, cut above) of a window on an axis of reach ``full``.
+
+    ``limit`` caps the half-width about 0 (the scene's window); ``center``/``half`` ask
+    for a box; the box is clamped to the reach and kept symmetric about its centre.
+    """
+    lim = full if limit is None else min(full, limit)
+    center = min(max(center, -lim), lim)  # beyond the reach nothing touches: clamp
+    lo, hi = (-lim, lim) if half is None else (max(center - half, -lim), min(center + half, lim))
+    if (hi - lo) % 2:
+        hi, lo = (hi - 1, lo) if hi > center else (hi, lo + 1)
+    return (lo + hi) // 2, (hi - lo) // 2, lo > -full, hi < full
+
+
+def _twist_cut(axis: np.ndarray, wrap: bool, twists: np.ndarray) -> tuple[bool, bool]:
+    """Which ends of ``twists`` cut a longer twist axis short."""
+    if len(axis) == 1:
+        return False, False
+    if wrap:
+        return (len(twists) < len(axis),) * 2
+    eps = 1e-9 * max(1.0, abs(axis).max())
+    return bool(twists[0] > axis[0] + eps), bool(twists[-1] < axis[-1] - eps)
 
 
 def estimate_bytes(scene: Scene, twists: np.ndarray | None = None) -> int:
@@ -540,11 +569,10 @@ def estimate_bytes(scene: Scene, twists: np.ndarray | None = None) -> int:
     return plan(scene, twists)["landscape_bytes"]
 
 
-def plan(scene: Scene, twists: np.ndarray | None = None) -> dict:
+def plan(scene: Scene, twists: np.ndarray | None = None, center_px: tuple[int, int] = (0, 0), half_px: int | None = None) -> dict:
     """Everything the build will do, computed without allocating the landscape."""
     all_twists, wrap, period = twist_axis(scene)
-    if twists is None:
-        twists = all_twists
+    twists = all_twists if twists is None else np.asarray(twists, float)
     pat = scene.pattern.data
     r0, r1, c0, c1 = _nonzero_box(pat > 0)
     h, w = pat.shape
@@ -553,28 +581,32 @@ def plan(scene: Scene, twists: np.ndarray | None = None) -> dict:
     reach = (max(w / 2 - c0, c1 - w / 2), max(h / 2 - r0, r1 - h / 2))
     parity = (int((2 * origin[1]) % 2), int((2 * origin[0]) % 2))
     rot = ChipRotator(scene.chip, scene.effects.twist, parity)
-    win = _window(scene, origin, reach, rot)
-    pat_up = pat[r0:r1, c0:c1][::-1]
-    # Keep only the pattern rows/columns some chip pose in the window can reach.
     hc, wc = rot.shape
+    chip_rx, chip_ry = _chip_reach_px(scene.chip, scene.effects.twist)
+    limit = None if scene.window_um is None else math.ceil(scene.window_um / scene.um_per_px - 1e-9)
+    cx, rx, x_lo, x_hi = _axis_box(math.ceil(reach[0] + chip_rx - 1e-9), limit, int(center_px[0]), half_px)
+    cy, ry, y_lo, y_hi = _axis_box(math.ceil(reach[1] + chip_ry - 1e-9), limit, int(center_px[1]), half_px)
+    dx, dy = origin[0] - wc / 2 + cx, origin[1] - hc / 2 + cy
+    assert dx == int(dx) and dy == int(dy), "pixel grids of chip and pattern must coincide"
+    win = Window(rx=rx, ry=ry, dx=int(dx), dy=int(dy))
+    # Keep only the pattern rows/columns some chip pose in the window can reach.
+    pat_up = pat[r0:r1, c0:c1][::-1]
     ya, yb = max(0, win.dy - win.ry), min(pat_up.shape[0], win.dy + win.ry + hc)
     xa, xb = max(0, win.dx - win.rx), min(pat_up.shape[1], win.dx + win.rx + wc)
+    if yb <= ya or xb <= xa:  # no pose of the box touches the pattern
+        ya, yb, xa, xb = 0, 1, 0, 1
     pat_up = pat_up[ya:yb, xa:xb]
     win = Window(rx=win.rx, ry=win.ry, dx=win.dx - xa, dy=win.dy - ya)
-    itemsize = np.dtype(scene.dtype).itemsize
-    full_reach = scene.window_um is None or (
-        win.rx >= math.ceil(reach[0] + _chip_reach_px(scene.chip, scene.effects.twist)[0] - 1e-9)
-    )
-    nbytes = len(twists) * (2 * win.ry + 1) * (2 * win.rx + 1) * itemsize
+    nbytes = len(twists) * (2 * win.ry + 1) * (2 * win.rx + 1) * np.dtype(scene.dtype).itemsize
     return {
-        "twists": np.asarray(twists, float),
-        "all_twists": all_twists,
+        "twists": twists,
         "wrap": wrap and len(twists) == len(all_twists),
         "period": period,
         "pattern_up": pat_up,
         "rotator": rot,
         "window": win,
-        "full_reach": bool(full_reach),
+        "center_px": (cx, cy),
+        "cut": (_twist_cut(all_twists, wrap, twists), (y_lo, y_hi), (x_lo, x_hi)),
         "landscape_bytes": int(nbytes),
     }
 
@@ -582,6 +614,8 @@ def plan(scene: Scene, twists: np.ndarray | None = None) -> dict:
 def build_landscape(
     scene: Scene,
     twists: np.ndarray | None = None,
+    center_px: tuple[int, int] = (0, 0),
+    half_px: int | None = None,
     backend: str = "auto",
     chunk: int = 8,
     progress: bool = False,
@@ -592,6 +626,9 @@ def build_landscape(
         scene: what to simulate.
         twists: twist values (degrees) to compute; default the scene's whole twist axis.
             A twist-free scene computes exactly one rotation.
+        center_px, half_px: compute only the box of translations within ``half_px`` px of
+            ``center_px`` (x, y px from the pattern centre), clamped to the reach; default
+            the scene's whole window.
         backend: "auto" (SciPy on CPU, JAX on GPU), "scipy" or "jax".
         chunk: twists transformed together (memory per chunk is reported in stats).
         progress: show a progress bar over twist chunks.
@@ -600,7 +637,7 @@ def build_landscape(
         InputError: the landscape would exceed ``scene.memory_budget_mb``.
     """
     t_start = time.perf_counter()
-    p = plan(scene, twists)
+    p = plan(scene, twists, center_px, half_px)
     win, rot = p["window"], p["rotator"]
     cor = Correlator(p["pattern_up"], rot.shape, win, scene.dtype, backend)
     budget = scene.memory_budget_mb * 2**20
@@ -620,16 +657,18 @@ def build_landscape(
         stack = np.stack([rot(t) for t in twists_deg[i : i + chunk]])
         cor(stack, out=energy[i : i + len(stack)], scale=scale)
     s = scene.um_per_px
+    cx, cy = p["center_px"]
     return Landscape(
         energy=energy,
-        x_um=(np.arange(2 * win.rx + 1) - win.rx) * s,
-        y_um=(np.arange(2 * win.ry + 1) - win.ry) * s,
+        x_um=(np.arange(2 * win.rx + 1) - win.rx + cx) * s,
+        y_um=(np.arange(2 * win.ry + 1) - win.ry + cy) * s,
         twist_deg=twists_deg,
         wrap=p["wrap"],
         period_deg=p["period"],
         um_per_px=s,
         delta_gamma=scene.materials.delta_gamma_N_m,
-        full_reach=p["full_reach"],
+        cut=p["cut"],
+        energy_scale_J=abs(scene.materials.delta_gamma_N_m) * min(scene.pattern.area_um2, scene.chip.area_um2) * UM2_TO_M2,
         stats={
             "rotations": rot.count,
             "seconds": time.perf_counter() - t_start,

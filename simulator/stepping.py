@@ -1,0 +1,353 @@
+"""Steppers on the energy landscape: pure, jit-able, vmap-able functions.
+
+Every stepper reads a :class:`Field` (the landscape arrays, a pytree) and a static
+:class:`Grid` (shape, spacing, periodicity: hashable, so jit recompiles only when it
+changes), starts from one pose in *grid-index units* ``(it, iy, ix)`` and runs a
+``lax.while_loop``. A batch is ``jax.vmap`` of the same function (see
+:mod:`simulator.montecarlo`), so one start and a batch run the same code.
+
+Index units: ``ix``, ``iy`` are pixels from the window's first column/row;
+``it`` counts twist steps from the first twist. On a periodic twist axis ``it``
+is *unwrapped* (it may leave [0, T) and is wrapped only for look-ups), so a
+trajectory reports the twist it actually turned through (e.g. -90 degrees).
+
+Ties (PHYSICS.md 5.3, DESIGN.md): energy differences at or below the landscape's
+noise floor are equal. Greedy keeps the current pose when it ties for the best;
+otherwise it takes the smallest move ``|dt| + |dy| + |dx|``, then the first in
+lexicographic order of ``(dt, dy, dx)`` from -1 to +1 (:data:`GREEDY_MOVES`). Each
+accepted move lowers the energy by more than the floor, so no pose is visited
+twice (no cycles) and a run ends after at most ``(E_start - E_min) / floor`` steps;
+``max_steps`` bounds it further.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from simulator.landscape import Landscape
+
+# Stop codes of a run (``status``), and the outcomes a trajectory reports.
+RUNNING, CONVERGED, MAX_STEPS, EDGE = 0, 1, 2, 3
+OUTCOMES = ("aligned", "plateau", "local_minimum", "no_contact", "max_steps")
+
+
+def _move_order() -> np.ndarray:
+    moves = list(itertools.product((-1, 0, 1), repeat=3))  # lexicographic in (dt, dy, dx)
+    moves.sort(key=lambda m: sum(map(abs, m)))  # stable: smallest move first
+    return np.array(moves, dtype=np.int32)
+
+
+#: The 27 greedy moves (dt, dy, dx) in tie-break order; row 0 is "stay".
+GREEDY_MOVES = _move_order()
+
+
+class Field(NamedTuple):
+    """The landscape arrays a stepper reads.
+
+    energy: (T, Ny, Nx) joules, ``[twist, y, x]``.
+    floor: noise floor (J): differences at or below it are ties.
+    best: (3,) grid indices (it, iy, ix) of the global minimum.
+    """
+
+    energy: jax.Array
+    floor: jax.Array
+    best: jax.Array
+
+
+@dataclass(frozen=True)
+class Grid:
+    """Static description of the pose grid (hashable: a jit static argument).
+
+    shape: (T, Ny, Nx). wrap: periodic twist axis. cut: ((t_lo, t_hi), (y_lo, y_hi),
+    (x_lo, x_hi)), True where the grid is a box cut from a larger one: reaching that
+    side stops the run with status EDGE so the caller can move the box (beyond an
+    uncut x/y side the energy is 0, no contact; beyond an uncut twist end, a wall).
+    um_per_px, twist_step_deg: spacing.
+    x0_um, y0_um, t0_deg: physical value of index 0. period_deg: chip symmetry.
+    rg_px: the chip's radius of gyration in px (scales twist to a length).
+    align_tol: (twist steps, px) within which a final pose counts as aligned.
+    """
+
+    shape: tuple[int, int, int]
+    wrap: bool
+    cut: tuple[tuple[bool, bool], tuple[bool, bool], tuple[bool, bool]]
+    um_per_px: float
+    twist_step_deg: float
+    # Where index 0 lies: host-side conversions only, so boxes of one shape share a
+    # compiled stepper (not part of the jit cache key).
+    x0_um: float = field(compare=False)
+    y0_um: float = field(compare=False)
+    t0_deg: float = field(compare=False)
+    period_deg: float
+    rg_px: float
+    align_tol: tuple[float, float] = (1.0, 1.0)
+
+    def to_pose(self, idx) -> np.ndarray:
+        """Grid indices (..., 3) (it, iy, ix) -> physical poses (..., 3) (x_um, y_um, twist_deg)."""
+        idx = np.asarray(idx, dtype=float)
+        return np.stack(
+            [self.x0_um + idx[..., 2] * self.um_per_px, self.y0_um + idx[..., 1] * self.um_per_px, self.t0_deg + idx[..., 0] * self.twist_step_deg],
+            axis=-1,
+        )
+
+    def to_index(self, pose) -> np.ndarray:
+        """Physical poses (..., 3) (x_um, y_um, twist_deg) -> fractional grid indices (..., 3)."""
+        pose = np.asarray(pose, dtype=float)
+        return np.stack(
+            [(pose[..., 2] - self.t0_deg) / self.twist_step_deg, (pose[..., 1] - self.y0_um) / self.um_per_px, (pose[..., 0] - self.x0_um) / self.um_per_px],
+            axis=-1,
+        )
+
+    @property
+    def twist_px_per_step(self) -> float:
+        """Arc length (px) at the radius of gyration for one twist step."""
+        return math.radians(self.twist_step_deg) * self.rg_px
+
+
+def field_and_grid(ls: Landscape, rg_px: float, dtype=None) -> tuple[Field, Grid]:
+    """The stepper view of a landscape. ``rg_px``: chip radius of gyration in px."""
+    e = jnp.asarray(ls.energy if dtype is None else ls.energy.astype(dtype))
+    it, iy, ix = np.unravel_index(int(np.argmin(ls.energy)), ls.energy.shape)
+    fld = Field(
+        energy=e,
+        floor=jnp.asarray(ls.noise_floor_J, e.dtype),
+        best=jnp.asarray([it, iy, ix], dtype=e.dtype),
+    )
+    grid = Grid(
+        shape=tuple(int(n) for n in ls.energy.shape),
+        wrap=bool(ls.wrap),
+        cut=tuple((bool(a), bool(b)) for a, b in ls.cut),
+        um_per_px=float(ls.um_per_px),
+        twist_step_deg=float(ls.twist_step_deg),
+        x0_um=float(ls.x_um[0]),
+        y0_um=float(ls.y_um[0]),
+        t0_deg=float(ls.twist_deg[0]),
+        period_deg=float(ls.period_deg),
+        rg_px=float(rg_px),
+    )
+    return fld, grid
+
+
+# ----------------------------------------------------------------- look-ups
+def lookup(field: Field, grid: Grid, it, iy, ix):
+    """Energy at integer grid indices (broadcasting). Beyond an uncut x/y side: 0 (no
+    contact); beyond a cut side or the end of a non-periodic twist axis: +inf (a wall
+    the steppers never cross; they stop at a cut side first)."""
+    t, ny, nx = grid.shape
+    (t_lo, t_hi), (y_lo, y_hi), (x_lo, x_hi) = grid.cut
+    below_y, above_y, below_x, above_x = iy < 0, iy >= ny, ix < 0, ix >= nx
+    wall = (y_lo & below_y) | (y_hi & above_y) | (x_lo & below_x) | (x_hi & above_x)
+    if grid.wrap:
+        itw = jnp.mod(it, t)
+    else:
+        itw = jnp.clip(it, 0, t - 1)
+        wall = wall | (it < 0) | (it >= t)
+    e = field.energy[itw, jnp.clip(iy, 0, ny - 1), jnp.clip(ix, 0, nx - 1)]
+    e = jnp.where(below_y | above_y | below_x | above_x, 0.0, e)
+    return jnp.where(wall, jnp.inf, e)
+
+
+def at_cut_edge(grid: Grid, q, margin: float = 0.0):
+    """True where fractional indices q lie within ``margin`` of a cut side of the grid."""
+    out = False
+    for k, n in enumerate(grid.shape):
+        lo, hi = grid.cut[k]
+        if lo:
+            out = out | (q[k] <= margin)
+        if hi:
+            out = out | (q[k] >= n - 1 - margin)
+    return jnp.asarray(out)
+
+
+def interpolate(field: Field, grid: Grid, q):
+    """Energy at fractional indices q = (it, iy, ix) by trilinear interpolation."""
+    q = jnp.asarray(q, field.energy.dtype)
+    base = jnp.floor(q)
+    f = q - base
+    b = base.astype(jnp.int32)
+    total = jnp.zeros(q.shape[:-1], field.energy.dtype)
+    for corner in itertools.product((0, 1), repeat=3):
+        w = jnp.ones(q.shape[:-1], field.energy.dtype)
+        for k, c in enumerate(corner):
+            w = w * (f[..., k] if c else 1 - f[..., k])
+        e = lookup(field, grid, b[..., 0] + corner[0], b[..., 1] + corner[1], b[..., 2] + corner[2])
+        total = total + jnp.where(w > 0, w * e, 0.0)  # 0 * inf at a wall is 0
+    return total
+
+
+def gradient(field: Field, grid: Grid, q):
+    """dE/dq (J per index unit) by central differences of one grid step; differences
+    at or below the noise floor are 0, so plateaus are exactly flat."""
+    out = []
+    for k in range(3):
+        d = jnp.zeros(3, q.dtype).at[k].set(1.0)
+        de = interpolate(field, grid, q + d) - interpolate(field, grid, q - d)
+        de = jnp.where(jnp.abs(de) <= field.floor, 0.0, de)
+        out.append(jnp.where(jnp.isfinite(de), de / 2, 0.0))
+    if grid.shape[0] == 1:
+        out[0] = jnp.zeros_like(out[0])
+    return jnp.stack(out)
+
+
+# ----------------------------------------------------------------- greedy
+class GreedyState(NamedTuple):
+    idx: jax.Array  # (3,) int32 (it, iy, ix), it unwrapped
+    energy: jax.Array  # current energy (J)
+    step: jax.Array  # steps taken
+    status: jax.Array  # RUNNING / CONVERGED / MAX_STEPS / EDGE
+    path: jax.Array  # (max_steps + 1, 3) int32, or (1, 3) when not recorded
+    path_energy: jax.Array  # (max_steps + 1,), or (1,)
+
+
+def greedy(field: Field, grid: Grid, start, max_steps: int, record: bool = True) -> GreedyState:
+    """Greedy descent (PHYSICS.md 5.2): move to the lowest of the 27 neighbours.
+
+    Args:
+        field, grid: the landscape (see :func:`field_and_grid`).
+        start: (3,) integer grid indices (it, iy, ix).
+        max_steps: at most this many moves (static).
+        record: keep the path (static; off for large batches).
+
+    Returns the final :class:`GreedyState`; ``path[:step + 1]`` is the path.
+    """
+    moves = jnp.asarray(GREEDY_MOVES)
+    start = jnp.asarray(start, jnp.int32)
+    n = max_steps + 1 if record else 1
+    e0 = lookup(field, grid, *start)
+    path = jnp.zeros((n, 3), jnp.int32).at[0].set(start)
+    path_e = jnp.full((n,), jnp.nan, field.energy.dtype).at[0].set(e0)
+
+    def cond(s: GreedyState):
+        return s.status == RUNNING
+
+    def body(s: GreedyState):
+        at_edge = at_cut_edge(grid, s.idx)
+        nb = s.idx[None, :] + moves
+        e = lookup(field, grid, nb[:, 0], nb[:, 1], nb[:, 2])
+        best = jnp.min(e)
+        choice = jnp.argmax(e <= best + field.floor)  # first tie in the documented order
+        moved = choice != 0
+        new_idx = jnp.where(moved, nb[choice], s.idx)
+        step = s.step + moved.astype(jnp.int32)
+        status = jnp.where(at_edge, EDGE, jnp.where(~moved, CONVERGED, jnp.where(step >= max_steps, MAX_STEPS, RUNNING)))
+        new_idx = jnp.where(at_edge, s.idx, new_idx)
+        step = jnp.where(at_edge, s.step, step)
+        energy = jnp.where(at_edge, s.energy, e[choice])
+        if record:
+            p = s.path.at[step].set(new_idx)
+            pe = s.path_energy.at[step].set(energy)
+        else:
+            p, pe = s.path, s.path_energy
+        return GreedyState(new_idx, energy, step, status.astype(jnp.int32), p, pe)
+
+    init = GreedyState(start, e0, jnp.int32(0), jnp.int32(MAX_STEPS if max_steps <= 0 else RUNNING), path, path_e)
+    return jax.lax.while_loop(cond, body, init)
+
+
+def on_plateau(field: Field, grid: Grid, idx) -> jax.Array:
+    """True where some greedy move leaves the energy unchanged (within the noise floor):
+    the pose sits on a plateau (a flat direction), not in a strict local minimum."""
+    idx = jnp.asarray(idx, jnp.int32)
+    nb = idx[None, :] + jnp.asarray(GREEDY_MOVES[1:])
+    e = lookup(field, grid, nb[:, 0], nb[:, 1], nb[:, 2])
+    return jnp.any(jnp.abs(e - lookup(field, grid, *idx)) <= field.floor)
+
+
+# ----------------------------------------------------------------- gradient
+class GradientState(NamedTuple):
+    q: jax.Array  # (3,) fractional indices (it, iy, ix), it unwrapped
+    energy: jax.Array
+    step: jax.Array
+    status: jax.Array
+    path: jax.Array  # (max_steps + 1, 3) float, or (1, 3)
+    path_energy: jax.Array
+    flat: jax.Array  # stopped because the force is exactly zero
+
+
+def gradient_descent(field: Field, grid: Grid, start, max_steps: int, record: bool = True, min_step_px: float = 1e-2) -> GradientState:
+    """Steepest descent on the interpolated landscape with backtracking.
+
+    Twist is measured as arc length at the chip's radius of gyration, so one metric
+    covers (x, y, twist). The trial step is proportional to the force (PHYSICS.md 5.4)
+    and at most 1 px long; it is halved until the energy decreases. The run stops on
+    zero force (``flat``: a plateau or a minimum at the noise floor), when no halving
+    down to ``min_step_px`` lowers the energy (the V-shaped cusp at alignment ends
+    here instead of chattering), or after ``max_steps``. Energy never increases.
+    """
+    dt = field.energy.dtype
+    start = jnp.asarray(start, dt)
+    # Metric: index units -> px. Twist index -> arc length in px.
+    metric = jnp.asarray([grid.twist_px_per_step if grid.shape[0] > 1 else 1.0, 1.0, 1.0], dt)
+    # Force scale: energy change per px of a chip edge of length 2 rg sliding over a pad.
+    g_ref = jnp.maximum(jnp.abs(field.energy).max() / (2.0 * grid.rg_px + 1.0), field.floor)
+    n = max_steps + 1 if record else 1
+    e0 = interpolate(field, grid, start)
+    path = jnp.zeros((n, 3), dt).at[0].set(start)
+    path_e = jnp.full((n,), jnp.nan, dt).at[0].set(e0)
+
+    def body(s: GradientState):
+        # Central differences and interpolation reach 2 indices out: stop short of a cut side.
+        edge = at_cut_edge(grid, s.q, margin=2.0)
+        g = gradient(field, grid, s.q) / metric  # J per px
+        gnorm = jnp.sqrt(jnp.sum(g * g))
+        flat = gnorm == 0
+        d = -g / g_ref  # px, proportional to the force
+        dlen = jnp.sqrt(jnp.sum(d * d))
+        d = jnp.where(dlen > 1.0, d / jnp.maximum(dlen, 1e-30), d)
+        dlen = jnp.minimum(dlen, 1.0)
+
+        def try_cond(c):
+            scale, e_new = c
+            return (e_new >= s.energy) & (scale * dlen >= min_step_px)
+
+        def try_body(c):
+            scale, _ = c
+            scale = scale / 2
+            return scale, interpolate(field, grid, s.q + scale * d / metric)
+
+        e_try = interpolate(field, grid, s.q + d / metric)
+        scale, e_new = jax.lax.while_loop(try_cond, try_body, (jnp.asarray(1.0, dt), e_try))
+        accept = (e_new < s.energy) & ~flat & ~edge
+        q = jnp.where(accept, s.q + scale * d / metric, s.q)
+        energy = jnp.where(accept, e_new, s.energy)
+        step = s.step + accept.astype(jnp.int32)
+        status = jnp.where(edge, EDGE, jnp.where(~accept, CONVERGED, jnp.where(step >= max_steps, MAX_STEPS, RUNNING)))
+        if record:
+            p, pe = s.path.at[step].set(q), s.path_energy.at[step].set(energy)
+        else:
+            p, pe = s.path, s.path_energy
+        return GradientState(q, energy, step, status.astype(jnp.int32), p, pe, flat & ~accept & ~edge)
+
+    init = GradientState(start, e0, jnp.int32(0), jnp.int32(MAX_STEPS if max_steps <= 0 else RUNNING), path, path_e, jnp.asarray(False))
+    return jax.lax.while_loop(lambda s: s.status == RUNNING, body, init)
+
+
+# ----------------------------------------------------------------- outcome
+def classify(field: Field, grid: Grid, q, energy, status, flat) -> jax.Array:
+    """Outcome index into :data:`OUTCOMES` for a final pose q (fractional indices).
+
+    aligned: within ``grid.align_tol`` (twist steps, px) of the global minimum, twist
+    compared modulo the chip's symmetry period. no_contact: zero overlap (|E| at or
+    below the floor). plateau: stopped with zero force or a flat direction (a move
+    that leaves the energy unchanged).
+    local_minimum: stopped anywhere else. max_steps: ran out of steps.
+    """
+    q = jnp.asarray(q, field.energy.dtype)
+    period = grid.period_deg / grid.twist_step_deg
+    dtw = q[0] - field.best[0]
+    dtw = dtw - period * jnp.round(dtw / period)
+    near = (jnp.abs(dtw) <= grid.align_tol[0] + 1e-6) & jnp.all(jnp.abs(q[1:] - field.best[1:]) <= grid.align_tol[1] + 1e-6)
+    no_contact = jnp.abs(energy) <= field.floor
+    out = jnp.where(
+        status == MAX_STEPS,
+        4,
+        jnp.where(no_contact, 3, jnp.where(near, 0, jnp.where(flat, 1, 2))),
+    )
+    return out.astype(jnp.int32)
