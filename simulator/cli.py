@@ -14,7 +14,7 @@ import sys
 from patterns.errors import InputError
 
 #: Subcommands, in the order ``selfalign --help`` lists them.
-COMMANDS = ("pattern", "energy")
+COMMANDS = ("pattern", "energy", "simulate")
 
 
 class OneLineParser(argparse.ArgumentParser):

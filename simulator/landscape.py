@@ -117,13 +117,29 @@ def _chip_reach_px(chip: Mask, twist: bool) -> tuple[float, float]:
     return rad, rad
 
 
+def _rotated_extent_px(chip: Mask, twists: np.ndarray) -> tuple[float, float]:
+    """Half-extent (x, y) in px of the chip's wettable area over the given twists."""
+    h, w = chip.shape
+    r0, r1, c0, c1 = _nonzero_box(chip.data > 0)
+    if chip.geometry is not None:
+        bounds = np.array([affinity.rotate(chip.geometry, float(t), origin=(0, 0)).bounds for t in twists]) / chip.um_per_px
+        return float(np.abs(bounds[:, [0, 2]]).max()), float(np.abs(bounds[:, [1, 3]]).max())
+    xs = np.array([c0, c1, c1, c0]) - w / 2
+    ys = h / 2 - np.array([r0, r0, r1, r1])
+    a = np.radians(np.asarray(twists, float))[:, None]
+    xr = xs * np.cos(a) - ys * np.sin(a)
+    yr = xs * np.sin(a) + ys * np.cos(a)
+    return float(np.abs(xr).max()), float(np.abs(yr).max())
+
+
 class ChipRotator:
     """Rotated chip rasters on one fixed canvas, y-up, with the pattern's pixel parity."""
 
-    def __init__(self, chip: Mask, twist: bool, parity: tuple[int, int]):
+    def __init__(self, chip: Mask, twists: np.ndarray, parity: tuple[int, int]):
         self.chip = chip
-        rx, ry = _chip_reach_px(chip, twist)
-        # Canvas (H, W) with W % 2 == parity so chip and pattern pixel grids coincide.
+        rx, ry = _rotated_extent_px(chip, twists)
+        # Canvas (H, W) with W % 2 == parity so chip and pattern pixel grids coincide;
+        # just large enough for the twists asked for (a band of twists needs less).
         self.shape = tuple(2 * math.ceil(r - 1e-9) + 2 + p for r, p in ((ry, parity[0]), (rx, parity[1])))
         self.count = 0  # rotations computed (the engine's "exactly one" check reads this)
 
@@ -200,9 +216,10 @@ class Correlator:
         self.window = window
         hp, wp = pattern.shape
         hc, wc = chip_shape
-        # Alias-free sizes for the window (see module docstring): N >= extent + window.
-        need_y = max(hp, hc, hp - (window.dy - window.ry), window.dy + window.ry + hc)
-        need_x = max(wp, wc, wp - (window.dx - window.rx), window.dx + window.rx + wc)
+        # Alias-free: the partners m +- N of every wanted shift m lie outside the linear
+        # support [-(hc - 1), hp - 1], and the window does not wrap onto itself.
+        need_y = max(hp, hc, 2 * window.ry + 1, hp - (window.dy - window.ry), window.dy + window.ry + hc)
+        need_x = max(wp, wc, 2 * window.rx + 1, wp - (window.dx - window.rx), window.dx + window.rx + wc)
         self.ny = sfft.next_fast_len(need_y, real=False)
         self.nx = sfft.next_fast_len(need_x, real=True)
         self.chip_shape = (hc, wc)
@@ -580,7 +597,7 @@ def plan(scene: Scene, twists: np.ndarray | None = None, center_px: tuple[int, i
     origin = (w / 2 - c0, r1 - h / 2)
     reach = (max(w / 2 - c0, c1 - w / 2), max(h / 2 - r0, r1 - h / 2))
     parity = (int((2 * origin[1]) % 2), int((2 * origin[0]) % 2))
-    rot = ChipRotator(scene.chip, scene.effects.twist, parity)
+    rot = ChipRotator(scene.chip, twists, parity)
     hc, wc = rot.shape
     chip_rx, chip_ry = _chip_reach_px(scene.chip, scene.effects.twist)
     limit = None if scene.window_um is None else math.ceil(scene.window_um / scene.um_per_px - 1e-9)

@@ -27,6 +27,11 @@ TOML keys (all optional except ``pattern`` and one of ``chip`` / ``chip_size_um`
 
     [effects]
     twist = true
+
+    [liquid]                        # for the dynamic methods
+    viscosity_mPa_s = 1.0
+    volume_nl = 20
+    # chip_thickness_um = 50, chip_density_kg_m3 = 1200, damping_calibration = 30 (top level)
 """
 
 from __future__ import annotations
@@ -43,7 +48,7 @@ from shapely.geometry import box
 from patterns.errors import InputError, positive, require
 from patterns.mask import Mask
 from patterns.raster import mask_from_geometry
-from simulator.materials import Materials
+from simulator.materials import DAMPING_CALIBRATION, SU8_DENSITY_KG_M3, Liquid, Materials
 
 DTYPES = ("float32", "float64")
 
@@ -106,6 +111,10 @@ class Scene:
             translation at which the chip can touch the pattern.
         dtype: "float32" (default) or "float64" for the landscape.
         memory_budget_mb: the landscape build refuses to exceed this.
+        liquid: the droplet (viscosity, volume) for the dynamic methods.
+        chip_thickness_um, chip_density_kg_m3: the chip body (mass, inertia) for dynamics.
+        damping_calibration: multiplier on the Couette damping estimate
+            (see :data:`simulator.materials.DAMPING_CALIBRATION`).
     """
 
     pattern: Mask
@@ -116,6 +125,10 @@ class Scene:
     window_um: float | None = None
     dtype: str = "float32"
     memory_budget_mb: float = field(default_factory=default_memory_budget_mb)
+    liquid: Liquid = field(default_factory=Liquid)
+    chip_thickness_um: float = 50.0
+    chip_density_kg_m3: float = SU8_DENSITY_KG_M3
+    damping_calibration: float = DAMPING_CALIBRATION
 
     def __post_init__(self) -> None:
         self.pattern.require_nonempty("pattern")
@@ -124,6 +137,9 @@ class Scene:
         if self.window_um is not None:
             positive("window_um", self.window_um, "um")
         positive("memory_budget_mb", self.memory_budget_mb, "MB")
+        positive("chip thickness", self.chip_thickness_um, "um")
+        positive("chip density", self.chip_density_kg_m3, "kg/m^3")
+        positive("damping calibration", self.damping_calibration)
         ps, cs = self.pattern.um_per_px, self.chip.um_per_px
         require(
             math.isclose(ps, cs, rel_tol=1e-9),
@@ -182,7 +198,10 @@ class Scene:
 
     @classmethod
     def from_dict(cls, doc: dict, base: Path = Path("."), **overrides: Any) -> Scene:
-        known = {"pattern", "chip", "chip_size_um", "um_per_px", "dtype", "window_um", "memory_budget_mb", "materials", "twist", "effects"}
+        known = {
+            "pattern", "chip", "chip_size_um", "um_per_px", "dtype", "window_um", "memory_budget_mb", "materials", "twist",
+            "effects", "liquid", "chip_thickness_um", "chip_density_kg_m3", "damping_calibration",
+        }
         unknown = set(doc) - known - {"start", "method", "simulate", "montecarlo"}
         require(not unknown, f"unknown scene keys {sorted(unknown)}; allowed: {sorted(known)}")
         require("pattern" in doc, "scene needs a 'pattern' (PNG path)")
@@ -206,7 +225,14 @@ class Scene:
             kw["twist"] = TwistGrid(**doc["twist"])
         if "effects" in doc:
             kw["effects"] = Effects(**doc["effects"])
-        for key in ("dtype", "window_um", "memory_budget_mb"):
+        if "liquid" in doc:
+            liq = dict(doc["liquid"])
+            if "surface_tension_mN_m" in liq:
+                liq["surface_tension_N_m"] = float(liq.pop("surface_tension_mN_m")) / 1000
+            if "viscosity_mPa_s" in liq:
+                liq["viscosity_Pa_s"] = float(liq.pop("viscosity_mPa_s")) / 1000
+            kw["liquid"] = Liquid(**liq)
+        for key in ("dtype", "window_um", "memory_budget_mb", "chip_thickness_um", "chip_density_kg_m3", "damping_calibration"):
             if key in doc:
                 kw[key] = doc[key]
         kw.update({k: v for k, v in overrides.items() if v is not None})

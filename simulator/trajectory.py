@@ -1,9 +1,9 @@
 """One trajectory from one start: the host side around the pure steppers.
 
-:func:`simulate` builds only the part of the landscape a run needs: a box of a
-few twists and translations around the start, moved to the chip whenever the
-stepper reaches one of its sides (status EDGE), after which the stepper resumes
-from where it stopped. Greedy and gradient stepping are memoryless, so the path
+:func:`simulate` builds only the part of the landscape a run needs (see
+:class:`_Boxes`): the stepper runs on a box of translations and a band of twists,
+stops with status EDGE when it reaches a side, and resumes from where it stopped
+once the band (or box) has moved. Greedy and gradient stepping are memoryless, so the path
 equals a run on the full landscape (tested), at a fraction of the cost
 (``Trajectory.cost``).
 """
@@ -20,7 +20,7 @@ import numpy as np
 
 from patterns.errors import InputError
 from simulator import stepping
-from simulator.landscape import Landscape, build_landscape, twist_axis
+from simulator.landscape import Landscape, _twist_cut, build_landscape, twist_axis
 from simulator.scene import Scene
 
 METHODS = ("greedy", "gradient", "overdamped", "inertial")
@@ -106,7 +106,7 @@ def simulate(
     method: str = "greedy",
     max_steps: int = DEFAULT_MAX_STEPS,
     landscape: Landscape | None = None,
-    band_steps: int = 6,
+    band_steps: int = 3,
     band_px: int = 48,
     dynamics=None,
     backend: str = "auto",
@@ -119,10 +119,10 @@ def simulate(
         method: "greedy", "gradient", "overdamped" or "inertial".
         max_steps: bound on moves (or solver steps for dynamics).
         landscape: a precomputed landscape to run on (its global minimum decides
-            "aligned"). Default: greedy and gradient build only a box of
-            +-``band_steps`` twists and +-``band_px`` px around the start, and move the
-            box to the chip whenever it reaches a side; dynamics build the whole
-            landscape (the chip may overshoot).
+            "aligned"). Default: greedy and gradient build only what the run needs
+            (:class:`_Boxes`: translations between the start and the centre plus
+            ``band_px`` px, twists within ``band_steps`` steps of the chip's, each plane
+            once); dynamics build the whole landscape (the chip may overshoot).
         dynamics: :class:`simulator.dynamics.DynamicsParams` for the dynamic methods
             (default: from the scene's chip, liquid and calibration).
     """
@@ -144,31 +144,19 @@ def simulate(
     step = axis[1] - axis[0] if n > 1 else 1.0
     if not wrap and n > 1 and not (axis[0] - step / 2 <= start[2] <= axis[-1] + step / 2):
         raise InputError(f"start twist {start[2]:g} deg is outside the twist range {axis[0]:g}..{axis[-1]:g} deg")
-    s = scene.um_per_px
     pose = np.asarray(start, float)
-    pieces, boxes, poses_computed, seconds = [], [], 0, 0.0
+    boxes = _Boxes(scene, axis, wrap, band_steps, band_px, backend)
+    pieces = []
     while True:
         if landscape is not None:
             ls = landscape
         elif dynamic:
             ls = build_landscape(scene, backend=backend)
+            boxes.count(ls)
         else:
-            k = int(round((pose[2] - axis[0]) / step)) if n > 1 else 0
-            lo, hi = k - band_steps, k + band_steps
-            if wrap and hi - lo + 1 >= n:
-                twists = None
-            else:
-                lo, hi = (lo, hi) if wrap else (max(lo, 0), min(hi, n - 1))
-                twists = axis[0] + step * np.arange(lo, hi + 1) if n > 1 else axis
-            center = (int(round(pose[0] / s)), int(round(pose[1] / s)))
-            box = (lo, hi, center)
-            if box in boxes:  # moving the box would not move the chip: stop here
+            ls = boxes.around(pose)
+            if ls is None:  # moving the box would not move the chip: stop here
                 break
-            boxes.append(box)
-            ls = build_landscape(scene, twists=twists, center_px=center, half_px=band_px, backend=backend)
-        if ls is not landscape:
-            poses_computed += ls.energy.size
-            seconds += ls.stats["seconds"]
         field, grid = stepping.field_and_grid(ls, rg)
         state = _run(method, field, grid, grid.to_index(pose), max_steps, dynamics)
         pieces.append(_to_trajectory(method, state, grid))
@@ -191,14 +179,101 @@ def simulate(
     out = stepping.classify(ref_field, ref_grid, q_ref, float(traj.energy_J[-1]), status, flat)
     full = full_landscape_poses(scene) if landscape is None else landscape.energy.size
     cost = {
-        "poses_computed": int(poses_computed),
+        "poses_computed": int(boxes.poses),
         "poses_full": int(full),
-        "fraction_of_full": poses_computed / full,
-        "boxes": len(boxes),
-        "landscape_s": seconds,
+        "fraction_of_full": boxes.poses / full,
+        "planes": boxes.planes,
+        "landscape_s": boxes.seconds,
         "total_s": time.perf_counter() - t0,
     }
     return Trajectory(method, stepping.OUTCOMES[int(out)], traj.path, traj.energy_J, traj.steps, traj.time_s, traj.t_s, cost)
+
+
+class _Boxes:
+    """The part of the landscape one run needs, built as the chip goes.
+
+    Translations: one square box holding the start, the aligned pose (0, 0) and a
+    margin of ``band_px``; grown (and rebuilt) only if the chip leaves it.
+    Twists: a band of +-``band_steps`` around the chip's twist, re-centred whenever
+    the chip reaches its end; every twist plane is computed once and cached.
+    """
+
+    def __init__(self, scene: Scene, axis: np.ndarray, wrap: bool, band_steps: int, band_px: int, backend: str):
+        self.scene, self.axis, self.wrap, self.backend = scene, axis, wrap, backend
+        self.band, self.margin = band_steps, band_px
+        self.step = axis[1] - axis[0] if len(axis) > 1 else 1.0
+        self.box: tuple[tuple[int, int], int] | None = None
+        self.planes_cache: dict[int, np.ndarray] = {}
+        self.template: Landscape | None = None
+        self.last: tuple | None = None
+        self.poses, self.planes, self.seconds = 0, 0, 0.0
+
+    def count(self, ls: Landscape) -> None:
+        self.poses += ls.energy.size
+        self.planes += ls.energy.shape[0]
+        self.seconds += ls.stats["seconds"]
+
+    def _fit_box(self, pose_px: np.ndarray) -> None:
+        pts = [(0, 0), tuple(pose_px)]
+        if self.box is not None:
+            (cx, cy), h = self.box
+            pts += [(cx - h, cy - h), (cx + h, cy + h)]
+        pts = np.array(pts, float)
+        lo, hi = pts.min(axis=0) - self.margin, pts.max(axis=0) + self.margin
+        center = np.round((lo + hi) / 2).astype(int)
+        half = int(np.ceil(((hi - lo) / 2).max()))
+        self.box = ((int(center[0]), int(center[1])), half)
+        self.planes_cache.clear()
+
+    def around(self, pose: np.ndarray) -> Landscape | None:
+        s = self.scene.um_per_px
+        pose_px = np.round(pose[:2] / s)
+        if self.box is None or (self.template is not None and self._outside(pose_px)):
+            self._fit_box(pose_px)
+        n = len(self.axis)
+        k = int(round((pose[2] - self.axis[0]) / self.step)) if n > 1 else 0
+        lo, hi = k - self.band, k + self.band
+        if n == 1 or (self.wrap and hi - lo + 1 >= n):
+            lo, hi = 0, n - 1
+        elif not self.wrap:
+            lo, hi = max(lo, 0), min(hi, n - 1)
+        key = (lo, hi, self.box)
+        if key == self.last:
+            return None
+        self.last = key
+        want = list(range(lo, hi + 1))
+        missing = sorted({j % n for j in want} - set(self.planes_cache))
+        if missing:
+            (cx, cy), half = self.box
+            ls = build_landscape(self.scene, twists=self.axis[missing], center_px=(cx, cy), half_px=half, backend=self.backend)
+            self.count(ls)
+            self.template = ls
+            self.planes_cache.update({j: ls.energy[i] for i, j in enumerate(missing)})
+        t = self.template
+        twists = self.axis[0] + self.step * np.asarray(want, float) if n > 1 else self.axis
+        full = len(want) == n
+        return Landscape(
+            energy=np.stack([self.planes_cache[j % n] for j in want]),
+            x_um=t.x_um,
+            y_um=t.y_um,
+            twist_deg=twists,
+            wrap=self.wrap and full,
+            period_deg=t.period_deg,
+            um_per_px=t.um_per_px,
+            delta_gamma=t.delta_gamma,
+            cut=(_twist_cut(self.axis, self.wrap, twists), t.cut[1], t.cut[2]),
+            energy_scale_J=t.energy_scale_J,
+            stats=t.stats,
+        )
+
+    def _outside(self, pose_px: np.ndarray) -> bool:
+        t = self.template
+        s = self.scene.um_per_px
+        x, y = pose_px * s
+        (xlo, xhi), (ylo, yhi) = t.cut[2], t.cut[1]
+        return bool(
+            (xlo and x <= t.x_um[0] + s) or (xhi and x >= t.x_um[-1] - s) or (ylo and y <= t.y_um[0] + s) or (yhi and y >= t.y_um[-1] - s)
+        )
 
 
 def reference_landscape(scene: Scene, backend: str = "auto", reach_steps: int = 2, half_px: int = 16) -> Landscape:

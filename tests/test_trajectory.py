@@ -11,9 +11,9 @@ from simulator.stepping import GREEDY_MOVES
 from simulator.trajectory import simulate
 
 
-def make_scene(L, g, dtype="float32", **kw):
+def make_scene(L, g, dtype="float32", um_per_px=1.0, **kw):
     pat = four_pad(L, g) if g else square(L)
-    return Scene(pattern=mask_from_geometry(pat, 1.0, margin_um=10), chip=mask_from_geometry(square(L), 1.0), dtype=dtype, **kw)
+    return Scene(pattern=mask_from_geometry(pat, um_per_px, margin_um=10), chip=mask_from_geometry(square(L), um_per_px), dtype=dtype, **kw)
 
 
 @pytest.fixture(scope="module")
@@ -152,11 +152,16 @@ def test_same_inputs_same_bits(fp200):
     assert a.path.tobytes() == b.path.tobytes() and a.energy_J.tobytes() == b.energy_J.tobytes()
 
 
-def test_lazy_band_equals_full_landscape(fp730):
-    full = build_landscape(fp730.replace(twist=TwistGrid(step_deg=1.0)))
-    for start in [(340, 0, 0), (300, 200, 10)]:
-        lazy = simulate(fp730, start)
-        ref = simulate(fp730, start, landscape=full)
-        np.testing.assert_array_equal(lazy.path, ref.path)
+@pytest.mark.parametrize("method", ["greedy", "gradient"])
+def test_lazy_boxes_equal_full_landscape(method):
+    s = make_scene(730, 50, um_per_px=2.0, twist=TwistGrid(step_deg=2.0))
+    full = build_landscape(s)
+    for start in [(680, 0, 0), (600, 400, 20), (-300, 250, -30)]:
+        lazy = simulate(s, start, method=method)
+        ref = simulate(s, start, method=method, landscape=full)
+        if method == "greedy":
+            np.testing.assert_array_equal(lazy.path, ref.path)
+        else:  # continuous float32 poses: box and full FFTs round differently
+            np.testing.assert_allclose(lazy.final, ref.final, atol=0.05)
         assert lazy.outcome == ref.outcome
-        assert lazy.cost["fraction_of_full"] < 0.1
+        assert lazy.cost["fraction_of_full"] < 0.5

@@ -89,6 +89,12 @@ def scene_from_args(args: argparse.Namespace) -> Scene:
         (None, "window_um"): args.window,
         (None, "dtype"): args.dtype,
         (None, "memory_budget_mb"): args.memory_budget,
+        # Liquid and chip body: only commands with dynamics define these flags.
+        ("liquid", "volume_nl"): getattr(args, "volume", None),
+        ("liquid", "viscosity_mPa_s"): getattr(args, "viscosity", None),
+        (None, "chip_thickness_um"): getattr(args, "chip_thickness", None),
+        (None, "chip_density_kg_m3"): getattr(args, "chip_density", None),
+        (None, "damping_calibration"): getattr(args, "damping_calibration", None),
     }
     for (table, key), value in flags.items():
         if value is not None:

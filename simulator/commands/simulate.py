@@ -1,0 +1,77 @@
+"""``selfalign simulate``: one trajectory, its energy curve and outcome."""
+
+from __future__ import annotations
+
+import argparse
+
+from patterns.errors import InputError
+from simulator.commands._common import add_scene_args, parse_pose, scene_from_args, write_json
+from simulator.trajectory import DEFAULT_MAX_STEPS, METHODS, simulate
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "simulate",
+        help="one trajectory from a start pose: path, energy curve, outcome",
+        description=(
+            "Move the chip from --start down the energy landscape and report where it ends. "
+            "greedy: 1 px / 1 twist-step moves to the lowest neighbour (PHYSICS.md 5.2); "
+            "gradient: steps along the force; overdamped / inertial: time-resolved dynamics "
+            "with Couette damping (times in seconds)."
+        ),
+    )
+    add_scene_args(p)
+    p.add_argument("--start", metavar="X,Y,TWIST", help="initial pose in um, um, degrees")
+    p.add_argument("--method", choices=METHODS, default=None, help="stepper (default greedy)")
+    p.add_argument("--max-steps", type=int, default=None, help=f"bound on moves or solver steps (default {DEFAULT_MAX_STEPS})")
+    d = p.add_argument_group("liquid and chip body (dynamic methods)")
+    d.add_argument("--volume", type=float, help="droplet volume in nl (default 20)")
+    d.add_argument("--viscosity", type=float, help="liquid viscosity in mPa s (default 1.0, water)")
+    d.add_argument("--chip-thickness", type=float, help="chip thickness in um (default 50)")
+    d.add_argument("--chip-density", type=float, help="chip density in kg/m^3 (default 1200, SU-8)")
+    d.add_argument("--damping-calibration", type=float, help="multiplier on the Couette damping estimate (default 30)")
+    o = p.add_argument_group("outputs")
+    o.add_argument("--json", help="write the trajectory as JSON")
+    o.add_argument("--plot", help="write the energy-versus-step (or time) curve as PNG")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from simulator.commands._common import read_toml
+
+    doc = read_toml(args.scene) if args.scene else {}
+    sim = doc.get("simulate", {})
+    start_text = args.start or (",".join(str(v) for v in sim["start"]) if "start" in sim else None)
+    if start_text is None:
+        raise InputError("give the start pose with --start X,Y,TWIST (um, um, degrees)")
+    start = parse_pose(start_text, "--start")
+    method = args.method or sim.get("method", "greedy")
+    max_steps = args.max_steps if args.max_steps is not None else sim.get("max_steps", DEFAULT_MAX_STEPS)
+    _check_outputs(args)
+    scene = scene_from_args(args)
+    traj = simulate(scene, start, method=method, max_steps=max_steps)
+    f = traj.final
+    time_txt = f", {traj.time_s * 1e3:.3g} ms" if traj.time_s is not None else ""
+    print(f"{method}: {traj.outcome} at ({f[0]:.2f} um, {f[1]:.2f} um, {f[2]:.2f} deg) after {traj.steps} steps{time_txt}")
+    c = traj.cost
+    if c.get("poses_computed"):
+        print(f"landscape computed: {c['poses_computed']:,} of {c['poses_full']:,} poses ({100 * c['fraction_of_full']:.2g} %), {c['landscape_s']:.2f} s")
+    if args.json:
+        write_json(args.json, traj.to_json())
+        print(f"wrote {args.json}")
+    if args.plot:
+        from simulator.render import plot_energy_curve
+
+        plot_energy_curve(traj, args.plot)
+        print(f"wrote {args.plot}")
+    return 0
+
+
+def _check_outputs(args: argparse.Namespace) -> None:
+    """Fail before any work when an output cannot be written."""
+    from pathlib import Path
+
+    for flag in ("json", "plot"):
+        path = getattr(args, flag)
+        if path and not Path(path).resolve().parent.is_dir():
+            raise InputError(f"--{flag} {path}: directory {Path(path).parent} does not exist")
