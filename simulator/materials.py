@@ -65,14 +65,16 @@ SU8_DENSITY_KG_M3 = 1200.0
 #: the analytic stiffness overestimates the measured one (section 3.3). None of
 #: these is modelled, so one scalar multiplies the Couette value.
 #:
-#: The default of 30 brings both set-ups to ``zeta ~ 0.65-0.7``: moderately
-#: underdamped, with a visible overshoot that dies within about one period. This
-#: is a choice for readable trajectories. It is not fitted to a measurement and
-#: does *not* give tens of ms: that needs factors of order 10^3 (overdamped
-#: creep). Treat it as a tunable parameter and fit it to a measured alignment time
-#: when you have one. It does not change where the chip ends up in the
-#: quasi-static simulator, which has no time scale (PHYSICS.md section 3.2, limit 4).
-DAMPING_CALIBRATION = 30.0
+#: The default of 1000 puts both set-ups in the measured range: the 200 um chip
+#: from (40, 40) um, 5 deg with 0.5 nl aligns in about 38 ms (overdamped and
+#: inertial runs of ``selfalign simulate`` agree), the 730 um chip with 20 nl in
+#: about 60 ms. The motion is then overdamped creep (zeta ~ 20): the inertial
+#: integrator switches to an implicit solver for it (see
+#: :func:`simulator.trajectory.simulate`). It is not fitted to one measurement:
+#: fit it to a measured alignment time when you have one (30 gives zeta ~ 0.7, a
+#: visible overshoot). It does not change where the chip ends up in the
+#: quasi-static simulator, which has no time scale (PHYSICS.md 3.2, limit 4).
+DAMPING_CALIBRATION = 1000.0
 
 
 # --------------------------------------------------------------------------- checks

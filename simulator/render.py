@@ -46,10 +46,7 @@ def plot_energy_curve(traj, path: str | os.PathLike) -> None:
     ax.plot(x[[0, -1]], e_nj[[0, -1]], "o", color="C3", ms=4)
     ax.set_xlabel(xlabel)
     ax.set_ylabel("energy (nJ)")
-    s, f = traj.start, traj.final
-    ax.set_title(
-        f"{traj.method}: ({s[0]:g}, {s[1]:g} um, {s[2]:g} deg) -> ({f[0]:.4g}, {f[1]:.4g} um, {f[2]:.4g} deg), {traj.outcome}",
-        fontsize=9,
-    )
+    s, f = traj.start, [round(v, 2) + 0.0 for v in traj.final]
+    ax.set_title(f"{traj.method}: ({s[0]:g}, {s[1]:g} um, {s[2]:g} deg) -> ({f[0]:g}, {f[1]:g} um, {f[2]:g} deg), {traj.outcome}", fontsize=9)
     ax.grid(alpha=0.3)
     save_figure(fig, path)

@@ -50,7 +50,7 @@ def run(args: argparse.Namespace) -> int:
     _check_outputs(args)
     scene = scene_from_args(args)
     traj = simulate(scene, start, method=method, max_steps=max_steps)
-    f = traj.final
+    f = [round(v, 2) + 0.0 for v in traj.final]  # no "-0.00"
     time_txt = f", {traj.time_s * 1e3:.3g} ms" if traj.time_s is not None else ""
     print(f"{method}: {traj.outcome} at ({f[0]:.2f} um, {f[1]:.2f} um, {f[2]:.2f} deg) after {traj.steps} steps{time_txt}")
     c = traj.cost
