@@ -1,0 +1,551 @@
+"""Landscape benchmark: selfalign against the peers a user would otherwise reach for.
+
+The job: the overlap landscape ``A[t, y, x]``, i.e. the *full linear* (zero-padded,
+never circular) 2-D cross-correlation of a pattern image P (N x N, float32) with
+the chip image rotated by each twist (-90..90 degrees, 1 degree steps = 181
+twists by default):
+
+    A[t, m + h - 1, n + w - 1] = sum_{k,l} chip_t[k, l] * P[k + m, l + n]
+
+for every shift (m, n) with any overlap, an array of shape (T, N + h - 1, N + w - 1).
+This is what ``cv2.matchTemplate(TM_CCORR)`` gives on P zero-padded by the chip
+size minus 1 on each side, and what ``scipy.signal.correlate(P, chip, "full")`` gives.
+
+Inputs (not timed; every method gets the same arrays): P is a four-pad pattern
+filling the N x N image (pads of side (N - g)/2 around a cross-shaped gap of
+g = N/10, rounded to even). The chip image is N x N with a centred square of side
+0.7 N (even), rotated about the image centre, so the rotated diagonal (0.99 N)
+fits: by exact area-coverage rasterization (``--chips exact``, default, what the
+engine uses) or by ``cv2.warpAffine`` INTER_LINEAR (``--chips opencv``).
+
+Peers (each a function ``(pattern, chips) -> (T, N+h-1, N+w-1)`` stack):
+
+* ``opencv-matchTemplate``: ``cv2.matchTemplate(TM_CCORR)`` per twist on the padded
+  pattern (OpenCV switches to its own tiled DFT for large templates).
+* ``opencv-dft``: ``cv2.dft`` of the pattern once at ``cv2.getOptimalDFTSize``;
+  per twist ``cv2.dft`` of the chip, ``cv2.mulSpectrums(conjB=True)``,
+  ``cv2.idft``, then un-wrap the circular result into the full linear layout.
+* ``scipy-fftconvolve``: ``scipy.signal.fftconvolve(P, chip[::-1, ::-1], "full")``
+  per twist (re-transforms the pattern every time).
+* ``scipy-rfft2``: ``scipy.fft.rfft2`` of the pattern once at ``next_fast_len``,
+  per twist rfft2 of the flipped chip, product, irfft2, crop; ``workers=2``.
+* ``naive-per-pose``: what a 2014 MATLAB simulator did for each pose: translate the
+  rotated chip into a pattern-sized zero canvas, multiply by the pattern and sum,
+  O(N^2) per pose. Far too slow for the full landscape, so it is timed on a random
+  sample of poses (default 2000) and the time is **extrapolated** to all
+  T (2N-1)^2 poses (marked "extrap." in the table).
+* ``scipy-rfft2-f64``: the float64 reference (same algorithm as scipy-rfft2 in
+  float64); errors of every method are measured against it.
+* ``selfalign`` / ``selfalign-jax``: the hook :func:`selfalign_method`, which calls
+  ``simulator.landscape.correlate_stack`` (auto backend, and the JAX backend).
+
+Measured per method, each in a fresh ``multiprocessing`` "spawn" subprocess:
+
+* total seconds for the whole stack (pattern transforms and padding included,
+  chip rotation not), and ms per twist;
+* peak memory: the rise of the process's peak RSS over its RSS just before the
+  call (Linux VmHWM, reset through /proc/self/clear_refs when allowed, else the
+  ``ru_maxrss`` delta). It includes the output stack, listed separately;
+* max |A - A_ref| / chip area on a sample of twists (default 12) against the
+  float64 reference, i.e. the error in units of "whole chip overlaps".
+
+Both selfalign hooks are timed on their second call; the first (warm-up) call,
+which includes JIT tracing and compiling on the JAX backend, is reported in the
+notes. Thread counts: OpenCV uses its default pool (all cores),
+scipy-rfft2 ``workers=2``, fftconvolve and the naive loop one thread.
+
+Usage::
+
+    python benchmarks/landscape.py [--sizes 512 1024] [--twists 181]
+        [--large-twists 46] [--methods NAME ...] [--json OUT]
+
+At sizes above 512 the twist count is capped at ``--large-twists`` (default 46,
+every 4 degrees) to keep the default run within a few minutes on a 2-core machine
+and the output stack under 1 GB; ms/twist stays comparable and the table also
+gives the time extrapolated to the full twist count. ``--large-twists 0`` removes
+the cap.
+"""
+
+from __future__ import annotations
+
+import argparse
+import concurrent.futures as cf
+import json
+import math
+import multiprocessing as mp
+import os
+import platform
+import resource
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+REFERENCE = "scipy-rfft2-f64"
+
+
+# ------------------------------------------------------------------------ inputs
+
+
+def make_pattern(n: int) -> np.ndarray:
+    """Four-pad pattern filling an n x n float32 image: pads around a cross gap of ~n/10."""
+    g = 2 * round(n / 20)
+    p = (n - g) // 2
+    img = np.zeros((n, n), np.float32)
+    for r0 in (0, p + g):
+        for c0 in (0, p + g):
+            img[r0 : r0 + p, c0 : c0 + p] = 1.0
+    return img
+
+
+def chip_side(n: int) -> int:
+    """Side of the square chip: 0.7 n rounded to even, so its diagonal fits in n."""
+    return 2 * round(0.35 * n)
+
+
+def make_chips(n: int, twists_deg: np.ndarray, kind: str = "exact") -> np.ndarray:
+    """(T, n, n) float32: the centred square chip rotated by each twist (CCW).
+
+    ``exact``: area-coverage rasterization of the rotated square (what selfalign's
+    engine feeds its correlation for a chip with exact geometry); rasters 90 degrees
+    apart are then the same, as they are for the real square chip.
+    ``opencv``: ``cv2.warpAffine`` INTER_LINEAR of the axis-aligned raster (what a
+    user rotating a chip PNG gets); rasters 90 degrees apart differ by interpolation.
+    """
+    if kind == "exact":
+        from shapely import affinity
+        from shapely.geometry import box
+
+        from patterns.raster import rasterize
+
+        h = chip_side(n) / 2
+        sq = box(-h, -h, h, h)
+        return np.stack([rasterize(affinity.rotate(sq, float(a), origin=(0, 0)), 1.0, shape=(n, n)) for a in twists_deg]).astype(np.float32)
+    import cv2
+
+    s = chip_side(n)
+    base = np.zeros((n, n), np.float32)
+    o = (n - s) // 2
+    base[o : o + s, o : o + s] = 1.0
+    out = np.empty((len(twists_deg), n, n), np.float32)
+    centre = ((n - 1) / 2.0, (n - 1) / 2.0)
+    for i, a in enumerate(twists_deg):
+        m = cv2.getRotationMatrix2D(centre, float(a), 1.0)
+        cv2.warpAffine(base, m, (n, n), dst=out[i], flags=cv2.INTER_LINEAR, borderValue=0.0)
+    return out
+
+
+def full_shape(pattern: np.ndarray, chips: np.ndarray) -> tuple[int, int, int]:
+    (hp, wp), (t, hc, wc) = pattern.shape, chips.shape
+    return t, hp + hc - 1, wp + wc - 1
+
+
+# ------------------------------------------------------------------------- peers
+
+
+def opencv_match_template(pattern: np.ndarray, chips: np.ndarray) -> np.ndarray:
+    import cv2
+
+    _, hc, wc = chips.shape
+    padded = cv2.copyMakeBorder(
+        pattern, hc - 1, hc - 1, wc - 1, wc - 1, cv2.BORDER_CONSTANT, value=0
+    )
+    out = np.empty(full_shape(pattern, chips), np.float32)
+    for t, chip in enumerate(chips):
+        out[t] = cv2.matchTemplate(padded, chip, cv2.TM_CCORR)
+    return out
+
+
+def _unwrap_circular(circ: np.ndarray, dst: np.ndarray, hc: int, wc: int) -> None:
+    """Write circ rolled by (hc - 1, wc - 1) and cropped to dst's shape into dst.
+
+    ``circ[m, n] = sum chip[k, l] P[k + m, l + n]`` with negative shifts wrapped to the
+    end; the full linear layout puts shift -(hc - 1) at row 0.
+    """
+    ny, nx = circ.shape
+    H, W = dst.shape
+    a, b = hc - 1, wc - 1
+    dst[:a, :b] = circ[ny - a :, nx - b :]
+    dst[:a, b:] = circ[ny - a :, : W - b]
+    dst[a:, :b] = circ[: H - a, nx - b :]
+    dst[a:, b:] = circ[: H - a, : W - b]
+
+
+def opencv_dft(pattern: np.ndarray, chips: np.ndarray) -> np.ndarray:
+    import cv2
+
+    t, H, W = full_shape(pattern, chips)
+    _, hc, wc = chips.shape
+    ny, nx = cv2.getOptimalDFTSize(H), cv2.getOptimalDFTSize(W)
+    hp, wp = pattern.shape
+    pp = cv2.copyMakeBorder(pattern, 0, ny - hp, 0, nx - wp, cv2.BORDER_CONSTANT, value=0)
+    pat_spec = cv2.dft(pp, nonzeroRows=hp)  # CCS-packed real spectrum
+    cbuf = np.zeros((ny, nx), np.float32)
+    out = np.empty((t, H, W), np.float32)
+    for i, chip in enumerate(chips):
+        cbuf[:hc, :wc] = chip
+        spec = cv2.dft(cbuf, nonzeroRows=hc)
+        prod = cv2.mulSpectrums(pat_spec, spec, 0, conjB=True)
+        circ = cv2.idft(prod, flags=cv2.DFT_REAL_OUTPUT | cv2.DFT_SCALE)
+        _unwrap_circular(circ, out[i], hc, wc)
+    return out
+
+
+def scipy_fftconvolve(pattern: np.ndarray, chips: np.ndarray) -> np.ndarray:
+    from scipy.signal import fftconvolve
+
+    out = np.empty(full_shape(pattern, chips), np.float32)
+    for t, chip in enumerate(chips):
+        out[t] = fftconvolve(pattern, chip[::-1, ::-1], mode="full")
+    return out
+
+
+def _scipy_rfft2(pattern: np.ndarray, chips: np.ndarray, dtype) -> np.ndarray:
+    import scipy.fft as sfft
+
+    t, H, W = full_shape(pattern, chips)
+    shape = (sfft.next_fast_len(H, real=True), sfft.next_fast_len(W, real=True))
+    pat_spec = sfft.rfft2(pattern.astype(dtype, copy=False), s=shape, workers=2)
+    out = np.empty((t, H, W), dtype)
+    for i, chip in enumerate(chips):
+        spec = sfft.rfft2(chip[::-1, ::-1].astype(dtype), s=shape, workers=2)
+        spec *= pat_spec
+        out[i] = sfft.irfft2(spec, s=shape, workers=2)[:H, :W]
+    return out
+
+
+def scipy_rfft2(pattern: np.ndarray, chips: np.ndarray) -> np.ndarray:
+    return _scipy_rfft2(pattern, chips, np.float32)
+
+
+def scipy_rfft2_f64(pattern: np.ndarray, chips: np.ndarray) -> np.ndarray:
+    return _scipy_rfft2(pattern, chips, np.float64)
+
+
+def naive_poses(pattern: np.ndarray, chips: np.ndarray, poses: np.ndarray) -> np.ndarray:
+    """The 2014-style evaluation: per pose, shift the chip into a zero canvas, multiply, sum.
+
+    ``poses`` is (K, 3) integer (t, row, col) indices into the full landscape.
+    """
+    hp, wp = pattern.shape
+    _, hc, wc = chips.shape
+    vals = np.empty(len(poses), np.float64)
+    canvas = np.empty_like(pattern)
+    for i, (t, r, c) in enumerate(poses):
+        m, n = r - (hc - 1), c - (wc - 1)  # pattern row/col under chip row/col 0
+        canvas.fill(0.0)
+        r0, r1 = max(m, 0), min(m + hc, hp)
+        c0, c1 = max(n, 0), min(n + wc, wp)
+        canvas[r0:r1, c0:c1] = chips[t, r0 - m : r1 - m, c0 - n : c1 - n]
+        vals[i] = np.sum(pattern * canvas, dtype=np.float64)
+    return vals
+
+
+# ------------------------------------------------------- selfalign hook (lead's API)
+
+
+def selfalign_method(
+    pattern: np.ndarray, chips: np.ndarray, backend: str | None = None
+) -> np.ndarray:
+    """HOOK: selfalign's own correlation, ``simulator.landscape.correlate_stack``.
+
+    Expected signature: ``correlate_stack(pattern (H, W), chips (T, h, w), dtype)
+    -> (T, H + h - 1, W + w - 1)`` in the layout of this module's docstring.
+    Raises ImportError when it is not available (the method is then skipped).
+    """
+    from simulator.landscape import correlate_stack
+
+    if backend is None:
+        return np.asarray(correlate_stack(pattern, chips, "float32"))
+    return np.asarray(correlate_stack(pattern, chips, "float32", backend=backend))
+
+
+def selfalign_jax_method(pattern: np.ndarray, chips: np.ndarray) -> np.ndarray:
+    return selfalign_method(pattern, chips, backend="jax")
+
+
+METHODS = {
+    "opencv-matchTemplate": opencv_match_template,
+    "opencv-dft": opencv_dft,
+    "scipy-fftconvolve": scipy_fftconvolve,
+    "scipy-rfft2": scipy_rfft2,
+    "naive-per-pose": None,  # special: sampled poses, extrapolated
+    REFERENCE: scipy_rfft2_f64,
+    "selfalign": selfalign_method,
+    "selfalign-jax": selfalign_jax_method,
+}
+WARM_UP = {"selfalign", "selfalign-jax"}  # jit: time the second call
+
+
+# ------------------------------------------------------------------ measurement
+
+
+def _status_kb(field: str) -> int | None:
+    try:
+        with open("/proc/self/status") as fh:
+            for line in fh:
+                if line.startswith(field + ":"):
+                    return int(line.split()[1])
+    except OSError:
+        pass
+    return None
+
+
+def _reset_peak() -> bool:
+    """Reset the kernel's peak-RSS counter (VmHWM) of this process, if allowed."""
+    try:
+        with open("/proc/self/clear_refs", "w") as fh:
+            fh.write("5")
+        return True
+    except OSError:
+        return False
+
+
+def _peak_rise_mb(before: dict) -> float:
+    if before["hwm_reset"]:
+        hwm = _status_kb("VmHWM")
+        if hwm is not None:
+            return (hwm - before["rss_kb"]) / 1024
+    return (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before["maxrss_kb"]) / 1024
+
+
+def _mark() -> dict:
+    reset = _reset_peak()
+    return {
+        "hwm_reset": reset,
+        "rss_kb": _status_kb("VmRSS") or 0,
+        "maxrss_kb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss,
+    }
+
+
+def _error_twists(t: int, k: int) -> np.ndarray:
+    return np.unique(np.linspace(0, t - 1, min(k, t)).round().astype(int))
+
+
+def _reference_at(pattern: np.ndarray, chips: np.ndarray, idx: np.ndarray) -> np.ndarray:
+    return scipy_rfft2_f64(pattern, chips[idx])
+
+
+def _child(
+    name: str, n: int, twists: list[float], err_twists: int, samples: int, seed: int, chips_kind: str = "exact"
+) -> dict:
+    """Run one method in this (fresh) process and return its measurements."""
+    import cv2  # noqa: F401  (import cost outside the timed region)
+    import scipy.fft  # noqa: F401
+    import scipy.signal  # noqa: F401
+
+    tw = np.asarray(twists, np.float64)
+    pattern = make_pattern(n)
+    chips = make_chips(n, tw, chips_kind)
+    t, H, W = full_shape(pattern, chips)
+    area = float(chips[0].sum(dtype=np.float64))
+    eidx = _error_twists(t, err_twists)
+    row = {"N": n, "method": name, "twists": t, "notes": []}
+
+    if name == "naive-per-pose":
+        rng = np.random.default_rng(seed)
+        poses = np.column_stack(
+            [rng.choice(eidx, samples), rng.integers(0, H, samples), rng.integers(0, W, samples)]
+        )
+        before = _mark()
+        t0 = time.perf_counter()
+        vals = naive_poses(pattern, chips, poses)
+        dt = time.perf_counter() - t0
+        row["peak_mb"] = _peak_rise_mb(before)
+        total = dt / samples * t * H * W
+        row.update(seconds=total, extrapolated=True, out_mb=0.0)
+        row["notes"].append(f"{samples} poses in {dt:.2f} s, extrapolated to {t * H * W:.3g} poses")
+        ref = _reference_at(pattern, chips, eidx)
+        pos = {int(k): i for i, k in enumerate(eidx)}
+        exact = ref[[pos[int(k)] for k in poses[:, 0]], poses[:, 1], poses[:, 2]]
+        row["max_err_per_area"] = float(np.max(np.abs(vals - exact)) / area)
+        return row
+
+    fn = METHODS[name]
+    try:
+        if name in WARM_UP:
+            t0 = time.perf_counter()
+            fn(pattern, chips)
+            row["notes"].append(f"warm-up call {time.perf_counter() - t0:.2f} s")
+    except ImportError as err:
+        return {**row, "skipped": f"not available: {err}"}
+    except TypeError as err:
+        return {**row, "skipped": f"signature mismatch: {err}"}
+    before = _mark()
+    t0 = time.perf_counter()
+    try:
+        out = fn(pattern, chips)
+    except ImportError as err:
+        return {**row, "skipped": f"not available: {err}"}
+    except TypeError as err:
+        return {**row, "skipped": f"signature mismatch: {err}"}
+    dt = time.perf_counter() - t0
+    row["peak_mb"] = _peak_rise_mb(before)
+    row.update(seconds=dt, extrapolated=False, out_mb=out.nbytes / 2**20, dtype=str(out.dtype))
+    if out.shape != (t, H, W):
+        row["notes"].append(f"wrong shape {out.shape}, expected {(t, H, W)}")
+        row["max_err_per_area"] = math.nan
+        return row
+    ref = _reference_at(pattern, chips, eidx)
+    row["max_err_per_area"] = float(np.max(np.abs(out[eidx].astype(np.float64) - ref)) / area)
+    return row
+
+
+def run_one(name: str, n: int, twists: np.ndarray, args: argparse.Namespace) -> dict:
+    ctx = mp.get_context("spawn")
+    with cf.ProcessPoolExecutor(max_workers=1, mp_context=ctx) as pool:
+        fut = pool.submit(
+            _child, name, n, list(map(float, twists)), args.error_twists, args.samples, args.seed, args.chips
+        )
+        try:
+            return fut.result()
+        except cf.process.BrokenProcessPool:
+            return {
+                "N": n,
+                "method": name,
+                "twists": len(twists),
+                "skipped": "subprocess died (out of memory?)",
+            }
+
+
+# ------------------------------------------------------------------------ report
+
+
+def _fmt(x: float, spec: str) -> str:
+    return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else format(x, spec)
+
+
+def table(rows: list[dict], full_twists: int) -> str:
+    head = (
+        f"| N | method | twists | total s | ms/twist | s for {full_twists} twists | "
+        "peak MB (out MB) | max err / chip area | notes |"
+    )
+    lines = [head, "|---|---|---:|---:|---:|---:|---:|---:|---|"]
+    for r in rows:
+        if "skipped" in r:
+            lines.append(
+                f"| {r['N']} | {r['method']} | {r['twists']} | - | - | - | - | - | skipped: {r['skipped']} |"
+            )
+            continue
+        per = r["seconds"] / r["twists"]
+        extrap = " (extrap.)" if r["extrapolated"] else ""
+        scaled = per * full_twists
+        scaled_s = _fmt(scaled, ".3g") + (
+            " (extrap.)" if r["extrapolated"] or r["twists"] != full_twists else ""
+        )
+        mem = f"{r['peak_mb']:.0f} ({r['out_mb']:.0f})"
+        lines.append(
+            f"| {r['N']} | {r['method']} | {r['twists']} | {_fmt(r['seconds'], '.3g')}{extrap} | "
+            f"{_fmt(per * 1e3, '.3g')} | {scaled_s} | {mem} | {_fmt(r['max_err_per_area'], '.2e')} | "
+            f"{'; '.join(r['notes'])} |"
+        )
+    return "\n".join(lines)
+
+
+def machine() -> dict:
+    import cv2
+    import scipy
+
+    info = {
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "scipy": scipy.__version__,
+        "opencv": cv2.__version__,
+        "cpus": os.cpu_count(),
+        "processor": platform.processor() or platform.machine(),
+    }
+    try:
+        import jax
+
+        info["jax"] = jax.__version__
+    except ImportError:
+        pass
+    return info
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--sizes", type=int, nargs="+", default=[512, 1024], help="image sizes N (px)")
+    ap.add_argument(
+        "--twists",
+        type=int,
+        default=181,
+        help="twists from -90 to 90 degrees (181 = 1 degree steps)",
+    )
+    ap.add_argument(
+        "--large-twists",
+        type=int,
+        default=46,
+        help="cap on twists for N > 512 (46 = 4 degree steps; 0 = no cap)",
+    )
+    ap.add_argument(
+        "--methods", nargs="+", default=list(METHODS), choices=list(METHODS), metavar="NAME"
+    )
+    ap.add_argument("--samples", type=int, default=2000, help="poses timed for naive-per-pose")
+    ap.add_argument(
+        "--error-twists", type=int, default=12, help="twists checked against the float64 reference"
+    )
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument(
+        "--chips",
+        choices=("exact", "opencv"),
+        default="exact",
+        help="rotated chip rasters: exact area coverage (default) or cv2.warpAffine bilinear",
+    )
+    ap.add_argument(
+        "--json", type=Path, default=None, metavar="OUT", help="also write the rows as JSON"
+    )
+    args = ap.parse_args(argv)
+    if args.twists < 1 or args.samples < 1 or args.error_twists < 1:
+        ap.error("--twists, --samples and --error-twists must be >= 1")
+
+    rows, notes = [], []
+    for n in args.sizes:
+        t = args.twists
+        if n > 512 and args.large_twists and t > args.large_twists:
+            t = args.large_twists
+            notes.append(
+                f"N = {n}: {t} twists instead of {args.twists} (--large-twists); 'extrap.' totals scale ms/twist"
+            )
+        twists = np.linspace(-90.0, 90.0, t)
+        for name in args.methods:
+            print(f"[N={n}] {name} ({t} twists) ...", file=sys.stderr, flush=True)
+            row = run_one(name, n, twists, args)
+            if "skipped" in row:
+                print(f"  skipped: {row['skipped']}", file=sys.stderr)
+            rows.append(row)
+
+    info = machine()
+    print(
+        f"\nLandscape benchmark: full linear correlation, pattern N x N float32, chip side 0.7 N, "
+        f"twists -90..90 deg. Machine: {info['cpus']} CPUs, numpy {info['numpy']}, scipy {info['scipy']}, "
+        f"opencv {info['opencv']}{', jax ' + info['jax'] if 'jax' in info else ''}.\n"
+    )
+    print(table(rows, args.twists))
+    for note in notes:
+        print(f"\n* {note}")
+    print(
+        "* naive-per-pose: timed on a random pose sample and extrapolated; its error is on those poses."
+    )
+    print(
+        f"* errors: max over {args.error_twists} evenly spaced twists vs {REFERENCE}, divided by the chip area (px^2)."
+    )
+    print("* peak MB: rise of peak RSS during the call, output stack included (in brackets).")
+    if args.json:
+        args.json.write_text(
+            json.dumps(
+                {"machine": info, "args": vars(args) | {"json": str(args.json)}, "rows": rows},
+                indent=2,
+            )
+        )
+        print(f"\nwrote {args.json}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

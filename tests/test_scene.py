@@ -1,0 +1,80 @@
+"""Scene: construction, validation, TOML files, chip resampling."""
+
+import numpy as np
+import pytest
+
+from patterns.errors import InputError
+from patterns.geometry import four_pad, square
+from patterns.io import write_mask
+from patterns.mask import Mask
+from patterns.raster import mask_from_geometry
+from simulator.scene import Scene, TwistGrid
+
+
+@pytest.fixture()
+def pattern_png(tmp_path):
+    path = tmp_path / "fp.png"
+    write_mask(path, mask_from_geometry(four_pad(200, 20), 1.0, margin_um=5))
+    return path
+
+
+def test_from_toml_with_every_table(pattern_png, tmp_path):
+    scene_file = tmp_path / "s.toml"
+    scene_file.write_text(
+        f'pattern = "{pattern_png.name}"\nchip_size_um = [200, 100]\ndtype = "float64"\nwindow_um = 150\n'
+        "[materials]\nsurface_tension_mN_m = 50\npad_angle_deg = 20\nsubstrate_angle_deg = 100\n"
+        "[twist]\nstep_deg = 2\nmin_deg = -10\nmax_deg = 10\n[effects]\ntwist = true\n"
+        "[liquid]\nvolume_nl = 0.5\nviscosity_mPa_s = 2\n"
+    )
+    s = Scene.from_toml(scene_file)  # the pattern path is relative to the TOML file
+    assert s.dtype == "float64" and s.window_um == 150
+    assert s.materials.surface_tension_N_m == pytest.approx(0.05)
+    assert s.twist == TwistGrid(step_deg=2, min_deg=-10, max_deg=10)
+    assert s.liquid.volume_nl == 0.5 and s.liquid.viscosity_Pa_s == pytest.approx(2e-3)
+    assert s.chip.area_um2 == pytest.approx(200 * 100)
+    assert s.chip.geometry is not None  # a size gives exact geometry
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ('chip_size_um = 200\n', "needs a 'pattern'"),
+        ('pattern = "{p}"\nchip_size_um = 200\ncolour = 3\n', "unknown scene keys"),
+        ('pattern = "{p}"\nchip_size_um = 200\n[twist]\nsteps = 3\n', "scene:"),
+        ('pattern = "{p}"\nchip_size_um = 200\n[twist]\nstep_deg = 0\n', "twist step_deg"),
+        ('pattern = "{p}"\nchip_size_um = 200\ndtype = "float16"\n', "dtype must be one of"),
+        ('pattern = "{p}"\n', "give exactly one of"),
+        ('pattern = "{p}"\nchip_size_um = 200\nwindow_um = -3\n', "window_um"),
+        ("this is [not toml", "not valid TOML"),
+    ],
+)
+def test_bad_scene_files(pattern_png, tmp_path, text, message):
+    f = tmp_path / "bad.toml"
+    f.write_text(text.replace("{p}", str(pattern_png)))
+    with pytest.raises(InputError, match=message):
+        Scene.from_toml(f)
+
+
+def test_missing_scene_file(tmp_path):
+    with pytest.raises(InputError, match="does not exist"):
+        Scene.from_toml(tmp_path / "nope.toml")
+
+
+def test_chip_png_at_other_scale_is_resampled(pattern_png, tmp_path):
+    chip_png = tmp_path / "chip.png"
+    write_mask(chip_png, Mask(mask_from_geometry(square(100), 0.5).data, 0.5))  # no geometry in a PNG
+    s = Scene.from_inputs(pattern_png, chip=chip_png)
+    assert s.chip.um_per_px == 1.0 and s.chip.area_um2 == pytest.approx(100 * 100, rel=1e-3)
+
+
+def test_nan_and_empty_masks_are_refused():
+    with pytest.raises(InputError, match="NaN or infinite"):
+        Mask(np.full((4, 4), np.nan), 1.0)
+    empty = Mask(np.zeros((8, 8)), 1.0)
+    with pytest.raises(InputError, match="all black"):
+        Scene(pattern=empty, chip=mask_from_geometry(square(4), 1.0))
+
+
+def test_scale_mismatch_is_refused():
+    with pytest.raises(InputError, match="differs from pattern scale"):
+        Scene(pattern=mask_from_geometry(square(20), 1.0), chip=mask_from_geometry(square(10), 0.5))
