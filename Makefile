@@ -15,7 +15,8 @@ demo: $(BIN)/selfalign
 	$(BIN)/selfalign demo --out out
 
 test: $(BIN)/selfalign
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q tests
+	$(BIN)/python -m pytest -q --nbmake notebooks
 
 lint: $(BIN)/selfalign
 	$(BIN)/ruff check .
