@@ -7,7 +7,8 @@ Python (:meth:`Scene.from_inputs`) or from a TOML file (:meth:`Scene.from_toml`)
 TOML keys (all optional except ``pattern`` and one of ``chip`` / ``chip_size_um``)::
 
     pattern = "patterns/library/fourpad_730_50.png"   # PNG path (scale from pHYs)
-    um_per_px = 1.0                 # overrides the PNG's scale
+    um_per_px = 1.0                 # the PNGs' scale (overrides their pHYs chunk)
+    resolution_um = 2.0             # simulate at this pixel size (resamples the pattern)
     chip = "chip.png"               # chip footprint PNG, or:
     chip_size_um = [730, 730]       # rectangular chip, exact geometry
     dtype = "float32"               # or "float64"
@@ -163,13 +164,16 @@ class Scene:
         chip: Mask | str | os.PathLike | None = None,
         chip_size_um: tuple[float, float] | float | None = None,
         um_per_px: float | None = None,
+        resolution_um: float | None = None,
         **kwargs: Any,
     ) -> Scene:
         """Scene from a pattern (Mask or PNG path) and a chip (Mask, PNG path or size).
 
-        A chip PNG at another scale than the pattern is resampled by area averaging
-        (OpenCV INTER_AREA) to the pattern's scale. ``chip_size_um`` gives an exact
-        rectangle (width, height) or a square (one number).
+        ``um_per_px`` states the scale of the PNGs (default: their pHYs chunk).
+        ``resolution_um`` is the pixel size to simulate at (default: the pattern's):
+        the pattern is resampled to it (:func:`resample_to_scale`). A chip PNG at
+        another scale is resampled to the simulation scale the same way.
+        ``chip_size_um`` gives an exact rectangle (width, height) or a square (one number).
         """
         from patterns.io import read_mask
 
@@ -178,6 +182,8 @@ class Scene:
         elif um_per_px is not None:
             pattern = Mask(pattern.data, um_per_px, pattern.geometry, pattern.params)
         require((chip is None) != (chip_size_um is None), "give exactly one of a chip image (--chip) or a chip size (--chip-size)")
+        if resolution_um is not None:
+            pattern = resample_to_scale(pattern, positive("resolution", resolution_um, "um per px"))
         s = pattern.um_per_px
         if chip_size_um is not None:
             w, h = (chip_size_um, chip_size_um) if np.isscalar(chip_size_um) else chip_size_um
@@ -199,7 +205,7 @@ class Scene:
     @classmethod
     def from_dict(cls, doc: dict, base: Path = Path("."), **overrides: Any) -> Scene:
         known = {
-            "pattern", "chip", "chip_size_um", "um_per_px", "dtype", "window_um", "memory_budget_mb", "materials", "twist",
+            "pattern", "chip", "chip_size_um", "um_per_px", "resolution_um", "dtype", "window_um", "memory_budget_mb", "materials", "twist",
             "effects", "liquid", "chip_thickness_um", "chip_density_kg_m3", "damping_calibration",
         }
         unknown = set(doc) - known - {"start", "method", "simulate", "montecarlo"}
@@ -242,20 +248,36 @@ class Scene:
             chip=resolve(chip) if chip is not None else None,
             chip_size_um=doc.get("chip_size_um"),
             um_per_px=doc.get("um_per_px"),
+            resolution_um=doc.get("resolution_um"),
             **kw,
         )
 
 
 def resample_to_scale(mask: Mask, um_per_px: float) -> Mask:
-    """``mask`` at another pixel size, by area averaging (sum x pixel area preserved)."""
+    """``mask`` at another pixel size, its centre kept at the image centre.
+
+    Exact geometry is rasterized anew. A raster is first padded symmetrically with
+    substrate so that its size maps to whole pixels at the new scale, then resampled
+    by area averaging (OpenCV INTER_AREA; sum x pixel area preserved) when coarsening,
+    and by pixel replication when refining.
+    """
     if math.isclose(mask.um_per_px, um_per_px, rel_tol=1e-9):
         return mask
     if mask.geometry is not None:
         return mask_from_geometry(mask.geometry, um_per_px, params=mask.params)
     import cv2
 
-    f = mask.um_per_px / um_per_px
-    h, w = mask.shape
-    nh, nw = max(1, round(h * f)), max(1, round(w * f))
-    data = cv2.resize(mask.data, (nw, nh), interpolation=cv2.INTER_AREA if f < 1 else cv2.INTER_LINEAR)
-    return Mask(np.clip(data, 0, 1), um_per_px, None, mask.params)
+    f = mask.um_per_px / um_per_px  # new pixels per old pixel
+    sizes = []
+    for n in mask.shape:
+        m = next((m for m in range(n, n + 2001, 2) if abs(m * f - round(m * f)) < 1e-6 and round(m * f) >= 1), None)
+        if m is None:
+            raise InputError(
+                f"cannot resample a {mask.um_per_px:g} um/px image to {um_per_px:g} um/px without moving its centre; "
+                "choose a resolution that is a simple multiple or fraction of the image's"
+            )
+        sizes.append(m)
+    (h, w), (ph, pw) = mask.shape, sizes
+    data = np.pad(mask.data, (((ph - h) // 2,) * 2, ((pw - w) // 2,) * 2))
+    out = cv2.resize(data, (round(pw * f), round(ph * f)), interpolation=cv2.INTER_AREA if f < 1 else cv2.INTER_NEAREST)
+    return Mask(np.clip(out, 0, 1), um_per_px, None, mask.params)

@@ -78,3 +78,24 @@ def test_nan_and_empty_masks_are_refused():
 def test_scale_mismatch_is_refused():
     with pytest.raises(InputError, match="differs from pattern scale"):
         Scene(pattern=mask_from_geometry(square(20), 1.0), chip=mask_from_geometry(square(10), 0.5))
+
+
+@pytest.mark.parametrize("resolution", [2.0, 3.0, 0.5])
+def test_resolution_resamples_raster_keeping_centre_and_area(tmp_path, resolution):
+    path = tmp_path / "p.png"
+    g = four_pad(200, 20)
+    write_mask(path, Mask(mask_from_geometry(g, 1.0, margin_um=7).data, 1.0))  # a raster: no geometry
+    s = Scene.from_inputs(path, chip_size_um=200, resolution_um=resolution)
+    assert s.um_per_px == resolution and s.pattern.area_um2 == pytest.approx(g.area, rel=1e-9)
+    # Centre kept: the mask's centroid stays at the image centre (the four-pad is symmetric).
+    d = s.pattern.data
+    h, w = d.shape
+    ys, xs = np.mgrid[0:h, 0:w]
+    assert (d * (xs + 0.5)).sum() / d.sum() == pytest.approx(w / 2) and (d * (ys + 0.5)).sum() / d.sum() == pytest.approx(h / 2)
+
+
+def test_resolution_that_would_move_the_centre_is_refused(tmp_path):
+    path = tmp_path / "p.png"
+    write_mask(path, Mask(mask_from_geometry(square(20), 1.0, margin_um=1).data, 1.0))
+    with pytest.raises(InputError, match="without moving its centre"):
+        Scene.from_inputs(path, chip_size_um=10, resolution_um=1 / 0.3731)

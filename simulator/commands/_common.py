@@ -20,7 +20,8 @@ def add_scene_args(p: argparse.ArgumentParser) -> None:
     g.add_argument("--pattern", help="pattern PNG (white = wettable pad)")
     g.add_argument("--chip", help="chip footprint PNG (white = wettable)")
     g.add_argument("--chip-size", help="rectangular chip W[xH] in um, e.g. 730 or 730x500")
-    g.add_argument("--um-per-px", type=float, help="pixel size in um (default: the PNG's pHYs scale)")
+    g.add_argument("--um-per-px", type=float, help="pixel size of the PNGs in um (default: their pHYs scale)")
+    g.add_argument("--resolution", type=float, help="simulate at this pixel size in um (resamples the pattern; default: its own)")
     m = p.add_argument_group("materials")
     m.add_argument("--surface-tension", type=float, help="liquid surface tension in mN/m (default 72.8, water)")
     m.add_argument("--pad-angle", type=float, help="contact angle on the pads in degrees (default 30)")
@@ -86,6 +87,7 @@ def scene_from_args(args: argparse.Namespace) -> Scene:
         ("twist", "step_deg"): args.twist_step,
         ("effects", "twist"): False if args.no_twist else None,
         (None, "um_per_px"): args.um_per_px,
+        (None, "resolution_um"): args.resolution,
         (None, "window_um"): args.window,
         (None, "dtype"): args.dtype,
         (None, "memory_budget_mb"): args.memory_budget,
