@@ -1,0 +1,101 @@
+"""Trajectory figures and costs for the README (not a test).
+
+1. ``docs/methods.png``: one trajectory of each method (greedy, gradient, overdamped,
+   inertial) on the 730/50 um four-pad, chip path over the pattern and energy curve.
+2. The cost of one greedy run that builds only what it needs, against the full
+   landscape (GitHub issue 4 item 6): 730 um four-pad, 1 um/px, start (300, 200, 10 deg).
+
+Usage: ``python benchmarks/trajectories.py [--out docs]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from patterns.library import library_path  # noqa: E402
+from simulator.landscape import build_landscape  # noqa: E402
+from simulator.render import _pyplot, save_figure  # noqa: E402
+from simulator.scene import Scene  # noqa: E402
+from simulator.trajectory import simulate  # noqa: E402
+
+METHODS = ("greedy", "gradient", "overdamped", "inertial")
+
+
+def methods_figure(out: Path, start=(380.0, 120.0, 8.0)) -> list[str]:
+    scene = Scene.from_inputs(library_path("four_pad_730_50"), chip_size_um=730, resolution_um=2.0)
+    ls = build_landscape(scene)
+    plt = _pyplot()
+    fig, axes = plt.subplots(2, 4, figsize=(16, 7.4), gridspec_kw={"height_ratios": [1.25, 1]})
+    lines = []
+    for k, method in enumerate(METHODS):
+        t0 = time.perf_counter()
+        t = simulate(scene, start, method=method, landscape=ls)
+        dt = time.perf_counter() - t0
+        ax = axes[0, k]
+        ax.imshow(scene.pattern.data, extent=scene.pattern.extent_um, cmap="gray", vmin=0, vmax=1.6)
+        sc = ax.scatter(t.path[:, 0], t.path[:, 1], c=t.path[:, 2], cmap="coolwarm", s=4, vmin=-25, vmax=25)
+        ax.plot(*t.path[0, :2], "o", color="C1", ms=6)
+        ax.plot(*t.path[-1, :2], "s", color="C2", ms=6)
+        ax.set(xlim=(-420, 420), ylim=(-420, 420), xlabel="x (um)", ylabel="y (um)", title=f"{method}: {t.outcome}")
+        fig.colorbar(sc, ax=ax, shrink=0.75, label="twist (deg)")
+        ax2 = axes[1, k]
+        if t.t_s is not None:
+            ax2.plot(t.t_s * 1e3, t.energy_J * 1e9)
+            ax2.set_xlabel("time (ms)")
+        else:
+            ax2.plot(np.arange(len(t.energy_J)), t.energy_J * 1e9)
+            ax2.set_xlabel("step")
+        ax2.set_ylabel("energy (nJ)")
+        ax2.grid(alpha=0.3)
+        f = [round(v, 1) + 0.0 for v in t.final]
+        time_txt = f", {t.time_s * 1e3:.0f} ms of chip time" if t.time_s else ""
+        lines.append(f"| {method} | {t.outcome} | ({f[0]:g}, {f[1]:g}, {f[2]:g}) | {t.steps}{time_txt} | {dt:.2f} |")
+    fig.suptitle(f"730 um chip on the 730/50 um four-pad, 2 um/px, from ({start[0]:g}, {start[1]:g} um, {start[2]:g} deg)")
+    fig.tight_layout()
+    save_figure(fig, out / "methods.png", dpi=80)
+    return lines
+
+
+def cost_table() -> list[str]:
+    scene = Scene.from_inputs(library_path("four_pad_730_50"), chip_size_um=730)
+    simulate(scene, (30.0, 20.0, 1.0))  # compile once, outside the timing
+    t0 = time.perf_counter()
+    t = simulate(scene, (300.0, 200.0, 10.0))
+    run_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    ls = build_landscape(scene)
+    full_s = time.perf_counter() - t0
+    c = t.cost
+    return [
+        "| | landscape poses | twist planes | landscape time (s) | peak landscape memory (MB) |",
+        "|---|---:|---:|---:|---:|",
+        f"| full landscape | {ls.energy.size:,} | {ls.energy.shape[0]} | {full_s:.2f} | {ls.energy.nbytes / 2**20:,.0f} |",
+        f"| greedy run (300, 200, 10 deg), {t.outcome} in {t.steps} steps | {c['poses_computed']:,} | {c['planes']} | {c['landscape_s']:.2f} | {c['poses_computed'] * 4 / 2**20:,.0f} |",
+        f"| ratio | {c['poses_computed'] / ls.energy.size:.1%} | {c['planes'] / ls.energy.shape[0]:.0%} | {c['landscape_s'] / full_s:.0%} | |",
+        "",
+        f"(whole run including stepping: {run_s:.2f} s)",
+    ]
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--out", type=Path, default=ROOT / "docs")
+    args = ap.parse_args(argv)
+    args.out.mkdir(parents=True, exist_ok=True)
+    print("| method | outcome | final (um, um, deg) | steps | wall s |\n|---|---|---|---|---:|")
+    print("\n".join(methods_figure(args.out)))
+    print()
+    print("\n".join(cost_table()))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
