@@ -6,6 +6,7 @@ import argparse
 
 from patterns.errors import InputError
 from simulator.commands._common import add_scene_args, parse_pose, scene_from_args, write_json
+from simulator.feedback import compiling
 from simulator.trajectory import DEFAULT_MAX_STEPS, METHODS, simulate
 
 
@@ -33,6 +34,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     o = p.add_argument_group("outputs")
     o.add_argument("--json", help="write the trajectory as JSON")
     o.add_argument("--plot", help="write the energy-versus-step (or time) curve as PNG")
+    o.add_argument("--gif", help="write an animation of the chip moving over the pattern (GIF, at most 120 frames)")
+    o.add_argument("--quiet", action="store_true", help="print only the results (no progress bars or waiting messages)")
     p.set_defaults(func=run)
 
 
@@ -49,6 +52,7 @@ def run(args: argparse.Namespace) -> int:
     max_steps = args.max_steps if args.max_steps is not None else sim.get("max_steps", DEFAULT_MAX_STEPS)
     _check_outputs(args)
     scene = scene_from_args(args)
+    compiling(method, args.quiet)
     traj = simulate(scene, start, method=method, max_steps=max_steps)
     f = [round(v, 2) + 0.0 for v in traj.final]  # no "-0.00"
     time_txt = f", {traj.time_s * 1e3:.3g} ms" if traj.time_s is not None else ""
@@ -64,6 +68,11 @@ def run(args: argparse.Namespace) -> int:
 
         plot_energy_curve(traj, args.plot)
         print(f"wrote {args.plot}")
+    if args.gif:
+        from simulator.render import write_trajectory_gif
+
+        n = write_trajectory_gif(scene, traj, args.gif, quiet=args.quiet)
+        print(f"wrote {args.gif} ({n} frames)")
     return 0
 
 
@@ -71,7 +80,9 @@ def _check_outputs(args: argparse.Namespace) -> None:
     """Fail before any work when an output cannot be written."""
     from pathlib import Path
 
-    for flag in ("json", "plot"):
+    for flag in ("json", "plot", "gif"):
         path = getattr(args, flag)
         if path and not Path(path).resolve().parent.is_dir():
             raise InputError(f"--{flag} {path}: directory {Path(path).parent} does not exist")
+    if args.gif and not args.gif.lower().endswith(".gif"):
+        raise InputError(f"--gif {args.gif}: the animation must end in .gif")
