@@ -14,7 +14,7 @@ import sys
 from patterns.errors import InputError
 
 #: Subcommands, in the order ``selfalign --help`` lists them.
-COMMANDS = ("pattern", "energy", "simulate")
+COMMANDS = ("pattern", "energy", "simulate", "montecarlo", "demo")
 
 
 class OneLineParser(argparse.ArgumentParser):

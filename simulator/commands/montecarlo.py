@@ -1,0 +1,376 @@
+"""``selfalign montecarlo``: many starts on one landscape: yield, outcomes, errors, capture map."""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+
+from patterns.errors import InputError, atomic_output
+from simulator.commands._common import add_scene_args, parse_pose, read_toml, scene_from_args
+from simulator.montecarlo import DEFAULT_CHUNK, DISTRIBUTIONS, MAX_STARTS, METHODS, StartGrid
+from simulator.trajectory import DEFAULT_MAX_STEPS
+
+#: Outcome colours of the capture map, in the order of stepping.OUTCOMES.
+OUTCOME_COLORS = ("#2ca02c", "#ff7f0e", "#d62728", "#7f7f7f", "#9467bd")
+MAP_SUFFIXES = (".png", ".svg", ".pdf")
+MAX_PANELS = 16
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "montecarlo",
+        help="many starts at once: yield, outcome counts, final-pose errors, capture map",
+        description=(
+            "Run many start poses down one energy landscape (built once) and report the yield "
+            "(fraction aligned), the outcome counts and the final-pose errors relative to the "
+            "nominal aligned pose (0, 0, 0). Starts: a regular --grid (capture map, maximum "
+            "bias) or --random placements around a nominal pose. Values that start with a "
+            "minus sign need '=': --grid=-200:200:10,-200:200:10."
+        ),
+    )
+    add_scene_args(p)
+    s = p.add_argument_group("starts (one of --grid or --random)")
+    s.add_argument(
+        "--grid",
+        metavar="X0:X1:DX,Y0:Y1:DY[,TWISTS]",
+        help="regular grid of starts, ends included, in um; each axis one value or a range; "
+        "TWISTS one twist or T0:T1:DT in degrees (default 0)",
+    )
+    s.add_argument("--random", metavar="N", help="N random starts (N >= 1; 1e6 is accepted)")
+    s.add_argument(
+        "--spread",
+        metavar="SX,SY,STWIST",
+        help="placement spread in um, um, degrees: standard deviations (normal) or half-widths (uniform)",
+    )
+    s.add_argument("--around", metavar="X,Y,TWIST", help="nominal pose the random starts scatter around (default 0,0,0)")
+    s.add_argument("--distribution", choices=DISTRIBUTIONS, help="random start distribution per coordinate (default normal)")
+    s.add_argument("--seed", type=int, help="seed of numpy.random.default_rng for --random (default 0)")
+    r = p.add_argument_group("runs")
+    r.add_argument("--method", choices=METHODS, help="stepper (default greedy)")
+    r.add_argument("--max-steps", type=int, help=f"bound on moves per start (default {DEFAULT_MAX_STEPS})")
+    r.add_argument("--chunk", type=int, help=f"starts per compiled batch (default {DEFAULT_CHUNK}); results do not depend on it")
+    r.add_argument("--quiet", action="store_true", help="no progress bars")
+    o = p.add_argument_group("outputs (written only when the whole run succeeds)")
+    o.add_argument("--json", help="summary statistics as JSON")
+    o.add_argument("--csv", help="one row per start: start and final pose, outcome, steps")
+    o.add_argument("--map", help="capture map picture (.png, .svg or .pdf; needs --grid)")
+    p.set_defaults(func=run)
+
+
+# --------------------------------------------------------------------- parsing
+def _number(text: str, what: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        v = math.nan
+    if not math.isfinite(v):
+        raise InputError(f"{what}: {text!r} is not a finite number")
+    return v
+
+
+def _range(text: str, what: str):
+    parts = text.split(":")
+    if len(parts) == 1:
+        return _number(parts[0], what)
+    if len(parts) != 3:
+        raise InputError(f"{what} must be one value or START:STOP:STEP, got {text!r}")
+    return tuple(_number(v, what) for v in parts)
+
+
+def parse_grid(text: str) -> StartGrid:
+    """'X0:X1:DX,Y0:Y1:DY[,TWISTS]' (um, um, degrees; ends included) -> StartGrid."""
+    parts = text.split(",")
+    if len(parts) not in (2, 3):
+        raise InputError(f"--grid must be X0:X1:DX,Y0:Y1:DY[,TWISTS] (um, um, degrees), got {text!r}")
+    names = ("--grid x", "--grid y", "--grid twist")
+    axes = [_range(v.strip(), n) for v, n in zip(parts, names, strict=False)]
+    try:
+        return StartGrid.from_ranges(*axes)
+    except InputError as err:
+        raise InputError(f"--grid {text!r}: {err}") from None
+
+
+def parse_count(text: str) -> int:
+    """'1000' or '1e6' -> a whole number of starts in [1, MAX_STARTS]."""
+    try:
+        v = float(text)
+    except ValueError:
+        v = math.nan
+    if not (math.isfinite(v) and v == int(v) and 1 <= v <= MAX_STARTS):
+        raise InputError(f"--random N must be a whole number from 1 to {MAX_STARTS:,}, got {text!r}")
+    return int(v)
+
+
+def parse_spread(text: str) -> tuple[float, float, float]:
+    sx, sy, st = parse_pose(text, "--spread")
+    if min(sx, sy, st) < 0:
+        raise InputError(f"--spread must be >= 0 (um, um, degrees), got {text!r}")
+    return sx, sy, st
+
+
+def _options(args: argparse.Namespace) -> dict:
+    """Flags over the TOML scene's [montecarlo] table."""
+    table = read_toml(args.scene).get("montecarlo", {}) if args.scene else {}
+    if not isinstance(table, dict):
+        raise InputError("[montecarlo] in the scene file must be a table")
+    allowed = {"grid", "random", "spread", "around", "distribution", "seed", "method", "max_steps", "chunk"}
+    unknown = set(table) - allowed
+    if unknown:
+        raise InputError(f"unknown [montecarlo] keys {sorted(unknown)}; allowed: {sorted(allowed)}")
+
+    def pick(flag: str, key: str, default=None):
+        v = getattr(args, flag)
+        return v if v is not None else table.get(key, default)
+
+    def text(v):
+        return ",".join(str(x) for x in v) if isinstance(v, list | tuple) else (None if v is None else str(v))
+
+    opt = {
+        "grid": text(pick("grid", "grid")),
+        "random": text(pick("random", "random")),
+        "spread": text(pick("spread", "spread")),
+        "around": text(pick("around", "around")),
+        "distribution": pick("distribution", "distribution"),
+        "seed": pick("seed", "seed"),
+        "method": pick("method", "method", "greedy"),
+        "max_steps": pick("max_steps", "max_steps", DEFAULT_MAX_STEPS),
+        "chunk": pick("chunk", "chunk", DEFAULT_CHUNK),
+    }
+    if opt["method"] not in METHODS:
+        raise InputError(f"method must be one of {', '.join(METHODS)}, got {opt['method']!r}")
+    if opt["distribution"] not in (None, *DISTRIBUTIONS):
+        raise InputError(f"distribution must be one of {', '.join(DISTRIBUTIONS)}, got {opt['distribution']!r}")
+    for key in ("max_steps", "chunk"):
+        v = opt[key]
+        if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+            raise InputError(f"--{key.replace('_', '-')} must be a whole number >= 1, got {v!r}")
+    seed = opt["seed"]
+    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int) or seed < 0):
+        raise InputError(f"--seed must be a whole number >= 0, got {seed!r}")
+    return opt
+
+
+def _starts(opt: dict):
+    """(StartGrid or (N, 3) poses, JSON description, seed) from the options."""
+    from simulator.montecarlo import random_starts
+
+    if (opt["grid"] is None) == (opt["random"] is None):
+        raise InputError("give exactly one of --grid X0:X1:DX,Y0:Y1:DY[,TWISTS] or --random N --spread SX,SY,STWIST")
+    if opt["grid"] is not None:
+        extra = [k for k in ("spread", "around", "distribution", "seed") if opt[k] is not None]
+        if extra:
+            raise InputError(f"--{extra[0]} applies to --random starts, not to --grid")
+        g = parse_grid(opt["grid"])
+        desc = {"kind": "grid", "spec": opt["grid"], "shape": list(g.shape)} | {k: _axis_doc(getattr(g, k)) for k in ("x_um", "y_um", "twist_deg")}
+        return g, desc, None
+    n = parse_count(opt["random"])
+    if opt["spread"] is None:
+        raise InputError("--random needs --spread SX,SY,STWIST (um, um, degrees)")
+    spread = parse_spread(opt["spread"])
+    around = parse_pose(opt["around"], "--around") if opt["around"] is not None else (0.0, 0.0, 0.0)
+    dist = opt["distribution"] or "normal"
+    seed = 0 if opt["seed"] is None else int(opt["seed"])
+    poses = random_starts(n, spread, seed, around=around, distribution=dist)
+    keys = ("x_um", "y_um", "twist_deg")
+    desc = {
+        "kind": "random",
+        "distribution": dist,
+        "spread": dict(zip(keys, spread, strict=True)),
+        "spread_means": "standard deviation" if dist == "normal" else "half-width",
+        "around": dict(zip(keys, around, strict=True)),
+    }
+    return poses, desc, seed
+
+
+def _axis_doc(values: tuple[float, ...]) -> dict:
+    step = values[1] - values[0] if len(values) > 1 else None
+    return {"from": values[0], "to": values[-1], "step": step, "count": len(values)}
+
+
+def _check_outputs(args: argparse.Namespace, is_grid: bool) -> None:
+    """Fail before any work when an output cannot be written."""
+    paths = {}
+    for flag in ("json", "csv", "map"):
+        path = getattr(args, flag)
+        if not path:
+            continue
+        p = Path(path)
+        parent = p.resolve().parent
+        if not parent.is_dir():
+            raise InputError(f"--{flag} {path}: directory {p.parent} does not exist; create it or choose another path")
+        if not os.access(parent, os.W_OK):
+            raise InputError(f"--{flag} {path}: directory {p.parent} is not writable; choose another path")
+        if p.is_dir():
+            raise InputError(f"--{flag} {path} is a directory; give a file name")
+        if p.resolve() in paths:
+            raise InputError(f"--{flag} and --{paths[p.resolve()]} name the same file {path}")
+        paths[p.resolve()] = flag
+    if args.map:
+        if not is_grid:
+            raise InputError("--map needs --grid starts (a capture map is drawn over the start grid)")
+        if Path(args.map).suffix.lower() not in MAP_SUFFIXES:
+            raise InputError(f"--map {args.map}: the picture must end in {', '.join(MAP_SUFFIXES)}")
+
+
+# --------------------------------------------------------------------- run
+def run(args: argparse.Namespace) -> int:
+    from simulator import montecarlo as mc
+    from simulator.stepping import OUTCOMES
+
+    opt = _options(args)
+    starts, desc, seed = _starts(opt)
+    grid = starts if isinstance(starts, StartGrid) else None
+    _check_outputs(args, grid is not None)
+    scene = scene_from_args(args)
+    result = mc.run_batch(scene, starts, opt["method"], chunk=opt["chunk"], max_steps=opt["max_steps"], progress=not args.quiet)
+    summary = mc.summarize(result, grid)
+    st = result.stats
+    doc = summary | {
+        "seed": seed,
+        "starts": desc,
+        "max_steps": opt["max_steps"],
+        "scene": {
+            "pattern": str(args.pattern or read_toml(args.scene).get("pattern")),
+            "um_per_px": scene.um_per_px,
+            "chip_area_um2": scene.chip.area_um2,
+            "twist_step_deg": scene.twist.step_deg if scene.effects.twist else None,
+            "dtype": scene.dtype,
+        },
+        "landscape_shape": list(st["landscape_shape"]),
+        "landscape_s": st["landscape_s"],
+        "run_s": st["run_s"],
+        "starts_per_s": st["starts_per_s"],
+    }
+    _print_summary(summary | {"seed": seed}, result, desc, st)
+    with contextlib.ExitStack() as stack:  # every output, or none
+        if args.csv:
+            write_csv(stack.enter_context(atomic_output(args.csv)), result, OUTCOMES)
+        if args.json:
+            stack.enter_context(atomic_output(args.json)).write_text(json.dumps(doc, indent=2) + "\n")
+        if args.map:
+            plot_capture_map(mc.capture_map(result, grid), grid, scene, args.map, title=_map_title(args, summary))
+    for flag in ("csv", "json", "map"):
+        if getattr(args, flag):
+            print(f"wrote {getattr(args, flag)}")
+    return 0
+
+
+def _print_summary(summary: dict, result, desc: dict, st: dict) -> None:
+    n = summary["n"]
+    if desc["kind"] == "grid":
+        t, ny, nx = desc["shape"]
+        what = f"grid {nx} x {ny} (x, y){f' x {t} twists' if t > 1 else ''}"
+    else:
+        sp, ar = desc["spread"], desc["around"]
+        what = (
+            f"random {desc['distribution']} around {ar['x_um']:g} um, {ar['y_um']:g} um, {ar['twist_deg']:g} deg, "
+            f"{desc['spread_means']}s {sp['x_um']:g} um, {sp['y_um']:g} um, {sp['twist_deg']:g} deg, seed {summary['seed']}"
+        )
+    shape = " x ".join(str(v) for v in st["landscape_shape"])
+    print(f"{result.method}: {n:,} starts ({what}); landscape {shape} (twist, y, x) in {st['landscape_s']:.2f} s; runs {st['run_s']:.2f} s incl. compilation ({st['starts_per_s']:,.0f} starts/s)")
+    c = summary["outcomes"]
+    print(f"yield: {100 * summary['yield']:.2f} % aligned ({c['aligned']:,} of {n:,} starts)")
+    print("outcomes (starts): " + ", ".join(f"{k} {v:,}" for k, v in c.items()))
+    e_um, e_deg = summary["aligned_error_um"], summary["aligned_error_deg"]
+    if e_um["x"] is not None:
+        print(
+            "final-pose error of the aligned starts, mean +- std (max |error|): "
+            f"x {e_um['x']['mean']:.3g} +- {e_um['x']['std']:.3g} um ({e_um['x']['max_abs']:.3g} um), "
+            f"y {e_um['y']['mean']:.3g} +- {e_um['y']['std']:.3g} um ({e_um['y']['max_abs']:.3g} um), "
+            f"twist {e_deg['twist']['mean']:.3g} +- {e_deg['twist']['std']:.3g} deg ({e_deg['twist']['max_abs']:.3g} deg)"
+        )
+    if "max_bias_um" in summary:
+        b, lim = summary["max_bias_um"], summary["max_bias_limited_by_grid"]
+        if any(v is not None for v in b.values()):
+            items = [f"{k} {'n/a' if v is None else f'{v:g} um'}{' (grid edge: at least)' if lim[k] else ''}" for k, v in b.items()]
+            print("max bias at twist 0 (every grid start up to it aligned): " + ", ".join(items))
+
+
+def write_csv(path: Path, result, outcomes) -> None:
+    """One row per start: start pose, final pose (twist unwrapped), outcome name, steps."""
+    names = np.asarray(outcomes)[result.outcome]
+    head = "start_x_um,start_y_um,start_twist_deg,final_x_um,final_y_um,final_twist_deg,outcome,steps\n"
+    with open(path, "w") as f:
+        f.write(head)
+        for i in range(0, result.n, 65536):
+            s, e = result.start[i : i + 65536], result.final[i : i + 65536]
+            rows = [
+                f"{a[0]:.10g},{a[1]:.10g},{a[2]:.10g},{b[0]:.10g},{b[1]:.10g},{b[2]:.10g},{o},{k}\n"
+                for a, b, o, k in zip(s.tolist(), e.tolist(), names[i : i + 65536], result.steps[i : i + 65536].tolist(), strict=True)
+            ]
+            f.write("".join(rows))
+
+
+# --------------------------------------------------------------------- picture
+def _map_title(args: argparse.Namespace, summary: dict) -> str:
+    name = Path(args.pattern).name if args.pattern else (Path(args.scene).name if args.scene else "")
+    return f"{name}: capture map, {summary['method']}, yield {100 * summary['yield']:.1f} % of {summary['n']:,} starts"
+
+
+def plot_capture_map(cmap: np.ndarray, grid: StartGrid, scene, path, title: str = "") -> None:
+    """The outcome of every grid start, one panel per twist (at most 16, evenly picked).
+
+    Axes are the chip-centre start position in um (x right, y up, origin at the pattern
+    centre); the pattern's outline (wettability 0.5) is drawn for orientation. Written
+    atomically with :func:`simulator.render.save_figure`.
+    """
+    from matplotlib.colors import BoundaryNorm, ListedColormap
+    from matplotlib.patches import Patch
+
+    from simulator.render import _pyplot, save_figure
+    from simulator.stepping import OUTCOMES
+
+    plt = _pyplot()
+    t, ny, nx = cmap.shape
+    show = np.unique(np.round(np.linspace(0, t - 1, min(t, MAX_PANELS))).astype(int))
+    line = (nx == 1) != (ny == 1)  # a 1-D grid: a strip per twist, not a square map
+    ncol = 1 if line else min(len(show), 4)
+    nrow = math.ceil(len(show) / ncol)
+    size = (7.5, 0.9 * nrow + 1.4) if line else (3.6 * ncol + 1.8, 3.6 * nrow + 0.6)
+    fig, axes = plt.subplots(nrow, ncol, figsize=size, squeeze=False, constrained_layout=True)
+    xs, ys = np.asarray(grid.x_um), np.asarray(grid.y_um)
+    dx = xs[1] - xs[0] if nx > 1 else scene.um_per_px
+    dy = ys[1] - ys[0] if ny > 1 else scene.um_per_px
+    extent = (xs[0] - dx / 2, xs[-1] + dx / 2, ys[0] - dy / 2, ys[-1] + dy / 2)
+    colors = ListedColormap(OUTCOME_COLORS)
+    norm = BoundaryNorm(np.arange(len(OUTCOMES) + 1) - 0.5, len(OUTCOMES))
+    pat = scene.pattern
+    h, w = pat.shape
+    s = pat.um_per_px
+    px = (np.arange(w) + 0.5 - w / 2) * s
+    py = (h / 2 - np.arange(h) - 0.5) * s
+    for ax in axes.ravel()[len(show) :]:
+        ax.set_visible(False)
+    for ax, k in zip(axes.ravel(), show, strict=False):
+        panel = f"start twist {grid.twist_deg[k]:g} deg"
+        if line:
+            along, fixed, cells = ("x", f"y = {ys[0]:g} um", cmap[k]) if ny == 1 else ("y", f"x = {xs[0]:g} um", cmap[k].T)
+            lo, hi = extent[:2] if ny == 1 else extent[2:]
+            ax.imshow(cells, extent=(lo, hi, 0, 1), cmap=colors, norm=norm, interpolation="nearest", aspect="auto")
+            ax.set_yticks([])
+            ax.set_xlabel(f"start {along} (um)")
+            ax.set_title(f"{panel}, {fixed}", fontsize=10)
+            continue
+        ax.imshow(cmap[k], origin="lower", extent=extent, cmap=colors, norm=norm, interpolation="nearest", aspect="equal")
+        ax.contour(px, py, pat.data, levels=[0.5], colors="black", linewidths=0.7, alpha=0.6)
+        ax.plot([0], [0], marker="+", color="black", ms=8, mew=1.2)
+        ax.set_xlim(extent[0], extent[1])
+        ax.set_ylim(extent[2], extent[3])
+        ax.set_title(panel, fontsize=10)
+        ax.set_xlabel("start x (um)")
+        ax.set_ylabel("start y (um)")
+    counts = np.bincount(cmap.ravel().astype(np.int64), minlength=len(OUTCOMES))
+    handles = [Patch(color=OUTCOME_COLORS[k], label=f"{name} ({counts[k]:,})") for k, name in enumerate(OUTCOMES) if counts[k]]
+    if not line:
+        handles.append(plt.Line2D([], [], color="black", lw=0.7, alpha=0.6, label="pattern edge"))
+    legend_title = "outcome (starts)" if t == 1 else f"outcome (starts,\nall {t} twists)"
+    fig.legend(handles=handles, loc="outside right center", fontsize=9, title=legend_title, title_fontsize=9)
+    shown = f" ({len(show)} of {t} twists shown)" if len(show) < t else ""
+    fig.suptitle(f"{title}{shown}\neach cell: the chip centre's start position; colour: how the run from there ended", fontsize=10)
+    save_figure(fig, path)

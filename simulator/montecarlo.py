@@ -1,0 +1,531 @@
+"""Many starts at once: yields, outcome counts, error statistics and capture maps.
+
+A batch runs the *same* stepper functions as one trajectory
+(:func:`simulator.stepping.greedy`, :func:`simulator.stepping.gradient_descent`, with
+``record=False``) under ``jax.jit(jax.vmap(...))`` on one landscape built once, so every
+start's final pose, step count and outcome are bit for bit those of
+``simulate(scene, start, landscape=ls)`` (tested).
+
+The jit boundary is :func:`_run_chunk`: ``grid`` (a hashable :class:`~simulator.stepping.Grid`),
+``method`` and ``max_steps`` are static (a new value recompiles); the landscape field and
+the (chunk, 3) start indices are traced. Starts are processed in chunks of a fixed size;
+the last chunk is padded (with copies of its first start, whose results are dropped) so
+one compiled program serves the whole run, and memory stays bounded by the chunk.
+Chunks run in order of their starts' distance from the global minimum (similar run
+lengths share a chunk, so few lanes idle in the vmapped while loop), on a thread per
+CPU core; results go back to the caller's order. Neither changes any result.
+
+Conventions:
+
+* Poses are ``(x_um, y_um, twist_deg)`` of the chip centre relative to the pattern's
+  nominal centre, x right, y up, twist counter-clockwise positive (PHYSICS.md 1.2).
+  Greedy starts at the grid pose nearest the start (the landscape's pixel and twist
+  step); gradient starts at the start itself.
+* Final twists are reported as the stepper turned (unwrapped, e.g. -90 degrees);
+  twist *errors* are taken modulo the chip's symmetry period into
+  ``[-period/2, period/2)``.
+* "aligned" is :func:`simulator.stepping.classify` against the landscape's global
+  minimum; the error statistics are relative to the nominal aligned pose (0, 0, 0),
+  which is where a defect-free pattern's minimum lies (for a random-jagged pattern the
+  minimum moves: that shift is what :func:`run_realizations` measures).
+* Randomness: start poses are drawn on the host with ``numpy.random.default_rng(seed)``
+  (:func:`random_starts`), all N at once, so the draws do not depend on the chunk size.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import os
+import time
+from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from patterns.errors import InputError, require
+from patterns.mask import Mask
+from simulator import stepping
+from simulator.landscape import Landscape, build_landscape
+from simulator.scene import Scene
+from simulator.trajectory import DEFAULT_MAX_STEPS, radius_of_gyration_px
+
+METHODS = ("greedy", "gradient")
+DISTRIBUTIONS = ("normal", "uniform")
+#: Starts per compiled batch (measured best on a 2-core CPU, see README "Monte Carlo").
+DEFAULT_CHUNK = 1024
+#: Largest |x|, |y| (um) and |twist| (degrees) of a start: keeps grid indices in int32.
+MAX_OFFSET_UM, MAX_TWIST_DEG = 1e7, 3600.0
+MAX_STARTS = 10**8
+
+
+# --------------------------------------------------------------------- starts
+def _axis(name: str, spec, unit: str) -> tuple[float, ...]:
+    """A number, or (start, stop, step) with stop included, -> tuple of values."""
+    if np.isscalar(spec):
+        v = float(spec)
+        require(math.isfinite(v), f"{name} must be finite, got {spec!r} {unit}")
+        return (v,)
+    require(len(spec) == 3, f"{name} must be one value or (start, stop, step) in {unit}, got {spec!r}")
+    a, b, d = (float(v) for v in spec)
+    require(all(math.isfinite(v) for v in (a, b, d)), f"{name} must be finite numbers, got {spec!r} {unit}")
+    require(d > 0, f"{name} step must be > 0 {unit}, got {d:g}")
+    require(b >= a, f"{name} stop ({b:g}) must be >= start ({a:g}) {unit}")
+    n = int(math.floor((b - a) / d + 1e-9)) + 1
+    require(n <= MAX_STARTS, f"{name} has {n:,} values; at most {MAX_STARTS:,}")
+    return tuple(float(v) for v in a + d * np.arange(n))
+
+
+@dataclass(frozen=True)
+class StartGrid:
+    """A regular grid of start poses (hashable).
+
+    x_um, y_um: ascending translations (um); twist_deg: ascending twists (degrees).
+    :meth:`poses` orders the starts with twist slowest, then y, then x, so outcomes
+    reshape to a capture map ``[twist, y, x]`` (:func:`capture_map`).
+    """
+
+    x_um: tuple[float, ...]
+    y_um: tuple[float, ...]
+    twist_deg: tuple[float, ...] = (0.0,)
+
+    @classmethod
+    def from_ranges(cls, x_um, y_um, twist_deg=0.0) -> StartGrid:
+        """Each axis one value or (start, stop, step), stop included (um, um, degrees)."""
+        g = cls(_axis("grid x", x_um, "um"), _axis("grid y", y_um, "um"), _axis("grid twist", twist_deg, "degrees"))
+        require(g.size <= MAX_STARTS, f"the start grid has {g.size:,} starts; at most {MAX_STARTS:,}")
+        return g
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        return len(self.twist_deg), len(self.y_um), len(self.x_um)
+
+    @property
+    def size(self) -> int:
+        return math.prod(self.shape)
+
+    def poses(self) -> np.ndarray:
+        """(T * Ny * Nx, 3) poses (x_um, y_um, twist_deg), twist slowest, x fastest."""
+        t, y, x = np.meshgrid(self.twist_deg, self.y_um, self.x_um, indexing="ij")
+        return np.stack([x.ravel(), y.ravel(), t.ravel()], axis=1)
+
+
+def _triple(name: str, v, unit: str) -> np.ndarray:
+    a = np.asarray(v, dtype=float).reshape(-1)
+    require(a.size == 3 and np.all(np.isfinite(a)), f"{name} must be three finite numbers ({unit}), got {v!r}")
+    return a
+
+
+def random_starts(n: int, spread, seed: int, around=(0.0, 0.0, 0.0), distribution: str = "normal") -> np.ndarray:
+    """``n`` start poses drawn around a nominal pose (placement noise).
+
+    Args:
+        n: number of starts (>= 1).
+        spread: (sx_um, sy_um, stwist_deg), each >= 0: standard deviations for
+            ``"normal"``, half-widths for ``"uniform"``; 0 keeps that coordinate at
+            its nominal value.
+        seed: integer >= 0 for ``numpy.random.default_rng``; the draws are one
+            ``(n, 3)`` array (x, y, twist per row), so the same seed and n give the
+            same starts whatever the chunk size.
+        around: the nominal pose (x_um, y_um, twist_deg) a gripper aims at.
+        distribution: "normal" (default) or "uniform", independently per coordinate.
+
+    Returns:
+        (n, 3) float64 poses (x_um, y_um, twist_deg).
+    """
+    if isinstance(n, bool) or not isinstance(n, int | np.integer) or not 1 <= n <= MAX_STARTS:
+        raise InputError(f"number of random starts must be a whole number from 1 to {MAX_STARTS:,}, got {n!r}")
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+        raise InputError(f"seed must be a whole number >= 0, got {seed!r}")
+    require(distribution in DISTRIBUTIONS, f"distribution must be one of {DISTRIBUTIONS}, got {distribution!r}")
+    s = _triple("spread", spread, "um, um, degrees")
+    require(bool(np.all(s >= 0)), f"spread must be >= 0 (um, um, degrees), got {tuple(s.tolist())}")
+    c = _triple("around", around, "um, um, degrees")
+    rng = np.random.default_rng(int(seed))
+    u = rng.standard_normal((int(n), 3)) if distribution == "normal" else rng.uniform(-1.0, 1.0, (int(n), 3))
+    return c + s * u
+
+
+def _as_poses(starts) -> np.ndarray:
+    poses = starts.poses() if isinstance(starts, StartGrid) else np.asarray(starts, dtype=float)
+    if poses.ndim == 1 and poses.size == 3:
+        poses = poses[None]
+    require(poses.ndim == 2 and poses.shape[1] == 3 and len(poses) >= 1, f"starts must be an (N, 3) array of poses (um, um, degrees) with N >= 1, got shape {poses.shape}")
+    require(bool(np.all(np.isfinite(poses))), "starts must be finite poses (um, um, degrees)")
+    require(
+        bool(np.all(np.abs(poses[:, :2]) <= MAX_OFFSET_UM) and np.all(np.abs(poses[:, 2]) <= MAX_TWIST_DEG)),
+        f"start poses must lie within +-{MAX_OFFSET_UM:g} um and +-{MAX_TWIST_DEG:g} degrees",
+    )
+    return poses
+
+
+# --------------------------------------------------------------------- batch
+@dataclass(frozen=True)
+class BatchResult:
+    """Per-start results of a batch, in the order of the starts.
+
+    start: (N, 3) requested poses (x_um, y_um, twist_deg).
+    final: (N, 3) final poses (twist unwrapped: as the chip turned).
+    outcome: (N,) int8 index into :data:`simulator.stepping.OUTCOMES`.
+    steps: (N,) int32 moves (greedy) or accepted steps (gradient).
+    energy_J: (N,) final energy.
+    period_deg: the chip's rotational symmetry period (twist errors are modulo it).
+    optimum: (x_um, y_um, twist_deg) of the landscape's global minimum ("aligned").
+    """
+
+    method: str
+    start: np.ndarray
+    final: np.ndarray
+    outcome: np.ndarray
+    steps: np.ndarray
+    energy_J: np.ndarray
+    period_deg: float
+    optimum: tuple[float, float, float]
+    stats: dict = field(default_factory=dict)
+
+    @property
+    def n(self) -> int:
+        return len(self.outcome)
+
+    def outcome_names(self) -> np.ndarray:
+        return np.asarray(stepping.OUTCOMES)[self.outcome]
+
+
+def _one(field: stepping.Field, grid: stepping.Grid, start, method: str, max_steps: int):
+    """One start -> (final q, steps, status, outcome, energy); the single run vmap maps."""
+    if method == "greedy":
+        s = stepping.greedy(field, grid, start, max_steps, record=False)
+        q = s.idx
+        flat = stepping.on_plateau(field, grid, s.idx)
+    else:
+        s = stepping.gradient_descent(field, grid, start, max_steps, record=False)
+        q = s.q
+        flat = s.flat | stepping.on_plateau(field, grid, jnp.round(s.q).astype(jnp.int32))
+    # As simulate(): a run that used up its steps without converging ran out of steps.
+    status = jnp.where((s.step >= max_steps) & (s.status != stepping.CONVERGED), stepping.MAX_STEPS, s.status)
+    out = stepping.classify(field, grid, q, s.energy, status, flat)
+    return q, s.step, status, out, s.energy
+
+
+@functools.partial(jax.jit, static_argnames=("grid", "method", "max_steps"))
+def _run_chunk(field: stepping.Field, starts: jax.Array, grid: stepping.Grid, method: str, max_steps: int):
+    """The jit boundary: vmap of :func:`_one` over a (chunk, 3) array of start indices."""
+    return jax.vmap(lambda s: _one(field, grid, s, method, max_steps))(starts)
+
+
+def _check_starts_fit(ls: Landscape, poses: np.ndarray) -> None:
+    """Starts the landscape cannot hold: twist outside a bounded axis, pose outside a cut window."""
+    t = ls.twist_deg
+    if len(t) == 1:
+        require(bool(np.all(np.abs(poses[:, 2] - t[0]) <= 1e-9)), f"the landscape has one twist ({t[0]:g} deg, no twisting); every start twist must be {t[0]:g} degrees")
+    elif not ls.wrap:
+        half = ls.twist_step_deg / 2
+        lo, hi = poses[:, 2].min(), poses[:, 2].max()
+        require(t[0] - half <= lo and hi <= t[-1] + half, f"start twists {lo:g}..{hi:g} deg are outside the twist range {t[0]:g}..{t[-1]:g} deg; widen the twist range")
+    s = ls.um_per_px
+    for k, (axis, (cut_lo, cut_hi)) in enumerate(((ls.x_um, ls.cut[2]), (ls.y_um, ls.cut[1]))):
+        v = poses[:, k]
+        bad = (cut_lo and v.min() < axis[0] - s / 2) or (cut_hi and v.max() > axis[-1] + s / 2)
+        require(not bad, f"start {'xy'[k]} values {v.min():g}..{v.max():g} um leave the translation window {axis[0]:g}..{axis[-1]:g} um; widen the window (--window / window_um)")
+
+
+def _distance_in_steps(q: np.ndarray, best: np.ndarray, grid: stepping.Grid) -> np.ndarray:
+    """max over axes of |q - best| in grid steps (twist modulo the period): a lower bound
+    on greedy's step count from q (PHYSICS.md C10), a rough one for gradient."""
+    d = np.abs(np.asarray(q, float) - best)
+    period = grid.period_deg / grid.twist_step_deg
+    d[:, 0] = np.abs(d[:, 0] - period * np.round(d[:, 0] / period))
+    return d.max(axis=1)
+
+
+def run_batch(
+    scene: Scene,
+    starts,
+    method: str = "greedy",
+    *,
+    landscape: Landscape | None = None,
+    chunk: int = DEFAULT_CHUNK,
+    max_steps: int = DEFAULT_MAX_STEPS,
+    progress: bool = True,
+    workers: int | None = None,
+) -> BatchResult:
+    """Run every start to its end on one landscape.
+
+    Args:
+        scene: what to simulate.
+        starts: (N, 3) poses (x_um, y_um, twist_deg), or a :class:`StartGrid`.
+        method: "greedy" or "gradient".
+        landscape: the landscape to run on; default ``build_landscape(scene)`` (the full
+            landscape, built once).
+        chunk: starts per compiled batch (at most N); memory is bounded by it.
+        max_steps: bound on moves per start.
+        progress: a tqdm bar over the starts, advanced per chunk (on stderr).
+        workers: threads that run chunks at once (default: one per CPU core). Lanes
+            are independent, so the results do not depend on it.
+
+    Returns:
+        A :class:`BatchResult`; ``stats`` holds seconds, starts and steps per second.
+    """
+    require(method in METHODS, f"method must be one of {', '.join(METHODS)}, got {method!r}")
+    for name, v in (("chunk", chunk), ("max steps", max_steps)):
+        if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < 1:
+            raise InputError(f"{name} must be a whole number >= 1, got {v!r}")
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int | np.integer) or workers < 1):
+        raise InputError(f"workers must be a whole number >= 1 or None, got {workers!r}")
+    poses = _as_poses(starts)
+    t0 = time.perf_counter()
+    ls = build_landscape(scene, progress=progress) if landscape is None else landscape
+    t_land = time.perf_counter() - t0
+    _check_starts_fit(ls, poses)
+    fld, grid = stepping.field_and_grid(ls, radius_of_gyration_px(scene))
+    q0 = grid.to_index(poses)
+    q0 = np.round(q0).astype(np.int32) if method == "greedy" else q0  # as simulate()
+    n, chunk = len(poses), int(min(chunk, len(poses)))
+    # A vmapped while loop runs until its slowest lane stops, so starts are run in order
+    # of a lower bound on their step count (their distance from the global minimum in
+    # grid steps) and scattered back: chunks hold runs of similar length. Lanes are
+    # independent, so the order changes no result.
+    order = np.argsort(_distance_in_steps(q0, np.asarray(fld.best), grid), kind="stable")
+    q0 = q0[order]
+    final_q = np.empty((n, 3), np.float64)
+    steps = np.empty(n, np.int32)
+    outcome = np.empty(n, np.int8)
+    energy = np.empty(n, np.float64)
+
+    def run(i: int) -> int:
+        """Chunk starting at i: run, then scatter its results (disjoint rows per chunk)."""
+        block = q0[i : i + chunk]
+        m = len(block)
+        if m < chunk:  # pad with the block's first start: one compiled shape
+            block = np.concatenate([block, np.repeat(block[:1], chunk - m, axis=0)])
+        q, st, _, out, e = _run_chunk(fld, jnp.asarray(block), grid=grid, method=method, max_steps=int(max_steps))
+        dest = order[i : i + m]
+        final_q[dest] = np.asarray(q)[:m]
+        steps[dest] = np.asarray(st)[:m]
+        outcome[dest] = np.asarray(out)[:m]
+        energy[dest] = np.asarray(e)[:m]
+        return m
+
+    t1 = time.perf_counter()
+    chunks = range(0, n, chunk)
+    workers = max(1, min(int(workers or os.cpu_count() or 1), len(chunks)))
+    with _bar(progress, n, method) as bar:
+        if workers == 1:
+            for i in chunks:
+                bar.update(run(i))
+        else:
+            # XLA runs one vmapped loop on one core: a thread per core keeps each busy.
+            ex = ThreadPoolExecutor(workers)
+            try:
+                for m in ex.map(run, chunks):
+                    bar.update(m)
+            finally:
+                ex.shutdown(wait=True, cancel_futures=True)
+    dt = time.perf_counter() - t1
+    x, y, t, _ = ls.global_minimum()
+    return BatchResult(
+        method=method,
+        start=poses,
+        final=grid.to_pose(final_q),
+        outcome=outcome,
+        steps=steps,
+        energy_J=energy,
+        period_deg=float(ls.period_deg),
+        optimum=(x, y, t),
+        stats={
+            "landscape_s": t_land,
+            "run_s": dt,
+            "starts_per_s": n / dt,
+            "steps_per_s": float(steps.sum()) / dt,
+            "chunk": chunk,
+            "landscape_shape": tuple(int(v) for v in ls.energy.shape),
+        },
+    )
+
+
+class _NoBar:
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        return None
+
+    def update(self, k: int) -> None:
+        return None
+
+
+def _bar(show: bool, total: int, method: str):
+    if not show:
+        return _NoBar()
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=method, unit="start", unit_scale=True)
+
+
+# --------------------------------------------------------------------- statistics
+def twist_error(twist_deg, period_deg: float) -> np.ndarray:
+    """Twist relative to 0 modulo the symmetry period, in [-period/2, period/2) degrees."""
+    p = float(period_deg)
+    return np.mod(np.asarray(twist_deg, float) + p / 2, p) - p / 2
+
+
+def _stats(v: np.ndarray) -> dict | None:
+    """mean, mean |v|, standard deviation (population, ddof 0) and max |v|; None if empty."""
+    if v.size == 0:
+        return None
+    a = np.abs(v)
+    return {"mean": float(v.mean()), "mean_abs": float(a.mean()), "std": float(v.std()), "max_abs": float(a.max())}
+
+
+def error_stats(final: np.ndarray, period_deg: float) -> tuple[dict, dict]:
+    """Final-pose error relative to (0, 0, 0): ({"x": .., "y": ..} in um, {"twist": ..} in degrees)."""
+    final = np.asarray(final, float).reshape(-1, 3)
+    return {"x": _stats(final[:, 0]), "y": _stats(final[:, 1])}, {"twist": _stats(twist_error(final[:, 2], period_deg))}
+
+
+def outcome_counts(outcome: np.ndarray) -> dict[str, int]:
+    """Counts per outcome name, every name of :data:`simulator.stepping.OUTCOMES` present."""
+    c = np.bincount(np.asarray(outcome, np.int64), minlength=len(stepping.OUTCOMES))
+    return {name: int(c[k]) for k, name in enumerate(stepping.OUTCOMES)}
+
+
+def capture_map(result: BatchResult, grid: StartGrid) -> np.ndarray:
+    """(T, Ny, Nx) outcome indices of a batch run on ``grid.poses()``, ``[twist, y, x]``."""
+    require(result.n == grid.size, f"the result has {result.n} starts but the grid {grid.size}")
+    return result.outcome.reshape(grid.shape)
+
+
+def max_bias(result: BatchResult, grid: StartGrid) -> tuple[dict, dict]:
+    """Largest bias along +x, -x, +y, -y (at twist 0) from which every start aligns.
+
+    On each half-axis through the origin (the grid row y = 0 for x, the column x = 0
+    for y), the starts are walked outward from the origin (the origin included when on
+    the grid): the bias is the largest |coordinate| up to which every start aligned, 0
+    if the nearest one failed, None if the grid has no start on that half-axis or no
+    twist 0. Returns (bias_um, limited_by_grid), the latter True where every start on
+    the half-axis aligned, so the true bias may be larger than the grid reaches.
+    """
+    cmap = capture_map(result, grid)
+    keys = ("+x", "-x", "+y", "-y")
+    bias: dict = dict.fromkeys(keys)
+    limited: dict = dict.fromkeys(keys)
+    tw, ys, xs = (np.asarray(a) for a in (grid.twist_deg, grid.y_um, grid.x_um))
+    k0 = np.flatnonzero(np.abs(tw) <= 1e-9)
+    if not k0.size:
+        return bias, limited
+    for key in keys:
+        along, across = (xs, ys) if key[1] == "x" else (ys, xs)
+        j = np.flatnonzero(np.abs(across) <= 1e-9)
+        if not j.size:
+            continue
+        line = cmap[k0[0], j[0], :] if key[1] == "x" else cmap[k0[0], :, j[0]]
+        sel = np.flatnonzero(along >= 0) if key[0] == "+" else np.flatnonzero(along <= 0)
+        if not np.any(np.abs(along[sel]) > 1e-9):
+            continue
+        sel = sel[np.argsort(np.abs(along[sel]))]
+        ok = line[sel] == stepping.OUTCOMES.index("aligned")
+        first_bad = int(np.argmin(ok)) if not ok.all() else len(ok)
+        bias[key] = float(np.abs(along[sel[first_bad - 1]])) if first_bad > 0 else 0.0
+        limited[key] = bool(ok.all())
+    return bias, limited
+
+
+def summarize(result: BatchResult, grid: StartGrid | None = None) -> dict:
+    """The statistics of a batch, JSON-ready (units in the key names).
+
+    Keys: ``n``, ``method``, ``yield`` (fraction aligned), ``outcomes`` (counts),
+    ``error_um`` / ``error_deg`` (over all starts), ``aligned_error_um`` /
+    ``aligned_error_deg`` (over the aligned starts; None if none), ``optimum``
+    (the global minimum, where "aligned" is measured), and for a grid
+    ``max_bias_um`` / ``max_bias_limited_by_grid`` (:func:`max_bias`).
+    """
+    counts = outcome_counts(result.outcome)
+    err_um, err_deg = error_stats(result.final, result.period_deg)
+    ok = result.outcome == stepping.OUTCOMES.index("aligned")
+    al_um, al_deg = error_stats(result.final[ok], result.period_deg)
+    x, y, t = result.optimum
+    out = {
+        "n": result.n,
+        "method": result.method,
+        "yield": counts["aligned"] / result.n,
+        "outcomes": counts,
+        "error_um": err_um,
+        "error_deg": err_deg,
+        "aligned_error_um": al_um,
+        "aligned_error_deg": al_deg,
+        "optimum": {"x_um": x, "y_um": y, "twist_deg": t},
+        "period_deg": result.period_deg,
+    }
+    if grid is not None:
+        out["max_bias_um"], out["max_bias_limited_by_grid"] = max_bias(result, grid)
+    return out
+
+
+# --------------------------------------------------------------------- pattern realizations
+def run_realizations(
+    sigmas: Sequence[float],
+    seeds: Sequence[int],
+    chip: Mask,
+    starts,
+    *,
+    size_um: float = 200.0,
+    pitch_um: float | None = None,
+    margin_um: float = 10.0,
+    method: str = "greedy",
+    scene_options: dict | None = None,
+    chunk: int = DEFAULT_CHUNK,
+    max_steps: int = DEFAULT_MAX_STEPS,
+    progress: bool = False,
+) -> list[dict]:
+    """Monte Carlo over random-jagged patterns (PHYSICS.md 10.3): one landscape per seed.
+
+    For each sigma and seed the pattern is ``patterns.geometry.random_jagged(size_um,
+    sigma=sigma, seed=seed, pitch=pitch_um)`` rasterized at the chip's scale
+    (``chip.um_per_px``) with ``margin_um`` of substrate around it, and every start is
+    run on its own landscape. The error is relative to the *nominal* square's centre.
+
+    Args:
+        sigmas: edge-roughness standard deviations (um).
+        seeds: pattern seeds (integers >= 0); the same seeds are used for every sigma.
+        chip: the chip footprint (e.g. ``mask_from_geometry(square(200), um_per_px)``).
+        starts: (N, 3) poses or a :class:`StartGrid`, the same for every pattern.
+        scene_options: further :class:`~simulator.scene.Scene` fields (materials,
+            twist, dtype, window_um, ...).
+
+    Returns:
+        One dict per sigma: ``sigma_um``, ``seeds``, the :func:`summarize` keys pooled
+        over every seed and start, and ``optima`` (per seed, the global minimum's
+        ``x_um``, ``y_um``, ``twist_deg``: where that pattern aligns a chip).
+    """
+    from patterns.geometry import random_jagged
+    from patterns.raster import mask_from_geometry
+
+    require(len(sigmas) >= 1 and len(seeds) >= 1, "give at least one sigma and one seed")
+    poses = _as_poses(starts)
+    out = []
+    for sigma in sigmas:
+        parts, optima = [], []
+        for seed in seeds:
+            geom = random_jagged(size_um, sigma=sigma, seed=seed, pitch=pitch_um)
+            pattern = mask_from_geometry(geom, chip.um_per_px, margin_um=margin_um, params={"design": "random-jagged", "sigma_um": sigma, "seed": seed})
+            scene = Scene(pattern=pattern, chip=chip, **(scene_options or {}))
+            r = run_batch(scene, poses, method, chunk=chunk, max_steps=max_steps, progress=progress)
+            parts.append(r)
+            optima.append({"seed": int(seed), "x_um": r.optimum[0], "y_um": r.optimum[1], "twist_deg": r.optimum[2]})
+        pooled = BatchResult(
+            method=method,
+            start=np.concatenate([p.start for p in parts]),
+            final=np.concatenate([p.final for p in parts]),
+            outcome=np.concatenate([p.outcome for p in parts]),
+            steps=np.concatenate([p.steps for p in parts]),
+            energy_J=np.concatenate([p.energy_J for p in parts]),
+            period_deg=parts[0].period_deg,
+            optimum=(math.nan,) * 3,
+        )
+        summary = summarize(pooled)
+        summary.pop("optimum")
+        out.append({"sigma_um": float(sigma), "seeds": [int(s) for s in seeds]} | summary | {"optima": optima})
+    return out
