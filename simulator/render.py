@@ -10,6 +10,7 @@ Units on the pictures: energy in nJ, force in uN, torque in nN m, time in ms.
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Iterator
 
@@ -493,4 +494,72 @@ def plot_forces(ls, path: str | os.PathLike, through: tuple[float, float, float]
         axes[0, 0].legend(handles=handles, loc="lower left", fontsize=8, framealpha=0.85)
     fig.suptitle(f"Energy and restoring force through ({tx:g} µm, {ty:g} µm, {tt:g}°); "
                  "force points towards lower energy", fontsize=11)
+    save_figure(fig, path)
+
+
+# --------------------------------------------------------------------- capture maps
+#: Outcome colours of capture maps, in the order of :data:`simulator.stepping.OUTCOMES`.
+OUTCOME_COLORS = ("#2ca02c", "#ff7f0e", "#d62728", "#7f7f7f", "#9467bd")
+MAX_PANELS = 16
+
+
+def plot_capture_map(cmap: np.ndarray, grid, scene, path, title: str = "") -> None:
+    """The outcome of every grid start, one panel per twist (at most 16, evenly picked).
+
+    Axes are the chip-centre start position in um (x right, y up, origin at the pattern
+    centre); the pattern's outline (wettability 0.5) is drawn for orientation. Written
+    atomically with :func:`simulator.render.save_figure`.
+    """
+    from matplotlib.colors import BoundaryNorm, ListedColormap
+    from matplotlib.patches import Patch
+
+    from simulator.stepping import OUTCOMES
+
+    plt = _pyplot()
+    t, ny, nx = cmap.shape
+    show = np.unique(np.round(np.linspace(0, t - 1, min(t, MAX_PANELS))).astype(int))
+    line = (nx == 1) != (ny == 1)  # a 1-D grid: a strip per twist, not a square map
+    ncol = 1 if line else min(len(show), 4)
+    nrow = math.ceil(len(show) / ncol)
+    size = (7.5, 0.9 * nrow + 1.4) if line else (3.6 * ncol + 1.8, 3.6 * nrow + 0.6)
+    fig, axes = plt.subplots(nrow, ncol, figsize=size, squeeze=False, constrained_layout=True)
+    xs, ys = np.asarray(grid.x_um), np.asarray(grid.y_um)
+    dx = xs[1] - xs[0] if nx > 1 else scene.um_per_px
+    dy = ys[1] - ys[0] if ny > 1 else scene.um_per_px
+    extent = (xs[0] - dx / 2, xs[-1] + dx / 2, ys[0] - dy / 2, ys[-1] + dy / 2)
+    colors = ListedColormap(OUTCOME_COLORS)
+    norm = BoundaryNorm(np.arange(len(OUTCOMES) + 1) - 0.5, len(OUTCOMES))
+    pat = scene.pattern
+    h, w = pat.shape
+    s = pat.um_per_px
+    px = (np.arange(w) + 0.5 - w / 2) * s
+    py = (h / 2 - np.arange(h) - 0.5) * s
+    for ax in axes.ravel()[len(show) :]:
+        ax.set_visible(False)
+    for ax, k in zip(axes.ravel(), show, strict=False):
+        panel = f"start twist {grid.twist_deg[k]:g} deg"
+        if line:
+            along, fixed, cells = ("x", f"y = {ys[0]:g} um", cmap[k]) if ny == 1 else ("y", f"x = {xs[0]:g} um", cmap[k].T)
+            lo, hi = extent[:2] if ny == 1 else extent[2:]
+            ax.imshow(cells, extent=(lo, hi, 0, 1), cmap=colors, norm=norm, interpolation="nearest", aspect="auto")
+            ax.set_yticks([])
+            ax.set_xlabel(f"start {along} (um)")
+            ax.set_title(f"{panel}, {fixed}", fontsize=10)
+            continue
+        ax.imshow(cmap[k], origin="lower", extent=extent, cmap=colors, norm=norm, interpolation="nearest", aspect="equal")
+        ax.contour(px, py, pat.data, levels=[0.5], colors="black", linewidths=0.7, alpha=0.6)
+        ax.plot([0], [0], marker="+", color="black", ms=8, mew=1.2)
+        ax.set_xlim(extent[0], extent[1])
+        ax.set_ylim(extent[2], extent[3])
+        ax.set_title(panel, fontsize=10)
+        ax.set_xlabel("start x (um)")
+        ax.set_ylabel("start y (um)")
+    counts = np.bincount(cmap.ravel().astype(np.int64), minlength=len(OUTCOMES))
+    handles = [Patch(color=OUTCOME_COLORS[k], label=f"{name} ({counts[k]:,})") for k, name in enumerate(OUTCOMES) if counts[k]]
+    if not line:
+        handles.append(plt.Line2D([], [], color="black", lw=0.7, alpha=0.6, label="pattern edge"))
+    legend_title = "outcome (starts)" if t == 1 else f"outcome (starts,\nall {t} twists)"
+    fig.legend(handles=handles, loc="outside right center", fontsize=9, title=legend_title, title_fontsize=9)
+    shown = f" ({len(show)} of {t} twists shown)" if len(show) < t else ""
+    fig.suptitle(f"{title}{shown}\neach cell: the chip centre's start position; colour: how the run from there ended", fontsize=10)
     save_figure(fig, path)
