@@ -14,7 +14,7 @@ import sys
 from patterns.errors import InputError
 
 #: Subcommands, in the order ``selfalign --help`` lists them.
-COMMANDS = ("pattern", "energy", "simulate", "montecarlo", "demo")
+COMMANDS = ("pattern", "energy", "simulate", "montecarlo", "evaluate", "demo")
 
 
 class OneLineParser(argparse.ArgumentParser):

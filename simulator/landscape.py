@@ -193,6 +193,36 @@ class Window:
     dy: int
 
 
+def fft_shape(pattern_shape: tuple[int, int], chip_shape: tuple[int, int], window: Window) -> tuple[int, int]:
+    """(ny, nx) of the transforms for a correlation window: sizes only, nothing allocated."""
+    (hp, wp), (hc, wc) = pattern_shape, chip_shape
+    # Alias-free: the partners m +- N of every wanted shift m lie outside the linear
+    # support [-(hc - 1), hp - 1], and the window does not wrap onto itself.
+    need_y = max(hp, hc, 2 * window.ry + 1, hp - (window.dy - window.ry), window.dy + window.ry + hc)
+    need_x = max(wp, wc, 2 * window.rx + 1, wp - (window.dx - window.rx), window.dx + window.rx + wc)
+    return sfft.next_fast_len(need_y, real=False), sfft.next_fast_len(need_x, real=True)
+
+
+#: Shifted pattern kernels a Correlator keeps (one per zero-row/column offset of a chunk).
+KERNEL_CACHE = 4
+
+
+def kernel_bytes(fft: tuple[int, int], dtype, chunks: int) -> int:
+    """Bytes of the stored pattern spectrum and its cached shifted copies."""
+    ny, nx = fft
+    one = ny * (nx // 2 + 1) * 2 * np.dtype(dtype).itemsize
+    return one * (1 + min(KERNEL_CACHE, chunks))
+
+
+def work_bytes(fft: tuple[int, int], out_rows: int, dtype, chunk: int, chunks: int) -> int:
+    """Working memory of a correlation in ``chunks`` chunks of ``chunk`` twists (bytes):
+    the kernels, and per twist two complex spectra and the real window rows."""
+    ny, nx = fft
+    item = np.dtype(dtype).itemsize
+    per_twist = ny * (nx // 2 + 1) * 2 * item * 2 + out_rows * nx * item
+    return kernel_bytes(fft, dtype, chunks) + chunk * per_twist
+
+
 class Correlator:
     """Linear cross-correlation of one fixed pattern with a stack of chips, windowed.
 
@@ -214,14 +244,8 @@ class Correlator:
         self.backend = _default_backend() if backend == "auto" else backend
         self.dtype = np.dtype(dtype)
         self.window = window
-        hp, wp = pattern.shape
         hc, wc = chip_shape
-        # Alias-free: the partners m +- N of every wanted shift m lie outside the linear
-        # support [-(hc - 1), hp - 1], and the window does not wrap onto itself.
-        need_y = max(hp, hc, 2 * window.ry + 1, hp - (window.dy - window.ry), window.dy + window.ry + hc)
-        need_x = max(wp, wc, 2 * window.rx + 1, wp - (window.dx - window.rx), window.dx + window.rx + wc)
-        self.ny = sfft.next_fast_len(need_y, real=False)
-        self.nx = sfft.next_fast_len(need_x, real=True)
+        self.ny, self.nx = fft_shape(pattern.shape, chip_shape, window)
         self.chip_shape = (hc, wc)
         self.out_shape = (2 * window.ry + 1, 2 * window.rx + 1)
         self.workers = os.cpu_count() or 1
@@ -239,8 +263,7 @@ class Correlator:
             self._jax_fn = self._make_jax()
 
     def bytes_per_twist(self) -> int:
-        complex_item = 2 * self.dtype.itemsize
-        return self.ny * (self.nx // 2 + 1) * complex_item * 2 + self.out_shape[0] * self.nx * self.dtype.itemsize
+        return work_bytes((self.ny, self.nx), self.out_shape[0], self.dtype, 1, 1) - kernel_bytes((self.ny, self.nx), self.dtype, 1)
 
     def __call__(self, chips: np.ndarray, out: np.ndarray | None = None, scale: float = 1.0) -> np.ndarray:
         """(B, hc, wc) chips -> ``scale`` * correlation window (B, 2 ry + 1, 2 rx + 1), into ``out``."""
@@ -281,7 +304,7 @@ class Correlator:
             return self.kernel
         cache = self.__dict__.setdefault("_kcache", {})
         if (r0, c0) not in cache:
-            if len(cache) >= 4:
+            if len(cache) >= KERNEL_CACHE:
                 cache.pop(next(iter(cache)))
             cdt = self.kernel.dtype
             py = np.exp(-2j * np.pi * self._fy * r0).astype(cdt)
@@ -479,9 +502,10 @@ class Landscape:
 
         Returns:
             dict with ``values`` (the axis samples), ``energy_J``, ``force`` (N along x/y,
-            N m for twist: minus the derivative along the axis) and ``plateaus``
-            (list of [start, end] ranges where the force is zero: energy differences below
-            the noise floor, see :meth:`gradient_at`).
+            N m for twist: minus the derivative along the axis), ``plateaus`` (list of
+            [start, end] ranges where the chip touches the pattern but the force is zero:
+            energy differences below the noise floor, see :meth:`gradient_at`) and
+            ``no_contact`` (ranges where the chip does not touch the pattern at all).
         """
         if axis not in ("x", "y", "twist"):
             raise InputError(f"curve axis must be x, y or twist, got {axis!r}")
@@ -495,12 +519,19 @@ class Landscape:
         e = self.energy_at(x, y, t)
         gx, gy, gt = self.gradient_at(x, y, t)
         force = -{"x": gx, "y": gy, "twist": gt}[axis]
-        return {"axis": axis, "values": v, "energy_J": e, "force": force, "plateaus": plateaus(v, force, 0.0)}
+        detached = np.abs(e) <= self.noise_floor_J  # the chip no longer touches the pattern
+        return {
+            "axis": axis,
+            "values": v,
+            "energy_J": e,
+            "force": force,
+            "plateaus": runs(v, (force == 0) & ~detached),
+            "no_contact": runs(v, detached),
+        }
 
 
-def plateaus(values: np.ndarray, force: np.ndarray, floor: float, min_points: int = 3) -> list[list[float]]:
-    """[start, end] ranges of ``values`` where |force| <= floor over >= ``min_points`` samples."""
-    flat = np.abs(force) <= floor
+def runs(values: np.ndarray, flat: np.ndarray, min_points: int = 3) -> list[list[float]]:
+    """[start, end] ranges of ``values`` where ``flat`` holds for >= ``min_points`` samples in a row."""
     out, i, n = [], 0, len(values)
     while i < n:
         if flat[i]:
@@ -581,6 +612,41 @@ def _twist_cut(axis: np.ndarray, wrap: bool, twists: np.ndarray) -> tuple[bool, 
     return bool(twists[0] > axis[0] + eps), bool(twists[-1] < axis[-1] - eps)
 
 
+def energy_scale_J(scene: Scene) -> float:
+    """The largest |E| the scene can reach, ``|Delta_gamma| min(|P|, |C|)`` in J (PHYSICS.md C8)."""
+    return abs(scene.materials.delta_gamma_N_m) * min(scene.pattern.area_um2, scene.chip.area_um2) * UM2_TO_M2
+
+
+def _check_energy_range(scene: Scene) -> None:
+    """Refuse a scene whose energies in joules the dtype cannot hold as normal numbers.
+
+    Three values must be normal (not subnormal, not infinite): the energy of one fully
+    overlapping pixel (the factor every correlation is multiplied by), the noise floor
+    (the smallest energy difference that counts) and the largest energy, with a margin
+    of 2**10 for sums and differences. Otherwise float32 silently loses the landscape:
+    XLA flushes subnormals to zero, so a weak scene would look like "no contact"
+    everywhere. In float32 this admits Delta_gamma from about 1e-20 N/m (at 1e-3 um/px;
+    1e-26 N/m at 1 um/px) up to about 1e35 N/m; in float64, anything physical.
+    A scene with Delta_gamma = 0 (``allow_repulsive``) has no energy at all and passes.
+    """
+    fi = np.finfo(scene.dtype)
+    dg = abs(scene.materials.delta_gamma_N_m)
+    if dg == 0:
+        return
+    pixel = dg * scene.um_per_px**2 * UM2_TO_M2
+    largest = energy_scale_J(scene)
+    floor = NOISE_FACTOR * float(fi.eps) * largest
+    if min(pixel, floor) < fi.tiny or largest > fi.max / 2**10:
+        m = scene.materials
+        raise InputError(
+            f"the energies of this scene are outside what {scene.dtype} holds: one pixel of overlap is "
+            f"{pixel:.3g} J, the noise floor {floor:.3g} J and the largest energy {largest:.3g} J, but they "
+            f"must lie between {float(fi.tiny):.3g} and {float(fi.max) / 2**10:.3g} J (surface tension "
+            f"{m.surface_tension_N_m:g} N/m, contact angles {m.pad_angle_deg:g}/{m.substrate_angle_deg:g} deg, "
+            f"{scene.um_per_px:g} um/px); use dtype float64, or check the surface tension and the scale"
+        )
+
+
 def estimate_bytes(scene: Scene, twists: np.ndarray | None = None) -> int:
     """Bytes the landscape array of ``scene`` would take (before building it)."""
     return plan(scene, twists)["landscape_bytes"]
@@ -656,10 +722,12 @@ def build_landscape(
     t_start = time.perf_counter()
     p = plan(scene, twists, center_px, half_px)
     win, rot = p["window"], p["rotator"]
-    cor = Correlator(p["pattern_up"], rot.shape, win, scene.dtype, backend)
+    _check_energy_range(scene)
+    # Sizes first, allocation after: an over-budget request fails before any transform.
     budget = scene.memory_budget_mb * 2**20
     chunk = max(1, min(chunk, len(p["twists"])))
-    need = p["landscape_bytes"] + chunk * cor.bytes_per_twist()
+    fft = fft_shape(p["pattern_up"].shape, rot.shape, win)
+    need = p["landscape_bytes"] + work_bytes(fft, 2 * win.ry + 1, scene.dtype, chunk, -(-len(p["twists"]) // chunk))
     if need > budget:
         raise InputError(
             f"the landscape needs about {need / 2**20:,.0f} MB ({len(p['twists'])} twists x "
@@ -667,6 +735,7 @@ def build_landscape(
             f"{scene.memory_budget_mb:,.0f} MB; use a coarser scale (--um-per-px), a larger twist step "
             "or narrower twist range, a smaller translation window (window_um), or raise memory_budget_mb"
         )
+    cor = Correlator(p["pattern_up"], rot.shape, win, scene.dtype, backend)
     twists_deg = p["twists"]
     scale = scene.materials.delta_gamma_N_m * scene.um_per_px**2 * UM2_TO_M2
     energy = np.empty((len(twists_deg), 2 * win.ry + 1, 2 * win.rx + 1), dtype=scene.dtype)
@@ -685,7 +754,7 @@ def build_landscape(
         um_per_px=s,
         delta_gamma=scene.materials.delta_gamma_N_m,
         cut=p["cut"],
-        energy_scale_J=abs(scene.materials.delta_gamma_N_m) * min(scene.pattern.area_um2, scene.chip.area_um2) * UM2_TO_M2,
+        energy_scale_J=energy_scale_J(scene),
         stats={
             "rotations": rot.count,
             "seconds": time.perf_counter() - t_start,

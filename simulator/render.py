@@ -57,6 +57,17 @@ def save_figure(fig, path: str | os.PathLike, dpi: int = 120) -> None:
     _pyplot().close(fig)
 
 
+def plot_pattern(mask: Mask, path: str | os.PathLike, title: str = "pattern as simulated") -> None:
+    """The wettability mask in the physical frame (um, y up), white = pad."""
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(4.6, 4.4))
+    im = ax.imshow(mask.data, extent=mask.extent_um, cmap="gray", vmin=0, vmax=1, interpolation="nearest")
+    ax.plot([0], [0], "+", color="C3", ms=10, mew=1.5)
+    ax.set(xlabel="x (um)", ylabel="y (um)", title=f"{title} ({mask.um_per_px:g} um/px)")
+    fig.colorbar(im, ax=ax, shrink=0.8, label="wettability (1 = pad)")
+    save_figure(fig, path)
+
+
 def plot_energy_curve(traj, path: str | os.PathLike) -> None:
     """Energy (nJ) and twist (deg) versus step (stepping methods) or time in ms (dynamics)."""
     plt = _pyplot()

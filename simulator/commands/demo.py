@@ -7,7 +7,8 @@ escapes by turning (6.4) and aligns. The same x-bias with neither y-bias nor twi
 stays stuck (check C9), which the summary reports for comparison.
 
 Writes into ``--out`` (default ``out``): ``demo.gif`` (the animated trajectory),
-``demo_energy.png`` (energy against step), ``trajectory.json`` and ``summary.txt``.
+``demo_energy.png`` (energy against step), ``trajectory.json``, ``summary.txt`` and
+the evaluation report of the pattern, ``report/report.html`` (see ``selfalign evaluate``).
 """
 
 from __future__ import annotations
@@ -56,8 +57,10 @@ def run(args: argparse.Namespace) -> int:
     f = [round(v, 2) + 0.0 for v in traj.final]
     print(f"{METHOD}: {traj.outcome} at ({f[0]:.2f} um, {f[1]:.2f} um, {f[2]:.2f} deg) after {traj.steps} steps")
     files = write_trajectory_files(out, scene, traj, args.quiet)
-    # Further outputs (e.g. an evaluation report under out/report/) are added here:
-    # files += write_report(scene, out / "report", args.quiet)
+    from simulator.evaluate import evaluate
+
+    evaluate(scene, out / "report", quiet=args.quiet, source=f"{PATTERN}.png")
+    files.append(out / "report" / "report.html")
     files.append(write_summary(out / "summary.txt", scene, traj, stuck, time.perf_counter() - t0, files))
     for path in files:
         print(f"wrote {path}")

@@ -83,14 +83,17 @@ def run(args: argparse.Namespace) -> int:
             "overlap_um2": ls.overlap_um2(cur["energy_J"]).tolist(),
             f"force_{funit}": cur["force"].tolist(),
             f"plateaus_{unit}": cur["plateaus"],
+            f"no_contact_{unit}": cur["no_contact"],
         }
         print(f"curve along {args.curve} through the first pose, {cur['values'][0]:g} to {cur['values'][-1]:g} {unit}, {len(cur['values'])} samples")
         for v, e, f in _sampled(cur):
             print(f"  {args.curve} = {v:10.3f} {unit}: energy {e:.6e} J, {'torque' if unit == 'deg' else 'force'} {f:.4e} {funit.replace('Nm', 'N m')}")
         if cur["plateaus"]:
-            print("plateaus (|force| below the noise floor): " + ", ".join(f"[{a:g}, {b:g}] {unit}" for a, b in cur["plateaus"]))
+            print("plateaus (zero force, energy changes below the noise floor): " + ", ".join(f"[{a:g}, {b:g}] {unit}" for a, b in cur["plateaus"]))
         else:
             print("plateaus: none")
+        if cur["no_contact"]:
+            print("no contact (chip off the pattern): " + ", ".join(f"[{a:g}, {b:g}] {unit}" for a, b in cur["no_contact"]))
     if args.json:
         write_json(args.json, result)
         print(f"wrote {args.json}")

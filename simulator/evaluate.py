@@ -1,0 +1,272 @@
+"""A complete assessment of one pattern: numbers, pictures and a one-page report.
+
+:func:`evaluate` computes, for a scene:
+
+* the global minimum pose of the energy;
+* the restoring force (N) and torque (N m) near alignment: at a bias of
+  ``near_um`` along +-x and +-y, and at +-``near_deg`` of twist;
+* the energy curves along x and y through the minimum, their plateaus and the
+  maximum bias per direction: the largest |bias| up to which the force points back
+  to the minimum everywhere (PHYSICS.md 6.3);
+* the capture fraction over a default grid of starts (twist 0): the fraction that
+  ends aligned, and the capture map;
+* the yield under default placement noise: normal around the aligned pose with
+  standard deviations of 10 % of the chip size in x and y and 2 degrees of twist;
+
+and writes ``summary.json``, ``landscape.png``, ``force.png``, ``capture.png``,
+``pattern.png`` (the input as used) and ``report.html`` into a directory. Everything
+is written into a temporary directory beside it and renamed into place at the end,
+so a failure leaves no partial directory.
+"""
+
+from __future__ import annotations
+
+import html
+import json
+import os
+import shutil
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from patterns.errors import InputError
+from simulator import montecarlo, render
+from simulator.landscape import build_landscape, estimate_bytes
+from simulator.scene import Scene, resample_to_scale
+
+#: Landscapes above this (MB) are built at a coarser resolution unless the user chose one.
+AUTO_LANDSCAPE_MB = 320.0
+#: Placement noise (fractions of the chip size, and degrees) for the default yield.
+NOISE_FRACTION, NOISE_TWIST_DEG = 0.10, 2.0
+YIELD_STARTS = 2000
+GRID_CELLS = 25
+
+
+def auto_resolution(scene: Scene, budget_mb: float = AUTO_LANDSCAPE_MB) -> Scene:
+    """The scene at the finest whole multiple of its pixel size whose landscape fits ``budget_mb``."""
+    for k in range(1, 17):
+        s = scene if k == 1 else scene.replace(pattern=resample_to_scale(scene.pattern, scene.um_per_px * k), chip=resample_to_scale(scene.chip, scene.um_per_px * k))
+        if estimate_bytes(s) / 2**20 <= budget_mb:
+            return s
+    return s
+
+
+def chip_size(scene: Scene) -> tuple[float, float]:
+    """Width and height (um) of the chip's wettable footprint (exact for geometry,
+    else the bounding box of pixels at least half covered)."""
+    if scene.chip.geometry is not None:
+        x0, y0, x1, y1 = scene.chip.geometry.bounds
+        return x1 - x0, y1 - y0
+    d = scene.chip.data >= 0.5
+    rows, cols = np.flatnonzero(d.any(axis=1)), np.flatnonzero(d.any(axis=0))
+    s = scene.um_per_px
+    return (cols[-1] + 1 - cols[0]) * s, (rows[-1] + 1 - rows[0]) * s
+
+
+def max_bias(values: np.ndarray, force: np.ndarray, x0: float) -> tuple[float, float]:
+    """(+, -) largest |v - x0| with the force pointing back to x0 at every sample in between."""
+    out = []
+    for sign in (1, -1):
+        sel = (values - x0) * sign > 0
+        v, f = (values[sel] - x0) * sign, force[sel] * sign
+        order = np.argsort(v)
+        v, f = v[order], f[order]
+        bad = np.flatnonzero(f >= 0)  # zero force (plateau) or pushing away
+        out.append(float(v[bad[0] - 1]) if bad.size and bad[0] > 0 else (0.0 if bad.size else float(v[-1]) if v.size else 0.0))
+    return out[0], out[1]
+
+
+def evaluate(scene: Scene, out_dir: str | os.PathLike, quiet: bool = False, source: str = "", auto: bool = True) -> dict:
+    """Assess ``scene`` and write the report into ``out_dir`` (created; must not exist as a file)."""
+    t_start = time.perf_counter()
+    out_dir = Path(out_dir)
+    parent = out_dir.resolve().parent
+    if out_dir.exists() and not out_dir.is_dir():
+        raise InputError(f"--out {out_dir}: exists and is not a directory")
+    if not parent.is_dir():
+        raise InputError(f"--out {out_dir}: parent directory {parent} does not exist; create it first")
+    if not os.access(parent, os.W_OK):
+        raise InputError(f"--out {out_dir}: parent directory {parent} is not writable")
+    native = scene.um_per_px
+    if auto:
+        scene = auto_resolution(scene)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=parent))
+    try:
+        summary = _assess(scene, tmp, quiet)
+        summary["settings"] |= {"source_um_per_px": native, "resolution_auto": bool(auto and scene.um_per_px != native)}
+        summary["seconds"] = round(time.perf_counter() - t_start, 2)
+        (tmp / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+        (tmp / "report.html").write_text(_html(summary, source))
+        if out_dir.exists():
+            shutil.rmtree(out_dir)
+        os.replace(tmp, out_dir)
+        os.chmod(out_dir, 0o777 & ~_umask())
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp, ignore_errors=True)
+    return summary
+
+
+def _umask() -> int:
+    m = os.umask(0)
+    os.umask(m)
+    return m
+
+
+def _assess(scene: Scene, out: Path, quiet: bool) -> dict:
+    s = scene.um_per_px
+    ls = build_landscape(scene, progress=not quiet)
+    xm, ym, tm, em = ls.global_minimum()
+    w, h = chip_size(scene)
+    near = max(2 * s, 0.02 * min(w, h))
+    near_deg = max(ls.twist_step_deg, 1.0) if len(ls.twist_deg) > 1 else 0.0
+    forces = {}
+    for label, dx, dy in (("+x", near, 0), ("-x", -near, 0), ("+y", 0, near), ("-y", 0, -near)):
+        fx, fy = ls.force_at(xm + dx, ym + dy, tm)
+        forces[label] = [float(fx) + 0.0, float(fy) + 0.0]  # no -0.0
+    torques = {}
+    if near_deg:
+        for label, d in (("+", near_deg), ("-", -near_deg)):
+            torques[label] = float(ls.torque_at(xm, ym, tm + d)) + 0.0
+    curves, biases = {}, {}
+    reach_x, reach_y = float(ls.x_um[-1]), float(ls.y_um[-1])
+    for axis, lo, hi in (("x", -reach_x, reach_x), ("y", -reach_y, reach_y)):
+        c = ls.curve(axis, (xm, ym, tm), lo, hi)
+        x0 = xm if axis == "x" else ym
+        plus, minus = max_bias(c["values"], c["force"], x0)
+        curves[axis] = c
+        biases[f"+{axis}"], biases[f"-{axis}"] = plus, minus
+    # Capture fraction over a grid of starts at twist 0, and the yield under placement noise.
+    span = 0.6 * max(w, h)
+    step = max(s, round(2 * span / (GRID_CELLS - 1) / s) * s)
+    n = int(span // step)
+    grid = montecarlo.StartGrid.from_ranges((-n * step, n * step, step), (-n * step, n * step, step), 0.0)
+    cap = montecarlo.run_batch(scene, grid, landscape=ls, progress=not quiet)
+    cap_sum = montecarlo.summarize(cap, grid)
+    noise = (NOISE_FRACTION * w, NOISE_FRACTION * h, NOISE_TWIST_DEG if len(ls.twist_deg) > 1 else 0.0)
+    starts = montecarlo.random_starts(YIELD_STARTS, noise, seed=0)
+    if len(ls.twist_deg) == 1:
+        starts[:, 2] = 0.0
+    yl = montecarlo.run_batch(scene, starts, landscape=ls, progress=not quiet)
+    yl_sum = montecarlo.summarize(yl)
+    # Pictures.
+    render.plot_pattern(scene.pattern, out / "pattern.png")
+    render.plot_landscape(ls, out / "landscape.png", pattern=scene.pattern)
+    render.plot_forces(ls, out / "force.png", through=(xm, ym, tm))
+    render.plot_capture_map(
+        montecarlo.capture_map(cap, grid), grid, scene, out / "capture.png", title=f"capture map, yield {100 * cap_sum['yield']:.1f} % of {cap_sum['n']} starts"
+    )
+    m = scene.materials
+    return {
+        "global_minimum": {"x_um": xm, "y_um": ym, "twist_deg": tm, "energy_J": em, "overlap_um2": float(ls.overlap_um2(em))},
+        "restoring_force_N": {"bias_um": near, **forces},
+        "restoring_torque_Nm": {"twist_deg": near_deg, **torques} if torques else None,
+        "plateaus_um": {a: curves[a]["plateaus"] for a in ("x", "y")},
+        "max_bias_um": biases,
+        "capture": {
+            "fraction": cap_sum["yield"],
+            "n": cap_sum["n"],
+            "outcomes": cap_sum["outcomes"],
+            "grid_um": {"from": -n * step, "to": n * step, "step": step},
+            "twist_deg": 0.0,
+        },
+        "yield": {
+            "fraction": yl_sum["yield"],
+            "n": yl_sum["n"],
+            "outcomes": yl_sum["outcomes"],
+            "placement_sigma": {"x_um": noise[0], "y_um": noise[1], "twist_deg": noise[2]},
+            "seed": 0,
+            "error_um": yl_sum.get("aligned_error_um"),
+            "error_deg": yl_sum.get("aligned_error_deg"),
+        },
+        "settings": {
+            "um_per_px": s,
+            "pattern_px": list(scene.pattern.shape),
+            "chip_um": [w, h],
+            "twist_step_deg": ls.twist_step_deg if len(ls.twist_deg) > 1 else None,
+            "twists": len(ls.twist_deg),
+            "dtype": scene.dtype,
+            "method": "greedy",
+            "surface_tension_N_m": m.surface_tension_N_m,
+            "pad_angle_deg": m.pad_angle_deg,
+            "substrate_angle_deg": m.substrate_angle_deg,
+            "delta_gamma_N_m": m.delta_gamma_N_m,
+            "landscape_MB": round(ls.energy.nbytes / 2**20, 1),
+            "landscape_s": round(ls.stats["seconds"], 2),
+        },
+    }
+
+
+def _fmt(v, unit: str, digits: int = 4) -> str:
+    if v is None:
+        return "n/a"
+    if isinstance(v, float) and (abs(v) < 1e-3 or abs(v) >= 1e4) and v != 0:
+        return f"{v:.{digits - 1}e} {unit}"
+    return f"{v:.{digits}g} {unit}"
+
+
+def _html(summary: dict, source: str) -> str:
+    """The one-page report: inputs, numbers with units, the four pictures."""
+    s, g = summary["settings"], summary["global_minimum"]
+    f, b = summary["restoring_force_N"], summary["max_bias_um"]
+    tq = summary["restoring_torque_Nm"]
+    cap, yl = summary["capture"], summary["yield"]
+    e = html.escape
+    rows_force = "".join(
+        f"<tr><td>{e(k)} {f['bias_um']:.3g} um</td><td>{_fmt(v[0] * 1e6, 'uN')}</td><td>{_fmt(v[1] * 1e6, 'uN')}</td></tr>"
+        for k, v in f.items()
+        if k != "bias_um"
+    )
+    rows_torque = (
+        "".join(f"<tr><td>twist {k}{tq['twist_deg']:g} deg</td><td colspan=2>{_fmt(v * 1e9, 'nN m')}</td></tr>" for k, v in tq.items() if k != "twist_deg")
+        if tq
+        else "<tr><td colspan=3>twist not simulated</td></tr>"
+    )
+    plateaus = "; ".join(f"{a}: " + (", ".join(f"[{p[0]:g}, {p[1]:g}] um" for p in pl) or "none") for a, pl in summary["plateaus_um"].items())
+    outcomes = ", ".join(f"{k} {v}" for k, v in yl["outcomes"].items() if v)
+    cap_out = ", ".join(f"{k} {v}" for k, v in cap["outcomes"].items() if v)
+    ps = yl["placement_sigma"]
+    err = yl.get("error_um") or {}
+    err_txt = ", ".join(f"{k}: mean |error| {v['mean_abs']:.3g} um" for k, v in err.items() if v) or "n/a"
+    auto = " (coarsened automatically to keep the landscape small; pass --resolution to choose)" if s.get("resolution_auto") else ""
+    return f"""<!doctype html>
+<html lang="en"><head><meta charset="utf-8"><title>selfalign evaluation: {e(source)}</title>
+<style>
+body {{ font-family: system-ui, sans-serif; max-width: 1100px; margin: 2em auto; color: #222; line-height: 1.4; }}
+h1 {{ font-size: 1.5em; }} h2 {{ font-size: 1.15em; margin-top: 1.6em; border-bottom: 1px solid #ccc; }}
+table {{ border-collapse: collapse; margin: .5em 0; }} td, th {{ border: 1px solid #ccc; padding: 3px 10px; text-align: left; }}
+img {{ max-width: 100%; border: 1px solid #ddd; }} .grid {{ display: grid; grid-template-columns: 1fr 1fr; gap: 1em; }}
+.note {{ color: #555; font-size: .9em; }}
+</style></head><body>
+<h1>selfalign evaluation of <code>{e(source)}</code></h1>
+<p class="note">Overlap model (energy = &Delta;&gamma; &times; overlap area). Positions in um of the chip centre from the
+pattern centre, x right, y up; twist in degrees, counter-clockwise positive. Computed in {summary['seconds']:.1f} s.</p>
+<h2>Inputs</h2>
+<div class="grid"><div><img src="pattern.png" alt="pattern as used"></div><div><table>
+<tr><th>pattern</th><td>{e(source)}, {s['pattern_px'][1]} x {s['pattern_px'][0]} px at {s['um_per_px']:g} um/px{e(auto)} (file scale {s['source_um_per_px']:g} um/px)</td></tr>
+<tr><th>chip</th><td>{s['chip_um'][0]:g} x {s['chip_um'][1]:g} um wettable footprint</td></tr>
+<tr><th>liquid / wetting</th><td>surface tension {s['surface_tension_N_m'] * 1e3:g} mN/m, pad {s['pad_angle_deg']:g} deg, substrate {s['substrate_angle_deg']:g} deg: &Delta;&gamma; = {s['delta_gamma_N_m'] * 1e3:.4g} mN/m</td></tr>
+<tr><th>pose grid</th><td>{s['twists']} twists{f", step {s['twist_step_deg']:g} deg" if s['twist_step_deg'] else ""}; {s['dtype']}; landscape {s['landscape_MB']:g} MB in {s['landscape_s']:g} s</td></tr>
+</table></div></div>
+<h2>Where the chip ends up</h2>
+<p>Global minimum of the energy at <b>({g['x_um']:g} um, {g['y_um']:g} um, {g['twist_deg']:g} deg)</b>,
+overlap {g['overlap_um2']:,.0f} um&sup2;, energy {_fmt(g['energy_J'], 'J')}.</p>
+<h2>Restoring force and torque near alignment</h2>
+<table><tr><th>chip displaced by</th><th>F<sub>x</sub></th><th>F<sub>y</sub></th></tr>{rows_force}{rows_torque}</table>
+<p>Maximum bias from which the force points back to the minimum all the way:
++x {b['+x']:g} um, &minus;x {b['-x']:g} um, +y {b['+y']:g} um, &minus;y {b['-y']:g} um (twist held at the minimum's).
+Plateaus (zero force): {e(plateaus)}.</p>
+<img src="force.png" alt="energy, force and torque curves">
+<h2>Energy landscape</h2>
+<img src="landscape.png" alt="energy over x and y">
+<h2>Capture region and yield</h2>
+<p>Capture fraction: <b>{100 * cap['fraction']:.1f} %</b> of {cap['n']} greedy starts on a grid from {cap['grid_um']['from']:g} to {cap['grid_um']['to']:g} um
+in steps of {cap['grid_um']['step']:g} um in x and y, twist 0 ({e(cap_out)}).</p>
+<p>Yield under placement noise: <b>{100 * yl['fraction']:.1f} %</b> of {yl['n']} starts drawn normally around the aligned pose with
+&sigma; = {ps['x_um']:.3g} um, {ps['y_um']:.3g} um, {ps['twist_deg']:g} deg (seed {yl['seed']}): {e(outcomes)}; aligned runs: {e(err_txt)}.</p>
+<img src="capture.png" alt="capture map">
+<p class="note">Written by selfalign. The numbers are in summary.json (units in the key names).</p>
+</body></html>
+"""

@@ -1,0 +1,87 @@
+"""``selfalign evaluate``: the files, their keys and units, and bad input."""
+
+import json
+import re
+
+import imageio.v3 as iio
+import pytest
+
+from patterns.geometry import four_pad
+from patterns.io import write_mask
+from patterns.library import library_path
+from patterns.raster import mask_from_geometry
+from simulator.cli import main
+
+
+@pytest.fixture(scope="module")
+def fourpad_png(tmp_path_factory):
+    path = tmp_path_factory.mktemp("ev") / "fp.png"
+    write_mask(path, mask_from_geometry(four_pad(200, 20), 2.0, margin_um=10))
+    return path
+
+
+@pytest.fixture(scope="module")
+def report(fourpad_png, tmp_path_factory):
+    out = tmp_path_factory.mktemp("rep") / "report"
+    assert main(["evaluate", str(fourpad_png), "--out", str(out), "--quiet", "--twist-step", "3"]) == 0
+    return out
+
+
+def test_writes_every_file_with_units(report):
+    names = {"summary.json", "landscape.png", "force.png", "capture.png", "pattern.png", "report.html"}
+    assert names <= {p.name for p in report.iterdir()}
+    s = json.loads((report / "summary.json").read_text())
+    g = s["global_minimum"]
+    assert (g["x_um"], g["y_um"], g["twist_deg"]) == (0.0, 0.0, 0.0)
+    assert g["overlap_um2"] == pytest.approx(4 * 90**2, rel=1e-6)
+    # Four-pad: the force near alignment is |dgamma| (L - g) (C4) and points back.
+    f = s["restoring_force_N"]["+x"][0]
+    assert f == pytest.approx(s["settings"]["delta_gamma_N_m"] * 180e-6, rel=1e-3)
+    # Max bias is one pad, p = 90 um, within one pixel (C3).
+    for k in ("+x", "-x", "+y", "-y"):
+        assert abs(s["max_bias_um"][k] - 90) <= 2
+    assert any(abs(a - 90) <= 2 and abs(b - 110) <= 2 for a, b in s["plateaus_um"]["x"])
+    assert 0 < s["capture"]["fraction"] <= 1 and s["yield"]["n"] == 2000
+    assert s["yield"]["placement_sigma"] == {"x_um": 20.0, "y_um": 20.0, "twist_deg": 2.0}
+    for png in ("landscape.png", "force.png", "capture.png", "pattern.png"):
+        assert iio.imread(report / png).ndim == 3
+
+
+def test_html_references_files_that_exist(report):
+    page = (report / "report.html").read_text()
+    refs = re.findall(r'src="([^"]+)"', page)
+    assert set(refs) == {"pattern.png", "force.png", "landscape.png", "capture.png"}
+    assert all((report / r).exists() for r in refs)
+    assert "um" in page and "uN" in page and "deg" in page
+
+
+def test_library_pattern_needs_no_other_flag(tmp_path):
+    out = tmp_path / "sq"
+    assert main(["evaluate", str(library_path("square_200")), "--out", str(out), "--quiet", "--twist-step", "5"]) == 0
+    s = json.loads((out / "summary.json").read_text())
+    assert s["settings"]["chip_um"] == [200.0, 200.0]  # default chip: the pattern's bounding box
+    assert s["capture"]["fraction"] == 1.0
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["missing.png"], "missing.png"),
+        (["{pat}", "--chip", "nochip.png"], "nochip.png"),
+        (["{pat}", "--pad-angle", "80"], "Delta_gamma"),
+    ],
+)
+def test_bad_input_leaves_no_directory(fourpad_png, tmp_path, capsys, args, message):
+    out = tmp_path / "out"
+    args = [a.replace("{pat}", str(fourpad_png)) for a in args]
+    assert main(["evaluate", *args, "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert message in err and len(err.strip().splitlines()) == 1
+    assert not out.exists() and list(tmp_path.iterdir()) == []
+
+
+def test_unwritable_output_directory(fourpad_png, tmp_path, capsys):
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    assert main(["evaluate", str(fourpad_png), "--out", str(blocker / "rep"), "--quiet"]) == 2
+    assert "does not exist" in capsys.readouterr().err
