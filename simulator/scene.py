@@ -14,6 +14,7 @@ TOML keys (all optional except ``pattern`` and one of ``chip`` / ``chip_size_um`
     dtype = "float32"               # or "float64"
     window_um = 800                 # translation half-width of the pose grid
     memory_budget_mb = 4096
+    accuracy = "balanced"           # preset for the knobs not set here: fast | balanced | precise
 
     [materials]
     surface_tension_mN_m = 72.8
@@ -208,7 +209,7 @@ class Scene:
             "pattern", "chip", "chip_size_um", "um_per_px", "resolution_um", "dtype", "window_um", "memory_budget_mb", "materials", "twist",
             "effects", "liquid", "chip_thickness_um", "chip_density_kg_m3", "damping_calibration",
         }
-        unknown = set(doc) - known - {"start", "method", "simulate", "montecarlo"}
+        unknown = set(doc) - known - {"simulate", "montecarlo", "accuracy"}
         require(not unknown, f"unknown scene keys {sorted(unknown)}; allowed: {sorted(known)}")
         require("pattern" in doc, "scene needs a 'pattern' (PNG path)")
         try:

@@ -28,11 +28,22 @@ def add_scene_args(p: argparse.ArgumentParser) -> None:
     m.add_argument("--substrate-angle", type=float, help="contact angle on the substrate in degrees (default 60)")
     m.add_argument("--allow-repulsive", action="store_true", help="allow a pad that wets worse than the substrate")
     n = p.add_argument_group("pose grid and numerics")
+    n.add_argument("--accuracy", choices=("fast", "balanced", "precise"), help=_accuracy_help())
     n.add_argument("--twist-step", type=float, help="twist grid step in degrees (default 1)")
     n.add_argument("--no-twist", action="store_true", help="keep the chip untwisted (computes one rotation)")
     n.add_argument("--window", type=float, help="translation half-width of the pose grid in um (default: full reach)")
     n.add_argument("--dtype", choices=("float32", "float64"), help="landscape precision (default float32)")
     n.add_argument("--memory-budget", type=float, help="landscape memory budget in MB")
+
+
+def _accuracy_help() -> str:
+    from simulator.accuracy import DEFAULT_PRESET, PRESETS
+
+    return (
+        f"accuracy preset (default {DEFAULT_PRESET}) setting the pixel size, twist step and dtype "
+        "that you do not set yourself (--resolution, --twist-step, --dtype win). "
+        + " | ".join(p.describe() for p in PRESETS.values())
+    ).replace("%", "%%")
 
 
 def parse_chip_size(text: str) -> tuple[float, float]:
@@ -101,7 +112,41 @@ def scene_from_args(args: argparse.Namespace) -> Scene:
     for (table, key), value in flags.items():
         if value is not None:
             (doc.setdefault(table, {}) if table else doc)[key] = value
-    return Scene.from_dict(doc, base=base)
+    return apply_accuracy(Scene.from_dict(doc, base=base), getattr(args, "accuracy", None) or doc.get("accuracy"), doc)
+
+
+def apply_accuracy(scene: Scene, preset: str | None, doc: dict) -> Scene:
+    """The scene with the knobs of an accuracy preset that the user did not set.
+
+    Explicit knobs (``resolution_um``, ``[twist] step_deg``, ``dtype`` in the scene
+    document, from flags or TOML) always win. Prints a one-line warning on stderr when
+    the resulting pixel size leaves the pattern's smallest feature under 3 pixels.
+    """
+    import sys
+
+    from simulator.accuracy import apply_preset, feature_warning, smallest_feature_um
+    from simulator.scene import TwistGrid, resample_to_scale
+
+    explicit = {"um_per_px": doc.get("resolution_um"), "twist_step_deg": doc.get("twist", {}).get("step_deg"), "dtype": doc.get("dtype")}
+    pattern = scene.pattern
+    try:
+        feature = smallest_feature_um(pattern)
+    except InputError:
+        feature = None
+    native = None if pattern.geometry is not None else pattern.um_per_px
+    knobs = apply_preset(preset, explicit, feature_um=feature, native_um_per_px=native)
+    s = knobs["um_per_px"]
+    if s != scene.um_per_px:
+        scene = scene.replace(pattern=resample_to_scale(scene.pattern, s), chip=resample_to_scale(scene.chip, s))
+    if knobs["twist_step_deg"] != scene.twist.step_deg:
+        scene = scene.replace(twist=TwistGrid(knobs["twist_step_deg"], scene.twist.min_deg, scene.twist.max_deg))
+    if knobs["dtype"] != scene.dtype:
+        scene = scene.replace(dtype=knobs["dtype"])
+    if feature is not None:
+        warning = feature_warning(pattern, scene.um_per_px)
+        if warning:
+            print(f"warning: {warning}", file=sys.stderr)
+    return scene
 
 
 def read_toml(path: str | os.PathLike) -> dict[str, Any]:
