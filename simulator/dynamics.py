@@ -95,6 +95,7 @@ from simulator.stepping import (
     Field,
     Grid,
     at_cut_edge,
+    clamp_start,
     interpolate,
     on_plateau,
 )
@@ -408,6 +409,19 @@ def _split(y, inertial: bool):
     return y if inertial else (y, jnp.zeros_like(y))
 
 
+def _energy(field: Field, grid: Grid, q):
+    """Landscape energy E (:func:`simulator.stepping.interpolate`) at q, read at the nearest
+    point of the grid where q has passed a wall (a cut side, an end of a bounded twist
+    axis): the run stops there with EDGE and reports the edge value, as Phi repeats it,
+    never the wall's +inf."""
+    lo, hi = [], []
+    for k, n in enumerate(grid.shape):
+        walls = (True, True) if k == 0 and not grid.wrap else grid.cut[k]
+        lo.append(0.0 if walls[0] else -np.inf)
+        hi.append(n - 1.0 if walls[1] else np.inf)
+    return interpolate(field, grid, jnp.clip(q, jnp.asarray(lo, q.dtype), jnp.asarray(hi, q.dtype)))
+
+
 def _save(y, args, inertial: bool):
     field, grid, co = args
     d, u = _split(y, inertial)
@@ -416,7 +430,7 @@ def _save(y, args, inertial: bool):
     return {
         "q": q,
         "v": u / co.tau,
-        "energy": interpolate(field, grid, q),
+        "energy": _energy(field, grid, q),
         "potential": phi,
         "kinetic": jnp.sum(co.ke * u * u),
     }
@@ -458,7 +472,8 @@ def _mechanical(y, args, inertial: bool):
 
 class _GuardedController(diffrax.AbstractAdaptiveStepSizeController):
     """A PID controller that also rejects a step which (a) raises the mechanical energy
-    by more than the noise floor or (b) moves more than one grid step along any axis.
+    more than the noise floor above the lowest value accepted so far or (b) moves more
+    than one grid step along any axis.
 
     Why: the force is piecewise linear between grid nodes. A step that spans several
     cells can skip a narrow feature (a plateau, a ridge, the cusp) while the embedded
@@ -481,11 +496,17 @@ class _GuardedController(diffrax.AbstractAdaptiveStepSizeController):
         return self
 
     def init(self, terms, t0, t1, y0, dt0, args, func, error_order):
-        return self.inner.init(terms, t0, t1, y0, dt0, args, func, error_order)
+        t1, inner = self.inner.init(terms, t0, t1, y0, dt0, args, func, error_order)
+        return t1, (inner, _mechanical(y0, args, self.inertial))
 
     def adapt_step_size(
         self, t0, t1, y0, y1_candidate, args, y_error, error_order, controller_state
     ):
+        # The state carries the lowest mechanical energy accepted so far: the rise is
+        # measured from it, not from the last step, so rises within the floor cannot add
+        # up over a long (lightly damped, ringing) run (measured before: 3 floors above
+        # the lowest value after 4700 steps).
+        controller_state, lowest = controller_state
         keep, next_t0, next_t1, made_jump, state, result = self.inner.adapt_step_size(
             t0, t1, y0, y1_candidate, args, y_error, error_order, controller_state
         )
@@ -493,7 +514,8 @@ class _GuardedController(diffrax.AbstractAdaptiveStepSizeController):
         d0, _ = _split(y0, self.inertial)
         d1, _ = _split(y1_candidate, self.inertial)
         moved = jnp.max(jnp.abs(d1 - d0))
-        rise = _mechanical(y1_candidate, args, self.inertial) - _mechanical(y0, args, self.inertial)
+        h1 = _mechanical(y1_candidate, args, self.inertial)
+        rise = h1 - lowest
         ok = (rise <= field.floor) & (moved <= 1.0) & jnp.isfinite(rise)
         dt = t1 - t0
         veto = keep & ~ok
@@ -506,9 +528,10 @@ class _GuardedController(diffrax.AbstractAdaptiveStepSizeController):
             state,
         )
         keep = keep & ok
+        lowest = jnp.where(keep, jnp.minimum(lowest, h1), lowest)
         cap = dt * 0.9 / jnp.maximum(moved, 1e-30)
         next_t1 = jnp.where(keep, next_t0 + jnp.minimum(next_t1 - next_t0, cap), next_t1)
-        return keep, next_t0, next_t1, made_jump, state, result
+        return keep, next_t0, next_t1, made_jump, (state, lowest), result
 
 
 # ----------------------------------------------------------------- steppers
@@ -521,37 +544,48 @@ def _run(
     d_rtol, d_atol = default_tolerances(dt)
     rtol = d_rtol if rtol is None else rtol
     atol = d_atol if atol is None else atol
-    scale = jnp.asarray(_axis_scales(grid), dt)
-    active = _active(grid, dt)
+    # The SI products m s^2 and c s^2 (about 1e-21 and 1e-17 for a 200 um chip at 1 um/px)
+    # are formed in float64: in float32 they underflow to 0 for light or weakly damped
+    # chips (XLA flushes subnormals), which made tau = 0 and the end time infinite. Only
+    # the nondimensional coefficients, of the order of the landscape's energies, are cast
+    # to the field's dtype; tau and the end time are clamped to that dtype's range.
+    wide = jax.dtypes.canonicalize_dtype(jnp.float64)
+    scale = jnp.asarray(_axis_scales(grid), wide)
+    active = _active(grid, wide)
     f_ref = _reference_force(field, grid, dt)
+    f_ref_w = f_ref.astype(wide)
     mass = jnp.stack(
         [
-            jnp.asarray(params.inertia_kg_m2, dt),
-            jnp.asarray(params.mass_kg, dt),
-            jnp.asarray(params.mass_kg, dt),
+            jnp.asarray(params.inertia_kg_m2, wide),
+            jnp.asarray(params.mass_kg, wide),
+            jnp.asarray(params.mass_kg, wide),
         ]
     )
     damping = jnp.stack(
         [
-            jnp.asarray(params.rot_damping_N_m_s, dt),
-            jnp.asarray(params.damping_N_s_m, dt),
-            jnp.asarray(params.damping_N_s_m, dt),
+            jnp.asarray(params.rot_damping_N_m_s, wide),
+            jnp.asarray(params.damping_N_s_m, wide),
+            jnp.asarray(params.damping_N_s_m, wide),
         ]
     )
     ms2, cs2 = mass * scale * scale, damping * scale * scale
     if inertial:
         # Time to move one step from rest under the reference force, fastest axis.
-        tau = jnp.min(jnp.where(active > 0, jnp.sqrt(ms2 / f_ref), jnp.inf))
+        tau = jnp.min(jnp.where(active > 0, jnp.sqrt(ms2 / f_ref_w), jnp.inf))
         drive = active * tau * tau / ms2
         damp = active * damping * tau / mass
         ke = active * ms2 / (2.0 * tau * tau)
     else:
         # Time to move one step at the reference force (terminal speed), fastest axis.
-        tau = jnp.min(jnp.where(active > 0, cs2 / f_ref, jnp.inf))
+        tau = jnp.min(jnp.where(active > 0, cs2 / f_ref_w, jnp.inf))
         drive = active * tau / cs2
-        damp = jnp.zeros(3, dt)
-        ke = jnp.zeros(3, dt)
-    q0 = jnp.asarray(start, dt)
+        damp = jnp.zeros(3, wide)
+        ke = jnp.zeros(3, wide)
+    fi = jnp.finfo(dt)
+    s_end = jnp.minimum(jnp.asarray(params.t_max_s, wide) / tau, float(fi.max) / 2**10).astype(dt)
+    tau = jnp.maximum(tau, float(fi.tiny)).astype(dt)
+    drive, damp, ke = drive.astype(dt), damp.astype(dt), ke.astype(dt)
+    q0 = clamp_start(grid, jnp.asarray(start, dt))
     co = _Coeffs(
         q0=q0,
         drive=drive,
@@ -576,7 +610,7 @@ def _run(
         term,
         diffrax.Tsit5() if solver is None else solver,
         t0=jnp.asarray(0.0, dt),
-        t1=jnp.asarray(params.t_max_s, dt) / tau,
+        t1=s_end,
         dt0=None,
         y0=y0,
         args=(field, grid, co),
@@ -613,7 +647,7 @@ def _run(
         pt = buf(sol.ts * tau)
     else:
         phi0, _ = potential_and_gradient(field, grid, q0)
-        path, pe, pp = q0[None], interpolate(field, grid, q0)[None], phi0[None]
+        path, pe, pp = q0[None], _energy(field, grid, q0)[None], phi0[None]
         pk, pt = jnp.zeros(1, dt), jnp.zeros(1, dt)
     return DynamicsState(
         q=q,

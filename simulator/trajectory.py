@@ -21,11 +21,14 @@ import numpy as np
 
 from patterns.errors import InputError
 from simulator import stepping
-from simulator.landscape import Landscape, _twist_cut, build_landscape, twist_axis
+from simulator.landscape import Landscape, _twist_cut, axis_step, build_landscape, twist_axis
 from simulator.scene import Scene
 
 METHODS = ("greedy", "gradient", "overdamped", "inertial")
 DEFAULT_MAX_STEPS = 5000
+#: Largest |x|, |y| of a start in pixels (float32 holds every whole pixel up to 2**24, and
+#: int32 grid indices have room) and largest |twist| in degrees (as TwistGrid's range).
+MAX_START_PX, MAX_START_TWIST_DEG = 2**24, 3600.0
 
 
 @dataclass(frozen=True)
@@ -152,6 +155,12 @@ def simulate(
         raise InputError(f"max steps must be a whole number >= 1, got {max_steps!r}")
     if len(start) != 3 or not all(math.isfinite(v) for v in start):
         raise InputError(f"start pose must be three finite numbers (um, um, deg), got {start}")
+    reach_um = MAX_START_PX * scene.um_per_px
+    if max(abs(start[0]), abs(start[1])) > reach_um or abs(start[2]) > MAX_START_TWIST_DEG:
+        raise InputError(
+            f"start pose {tuple(start)} is out of range: |x| and |y| must be at most {reach_um:g} um "
+            f"({MAX_START_PX} px) and |twist| at most {MAX_START_TWIST_DEG:g} deg"
+        )
     dynamic = method in ("overdamped", "inertial")
     if dynamic and dynamics is None:
         from simulator.dynamics import DynamicsParams
@@ -161,9 +170,14 @@ def simulate(
     t0 = time.perf_counter()
     axis, wrap, _ = twist_axis(scene) if landscape is None else (landscape.twist_deg, landscape.wrap, None)
     n = len(axis)
-    step = axis[1] - axis[0] if n > 1 else 1.0
+    step = axis_step(axis)
     if not wrap and n > 1 and not (axis[0] - step / 2 <= start[2] <= axis[-1] + step / 2):
         raise InputError(f"start twist {start[2]:g} deg is outside the twist range {axis[0]:g}..{axis[-1]:g} deg")
+    if n == 1 and abs(start[2] - axis[0]) > 1e-9:
+        raise InputError(
+            f"start twist {start[2]:g} deg: this scene has one twist ({axis[0]:g} deg, twist turned off), "
+            f"so the start twist must be {axis[0]:g} deg; give that, or turn twist on"
+        )
     pose = np.asarray(start, float)
     boxes = _Boxes(scene, axis, wrap, band_steps, band_px, backend)
     pieces = []
@@ -221,7 +235,7 @@ class _Boxes:
     def __init__(self, scene: Scene, axis: np.ndarray, wrap: bool, band_steps: int, band_px: int, backend: str):
         self.scene, self.axis, self.wrap, self.backend = scene, axis, wrap, backend
         self.band, self.margin = band_steps, band_px
-        self.step = axis[1] - axis[0] if len(axis) > 1 else 1.0
+        self.step = axis_step(axis)
         self.box: tuple[tuple[int, int], int] | None = None
         self.planes_cache: dict[int, np.ndarray] = {}
         self.template: Landscape | None = None
@@ -310,7 +324,7 @@ def reference_landscape(scene: Scene, backend: str = "auto", reach_steps: int = 
         lo, hi = k0 - reach_steps, k0 + reach_steps
         if not wrap:
             lo, hi = max(lo, 0), min(hi, n - 1)
-        twists = None if (wrap and hi - lo + 1 >= n) else axis[0] + (axis[1] - axis[0]) * np.arange(lo, hi + 1)
+        twists = None if (wrap and hi - lo + 1 >= n) else axis[0] + axis_step(axis) * np.arange(lo, hi + 1)
     else:
         twists = None
     return build_landscape(scene, twists=twists, center_px=(0, 0), half_px=half_px, backend=backend)
