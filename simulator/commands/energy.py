@@ -87,6 +87,8 @@ def run(args: argparse.Namespace) -> int:
         }
         print(f"curve along {args.curve} through the first pose, {cur['values'][0]:g} to {cur['values'][-1]:g} {unit}, {len(cur['values'])} samples")
         for v, e, f in _sampled(cur):
+            e = 0.0 if abs(e) <= ls.noise_floor_J else e  # round-off beyond contact reads as 0
+            f = f + 0.0
             print(f"  {args.curve} = {v:10.3f} {unit}: energy {e:.6e} J, {'torque' if unit == 'deg' else 'force'} {f:.4e} {funit.replace('Nm', 'N m')}")
         if cur["plateaus"]:
             print("plateaus (zero force, energy changes below the noise floor): " + ", ".join(f"[{a:g}, {b:g}] {unit}" for a, b in cur["plateaus"]))

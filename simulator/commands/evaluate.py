@@ -49,7 +49,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"global minimum at ({g['x_um']:g} um, {g['y_um']:g} um, {g['twist_deg']:g} deg)")
     print(f"max bias: +x {b['+x']:g} um, -x {b['-x']:g} um, +y {b['+y']:g} um, -y {b['-y']:g} um")
     print(f"capture fraction {100 * cap['fraction']:.1f} % of {cap['n']} grid starts; yield {100 * yl['fraction']:.1f} % under placement noise")
-    print(f"wrote {args.out}/report.html (and summary.json, landscape.png, force.png, capture.png, pattern.png)")
+    print(f"wrote {Path(args.out) / 'report.html'} (and summary.json, landscape.png, force.png, capture.png, pattern.png)")
     return 0
 
 
