@@ -76,13 +76,13 @@ import json
 import multiprocessing as mp
 import os
 import platform
-import resource
 import sys
 import time
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
+from _memory import mark, peak_mb  # noqa: E402  (benchmarks/ is on sys.path)
 
 ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
@@ -143,34 +143,10 @@ WINDOW_EXTRA_UM = 50.0
 # ------------------------------------------------------------------ memory
 
 
-def _status_kb(field: str) -> int | None:
-    try:
-        with open("/proc/self/status") as fh:
-            for line in fh:
-                if line.startswith(field + ":"):
-                    return int(line.split()[1])
-    except OSError:
-        pass
-    return None
 
 
-def _mark() -> dict:
-    """Reset the peak-RSS counter (VmHWM) if allowed and remember the RSS now."""
-    try:
-        with open("/proc/self/clear_refs", "w") as fh:
-            fh.write("5")
-        reset = True
-    except OSError:
-        reset = False
-    return {"reset": reset, "rss_kb": _status_kb("VmRSS") or 0, "maxrss_kb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss}
 
 
-def _peak_mb(mark: dict) -> float:
-    if mark["reset"]:
-        hwm = _status_kb("VmHWM")
-        if hwm is not None:
-            return max(0.0, (hwm - mark["rss_kb"]) / 1024)
-    return max(0.0, (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - mark["maxrss_kb"]) / 1024)
 
 
 # ------------------------------------------------------------------ inputs
@@ -236,11 +212,11 @@ def measure_point(case: str, knobs: dict, settings: dict) -> dict:
     tiny = _scene("jagged_s2", Knobs(um_per_px=8.0, twist_step_deg=30.0))
     build_landscape(tiny)  # load FFT plans and libraries outside the measurement
 
-    mark = _mark()
+    before = mark()
     t0 = time.perf_counter()
     ls = build_landscape(scene)
     land_s = time.perf_counter() - t0
-    land_mb = _peak_mb(mark)
+    land_mb = peak_mb(before)
     land_s = _best_of(lambda: build_landscape(scene), land_s)
 
     poses = _poses(case, settings["poses"], SEED)
@@ -257,22 +233,22 @@ def measure_point(case: str, knobs: dict, settings: dict) -> dict:
 
     start = tuple(float(v) for v in starts[0])
     simulate(scene, start, k.method)  # warm-up: compiles the steppers for these boxes
-    mark = _mark()
+    before = mark()
     t0 = time.perf_counter()
     traj = simulate(scene, start, k.method)
     traj_s = time.perf_counter() - t0
-    traj_mb = _peak_mb(mark)
+    traj_mb = peak_mb(before)
     traj_s = _best_of(lambda: simulate(scene, start, k.method), traj_s)
 
     mc_starts = random_starts(settings["mc"], spread, SEED + 2, distribution="uniform")
     t0 = time.perf_counter()
     run_batch(scene, mc_starts[: min(DEFAULT_CHUNK, len(mc_starts))], k.method, landscape=ls, progress=False)
     warm_s = time.perf_counter() - t0
-    mark = _mark()
+    before = mark()
     t0 = time.perf_counter()
     mc = run_batch(scene, mc_starts, k.method, landscape=ls, progress=False)
     mc_s = time.perf_counter() - t0
-    mc_mb = _peak_mb(mark)
+    mc_mb = peak_mb(before)
     mc_s = _best_of(lambda: run_batch(scene, mc_starts, k.method, landscape=ls, progress=False), mc_s)
     return {
         "overlap_um2": area.tolist(),
@@ -294,7 +270,7 @@ def measure_point(case: str, knobs: dict, settings: dict) -> dict:
         "mc_yield": float(np.mean(mc.outcome == 0)),
         "rg_px": radius_of_gyration_px(scene),
         "a_max_um2": float(ls.overlap_um2(ls.energy.min())),
-        "memory_method": "VmHWM reset" if mark["reset"] else "ru_maxrss",
+        "memory_method": "VmHWM reset" if before["reset"] else "ru_maxrss",
     }
 
 

@@ -75,12 +75,12 @@ import math
 import multiprocessing as mp
 import os
 import platform
-import resource
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+from _memory import mark, peak_mb  # noqa: E402  (benchmarks/ is on sys.path)
 
 ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
@@ -285,42 +285,12 @@ WARM_UP = {"selfalign", "selfalign-jax"}  # jit: time the second call
 # ------------------------------------------------------------------ measurement
 
 
-def _status_kb(field: str) -> int | None:
-    try:
-        with open("/proc/self/status") as fh:
-            for line in fh:
-                if line.startswith(field + ":"):
-                    return int(line.split()[1])
-    except OSError:
-        pass
-    return None
 
 
-def _reset_peak() -> bool:
-    """Reset the kernel's peak-RSS counter (VmHWM) of this process, if allowed."""
-    try:
-        with open("/proc/self/clear_refs", "w") as fh:
-            fh.write("5")
-        return True
-    except OSError:
-        return False
 
 
-def _peak_rise_mb(before: dict) -> float:
-    if before["hwm_reset"]:
-        hwm = _status_kb("VmHWM")
-        if hwm is not None:
-            return (hwm - before["rss_kb"]) / 1024
-    return (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before["maxrss_kb"]) / 1024
 
 
-def _mark() -> dict:
-    reset = _reset_peak()
-    return {
-        "hwm_reset": reset,
-        "rss_kb": _status_kb("VmRSS") or 0,
-        "maxrss_kb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss,
-    }
 
 
 def _error_twists(t: int, k: int) -> np.ndarray:
@@ -352,11 +322,11 @@ def _child(
         poses = np.column_stack(
             [rng.choice(eidx, samples), rng.integers(0, H, samples), rng.integers(0, W, samples)]
         )
-        before = _mark()
+        before = mark()
         t0 = time.perf_counter()
         vals = naive_poses(pattern, chips, poses)
         dt = time.perf_counter() - t0
-        row["peak_mb"] = _peak_rise_mb(before)
+        row["peak_mb"] = peak_mb(before)
         total = dt / samples * t * H * W
         row.update(seconds=total, extrapolated=True, out_mb=0.0)
         row["notes"].append(f"{samples} poses in {dt:.2f} s, extrapolated to {t * H * W:.3g} poses")
@@ -376,7 +346,7 @@ def _child(
         return {**row, "skipped": f"not available: {err}"}
     except TypeError as err:
         return {**row, "skipped": f"signature mismatch: {err}"}
-    before = _mark()
+    before = mark()
     t0 = time.perf_counter()
     try:
         out = fn(pattern, chips)
@@ -385,7 +355,7 @@ def _child(
     except TypeError as err:
         return {**row, "skipped": f"signature mismatch: {err}"}
     dt = time.perf_counter() - t0
-    row["peak_mb"] = _peak_rise_mb(before)
+    row["peak_mb"] = peak_mb(before)
     row.update(seconds=dt, extrapolated=False, out_mb=out.nbytes / 2**20, dtype=str(out.dtype))
     if out.shape != (t, H, W):
         row["notes"].append(f"wrong shape {out.shape}, expected {(t, H, W)}")
