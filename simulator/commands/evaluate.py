@@ -43,6 +43,9 @@ def run(args: argparse.Namespace) -> int:
     if not (args.chip or args.chip_size or args.scene):
         args.chip_size = _bbox_chip(args)
     scene = scene_from_args(args)
+    from simulator.feedback import compiling
+
+    compiling("greedy", args.quiet)
     summary = evaluate(scene, args.out, quiet=args.quiet, source=Path(args.pattern or args.scene).name, auto=args.resolution is None)
     g, cap, yl = summary["global_minimum"], summary["capture"], summary["yield"]
     b = summary["max_bias_um"]

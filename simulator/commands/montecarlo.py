@@ -226,6 +226,9 @@ def run(args: argparse.Namespace) -> int:
     grid = starts if isinstance(starts, StartGrid) else None
     _check_outputs(args, grid is not None)
     scene = scene_from_args(args)
+    from simulator.feedback import compiling
+
+    compiling(opt["method"], args.quiet)
     result = mc.run_batch(scene, starts, opt["method"], chunk=opt["chunk"], max_steps=opt["max_steps"], progress=not args.quiet)
     summary = mc.summarize(result, grid)
     st = result.stats
