@@ -59,7 +59,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"{method}: {traj.outcome} at ({f[0]:.2f} um, {f[1]:.2f} um, {f[2]:.2f} deg) after {traj.steps} steps{time_txt}")
     c = traj.cost
     if c.get("poses_computed"):
-        print(f"landscape computed: {c['poses_computed']:,} of {c['poses_full']:,} poses ({100 * c['fraction_of_full']:.2g} %), {c['landscape_s']:.2f} s")
+        print(f"landscape computed: {c['poses_computed']:,} of {c['poses_full']:,} poses ({100 * c['fraction_of_full']:.3g} %), {c['landscape_s']:.2f} s")
     if args.json:
         write_json(args.json, traj.to_json())
         print(f"wrote {args.json}")
