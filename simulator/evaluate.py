@@ -53,16 +53,21 @@ def auto_resolution(scene: Scene, budget_mb: float = AUTO_LANDSCAPE_MB) -> Scene
     return s
 
 
-def chip_size(scene: Scene) -> tuple[float, float]:
-    """Width and height (um) of the chip's wettable footprint (exact for geometry,
-    else the bounding box of pixels at least half covered)."""
-    if scene.chip.geometry is not None:
-        x0, y0, x1, y1 = scene.chip.geometry.bounds
+def footprint_um(mask) -> tuple[float, float]:
+    """Width and height (um) of a mask's wettable footprint: exact for geometry, else the
+    bounding box of the pixels at least half covered."""
+    if mask.geometry is not None:
+        x0, y0, x1, y1 = mask.geometry.bounds
         return x1 - x0, y1 - y0
-    d = scene.chip.data >= 0.5
+    d = mask.data >= 0.5
     rows, cols = np.flatnonzero(d.any(axis=1)), np.flatnonzero(d.any(axis=0))
-    s = scene.um_per_px
+    s = mask.um_per_px
     return (cols[-1] + 1 - cols[0]) * s, (rows[-1] + 1 - rows[0]) * s
+
+
+def chip_size(scene: Scene) -> tuple[float, float]:
+    """Width and height (um) of the chip's wettable footprint."""
+    return footprint_um(scene.chip)
 
 
 def max_bias(values: np.ndarray, force: np.ndarray, x0: float) -> tuple[float, float]:

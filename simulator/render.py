@@ -18,6 +18,7 @@ import numpy as np
 
 from patterns.errors import InputError, atomic_output
 from patterns.mask import Mask
+from simulator.landscape import axis_step
 
 __all__ = [
     "TrajectoryAnimation",
@@ -440,7 +441,7 @@ def _mask_grid(mask: Mask) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _line_range(values: np.ndarray, centre: float, span: float | None) -> tuple[float, float]:
-    step = float(values[1] - values[0]) if len(values) > 1 else 1.0
+    step = axis_step(np.asarray(values))
     lo, hi = float(values[0]) + step, float(values[-1]) - step
     if span is not None:
         lo, hi = max(lo, centre - span), min(hi, centre + span)
@@ -535,8 +536,8 @@ def plot_capture_map(cmap: np.ndarray, grid, scene, path, title: str = "") -> No
     size = (7.5, 0.9 * nrow + 1.4) if line else (3.6 * ncol + 1.8, 3.6 * nrow + 0.6)
     fig, axes = plt.subplots(nrow, ncol, figsize=size, squeeze=False, constrained_layout=True)
     xs, ys = np.asarray(grid.x_um), np.asarray(grid.y_um)
-    dx = xs[1] - xs[0] if nx > 1 else scene.um_per_px
-    dy = ys[1] - ys[0] if ny > 1 else scene.um_per_px
+    dx = axis_step(xs) if nx > 1 else scene.um_per_px
+    dy = axis_step(ys) if ny > 1 else scene.um_per_px
     extent = (xs[0] - dx / 2, xs[-1] + dx / 2, ys[0] - dy / 2, ys[-1] + dy / 2)
     colors = ListedColormap(OUTCOME_COLORS)
     norm = BoundaryNorm(np.arange(len(OUTCOMES) + 1) - 0.5, len(OUTCOMES))

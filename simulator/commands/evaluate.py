@@ -58,12 +58,10 @@ def run(args: argparse.Namespace) -> int:
 
 def _bbox_chip(args: argparse.Namespace) -> str:
     """Default chip: the size of the pattern's wettable bounding box (W x H um)."""
-    import numpy as np
-
     from patterns.io import read_mask
+    from simulator.evaluate import footprint_um
 
     m = read_mask(args.pattern, um_per_px=args.um_per_px)
     m.require_nonempty(f"pattern {args.pattern}")
-    d = m.data >= 0.5  # pixels at least half wettable
-    rows, cols = np.flatnonzero(d.any(axis=1)), np.flatnonzero(d.any(axis=0))
-    return f"{(cols[-1] + 1 - cols[0]) * m.um_per_px:g}x{(rows[-1] + 1 - rows[0]) * m.um_per_px:g}"
+    w, h = footprint_um(m)
+    return f"{w:g}x{h:g}"

@@ -13,6 +13,7 @@ import numpy as np
 
 from patterns.errors import InputError, atomic_output
 from simulator.commands._common import add_scene_args, parse_pose, read_toml, scene_from_args
+from simulator.landscape import axis_step
 from simulator.montecarlo import DEFAULT_CHUNK, DISTRIBUTIONS, MAX_STARTS, METHODS, StartGrid
 from simulator.render import plot_capture_map
 from simulator.trajectory import DEFAULT_MAX_STEPS
@@ -187,7 +188,7 @@ def _starts(opt: dict):
 
 
 def _axis_doc(values: tuple[float, ...]) -> dict:
-    step = values[1] - values[0] if len(values) > 1 else None
+    step = axis_step(np.asarray(values)) if len(values) > 1 else None
     return {"from": values[0], "to": values[-1], "step": step, "count": len(values)}
 
 
