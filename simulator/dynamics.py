@@ -92,6 +92,7 @@ from simulator.stepping import (
     CONVERGED,
     EDGE,
     MAX_STEPS,
+    PAD,
     Field,
     Grid,
     at_cut_edge,
@@ -259,14 +260,11 @@ def _node_energy(field: Field, grid: Grid, it, iy, ix):
     t, ny, nx = grid.shape
     (_, _), (y_lo, y_hi), (x_lo, x_hi) = grid.cut
     itw = jnp.mod(it, t) if grid.wrap else jnp.clip(it, 0, t - 1)
-    e = field.energy[itw, jnp.clip(iy, 0, ny - 1), jnp.clip(ix, 0, nx - 1)]
-    off = (
-        ((iy < 0) & (not y_lo))
-        | ((iy >= ny) & (not y_hi))
-        | ((ix < 0) & (not x_lo))
-        | ((ix >= nx) & (not x_hi))
-    )
-    return jnp.where(off, 0.0, e)
+
+    def clip(i, n, lo_cut, hi_cut):  # a cut side repeats its edge; an uncut one reads the pad's 0
+        return jnp.clip(i, 0 if lo_cut else -PAD, n - 1 if hi_cut else n - 1 + PAD) + PAD
+
+    return field.padded[itw + PAD, clip(iy, ny, y_lo, y_hi), clip(ix, nx, x_lo, x_hi)]
 
 
 def potential_and_gradient(field: Field, grid: Grid, q):
@@ -276,7 +274,7 @@ def potential_and_gradient(field: Field, grid: Grid, q):
     the module docstring). A grid with one twist has no twist axis: Phi does not depend
     on ``it`` there.
     """
-    dt = field.energy.dtype
+    dt = field.dtype
     q = jnp.asarray(q, dt)
     base = jnp.floor(q)
     frac = q - base
@@ -358,7 +356,7 @@ def _axis_scales(grid: Grid) -> np.ndarray:
 def _reference_force(field: Field, grid: Grid, dt) -> jax.Array:
     """Typical |dE/dq| per index step (J), as in stepping.gradient_descent: a chip edge of
     length 2 rg sliding over a pad, for x and y; times the arc per twist step for twist."""
-    g = jnp.maximum(jnp.max(jnp.abs(field.energy)) / (2.0 * grid.rg_px + 1.0), field.floor)
+    g = jnp.maximum(field.scale / (2.0 * grid.rg_px + 1.0), field.floor)
     g = jnp.maximum(g, jnp.finfo(dt).tiny / jnp.finfo(dt).eps)
     return g * jnp.asarray([max(grid.twist_px_per_step, 1e-6), 1.0, 1.0], dt)
 
@@ -540,7 +538,7 @@ def _run(
 ) -> DynamicsState:
     if not isinstance(max_steps, int) or max_steps < 1:
         raise InputError(f"max_steps must be a positive integer (static), got {max_steps!r}")
-    dt = field.energy.dtype
+    dt = field.dtype
     d_rtol, d_atol = default_tolerances(dt)
     rtol = d_rtol if rtol is None else rtol
     atol = d_atol if atol is None else atol

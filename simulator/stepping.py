@@ -48,19 +48,38 @@ def _move_order() -> np.ndarray:
 
 #: The 27 greedy moves (dt, dy, dx) in tie-break order; row 0 is "stay".
 GREEDY_MOVES = _move_order()
+#: The same 27 moves in (dt, dy, dx) lexicographic order: the layout of
+#: :func:`neighbourhood`'s (3, 3, 3) block; "stay" is BLOCK_MOVES[13].
+BLOCK_MOVES = np.array(list(itertools.product((-1, 0, 1), repeat=3)), dtype=np.int32)
+#: TIE_RANK[k]: the place of BLOCK_MOVES[k] in the tie-break order (0 = stay).
+TIE_RANK = np.array([[tuple(m) for m in GREEDY_MOVES].index(tuple(b)) for b in BLOCK_MOVES], dtype=np.int32)
+STAY = 13
+
+
+#: Cells of padding on every side of :attr:`Field.padded` (see :func:`pad_energy`).
+PAD = 3
 
 
 class Field(NamedTuple):
     """The landscape arrays a stepper reads.
 
-    energy: (T, Ny, Nx) joules, ``[twist, y, x]``.
+    padded: (T + 2 PAD, Ny + 2 PAD, Nx + 2 PAD) joules, ``[twist, y, x]``: the landscape
+        with what lies beyond each side written in (:func:`pad_energy`), so a look-up is
+        one gather with no bounds logic. Node (it, iy, ix) is ``padded[it + PAD, iy +
+        PAD, ix + PAD]``.
     floor: noise floor (J): differences at or below it are ties.
     best: (3,) grid indices (it, iy, ix) of the global minimum.
+    scale: max |E| over the landscape (J), the energy scale of force references.
     """
 
-    energy: jax.Array
+    padded: jax.Array
     floor: jax.Array
     best: jax.Array
+    scale: jax.Array
+
+    @property
+    def dtype(self):
+        return self.padded.dtype
 
 
 @dataclass(frozen=True)
@@ -113,15 +132,44 @@ class Grid:
         return math.radians(self.twist_step_deg) * self.rg_px
 
 
+def pad_energy(energy: np.ndarray, wrap: bool, cut) -> np.ndarray:
+    """The landscape with PAD cells on every side holding what lies beyond it: past an
+    uncut x/y side 0 (no contact); past a cut side, or the end of a non-periodic twist
+    axis, +inf (a wall); a periodic twist axis wraps around. A corner is a wall when
+    either of its sides is. Index clipping into the pad (:func:`lookup`) then gives the
+    energy anywhere, however far outside."""
+    energy = np.asarray(energy)
+    out = np.pad(energy, ((0, 0), (PAD, PAD), (PAD, PAD)))
+    (_, _), (y_lo, y_hi), (x_lo, x_hi) = cut
+    if y_lo:
+        out[:, :PAD, :] = np.inf
+    if y_hi:
+        out[:, -PAD:, :] = np.inf
+    if x_lo:
+        out[:, :, :PAD] = np.inf
+    if x_hi:
+        out[:, :, -PAD:] = np.inf
+    if wrap:
+        return np.pad(out, ((PAD, PAD), (0, 0), (0, 0)), mode="wrap")
+    return np.pad(out, ((PAD, PAD), (0, 0), (0, 0)), constant_values=np.inf)
+
+
+def make_field(energy, grid: Grid, floor, best) -> Field:
+    """A :class:`Field` from a (T, Ny, Nx) energy array (J) on ``grid``."""
+    energy = np.asarray(energy)
+    dt = energy.dtype
+    return Field(
+        padded=jnp.asarray(pad_energy(energy, grid.wrap, grid.cut)),
+        floor=jnp.asarray(floor, dt),
+        best=jnp.asarray(best, dt),
+        scale=jnp.asarray(np.abs(energy).max() if energy.size else 0.0, dt),
+    )
+
+
 def field_and_grid(ls: Landscape, rg_px: float, dtype=None) -> tuple[Field, Grid]:
     """The stepper view of a landscape. ``rg_px``: chip radius of gyration in px."""
-    e = jnp.asarray(ls.energy if dtype is None else ls.energy.astype(dtype))
+    e = ls.energy if dtype is None else ls.energy.astype(dtype)
     it, iy, ix = np.unravel_index(int(np.argmin(ls.energy)), ls.energy.shape)
-    fld = Field(
-        energy=e,
-        floor=jnp.asarray(ls.noise_floor_J, e.dtype),
-        best=jnp.asarray([it, iy, ix], dtype=e.dtype),
-    )
     grid = Grid(
         shape=tuple(int(n) for n in ls.energy.shape),
         wrap=bool(ls.wrap),
@@ -134,26 +182,43 @@ def field_and_grid(ls: Landscape, rg_px: float, dtype=None) -> tuple[Field, Grid
         period_deg=float(ls.period_deg),
         rg_px=float(rg_px),
     )
-    return fld, grid
+    return make_field(e, grid, ls.noise_floor_J, [it, iy, ix]), grid
 
 
 # ----------------------------------------------------------------- look-ups
 def lookup(field: Field, grid: Grid, it, iy, ix):
     """Energy at integer grid indices (broadcasting). Beyond an uncut x/y side: 0 (no
     contact); beyond a cut side or the end of a non-periodic twist axis: +inf (a wall
-    the steppers never cross; they stop at a cut side first)."""
+    the steppers never cross; they stop at a cut side first). One gather from
+    :attr:`Field.padded`: indices past the pad are clipped into it, where the value is
+    the same."""
     t, ny, nx = grid.shape
-    (t_lo, t_hi), (y_lo, y_hi), (x_lo, x_hi) = grid.cut
-    below_y, above_y, below_x, above_x = iy < 0, iy >= ny, ix < 0, ix >= nx
-    wall = (y_lo & below_y) | (y_hi & above_y) | (x_lo & below_x) | (x_hi & above_x)
-    if grid.wrap:
-        itw = jnp.mod(it, t)
-    else:
-        itw = jnp.clip(it, 0, t - 1)
-        wall = wall | (it < 0) | (it >= t)
-    e = field.energy[itw, jnp.clip(iy, 0, ny - 1), jnp.clip(ix, 0, nx - 1)]
-    e = jnp.where(below_y | above_y | below_x | above_x, 0.0, e)
-    return jnp.where(wall, jnp.inf, e)
+    itw = jnp.mod(it, t) if grid.wrap else jnp.clip(it, -PAD, t - 1 + PAD)
+    return field.padded[itw + PAD, jnp.clip(iy, -PAD, ny - 1 + PAD) + PAD, jnp.clip(ix, -PAD, nx - 1 + PAD) + PAD]
+
+
+def neighbourhood(field: Field, grid: Grid, idx):
+    """Energies at the 27 nodes ``idx + BLOCK_MOVES`` (the (3, 3, 3) block around idx,
+    ``(dt, dy, dx)`` lexicographic), exactly as :func:`lookup` gives them.
+
+    One base index is clipped (to one cell inside the pad, so every move of at most one
+    cell stays in the pad, whose values equal those farther out), then the block is read
+    as nine 3-cell rows of the flattened padded array: under vmap one gather of 3-cell
+    slices, measured 1.45x faster per greedy step than 27 single look-ups."""
+    t, ny, nx = grid.shape
+    sy, st = nx + 2 * PAD, (ny + 2 * PAD) * (nx + 2 * PAD)
+    m = PAD - 1
+    size = field.padded.size
+    itype = jnp.int32 if size < 2**31 else jnp.int64
+    itw = jnp.mod(idx[0], t) if grid.wrap else jnp.clip(idx[0], -m, t - 1 + m)
+    base = (
+        (itw.astype(itype) + PAD) * st
+        + (jnp.clip(idx[1], -m, ny - 1 + m).astype(itype) + PAD) * sy
+        + (jnp.clip(idx[2], -m, nx - 1 + m).astype(itype) + PAD)
+    )
+    rows = jnp.asarray([dt * st + dy * sy - 1 for dt in (-1, 0, 1) for dy in (-1, 0, 1)], itype)
+    flat = field.padded.reshape(-1)
+    return jax.vmap(lambda r: jax.lax.dynamic_slice(flat, (base + r,), (3,)))(rows).reshape(27)
 
 
 def at_cut_edge(grid: Grid, q, margin: float = 0.0):
@@ -179,13 +244,13 @@ def clamp_start(grid: Grid, q):
 
 def interpolate(field: Field, grid: Grid, q):
     """Energy at fractional indices q = (it, iy, ix) by trilinear interpolation."""
-    q = jnp.asarray(q, field.energy.dtype)
+    q = jnp.asarray(q, field.dtype)
     base = jnp.floor(q)
     f = q - base
     b = base.astype(jnp.int32)
-    total = jnp.zeros(q.shape[:-1], field.energy.dtype)
+    total = jnp.zeros(q.shape[:-1], field.dtype)
     for corner in itertools.product((0, 1), repeat=3):
-        w = jnp.ones(q.shape[:-1], field.energy.dtype)
+        w = jnp.ones(q.shape[:-1], field.dtype)
         for k, c in enumerate(corner):
             w = w * (f[..., k] if c else 1 - f[..., k])
         e = lookup(field, grid, b[..., 0] + corner[0], b[..., 1] + corner[1], b[..., 2] + corner[2])
@@ -237,24 +302,25 @@ def greedy(field: Field, grid: Grid, start, max_steps: int, record: bool = True)
 
     Returns the final :class:`GreedyState`; ``path[:step + 1]`` is the path.
     """
-    moves = jnp.asarray(GREEDY_MOVES)
+    moves, rank = jnp.asarray(BLOCK_MOVES), jnp.asarray(TIE_RANK)
     start = clamp_start(grid, jnp.asarray(start, jnp.int32))
     n = max_steps + 1 if record else 1
     e0 = lookup(field, grid, *start)
     path = jnp.zeros((n, 3), jnp.int32).at[0].set(start)
-    path_e = jnp.full((n,), jnp.nan, field.energy.dtype).at[0].set(e0)
+    path_e = jnp.full((n,), jnp.nan, field.dtype).at[0].set(e0)
 
     def cond(s: GreedyState):
         return s.status == RUNNING
 
     def body(s: GreedyState):
         at_edge = at_cut_edge(grid, s.idx)
-        nb = s.idx[None, :] + moves
-        e = lookup(field, grid, nb[:, 0], nb[:, 1], nb[:, 2])
+        e = neighbourhood(field, grid, s.idx)  # block order
         best = jnp.min(e)
-        choice = jnp.argmax(e <= best + field.floor)  # first tie in the documented order
-        moved = choice != 0
-        new_idx = jnp.where(moved, nb[choice], s.idx)
+        # the first tie for the best in the documented order: the smallest tie rank
+        r = jnp.min(jnp.where(e <= best + field.floor, rank, len(rank)))
+        choice = jnp.argmax(rank == r)
+        moved = r != 0
+        new_idx = jnp.where(moved, s.idx + moves[choice], s.idx)
         step = s.step + moved.astype(jnp.int32)
         status = jnp.where(at_edge, EDGE, jnp.where(~moved, CONVERGED, jnp.where(step >= max_steps, MAX_STEPS, RUNNING)))
         new_idx = jnp.where(at_edge, s.idx, new_idx)
@@ -274,10 +340,9 @@ def greedy(field: Field, grid: Grid, start, max_steps: int, record: bool = True)
 def on_plateau(field: Field, grid: Grid, idx) -> jax.Array:
     """True where some greedy move leaves the energy unchanged (within the noise floor):
     the pose sits on a plateau (a flat direction), not in a strict local minimum."""
-    idx = jnp.asarray(idx, jnp.int32)
-    nb = idx[None, :] + jnp.asarray(GREEDY_MOVES[1:])
-    e = lookup(field, grid, nb[:, 0], nb[:, 1], nb[:, 2])
-    return jnp.any(jnp.abs(e - lookup(field, grid, *idx)) <= field.floor)
+    e = neighbourhood(field, grid, jnp.asarray(idx, jnp.int32))
+    others = np.arange(27) != STAY
+    return jnp.any(jnp.abs(e[others] - e[STAY]) <= field.floor)
 
 
 # ----------------------------------------------------------------- gradient
@@ -301,12 +366,12 @@ def gradient_descent(field: Field, grid: Grid, start, max_steps: int, record: bo
     down to ``min_step_px`` lowers the energy (the V-shaped cusp at alignment ends
     here instead of chattering), or after ``max_steps``. Energy never increases.
     """
-    dt = field.energy.dtype
+    dt = field.dtype
     start = clamp_start(grid, jnp.asarray(start, dt))
     # Metric: index units -> px. Twist index -> arc length in px.
     metric = jnp.asarray([grid.twist_px_per_step if grid.shape[0] > 1 else 1.0, 1.0, 1.0], dt)
     # Force scale: energy change per px of a chip edge of length 2 rg sliding over a pad.
-    g_ref = jnp.maximum(jnp.abs(field.energy).max() / (2.0 * grid.rg_px + 1.0), field.floor)
+    g_ref = jnp.maximum(field.scale / (2.0 * grid.rg_px + 1.0), field.floor)
     n = max_steps + 1 if record else 1
     e0 = interpolate(field, grid, start)
     path = jnp.zeros((n, 3), dt).at[0].set(start)
@@ -361,7 +426,7 @@ def classify(field: Field, grid: Grid, q, energy, status, flat) -> jax.Array:
     that leaves the energy unchanged).
     local_minimum: stopped anywhere else. max_steps: ran out of steps.
     """
-    q = jnp.asarray(q, field.energy.dtype)
+    q = jnp.asarray(q, field.dtype)
     period = grid.period_deg / grid.twist_step_deg
     dtw = q[0] - field.best[0]
     dtw = dtw - period * jnp.round(dtw / period)

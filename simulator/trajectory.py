@@ -103,7 +103,7 @@ def _stiff(method: str, field, grid, params) -> bool:
     solver (Kvaerno5) takes ~100 steps where an explicit one takes ~10^4."""
     if method != "inertial":
         return False
-    f_ref = float(jnp.abs(field.energy).max()) / (2 * grid.rg_px * grid.um_per_px * 1e-6)  # N
+    f_ref = float(field.scale) / (2 * grid.rg_px * grid.um_per_px * 1e-6)  # N
     tau_m = params.mass_kg / params.damping_N_s_m
     tau_c = params.damping_N_s_m * grid.um_per_px * 1e-6 / max(f_ref, 1e-30)
     return tau_m < 0.1 * tau_c

@@ -27,7 +27,7 @@ from simulator import dynamics, materials, stepping
 from simulator.dynamics import DynamicsParams
 from simulator.landscape import build_landscape
 from simulator.scene import Scene, TwistGrid
-from simulator.stepping import CONVERGED, EDGE, MAX_STEPS, Field, Grid
+from simulator.stepping import CONVERGED, EDGE, MAX_STEPS, Grid, make_field
 
 STATIC = ("grid", "max_steps", "record")
 OVERDAMPED = jax.jit(dynamics.overdamped, static_argnames=STATIC)
@@ -48,11 +48,6 @@ def spring_field(k=K0, sign=1.0):
     x = (np.arange(NX) - XC) * UM_PER_PX * 1e-6
     e = np.broadcast_to(sign * 0.5 * k * x * x, (1, NY, NX)).astype(np.float32)
     floor = 32 * np.finfo(np.float32).eps * np.abs(e).max()
-    field = Field(
-        energy=jnp.asarray(e),
-        floor=jnp.asarray(floor, jnp.float32),
-        best=jnp.asarray([0, NY // 2, XC], jnp.float32),
-    )
     grid = Grid(
         shape=(1, NY, NX),
         wrap=False,
@@ -65,6 +60,7 @@ def spring_field(k=K0, sign=1.0):
         period_deg=90.0,
         rg_px=100.0,
     )
+    field = make_field(e, grid, floor, [0, NY // 2, XC])
     return field, grid
 
 
@@ -174,7 +170,7 @@ def plateau_field(a=1e-12):
     e = np.broadcast_to(-a * w, (1, NY, NX)).astype(np.float32)
     field, grid = spring_field()
     floor = 32 * np.finfo(np.float32).eps * np.abs(e).max()
-    return field._replace(energy=jnp.asarray(e), floor=jnp.asarray(floor, jnp.float32)), grid
+    return make_field(e, grid, floor, field.best), grid
 
 
 @pytest.mark.parametrize(

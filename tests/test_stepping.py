@@ -1,0 +1,76 @@
+"""Look-ups on the padded landscape give, everywhere, the energy the boundary rules define."""
+
+import itertools
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from simulator.stepping import BLOCK_MOVES, GREEDY_MOVES, PAD, STAY, TIE_RANK, Grid, lookup, make_field, neighbourhood, on_plateau
+
+T, NY, NX = 4, 5, 6
+
+
+def reference(e: np.ndarray, wrap: bool, cut, it, iy, ix) -> float:
+    """The boundary rules written out (stepping.lookup's docstring): beyond an uncut x/y
+    side 0; beyond a cut side or a non-periodic twist end +inf; twist wraps if periodic."""
+    (_, _), (y_lo, y_hi), (x_lo, x_hi) = cut
+    wall = (y_lo and iy < 0) or (y_hi and iy >= NY) or (x_lo and ix < 0) or (x_hi and ix >= NX)
+    if wrap:
+        it = it % T
+    elif not 0 <= it < T:
+        wall = True
+    if wall:
+        return np.inf
+    if not (0 <= iy < NY and 0 <= ix < NX):
+        return 0.0
+    return float(e[it, iy, ix])
+
+
+def grid_for(wrap: bool, cut) -> Grid:
+    return Grid(shape=(T, NY, NX), wrap=wrap, cut=cut, um_per_px=1.0, twist_step_deg=1.0, x0_um=0.0, y0_um=0.0, t0_deg=0.0, period_deg=90.0, rg_px=3.0)
+
+
+CASES = [
+    (wrap, ((False, False), (ylo, yhi), (xlo, xhi)))
+    for wrap in (True, False)
+    for ylo, yhi, xlo, xhi in [(False, False, False, False), (True, True, True, True), (True, False, False, True), (False, True, True, False)]
+]
+
+
+@pytest.mark.parametrize("wrap, cut", CASES)
+def test_lookup_and_neighbourhood_follow_the_boundary_rules_far_outside(wrap, cut):
+    rng = np.random.default_rng(1)
+    e = -rng.uniform(1, 2, (T, NY, NX)).astype(np.float32)
+    grid = grid_for(wrap, cut)
+    field = make_field(e, grid, 1e-9, [0, 0, 0])
+    assert field.padded.shape == (T + 2 * PAD, NY + 2 * PAD, NX + 2 * PAD)
+    # every node from 9 cells outside to 9 cells past the far side, on every axis
+    pts = np.array(list(itertools.product(range(-9, T + 9), range(-9, NY + 9), range(-9, NX + 9))), np.int32)
+    got = np.asarray(lookup(field, grid, jnp.asarray(pts[:, 0]), jnp.asarray(pts[:, 1]), jnp.asarray(pts[:, 2])))
+    want = np.array([reference(e, wrap, cut, *p) for p in pts], np.float32)
+    np.testing.assert_array_equal(got, want)
+    # the (3, 3, 3) block read from one clipped base index holds the 27 look-ups
+    for p in pts[:: 7]:
+        nb = np.asarray(neighbourhood(field, grid, jnp.asarray(p)))
+        want = [reference(e, wrap, cut, *(p + m)) for m in BLOCK_MOVES]
+        np.testing.assert_array_equal(nb, np.array(want, np.float32))
+
+
+def test_on_plateau_sees_a_flat_direction_and_not_a_strict_minimum():
+    e = np.zeros((T, NY, NX), np.float32)
+    e[:, 2, :] = -1.0  # a valley along x: flat in x, rising in y
+    grid = grid_for(True, ((False, False), (True, True), (True, True)))
+    field = make_field(e, grid, 1e-6, [0, 2, 0])
+    assert bool(on_plateau(field, grid, jnp.asarray([1, 2, 3])))
+    e2 = e.copy()
+    e2[1, 2, 3] = -2.0  # a strict minimum
+    field2 = make_field(e2, grid, 1e-6, [1, 2, 3])
+    assert not bool(on_plateau(field2, grid, jnp.asarray([1, 2, 3])))
+
+
+def test_block_layout_and_tie_ranks_describe_the_same_moves():
+    assert sorted(map(tuple, BLOCK_MOVES)) == list(map(tuple, BLOCK_MOVES))  # lexicographic
+    assert tuple(BLOCK_MOVES[STAY]) == (0, 0, 0) and TIE_RANK[STAY] == 0
+    np.testing.assert_array_equal(GREEDY_MOVES[TIE_RANK], BLOCK_MOVES)
+    assert sorted(TIE_RANK.tolist()) == list(range(27))
