@@ -6,7 +6,18 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from simulator.stepping import BLOCK_MOVES, GREEDY_MOVES, PAD, STAY, TIE_RANK, Grid, lookup, make_field, neighbourhood, on_plateau
+from simulator.stepping import (
+    BLOCK_MOVES,
+    GREEDY_MOVES,
+    PAD,
+    STAY,
+    TIE_RANK,
+    Grid,
+    lookup,
+    make_field,
+    neighbourhood,
+    on_plateau,
+)
 
 T, NY, NX = 4, 5, 6
 
