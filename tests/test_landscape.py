@@ -16,7 +16,15 @@ from patterns.errors import InputError
 from patterns.geometry import defect_type, four_pad, square
 from patterns.mask import Mask
 from patterns.raster import mask_from_geometry
-from simulator.landscape import build_landscape, chip_symmetry, correlate_stack, twist_axis
+from simulator.landscape import (
+    Correlator,
+    Window,
+    build_landscape,
+    chip_relations,
+    chip_symmetry,
+    correlate_stack,
+    twist_axis,
+)
 from simulator.materials import Materials
 from simulator.scene import Effects, Scene, TwistGrid
 
@@ -285,6 +293,61 @@ def test_correlate_stack_is_linear_correlation():
     out = correlate_stack(pat, chips, dtype="float64")
     ref = np.stack([correlate(pat, c, mode="full", method="direct") for c in chips])
     np.testing.assert_allclose(out, ref, atol=1e-10)
+
+
+@pytest.mark.parametrize("symmetric_pattern", [True, False])
+def test_correlate_stack_mirror_twins_and_repeats_match_direct_correlation(symmetric_pattern):
+    from scipy.signal import correlate
+
+    rng = np.random.default_rng(4)
+    pat = rng.random((31, 40))
+    if symmetric_pattern:
+        pat = pat + pat[::-1]  # mirror-symmetric rows: twins become flipped copies
+    chips = rng.random((6, 12, 9))
+    chips[1] = chips[0][::-1]  # mirror twin of chip 0
+    chips[3] = chips[0]  # repeat
+    chips[4] = chips[2][::-1] + 1e-6  # a near miss: computed on its own
+    chips[5] = chips[2][::-1] + 1e-12  # a twin to within round-off
+    rel = chip_relations(chips)
+    assert rel == [(0, False), (0, True), (2, False), (0, False), (4, False), (2, True)]
+    out = correlate_stack(pat, chips, dtype="float64")
+    ref = np.stack([correlate(pat, c, mode="full", method="direct") for c in chips])
+    np.testing.assert_allclose(out, ref, atol=1e-9)
+
+
+def test_correlator_mirror_output_is_the_mirror_images_correlation():
+    rng = np.random.default_rng(5)
+    pat = rng.random((50, 44))
+    chips = rng.random((3, 20, 16))
+    chips[:, :3] = 0  # zero rows: the cut row pass and the mirror relation together
+    win = Window(rx=20, ry=25, dx=14, dy=15)
+    cor = Correlator(pat, chips.shape[1:], win, "float64", "scipy")
+    mirror = np.empty((3, 51, 41))
+    direct = cor(chips, scale=2.0, mirror_out=mirror)
+    np.testing.assert_allclose(mirror, cor(chips[:, ::-1], scale=2.0), atol=1e-10)
+    np.testing.assert_allclose(direct, cor(chips, scale=2.0), atol=0)
+
+
+@pytest.mark.parametrize(
+    "pattern_geom, chip_geom, kind",
+    [
+        (four_pad(120, 20), square(100), "copied_twists"),  # both mirror-symmetric: planes flipped
+        (defect_type("B", "inward", 120), square(100), "mirrored_twists"),  # pattern not: spectra shared
+        (square(120), shapely.Polygon([(-50, -50), (50, -50), (30, 50), (-50, 30)]), None),  # chip not
+    ],
+)
+def test_landscape_symmetry_savings_change_nothing(pattern_geom, chip_geom, kind):
+    sc = scene(pattern_geom, chip_geom, um_per_px=2.0, twist=TwistGrid(step_deg=10.0, min_deg=-40, max_deg=40))
+    ls = build_landscape(sc)
+    t = ls.twist_deg
+    pairs = int(np.sum(t > 0))
+    for name in ("copied_twists", "mirrored_twists"):
+        assert ls.stats[name] == (pairs if name == kind else 0)
+    assert ls.stats["rotations"] == len(t) - (pairs if kind else 0)
+    # each twist on its own (no twin to share with) gives the same planes
+    for k in (0, 1, len(t) - 1):
+        alone = build_landscape(sc, twists=t[k : k + 1])
+        np.testing.assert_allclose(ls.energy[k], alone.energy[0], rtol=0, atol=ls.noise_floor_J)
 
 
 def test_memory_budget_error_names_the_knobs():
