@@ -295,8 +295,9 @@ def test_correlate_stack_is_linear_correlation():
     np.testing.assert_allclose(out, ref, atol=1e-10)
 
 
+@pytest.mark.parametrize("backend", ["scipy", "jax"])
 @pytest.mark.parametrize("symmetric_pattern", [True, False])
-def test_correlate_stack_mirror_twins_and_repeats_match_direct_correlation(symmetric_pattern):
+def test_correlate_stack_mirror_twins_and_repeats_match_direct_correlation(symmetric_pattern, backend):
     from scipy.signal import correlate
 
     rng = np.random.default_rng(4)
@@ -310,7 +311,7 @@ def test_correlate_stack_mirror_twins_and_repeats_match_direct_correlation(symme
     chips[5] = chips[2][::-1] + 1e-12  # a twin to within round-off
     rel = chip_relations(chips)
     assert rel == [(0, False), (0, True), (2, False), (0, False), (4, False), (2, True)]
-    out = correlate_stack(pat, chips, dtype="float64")
+    out = correlate_stack(pat, chips, dtype="float64", backend=backend)
     ref = np.stack([correlate(pat, c, mode="full", method="direct") for c in chips])
     np.testing.assert_allclose(out, ref, atol=1e-9)
 
