@@ -33,3 +33,28 @@ def compiling(method: str, quiet: bool = False) -> None:
     """Explain the pause before the first trajectory: JAX compiles the stepper."""
     seconds = "a few" if method in ("greedy", "gradient") else "5-10"
     announce_once(f"compiling the {method} stepper with JAX ({seconds} seconds, once per process)...", quiet)
+
+
+class _NoBar:
+    """Stands in for a progress bar that is not shown."""
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        return None
+
+    def update(self, k: int) -> None:
+        return None
+
+
+def progress_bar(show: bool, total: int, desc: str, unit: str):
+    """A tqdm bar on stderr over ``total`` ``unit``s, or a stand-in that shows nothing.
+
+    Use as a context manager and call ``update(k)`` as work is done.
+    """
+    if not show:
+        return _NoBar()
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=desc, unit=unit, unit_scale=True)

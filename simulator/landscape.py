@@ -41,6 +41,7 @@ from shapely import affinity
 from patterns.errors import InputError
 from patterns.mask import Mask
 from patterns.raster import rasterize
+from simulator.feedback import progress_bar
 from simulator.scene import Scene
 
 UM2_TO_M2 = 1e-12
@@ -370,6 +371,8 @@ def chip_relations(chips: np.ndarray, tol: float = SAME_CHIP_TOL) -> list[tuple[
     chip.
     """
     chips = np.asarray(chips)
+    if not np.issubdtype(chips.dtype, np.floating):
+        chips = chips.astype(np.float64)
     t, h, w = chips.shape
     if t == 0:
         return []
@@ -433,7 +436,8 @@ def correlate_stack(pattern: np.ndarray, chips: np.ndarray, dtype: str = "float3
     for i, (j, mirrored) in enumerate(rel):
         if mirrored:
             twin.setdefault(j, i)
-    pattern_mirror = bool(np.array_equal(pattern, pattern[::-1]))
+    pf = np.asarray(pattern, np.float64)
+    pattern_mirror = bool(np.abs(pf - pf[::-1]).max() <= SAME_CHIP_TOL)
     out = np.empty((t, 2 * win.ry + 1, 2 * win.rx + 1), cor.dtype)
     H, W = hp + hc - 1, wp + wc - 1  # the full layout (a window of out)
     firsts = [i for i in range(t) if rel[i][0] == i]
@@ -848,7 +852,7 @@ def build_landscape(
     pat = scene.pattern.data
     copy = exact and p["center_px"][1] == 0 and bool(np.abs(pat - pat[::-1]).max() <= SAME_CHIP_TOL)
     n_mirror = n_copied = 0
-    with _bar(progress, len(twists_deg)) as bar:
+    with progress_bar(progress, len(twists_deg), "landscape", "twist") as bar:
         for i in range(0, len(singles), chunk):
             sel = singles[i : i + chunk]
             _correlate_into(cor, np.stack([rot(twists_deg[k]) for k in sel]), energy, sel, scale)
@@ -923,26 +927,6 @@ def mirror_twins(chip: Mask, twists_deg: np.ndarray) -> dict[int, int]:
         return {}
     pos = {round(float(t), 9): i for i, t in enumerate(twists_deg)}
     return {i: pos[round(-float(t), 9)] for i, t in enumerate(twists_deg) if t > 0 and round(-float(t), 9) in pos}
-
-
-class _NoBar:
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc) -> None:
-        return None
-
-    def update(self, k: int) -> None:
-        return None
-
-
-def _bar(show: bool, total: int):
-    """A tqdm bar over twists (on stderr), or a stand-in that does nothing."""
-    if not show:
-        return _NoBar()
-    from tqdm import tqdm
-
-    return tqdm(total=total, desc="landscape", unit="twist")
 
 
 def twists_around(scene: Scene, twist_values, margin_steps: int = 1) -> np.ndarray:

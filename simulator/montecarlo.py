@@ -50,6 +50,7 @@ import numpy as np
 from patterns.errors import InputError, require
 from patterns.mask import Mask
 from simulator import stepping
+from simulator.feedback import progress_bar
 from simulator.landscape import Landscape, build_landscape
 from simulator.scene import Scene
 from simulator.trajectory import DEFAULT_MAX_STEPS, radius_of_gyration_px
@@ -338,7 +339,7 @@ def run_batch(
     t1 = time.perf_counter()
     chunks = range(0, n, chunk)
     workers = max(1, min(int(workers or os.cpu_count() or 1), len(chunks)))
-    with _bar(progress, n, method) as bar:
+    with progress_bar(progress, n, method, "start") as bar:
         if workers == 1:
             for i in chunks:
                 bar.update(run(i))
@@ -370,25 +371,6 @@ def run_batch(
             "landscape_shape": tuple(int(v) for v in ls.energy.shape),
         },
     )
-
-
-class _NoBar:
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc) -> None:
-        return None
-
-    def update(self, k: int) -> None:
-        return None
-
-
-def _bar(show: bool, total: int, method: str):
-    if not show:
-        return _NoBar()
-    from tqdm import tqdm
-
-    return tqdm(total=total, desc=method, unit="start", unit_scale=True)
 
 
 # --------------------------------------------------------------------- statistics

@@ -293,6 +293,8 @@ def test_correlate_stack_is_linear_correlation():
     out = correlate_stack(pat, chips, dtype="float64")
     ref = np.stack([correlate(pat, c, mode="full", method="direct") for c in chips])
     np.testing.assert_allclose(out, ref, atol=1e-10)
+    # binary masks as bool arrays: the same as their 0/1 floats
+    np.testing.assert_allclose(correlate_stack(pat > 0.5, chips > 0.5, dtype="float64"), correlate_stack((pat > 0.5) * 1.0, (chips > 0.5) * 1.0, dtype="float64"), atol=1e-10)
 
 
 @pytest.mark.parametrize("backend", ["scipy", "jax"])
