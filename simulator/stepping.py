@@ -56,8 +56,9 @@ TIE_RANK = np.array([[tuple(m) for m in GREEDY_MOVES].index(tuple(b)) for b in B
 STAY = 13
 
 
-#: Cells of padding on every side of :attr:`Field.padded` (see :func:`pad_energy`).
-PAD = 3
+#: Cells of padding on every side of :attr:`Field.padded` (see :func:`pad_energy`): enough
+#: for a (4, 4, 4) block around any clipped base index (:func:`block`).
+PAD = 4
 
 
 class Field(NamedTuple):
@@ -258,17 +259,59 @@ def interpolate(field: Field, grid: Grid, q):
     return total
 
 
+def block(field: Field, grid: Grid, b):
+    """Energies at ``b + (i, j, k)``, i, j, k in -1..2: the (4, 4, 4) block that holds
+    every corner of the trilinear interpolations at q and q +- one step along any axis,
+    for b = floor(q). As :func:`neighbourhood`: one clipped base index, then 16 rows of
+    4 cells of the flattened padded array (values equal to :func:`lookup`'s)."""
+    t, ny, nx = grid.shape
+    sy, st = nx + 2 * PAD, (ny + 2 * PAD) * (nx + 2 * PAD)
+    itype = jnp.int32 if field.padded.size < 2**31 else jnp.int64
+    lo = PAD - 1
+    itw = jnp.mod(b[0], t) if grid.wrap else jnp.clip(b[0], -lo, t - 1 + PAD - 2)
+    base = (
+        (itw.astype(itype) + PAD) * st
+        + (jnp.clip(b[1], -lo, ny - 1 + PAD - 2).astype(itype) + PAD) * sy
+        + (jnp.clip(b[2], -lo, nx - 1 + PAD - 2).astype(itype) + PAD)
+    )
+    rows = jnp.asarray([dt * st + dy * sy - 1 for dt in range(-1, 3) for dy in range(-1, 3)], itype)
+    flat = field.padded.reshape(-1)
+    return jax.vmap(lambda r: jax.lax.dynamic_slice(flat, (base + r,), (4,)))(rows).reshape(4, 4, 4)
+
+
 def gradient(field: Field, grid: Grid, q):
     """dE/dq (J per index unit) by central differences of one grid step; differences
     at or below the noise floor are 0, so plateaus are exactly flat. Next to a wall (the
     end of a bounded twist axis, a cut side) the one-sided difference away from the wall
     is used, so a chip at the end of its twist range still feels the torque back into
-    the range."""
-    e0 = interpolate(field, grid, q)
+    the range.
+
+    The seven trilinear interpolations (at q and q +- one step along each axis) read
+    one (4, 4, 4) :func:`block` and share q's position within its cell."""
+    dt = field.dtype
+    q = jnp.asarray(q, dt)
+    base = jnp.floor(q)
+    f = q - base
+    blk = block(field, grid, base.astype(jnp.int32))
+
+    def interp(o):  # :func:`interpolate` at q + o, from the block
+        total = jnp.zeros((), dt)
+        for corner in itertools.product((0, 1), repeat=3):
+            w = jnp.ones((), dt)
+            for k, c in enumerate(corner):
+                w = w * (f[k] if c else 1 - f[k])
+            e = blk[1 + o[0] + corner[0], 1 + o[1] + corner[1], 1 + o[2] + corner[2]]
+            total = total + jnp.where(w > 0, w * e, 0.0)  # 0 * inf at a wall is 0
+        return total
+
+    e0 = interp((0, 0, 0))
     out = []
     for k in range(3):
-        d = jnp.zeros(3, q.dtype).at[k].set(1.0)
-        ep, em = interpolate(field, grid, q + d), interpolate(field, grid, q - d)
+        step = [0, 0, 0]
+        step[k] = 1
+        ep = interp(tuple(step))
+        step[k] = -1
+        em = interp(tuple(step))
         fp, fm = jnp.isfinite(ep), jnp.isfinite(em)
         central = jnp.where(fp & fm, ep - em, 0.0) / 2
         one_sided = jnp.where(fm, e0 - jnp.where(fm, em, 0.0), jnp.where(fp, jnp.where(fp, ep, 0.0) - e0, 0.0))

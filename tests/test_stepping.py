@@ -2,6 +2,7 @@
 
 import itertools
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -13,6 +14,9 @@ from simulator.stepping import (
     STAY,
     TIE_RANK,
     Grid,
+    block,
+    gradient,
+    interpolate,
     lookup,
     make_field,
     neighbourhood,
@@ -61,11 +65,15 @@ def test_lookup_and_neighbourhood_follow_the_boundary_rules_far_outside(wrap, cu
     got = np.asarray(lookup(field, grid, jnp.asarray(pts[:, 0]), jnp.asarray(pts[:, 1]), jnp.asarray(pts[:, 2])))
     want = np.array([reference(e, wrap, cut, *p) for p in pts], np.float32)
     np.testing.assert_array_equal(got, want)
-    # the (3, 3, 3) block read from one clipped base index holds the 27 look-ups
-    for p in pts[:: 7]:
-        nb = np.asarray(neighbourhood(field, grid, jnp.asarray(p)))
-        want = [reference(e, wrap, cut, *(p + m)) for m in BLOCK_MOVES]
-        np.testing.assert_array_equal(nb, np.array(want, np.float32))
+    # the (3, 3, 3) and (4, 4, 4) blocks read from one clipped base index hold the look-ups
+    sample = pts[::7]
+    nb = np.asarray(jax.jit(jax.vmap(neighbourhood, (None, None, 0)), static_argnums=1)(field, grid, jnp.asarray(sample)))
+    want = [[reference(e, wrap, cut, *(p + m)) for m in BLOCK_MOVES] for p in sample]
+    np.testing.assert_array_equal(nb, np.array(want, np.float32))
+    blk = np.asarray(jax.jit(jax.vmap(block, (None, None, 0)), static_argnums=1)(field, grid, jnp.asarray(sample)))
+    offsets = list(itertools.product(range(-1, 3), repeat=3))
+    want = [[reference(e, wrap, cut, *(p + np.array(o))) for o in offsets] for p in sample]
+    np.testing.assert_array_equal(blk.reshape(len(sample), 64), np.array(want, np.float32))
 
 
 def test_on_plateau_sees_a_flat_direction_and_not_a_strict_minimum():
@@ -85,3 +93,31 @@ def test_block_layout_and_tie_ranks_describe_the_same_moves():
     assert tuple(BLOCK_MOVES[STAY]) == (0, 0, 0) and TIE_RANK[STAY] == 0
     np.testing.assert_array_equal(GREEDY_MOVES[TIE_RANK], BLOCK_MOVES)
     assert sorted(TIE_RANK.tolist()) == list(range(27))
+
+
+def gradient_from_interpolate(field, grid, q):
+    """The central differences of stepping.gradient written with seven separate
+    :func:`interpolate` calls (each stencil point's own cell and fraction)."""
+    e0 = interpolate(field, grid, q)
+    out = []
+    for k in range(3):
+        d = jnp.zeros(3, q.dtype).at[k].set(1.0)
+        ep, em = interpolate(field, grid, q + d), interpolate(field, grid, q - d)
+        fp, fm = jnp.isfinite(ep), jnp.isfinite(em)
+        de = jnp.where(fp & fm, (ep - em) / 2, jnp.where(fm, e0 - em, jnp.where(fp, ep - e0, 0.0)))
+        out.append(jnp.where(jnp.isfinite(e0) | (fp & fm), de, 0.0))
+    return jnp.stack(out)
+
+
+@pytest.mark.parametrize("wrap, cut", CASES)
+def test_gradient_from_one_block_equals_seven_interpolations(wrap, cut):
+    rng = np.random.default_rng(2)
+    e = -rng.uniform(1, 2, (T, NY, NX))
+    grid = grid_for(wrap, cut)
+    field = make_field(e, grid, 1e-12, [0, 0, 0])
+    # inside, across every side, and far outside
+    qs = np.concatenate([rng.uniform(-1.5, 1.5, (60, 3)) + np.array([T, NY, NX]) * rng.uniform(0, 1, (60, 3)), rng.uniform(-12, 14, (60, 3))])
+    qs = np.concatenate([qs, np.floor(qs[:20])])  # on nodes: fractions exactly 0
+    batch = [jax.jit(jax.vmap(g, (None, None, 0)), static_argnums=1) for g in (gradient, gradient_from_interpolate)]
+    got, want = (np.asarray(b(field, grid, jnp.asarray(qs))) for b in batch)
+    np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12)
