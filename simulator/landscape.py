@@ -445,17 +445,8 @@ def correlate_stack(pattern: np.ndarray, chips: np.ndarray, dtype: str = "float3
     for group, mirror in (([i for i in firsts if i not in paired], False), (paired, True)):
         for k in range(0, len(group), chunk):
             sel = group[k : k + chunk]
-            tw = [twin[i] for i in sel] if mirror else []
-            if mirror and _run(sel, 1) and _run(tw, -1):  # both views: no copies
-                cor(chips[sel[0] : sel[-1] + 1], out=out[sel[0] : sel[-1] + 1], mirror_out=out[tw[-1] : tw[0] + 1][::-1])
-            elif mirror:
-                mo = np.empty((len(sel),) + out.shape[1:], out.dtype)
-                out[sel] = cor(chips[sel], mirror_out=mo)
-                out[tw] = mo
-            elif _run(sel, 1):
-                cor(chips[sel[0] : sel[-1] + 1], out=out[sel[0] : sel[-1] + 1])
-            else:
-                out[sel] = cor(chips[sel])
+            stack = chips[sel[0] : sel[-1] + 1] if _run(sel, 1) else chips[sel]
+            _correlate_into(cor, stack, out, sel, 1.0, mirror_idx=[twin[i] for i in sel] if mirror else None)
     done = set(firsts) | {twin[i] for i in paired}
     for i, (j, mirrored) in enumerate(rel):
         if i in done:

@@ -249,20 +249,24 @@ def clamp_start(grid: Grid, q):
     return q.at[0].set(jnp.clip(q[0], 0, grid.shape[0] - 1))
 
 
+def _trilinear(f, corner_energy, dtype):
+    """Sum over the 8 cell corners of weight * ``corner_energy(corner)`` for fractions
+    f (..., 3); a corner of weight 0 adds 0 even at a wall (0 * inf)."""
+    total = jnp.zeros(f.shape[:-1], dtype)
+    for corner in itertools.product((0, 1), repeat=3):
+        w = jnp.ones(f.shape[:-1], dtype)
+        for k, c in enumerate(corner):
+            w = w * (f[..., k] if c else 1 - f[..., k])
+        total = total + jnp.where(w > 0, w * corner_energy(corner), 0.0)
+    return total
+
+
 def interpolate(field: Field, grid: Grid, q):
     """Energy at fractional indices q = (it, iy, ix) by trilinear interpolation."""
     q = jnp.asarray(q, field.dtype)
     base = jnp.floor(q)
-    f = q - base
     b = base.astype(jnp.int32)
-    total = jnp.zeros(q.shape[:-1], field.dtype)
-    for corner in itertools.product((0, 1), repeat=3):
-        w = jnp.ones(q.shape[:-1], field.dtype)
-        for k, c in enumerate(corner):
-            w = w * (f[..., k] if c else 1 - f[..., k])
-        e = lookup(field, grid, b[..., 0] + corner[0], b[..., 1] + corner[1], b[..., 2] + corner[2])
-        total = total + jnp.where(w > 0, w * e, 0.0)  # 0 * inf at a wall is 0
-    return total
+    return _trilinear(q - base, lambda c: lookup(field, grid, b[..., 0] + c[0], b[..., 1] + c[1], b[..., 2] + c[2]), field.dtype)
 
 
 def block(field: Field, grid: Grid, b):
@@ -288,14 +292,7 @@ def gradient(field: Field, grid: Grid, q):
     blk = block(field, grid, base.astype(jnp.int32))
 
     def interp(o):  # :func:`interpolate` at q + o, from the block
-        total = jnp.zeros((), dt)
-        for corner in itertools.product((0, 1), repeat=3):
-            w = jnp.ones((), dt)
-            for k, c in enumerate(corner):
-                w = w * (f[k] if c else 1 - f[k])
-            e = blk[1 + o[0] + corner[0], 1 + o[1] + corner[1], 1 + o[2] + corner[2]]
-            total = total + jnp.where(w > 0, w * e, 0.0)  # 0 * inf at a wall is 0
-        return total
+        return _trilinear(f, lambda c: blk[1 + o[0] + c[0], 1 + o[1] + c[1], 1 + o[2] + c[2]], dt)
 
     e0 = interp((0, 0, 0))
     out = []
