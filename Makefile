@@ -12,7 +12,7 @@ $(BIN)/selfalign: pyproject.toml
 	@touch $@
 
 demo: $(BIN)/selfalign
-	$(BIN)/selfalign demo --out out
+	$(BIN)/selfalign demo --out out --force
 
 test: $(BIN)/selfalign
 	$(BIN)/python -m pytest -q tests

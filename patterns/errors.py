@@ -1,16 +1,15 @@
-"""Errors a user can fix, and output files that never exist half-written.
+"""Errors a user can fix, and checks of the inputs named on the command line.
 
 Every function that takes user input raises :class:`InputError` with a one-line
 message that names the input, shows the value and says what is allowed. The CLI
-prints that line and exits with code 2 (no traceback).
+prints that line and exits with code 2 (no traceback). Output files and directories
+live in :mod:`patterns.outputs`.
 """
 
 from __future__ import annotations
 
-import contextlib
 import os
-import tempfile
-from collections.abc import Iterator
+import stat
 from pathlib import Path
 
 
@@ -35,28 +34,22 @@ def positive(name: str, value: float, unit: str = "") -> float:
     return v
 
 
-@contextlib.contextmanager
-def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
-    """Yield a temporary path next to ``path``; move it into place only on success.
+def require_regular_file(path: str | os.PathLike, what: str = "file") -> Path:
+    """``path`` if it is an existing regular file (not a directory, FIFO or device), else InputError.
 
-    A failure anywhere inside the block leaves no file at ``path`` (and no temporary).
-    The parent directory must exist and be writable, else InputError.
+    Checked with ``stat`` before anything opens the file, so a FIFO never blocks.
     """
     path = Path(path)
-    parent = path.parent if str(path.parent) else Path(".")
-    if not parent.is_dir():
-        raise InputError(f"output {path}: directory {parent} does not exist; create it or choose another path")
-    if not os.access(parent, os.W_OK):
-        raise InputError(f"output {path}: directory {parent} is not writable; choose another path")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=parent)
-    os.close(fd)
-    tmp_path = Path(tmp)
     try:
-        yield tmp_path
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp_path, 0o666 & ~umask)  # mkstemp makes files owner-only
-        os.replace(tmp_path, path)
-    finally:
-        if tmp_path.exists():
-            tmp_path.unlink()
+        st = os.stat(path)
+    except FileNotFoundError:
+        raise InputError(f"{path}: file does not exist") from None
+    except OSError as err:
+        raise InputError(f"{path}: cannot read the {what} file ({err.strerror or err})") from None
+    if stat.S_ISDIR(st.st_mode):
+        article = "an" if what[0] in "aeiou" else "a"
+        raise InputError(f"{path}: is a directory, not {article} {what} file")
+    if not stat.S_ISREG(st.st_mode):
+        kind = "a FIFO (named pipe)" if stat.S_ISFIFO(st.st_mode) else "a device or socket"
+        raise InputError(f"{path}: is {kind}, not a regular {what} file; save the {what} to a file and give that")
+    return path

@@ -32,8 +32,10 @@ from typing import Any
 import numpy as np
 from PIL import Image, PngImagePlugin
 
-from patterns.errors import InputError, atomic_output, positive
+from patterns.errors import InputError, positive, require_regular_file
 from patterns.mask import Mask
+from patterns.outputs import atomic_output
+from patterns.resources import price_image
 
 __all__ = ["TEXT_KEY", "read_mask", "write_mask"]
 
@@ -94,26 +96,38 @@ def _scale_from_file(info: dict, params: dict, path: Path) -> float:
     return _UM_PER_M / px_per_m[0]
 
 
-def read_mask(path: str | os.PathLike, um_per_px: float | None = None, invert: bool = False) -> Mask:
+def read_mask(
+    path: str | os.PathLike,
+    um_per_px: float | None = None,
+    invert: bool = False,
+    max_mpx: float | None = None,
+    budget_mb: float | None = None,
+) -> Mask:
     """Read an image file as a :class:`~patterns.mask.Mask` (see the module notes for the rules).
 
     Args:
         path: any Pillow-readable image (PNG expected); the first frame of multi-frame files.
         um_per_px: pixel size in micrometres; overrides the file's pHYs scale.
         invert: take ``1 - value`` (for images where black marks the pad).
+        max_mpx: largest image in megapixels (default
+            :data:`patterns.resources.DEFAULT_MAX_IMAGE_MPX`); checked from the header,
+            before the pixels are decoded.
+        budget_mb: memory budget the decoded image must fit (default: the default budget).
 
     Raises:
-        InputError: missing or unreadable file, or no usable scale.
+        InputError: missing, unreadable, not a regular file or too large, or no usable scale.
     """
     path = Path(path)
     if um_per_px is not None:
         um_per_px = positive("--um-per-px", um_per_px, "um per px")
-    if not path.exists():
-        raise InputError(f"{path}: file does not exist")
-    if path.is_dir():
-        raise InputError(f"{path}: is a directory, not an image file")
+    require_regular_file(path, "image")
     try:
-        with Image.open(path) as im:
+        with warnings.catch_warnings():
+            # Pillow warns above its own bomb limit; our limit (price_image) applies instead.
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+            im = Image.open(path)
+        with im:
+            price_image(im.size[0], im.size[1], path, max_mpx, budget_mb)
             im.load()
             value, alpha = _values(im, path)
             info = dict(im.info)
@@ -121,6 +135,8 @@ def read_mask(path: str | os.PathLike, um_per_px: float | None = None, invert: b
         raise
     except Image.DecompressionBombError as err:
         raise InputError(f"{path}: image too large to read safely ({err})") from None
+    except MemoryError:
+        raise InputError(f"{path}: not enough memory to decode this image; downsample it") from None
     except (OSError, SyntaxError, ValueError, EOFError, struct.error) as err:
         raise InputError(f"{path}: not a readable image ({type(err).__name__}: {err}); give a PNG file") from None
     params = _read_params(info)

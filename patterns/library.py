@@ -20,9 +20,10 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from patterns.errors import InputError, atomic_output
+from patterns.errors import InputError
 from patterns.geometry import DEFECT_TYPES, build, design_record
 from patterns.mask import Mask
+from patterns.outputs import atomic_output
 
 __all__ = ["LIBRARY", "LIBRARY_DIR", "MARGIN_UM", "UM_PER_PX", "build_library", "library_path"]
 

@@ -22,6 +22,7 @@ from shapely.geometry.base import BaseGeometry
 
 from patterns.errors import InputError, positive
 from patterns.mask import Mask
+from patterns.resources import price_raster
 
 
 def canvas_shape(geometry: BaseGeometry, um_per_px: float, margin_um: float = 0.0) -> tuple[int, int]:
@@ -32,6 +33,12 @@ def canvas_shape(geometry: BaseGeometry, um_per_px: float, margin_um: float = 0.
     xmin, ymin, xmax, ymax = geometry.bounds
     half_w = max(abs(xmin), abs(xmax)) + margin_um
     half_h = max(abs(ymin), abs(ymax)) + margin_um
+    fw, fh = half_w / s, half_h / s
+    if not (math.isfinite(fw) and math.isfinite(fh)) or max(fw, fh) > 2**31:
+        raise InputError(
+            f"the raster would be {2 * fw:.3g} x {2 * fh:.3g} px at {s:g} um/px, more than any machine holds; "
+            "use a coarser scale (--resolution or --um-per-px) or a smaller chip/pattern"
+        )
     # Round to whole pixels with a tolerance so that 365.0000000001 um stays 365 px.
     w = 2 * max(1, math.ceil(half_w / s - 1e-9))
     h = 2 * max(1, math.ceil(half_h / s - 1e-9))
@@ -115,6 +122,8 @@ def rasterize(
     um_per_px: float,
     shape: tuple[int, int] | None = None,
     margin_um: float = 0.0,
+    budget_mb: float | None = None,
+    what: str = "the raster",
 ) -> np.ndarray:
     """Area-coverage raster of ``geometry`` (um, centred) at ``um_per_px``.
 
@@ -123,6 +132,9 @@ def rasterize(
         um_per_px: pixel size in micrometres (> 0).
         shape: (H, W) of the canvas; default :func:`canvas_shape` (even, symmetric).
         margin_um: border added around the geometry when ``shape`` is None.
+        budget_mb: memory budget (MiB) the raster must fit (default: the default budget);
+            priced before anything is allocated (:func:`patterns.resources.price_raster`).
+        what: the raster's name in the refusal message.
 
     Returns:
         (H, W) float64 array in [0, 1]; row 0 at the top. Geometry outside the canvas
@@ -134,6 +146,7 @@ def rasterize(
     h, w = int(shape[0]), int(shape[1])
     if h < 1 or w < 1:
         raise InputError(f"canvas shape must be positive, got {shape}")
+    price_raster((h, w), s, what, budget_mb)
     if geometry.is_empty:
         return np.zeros((h, w), dtype=np.float64)
     return _coverage(to_pixel_frame(geometry, s, (h, w)), (h, w))
@@ -145,7 +158,9 @@ def mask_from_geometry(
     margin_um: float = 0.0,
     params: dict | None = None,
     shape: tuple[int, int] | None = None,
+    budget_mb: float | None = None,
+    what: str = "the raster",
 ) -> Mask:
     """Rasterize ``geometry`` into a :class:`Mask` that keeps the exact geometry."""
-    data = rasterize(geometry, um_per_px, shape=shape, margin_um=margin_um)
+    data = rasterize(geometry, um_per_px, shape=shape, margin_um=margin_um, budget_mb=budget_mb, what=what)
     return Mask(data=data, um_per_px=um_per_px, geometry=geometry, params=dict(params or {}))

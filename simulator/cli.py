@@ -1,15 +1,26 @@
 """The ``selfalign`` command: one subcommand per module in :mod:`simulator.commands`.
 
 Each command module defines ``register(subparsers)``, which adds its parser and sets
-``func`` to a function ``run(args) -> int``. Errors a user can fix
-(:class:`patterns.errors.InputError`) print one line and exit with code 2.
+``func`` to a function ``run(args) -> int``. Every failure is one line on stderr:
+errors a user can fix (:class:`patterns.errors.InputError`, a full disk, memory) exit
+with code 2; anything unexpected says "internal error", where its traceback was saved
+(``SELFALIGN_DEBUG=1`` prints it instead) and exits with code 1. SIGTERM and Ctrl-C
+unwind normally, so no temporary file or directory is left behind.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import errno
 import importlib
+import os
+import signal
 import sys
+import tempfile
+import threading
+import traceback
+import warnings
 
 from patterns.errors import InputError
 
@@ -36,20 +47,103 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
+class Terminated(BaseException):
+    """SIGTERM, raised in the main thread so that ``finally`` blocks remove temporaries."""
+
+
+#: OS errors a user can fix (disk full, quota, read-only or forbidden place): exit 2.
+USER_OS_ERRORS = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS, errno.EACCES, errno.EPERM, errno.ENAMETOOLONG}
+
+
+@contextlib.contextmanager
+def _boundary():
+    """SIGTERM as an exception and library warnings as one line each, for one command."""
+    def terminate(signum, frame):
+        raise Terminated(signum)
+
+    def one_line(message, category, filename, lineno, file=None, line=None):
+        text = " ".join(str(message).split())
+        print(f"selfalign: warning: {text}", file=sys.stderr)
+
+    main_thread = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGTERM, terminate) if main_thread else None
     try:
-        return int(args.func(args) or 0)
-    except InputError as err:
-        print(f"selfalign {args.command}: error: {err}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("selfalign: interrupted", file=sys.stderr)
-        return 130
-    except BrokenPipeError:  # output piped into e.g. `head`: stop quietly
-        sys.stderr.close()
-        return 141
+        with warnings.catch_warnings():
+            warnings.simplefilter("default")
+            warnings.showwarning = one_line
+            yield
+    finally:
+        if main_thread:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _quiet_stdout() -> None:
+    """After stdout failed: point it at /dev/null so the interpreter's final flush is silent."""
+    with contextlib.suppress(Exception):
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+
+
+def _internal_error(command: str, err: BaseException) -> int:
+    """One line naming the failure and where its traceback is; the traceback in a file."""
+    text = "".join(traceback.format_exception(err))
+    where = "set SELFALIGN_DEBUG=1 to see the traceback"
+    with contextlib.suppress(OSError):
+        fd, name = tempfile.mkstemp(prefix="selfalign-traceback-", suffix=".txt")
+        with os.fdopen(fd, "w") as f:
+            f.write(text)
+        where = f"traceback in {name}, or set SELFALIGN_DEBUG=1 to print it"
+    summary = " ".join(f"{type(err).__name__}: {err}".split())[:300]
+    print(f"selfalign {command}: internal error: {summary} ({where}); please report it", file=sys.stderr)
+    return 1
+
+
+def main(argv: list[str] | None = None) -> int:
+    with _boundary():
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        name = args.command
+        try:
+            code = int(args.func(args) or 0)
+            sys.stdout.flush()
+            return code
+        except InputError as err:
+            print(f"selfalign {name}: error: {err}", file=sys.stderr)
+            return 2
+        except KeyboardInterrupt:
+            print("selfalign: interrupted (no partial output was kept)", file=sys.stderr)
+            return 130
+        except Terminated:
+            print("selfalign: terminated (no partial output was kept)", file=sys.stderr)
+            return 143
+        except BrokenPipeError:  # output piped into e.g. `head`: stop quietly
+            _quiet_stdout()
+            sys.stderr.close()
+            return 141
+        except MemoryError:
+            print(f"selfalign {name}: error: out of memory; lower --memory-budget, use a coarser --resolution or fewer starts", file=sys.stderr)
+            return 2
+        except RecursionError:
+            print(f"selfalign {name}: error: an input is nested too deeply to read; simplify it", file=sys.stderr)
+            return 2
+        except OSError as err:
+            if os.environ.get("SELFALIGN_DEBUG") == "1" or err.errno not in USER_OS_ERRORS:
+                if os.environ.get("SELFALIGN_DEBUG") == "1":
+                    raise
+                return _internal_error(name, err)
+            target = err.filename or "standard output"
+            if target == "standard output":
+                _quiet_stdout()
+            print(f"selfalign {name}: error: cannot write {target}: {err.strerror}; free some space or choose another place "
+                  "(no partial output was kept)", file=sys.stderr)
+            return 2
+        except Exception as err:
+            if os.environ.get("SELFALIGN_DEBUG") == "1":
+                raise
+            if "RESOURCE_EXHAUSTED" in str(err):
+                print(f"selfalign {name}: error: out of memory on the accelerator; lower --memory-budget or use a coarser --resolution", file=sys.stderr)
+                return 2
+            return _internal_error(name, err)
 
 
 if __name__ == "__main__":

@@ -16,7 +16,8 @@
 and writes ``summary.json``, ``landscape.png``, ``force.png``, ``capture.png``,
 ``pattern.png`` (the input as used) and ``report.html`` into a directory. Everything
 is written into a temporary directory beside it and renamed into place at the end,
-so a failure leaves no partial directory.
+so a failure leaves no partial directory; an existing directory is never replaced
+unless asked (``force``) and only when it holds a previous selfalign output.
 """
 
 from __future__ import annotations
@@ -24,15 +25,13 @@ from __future__ import annotations
 import html
 import json
 import os
-import shutil
-import tempfile
 import time
-from pathlib import Path
 
 import numpy as np
 
-from patterns.errors import InputError
+from patterns.outputs import check_output_dir, output_directory
 from simulator import montecarlo, render
+from simulator.finite import require_finite
 from simulator.landscape import build_landscape, estimate_bytes
 from simulator.scene import Scene, resample_to_scale
 
@@ -83,44 +82,31 @@ def max_bias(values: np.ndarray, force: np.ndarray, x0: float) -> tuple[float, f
     return out[0], out[1]
 
 
-def evaluate(scene: Scene, out_dir: str | os.PathLike, quiet: bool = False, source: str = "", auto: bool = True) -> dict:
-    """Assess ``scene`` and write the report into ``out_dir`` (created; must not exist as a file)."""
+def evaluate(scene: Scene, out_dir: str | os.PathLike, quiet: bool = False, source: str = "", auto: bool = True,
+             force: bool = False, inputs: tuple = ()) -> dict:
+    """Assess ``scene`` and write the report into ``out_dir``.
+
+    ``out_dir`` is created atomically (see :func:`patterns.outputs.output_directory`): it
+    must not exist, or be an empty directory, or with ``force`` hold nothing but a
+    previous selfalign output. ``inputs`` (files the scene was read from) are never
+    inside it. A failure leaves ``out_dir`` as it was.
+    """
     t_start = time.perf_counter()
-    out_dir = Path(out_dir)
-    parent = out_dir.resolve().parent
-    if out_dir.exists() and not out_dir.is_dir():
-        raise InputError(f"--out {out_dir}: exists and is not a directory")
-    if not parent.is_dir():
-        raise InputError(f"--out {out_dir}: parent directory {parent} does not exist; create it first")
-    if not os.access(parent, os.W_OK):
-        raise InputError(f"--out {out_dir}: parent directory {parent} is not writable")
+    check_output_dir(out_dir, "--out", force, inputs)  # before any work
     native = scene.um_per_px
     if auto:
         scene = auto_resolution(scene)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=parent))
-    try:
+    with output_directory(out_dir, "--out", force, inputs, command="evaluate") as tmp:
         summary = _assess(scene, tmp, quiet)
         summary["settings"] |= {"source_um_per_px": native, "resolution_auto": bool(auto and scene.um_per_px != native)}
         summary["seconds"] = round(time.perf_counter() - t_start, 2)
-        (tmp / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+        require_finite(summary, "evaluate summary")
+        (tmp / "summary.json").write_text(json.dumps(summary, indent=2, allow_nan=False) + "\n")
         (tmp / "report.html").write_text(_html(summary, source))
-        if out_dir.exists():
-            shutil.rmtree(out_dir)
-        os.replace(tmp, out_dir)
-        os.chmod(out_dir, 0o777 & ~_umask())
-    finally:
-        if tmp.exists():
-            shutil.rmtree(tmp, ignore_errors=True)
     return summary
 
 
-def _umask() -> int:
-    m = os.umask(0)
-    os.umask(m)
-    return m
-
-
-def _assess(scene: Scene, out: Path, quiet: bool) -> dict:
+def _assess(scene: Scene, out, quiet: bool) -> dict:
     s = scene.um_per_px
     ls = build_landscape(scene, progress=not quiet)
     xm, ym, tm, em = ls.global_minimum()

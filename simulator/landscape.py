@@ -41,6 +41,7 @@ from shapely import affinity
 from patterns.errors import InputError
 from patterns.mask import Mask
 from patterns.raster import rasterize
+from patterns.resources import fmt_bytes
 from simulator.feedback import progress_bar
 from simulator.scene import Scene
 
@@ -84,12 +85,30 @@ def axis_step(axis: np.ndarray) -> float:
     return float(axis[-1] - axis[0]) / (n - 1) if n > 1 else 1.0
 
 
+#: Most twists a pose grid may have (0.0001 degree steps over a 90 degree period).
+MAX_TWISTS = 2**20
+#: Most samples of one energy curve.
+MAX_CURVE_SAMPLES = 10**7
+
+
+def _require_twist_count(scene: Scene, span_deg: float) -> None:
+    """Refuse a twist axis of more than MAX_TWISTS twists before any array is made."""
+    tg = scene.twist
+    n = span_deg / tg.step_deg
+    if not n <= MAX_TWISTS:
+        raise InputError(
+            f"twist step {tg.step_deg:g} deg gives {n:.3g} twists over {span_deg:g} deg, more than {MAX_TWISTS:,} "
+            f"(the landscape would need {fmt_bytes(n * 4)} for every translation); use a larger --twist-step or a narrower twist range"
+        )
+
+
 def twist_axis(scene: Scene) -> tuple[np.ndarray, bool, float]:
     """(twists in degrees, periodic?, chip symmetry period) for the scene's grid."""
     period, _ = chip_symmetry(scene.chip)
     if not scene.effects.twist:
         return np.zeros(1), False, period
     tg = scene.twist
+    _require_twist_count(scene, period if tg.min_deg is None else tg.max_deg - tg.min_deg)
     step = tg.step_deg
     n_period = period / step
     divides = abs(n_period - round(n_period)) < 1e-9
@@ -601,6 +620,12 @@ class Landscape:
         step = self.twist_step_deg if axis == "twist" else self.um_per_px
         if not (math.isfinite(start) and math.isfinite(stop) and stop > start):
             raise InputError(f"curve range must be finite with --to > --from, got {start} .. {stop}")
+        samples = (stop - start) / step + 1
+        if not samples <= MAX_CURVE_SAMPLES:
+            raise InputError(
+                f"the curve from {start:g} to {stop:g} at steps of {step:g} would have {samples:.3g} samples "
+                f"(about {samples * 96:.3g} bytes), more than {MAX_CURVE_SAMPLES:,}; narrow --from/--to"
+            )
         n = int(math.floor((stop - start) / step + 1e-9)) + 1
         v = start + step * np.arange(n)
         x, y, t = (np.full(n, float(c)) for c in through)
@@ -741,12 +766,23 @@ def _check_energy_range(scene: Scene) -> None:
 
 
 def estimate_bytes(scene: Scene, twists: np.ndarray | None = None) -> int:
-    """Bytes the landscape array of ``scene`` would take (before building it)."""
-    return plan(scene, twists)["landscape_bytes"]
+    """Bytes the landscape array of ``scene`` would take (before building it; nothing is rotated)."""
+    return _box(scene, twists)["landscape_bytes"]
 
 
-def plan(scene: Scene, twists: np.ndarray | None = None, center_px: tuple[int, int] = (0, 0), half_px: int | None = None) -> dict:
-    """Everything the build will do, computed without allocating the landscape."""
+def _refuse_over_budget(scene: Scene, need: float, n_twists: int, ny: int, nx: int) -> None:
+    """InputError unless ``need`` bytes fit ``scene.memory_budget_mb``."""
+    if need > scene.memory_budget_mb * 2**20:
+        raise InputError(
+            f"the landscape needs about {need / 2**20:,.0f} MB ({n_twists} twists x "
+            f"{ny} x {nx} poses, {scene.dtype}) but the memory budget is "
+            f"{scene.memory_budget_mb:,.0f} MB; use a coarser scale (--um-per-px), a larger twist step "
+            "or narrower twist range, a smaller translation window (window_um), or raise memory_budget_mb"
+        )
+
+
+def _box(scene: Scene, twists: np.ndarray | None, center_px: tuple[int, int] = (0, 0), half_px: int | None = None) -> dict:
+    """Twists and translation box of a build, and its landscape bytes: sizes only, no rotation."""
     all_twists, wrap, period = twist_axis(scene)
     twists = all_twists if twists is None else np.asarray(twists, float)
     pat = scene.pattern.data
@@ -755,13 +791,31 @@ def plan(scene: Scene, twists: np.ndarray | None = None, center_px: tuple[int, i
     # Cropped pattern, y-up; origin (physical 0, 0) in pixel-corner coordinates.
     origin = (w / 2 - c0, r1 - h / 2)
     reach = (max(w / 2 - c0, c1 - w / 2), max(h / 2 - r0, r1 - h / 2))
-    parity = (int((2 * origin[1]) % 2), int((2 * origin[0]) % 2))
-    rot = ChipRotator(scene.chip, twists, parity)
-    hc, wc = rot.shape
     chip_rx, chip_ry = _chip_reach_px(scene.chip, scene.effects.twist)
     limit = None if scene.window_um is None else math.ceil(scene.window_um / scene.um_per_px - 1e-9)
     cx, rx, x_lo, x_hi = _axis_box(math.ceil(reach[0] + chip_rx - 1e-9), limit, int(center_px[0]), half_px)
     cy, ry, y_lo, y_hi = _axis_box(math.ceil(reach[1] + chip_ry - 1e-9), limit, int(center_px[1]), half_px)
+    nbytes = len(twists) * (2 * ry + 1) * (2 * rx + 1) * np.dtype(scene.dtype).itemsize
+    return {
+        "twists": twists, "all_twists": all_twists, "wrap": wrap, "period": period, "origin": origin,
+        "crop": (r0, r1, c0, c1), "x": (cx, rx, x_lo, x_hi), "y": (cy, ry, y_lo, y_hi), "landscape_bytes": int(nbytes),
+    }
+
+
+def plan(scene: Scene, twists: np.ndarray | None = None, center_px: tuple[int, int] = (0, 0), half_px: int | None = None) -> dict:
+    """Everything the build will do, computed without allocating the landscape.
+
+    Refuses (InputError) a landscape over the scene's memory budget before any chip
+    rotation is computed.
+    """
+    b = _box(scene, twists, center_px, half_px)
+    twists, all_twists, wrap, period, origin = b["twists"], b["all_twists"], b["wrap"], b["period"], b["origin"]
+    (r0, r1, c0, c1), (cx, rx, x_lo, x_hi), (cy, ry, y_lo, y_hi) = b["crop"], b["x"], b["y"]
+    _refuse_over_budget(scene, b["landscape_bytes"], len(twists), 2 * ry + 1, 2 * rx + 1)
+    pat = scene.pattern.data
+    parity = (int((2 * origin[1]) % 2), int((2 * origin[0]) % 2))
+    rot = ChipRotator(scene.chip, twists, parity)
+    hc, wc = rot.shape
     dx, dy = origin[0] - wc / 2 + cx, origin[1] - hc / 2 + cy
     assert dx == int(dx) and dy == int(dy), "pixel grids of chip and pattern must coincide"
     win = Window(rx=rx, ry=ry, dx=int(dx), dy=int(dy))
@@ -773,7 +827,7 @@ def plan(scene: Scene, twists: np.ndarray | None = None, center_px: tuple[int, i
         ya, yb, xa, xb = 0, 1, 0, 1
     pat_up = pat_up[ya:yb, xa:xb]
     win = Window(rx=win.rx, ry=win.ry, dx=win.dx - xa, dy=win.dy - ya)
-    nbytes = len(twists) * (2 * win.ry + 1) * (2 * win.rx + 1) * np.dtype(scene.dtype).itemsize
+    nbytes = b["landscape_bytes"]
     return {
         "twists": twists,
         "wrap": wrap and len(twists) == len(all_twists),
@@ -817,19 +871,12 @@ def build_landscape(
     win, rot = p["window"], p["rotator"]
     _check_energy_range(scene)
     # Sizes first, allocation after: an over-budget request fails before any transform.
-    budget = scene.memory_budget_mb * 2**20
     chunk = max(1, min(chunk, len(p["twists"])))
     fft = fft_shape(p["pattern_up"].shape, rot.shape, win)
     # A chunk of mirror twins works on twice the twists (the twins' spectra and windows).
     per_chunk = chunk * (2 if mirror_twins(scene.chip, p["twists"]) else 1)
     need = p["landscape_bytes"] + work_bytes(fft, 2 * win.ry + 1, scene.dtype, per_chunk, -(-len(p["twists"]) // chunk))
-    if need > budget:
-        raise InputError(
-            f"the landscape needs about {need / 2**20:,.0f} MB ({len(p['twists'])} twists x "
-            f"{2 * win.ry + 1} x {2 * win.rx + 1} poses, {scene.dtype}) but the memory budget is "
-            f"{scene.memory_budget_mb:,.0f} MB; use a coarser scale (--um-per-px), a larger twist step "
-            "or narrower twist range, a smaller translation window (window_um), or raise memory_budget_mb"
-        )
+    _refuse_over_budget(scene, need, len(p["twists"]), 2 * win.ry + 1, 2 * win.rx + 1)
     cor = Correlator(p["pattern_up"], rot.shape, win, scene.dtype, backend)
     twists_deg = p["twists"]
     scale = scene.materials.delta_gamma_N_m * scene.um_per_px**2 * UM2_TO_M2

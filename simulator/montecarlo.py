@@ -49,11 +49,12 @@ import numpy as np
 
 from patterns.errors import InputError, require
 from patterns.mask import Mask
+from patterns.resources import require_fits
 from simulator import stepping
 from simulator.feedback import progress_bar
 from simulator.landscape import Landscape, build_landscape
 from simulator.scene import Scene
-from simulator.trajectory import DEFAULT_MAX_STEPS, radius_of_gyration_px
+from simulator.trajectory import DEFAULT_MAX_STEPS, MAX_STEPS_LIMIT, radius_of_gyration_px
 
 METHODS = ("greedy", "gradient")
 DISTRIBUTIONS = ("normal", "uniform")
@@ -62,6 +63,8 @@ DEFAULT_CHUNK = 2048
 #: Largest |x|, |y| (um) and |twist| (degrees) of a start: keeps grid indices in int32.
 MAX_OFFSET_UM, MAX_TWIST_DEG = 1e7, 3600.0
 MAX_STARTS = 10**8
+#: Largest chunk of starts compiled together.
+MAX_CHUNK = 2**20
 
 
 # --------------------------------------------------------------------- starts
@@ -99,6 +102,7 @@ class StartGrid:
         """Each axis one value or (start, stop, step), stop included (um, um, degrees)."""
         g = cls(_axis("grid x", x_um, "um"), _axis("grid y", y_um, "um"), _axis("grid twist", twist_deg, "degrees"))
         require(g.size <= MAX_STARTS, f"the start grid has {g.size:,} starts; at most {MAX_STARTS:,}")
+        price_starts(g.size, None, DRAW_BYTES_PER_START)
         return g
 
     @property
@@ -121,7 +125,20 @@ def _triple(name: str, v, unit: str) -> np.ndarray:
     return a
 
 
-def random_starts(n: int, spread, seed: int, around=(0.0, 0.0, 0.0), distribution: str = "normal") -> np.ndarray:
+#: Peak bytes per start of a batch: the start, its index, run order and sort keys, the
+#: final pose, energy, steps and outcome, and the summary's copies.
+BATCH_BYTES_PER_START = 192
+#: Peak bytes per start while random starts are drawn (draws, scaling, the result).
+DRAW_BYTES_PER_START = 96
+
+
+def price_starts(n: int, budget_mb: float | None, per_start: int = BATCH_BYTES_PER_START) -> None:
+    """Refuse ``n`` starts whose arrays would not fit the memory budget (before allocating)."""
+    require_fits(f"{n:,} starts", float(n) * per_start, "use fewer starts (--random N or a coarser --grid)", budget_mb)
+
+
+def random_starts(n: int, spread, seed: int, around=(0.0, 0.0, 0.0), distribution: str = "normal",
+                  budget_mb: float | None = None) -> np.ndarray:
     """``n`` start poses drawn around a nominal pose (placement noise).
 
     Args:
@@ -134,6 +151,7 @@ def random_starts(n: int, spread, seed: int, around=(0.0, 0.0, 0.0), distributio
             same starts whatever the chunk size.
         around: the nominal pose (x_um, y_um, twist_deg) a gripper aims at.
         distribution: "normal" (default) or "uniform", independently per coordinate.
+        budget_mb: memory budget the draws must fit (default: the default budget).
 
     Returns:
         (n, 3) float64 poses (x_um, y_um, twist_deg).
@@ -143,6 +161,7 @@ def random_starts(n: int, spread, seed: int, around=(0.0, 0.0, 0.0), distributio
     if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
         raise InputError(f"seed must be a whole number >= 0, got {seed!r}")
     require(distribution in DISTRIBUTIONS, f"distribution must be one of {DISTRIBUTIONS}, got {distribution!r}")
+    price_starts(int(n), budget_mb, DRAW_BYTES_PER_START)
     s = _triple("spread", spread, "um, um, degrees")
     require(bool(np.all(s >= 0)), f"spread must be >= 0 (um, um, degrees), got {tuple(s.tolist())}")
     c = _triple("around", around, "um, um, degrees")
@@ -301,9 +320,14 @@ def run_batch(
     for name, v in (("chunk", chunk), ("max steps", max_steps)):
         if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < 1:
             raise InputError(f"{name} must be a whole number >= 1, got {v!r}")
+    require(max_steps <= MAX_STEPS_LIMIT, f"max steps must be at most {MAX_STEPS_LIMIT:,} (the step counter is 32-bit), got {max_steps:,}")
+    require(chunk <= MAX_CHUNK, f"chunk must be at most {MAX_CHUNK:,} starts, got {chunk:,}")
+    if isinstance(starts, StartGrid):
+        price_starts(starts.size, scene.memory_budget_mb)
     if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int | np.integer) or workers < 1):
         raise InputError(f"workers must be a whole number >= 1 or None, got {workers!r}")
     poses = _as_poses(starts)
+    price_starts(len(poses), scene.memory_budget_mb)
     t0 = time.perf_counter()
     ls = build_landscape(scene, progress=progress) if landscape is None else landscape
     t_land = time.perf_counter() - t0

@@ -16,8 +16,9 @@ from collections.abc import Iterator
 
 import numpy as np
 
-from patterns.errors import InputError, atomic_output
+from patterns.errors import InputError
 from patterns.mask import Mask
+from patterns.outputs import atomic_output
 from simulator.landscape import axis_step
 
 __all__ = [

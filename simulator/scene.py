@@ -50,18 +50,15 @@ from shapely.geometry import box
 from patterns.errors import InputError, positive, require
 from patterns.mask import Mask
 from patterns.raster import mask_from_geometry
+from patterns.resources import check_budget_mb, default_budget_mb, price_raster
 from simulator.materials import DAMPING_CALIBRATION, SU8_DENSITY_KG_M3, Liquid, Materials
 
 DTYPES = ("float32", "float64")
 
 
 def default_memory_budget_mb() -> float:
-    """Half of the machine's available memory, at most 8 GiB."""
-    try:
-        avail = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
-    except (ValueError, OSError, AttributeError):
-        avail = 8 * 2**30
-    return float(min(8192.0, avail / 2**20 / 2))
+    """Half of the memory available when the process started, at most 8 GiB (MiB)."""
+    return default_budget_mb()
 
 
 @dataclass(frozen=True)
@@ -138,7 +135,7 @@ class Scene:
         require(self.dtype in DTYPES, f"dtype must be one of {DTYPES}, got {self.dtype!r}")
         if self.window_um is not None:
             positive("window_um", self.window_um, "um")
-        positive("memory_budget_mb", self.memory_budget_mb, "MB")
+        check_budget_mb(self.memory_budget_mb, "memory_budget_mb")
         positive("chip thickness", self.chip_thickness_um, "um")
         positive("chip density", self.chip_density_kg_m3, "kg/m^3")
         positive("damping calibration", self.damping_calibration)
@@ -166,6 +163,7 @@ class Scene:
         chip_size_um: tuple[float, float] | float | None = None,
         um_per_px: float | None = None,
         resolution_um: float | None = None,
+        max_image_mpx: float | None = None,
         **kwargs: Any,
     ) -> Scene:
         """Scene from a pattern (Mask or PNG path) and a chip (Mask, PNG path or size).
@@ -175,25 +173,32 @@ class Scene:
         the pattern is resampled to it (:func:`resample_to_scale`). A chip PNG at
         another scale is resampled to the simulation scale the same way.
         ``chip_size_um`` gives an exact rectangle (width, height) or a square (one number).
+        ``max_image_mpx`` raises the limit on the size of the images read (megapixels).
+        Every raster is priced against ``memory_budget_mb`` before it is made.
         """
         from patterns.io import read_mask
 
+        budget = kwargs.get("memory_budget_mb")
+        if budget is not None:
+            budget = check_budget_mb(budget, "memory_budget_mb")
         if not isinstance(pattern, Mask):
-            pattern = read_mask(pattern, um_per_px=um_per_px)
+            pattern = read_mask(pattern, um_per_px=um_per_px, max_mpx=max_image_mpx, budget_mb=budget)
         elif um_per_px is not None:
             pattern = Mask(pattern.data, um_per_px, pattern.geometry, pattern.params)
         require((chip is None) != (chip_size_um is None), "give exactly one of a chip image (--chip) or a chip size (--chip-size)")
         if resolution_um is not None:
-            pattern = resample_to_scale(pattern, positive("resolution", resolution_um, "um per px"))
+            pattern = resample_to_scale(pattern, positive("resolution", resolution_um, "um per px"), budget)
         s = pattern.um_per_px
         if chip_size_um is not None:
             w, h = (chip_size_um, chip_size_um) if np.isscalar(chip_size_um) else chip_size_um
             w, h = positive("chip width", w, "um"), positive("chip height", h, "um")
-            chip = mask_from_geometry(box(-w / 2, -h / 2, w / 2, h / 2), s, params={"design": "rectangle", "width_um": w, "height_um": h})
+            chip = mask_from_geometry(
+                box(-w / 2, -h / 2, w / 2, h / 2), s, params={"design": "rectangle", "width_um": w, "height_um": h}, budget_mb=budget, what=f"the {w:g} x {h:g} um chip raster"
+            )
         else:
             if not isinstance(chip, Mask):
-                chip = read_mask(chip, um_per_px=um_per_px)
-            chip = resample_to_scale(chip, s)
+                chip = read_mask(chip, um_per_px=um_per_px, max_mpx=max_image_mpx, budget_mb=budget)
+            chip = resample_to_scale(chip, s, budget)
         return cls(pattern=pattern, chip=chip, **kwargs)
 
     @classmethod
@@ -207,7 +212,7 @@ class Scene:
     def from_dict(cls, doc: dict, base: Path = Path("."), **overrides: Any) -> Scene:
         known = {
             "pattern", "chip", "chip_size_um", "um_per_px", "resolution_um", "dtype", "window_um", "memory_budget_mb", "materials", "twist",
-            "effects", "liquid", "chip_thickness_um", "chip_density_kg_m3", "damping_calibration",
+            "effects", "liquid", "chip_thickness_um", "chip_density_kg_m3", "damping_calibration", "max_image_mpx",
         }
         unknown = set(doc) - known - {"simulate", "montecarlo", "accuracy"}
         require(not unknown, f"unknown scene keys {sorted(unknown)}; allowed: {sorted(known)}")
@@ -250,25 +255,28 @@ class Scene:
             chip_size_um=doc.get("chip_size_um"),
             um_per_px=doc.get("um_per_px"),
             resolution_um=doc.get("resolution_um"),
+            max_image_mpx=doc.get("max_image_mpx"),
             **kw,
         )
 
 
-def resample_to_scale(mask: Mask, um_per_px: float) -> Mask:
+def resample_to_scale(mask: Mask, um_per_px: float, budget_mb: float | None = None) -> Mask:
     """``mask`` at another pixel size, its centre kept at the image centre.
 
     Exact geometry is rasterized anew. A raster is first padded symmetrically with
     substrate so that its size maps to whole pixels at the new scale, then resampled
     by area averaging (OpenCV INTER_AREA; sum x pixel area preserved) when coarsening,
-    and by pixel replication when refining.
+    and by pixel replication when refining. The result is priced against ``budget_mb``
+    (default: the default budget) before it is made.
     """
     if math.isclose(mask.um_per_px, um_per_px, rel_tol=1e-9):
         return mask
     if mask.geometry is not None:
-        return mask_from_geometry(mask.geometry, um_per_px, params=mask.params)
+        return mask_from_geometry(mask.geometry, um_per_px, params=mask.params, budget_mb=budget_mb, what=f"the raster at {um_per_px:g} um/px")
     import cv2
 
     f = mask.um_per_px / um_per_px  # new pixels per old pixel
+    price_raster(tuple(n * f for n in mask.shape), um_per_px, f"the image resampled to {um_per_px:g} um/px", budget_mb)
     sizes = []
     for n in mask.shape:
         m = next((m for m in range(n, n + 2001, 2) if abs(m * f - round(m * f)) < 1e-6 and round(m * f) >= 1), None)

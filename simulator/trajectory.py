@@ -20,6 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from patterns.errors import InputError
+from patterns.resources import require_fits
 from simulator import stepping
 from simulator.landscape import Landscape, _twist_cut, axis_step, build_landscape, twist_axis
 from simulator.scene import Scene
@@ -29,6 +30,11 @@ DEFAULT_MAX_STEPS = 5000
 #: Largest |x|, |y| of a start in pixels (float32 holds every whole pixel up to 2**24, and
 #: int32 grid indices have room) and largest |twist| in degrees (as TwistGrid's range).
 MAX_START_PX, MAX_START_TWIST_DEG = 2**24, 3600.0
+#: Largest max_steps: step counters are int32.
+MAX_STEPS_LIMIT = 2**31 - 2
+#: Peak bytes per recorded step of one run (device buffers, their host copies and the
+#: Trajectory's float64 path and energies): stepping and dynamics.
+PATH_BYTES_PER_STEP = {"stepping": 96, "dynamics": 320}
 
 
 @dataclass(frozen=True)
@@ -153,6 +159,10 @@ def simulate(
         raise InputError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
     if isinstance(max_steps, bool) or not isinstance(max_steps, int | np.integer) or max_steps < 1:
         raise InputError(f"max steps must be a whole number >= 1, got {max_steps!r}")
+    if max_steps > MAX_STEPS_LIMIT:
+        raise InputError(f"max steps must be at most {MAX_STEPS_LIMIT:,} (the step counter is 32-bit), got {max_steps:,}")
+    per_step = PATH_BYTES_PER_STEP["dynamics" if method in ("overdamped", "inertial") else "stepping"]
+    require_fits(f"the path of up to {max_steps:,} steps", float(max_steps + 1) * per_step, "use a smaller --max-steps", scene.memory_budget_mb)
     if len(start) != 3 or not all(math.isfinite(v) for v in start):
         raise InputError(f"start pose must be three finite numbers (um, um, deg), got {start}")
     reach_um = MAX_START_PX * scene.um_per_px
@@ -332,9 +342,9 @@ def reference_landscape(scene: Scene, backend: str = "auto", reach_steps: int = 
 
 def full_landscape_poses(scene: Scene) -> int:
     """Poses of the scene's full landscape (what a trajectory would cost without boxes)."""
-    from simulator.landscape import plan
+    from simulator.landscape import estimate_bytes
 
-    return plan(scene)["landscape_bytes"] // np.dtype(scene.dtype).itemsize
+    return estimate_bytes(scene) // np.dtype(scene.dtype).itemsize
 
 
 def _to_trajectory(method: str, state, grid) -> Trajectory:

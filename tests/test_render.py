@@ -176,7 +176,7 @@ def test_plot_forces_bad_span(small_landscape, tmp_path):
 def test_demo_writes_all_its_files(tmp_path, capsys):
     out = tmp_path / "out"
     assert main(["demo", "--out", str(out), "--quiet"]) == 0
-    assert sorted(p.name for p in out.iterdir()) == ["demo.gif", "demo_energy.png", "report", "summary.txt", "trajectory.json"]
+    assert sorted(p.name for p in out.iterdir()) == [".selfalign-output.json", "demo.gif", "demo_energy.png", "report", "summary.txt", "trajectory.json"]
     assert (out / "report" / "report.html").exists() and (out / "report" / "summary.json").exists()
     captured = capsys.readouterr()
     assert captured.err == ""  # --quiet: no progress bars or waiting messages

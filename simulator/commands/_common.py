@@ -9,7 +9,8 @@ import os
 from pathlib import Path
 from typing import Any
 
-from patterns.errors import InputError, atomic_output
+from patterns.errors import InputError
+from patterns.outputs import atomic_output
 from simulator.scene import Scene
 
 
@@ -33,7 +34,9 @@ def add_scene_args(p: argparse.ArgumentParser) -> None:
     n.add_argument("--no-twist", action="store_true", help="keep the chip untwisted (computes one rotation)")
     n.add_argument("--window", type=float, help="translation half-width of the pose grid in um (default: full reach)")
     n.add_argument("--dtype", choices=("float32", "float64"), help="landscape precision (default float32)")
-    n.add_argument("--memory-budget", type=float, help="landscape memory budget in MB")
+    n.add_argument("--memory-budget", type=float, help="memory budget in MB for the landscape and every other large array "
+                   "(default: half the available memory, at most 8192; never more than the machine has)")
+    g.add_argument("--max-image-mpx", type=float, help="largest image to read, in megapixels (default 64)")
 
 
 def _accuracy_help() -> str:
@@ -102,6 +105,7 @@ def scene_from_args(args: argparse.Namespace) -> Scene:
         (None, "window_um"): args.window,
         (None, "dtype"): args.dtype,
         (None, "memory_budget_mb"): args.memory_budget,
+        (None, "max_image_mpx"): getattr(args, "max_image_mpx", None),
         # Liquid and chip body: only commands with dynamics define these flags.
         ("liquid", "volume_nl"): getattr(args, "volume", None),
         ("liquid", "viscosity_mPa_s"): getattr(args, "viscosity", None),
@@ -162,7 +166,41 @@ def read_toml(path: str | os.PathLike) -> dict[str, Any]:
         raise InputError(f"scene file {path} is not valid TOML: {err}") from None
 
 
+def input_paths(args: argparse.Namespace) -> list[Path]:
+    """The files this run reads (pattern, chip, scene and the scene's own pattern/chip)."""
+    paths = [getattr(args, k, None) for k in ("scene", "pattern", "chip", "image")]
+    scene = getattr(args, "scene", None)
+    if scene:
+        try:
+            doc = read_toml(scene)
+        except InputError:
+            doc = {}
+        for key in ("pattern", "chip"):
+            if isinstance(doc.get(key), str):
+                paths.append(str(Path(scene).parent / doc[key]))
+    return [Path(p) for p in paths if isinstance(p, str) and p]
+
+
+def check_outputs(args: argparse.Namespace, flags: tuple[str, ...]) -> None:
+    """Fail before any work when an output file cannot or must not be written.
+
+    ``flags`` are attribute names (``json`` for ``--json``). An output may not be an
+    input, a link, a device or a directory, and two outputs may not name one file.
+    """
+    from patterns.outputs import check_distinct, check_output_file
+
+    inputs = input_paths(args)
+    named = {f"--{f.replace('_', '-')}": getattr(args, f, None) for f in flags}
+    for flag, path in named.items():
+        if path:
+            check_output_file(path, flag, inputs)
+    check_distinct(named)
+
+
 def write_json(path: str | os.PathLike, obj: Any) -> None:
-    """Write JSON atomically (no half-written file on failure)."""
+    """Write JSON atomically (no half-written file on failure); every number must be finite."""
+    from simulator.finite import require_finite
+
+    require_finite(obj, f"output {path}")
     with atomic_output(path) as tmp:
-        tmp.write_text(json.dumps(obj, indent=2) + "\n")
+        tmp.write_text(json.dumps(obj, indent=2, allow_nan=False) + "\n")

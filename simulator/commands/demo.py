@@ -17,8 +17,8 @@ import argparse
 import time
 from pathlib import Path
 
-from patterns.errors import InputError, atomic_output
 from patterns.library import library_path
+from patterns.outputs import atomic_output, check_output_dir, output_directory
 from simulator.feedback import announce, compiling
 from simulator.scene import Scene
 from simulator.trajectory import Trajectory, simulate
@@ -42,46 +42,36 @@ def register(sub: argparse._SubParsersAction) -> None:
             "trajectory.json and summary.txt into --out. Takes well under a minute."
         ),
     )
-    p.add_argument("--out", default="out", metavar="DIR", help="output directory, created if missing (default: out)")
+    p.add_argument("--out", default="out", metavar="DIR", help="output directory: new or empty (default: out)")
+    p.add_argument("--force", action="store_true", help="replace --out if it holds a previous selfalign output (and nothing else)")
     p.add_argument("--quiet", action="store_true", help="print only the results (no progress bars or waiting messages)")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
-    out = output_dir(args.out)
+    out = check_output_dir(args.out, "--out", args.force)  # before any work
     scene = demo_scene()
     compiling(METHOD, args.quiet)
     traj = simulate(scene, START, method=METHOD)
     stuck = simulate(scene, STUCK_START, method=METHOD)
     f = [round(v, 2) + 0.0 for v in traj.final]
     print(f"{METHOD}: {traj.outcome} at ({f[0]:.2f} um, {f[1]:.2f} um, {f[2]:.2f} deg) after {traj.steps} steps")
-    files = write_trajectory_files(out, scene, traj, args.quiet)
     from simulator.evaluate import evaluate
 
-    evaluate(scene, out / "report", quiet=args.quiet, source=f"{PATTERN}.png")
-    files.append(out / "report" / "report.html")
-    files.append(write_summary(out / "summary.txt", scene, traj, stuck, time.perf_counter() - t0, files))
+    with output_directory(out, "--out", args.force, command="demo") as tmp:
+        files = write_trajectory_files(tmp, scene, traj, args.quiet)
+        evaluate(scene, tmp / "report", quiet=args.quiet, source=f"{PATTERN}.png")
+        files.append(tmp / "report" / "report.html")
+        files.append(write_summary(tmp / "summary.txt", scene, traj, stuck, time.perf_counter() - t0, files))
     for path in files:
-        print(f"wrote {path}")
+        print(f"wrote {out / path.relative_to(tmp)}")
     return 0
 
 
 def demo_scene() -> Scene:
     """The library four-pad pattern (730 um, gap 50 um) with a 730 um square chip, water, 30/60 deg."""
     return Scene.from_inputs(library_path(PATTERN), chip_size_um=CHIP_UM)
-
-
-def output_dir(text: str) -> Path:
-    """The output directory, created if its parent exists; InputError otherwise (before any work)."""
-    out = Path(text)
-    if out.exists() and not out.is_dir():
-        raise InputError(f"--out {out}: exists and is not a directory; choose a directory")
-    if not out.exists():
-        if not out.resolve().parent.is_dir():
-            raise InputError(f"--out {out}: parent directory {out.parent} does not exist; create it first")
-        out.mkdir()
-    return out
 
 
 def write_trajectory_files(out: Path, scene: Scene, traj: Trajectory, quiet: bool) -> list[Path]:

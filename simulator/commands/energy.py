@@ -7,7 +7,13 @@ import argparse
 import numpy as np
 
 from patterns.errors import InputError
-from simulator.commands._common import add_scene_args, parse_pose, scene_from_args, write_json
+from simulator.commands._common import (
+    add_scene_args,
+    check_outputs,
+    parse_pose,
+    scene_from_args,
+    write_json,
+)
 from simulator.landscape import build_landscape, twists_around
 
 
@@ -36,6 +42,7 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("give at least one pose with --at X,Y,TWIST (um, um, degrees), or a --curve")
     if args.curve and (args.start is None or args.stop is None):
         raise InputError("--curve needs --from A --to B (um for x/y, degrees for twist)")
+    check_outputs(args, ("json",))
     scene = scene_from_args(args)
     twists = [p[2] for p in poses]
     if args.curve == "twist":

@@ -6,7 +6,8 @@ import argparse
 from pathlib import Path
 
 from patterns.errors import InputError
-from simulator.commands._common import add_scene_args, scene_from_args
+from patterns.outputs import check_output_dir
+from simulator.commands._common import add_scene_args, input_paths, scene_from_args
 from simulator.evaluate import AUTO_LANDSCAPE_MB, evaluate
 
 
@@ -26,7 +27,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("image", nargs="?", metavar="PATTERN.png", help="the pattern PNG (or give --pattern / a TOML scene)")
     add_scene_args(p)
-    p.add_argument("--out", required=True, metavar="DIR", help="output directory (replaced if it exists)")
+    p.add_argument("--out", required=True, metavar="DIR", help="output directory: new, or empty (never '.', an input's directory or a link)")
+    p.add_argument("--force", action="store_true", help="replace --out if it holds a previous selfalign output (and nothing else)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=run)
 
@@ -40,13 +42,16 @@ def run(args: argparse.Namespace) -> int:
         args.pattern = args.image
     if not (args.pattern or args.scene):
         raise InputError("give the pattern PNG: selfalign evaluate PATTERN.png --out DIR")
+    inputs = input_paths(args)
+    check_output_dir(args.out, "--out", args.force, inputs)  # before any work
     if not (args.chip or args.chip_size or args.scene):
         args.chip_size = _bbox_chip(args)
     scene = scene_from_args(args)
     from simulator.feedback import compiling
 
     compiling("greedy", args.quiet)
-    summary = evaluate(scene, args.out, quiet=args.quiet, source=Path(args.pattern or args.scene).name, auto=args.resolution is None)
+    summary = evaluate(scene, args.out, quiet=args.quiet, source=Path(args.pattern or args.scene).name, auto=args.resolution is None,
+                       force=args.force, inputs=tuple(inputs))
     g, cap, yl = summary["global_minimum"], summary["capture"], summary["yield"]
     b = summary["max_bias_um"]
     print(f"global minimum at ({g['x_um']:g} um, {g['y_um']:g} um, {g['twist_deg']:g} deg)")
@@ -61,7 +66,7 @@ def _bbox_chip(args: argparse.Namespace) -> str:
     from patterns.io import read_mask
     from simulator.evaluate import footprint_um
 
-    m = read_mask(args.pattern, um_per_px=args.um_per_px)
+    m = read_mask(args.pattern, um_per_px=args.um_per_px, max_mpx=args.max_image_mpx, budget_mb=args.memory_budget)
     m.require_nonempty(f"pattern {args.pattern}")
     w, h = footprint_um(m)
     return f"{w:g}x{h:g}"

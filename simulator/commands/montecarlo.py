@@ -6,13 +6,20 @@ import argparse
 import contextlib
 import json
 import math
-import os
 from pathlib import Path
 
 import numpy as np
 
-from patterns.errors import InputError, atomic_output
-from simulator.commands._common import add_scene_args, parse_pose, read_toml, scene_from_args
+from patterns.errors import InputError
+from patterns.outputs import atomic_output
+from simulator.commands._common import (
+    add_scene_args,
+    check_outputs,
+    parse_pose,
+    read_toml,
+    scene_from_args,
+)
+from simulator.finite import require_finite
 from simulator.landscape import axis_step
 from simulator.montecarlo import DEFAULT_CHUNK, DISTRIBUTIONS, MAX_STARTS, METHODS, StartGrid
 from simulator.render import plot_capture_map
@@ -193,23 +200,8 @@ def _axis_doc(values: tuple[float, ...]) -> dict:
 
 
 def _check_outputs(args: argparse.Namespace, is_grid: bool) -> None:
-    """Fail before any work when an output cannot be written."""
-    paths = {}
-    for flag in ("json", "csv", "map"):
-        path = getattr(args, flag)
-        if not path:
-            continue
-        p = Path(path)
-        parent = p.resolve().parent
-        if not parent.is_dir():
-            raise InputError(f"--{flag} {path}: directory {p.parent} does not exist; create it or choose another path")
-        if not os.access(parent, os.W_OK):
-            raise InputError(f"--{flag} {path}: directory {p.parent} is not writable; choose another path")
-        if p.is_dir():
-            raise InputError(f"--{flag} {path} is a directory; give a file name")
-        if p.resolve() in paths:
-            raise InputError(f"--{flag} and --{paths[p.resolve()]} name the same file {path}")
-        paths[p.resolve()] = flag
+    """Fail before any work when an output cannot or must not be written."""
+    check_outputs(args, ("json", "csv", "map"))
     if args.map:
         if not is_grid:
             raise InputError("--map needs --grid starts (a capture map is drawn over the start grid)")
@@ -249,12 +241,14 @@ def run(args: argparse.Namespace) -> int:
         "run_s": st["run_s"],
         "starts_per_s": st["starts_per_s"],
     }
+    require_finite(doc, "montecarlo summary")
+    require_finite({"start": result.start, "final": result.final}, "montecarlo starts")
     _print_summary(summary | {"seed": seed}, result, desc, st)
     with contextlib.ExitStack() as stack:  # every output, or none
         if args.csv:
             write_csv(stack.enter_context(atomic_output(args.csv)), result, OUTCOMES)
         if args.json:
-            stack.enter_context(atomic_output(args.json)).write_text(json.dumps(doc, indent=2) + "\n")
+            stack.enter_context(atomic_output(args.json)).write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n")
         if args.map:
             plot_capture_map(mc.capture_map(result, grid), grid, scene, args.map, title=_map_title(args, summary))
     for flag in ("csv", "json", "map"):

@@ -5,7 +5,13 @@ from __future__ import annotations
 import argparse
 
 from patterns.errors import InputError
-from simulator.commands._common import add_scene_args, parse_pose, scene_from_args, write_json
+from simulator.commands._common import (
+    add_scene_args,
+    check_outputs,
+    parse_pose,
+    scene_from_args,
+    write_json,
+)
 from simulator.feedback import compiling
 from simulator.trajectory import DEFAULT_MAX_STEPS, METHODS, simulate
 
@@ -77,12 +83,9 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _check_outputs(args: argparse.Namespace) -> None:
-    """Fail before any work when an output cannot be written."""
-    from pathlib import Path
-
-    for flag in ("json", "plot", "gif"):
-        path = getattr(args, flag)
-        if path and not Path(path).resolve().parent.is_dir():
-            raise InputError(f"--{flag} {path}: directory {Path(path).parent} does not exist")
+    """Fail before any work when an output cannot or must not be written."""
+    check_outputs(args, ("json", "plot", "gif"))
     if args.gif and not args.gif.lower().endswith(".gif"):
         raise InputError(f"--gif {args.gif}: the animation must end in .gif")
+    if args.plot and not args.plot.lower().endswith((".png", ".svg", ".pdf")):
+        raise InputError(f"--plot {args.plot}: the picture must end in .png, .svg or .pdf")
