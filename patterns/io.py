@@ -34,6 +34,7 @@ from PIL import Image, PngImagePlugin
 
 from patterns.errors import InputError, positive, require_regular_file
 from patterns.mask import Mask
+from patterns.metadata import parse_png_params
 from patterns.outputs import atomic_output
 from patterns.resources import price_image
 
@@ -139,7 +140,7 @@ def read_mask(
         raise InputError(f"{path}: not enough memory to decode this image; downsample it") from None
     except (OSError, SyntaxError, ValueError, EOFError, struct.error) as err:
         raise InputError(f"{path}: not a readable image ({type(err).__name__}: {err}); give a PNG file") from None
-    params = _read_params(info)
+    params = parse_png_params(info.get(TEXT_KEY), path)
     scale = um_per_px if um_per_px is not None else _scale_from_file(info, params, path)
     if invert:
         value = 1.0 - value
@@ -148,17 +149,6 @@ def read_mask(
     if value.min() < 0 or value.max() > 1 or not np.all(np.isfinite(value)):
         raise InputError(f"{path}: float image with values outside [0, 1]; save it as 8- or 16-bit grey")
     return Mask(data=value, um_per_px=scale, params=params)
-
-
-def _read_params(info: dict) -> dict:
-    text = info.get(TEXT_KEY)
-    if not isinstance(text, str):
-        return {}
-    try:
-        params = json.loads(text)
-    except json.JSONDecodeError:
-        return {}  # provenance only: a damaged note does not make the image unusable
-    return params if isinstance(params, dict) else {}
 
 
 def write_mask(path: str | os.PathLike, mask: Mask, params: dict[str, Any] | None = None) -> Path:

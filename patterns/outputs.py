@@ -114,9 +114,18 @@ def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
         yield tmp_path
         os.chmod(tmp_path, 0o666 & ~_umask())  # mkstemp makes files owner-only
         os.replace(tmp_path, path)
+    except OSError as err:
+        raise _attributed(err, path) from None
     finally:
         with contextlib.suppress(FileNotFoundError):
             tmp_path.unlink()
+
+
+def _attributed(err: OSError, target: Path) -> OSError:
+    """``err`` naming the output it failed on (a failed write() names no file)."""
+    if err.filename is None or ".selfalign-tmp" in str(err.filename) or Path(str(err.filename)).name.startswith("."):
+        return type(err)(err.errno, err.strerror or str(err), str(target))
+    return err
 
 
 # --------------------------------------------------------------------- directories
@@ -221,7 +230,7 @@ def output_directory(path: str | os.PathLike, flag: str = "--out", force: bool =
             os.replace(old / "d", out)  # put the previous output back
         if isinstance(err, FileExistsError | IsADirectoryError) or getattr(err, "errno", None) == 39:
             raise InputError(f"{flag} {path}: was created by someone else while this ran; nothing replaced") from None
-        raise
+        raise _attributed(err, out) from None
     finally:
         if tmp.exists():
             shutil.rmtree(tmp, ignore_errors=True)

@@ -70,6 +70,7 @@ def _boundary():
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("default")
+            warnings.simplefilter("ignore", ResourceWarning)  # files a failed library write left open
             warnings.showwarning = one_line
             yield
     finally:

@@ -101,6 +101,10 @@ from simulator.stepping import (
     on_plateau,
 )
 
+#: Thinnest liquid film (um) the dynamics accept: 1e-6 nm. Real films are nm or more thick
+#: (the Couette model itself needs a continuum liquid); much below this the damping
+#: coefficient overflows the solver's float32 arithmetic (NaN times near 1e-30 um).
+MIN_FILM_UM = 1e-9
 _OFFSETS = np.arange(-1, 3)  # the 4 nodes per axis in the support of Phi's kernel
 
 
@@ -214,6 +218,12 @@ class DynamicsParams:
         cal = positive("damping calibration", calibration)
         h = liquid.meniscus_height_um(area)
         mu = liquid.viscosity_Pa_s
+        if not h >= MIN_FILM_UM:
+            raise InputError(
+                f"droplet volume {liquid.volume_nl:g} nl spreads to a film {h:.3g} um thick under the chip "
+                f"({area:,.0f} um^2), thinner than {MIN_FILM_UM * 1e3:g} nm, where the damping overflows the solver (and no real film is that thin); "
+                f"use at least {MIN_FILM_UM * area * 1e-6:.3g} nl (--volume)"
+            )
         return cls(
             mass_kg=mass,
             inertia_kg_m2=inertia,

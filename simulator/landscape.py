@@ -624,7 +624,7 @@ class Landscape:
         if not samples <= MAX_CURVE_SAMPLES:
             raise InputError(
                 f"the curve from {start:g} to {stop:g} at steps of {step:g} would have {samples:.3g} samples "
-                f"(about {samples * 96:.3g} bytes), more than {MAX_CURVE_SAMPLES:,}; narrow --from/--to"
+                f"(about {fmt_bytes(samples * 96)}), more than {MAX_CURVE_SAMPLES:,}; narrow --from/--to"
             )
         n = int(math.floor((stop - start) / step + 1e-9)) + 1
         v = start + step * np.arange(n)
@@ -800,6 +800,15 @@ def _box(scene: Scene, twists: np.ndarray | None, center_px: tuple[int, int] = (
         "twists": twists, "all_twists": all_twists, "wrap": wrap, "period": period, "origin": origin,
         "crop": (r0, r1, c0, c1), "x": (cx, rx, x_lo, x_hi), "y": (cy, ry, y_lo, y_hi), "landscape_bytes": int(nbytes),
     }
+
+
+def require_landscape_fits(scene: Scene, twists: np.ndarray | None = None) -> None:
+    """Refuse (InputError) a landscape over the memory budget or with too many twists, cheaply
+    (no rotation, no allocation): for commands to call before announcing a long run."""
+    b = _box(scene, twists)
+    _, rx, _, _ = b["x"]
+    _, ry, _, _ = b["y"]
+    _refuse_over_budget(scene, b["landscape_bytes"], len(b["twists"]), 2 * ry + 1, 2 * rx + 1)
 
 
 def plan(scene: Scene, twists: np.ndarray | None = None, center_px: tuple[int, int] = (0, 0), half_px: int | None = None) -> dict:

@@ -163,6 +163,8 @@ class Materials:
         set_(
             self, "substrate_angle_deg", _angle("substrate contact angle", self.substrate_angle_deg)
         )
+        if not isinstance(self.allow_repulsive, bool | np.bool_):
+            raise InputError(f"allow_repulsive must be true or false, got {self.allow_repulsive!r}")
         set_(self, "allow_repulsive", bool(self.allow_repulsive))
         dg = self.delta_gamma_N_m
         if dg >= 0 and not self.allow_repulsive:
@@ -170,6 +172,12 @@ class Materials:
                 f"pad contact angle {self.pad_angle_deg:g} deg must be smaller than substrate contact angle "
                 f"{self.substrate_angle_deg:g} deg: Delta_gamma = {dg * 1e3:+.2f} mN/m >= 0 would push the chip "
                 "off the pad; swap the angles, or pass allow_repulsive=True to study that case"
+            )
+        if dg == 0:
+            raise InputError(
+                f"pad and substrate contact angles give no wettability contrast (pad {self.pad_angle_deg:g} deg, substrate "
+                f"{self.substrate_angle_deg:g} deg: Delta_gamma = 0), so the energy is zero at every pose and nothing aligns; "
+                "give different angles"
             )
 
     @property

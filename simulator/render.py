@@ -336,10 +336,12 @@ def write_trajectory_gif(scene, traj, path: str | os.PathLike, max_frames: int =
     ms = max(20, int(round(1000 / fps / 10)) * 10)  # GIF delays are whole centiseconds
     durations = [ms] * len(frames)
     durations[0] = durations[-1] = max(ms, int(round(hold_s * 100)) * 10)
+    # Encoded in memory, then written: a full disk fails in our write, not inside the encoder.
+    # optimize: pixels unchanged since the last frame are written as transparent
+    data = iio.imwrite("<bytes>", index, extension=".gif", mode="P", palette=palette, optimize=True,
+                       duration=durations, loop=0)
     with atomic_output(path) as tmp:
-        # optimize: pixels unchanged since the last frame are written as transparent
-        iio.imwrite(tmp, index, extension=".gif", mode="P", palette=palette, optimize=True,
-                    duration=durations, loop=0)
+        tmp.write_bytes(data)
     return len(frames)
 
 
@@ -419,7 +421,7 @@ def plot_landscape(ls, path: str | os.PathLike, pattern: Mask | None = None) -> 
             ax.contour(ls.x_um, ls.y_um, img, levels=levels, colors="white", linewidths=0.5, alpha=0.6,
                        linestyles="solid")
         if pattern is not None:
-            ax.contour(*_mask_grid(pattern), pattern.data, levels=[0.5], colors="#ff9f1c", linewidths=1.0)
+            ax.contour(*_outline(pattern), levels=[0.5], colors="#ff9f1c", linewidths=1.0)
         ax.plot(gx, gy, marker="*", ms=14, mfc=CHIP_COLOUR, mec="white", mew=1.0, ls="none",
                 label=f"global minimum ({gx:g} µm, {gy:g} µm, {gt:g}°), {ge * J_TO_NJ:.3g} nJ")
         ax.set_title(f"energy {label}", fontsize=10)
@@ -439,6 +441,14 @@ def _mask_grid(mask: Mask) -> tuple[np.ndarray, np.ndarray]:
     h, w = mask.shape
     s = mask.um_per_px
     return (np.arange(w) + 0.5 - w / 2) * s, (h / 2 - np.arange(h) - 0.5) * s
+
+
+def _outline(mask: Mask) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(x, y, data) for contouring a mask's 0.5 outline: padded by one substrate pixel,
+    so that the outline closes at the image border and a 1 x 1 px mask can be drawn."""
+    x, y = _mask_grid(mask)
+    s = mask.um_per_px
+    return np.r_[x[0] - s, x, x[-1] + s], np.r_[y[0] + s, y, y[-1] - s], np.pad(mask.data, 1)
 
 
 def _line_range(values: np.ndarray, centre: float, span: float | None) -> tuple[float, float]:
@@ -542,11 +552,7 @@ def plot_capture_map(cmap: np.ndarray, grid, scene, path, title: str = "") -> No
     extent = (xs[0] - dx / 2, xs[-1] + dx / 2, ys[0] - dy / 2, ys[-1] + dy / 2)
     colors = ListedColormap(OUTCOME_COLORS)
     norm = BoundaryNorm(np.arange(len(OUTCOMES) + 1) - 0.5, len(OUTCOMES))
-    pat = scene.pattern
-    h, w = pat.shape
-    s = pat.um_per_px
-    px = (np.arange(w) + 0.5 - w / 2) * s
-    py = (h / 2 - np.arange(h) - 0.5) * s
+    px, py, outline = _outline(scene.pattern)
     for ax in axes.ravel()[len(show) :]:
         ax.set_visible(False)
     for ax, k in zip(axes.ravel(), show, strict=False):
@@ -560,7 +566,7 @@ def plot_capture_map(cmap: np.ndarray, grid, scene, path, title: str = "") -> No
             ax.set_title(f"{panel}, {fixed}", fontsize=10)
             continue
         ax.imshow(cmap[k], origin="lower", extent=extent, cmap=colors, norm=norm, interpolation="nearest", aspect="equal")
-        ax.contour(px, py, pat.data, levels=[0.5], colors="black", linewidths=0.7, alpha=0.6)
+        ax.contour(px, py, outline, levels=[0.5], colors="black", linewidths=0.7, alpha=0.6)
         ax.plot([0], [0], marker="+", color="black", ms=8, mew=1.2)
         ax.set_xlim(extent[0], extent[1])
         ax.set_ylim(extent[2], extent[3])

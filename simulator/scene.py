@@ -94,6 +94,10 @@ class Effects:
 
     twist: bool = True
 
+    def __post_init__(self) -> None:
+        if not isinstance(self.twist, bool | np.bool_):
+            raise InputError(f"effects twist must be true or false, got {self.twist!r}")
+
 
 @dataclass(frozen=True, eq=False)
 class Scene:
@@ -204,9 +208,9 @@ class Scene:
     @classmethod
     def from_toml(cls, path: str | os.PathLike, **overrides: Any) -> Scene:
         """Scene from a TOML file (keys in the module docstring); paths are relative to it."""
-        from simulator.commands._common import read_toml
+        from simulator.schema import read_scene_file
 
-        return cls.from_dict(read_toml(path), base=Path(path).parent, **overrides)
+        return cls.from_dict(read_scene_file(path), base=Path(path).parent, **overrides)
 
     @classmethod
     def from_dict(cls, doc: dict, base: Path = Path("."), **overrides: Any) -> Scene:

@@ -129,6 +129,17 @@ def _dynamics_jit(method: str, stiff: bool):
     return jax.jit(functools.partial(fn, solver=diffrax.Kvaerno5() if stiff else None), static_argnames=("grid", "max_steps", "record"))
 
 
+def price_run(scene: Scene, method: str, max_steps: int) -> None:
+    """Refuse, before anything is compiled or allocated, a ``max_steps`` that overflows the
+    step counter or whose recorded path would not fit the scene's memory budget."""
+    if isinstance(max_steps, bool) or not isinstance(max_steps, int | np.integer) or max_steps < 1:
+        raise InputError(f"max steps must be a whole number >= 1, got {max_steps!r}")
+    if max_steps > MAX_STEPS_LIMIT:
+        raise InputError(f"max steps must be at most {MAX_STEPS_LIMIT:,} (the step counter is 32-bit), got {max_steps:,}")
+    per_step = PATH_BYTES_PER_STEP["dynamics" if method in ("overdamped", "inertial") else "stepping"]
+    require_fits(f"the path of up to {max_steps:,} steps", float(max_steps + 1) * per_step, "use a smaller --max-steps", scene.memory_budget_mb)
+
+
 def simulate(
     scene: Scene,
     start: tuple[float, float, float],
@@ -157,12 +168,7 @@ def simulate(
     """
     if method not in METHODS:
         raise InputError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
-    if isinstance(max_steps, bool) or not isinstance(max_steps, int | np.integer) or max_steps < 1:
-        raise InputError(f"max steps must be a whole number >= 1, got {max_steps!r}")
-    if max_steps > MAX_STEPS_LIMIT:
-        raise InputError(f"max steps must be at most {MAX_STEPS_LIMIT:,} (the step counter is 32-bit), got {max_steps:,}")
-    per_step = PATH_BYTES_PER_STEP["dynamics" if method in ("overdamped", "inertial") else "stepping"]
-    require_fits(f"the path of up to {max_steps:,} steps", float(max_steps + 1) * per_step, "use a smaller --max-steps", scene.memory_budget_mb)
+    price_run(scene, method, max_steps)
     if len(start) != 3 or not all(math.isfinite(v) for v in start):
         raise InputError(f"start pose must be three finite numbers (um, um, deg), got {start}")
     reach_um = MAX_START_PX * scene.um_per_px

@@ -154,16 +154,10 @@ def apply_accuracy(scene: Scene, preset: str | None, doc: dict) -> Scene:
 
 
 def read_toml(path: str | os.PathLike) -> dict[str, Any]:
-    """Parse a TOML scene file, with one-line errors."""
-    import tomllib
+    """Read and validate a TOML scene file (:func:`simulator.schema.read_scene_file`)."""
+    from simulator.schema import read_scene_file
 
-    path = Path(path)
-    try:
-        return tomllib.loads(path.read_text())
-    except FileNotFoundError:
-        raise InputError(f"scene file {path} does not exist") from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError, IsADirectoryError) as err:
-        raise InputError(f"scene file {path} is not valid TOML: {err}") from None
+    return read_scene_file(path)
 
 
 def input_paths(args: argparse.Namespace) -> list[Path]:

@@ -48,6 +48,9 @@ def run(args: argparse.Namespace) -> int:
         args.chip_size = _bbox_chip(args)
     scene = scene_from_args(args)
     from simulator.feedback import compiling
+    from simulator.landscape import twist_axis
+
+    twist_axis(scene)  # a twist step that gives too many twists fails before the announcement
 
     compiling("greedy", args.quiet)
     summary = evaluate(scene, args.out, quiet=args.quiet, source=Path(args.pattern or args.scene).name, auto=args.resolution is None,

@@ -23,7 +23,7 @@ from simulator.finite import require_finite
 from simulator.landscape import axis_step
 from simulator.montecarlo import DEFAULT_CHUNK, DISTRIBUTIONS, MAX_STARTS, METHODS, StartGrid
 from simulator.render import plot_capture_map
-from simulator.trajectory import DEFAULT_MAX_STEPS
+from simulator.trajectory import DEFAULT_MAX_STEPS, MAX_STEPS_LIMIT
 
 MAP_SUFFIXES = (".png", ".svg", ".pdf")
 
@@ -156,6 +156,8 @@ def _options(args: argparse.Namespace) -> dict:
         v = opt[key]
         if isinstance(v, bool) or not isinstance(v, int) or v < 1:
             raise InputError(f"--{key.replace('_', '-')} must be a whole number >= 1, got {v!r}")
+        if v > MAX_STEPS_LIMIT:
+            raise InputError(f"--{key.replace('_', '-')} must be at most {MAX_STEPS_LIMIT:,}, got {v:,}")
     seed = opt["seed"]
     if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int) or seed < 0):
         raise InputError(f"--seed must be a whole number >= 0, got {seed!r}")
@@ -220,6 +222,9 @@ def run(args: argparse.Namespace) -> int:
     _check_outputs(args, grid is not None)
     scene = scene_from_args(args)
     from simulator.feedback import compiling
+    from simulator.landscape import require_landscape_fits
+
+    require_landscape_fits(scene)
 
     compiling(opt["method"], args.quiet)
     result = mc.run_batch(scene, starts, opt["method"], chunk=opt["chunk"], max_steps=opt["max_steps"], progress=not args.quiet)

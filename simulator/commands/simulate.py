@@ -13,7 +13,7 @@ from simulator.commands._common import (
     write_json,
 )
 from simulator.feedback import compiling
-from simulator.trajectory import DEFAULT_MAX_STEPS, METHODS, simulate
+from simulator.trajectory import DEFAULT_MAX_STEPS, METHODS, price_run, simulate
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -58,6 +58,11 @@ def run(args: argparse.Namespace) -> int:
     max_steps = args.max_steps if args.max_steps is not None else sim.get("max_steps", DEFAULT_MAX_STEPS)
     _check_outputs(args)
     scene = scene_from_args(args)
+    price_run(scene, method, max_steps)
+    if method in ("overdamped", "inertial"):
+        from simulator.dynamics import DynamicsParams
+
+        DynamicsParams.from_scene(scene)  # a liquid the model cannot take fails before compiling
     compiling(method, args.quiet)
     traj = simulate(scene, start, method=method, max_steps=max_steps)
     f = [round(v, 2) + 0.0 for v in traj.final]  # no "-0.00"
