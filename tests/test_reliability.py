@@ -457,14 +457,15 @@ def test_json_onto_a_symlink_keeps_the_link(tmp_path, capsys):
 
 
 @pytest.mark.parametrize(
-    "name,args",
+    "name,args,sig",
     [
-        ("evaluate", ["evaluate", FOUR_PAD, "--chip-size", "730", "--out", "ev", "--resolution", "2"]),
+        ("evaluate", ["evaluate", FOUR_PAD, "--chip-size", "730", "--out", "ev", "--resolution", "2"], signal.SIGTERM),
+        ("evaluate", ["evaluate", FOUR_PAD, "--chip-size", "730", "--out", "ev", "--resolution", "2"], signal.SIGINT),
         ("montecarlo", ["montecarlo", "--pattern", FOUR_PAD, "--chip-size", "730", "--random", "3000000", "--spread", "200,200,5",
-                        "--json", "mc.json", "--csv", "mc.csv"]),
+                        "--json", "mc.json", "--csv", "mc.csv"], signal.SIGTERM),
     ],
 )
-def test_sigterm_leaves_no_temporaries(tmp_path, name, args):
+def test_sigterm_leaves_no_temporaries(tmp_path, name, args, sig):
     # SIGTERM while the run works; the CLI turns it into an exception, so the temporary
     # output (a hidden directory or file beside the target) is removed on the way out.
     proc = subprocess.Popen([sys.executable, "-m", "simulator.cli", *args], cwd=tmp_path, stdout=subprocess.PIPE,
@@ -476,8 +477,8 @@ def test_sigterm_leaves_no_temporaries(tmp_path, name, args):
         assert any(p.name.startswith(".ev.") for p in tmp_path.iterdir())
     else:  # wait for the batch to be running (its progress bar)
         time.sleep(6)
-    proc.send_signal(signal.SIGTERM)
+    proc.send_signal(sig)
     _, err = proc.communicate(timeout=120)
-    assert proc.returncode == 143, err[-2000:]
-    assert "terminated" in err and "Traceback" not in err
+    assert proc.returncode == (143 if sig == signal.SIGTERM else 130), err[-2000:]
+    assert ("terminated" if sig == signal.SIGTERM else "interrupted") in err and "Traceback" not in err
     assert listing(tmp_path) == []
