@@ -99,6 +99,8 @@ def evaluate(scene: Scene, out_dir: str | os.PathLike, quiet: bool = False, sour
     with output_directory(out_dir, "--out", force, inputs, command="evaluate") as tmp:
         summary = _assess(scene, tmp, quiet)
         summary["settings"] |= {"source_um_per_px": native, "resolution_auto": bool(auto and scene.um_per_px != native)}
+        if "layout" in scene.pattern.params:  # a layout pattern: file, cell, layers, units, and where the origin is
+            summary["layout"] = scene.pattern.params["layout"]
         summary["seconds"] = round(time.perf_counter() - t_start, 2)
         require_finite(summary, "evaluate summary")
         (tmp / "summary.json").write_text(json.dumps(summary, indent=2, allow_nan=False) + "\n")
@@ -198,6 +200,15 @@ def _fmt(v, unit: str, digits: int = 4) -> str:
     return f"{v:.{digits}g} {unit}"
 
 
+def _layout_row(record: dict | None) -> str:
+    """The report's row on a layout pattern's cell, layers, units and origin (empty for images)."""
+    if not record:
+        return ""
+    from patterns.layout import frame_note
+
+    return f"\n<tr><th>layout</th><td>{html.escape(frame_note(record).removeprefix('frame: '))}</td></tr>"
+
+
 def _html(summary: dict, source: str) -> str:
     """The one-page report: inputs, numbers with units, the four pictures."""
     s, g = summary["settings"], summary["global_minimum"]
@@ -237,7 +248,7 @@ pattern centre, x right, y up; twist in degrees, counter-clockwise positive. Com
 <h2>Inputs</h2>
 <div class="grid"><div><img src="pattern.png" alt="pattern as used"></div><div><table>
 <tr><th>pattern</th><td>{e(source)}, {s['pattern_px'][1]} x {s['pattern_px'][0]} px at {s['um_per_px']:g} um/px{e(auto)} (file scale {s['source_um_per_px']:g} um/px)</td></tr>
-<tr><th>chip</th><td>{s['chip_um'][0]:g} x {s['chip_um'][1]:g} um wettable footprint</td></tr>
+<tr><th>chip</th><td>{s['chip_um'][0]:g} x {s['chip_um'][1]:g} um wettable footprint</td></tr>{_layout_row(summary.get("layout"))}
 <tr><th>liquid / wetting</th><td>surface tension {s['surface_tension_N_m'] * 1e3:g} mN/m, pad {s['pad_angle_deg']:g} deg, substrate {s['substrate_angle_deg']:g} deg: &Delta;&gamma; = {s['delta_gamma_N_m'] * 1e3:.4g} mN/m</td></tr>
 <tr><th>pose grid</th><td>{s['twists']} twists{f", step {s['twist_step_deg']:g} deg" if s['twist_step_deg'] else ""}; {s['dtype']}; landscape {s['landscape_MB']:g} MB in {s['landscape_s']:g} s</td></tr>
 </table></div></div>

@@ -4,9 +4,11 @@ A :class:`Scene` is frozen and validated at construction; everything downstream
 (landscape, steppers, Monte Carlo) reads it and never changes it. Build one in
 Python (:meth:`Scene.from_inputs`) or from a TOML file (:meth:`Scene.from_toml`).
 
-TOML keys (all optional except ``pattern`` and one of ``chip`` / ``chip_size_um``)::
+TOML keys (all optional except ``pattern`` and one of ``chip`` / ``chip_size_um`` / ``chip_layer``)::
 
-    pattern = "patterns/library/fourpad_730_50.png"   # PNG path (scale from pHYs)
+    pattern = "patterns/library/fourpad_730_50.png"   # PNG path (scale from pHYs), or .gds/.oas/.dxf
+    layer = "1/0"                   # layout patterns: the pattern layer (DXF: its name); also
+    # cell = "SITE", chip_layer = "2/0" (the chip from the layout), dxf_units = "um" | "mm" | "nm"
     um_per_px = 1.0                 # the PNGs' scale (overrides their pHYs chunk)
     resolution_um = 2.0             # simulate at this pixel size (resamples the pattern)
     chip = "chip.png"               # chip footprint PNG, or:
@@ -54,6 +56,8 @@ from patterns.resources import check_budget_mb, default_budget_mb, price_raster
 from simulator.materials import DAMPING_CALIBRATION, SU8_DENSITY_KG_M3, Liquid, Materials
 
 DTYPES = ("float32", "float64")
+#: Scene keys that choose what to read from a layout pattern (:class:`patterns.layout.LayoutSelection`).
+LAYOUT_KEYS = ("layer", "cell", "chip_layer", "dxf_units")
 
 
 def default_memory_budget_mb() -> float:
@@ -168,9 +172,10 @@ class Scene:
         um_per_px: float | None = None,
         resolution_um: float | None = None,
         max_image_mpx: float | None = None,
+        layout: Any = None,
         **kwargs: Any,
     ) -> Scene:
-        """Scene from a pattern (Mask or PNG path) and a chip (Mask, PNG path or size).
+        """Scene from a pattern (Mask, PNG or layout path) and a chip (Mask, PNG/layout path, size or layout layer).
 
         ``um_per_px`` states the scale of the PNGs (default: their pHYs chunk).
         ``resolution_um`` is the pixel size to simulate at (default: the pattern's):
@@ -178,18 +183,38 @@ class Scene:
         another scale is resampled to the simulation scale the same way.
         ``chip_size_um`` gives an exact rectangle (width, height) or a square (one number).
         ``max_image_mpx`` raises the limit on the size of the images read (megapixels).
+        ``layout`` (a :class:`patterns.layout.LayoutSelection`) chooses the cell and layers of a
+        ``.gds``/``.oas``/``.dxf`` pattern, rasterized at ``resolution_um`` (else ``um_per_px``,
+        else :data:`patterns.layout.DEFAULT_UM_PER_PX`); its ``chip_layer`` gives the chip.
         Every raster is priced against ``memory_budget_mb`` before it is made.
         """
         from patterns.io import read_mask
+        from patterns.layout import (
+            DEFAULT_UM_PER_PX,
+            LayoutSelection,
+            is_layout,
+            layout_chip_mask,
+            layout_masks,
+        )
 
         budget = kwargs.get("memory_budget_mb")
         if budget is not None:
             budget = check_budget_mb(budget, "memory_budget_mb")
-        if not isinstance(pattern, Mask):
-            pattern = read_mask(pattern, um_per_px=um_per_px, max_mpx=max_image_mpx, budget_mb=budget)
-        elif um_per_px is not None:
-            pattern = Mask(pattern.data, um_per_px, pattern.geometry, pattern.params)
-        require((chip is None) != (chip_size_um is None), "give exactly one of a chip image (--chip) or a chip size (--chip-size)")
+        layout = layout if layout is not None else LayoutSelection()
+        layout_chip = None
+        if is_layout(pattern):
+            pattern, layout_chip = layout_masks(pattern, layout, resolution_um or um_per_px or DEFAULT_UM_PER_PX, budget)
+            resolution_um = None  # rasterized at it already
+        else:
+            layout.require_unused("the pattern" if isinstance(pattern, Mask) else f"the pattern {pattern}", units_ok=is_layout(chip))
+            if not isinstance(pattern, Mask):
+                pattern = read_mask(pattern, um_per_px=um_per_px, max_mpx=max_image_mpx, budget_mb=budget)
+            elif um_per_px is not None:
+                pattern = Mask(pattern.data, um_per_px, pattern.geometry, pattern.params)
+        if layout_chip is not None:
+            require(chip is None and chip_size_um is None, "give one chip: a chip image (--chip), a chip size (--chip-size) or a chip layer (--chip-layer)")
+            chip = layout_chip
+        require((chip is None) != (chip_size_um is None), "give exactly one of a chip image (--chip), a chip size (--chip-size) or a chip layer (--chip-layer)")
         if resolution_um is not None:
             pattern = resample_to_scale(pattern, positive("resolution", resolution_um, "um per px"), budget)
         s = pattern.um_per_px
@@ -200,7 +225,9 @@ class Scene:
                 box(-w / 2, -h / 2, w / 2, h / 2), s, params={"design": "rectangle", "width_um": w, "height_um": h}, budget_mb=budget, what=f"the {w:g} x {h:g} um chip raster"
             )
         else:
-            if not isinstance(chip, Mask):
+            if is_layout(chip):
+                chip = layout_chip_mask(chip, s, layout, budget)
+            elif not isinstance(chip, Mask):
                 chip = read_mask(chip, um_per_px=um_per_px, max_mpx=max_image_mpx, budget_mb=budget)
             chip = resample_to_scale(chip, s, budget)
         return cls(pattern=pattern, chip=chip, **kwargs)
@@ -217,10 +244,11 @@ class Scene:
         known = {
             "pattern", "chip", "chip_size_um", "um_per_px", "resolution_um", "dtype", "window_um", "memory_budget_mb", "materials", "twist",
             "effects", "liquid", "chip_thickness_um", "chip_density_kg_m3", "damping_calibration", "max_image_mpx",
+            *LAYOUT_KEYS,
         }
         unknown = set(doc) - known - {"simulate", "montecarlo", "accuracy"}
         require(not unknown, f"unknown scene keys {sorted(unknown)}; allowed: {sorted(known)}")
-        require("pattern" in doc, "scene needs a 'pattern' (PNG path)")
+        require("pattern" in doc, "scene needs a 'pattern' (PNG or layout path)")
         try:
             return cls._from_dict(doc, base, overrides)
         except TypeError as err:  # an unknown key inside a TOML table
@@ -253,6 +281,9 @@ class Scene:
                 kw[key] = doc[key]
         kw.update({k: v for k, v in overrides.items() if v is not None})
         chip = doc.get("chip")
+        from patterns.layout import LayoutSelection
+
+        layout = LayoutSelection(**{k: doc[k] for k in LAYOUT_KEYS if k in doc})
         return cls.from_inputs(
             pattern=resolve(doc["pattern"]),
             chip=resolve(chip) if chip is not None else None,
@@ -260,6 +291,7 @@ class Scene:
             um_per_px=doc.get("um_per_px"),
             resolution_um=doc.get("resolution_um"),
             max_image_mpx=doc.get("max_image_mpx"),
+            layout=layout,
             **kw,
         )
 

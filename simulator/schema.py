@@ -92,6 +92,7 @@ ACCURACY_PRESETS = ("fast", "balanced", "precise")  # simulator.accuracy.PRESETS
 SIMULATE_METHODS = ("greedy", "gradient", "overdamped", "inertial")  # simulator.trajectory.METHODS
 MONTECARLO_METHODS = ("greedy", "gradient")  # simulator.montecarlo.METHODS
 DISTRIBUTIONS = ("normal", "uniform")  # simulator.montecarlo.DISTRIBUTIONS
+DXF_UNITS = ("um", "mm", "nm")  # patterns.layout.DXF_UNITS
 
 
 # ----------------------------------------------------------------------- helpers
@@ -422,8 +423,12 @@ START_POSE = Pose((("x", POSITION_UM), ("y", POSITION_UM), ("twist", TWIST_DEG))
 #: Every key of a scene file, per section (None = top level): what its value must be.
 SCHEMA: dict[str | None, dict[str, Kind]] = {
     None: {
-        "pattern": FilePath("the pattern image (PNG)"),
-        "chip": FilePath("the chip footprint image (PNG)"),
+        "pattern": FilePath("the pattern image (PNG) or layout (.gds, .oas, .dxf)"),
+        "chip": FilePath("the chip footprint image (PNG) or layout"),
+        "layer": Text(200),  # layout pattern layer "L/D" (DXF: the layer name); checked by patterns.layout
+        "cell": Text(200),
+        "chip_layer": Text(200),
+        "dxf_units": Choice(DXF_UNITS),
         "chip_size_um": Size(LENGTH_UM),
         "um_per_px": number(f"(0, {MAX_UM:g}]", "um per px"),  # as write_mask's pHYs range
         "resolution_um": number(f"(0, {MAX_UM:g}]", "um per px"),

@@ -18,10 +18,17 @@ def add_scene_args(p: argparse.ArgumentParser) -> None:
     """Pattern, chip, scale, materials and pose-grid options (a TOML scene may give them)."""
     p.add_argument("scene", nargs="?", help="optional TOML scene file; flags given here override it")
     g = p.add_argument_group("inputs")
-    g.add_argument("--pattern", help="pattern PNG (white = wettable pad)")
-    g.add_argument("--chip", help="chip footprint PNG (white = wettable)")
+    g.add_argument("--pattern", help="pattern PNG (white = wettable pad) or layout (.gds, .oas, .dxf)")
+    g.add_argument("--chip", help="chip footprint PNG (white = wettable), or a layout holding only the chip outline")
     g.add_argument("--chip-size", help="rectangular chip W[xH] in um, e.g. 730 or 730x500")
-    g.add_argument("--um-per-px", type=float, help="pixel size of the PNGs in um (default: their pHYs scale)")
+    g.add_argument("--um-per-px", type=float, help="pixel size of the PNGs in um (default: their pHYs scale); "
+                   "for a layout, the raster's pixel size when --resolution is not given (default 1)")
+    y = p.add_argument_group("layout patterns (.gds, .oas, .dxf)")
+    y.add_argument("--layer", metavar="L/D", help="the pattern's layer/datatype, e.g. 1/0 (DXF: the layer name; default: the only layer)")
+    y.add_argument("--cell", metavar="NAME", help="the cell to read (default: the single top cell; DXF: the model space, or a block)")
+    y.add_argument("--chip-layer", metavar="L/D", help="read the chip outline from this layer: its position in the layout is "
+                   "the aligned pose (default: no chip layer; the target is the pattern's bounding-box centre)")
+    y.add_argument("--dxf-units", choices=("um", "mm", "nm"), help="units of a DXF file that states none ($INSUNITS)")
     g.add_argument("--resolution", type=float, help="simulate at this pixel size in um (resamples the pattern; default: its own)")
     m = p.add_argument_group("materials")
     m.add_argument("--surface-tension", type=float, help="liquid surface tension in mN/m (default 72.8, water)")
@@ -70,11 +77,12 @@ def parse_pose(text: str, flag: str) -> tuple[float, float, float]:
     return vals[0], vals[1], vals[2]
 
 
-def scene_from_args(args: argparse.Namespace) -> Scene:
+def scene_from_args(args: argparse.Namespace, note_frame: bool = True) -> Scene:
     """Build the scene from an optional TOML file and the flags (flags win).
 
     Flags are merged into the TOML document under the TOML keys (see
     :mod:`simulator.scene`), so a file and the command line mean the same thing.
+    For a layout pattern, ``note_frame`` prints on stderr where the poses' origin is.
     """
     doc: dict[str, Any] = {}
     base = Path(".")
@@ -83,16 +91,18 @@ def scene_from_args(args: argparse.Namespace) -> Scene:
         base = Path(args.scene).parent
     if args.pattern:
         doc["pattern"] = str(Path(args.pattern).resolve())
-    if args.chip:
-        doc["chip"] = str(Path(args.chip).resolve())
-        doc.pop("chip_size_um", None)
-    if args.chip_size:
-        doc["chip_size_um"] = list(parse_chip_size(args.chip_size))
-        doc.pop("chip", None)
+    chips = {"chip": str(Path(args.chip).resolve()) if args.chip else None,
+             "chip_size_um": list(parse_chip_size(args.chip_size)) if args.chip_size else None,
+             "chip_layer": getattr(args, "chip_layer", None)}
+    given = {k: v for k, v in chips.items() if v is not None}
+    if given:  # a chip on the command line replaces the scene file's (two on the command line: refused downstream)
+        for k in chips:
+            doc.pop(k, None)
+        doc.update(given)
     if "pattern" not in doc:
-        raise InputError("no pattern given: pass --pattern P.png (or a TOML scene with pattern = ...)")
-    if "chip" not in doc and "chip_size_um" not in doc:
-        raise InputError("no chip given: pass --chip C.png or --chip-size W[xH] (um)")
+        raise InputError("no pattern given: pass --pattern P.png or a layout P.gds (or a TOML scene with pattern = ...)")
+    if not any(k in doc for k in chips):
+        raise InputError("no chip given: pass --chip C.png, --chip-size W[xH] (um) or, for a layout, --chip-layer L/D")
     flags = {
         ("materials", "surface_tension_mN_m"): args.surface_tension,
         ("materials", "pad_angle_deg"): args.pad_angle,
@@ -106,6 +116,9 @@ def scene_from_args(args: argparse.Namespace) -> Scene:
         (None, "dtype"): args.dtype,
         (None, "memory_budget_mb"): args.memory_budget,
         (None, "max_image_mpx"): getattr(args, "max_image_mpx", None),
+        (None, "layer"): getattr(args, "layer", None),
+        (None, "cell"): getattr(args, "cell", None),
+        (None, "dxf_units"): getattr(args, "dxf_units", None),
         # Liquid and chip body: only commands with dynamics define these flags.
         ("liquid", "volume_nl"): getattr(args, "volume", None),
         ("liquid", "viscosity_mPa_s"): getattr(args, "viscosity", None),
@@ -116,7 +129,14 @@ def scene_from_args(args: argparse.Namespace) -> Scene:
     for (table, key), value in flags.items():
         if value is not None:
             (doc.setdefault(table, {}) if table else doc)[key] = value
-    return apply_accuracy(Scene.from_dict(doc, base=base), getattr(args, "accuracy", None) or doc.get("accuracy"), doc)
+    scene = apply_accuracy(Scene.from_dict(doc, base=base), getattr(args, "accuracy", None) or doc.get("accuracy"), doc)
+    if note_frame and "layout" in scene.pattern.params:
+        import sys
+
+        from patterns.layout import frame_note
+
+        print(frame_note(scene.pattern.params["layout"]), file=sys.stderr)
+    return scene
 
 
 def apply_accuracy(scene: Scene, preset: str | None, doc: dict) -> Scene:

@@ -16,16 +16,16 @@ def register(sub: argparse._SubParsersAction) -> None:
         "evaluate",
         help="assess a pattern: minimum, forces, max bias, capture map, yield, HTML report",
         description=(
-            "Assess a pattern PNG: where the chip ends up (global minimum), the restoring force and torque "
+            "Assess a pattern PNG or layout (.gds, .oas, .dxf: see --layer, --chip-layer): where the chip ends up (global minimum), the restoring force and torque "
             "near alignment, plateaus and the maximum bias along x and y, the capture fraction over a grid of "
             "starts and the yield under placement noise (10 %% of the chip size, 2 deg). Writes summary.json, "
-            "landscape.png, force.png, capture.png, pattern.png and report.html into --out. Without --chip or "
-            "--chip-size the chip is a rectangle the size of the pattern's wettable bounding box. Without "
+            "landscape.png, force.png, capture.png, pattern.png and report.html into --out. Without --chip, "
+            "--chip-size or --chip-layer the chip is a rectangle the size of the pattern's wettable bounding box. Without "
             f"--resolution, a pattern whose landscape would exceed {AUTO_LANDSCAPE_MB:g} MB is simulated at a "
             "coarser whole multiple of its pixel size (the report says which)."
         ),
     )
-    p.add_argument("image", nargs="?", metavar="PATTERN.png", help="the pattern PNG (or give --pattern / a TOML scene)")
+    p.add_argument("image", nargs="?", metavar="PATTERN", help="the pattern PNG or layout (.gds, .oas, .dxf), or give --pattern / a TOML scene")
     add_scene_args(p)
     p.add_argument("--out", required=True, metavar="DIR", help="output directory: new, or empty (never '.', an input's directory or a link)")
     p.add_argument("--force", action="store_true", help="replace --out if it holds a previous selfalign output (and nothing else)")
@@ -38,15 +38,20 @@ def run(args: argparse.Namespace) -> int:
         args.scene, args.image = args.image, None
     if args.image:
         if args.pattern:
-            raise InputError("give the pattern once: as PATTERN.png or with --pattern")
+            raise InputError("give the pattern once: as PATTERN or with --pattern")
         args.pattern = args.image
     if not (args.pattern or args.scene):
-        raise InputError("give the pattern PNG: selfalign evaluate PATTERN.png --out DIR")
+        raise InputError("give the pattern PNG or layout: selfalign evaluate PATTERN.png --out DIR")
     inputs = input_paths(args)
     check_output_dir(args.out, "--out", args.force, inputs)  # before any work
-    if not (args.chip or args.chip_size or args.scene):
+    if not (args.chip or args.chip_size or args.chip_layer or args.scene):
         args.chip_size = _bbox_chip(args)
-    scene = scene_from_args(args)
+    scene = scene_from_args(args, note_frame=False)
+    layout = scene.pattern.params.get("layout")
+    if layout:
+        from patterns.layout import frame_note
+
+        print(frame_note(layout))
     from simulator.feedback import compiling
     from simulator.landscape import twist_axis
 
@@ -67,8 +72,13 @@ def run(args: argparse.Namespace) -> int:
 def _bbox_chip(args: argparse.Namespace) -> str:
     """Default chip: the size of the pattern's wettable bounding box (W x H um)."""
     from patterns.io import read_mask
+    from patterns.layout import LayoutSelection, is_layout, layout_geometry
     from simulator.evaluate import footprint_um
 
+    if is_layout(args.pattern):
+        sel = LayoutSelection(layer=args.layer, cell=args.cell, dxf_units=args.dxf_units)
+        x0, y0, x1, y1 = layout_geometry(args.pattern, sel, args.memory_budget)[0].bounds
+        return f"{x1 - x0:.12g}x{y1 - y0:.12g}"
     m = read_mask(args.pattern, um_per_px=args.um_per_px, max_mpx=args.max_image_mpx, budget_mb=args.memory_budget)
     m.require_nonempty(f"pattern {args.pattern}")
     w, h = footprint_um(m)

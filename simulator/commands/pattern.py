@@ -1,16 +1,21 @@
-"""``selfalign pattern``: draw a design as a 16-bit PNG that carries its scale.
+"""``selfalign pattern``: draw a design as a 16-bit PNG that carries its scale, or as a mask layout.
 
     selfalign pattern DESIGN [design parameters] [--um-per-px R] [--margin M] -o OUT.png
+    selfalign pattern DESIGN [design parameters] -o OUT.gds    (or .oas, .dxf)
     selfalign pattern --list
 
 Design parameters are lengths in micrometres (see ``--list``). The image is centred on the
 nominal pattern centre, y up, with an anti-aliased (area-coverage) edge; its pHYs chunk
-records the scale and a ``selfalign`` text chunk the parameters.
+records the scale and a ``selfalign`` text chunk the parameters. A layout holds the exact
+polygon, vertices rounded to the 1 nm database unit, on layer 1/0 (DXF: layer PATTERN, in
+micrometres), origin at the nominal pattern centre (:func:`patterns.layout.write_layout`);
+``--um-per-px`` and ``--margin`` do not apply to it.
 """
 
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 from typing import NoReturn
 
 from patterns.errors import InputError, positive
@@ -50,7 +55,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                          help="pixel size in micrometres (default 1)")
         sub.add_argument("--margin", default=str(DEFAULT_MARGIN_UM), metavar="UM",
                          help=f"substrate border around the design in um (default {DEFAULT_MARGIN_UM:g})")
-        sub.add_argument("-o", "--output", metavar="OUT.png", help="output PNG file (required)")
+        sub.add_argument("-o", "--output", metavar="OUT.png", help="output file (required): a PNG, or a layout .gds, .oas or .dxf "
+                         "(exact polygon, 1 nm database unit, layer 1/0; DXF layer PATTERN)")
         sub.set_defaults(func=run)
     parser.set_defaults(func=run, design=None)
 
@@ -62,7 +68,7 @@ def describe_designs() -> str:
         lines.append(f"{design.name}: {design.description}")
         lines.extend(f"    {p.describe()}" for p in design.params)
     lines.append("every design also takes: --um-per-px UM (default 1), "
-                 f"--margin UM (default {DEFAULT_MARGIN_UM:g}), -o OUT.png (required)")
+                 f"--margin UM (default {DEFAULT_MARGIN_UM:g}), -o OUT.png (required; or OUT.gds, OUT.oas, OUT.dxf for a layout)")
     return "\n".join(lines)
 
 
@@ -99,8 +105,15 @@ def run(args: argparse.Namespace) -> int:
     if not 0 <= margin < float("inf"):
         raise InputError(f"--margin must be a finite number >= 0 um, got {args.margin!r}")
     if args.output is None:
-        raise InputError("-o OUT.png is required (the PNG file to write)")
+        raise InputError("-o OUT.png is required (the PNG file to write; or OUT.gds, OUT.oas, OUT.dxf for a layout)")
     geometry = build(design.name, **values)
+    from patterns.layout import SUFFIXES
+
+    suffix = Path(args.output).suffix.lower()
+    if suffix in SUFFIXES:
+        return _write_layout(args.output, design.name, geometry)
+    if suffix != ".png" and not Path(args.output).is_dir():  # a directory: write_mask says so
+        raise InputError(f"-o {args.output}: the file name must end in .png, or in .gds, .oas or .dxf for a layout")
     record = design_record(design.name, **values)
     record.update(margin_um=margin, area_um2=geometry.area)
     mask = mask_from_geometry(geometry, scale, margin_um=margin, params=record)
@@ -109,4 +122,19 @@ def run(args: argparse.Namespace) -> int:
     h, w = mask.shape
     print(f"wrote {path}: {w} x {h} px at {scale:g} um/px ({w * scale:g} x {h * scale:g} um), "
           f"wettable area {mask.area_um2:.6g} um^2 (exact {geometry.area:.6g} um^2)")
+    return 0
+
+
+def _write_layout(output: str, name: str, geometry) -> int:
+    """Write the exact polygon as a layout and say what was written."""
+    import shapely
+
+    from patterns.layout import WRITE_DXF_LAYER, WRITE_LAYER, snap, write_layout
+
+    path = write_layout(output, geometry, cell=name)
+    layer = WRITE_DXF_LAYER if path.suffix.lower() == ".dxf" else f"{WRITE_LAYER[0]}/{WRITE_LAYER[1]}"
+    n = len(shapely.get_parts(geometry))
+    where = "model space" if path.suffix.lower() == ".dxf" else f"cell {name.replace('-', '_')}"
+    print(f"wrote {path}: {where}, layer {layer}, {n} polygon{'' if n == 1 else 's'}, database unit 1 nm, "
+          f"area {snap(geometry).area:.12g} um^2 (exact {geometry.area:.12g} um^2)")
     return 0
