@@ -21,8 +21,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from patterns.library import library_path  # noqa: E402
+from simulator import pyplot, save_figure  # noqa: E402
 from simulator.landscape import build_landscape  # noqa: E402
-from simulator.render import _pyplot, save_figure  # noqa: E402
 from simulator.scene import Scene  # noqa: E402
 from simulator.trajectory import simulate  # noqa: E402
 
@@ -32,7 +32,7 @@ METHODS = ("greedy", "gradient", "overdamped", "inertial")
 def methods_figure(out: Path, start=(380.0, 120.0, 8.0)) -> list[str]:
     scene = Scene.from_inputs(library_path("four_pad_730_50"), chip_size_um=730, resolution_um=2.0)
     ls = build_landscape(scene)
-    plt = _pyplot()
+    plt = pyplot()
     fig, axes = plt.subplots(2, 4, figsize=(16, 7.4), gridspec_kw={"height_ratios": [1.25, 1]})
     lines = []
     for k, method in enumerate(METHODS):

@@ -71,3 +71,10 @@ class Mask:
         if not np.any(self.data > 0):
             raise InputError(f"{name}: the mask is all black (no wettable area); white marks the wettable area, or use --invert")
         return self
+
+
+def nonzero_box(data: np.ndarray) -> tuple[int, int, int, int]:
+    """(row0, row1, col0, col1), end-exclusive, of the non-zero pixels of ``data``."""
+    rows = np.flatnonzero(data.any(axis=1))
+    cols = np.flatnonzero(data.any(axis=0))
+    return rows[0], rows[-1] + 1, cols[0], cols[-1] + 1

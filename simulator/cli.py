@@ -101,10 +101,11 @@ def _internal_error(command: str, err: BaseException) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     with _boundary():
-        parser = build_parser()
-        args = parser.parse_args(argv)
-        name = args.command
+        name = "command"
         try:
+            parser = build_parser()
+            args = parser.parse_args(argv)
+            name = args.command
             code = int(args.func(args) or 0)
             sys.stdout.flush()
             return code

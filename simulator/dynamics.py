@@ -99,7 +99,11 @@ from simulator.stepping import (
     clamp_start,
     interpolate,
     on_plateau,
+    reference_gradient,
 )
+
+# A float64 landscape stays float64 inside the steppers (documented in simulator/__init__.py).
+jax.config.update("jax_enable_x64", True)
 
 #: Thinnest liquid film (um) the dynamics accept: 1e-6 nm. Real films are nm or more thick
 #: (the Couette model itself needs a continuum liquid); much below this the damping
@@ -366,8 +370,7 @@ def _axis_scales(grid: Grid) -> np.ndarray:
 def _reference_force(field: Field, grid: Grid, dt) -> jax.Array:
     """Typical |dE/dq| per index step (J), as in stepping.gradient_descent: a chip edge of
     length 2 rg sliding over a pad, for x and y; times the arc per twist step for twist."""
-    g = jnp.maximum(field.scale / (2.0 * grid.rg_px + 1.0), field.floor)
-    g = jnp.maximum(g, jnp.finfo(dt).tiny / jnp.finfo(dt).eps)
+    g = jnp.maximum(reference_gradient(field, grid), jnp.finfo(dt).tiny / jnp.finfo(dt).eps)
     return g * jnp.asarray([max(grid.twist_px_per_step, 1e-6), 1.0, 1.0], dt)
 
 

@@ -69,7 +69,7 @@ def chip_size(scene: Scene) -> tuple[float, float]:
     return footprint_um(scene.chip)
 
 
-def max_bias(values: np.ndarray, force: np.ndarray, x0: float) -> tuple[float, float]:
+def max_bias_along(values: np.ndarray, force: np.ndarray, x0: float) -> tuple[float, float]:
     """(+, -) largest |v - x0| with the force pointing back to x0 at every sample in between."""
     out = []
     for sign in (1, -1):
@@ -128,7 +128,7 @@ def _assess(scene: Scene, out, quiet: bool) -> dict:
     for axis, lo, hi in (("x", -reach_x, reach_x), ("y", -reach_y, reach_y)):
         c = ls.curve(axis, (xm, ym, tm), lo, hi)
         x0 = xm if axis == "x" else ym
-        plus, minus = max_bias(c["values"], c["force"], x0)
+        plus, minus = max_bias_along(c["values"], c["force"], x0)
         curves[axis] = c
         biases[f"+{axis}"], biases[f"-{axis}"] = plus, minus
     # Capture fraction over a grid of starts at twist 0, and the yield under placement noise.

@@ -50,7 +50,7 @@ import numpy as np
 from patterns.errors import InputError, require
 from patterns.mask import Mask
 from patterns.resources import require_fits
-from simulator import stepping
+from simulator import steppers, stepping
 from simulator.feedback import progress_bar
 from simulator.landscape import Landscape, build_landscape
 from simulator.scene import Scene
@@ -217,18 +217,9 @@ class BatchResult:
 
 def _one(field: stepping.Field, grid: stepping.Grid, start, method: str, max_steps: int):
     """One start -> (final q, steps, status, outcome, energy); the single run vmap maps."""
-    if method == "greedy":
-        s = stepping.greedy(field, grid, start, max_steps, record=False)
-        q = s.idx
-        flat = stepping.on_plateau(field, grid, s.idx)
-    else:
-        s = stepping.gradient_descent(field, grid, start, max_steps, record=False)
-        q = s.q
-        flat = s.flat | stepping.on_plateau(field, grid, jnp.round(s.q).astype(jnp.int32))
-    # As simulate(): a run that used up its steps without converging ran out of steps.
-    status = jnp.where((s.step >= max_steps) & (s.status != stepping.CONVERGED), stepping.MAX_STEPS, s.status)
-    out = stepping.classify(field, grid, q, s.energy, status, flat)
-    return q, s.step, status, out, s.energy
+    s = steppers.stepper(method)(field, grid, None, start, max_steps, record=False)
+    status, out = steppers.finish(field, grid, s, max_steps)
+    return s.q, s.step, status, out, s.energy
 
 
 @functools.partial(jax.jit, static_argnames=("grid", "method", "max_steps"))

@@ -37,7 +37,7 @@ import shapely
 from shapely.geometry.base import BaseGeometry
 
 from patterns.errors import InputError, positive
-from simulator.materials import Materials
+from simulator.materials import UM2, Materials
 from simulator.stepping import GREEDY_MOVES
 
 __all__ = [
@@ -53,7 +53,6 @@ __all__ = [
     "torque_Nm",
 ]
 
-UM2_TO_M2 = 1e-12
 #: Tie tolerance per um^2 of chip area (1e-9 um^2 for a 200 um chip).
 TIE_PER_UM2 = 1e-9 / 4e4
 #: Default central-difference steps of :func:`gradient_um2`: um for x, y; radians for twist.
@@ -117,7 +116,7 @@ def overlap_um2(pattern: BaseGeometry, chip: BaseGeometry, poses) -> np.ndarray:
 def energy_J(pattern: BaseGeometry, chip: BaseGeometry, poses, materials: Materials | None = None) -> np.ndarray:
     """E = Delta_gamma * A_ol (J) at each pose (PHYSICS.md Eq. 9), shape (N,)."""
     dg = (materials or Materials()).delta_gamma_N_m
-    return dg * overlap_um2(pattern, chip, poses) * UM2_TO_M2
+    return dg * overlap_um2(pattern, chip, poses) * UM2
 
 
 def gradient_um2(pattern: BaseGeometry, chip: BaseGeometry, poses, h_um: float = 1e-3, h_deg: float = 1e-3) -> np.ndarray:
@@ -139,13 +138,13 @@ def force_N(pattern: BaseGeometry, chip: BaseGeometry, poses, materials: Materia
     """(N, 2) restoring force (Fx, Fy) in N: F = -grad E (PHYSICS.md 3.4)."""
     dg = (materials or Materials()).delta_gamma_N_m
     g = gradient_um2(pattern, chip, poses, **steps)
-    return -dg * g[:, :2] * UM2_TO_M2 / 1e-6
+    return -dg * g[:, :2] * UM2 / 1e-6
 
 
 def torque_Nm(pattern: BaseGeometry, chip: BaseGeometry, poses, materials: Materials | None = None, **steps) -> np.ndarray:
     """(N,) restoring torque about z in N m: tau = -dE/dtwist (twist in radians, CCW +)."""
     dg = (materials or Materials()).delta_gamma_N_m
-    return -dg * gradient_um2(pattern, chip, poses, **steps)[:, 2] * UM2_TO_M2
+    return -dg * gradient_um2(pattern, chip, poses, **steps)[:, 2] * UM2
 
 
 def radius_of_gyration_um(chip: BaseGeometry) -> float:

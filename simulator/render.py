@@ -19,7 +19,7 @@ import numpy as np
 from patterns.errors import InputError
 from patterns.mask import Mask
 from patterns.outputs import atomic_output
-from simulator.landscape import axis_step
+from simulator.posegrid import axis_step
 
 __all__ = [
     "TrajectoryAnimation",
@@ -39,7 +39,8 @@ PLATEAU_COLOUR = "#f5b942"
 J_TO_NJ, N_TO_UN, NM_TO_NNM, S_TO_MS = 1e9, 1e6, 1e9, 1e3
 
 
-def _pyplot():
+def pyplot():
+    """``matplotlib.pyplot`` on the non-interactive Agg backend (what every picture here draws with)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -56,12 +57,12 @@ def save_figure(fig, path: str | os.PathLike, dpi: int = 120) -> None:
         raise InputError(f"output {path}: the picture must end in .png, .svg or .pdf")
     with atomic_output(path) as tmp:
         fig.savefig(tmp, dpi=dpi, format=suffix[1:], bbox_inches="tight")
-    _pyplot().close(fig)
+    pyplot().close(fig)
 
 
 def plot_pattern(mask: Mask, path: str | os.PathLike, title: str = "pattern as simulated") -> None:
     """The wettability mask in the physical frame (um, y up), white = pad."""
-    plt = _pyplot()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(4.6, 4.4))
     im = ax.imshow(mask.data, extent=mask.extent_um, cmap="gray", vmin=0, vmax=1, interpolation="nearest")
     ax.plot([0], [0], "+", color="C3", ms=10, mew=1.5)
@@ -72,7 +73,7 @@ def plot_pattern(mask: Mask, path: str | os.PathLike, title: str = "pattern as s
 
 def plot_energy_curve(traj, path: str | os.PathLike) -> None:
     """Energy (nJ) and twist (deg) versus step (stepping methods) or time in ms (dynamics)."""
-    plt = _pyplot()
+    plt = pyplot()
     fig, (ax, ax_t) = plt.subplots(2, 1, figsize=(6.4, 4.6), sharex=True, height_ratios=(2, 1), layout="constrained")
     e_nj = np.asarray(traj.energy_J) * J_TO_NJ
     twist = np.asarray(traj.path)[:, 2]
@@ -403,7 +404,7 @@ def plot_landscape(ls, path: str | os.PathLike, pattern: Mask | None = None) -> 
     level of its mask) when ``pattern`` is given. A landscape with one twist gets
     one panel.
     """
-    plt = _pyplot()
+    plt = pyplot()
     e = np.asarray(ls.energy, float) * J_TO_NJ
     k0 = _nearest_twist(ls)
     panels = [(e[k0], f"at twist {ls.twist_deg[k0]:g}°")]
@@ -471,7 +472,7 @@ def plot_forces(ls, path: str | os.PathLike, through: tuple[float, float, float]
     the chip no longer touches the pattern. ``span_um`` limits the x and y lines to
     ``through +- span_um`` (default: the whole landscape).
     """
-    plt = _pyplot()
+    plt = pyplot()
     if span_um is not None and not (np.isfinite(span_um) and span_um > 0):
         raise InputError(f"span_um must be a finite number > 0 um, got {span_um!r}")
     tx, ty, tt = (float(v) for v in through)
@@ -538,7 +539,7 @@ def plot_capture_map(cmap: np.ndarray, grid, scene, path, title: str = "") -> No
 
     from simulator.stepping import OUTCOMES
 
-    plt = _pyplot()
+    plt = pyplot()
     t, ny, nx = cmap.shape
     show = np.unique(np.round(np.linspace(0, t - 1, min(t, MAX_PANELS))).astype(int))
     line = (nx == 1) != (ny == 1)  # a 1-D grid: a strip per twist, not a square map

@@ -35,6 +35,9 @@ import numpy as np
 
 from simulator.landscape import Landscape
 
+# A float64 landscape stays float64 inside the steppers (documented in simulator/__init__.py).
+jax.config.update("jax_enable_x64", True)
+
 # Stop codes of a run (``status``), and the outcomes a trajectory reports.
 RUNNING, CONVERGED, MAX_STEPS, EDGE = 0, 1, 2, 3
 OUTCOMES = ("aligned", "plateau", "local_minimum", "no_contact", "max_steps")
@@ -379,6 +382,12 @@ def on_plateau(field: Field, grid: Grid, idx) -> jax.Array:
 
 
 # ----------------------------------------------------------------- gradient
+def reference_gradient(field: Field, grid: Grid) -> jax.Array:
+    """Typical |dE/dx| (J per px): a chip edge of length 2 rg + 1 px sliding over a pad,
+    at least the noise floor. The force scale of the gradient stepper and the dynamics."""
+    return jnp.maximum(field.scale / (2.0 * grid.rg_px + 1.0), field.floor)
+
+
 class GradientState(NamedTuple):
     q: jax.Array  # (3,) fractional indices (it, iy, ix), it unwrapped
     energy: jax.Array
@@ -403,8 +412,7 @@ def gradient_descent(field: Field, grid: Grid, start, max_steps: int, record: bo
     start = clamp_start(grid, jnp.asarray(start, dt))
     # Metric: index units -> px. Twist index -> arc length in px.
     metric = jnp.asarray([grid.twist_px_per_step if grid.shape[0] > 1 else 1.0, 1.0, 1.0], dt)
-    # Force scale: energy change per px of a chip edge of length 2 rg sliding over a pad.
-    g_ref = jnp.maximum(field.scale / (2.0 * grid.rg_px + 1.0), field.floor)
+    g_ref = reference_gradient(field, grid)
     n = max_steps + 1 if record else 1
     e0 = interpolate(field, grid, start)
     path = jnp.zeros((n, 3), dt).at[0].set(start)

@@ -10,19 +10,19 @@ equals a run on the full landscape (tested), at a fraction of the cost
 
 from __future__ import annotations
 
-import functools
 import math
 import time
 from dataclasses import dataclass, field
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
 from patterns.errors import InputError
 from patterns.resources import require_fits
-from simulator import stepping
-from simulator.landscape import Landscape, _twist_cut, axis_step, build_landscape, twist_axis
+from simulator import steppers, stepping
+from simulator.engine import build_landscape
+from simulator.landscape import Landscape
+from simulator.posegrid import _twist_cut, axis_step, twist_axis
 from simulator.scene import Scene
 
 METHODS = ("greedy", "gradient", "overdamped", "inertial")
@@ -95,14 +95,6 @@ def radius_of_gyration_px(scene: Scene) -> float:
     return float(math.sqrt((d * r2).sum() / d.sum()))
 
 
-def _run(method: str, field, grid, start, max_steps: int, dyn_params=None):
-    if method == "greedy":
-        return _greedy_jit(field, grid, jnp.asarray(np.round(start), jnp.int32), max_steps)
-    if method == "gradient":
-        return _gradient_jit(field, grid, jnp.asarray(start), max_steps)
-    return _dynamics_jit(method, _stiff(method, field, grid, dyn_params))(field, grid, dyn_params, jnp.asarray(start), max_steps)
-
-
 def _stiff(method: str, field, grid, params) -> bool:
     """An inertial run is stiff when inertia relaxes (m / c) much faster than the chip
     creeps one pixel under a typical force (overdamped, c s / F): then an implicit
@@ -113,20 +105,6 @@ def _stiff(method: str, field, grid, params) -> bool:
     tau_m = params.mass_kg / params.damping_N_s_m
     tau_c = params.damping_N_s_m * grid.um_per_px * 1e-6 / max(f_ref, 1e-30)
     return tau_m < 0.1 * tau_c
-
-
-_greedy_jit = jax.jit(stepping.greedy, static_argnames=("grid", "max_steps", "record"))
-_gradient_jit = jax.jit(stepping.gradient_descent, static_argnames=("grid", "max_steps", "record", "min_step_px"))
-
-
-@functools.cache
-def _dynamics_jit(method: str, stiff: bool):
-    import diffrax
-
-    from simulator import dynamics
-
-    fn = dynamics.overdamped if method == "overdamped" else dynamics.inertial
-    return jax.jit(functools.partial(fn, solver=diffrax.Kvaerno5() if stiff else None), static_argnames=("grid", "max_steps", "record"))
 
 
 def price_run(scene: Scene, method: str, max_steps: int) -> None:
@@ -208,7 +186,8 @@ def simulate(
             if ls is None:  # moving the box would not move the chip: stop here
                 break
         field, grid = stepping.field_and_grid(ls, rg)
-        state = _run(method, field, grid, grid.to_index(pose), max_steps, dynamics)
+        run = steppers.jitted(method, _stiff(method, field, grid, dynamics))
+        state = run(field, grid, dynamics, jnp.asarray(grid.to_index(pose)), max_steps)
         pieces.append(_to_trajectory(method, state, grid))
         if int(state.status) != stepping.EDGE or landscape is not None or dynamic:
             break
@@ -222,7 +201,7 @@ def simulate(
         traj = Trajectory(method, "", traj.path[: max_steps + 1], traj.energy_J[: max_steps + 1], max_steps, traj.time_s, None if traj.t_s is None else traj.t_s[: max_steps + 1])
     # Outcome: flatness where the run ended; "aligned" against the global minimum.
     q_end = grid.to_index(np.asarray(traj.final))
-    flat = bool(getattr(state, "flat", False)) or bool(stepping.on_plateau(field, grid, np.round(q_end).astype(np.int32)))
+    flat = bool(steppers.flat_at(field, grid, state.flat, q_end))
     ref = landscape if landscape is not None else reference_landscape(scene, backend)
     ref_field, ref_grid = stepping.field_and_grid(ref, rg)
     q_ref = ref_grid.to_index(np.asarray(traj.final))
@@ -348,17 +327,18 @@ def reference_landscape(scene: Scene, backend: str = "auto", reach_steps: int = 
 
 def full_landscape_poses(scene: Scene) -> int:
     """Poses of the scene's full landscape (what a trajectory would cost without boxes)."""
-    from simulator.landscape import estimate_bytes
+    from simulator.engine import estimate_bytes
 
     return estimate_bytes(scene) // np.dtype(scene.dtype).itemsize
 
 
-def _to_trajectory(method: str, state, grid) -> Trajectory:
+def _to_trajectory(method: str, state: steppers.RunState, grid) -> Trajectory:
     n = int(state.step) + 1
     idx = np.asarray(state.path)[:n]
     energy = np.asarray(state.path_energy)[:n].astype(float)
-    t_s = np.asarray(state.path_t)[:n].astype(float) if hasattr(state, "path_t") else None
-    time_s = float(state.time_s) if hasattr(state, "time_s") else None
+    dynamic = method in steppers.DYNAMIC
+    t_s = np.asarray(state.path_t)[:n].astype(float) if dynamic else None
+    time_s = float(state.time_s) if dynamic else None
     return Trajectory(method, "", grid.to_pose(idx), energy, n - 1, time_s, t_s)
 
 

@@ -55,7 +55,6 @@ import os
 import subprocess
 import sys
 import textwrap
-import time
 import tracemalloc
 
 import jax
@@ -72,7 +71,7 @@ from patterns.errors import InputError
 from patterns.geometry import defect, four_pad, rectangle, square
 from patterns.mask import Mask
 from patterns.raster import mask_from_geometry
-from simulator import dynamics, stepping, trajectory
+from simulator import dynamics, steppers, stepping, trajectory
 from simulator.dynamics import DynamicsParams
 from simulator.landscape import build_landscape
 from simulator.materials import Liquid, Materials
@@ -484,7 +483,7 @@ def run_dynamics(s, field, grid, method, pose=START):
     """One dynamics run as simulate does it (the same compiled function: simulate's
     solver choice, stiff runs implicit), returning the full state."""
     p = DynamicsParams.from_scene(s)
-    fn = trajectory._dynamics_jit(method, trajectory._stiff(method, field, grid, p))
+    fn = steppers.dynamics_jitted(method, trajectory._stiff(method, field, grid, p))
     return fn(field, grid, p, jnp.asarray(grid.to_index(np.asarray(pose, float))), trajectory.DEFAULT_MAX_STEPS), p
 
 
@@ -630,21 +629,19 @@ def big_scene(budget_mb):
 def test_resources_over_budget_fails_before_allocating():
     s = big_scene(64)
     tracemalloc.start()
-    t0 = time.perf_counter()
     try:
         with pytest.raises(InputError, match=r"needs about [\d,]+ MB .* memory budget is 64 MB; use a coarser scale"):
             build_landscape(s)
-        seconds = time.perf_counter() - t0
         _, peak = tracemalloc.get_traced_memory()
     finally:
         tracemalloc.stop()
-    assert seconds < 0.5
+    # How fast it is refused (target < 0.5 s): benchmarks/refusals.py.
     # Nothing landscape-sized: only masks of the inputs' size (the pattern is 128 MiB).
     assert peak < s.pattern.data.nbytes / 2, f"{peak / 2**20:.0f} MiB allocated before refusing"
 
 
 BIG_RUN = """
-import json, resource, time
+import json, time
 t0 = time.perf_counter()
 import simulator
 from patterns.geometry import four_pad, square
@@ -656,7 +653,7 @@ t = simulate(s, (90, -70, 1), method="greedy", max_steps=100)
 print(json.dumps({"shape": s.pattern.shape, "final": t.final, "steps": t.steps, "outcome": t.outcome,
                   "finite": bool((abs(t.path) < 1e300).all() and (abs(t.energy_J) < 1e300).all()),
                   "planes": t.cost["planes"], "seconds": time.perf_counter() - t0,
-                  "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
+                  "peak_rss_mb": [int(l.split()[1]) for l in open("/proc/self/status") if l.startswith("VmHWM:")][0] / 1024}))
 """
 
 
@@ -671,8 +668,8 @@ def test_resources_4096_px_pattern_single_trajectory():
     assert r["shape"] == [4096, 4096] and r["finite"]
     assert r["final"] == [48.0, -48.0, 0.0] and r["steps"] == 42 and r["outcome"] == "plateau"
     assert r["planes"] <= 12
-    assert r["peak_rss_mb"] < 8 * 1024, r
-    assert r["seconds"] < 60, r
+    assert r["peak_rss_mb"] < 8 * 1024, r  # this process's own peak (VmHWM)
+    # How long it takes (target < 60 s): benchmarks/refusals.py.
     print(f"4096 px trajectory: {r['seconds']:.1f} s, peak RSS {r['peak_rss_mb']:.0f} MiB")
 
 

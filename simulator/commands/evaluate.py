@@ -53,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
 
         print(frame_note(layout))
     from simulator.feedback import compiling
-    from simulator.landscape import twist_axis
+    from simulator.posegrid import twist_axis
 
     twist_axis(scene)  # a twist step that gives too many twists fails before the announcement
 

@@ -20,8 +20,8 @@ from simulator.commands._common import (
     scene_from_args,
 )
 from simulator.finite import require_finite
-from simulator.landscape import axis_step
 from simulator.montecarlo import DEFAULT_CHUNK, DISTRIBUTIONS, MAX_STARTS, METHODS, StartGrid
+from simulator.posegrid import axis_step
 from simulator.render import plot_capture_map
 from simulator.trajectory import DEFAULT_MAX_STEPS, MAX_STEPS_LIMIT
 
@@ -221,8 +221,8 @@ def run(args: argparse.Namespace) -> int:
     grid = starts if isinstance(starts, StartGrid) else None
     _check_outputs(args, grid is not None)
     scene = scene_from_args(args)
+    from simulator.engine import require_landscape_fits
     from simulator.feedback import compiling
-    from simulator.landscape import require_landscape_fits
 
     require_landscape_fits(scene)
 

@@ -13,6 +13,7 @@ from simulator.commands._common import (
     write_json,
 )
 from simulator.feedback import compiling
+from simulator.materials import DAMPING_CALIBRATION
 from simulator.trajectory import DEFAULT_MAX_STEPS, METHODS, price_run, simulate
 
 
@@ -36,7 +37,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     d.add_argument("--viscosity", type=float, help="liquid viscosity in mPa s (default 1.0, water)")
     d.add_argument("--chip-thickness", type=float, help="chip thickness in um (default 50)")
     d.add_argument("--chip-density", type=float, help="chip density in kg/m^3 (default 1200, SU-8)")
-    d.add_argument("--damping-calibration", type=float, help="multiplier on the Couette damping estimate (default 30)")
+    d.add_argument("--damping-calibration", type=float, help=f"multiplier on the Couette damping estimate (default {DAMPING_CALIBRATION:g})")
     o = p.add_argument_group("outputs")
     o.add_argument("--json", help="write the trajectory as JSON")
     o.add_argument("--plot", help="write the energy-versus-step (or time) curve as PNG")
