@@ -33,7 +33,7 @@ from patterns.outputs import check_output_dir, output_directory
 from simulator import montecarlo, render
 from simulator.finite import require_finite
 from simulator.landscape import build_landscape, estimate_bytes
-from simulator.scene import Scene, resample_to_scale
+from simulator.scene import Scene
 
 #: Landscapes above this (MB) are built at a coarser resolution unless the user chose one.
 AUTO_LANDSCAPE_MB = 320.0
@@ -46,7 +46,7 @@ GRID_CELLS = 25
 def auto_resolution(scene: Scene, budget_mb: float = AUTO_LANDSCAPE_MB) -> Scene:
     """The scene at the finest whole multiple of its pixel size whose landscape fits ``budget_mb``."""
     for k in range(1, 17):
-        s = scene if k == 1 else scene.replace(pattern=resample_to_scale(scene.pattern, scene.um_per_px * k), chip=resample_to_scale(scene.chip, scene.um_per_px * k))
+        s = scene if k == 1 else scene.at_resolution(scene.um_per_px * k)
         if estimate_bytes(s) / 2**20 <= budget_mb:
             return s
     return s

@@ -162,6 +162,50 @@ class Scene:
         """A copy with some fields changed (validated again)."""
         return replace(self, **changes)
 
+    def at_resolution(self, um_per_px: float) -> Scene:
+        """The scene at another pixel size: pattern and chip resampled
+        (:func:`resample_to_scale`: exact geometry rasterized anew), priced against the budget."""
+        s = positive("resolution", um_per_px, "um per px")
+        if math.isclose(s, self.um_per_px, rel_tol=1e-9):
+            return self
+        b = self.memory_budget_mb
+        return self.replace(pattern=resample_to_scale(self.pattern, s, b), chip=resample_to_scale(self.chip, s, b))
+
+    def with_preset(self, name: str | None = None, explicit: dict | None = None) -> Scene:
+        """The scene with the knobs of an accuracy preset (pixel size, twist step, dtype)
+        that ``explicit`` does not set (:func:`simulator.accuracy.apply_preset`; None =
+        the default preset). A pattern image is never refined past its own pixels."""
+        from simulator.accuracy import apply_preset
+
+        native = None if self.pattern.geometry is not None else self.pattern.um_per_px
+        knobs = apply_preset(name, explicit, feature_um=self.smallest_feature_um(), native_um_per_px=native)
+        scene = self.at_resolution(knobs["um_per_px"])
+        if knobs["twist_step_deg"] != scene.twist.step_deg:
+            scene = scene.replace(twist=TwistGrid(knobs["twist_step_deg"], scene.twist.min_deg, scene.twist.max_deg))
+        if knobs["dtype"] != scene.dtype:
+            scene = scene.replace(dtype=knobs["dtype"])
+        return scene
+
+    def smallest_feature_um(self) -> float | None:
+        """The pattern's smallest feature in um (:func:`simulator.accuracy.smallest_feature_um`), or None."""
+        from simulator.accuracy import smallest_feature_um
+
+        try:
+            return smallest_feature_um(self.pattern)
+        except InputError:
+            return None
+
+    def accuracy_warning(self, pattern: Mask | None = None) -> str | None:
+        """A one-line warning when the pixel size leaves the smallest feature of ``pattern``
+        (default: the scene's) under 3 pixels, else None."""
+        from simulator.accuracy import feature_warning
+
+        pattern = self.pattern if pattern is None else pattern
+        try:
+            return feature_warning(pattern, self.um_per_px)
+        except InputError:
+            return None
+
     # ----------------------------------------------------------------- builders
     @classmethod
     def from_inputs(
@@ -234,7 +278,11 @@ class Scene:
 
     @classmethod
     def from_toml(cls, path: str | os.PathLike, **overrides: Any) -> Scene:
-        """Scene from a TOML file (keys in the module docstring); paths are relative to it."""
+        """Scene from a TOML file (keys in the module docstring); paths are relative to it.
+
+        The file means what it means on the command line: its ``accuracy`` preset (default
+        "balanced") sets the pixel size, twist step and dtype the file does not set.
+        """
         from simulator.schema import read_scene_file
 
         return cls.from_dict(read_scene_file(path), base=Path(path).parent, **overrides)
@@ -250,9 +298,11 @@ class Scene:
         require(not unknown, f"unknown scene keys {sorted(unknown)}; allowed: {sorted(known)}")
         require("pattern" in doc, "scene needs a 'pattern' (PNG or layout path)")
         try:
-            return cls._from_dict(doc, base, overrides)
+            scene = cls._from_dict(doc, base, overrides)
         except TypeError as err:  # an unknown key inside a TOML table
             raise InputError(f"scene: {err}") from None
+        explicit = {"um_per_px": doc.get("resolution_um"), "twist_step_deg": (doc.get("twist") or {}).get("step_deg"), "dtype": doc.get("dtype")}
+        return scene.with_preset(doc.get("accuracy"), explicit)
 
     @classmethod
     def _from_dict(cls, doc: dict, base: Path, overrides: dict) -> Scene:

@@ -99,3 +99,22 @@ def test_resolution_that_would_move_the_centre_is_refused(tmp_path):
     write_mask(path, Mask(mask_from_geometry(square(20), 1.0, margin_um=1).data, 1.0))
     with pytest.raises(InputError, match="without moving its centre"):
         Scene.from_inputs(path, chip_size_um=10, resolution_um=1 / 0.3731)
+
+
+@pytest.mark.parametrize("accuracy", ['accuracy = "fast"\n', 'accuracy = "precise"\n', ""])
+def test_scene_file_means_the_same_in_python_and_on_the_command_line(tmp_path, capsys, accuracy):
+    import json
+
+    from simulator.cli import main
+
+    png = tmp_path / "pad.png"
+    assert main(["pattern", "square", "--size", "100", "--um-per-px", "0.5", "-o", str(png)]) == 0
+    f = tmp_path / "s.toml"
+    f.write_text(f'pattern = "pad.png"\nchip_size_um = 100\n{accuracy}')
+    s = Scene.from_toml(f)
+    out = tmp_path / "e.json"
+    assert main(["energy", str(f), "--at", "0,0,0", "--json", str(out)]) == 0
+    doc = json.loads(out.read_text())
+    assert (s.um_per_px, s.twist.step_deg, s.dtype) == (doc["um_per_px"], doc["twist_step_deg"], doc["dtype"])
+    expected = {'accuracy = "fast"\n': (4.0, 2.0), 'accuracy = "precise"\n': (0.5, 0.5), "": (1.0, 1.0)}[accuracy]
+    assert (s.um_per_px, s.twist.step_deg) == expected  # the preset's knobs, in Python as on the command line

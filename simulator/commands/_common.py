@@ -6,6 +6,7 @@ import argparse
 import json
 import math
 import os
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -129,47 +130,16 @@ def scene_from_args(args: argparse.Namespace, note_frame: bool = True) -> Scene:
     for (table, key), value in flags.items():
         if value is not None:
             (doc.setdefault(table, {}) if table else doc)[key] = value
-    scene = apply_accuracy(Scene.from_dict(doc, base=base), getattr(args, "accuracy", None) or doc.get("accuracy"), doc)
+    if getattr(args, "accuracy", None):
+        doc["accuracy"] = args.accuracy
+    scene = Scene.from_dict(doc, base=base)  # the accuracy preset applies here, as for Scene.from_toml
+    warning = scene.accuracy_warning()
+    if warning:
+        print(f"warning: {warning}", file=sys.stderr)
     if note_frame and "layout" in scene.pattern.params:
-        import sys
-
         from patterns.layout import frame_note
 
         print(frame_note(scene.pattern.params["layout"]), file=sys.stderr)
-    return scene
-
-
-def apply_accuracy(scene: Scene, preset: str | None, doc: dict) -> Scene:
-    """The scene with the knobs of an accuracy preset that the user did not set.
-
-    Explicit knobs (``resolution_um``, ``[twist] step_deg``, ``dtype`` in the scene
-    document, from flags or TOML) always win. Prints a one-line warning on stderr when
-    the resulting pixel size leaves the pattern's smallest feature under 3 pixels.
-    """
-    import sys
-
-    from simulator.accuracy import apply_preset, feature_warning, smallest_feature_um
-    from simulator.scene import TwistGrid, resample_to_scale
-
-    explicit = {"um_per_px": doc.get("resolution_um"), "twist_step_deg": doc.get("twist", {}).get("step_deg"), "dtype": doc.get("dtype")}
-    pattern = scene.pattern
-    try:
-        feature = smallest_feature_um(pattern)
-    except InputError:
-        feature = None
-    native = None if pattern.geometry is not None else pattern.um_per_px
-    knobs = apply_preset(preset, explicit, feature_um=feature, native_um_per_px=native)
-    s = knobs["um_per_px"]
-    if s != scene.um_per_px:
-        scene = scene.replace(pattern=resample_to_scale(scene.pattern, s), chip=resample_to_scale(scene.chip, s))
-    if knobs["twist_step_deg"] != scene.twist.step_deg:
-        scene = scene.replace(twist=TwistGrid(knobs["twist_step_deg"], scene.twist.min_deg, scene.twist.max_deg))
-    if knobs["dtype"] != scene.dtype:
-        scene = scene.replace(dtype=knobs["dtype"])
-    if feature is not None:
-        warning = feature_warning(pattern, scene.um_per_px)
-        if warning:
-            print(f"warning: {warning}", file=sys.stderr)
     return scene
 
 
