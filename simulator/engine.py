@@ -189,14 +189,14 @@ def build_landscape(
     chunk = max(1, min(chunk, len(p["twists"])))
     fft = fft_shape(p["pattern_up"].shape, rot.shape, win)
     # A chunk of mirror twins works on twice the twists (the twins' spectra and windows).
-    per_chunk = chunk * (2 if mirror_twins(scene.chip, p["twists"]) else 1)
+    twins = mirror_twins(scene.twist_axis.mirror, p["twists"])
+    per_chunk = chunk * (2 if twins else 1)
     need = p["landscape_bytes"] + work_bytes(fft, 2 * win.ry + 1, scene.dtype, per_chunk, -(-len(p["twists"]) // chunk))
     _refuse_over_budget(scene, need, len(p["twists"]), 2 * win.ry + 1, 2 * win.rx + 1)
     cor = Correlator(p["pattern_up"], rot.shape, win, scene.dtype, backend)
     twists_deg = p["twists"]
     scale = scene.materials.delta_gamma_N_m * scene.um_per_px**2 * UM2
     energy = np.empty((len(twists_deg), 2 * win.ry + 1, 2 * win.rx + 1), dtype=scene.dtype)
-    twins = mirror_twins(scene.chip, twists_deg)
     singles = [i for i in range(len(twists_deg)) if i not in twins and i not in twins.values()]
     pairs = sorted(twins.items())
     exact = scene.chip.geometry is not None

@@ -8,6 +8,7 @@ for a square) and is then periodic; a scene may bound it instead. Translation bo
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 from shapely import affinity
@@ -65,24 +66,59 @@ def _require_twist_count(scene: Scene, span_deg: float) -> None:
         )
 
 
+@dataclass(frozen=True)
+class TwistAxis:
+    """The twist axis of a scene's pose grid: built once (:meth:`from_scene`), frozen.
+
+    Twist k is ``step_deg * (k + first)`` for k in ``range(count)`` on an axis centred on 0
+    (``origin_deg`` None: the default axis of one symmetry period), and
+    ``origin_deg + step_deg * k`` on a bounded one (``origin_deg`` = its ``min_deg``). ``periodic``: the axis covers one full period of the
+    chip's rotational symmetry (``period_deg``) and wraps. ``mirror``: the chip is
+    mirror-symmetric about the x axis.
+    """
+
+    origin_deg: float | None
+    step_deg: float
+    first: int
+    count: int
+    periodic: bool
+    period_deg: float
+    mirror: bool
+
+    def values(self) -> np.ndarray:
+        """The twists in degrees, ascending (one twist 0.0 when twist is off)."""
+        if self.count == 1 and self.origin_deg is None and self.first == 0:
+            return np.zeros(1)
+        if self.origin_deg is None:
+            return self.step_deg * (np.arange(self.count) + self.first)
+        return self.origin_deg + self.step_deg * np.arange(self.count)
+
+    @classmethod
+    def from_scene(cls, scene: Scene) -> TwistAxis:
+        """The axis of ``scene`` (its chip's symmetry is computed here, once per scene)."""
+        period, mirror = chip_symmetry(scene.chip)
+        if not scene.effects.twist:
+            return cls(None, 1.0, 0, 1, False, period, mirror)
+        tg = scene.twist
+        _require_twist_count(scene, period if tg.min_deg is None else tg.max_deg - tg.min_deg)
+        step = tg.step_deg
+        n_period = period / step
+        divides = abs(n_period - round(n_period)) < 1e-9
+        if tg.min_deg is None or (divides and tg.max_deg - tg.min_deg + step >= period - 1e-9):
+            if divides:
+                n = round(n_period)  # one period, centred on and always containing 0
+                return cls(None, step, -(n // 2), n, True, period, mirror)
+            n = int(math.floor(period / step / 2 + 1e-9))
+            return cls(None, step, -n, 2 * n + 1, False, period, mirror)
+        n = int(math.floor((tg.max_deg - tg.min_deg) / step + 1e-9)) + 1
+        return cls(tg.min_deg, step, 0, n, False, period, mirror)
+
+
 def twist_axis(scene: Scene) -> tuple[np.ndarray, bool, float]:
-    """(twists in degrees, periodic?, chip symmetry period) for the scene's grid."""
-    period, _ = chip_symmetry(scene.chip)
-    if not scene.effects.twist:
-        return np.zeros(1), False, period
-    tg = scene.twist
-    _require_twist_count(scene, period if tg.min_deg is None else tg.max_deg - tg.min_deg)
-    step = tg.step_deg
-    n_period = period / step
-    divides = abs(n_period - round(n_period)) < 1e-9
-    if tg.min_deg is None or (divides and tg.max_deg - tg.min_deg + step >= period - 1e-9):
-        if divides:
-            n = round(n_period)  # one period, centred on and always containing 0
-            return step * (np.arange(n) - n // 2), True, period
-        n = int(math.floor(period / step / 2 + 1e-9))
-        return step * np.arange(-n, n + 1), False, period
-    n = int(math.floor((tg.max_deg - tg.min_deg) / step + 1e-9)) + 1
-    return tg.min_deg + step * np.arange(n), False, period
+    """(twists in degrees, periodic?, chip symmetry period) of the scene's pose grid
+    (:attr:`Scene.twist_axis`, built once per scene)."""
+    axis = scene.twist_axis
+    return axis.values(), axis.periodic, axis.period_deg
 
 
 def twists_around(scene: Scene, twist_values, margin_steps: int = 1) -> np.ndarray:

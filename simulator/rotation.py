@@ -10,7 +10,6 @@ from shapely import affinity
 
 from patterns.mask import Mask, nonzero_box
 from patterns.raster import rasterize
-from simulator.posegrid import chip_symmetry
 
 
 def _chip_reach_px(chip: Mask, twist: bool) -> tuple[float, float]:
@@ -84,11 +83,12 @@ class ChipRotator:
         return np.clip(out, 0.0, 1.0)
 
 
-def mirror_twins(chip: Mask, twists_deg: np.ndarray) -> dict[int, int]:
+def mirror_twins(mirror: bool, twists_deg: np.ndarray) -> dict[int, int]:
     """{i: j} for twists t_j = -t_i < 0 when the chip is mirror-symmetric about the x
-    axis: its raster at -alpha is the one at +alpha upside down, so one forward
-    transform serves both (:meth:`Correlator.__call__` ``mirror_out``)."""
-    if len(twists_deg) < 2 or not chip_symmetry(chip)[1]:
+    axis (``mirror``, :attr:`simulator.posegrid.TwistAxis.mirror`): its raster at -alpha
+    is the one at +alpha upside down, so one forward transform serves both
+    (:meth:`Correlator.__call__` ``mirror_out``)."""
+    if len(twists_deg) < 2 or not mirror:
         return {}
     pos = {round(float(t), 9): i for i, t in enumerate(twists_deg)}
     return {i: pos[round(-float(t), 9)] for i, t in enumerate(twists_deg) if t > 0 and round(-float(t), 9) in pos}

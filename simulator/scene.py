@@ -40,6 +40,7 @@ TOML keys (all optional except ``pattern`` and one of ``chip`` / ``chip_size_um`
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 from dataclasses import dataclass, field, replace
@@ -157,6 +158,14 @@ class Scene:
     @property
     def um_per_px(self) -> float:
         return self.pattern.um_per_px
+
+    @functools.cached_property
+    def twist_axis(self):
+        """The twist axis of the pose grid (:class:`simulator.posegrid.TwistAxis`): the
+        chip's symmetry is computed once per scene, however often the axis is asked for."""
+        from simulator.posegrid import TwistAxis
+
+        return TwistAxis.from_scene(self)
 
     def replace(self, **changes: Any) -> Scene:
         """A copy with some fields changed (validated again)."""
