@@ -43,8 +43,10 @@ def _cgroup_limit_bytes() -> float:
     return math.inf
 
 
+@functools.cache
 def machine_memory_bytes() -> float:
-    """Physical memory of the machine (or the cgroup's limit when smaller), bytes."""
+    """Physical memory of the machine (or the cgroup's limit when smaller), bytes; read once
+    per process (every Scene checks its budget against it)."""
     try:
         total = float(os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
     except (ValueError, OSError, AttributeError):
