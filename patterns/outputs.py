@@ -33,6 +33,21 @@ from patterns.errors import InputError
 #: Marker file of an output directory: JSON listing the files selfalign wrote there.
 MARKER = ".selfalign-output.json"
 
+#: Temporaries that exist right now (files and directories), for :func:`remove_pending`.
+_PENDING: set[Path] = set()
+
+
+def remove_pending() -> None:
+    """Remove every temporary output that exists now: for a signal handler that must end
+    the process at once (SIGTERM), where unwinding through ``finally`` could deadlock."""
+    for p in list(_PENDING):
+        if p.is_dir() and not p.is_symlink():
+            shutil.rmtree(p, ignore_errors=True)
+        else:
+            with contextlib.suppress(OSError):
+                p.unlink()
+        _PENDING.discard(p)
+
 
 def _umask() -> int:
     m = os.umask(0)
@@ -110,6 +125,7 @@ def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=parent)
     os.close(fd)
     tmp_path = Path(tmp)
+    _PENDING.add(tmp_path)
     try:
         yield tmp_path
         os.chmod(tmp_path, 0o666 & ~_umask())  # mkstemp makes files owner-only
@@ -119,6 +135,7 @@ def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
     finally:
         with contextlib.suppress(FileNotFoundError):
             tmp_path.unlink()
+        _PENDING.discard(tmp_path)
 
 
 def _attributed(err: OSError, target: Path) -> OSError:
@@ -209,6 +226,7 @@ def output_directory(path: str | os.PathLike, flag: str = "--out", force: bool =
     out = check_output_dir(path, flag, force, inputs)
     parent = out.resolve().parent
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".selfalign-tmp", dir=parent))
+    _PENDING.add(tmp)
     old: Path | None = None
     try:
         yield tmp
@@ -220,6 +238,7 @@ def output_directory(path: str | os.PathLike, flag: str = "--out", force: bool =
             if any(out.iterdir()):  # a previous selfalign output, replaced as asked
                 old = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".selfalign-old", dir=parent))
                 os.replace(out, old / "d")
+                _PENDING.add(old)
             os.replace(tmp, out)
             os.chmod(out, mode)
         else:
@@ -236,3 +255,6 @@ def output_directory(path: str | os.PathLike, flag: str = "--out", force: bool =
             shutil.rmtree(tmp, ignore_errors=True)
         if old is not None:
             shutil.rmtree(old, ignore_errors=True)
+        _PENDING.discard(tmp)
+        if old is not None:
+            _PENDING.discard(old)

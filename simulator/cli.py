@@ -5,7 +5,8 @@ Each command module defines ``register(subparsers)``, which adds its parser and 
 errors a user can fix (:class:`patterns.errors.InputError`, a full disk, memory) exit
 with code 2; anything unexpected says "internal error", where its traceback was saved
 (``SELFALIGN_DEBUG=1`` prints it instead) and exits with code 1. SIGTERM and Ctrl-C
-unwind normally, so no temporary file or directory is left behind.
+leave no temporary file or directory behind (Ctrl-C unwinds; SIGTERM removes the
+temporaries and ends the process at once).
 """
 
 from __future__ import annotations
@@ -47,19 +48,23 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-class Terminated(BaseException):
-    """SIGTERM, raised in the main thread so that ``finally`` blocks remove temporaries."""
-
-
 #: OS errors a user can fix (disk full, quota, read-only or forbidden place): exit 2.
 USER_OS_ERRORS = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS, errno.EACCES, errno.EPERM, errno.ENAMETOOLONG}
 
 
 @contextlib.contextmanager
 def _boundary():
-    """SIGTERM as an exception and library warnings as one line each, for one command."""
+    """SIGTERM ends the process after removing temporary outputs; library warnings are
+    one line each; for one command."""
     def terminate(signum, frame):
-        raise Terminated(signum)
+        # End at once: unwinding an exception raised at an arbitrary point (inside a lock,
+        # a thread pool's shutdown, an XLA call) can hang. Temporaries are removed here;
+        # os.write, not print: the main thread may be inside a write to stderr.
+        from patterns.outputs import remove_pending
+
+        remove_pending()
+        os.write(2, b"selfalign: terminated (no partial output was kept)\n")
+        os._exit(143)
 
     def one_line(message, category, filename, lineno, file=None, line=None):
         text = " ".join(str(message).split())
@@ -115,9 +120,6 @@ def main(argv: list[str] | None = None) -> int:
         except KeyboardInterrupt:
             print("selfalign: interrupted (no partial output was kept)", file=sys.stderr)
             return 130
-        except Terminated:
-            print("selfalign: terminated (no partial output was kept)", file=sys.stderr)
-            return 143
         except BrokenPipeError:  # output piped into e.g. `head`: stop quietly
             _quiet_stdout()
             sys.stderr.close()
