@@ -3,7 +3,7 @@ PY ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: demo test lint library bench clean
+.PHONY: demo test lint library bench validate clean
 
 $(BIN)/selfalign: pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -26,6 +26,11 @@ library: $(BIN)/selfalign
 
 bench: $(BIN)/selfalign
 	$(BIN)/python benchmarks/landscape.py
+
+# Surface Evolver reference numbers for the finite-meniscus model (~20 min on one core).
+validate: $(BIN)/selfalign
+	@command -v evolver >/dev/null 2>&1 || { echo "make validate: Surface Evolver ('evolver') is not on PATH; install it with: apt-get install -y evolver-nox"; exit 1; }
+	$(BIN)/python validation/evolver.py --out validation/evolver_reference.csv
 
 clean:
 	rm -rf $(VENV) out .pytest_cache
