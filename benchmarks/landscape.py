@@ -515,7 +515,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--json", type=Path, default=None, metavar="OUT", help="also write the rows as JSON"
     )
+    ap.add_argument("--meniscus-only", action="store_true", help="run only the finite-meniscus row")
     args = ap.parse_args(argv)
+    if args.meniscus_only:
+        print(meniscus_row(args.repeats))
+        return 0
     if min(args.twists, args.samples, args.error_twists, args.repeats) < 1:
         ap.error("--twists, --samples, --error-twists and --repeats must be >= 1")
 
@@ -554,6 +558,8 @@ def main(argv: list[str] | None = None) -> int:
         f"* errors: max over {args.error_twists} evenly spaced twists vs {REFERENCE}, divided by the chip area (px^2)."
     )
     print("* peak MB: rise of peak RSS during the call, output stack included (in brackets).")
+    mrow = meniscus_row(args.repeats)
+    print(f"\n{mrow}")
     if args.json:
         args.json.write_text(
             json.dumps(
@@ -563,6 +569,30 @@ def main(argv: list[str] | None = None) -> int:
         )
         print(f"\nwrote {args.json}")
     return 0
+
+
+def meniscus_row(repeats: int = 3) -> str:
+    """The finite meniscus's cost as a ratio to the overlap-only landscape, in one run:
+    ``build_landscape`` of the 730/50 um four-pad at 2 um/px, 730 um chip, 1 degree twists
+    over the chip's period, 20 nl (h = 37.5 um), overlap only and with ``meniscus``,
+    interleaved, best of ``repeats`` each."""
+    from dataclasses import replace
+
+    from simulator.landscape import build_landscape
+    from simulator.scene import Scene
+
+    base = Scene.from_inputs(ROOT / "patterns/library/four_pad_730_50.png", chip_size_um=730, resolution_um=2.0)
+    men = base.replace(effects=replace(base.effects, meniscus=True))
+    build_landscape(base), build_landscape(men)  # warm-up
+    t = {"overlap": [], "meniscus": []}
+    for _ in range(max(1, repeats)):
+        for name, sc in (("overlap", base), ("meniscus", men)):
+            t0 = time.perf_counter()
+            build_landscape(sc)
+            t[name].append(time.perf_counter() - t0)
+    a, b = min(t["overlap"]), min(t["meniscus"])
+    return (f"meniscus row: four_pad_730_50 at 2 um/px, {base.twist_axis.count} twists, h = {men.meniscus_height_um:.1f} um: "
+            f"overlap {a:.2f} s, meniscus {b:.2f} s, ratio {b / a:.2f} (best of {max(1, repeats)}, interleaved)")
 
 
 if __name__ == "__main__":

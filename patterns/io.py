@@ -11,7 +11,8 @@ Reading (:func:`read_mask`):
   background non-wettable.
 * Scale: an explicit ``um_per_px`` wins. Otherwise the PNG's pHYs chunk (pixels per metre,
   unit "metre") gives ``um_per_px = 1e6 / px_per_m``; a pHYs with unit "unknown" only states
-  an aspect ratio and is ignored. pHYs stores whole pixels per metre, so a file written by
+  an aspect ratio and is ignored. ``default_um_per_px`` is the scale of a file that stores
+  none, and must agree with the scale of one that does (the command line's rule). pHYs stores whole pixels per metre, so a file written by
   :func:`write_mask` also records the exact scale in its ``selfalign`` text chunk, which
   refines the pHYs value when both agree.
 * The ``selfalign`` text chunk (JSON), when present, becomes ``Mask.params``.
@@ -23,6 +24,7 @@ pixels per metre, the ``selfalign`` JSON text chunk, written atomically.
 from __future__ import annotations
 
 import json
+import math
 import os
 import struct
 import warnings
@@ -80,21 +82,40 @@ def _values(im: Image.Image, path: Path) -> tuple[np.ndarray, np.ndarray | None]
     return _luminance(rgba[..., :3]), rgba[..., 3] / 255.0
 
 
-def _scale_from_file(info: dict, params: dict, path: Path) -> float:
-    """um per px from the pHYs chunk (refined by the text chunk's exact value), or InputError."""
+def _scale_from_file(info: dict, params: dict, path: Path, default: float | None = None, flag: str = "--um-per-px",
+                     hint: str | None = None) -> float:
+    """um per px from the pHYs chunk (refined by the text chunk's exact value).
+
+    A file without a usable scale takes ``default`` (the scale a flag gives for files that
+    lack one), else InputError naming ``hint`` (default ``flag``). A file that stores a
+    scale keeps it; a ``default`` that contradicts it is an InputError (the caller
+    overrides stored scales by passing ``um_per_px`` to :func:`read_mask` instead).
+    """
+    hint = hint or flag
     dpi = info.get("dpi")  # Pillow sets 'dpi' only for pHYs with unit = metre (as px_per_m * 0.0254)
     if dpi is None:
-        raise InputError(f"{path} has no scale (pHYs chunk); pass --um-per-px")
+        if default is not None:
+            return default
+        raise InputError(f"{path} has no scale (pHYs chunk); pass {hint}")
     px_per_m = [round(float(v) / 0.0254) for v in dpi]
     if px_per_m[0] <= 0 or px_per_m[1] <= 0:
-        raise InputError(f"{path}: its pHYs chunk gives a non-positive scale ({px_per_m[0]} x {px_per_m[1]} px/m); pass --um-per-px")
+        if default is not None:
+            return default
+        raise InputError(f"{path}: its pHYs chunk gives a non-positive scale ({px_per_m[0]} x {px_per_m[1]} px/m); pass {hint}")
     if px_per_m[0] != px_per_m[1]:
+        if default is not None:
+            return default
         raise InputError(f"{path}: its pHYs chunk gives non-square pixels ({px_per_m[0]} x {px_per_m[1]} px/m); "
-                         "resample to square pixels or pass --um-per-px")
+                         f"resample to square pixels or pass {hint}")
     exact = params.get("um_per_px")
     if isinstance(exact, int | float) and exact > 0 and round(_UM_PER_M / exact) == px_per_m[0]:
-        return float(exact)
-    return _UM_PER_M / px_per_m[0]
+        stored = float(exact)
+    else:
+        stored = _UM_PER_M / px_per_m[0]
+    if default is not None and not math.isclose(default, stored, rel_tol=1e-6):
+        raise InputError(f"{path} stores its scale, {stored:g} um/px (pHYs chunk), but {flag} {default:g} contradicts it; "
+                         f"drop {flag} to use the file's scale, or add --override-scale to use {default:g} um/px")
+    return stored
 
 
 def read_mask(
@@ -103,12 +124,20 @@ def read_mask(
     invert: bool = False,
     max_mpx: float | None = None,
     budget_mb: float | None = None,
+    default_um_per_px: float | None = None,
+    scale_flag: str = "--um-per-px",
+    missing_hint: str | None = None,
 ) -> Mask:
     """Read an image file as a :class:`~patterns.mask.Mask` (see the module notes for the rules).
 
     Args:
         path: any Pillow-readable image (PNG expected); the first frame of multi-frame files.
         um_per_px: pixel size in micrometres; overrides the file's pHYs scale.
+        default_um_per_px: pixel size for a file that stores no (usable) scale; one that
+            contradicts the file's stored scale is an InputError naming ``scale_flag``
+            (the command line's rule: a file's own scale wins, ``--override-scale`` aside).
+        missing_hint: what the error for a file without a scale tells the user to pass
+            (default ``scale_flag``).
         invert: take ``1 - value`` (for images where black marks the pad).
         max_mpx: largest image in megapixels (default
             :data:`patterns.resources.DEFAULT_MAX_IMAGE_MPX`); checked from the header,
@@ -121,6 +150,8 @@ def read_mask(
     path = Path(path)
     if um_per_px is not None:
         um_per_px = positive("--um-per-px", um_per_px, "um per px")
+    if default_um_per_px is not None:
+        default_um_per_px = positive(scale_flag, default_um_per_px, "um per px")
     require_regular_file(path, "image")
     try:
         with warnings.catch_warnings():
@@ -141,7 +172,7 @@ def read_mask(
     except (OSError, SyntaxError, ValueError, EOFError, struct.error) as err:
         raise InputError(f"{path}: not a readable image ({type(err).__name__}: {err}); give a PNG file") from None
     params = parse_png_params(info.get(TEXT_KEY), path)
-    scale = um_per_px if um_per_px is not None else _scale_from_file(info, params, path)
+    scale = um_per_px if um_per_px is not None else _scale_from_file(info, params, path, default_um_per_px, scale_flag, missing_hint)
     if invert:
         value = 1.0 - value
     if alpha is not None:

@@ -66,10 +66,11 @@ class Mask:
         s = self.um_per_px
         return (-w / 2 * s, w / 2 * s, -h / 2 * s, h / 2 * s)
 
-    def require_nonempty(self, name: str) -> Mask:
-        """Raise InputError if the mask has no wettable pixel."""
+    def require_nonempty(self, name: str, invert_flag: str | None = "--invert") -> Mask:
+        """Raise InputError if the mask has no wettable pixel (naming the flag that inverts it)."""
         if not np.any(self.data > 0):
-            raise InputError(f"{name}: the mask is all black (no wettable area); white marks the wettable area, or use --invert")
+            fix = f", or use {invert_flag}" if invert_flag else ""
+            raise InputError(f"{name}: the mask is all black (no wettable area); white marks the wettable area{fix}")
         return self
 
 

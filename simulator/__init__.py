@@ -22,15 +22,18 @@ _EXPORTS = {
     "Materials": "simulator.materials", "Liquid": "simulator.materials", "UM2": "simulator.materials",
     # the energy landscape
     "build_landscape": "simulator.engine", "estimate_bytes": "simulator.engine", "Landscape": "simulator.landscape",
+    "global_minimum": "simulator.optimum", "GlobalMinimum": "simulator.optimum",
     # trajectories and batches
     "simulate": "simulator.trajectory", "Trajectory": "simulator.trajectory",
     "run_batch": "simulator.montecarlo", "StartGrid": "simulator.montecarlo", "random_starts": "simulator.montecarlo",
     "summarize": "simulator.montecarlo", "capture_map": "simulator.montecarlo", "run_realizations": "simulator.montecarlo",
     "BatchResult": "simulator.montecarlo",
     # assessment and accuracy
-    "evaluate": "simulator.evaluate", "exact_overlap_um2": "simulator.reference:overlap_um2",
+    "evaluate": "simulator.evaluate", "assess": "simulator.evaluate", "exact_overlap_um2": "simulator.reference:overlap_um2",
     "PRESETS": "simulator.accuracy", "apply_preset": "simulator.accuracy", "feature_warning": "simulator.accuracy",
     "smallest_feature_um": "simulator.accuracy",
+    # design sweeps
+    "sweep": "simulator.sweep", "load_sweep": "simulator.sweep",
     # pictures
     "plot_pattern": "simulator.render", "plot_landscape": "simulator.render", "plot_forces": "simulator.render",
     "plot_energy_curve": "simulator.render", "plot_capture_map": "simulator.render", "write_trajectory_gif": "simulator.render",

@@ -16,6 +16,7 @@ import contextlib
 import errno
 import importlib
 import os
+import re
 import signal
 import sys
 import tempfile
@@ -26,11 +27,28 @@ import warnings
 from patterns.errors import InputError
 
 #: Subcommands, in the order ``selfalign --help`` lists them.
-COMMANDS = ("pattern", "energy", "simulate", "montecarlo", "evaluate", "demo")
+COMMANDS = ("pattern", "energy", "simulate", "montecarlo", "evaluate", "sweep", "liquid", "demo")
+
+
+#: A value that begins with a minus sign and is made of numbers: a number, or a list of them
+#: separated by ``,``, ``:``, ``;``, ``x`` or spaces (``-300,200,10``, ``-100:100:50,-100:100:50``,
+#: ``-1e-3``, ``"-100,-100;100,-100;0,100"``). argparse takes such a word for a value, not an option.
+NEGATIVE_VALUE = re.compile(r"^-\.?\d[\d.eE+\-,:;x\s]*$")
 
 
 class OneLineParser(argparse.ArgumentParser):
-    """Usage errors as one line (the command and the fix), exit code 2."""
+    """Usage errors as one line (the command and the fix), exit code 2.
+
+    A value with a leading minus sign may follow its flag after a space (``--start
+    -300,200,10``, ``--grid -100:100:50,0``, ``--from -60``): argparse's own test for
+    negative numbers accepts only a plain number, so it is widened to the numbers and
+    number lists the flags take (:data:`NEGATIVE_VALUE`). No option looks like a negative
+    number, so argparse keeps treating such words as values.
+    """
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = NEGATIVE_VALUE
 
     def error(self, message: str):  # type: ignore[override]
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")

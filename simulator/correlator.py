@@ -92,7 +92,8 @@ class Correlator:
     chips are not transformed. One multiply per twist remains.
     """
 
-    def __init__(self, pattern: np.ndarray, chip_shape: tuple[int, int], window: Window, dtype: str, backend: str = "auto"):
+    def __init__(self, pattern: np.ndarray, chip_shape: tuple[int, int], window: Window, dtype: str, backend: str = "auto",
+                 meniscus_px: float = 0.0):
         if backend not in BACKENDS:
             raise InputError(f"backend must be one of {BACKENDS}, got {backend!r}")
         self.backend = _default_backend() if backend == "auto" else backend
@@ -110,6 +111,10 @@ class Correlator:
         kx = np.exp(2j * np.pi * np.fft.rfftfreq(self.nx) * (wc - 1 + window.dx - window.rx))
         spec = sfft.fft(sfft.rfft(np.asarray(pattern, self.dtype), n=self.nx, axis=1, workers=self.workers), n=self.ny, axis=0, workers=self.workers)
         cdt = spec.dtype
+        if meniscus_px > 0:  # the finite meniscus: the pattern blurred by K_h (simulator.meniscus)
+            from simulator.meniscus import kernel_spectrum
+
+            spec *= kernel_spectrum(self.ny, self.nx, meniscus_px)
         self.kernel = (spec * ky[:, None] * kx[None, :]).astype(cdt)
         if self.backend == "jax":
             self._jax_fn = self._make_jax()

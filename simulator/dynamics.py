@@ -12,31 +12,8 @@ index step is ``grid.um_per_px`` um, one twist index step is ``grid.twist_step_d
 degrees (radians inside). Positions are in grid-index units ``(it, iy, ix)`` as in
 :mod:`simulator.stepping` (``it`` unwrapped on a periodic twist axis); times in seconds.
 
-The potential Phi (why not the trilinear energy itself). The landscape is the overlap
-energy, piecewise linear with a V-shaped cusp at alignment. Its trilinear interpolant
-has a discontinuous gradient (no Lipschitz force: the chip would chatter across the
-cusp), and the central-difference force of :func:`simulator.stepping.gradient` is
-continuous but is *not* the gradient of the interpolated energy: with it, each passage
-of the cusp can raise ``E + kinetic`` by up to half of (force x one grid step) (measured
-on a damped V-well: rises adding up to 4 such units), and an overdamped chip in a
-lopsided well climbs to where the central difference vanishes. So the dynamics uses
-one smoothed potential and its exact gradient::
-
-    Phi(q) = mean of E_trilinear over the box q +- 1 grid step along each axis
-
-(:func:`potential`). Along any single axis its gradient is exactly the central
-difference of :func:`simulator.stepping.gradient`; in 3-D it is that difference averaged
-over the +-1 step square of the other two axes. Phi equals E wherever E is linear over
-the box (everywhere more than one step from a kink of the landscape) and rounds each
-kink over +-1 step: at an aligned square of side L px, ``Phi - E`` is ``1/(2L)`` of the
-well depth per translation axis and ``twist_step_rad/4`` of it for the twist; a plateau
-edge moves in by about one step. Phi is a tensor-product piecewise-quadratic spline of
-the node energies (4 nodes per axis), C1, so the force is Lipschitz, and the mechanical
-energy ``Phi + kinetic`` is a Lyapunov function of both models: it can only fall, by
-``c v^2`` per unit time. The state reports both the landscape energy ``E``
-(:func:`simulator.stepping.interpolate`, comparable with the other steppers) and
-``Phi``. For a quadratic landscape ``Phi = E + const`` exactly, so a linear spring is
-reproduced without interpolation error (tested against closed forms).
+The potential Phi: :mod:`simulator.potential` (the landscape averaged over +-1 grid step,
+C1, with an exact gradient; why, and what it changes, is written there).
 
 Integration: ``diffrax.diffeqsolve`` with Tsit5 (explicit 5th-order Runge-Kutta with an
 embedded error estimate) and a PID step-size controller, in nondimensional time (unit
@@ -74,10 +51,8 @@ other steppers.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import NamedTuple
 
 import diffrax
@@ -86,13 +61,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from patterns.errors import InputError, positive
-from simulator import materials
+from patterns.errors import InputError
 from simulator.stepping import (
     CONVERGED,
     EDGE,
     MAX_STEPS,
-    PAD,
     Field,
     Grid,
     at_cut_edge,
@@ -105,222 +78,11 @@ from simulator.stepping import (
 # A float64 landscape stays float64 inside the steppers (documented in simulator/__init__.py).
 jax.config.update("jax_enable_x64", True)
 
-#: Thinnest liquid film (um) the dynamics accept: 1e-6 nm. Real films are nm or more thick
-#: (the Couette model itself needs a continuum liquid); much below this the damping
-#: coefficient overflows the solver's float32 arithmetic (NaN times near 1e-30 um).
-MIN_FILM_UM = 1e-9
-_OFFSETS = np.arange(-1, 3)  # the 4 nodes per axis in the support of Phi's kernel
 
 
-# ----------------------------------------------------------------- parameters
-@jax.tree_util.register_dataclass
-@dataclass(frozen=True)
-class DynamicsParams:
-    """Mass, inertia and damping of the chip, in SI (a pytree: values may be traced).
-
-    Attributes:
-        mass_kg: chip mass m (inertial model only).
-        inertia_kg_m2: moment of inertia I about the vertical axis (inertial model only).
-        damping_N_s_m: translational damping c, N s/m.
-        rot_damping_N_m_s: rotational damping c_t, N m s (per radian per second).
-        t_max_s: the run stops (status MAX_STEPS) at this time, s.
-
-    Build from materials with :meth:`from_physics`. Values given as Python numbers are
-    checked here; traced values (under jit/vmap) are not.
-    """
-
-    mass_kg: float
-    inertia_kg_m2: float
-    damping_N_s_m: float
-    rot_damping_N_m_s: float
-    t_max_s: float = 1.0
-
-    def __post_init__(self) -> None:
-        units = {
-            "mass_kg": "kg",
-            "inertia_kg_m2": "kg m^2",
-            "damping_N_s_m": "N s/m",
-            "rot_damping_N_m_s": "N m s",
-            "t_max_s": "s",
-        }
-        for f in dataclasses.fields(self):
-            v = getattr(self, f.name)
-            if isinstance(v, (int, float, np.floating, np.integer)) and not isinstance(v, bool):
-                object.__setattr__(self, f.name, positive(f.name, v, units[f.name]))
-
-    @classmethod
-    def from_physics(
-        cls,
-        chip: materials.Chip,
-        liquid: materials.Liquid,
-        wetted_area_um2: float | None = None,
-        calibration: float = materials.DAMPING_CALIBRATION,
-        t_max_s: float = 1.0,
-        polar_moment_um4: float | None = None,
-    ) -> DynamicsParams:
-        """Couette damping of the liquid film under a rigid chip (PHYSICS.md 4, 7.1).
-
-        ``h = V / A`` (flat slab), ``c = calibration * mu A / h`` and
-        ``c_t = calibration * mu J / h``; mass and inertia of the chip's cuboid body.
-
-        Args:
-            chip: the chip body (mass, moment of inertia, footprint).
-            liquid: viscosity and droplet volume.
-            wetted_area_um2: area A of the liquid film, um^2 (default: the chip footprint).
-            calibration: multiplier on both Couette values; the default
-                :data:`simulator.materials.DAMPING_CALIBRATION` (30) and why it exists
-                are documented there. 1 gives the bare (lightly damped) estimate.
-            t_max_s: time limit of a run, s.
-            polar_moment_um4: polar second moment J of the film about the chip centre,
-                um^4 (default: the chip's ``(w^2 + h^2)/12`` per unit area times A).
-        """
-        area = (
-            chip.area_um2
-            if wetted_area_um2 is None
-            else positive("wetted area", wetted_area_um2, "um^2")
-        )
-        j = (
-            area * (chip.width_um**2 + chip.height_um**2) / 12.0
-            if polar_moment_um4 is None
-            else positive("polar moment", polar_moment_um4, "um^4")
-        )
-        return cls._film(
-            chip.mass_kg, chip.moment_of_inertia_kg_m2, area, j, liquid, calibration, t_max_s
-        )
-
-    @classmethod
-    def from_scene(cls, scene, t_max_s: float = 1.0) -> DynamicsParams:
-        """From a :class:`simulator.scene.Scene`: its chip footprint, liquid and calibration.
-
-        The chip body is its wettable footprint (the mask, any shape, area coverage per
-        pixel) extruded to ``scene.chip_thickness_um`` at ``scene.chip_density_kg_m3``;
-        the liquid film covers the same footprint. Area and polar moment come from the
-        mask about its centre (each pixel with its own ``px^2/6`` term, so full pixels
-        are exact): a 200 um square gives the cuboid values of :meth:`from_physics`.
-        """
-        chip = scene.chip
-        s = float(chip.um_per_px)
-        d = np.asarray(chip.data, dtype=float)
-        h, w = d.shape
-        y, x = np.mgrid[0:h, 0:w]
-        r2 = ((x + 0.5 - w / 2) ** 2 + (y + 0.5 - h / 2) ** 2 + 1.0 / 6.0) * s * s  # um^2
-        area = positive("chip footprint area", d.sum() * s * s, "um^2")
-        j = float((d * r2).sum() * s * s)  # um^4
-        rho_t = scene.chip_density_kg_m3 * scene.chip_thickness_um * materials.UM  # kg/m^2
-        return cls._film(
-            rho_t * area * materials.UM2,
-            rho_t * j * materials.UM2 * materials.UM2,
-            area,
-            j,
-            scene.liquid,
-            scene.damping_calibration,
-            t_max_s,
-        )
-
-    @classmethod
-    def _film(cls, mass, inertia, area, j, liquid, calibration, t_max_s) -> DynamicsParams:
-        cal = positive("damping calibration", calibration)
-        h = liquid.meniscus_height_um(area)
-        mu = liquid.viscosity_Pa_s
-        if not h >= MIN_FILM_UM:
-            raise InputError(
-                f"droplet volume {liquid.volume_nl:g} nl spreads to a film {h:.3g} um thick under the chip "
-                f"({area:,.0f} um^2), thinner than {MIN_FILM_UM * 1e3:g} nm, where the damping overflows the solver (and no real film is that thin); "
-                f"use at least {MIN_FILM_UM * area * 1e-6:.3g} nl (--volume)"
-            )
-        return cls(
-            mass_kg=mass,
-            inertia_kg_m2=inertia,
-            damping_N_s_m=cal * materials.couette_damping(mu, area, h),
-            rot_damping_N_m_s=cal * materials.couette_torsional_damping(mu, j, h),
-            t_max_s=t_max_s,
-        )
-
-    def damping_ratio(self, stiffness_N_m: float) -> float:
-        """``zeta = c / (2 sqrt(k m))`` of the translation for a spring of stiffness k (N/m)."""
-        return self.damping_N_s_m / (2.0 * math.sqrt(stiffness_N_m * self.mass_kg))
-
-
-def default_tolerances(dtype) -> tuple[float, float]:
-    """(rtol, atol in grid steps) for a dtype: ``sqrt(eps) / 30`` for both.
-
-    float32: 1.2e-5, float64: 5e-10. Measured on the linear-spring tests: trajectory
-    errors of at most 1e-5 (float32) and 2e-10 (float64) of the start offset. (That the
-    mechanical energy never rises is enforced by the guarded controller, not by these.)
-    """
-    eps = float(jnp.finfo(dtype).eps)
-    tol = math.sqrt(eps) / 30.0
-    return tol, tol
-
-
-# ----------------------------------------------------------------- potential
-def _kernel(t):
-    """Phi's 1-D kernel: the hat function averaged over +-1, and its derivative.
-
-    ``K(t) = (1/2) * integral_{t-1}^{t+1} hat(s) ds``: ``1/2 - t^2/4`` for ``|t| <= 1``,
-    ``(2 - |t|)^2 / 4`` for ``1 <= |t| <= 2``, 0 beyond; C1, a partition of unity.
-    """
-    a = jnp.abs(t)
-    inner = a <= 1
-    k = jnp.where(inner, 0.5 - 0.25 * t * t, 0.25 * jnp.square(jnp.maximum(2.0 - a, 0.0)))
-    dk = jnp.where(inner, -0.5 * t, -0.5 * jnp.sign(t) * jnp.maximum(2.0 - a, 0.0))
-    return k, dk
-
-
-def _node_energy(field: Field, grid: Grid, it, iy, ix):
-    """Node energies for Phi, as :func:`simulator.stepping.lookup` but finite: beyond an
-    uncut x/y side 0 (no contact); beyond a cut side or the end of a non-periodic twist
-    axis (walls, +inf there) the edge value is repeated, and the run stops with EDGE."""
-    t, ny, nx = grid.shape
-    (_, _), (y_lo, y_hi), (x_lo, x_hi) = grid.cut
-    itw = jnp.mod(it, t) if grid.wrap else jnp.clip(it, 0, t - 1)
-
-    def clip(i, n, lo_cut, hi_cut):  # a cut side repeats its edge; an uncut one reads the pad's 0
-        return jnp.clip(i, 0 if lo_cut else -PAD, n - 1 if hi_cut else n - 1 + PAD) + PAD
-
-    return field.padded[itw + PAD, clip(iy, ny, y_lo, y_hi), clip(ix, nx, x_lo, x_hi)]
-
-
-def potential_and_gradient(field: Field, grid: Grid, q):
-    """``(Phi(q), dPhi/dq)`` at fractional indices q (3,) = (it, iy, ix); J and J per index step.
-
-    Phi is the landscape energy averaged over ``q +- 1`` grid step along each axis (see
-    the module docstring). A grid with one twist has no twist axis: Phi does not depend
-    on ``it`` there.
-    """
-    dt = field.dtype
-    q = jnp.asarray(q, dt)
-    base = jnp.floor(q)
-    frac = q - base
-    b = base.astype(jnp.int32)
-    off = jnp.asarray(_OFFSETS, jnp.int32)
-    ws, dws, idx = [], [], []
-    for k in range(3):
-        w, dw = _kernel(frac[k] - off.astype(dt))
-        if k == 0 and grid.shape[0] == 1:
-            w, dw = jnp.asarray([0.0, 1.0, 0.0, 0.0], dt), jnp.zeros(4, dt)
-            idx.append(jnp.zeros(4, jnp.int32))
-        else:
-            idx.append(b[k] + off)
-        ws.append(w)
-        dws.append(dw)
-    e = _node_energy(
-        field, grid, idx[0][:, None, None], idx[1][None, :, None], idx[2][None, None, :]
-    )
-    phi = jnp.einsum("i,j,k,ijk->", ws[0], ws[1], ws[2], e)
-    grad = jnp.stack(
-        [
-            jnp.einsum("i,j,k,ijk->", dws[0], ws[1], ws[2], e),
-            jnp.einsum("i,j,k,ijk->", ws[0], dws[1], ws[2], e),
-            jnp.einsum("i,j,k,ijk->", ws[0], ws[1], dws[2], e),
-        ]
-    )
-    return phi, grad
-
-
-def potential(field: Field, grid: Grid, q):
-    """Phi(q) in J (see :func:`potential_and_gradient`)."""
-    return potential_and_gradient(field, grid, q)[0]
+# Parameters (simulator.dynamics_params) and the potential Phi (simulator.potential), re-exported.
+from simulator.dynamics_params import MIN_FILM_UM, DynamicsParams, default_tolerances  # noqa: E402, F401
+from simulator.potential import potential, potential_and_gradient  # noqa: E402, F401
 
 
 # ----------------------------------------------------------------- state
@@ -396,6 +158,12 @@ def _stop_flags(field: Field, grid: Grid, co: _Coeffs, q, grad, kinetic):
     active = _active(grid, q.dtype) > 0
     ke_stop = jnp.maximum(field.floor, jnp.min(jnp.where(active, co.f_ref, jnp.inf)) * delta)
     converged = jnp.all(jnp.abs(grad) <= f_stop) & (kinetic <= ke_stop)
+    if any(grid.pin):
+        # Hysteresis (simulator.hysteresis): pinned where no axis's force beats its pinning
+        # force and the kinetic energy left is below the pinning work over one grid step.
+        pin = jnp.asarray(grid.pin, q.dtype)
+        work = jnp.min(jnp.where(active & (pin > 0), pin, jnp.inf))
+        converged = converged | (jnp.all(jnp.abs(grad) <= jnp.maximum(pin, f_stop)) & (kinetic <= jnp.maximum(work, ke_stop)))
     edge = at_cut_edge(grid, q)
     if not grid.wrap and grid.shape[0] > 1:
         edge = edge | (q[0] < 0) | (q[0] > grid.shape[0] - 1)

@@ -26,6 +26,7 @@ from simulator.correlator import (
 )
 from simulator.feedback import progress_bar
 from simulator.materials import UM2
+from simulator.meniscus import CHIP_BLUR_MIN_PX, margin_px
 from simulator.posegrid import _axis_box, _twist_cut, twist_axis
 from simulator.rotation import ChipRotator, _chip_reach_px, mirror_twins
 from simulator.scene import Scene
@@ -37,7 +38,7 @@ if TYPE_CHECKING:
 
 def energy_scale_J(scene: Scene) -> float:
     """The largest |E| the scene can reach, ``|Delta_gamma| min(|P|, |C|)`` in J (PHYSICS.md C8)."""
-    return abs(scene.materials.delta_gamma_N_m) * min(scene.pattern.area_um2, scene.chip.area_um2) * UM2
+    return abs(scene.delta_gamma_N_m) * min(scene.pattern.area_um2, scene.chip.area_um2) * UM2
 
 
 def _check_energy_range(scene: Scene) -> None:
@@ -54,7 +55,7 @@ def _check_energy_range(scene: Scene) -> None:
     A scene with Delta_gamma = 0 (``allow_repulsive``) has no energy at all and passes.
     """
     fi = np.finfo(scene.dtype)
-    dg = abs(scene.materials.delta_gamma_N_m)
+    dg = abs(scene.delta_gamma_N_m)
     if dg == 0:
         return
     pixel = dg * scene.um_per_px**2 * UM2
@@ -98,6 +99,9 @@ def _box(scene: Scene, twists: np.ndarray | None, center_px: tuple[int, int] = (
     origin = (w / 2 - c0, r1 - h / 2)
     reach = (max(w / 2 - c0, c1 - w / 2), max(h / 2 - r0, r1 - h / 2))
     chip_rx, chip_ry = _chip_reach_px(scene.chip, scene.effects.twist)
+    # A finite meniscus widens the liquid footprint: poses that far beyond contact still feel it.
+    margin = margin_px(scene.meniscus_height_px)
+    chip_rx, chip_ry = chip_rx + margin, chip_ry + margin
     limit = None if scene.window_um is None else math.ceil(scene.window_um / scene.um_per_px - 1e-9)
     cx, rx, x_lo, x_hi = _axis_box(math.ceil(reach[0] + chip_rx - 1e-9), limit, int(center_px[0]), half_px)
     cy, ry, y_lo, y_hi = _axis_box(math.ceil(reach[1] + chip_ry - 1e-9), limit, int(center_px[1]), half_px)
@@ -105,6 +109,7 @@ def _box(scene: Scene, twists: np.ndarray | None, center_px: tuple[int, int] = (
     return {
         "twists": twists, "all_twists": all_twists, "wrap": wrap, "period": period, "origin": origin,
         "crop": (r0, r1, c0, c1), "x": (cx, rx, x_lo, x_hi), "y": (cy, ry, y_lo, y_hi), "landscape_bytes": int(nbytes),
+        "margin": margin,
     }
 
 
@@ -117,19 +122,26 @@ def require_landscape_fits(scene: Scene, twists: np.ndarray | None = None) -> No
     _refuse_over_budget(scene, b["landscape_bytes"], len(b["twists"]), 2 * ry + 1, 2 * rx + 1)
 
 
-def plan(scene: Scene, twists: np.ndarray | None = None, center_px: tuple[int, int] = (0, 0), half_px: int | None = None) -> dict:
+def plan(scene: Scene, twists: np.ndarray | None = None, center_px: tuple[int, int] = (0, 0), half_px: int | None = None,
+         check_budget: bool = True) -> dict:
     """Everything the build will do, computed without allocating the landscape.
 
     Refuses (InputError) a landscape over the scene's memory budget before any chip
-    rotation is computed.
+    rotation is computed (``check_budget=False``: the layout only, for a caller that
+    never allocates the landscape, e.g. :mod:`simulator.optimum`'s bound).
     """
     b = _box(scene, twists, center_px, half_px)
     twists, all_twists, wrap, period, origin = b["twists"], b["all_twists"], b["wrap"], b["period"], b["origin"]
     (r0, r1, c0, c1), (cx, rx, x_lo, x_hi), (cy, ry, y_lo, y_hi) = b["crop"], b["x"], b["y"]
-    _refuse_over_budget(scene, b["landscape_bytes"], len(twists), 2 * ry + 1, 2 * rx + 1)
+    if check_budget:
+        _refuse_over_budget(scene, b["landscape_bytes"], len(twists), 2 * ry + 1, 2 * rx + 1)
     pat = scene.pattern.data
     parity = (int((2 * origin[1]) % 2), int((2 * origin[0]) % 2))
-    rot = ChipRotator(scene.chip, twists, parity)
+    # The meniscus blur: on the chip (rotated smoothly) from one pixel up; below a pixel on
+    # the pattern, whose exact rasters then return the overlap model to round-off as h -> 0.
+    h_px = scene.meniscus_height_px
+    chip_blur = h_px if h_px >= CHIP_BLUR_MIN_PX else 0.0
+    rot = ChipRotator(scene.chip, twists, parity, blur_px=chip_blur, margin_px=b["margin"] if chip_blur else 0)
     hc, wc = rot.shape
     dx, dy = origin[0] - wc / 2 + cx, origin[1] - hc / 2 + cy
     assert dx == int(dx) and dy == int(dy), "pixel grids of chip and pattern must coincide"
@@ -142,6 +154,10 @@ def plan(scene: Scene, twists: np.ndarray | None = None, center_px: tuple[int, i
         ya, yb, xa, xb = 0, 1, 0, 1
     pat_up = pat_up[ya:yb, xa:xb]
     win = Window(rx=win.rx, ry=win.ry, dx=win.dx - xa, dy=win.dy - ya)
+    m = b["margin"] if 0 < h_px < CHIP_BLUR_MIN_PX else 0
+    if m:  # room for the blurred footprint, so that the meniscus blur does not wrap around
+        pat_up = np.pad(pat_up, m)
+        win = Window(rx=win.rx, ry=win.ry, dx=win.dx + m, dy=win.dy + m)
     nbytes = b["landscape_bytes"]
     return {
         "twists": twists,
@@ -153,6 +169,8 @@ def plan(scene: Scene, twists: np.ndarray | None = None, center_px: tuple[int, i
         "center_px": (cx, cy),
         "cut": (_twist_cut(all_twists, wrap, twists), (y_lo, y_hi), (x_lo, x_hi)),
         "landscape_bytes": int(nbytes),
+        "meniscus_px": h_px if not chip_blur else 0.0,  # blur left to the correlator (pattern side)
+        "chip_blurred": bool(chip_blur),
     }
 
 
@@ -193,12 +211,14 @@ def build_landscape(
     per_chunk = chunk * (2 if twins else 1)
     need = p["landscape_bytes"] + work_bytes(fft, 2 * win.ry + 1, scene.dtype, per_chunk, -(-len(p["twists"]) // chunk))
     _refuse_over_budget(scene, need, len(p["twists"]), 2 * win.ry + 1, 2 * win.rx + 1)
-    cor = Correlator(p["pattern_up"], rot.shape, win, scene.dtype, backend)
+    cor = Correlator(p["pattern_up"], rot.shape, win, scene.dtype, backend, meniscus_px=p["meniscus_px"])
     twists_deg = p["twists"]
-    scale = scene.materials.delta_gamma_N_m * scene.um_per_px**2 * UM2
+    scale = scene.delta_gamma_N_m * scene.um_per_px**2 * UM2
     energy = np.empty((len(twists_deg), 2 * win.ry + 1, 2 * win.rx + 1), dtype=scene.dtype)
     singles = [i for i in range(len(twists_deg)) if i not in twins and i not in twins.values()]
     pairs = sorted(twins.items())
+    # Exact geometry, and a blurred one (a mirror-symmetric image rotated by splines on a
+    # mirror-symmetric grid): the raster at -alpha is the one at +alpha upside down.
     exact = scene.chip.geometry is not None
     # Pattern mirror-symmetric too (about y = 0) and the window centred on y = 0:
     # E(x, y, -alpha) = E(x, -y, +alpha), the twin's plane upside down, no transform.
@@ -250,9 +270,10 @@ def build_landscape(
         wrap=p["wrap"],
         period_deg=p["period"],
         um_per_px=s,
-        delta_gamma=scene.materials.delta_gamma_N_m,
+        delta_gamma=scene.delta_gamma_N_m,
         cut=p["cut"],
         energy_scale_J=energy_scale_J(scene),
+        meniscus_height_um=scene.meniscus_height_um,
         stats={
             "rotations": rotations,
             "mirrored_twists": n_mirror,  # spectrum from the twin's transform

@@ -8,35 +8,41 @@
 * the energy curves along x and y through the minimum, their plateaus and the
   maximum bias per direction: the largest |bias| up to which the force points back
   to the minimum everywhere (PHYSICS.md 6.3);
-* the capture fraction over a default grid of starts (twist 0): the fraction that
-  ends aligned, and the capture map;
-* the yield under default placement noise: normal around the aligned pose with
-  standard deviations of 10 % of the chip size in x and y and 2 degrees of twist;
+* the capture fraction over a default grid of starts around the global minimum (at its
+  twist): the fraction that ends aligned, and the capture map;
+* the yield under default placement noise: normal around the aligned pose (the global
+  minimum) with standard deviations of 10 % of the chip size in x and y and 2 degrees of
+  twist;
 
 and writes ``summary.json``, ``landscape.png``, ``force.png``, ``capture.png``,
 ``pattern.png`` (the input as used) and ``report.html`` into a directory. Everything
 is written into a temporary directory beside it and renamed into place at the end,
 so a failure leaves no partial directory; an existing directory is never replaced
 unless asked (``force``) and only when it holds a previous selfalign output.
+
+:func:`assess` computes the same numbers without writing anything (pictures only when
+asked): one point of a design sweep (:mod:`simulator.sweep`).
 """
 
 from __future__ import annotations
 
 import html
 import json
+import math
 import os
 import time
+from dataclasses import replace
 
 import numpy as np
 
 from patterns.outputs import check_output_dir, output_directory
 from simulator import montecarlo, render
+from simulator.defaults import AUTO_LANDSCAPE_MB  # noqa: F401  (re-exported; landscapes above it are coarsened)
 from simulator.finite import require_finite
 from simulator.landscape import build_landscape, estimate_bytes
+from simulator.meniscus import regime_warning
 from simulator.scene import Scene
 
-#: Landscapes above this (MB) are built at a coarser resolution unless the user chose one.
-AUTO_LANDSCAPE_MB = 320.0
 #: Placement noise (fractions of the chip size, and degrees) for the default yield.
 NOISE_FRACTION, NOISE_TWIST_DEG = 0.10, 2.0
 YIELD_STARTS = 2000
@@ -72,8 +78,11 @@ def chip_size(scene: Scene) -> tuple[float, float]:
 def max_bias_along(values: np.ndarray, force: np.ndarray, x0: float) -> tuple[float, float]:
     """(+, -) largest |v - x0| with the force pointing back to x0 at every sample in between."""
     out = []
+    # Samples within a hundredth of a step of x0 are x0 itself (a refined minimum sits
+    # a round-off away from the samples through it).
+    tiny = 0.01 * float(np.min(np.diff(values))) if len(values) > 1 else 0.0
     for sign in (1, -1):
-        sel = (values - x0) * sign > 0
+        sel = (values - x0) * sign > tiny
         v, f = (values[sel] - x0) * sign, force[sel] * sign
         order = np.argsort(v)
         v, f = v[order], f[order]
@@ -83,8 +92,11 @@ def max_bias_along(values: np.ndarray, force: np.ndarray, x0: float) -> tuple[fl
 
 
 def evaluate(scene: Scene, out_dir: str | os.PathLike, quiet: bool = False, source: str = "", auto: bool = True,
-             force: bool = False, inputs: tuple = ()) -> dict:
+             force: bool = False, inputs: tuple = (), liquid_warnings: list[str] | None = None) -> dict:
     """Assess ``scene`` and write the report into ``out_dir``.
+
+    ``liquid_warnings`` (:func:`simulator.liquid.scene_warnings`) go into the summary
+    (``liquid_warnings``, a list of one-line strings) and the report.
 
     ``out_dir`` is created atomically (see :func:`patterns.outputs.output_directory`): it
     must not exist, or be an empty directory, or with ``force`` hold nothing but a
@@ -97,10 +109,11 @@ def evaluate(scene: Scene, out_dir: str | os.PathLike, quiet: bool = False, sour
     if auto:
         scene = auto_resolution(scene)
     with output_directory(out_dir, "--out", force, inputs, command="evaluate") as tmp:
-        summary = _assess(scene, tmp, quiet)
+        summary = assess(scene, quiet=quiet, pictures=tmp)
         summary["settings"] |= {"source_um_per_px": native, "resolution_auto": bool(auto and scene.um_per_px != native)}
         if "layout" in scene.pattern.params:  # a layout pattern: file, cell, layers, units, and where the origin is
             summary["layout"] = scene.pattern.params["layout"]
+        summary["liquid_warnings"] = list(liquid_warnings or [])
         summary["seconds"] = round(time.perf_counter() - t_start, 2)
         require_finite(summary, "evaluate summary")
         (tmp / "summary.json").write_text(json.dumps(summary, indent=2, allow_nan=False) + "\n")
@@ -108,10 +121,29 @@ def evaluate(scene: Scene, out_dir: str | os.PathLike, quiet: bool = False, sour
     return summary
 
 
-def _assess(scene: Scene, out, quiet: bool) -> dict:
+def assess(scene: Scene, *, quiet: bool = True, pictures=None, method: str = "greedy", seed: int = 0,
+           placement_sigma: tuple[float, float, float] | None = None, yield_starts: int = YIELD_STARTS,
+           grid_cells: int = GRID_CELLS) -> dict:
+    """The numbers of :func:`evaluate` for ``scene`` (no resolution change, nothing written
+    unless ``pictures`` names a directory for the four pictures).
+
+    The defaults are evaluate's: greedy steps, the yield's placement noise (sigma x, y in um
+    and twist in degrees; default 10 % of the chip size and 2 degrees) drawn with ``seed``
+    0, ``yield_starts`` starts, and a capture grid of about ``grid_cells`` starts per side.
+    """
     s = scene.um_per_px
     ls = build_landscape(scene, progress=not quiet)
     xm, ym, tm, em = ls.global_minimum()
+    gx, gy, gt = xm, ym, tm  # the grid's global minimum: centre of the capture grid and of the placement noise
+    meniscus = None
+    if ls.meniscus_height_um is not None:
+        # A smooth well: its minimum below the grid, and its stiffness there.
+        from simulator.refine import refine_minimum, stiffness
+
+        r = refine_minimum(ls, xm, ym, tm)
+        xm, ym, tm, em = r["x_um"], r["y_um"], r["twist_deg"], r["energy_J"]
+        meniscus = {"stiffness": stiffness(ls, xm, ym, tm), "overlap": build_landscape(scene.replace(
+            effects=replace(scene.effects, meniscus=False)), twists=np.array([ls.twist_deg[int(np.argmin(np.abs(ls.twist_deg - tm)))]]))}
     w, h = chip_size(scene)
     near = max(2 * s, 0.02 * min(w, h))
     near_deg = max(ls.twist_step_deg, 1.0) if len(ls.twist_deg) > 1 else 0.0
@@ -131,29 +163,44 @@ def _assess(scene: Scene, out, quiet: bool) -> dict:
         plus, minus = max_bias_along(c["values"], c["force"], x0)
         curves[axis] = c
         biases[f"+{axis}"], biases[f"-{axis}"] = plus, minus
-    # Capture fraction over a grid of starts at twist 0, and the yield under placement noise.
+    # Capture fraction over a grid of starts around the global minimum (at its twist), and the
+    # yield under placement noise around it: the target a gripper aims at.
     span = 0.6 * max(w, h)
-    step = max(s, round(2 * span / (GRID_CELLS - 1) / s) * s)
+    step = max(s, round(2 * span / (grid_cells - 1) / s) * s)
     n = int(span // step)
-    grid = montecarlo.StartGrid.from_ranges((-n * step, n * step, step), (-n * step, n * step, step), 0.0)
-    cap = montecarlo.run_batch(scene, grid, landscape=ls, progress=not quiet)
+    grid = montecarlo.StartGrid.from_ranges((gx - n * step, gx + n * step, step), (gy - n * step, gy + n * step, step), gt)
+    cap = montecarlo.run_batch(scene, grid, method, landscape=ls, progress=not quiet)
     cap_sum = montecarlo.summarize(cap, grid)
-    noise = (NOISE_FRACTION * w, NOISE_FRACTION * h, NOISE_TWIST_DEG if len(ls.twist_deg) > 1 else 0.0)
-    starts = montecarlo.random_starts(YIELD_STARTS, noise, seed=0)
+    noise = (NOISE_FRACTION * w, NOISE_FRACTION * h, NOISE_TWIST_DEG) if placement_sigma is None else tuple(float(v) for v in placement_sigma)
+    if len(ls.twist_deg) == 1:
+        noise = (noise[0], noise[1], 0.0)
+    starts = montecarlo.random_starts(yield_starts, noise, seed=seed, around=(gx, gy, gt))
     if len(ls.twist_deg) == 1:
         starts[:, 2] = 0.0
-    yl = montecarlo.run_batch(scene, starts, landscape=ls, progress=not quiet)
+    yl = montecarlo.run_batch(scene, starts, method, landscape=ls, progress=not quiet)
     yl_sum = montecarlo.summarize(yl)
-    # Pictures.
-    render.plot_pattern(scene.pattern, out / "pattern.png")
-    render.plot_landscape(ls, out / "landscape.png", pattern=scene.pattern)
-    render.plot_forces(ls, out / "force.png", through=(xm, ym, tm))
-    render.plot_capture_map(
-        montecarlo.capture_map(cap, grid), grid, scene, out / "capture.png", title=f"capture map, yield {100 * cap_sum['yield']:.1f} % of {cap_sum['n']} starts"
-    )
+    if pictures is not None:
+        out = pictures
+        render.plot_pattern(scene.pattern, out / "pattern.png")
+        render.plot_landscape(ls, out / "landscape.png", pattern=scene.pattern)
+        render.plot_forces(ls, out / "force.png", through=(xm, ym, tm), compare=meniscus["overlap"] if meniscus else None)
+        render.plot_capture_map(
+            montecarlo.capture_map(cap, grid), grid, scene, out / "capture.png", title=f"capture map: capture fraction {100 * cap_sum['yield']:.1f} % of {cap_sum['n']} grid starts"
+        )
     m = scene.materials
-    return {
-        "global_minimum": {"x_um": xm, "y_um": ym, "twist_deg": tm, "energy_J": em, "overlap_um2": float(ls.overlap_um2(em))},
+    extra = {}
+    if meniscus:
+        extra = {
+            "meniscus_height_um": ls.meniscus_height_um,
+            "pinned": scene.liquid.pinned,
+            "stiffness": meniscus["stiffness"],
+            "offset_from_centre": {"x_um": round(xm, 1) + 0.0, "y_um": round(ym, 1) + 0.0, "twist_deg": round(tm, 1) + 0.0,
+                                   "distance_um": round(math.hypot(xm, ym), 1)},
+            "meniscus_warning": regime_warning(ls.meniscus_height_um, scene.chip_min_side_um),
+        }
+    return extra | {
+        "global_minimum": {"x_um": xm, "y_um": ym, "twist_deg": tm, "energy_J": em, "overlap_um2": float(ls.overlap_um2(em)),
+                           "refined": meniscus is not None},
         "restoring_force_N": {"bias_um": near, **forces},
         "restoring_torque_Nm": {"twist_deg": near_deg, **torques} if torques else None,
         "plateaus_um": {a: curves[a]["plateaus"] for a in ("x", "y")},
@@ -162,15 +209,16 @@ def _assess(scene: Scene, out, quiet: bool) -> dict:
             "fraction": cap_sum["yield"],
             "n": cap_sum["n"],
             "outcomes": cap_sum["outcomes"],
-            "grid_um": {"from": -n * step, "to": n * step, "step": step},
-            "twist_deg": 0.0,
+            "grid_um": {"from": -n * step, "to": n * step, "step": step},  # about the centre
+            "center": {"x_um": gx, "y_um": gy},
+            "twist_deg": gt,
         },
         "yield": {
             "fraction": yl_sum["yield"],
             "n": yl_sum["n"],
             "outcomes": yl_sum["outcomes"],
             "placement_sigma": {"x_um": noise[0], "y_um": noise[1], "twist_deg": noise[2]},
-            "seed": 0,
+            "seed": seed,
             "error_um": yl_sum.get("aligned_error_um"),
             "error_deg": yl_sum.get("aligned_error_deg"),
         },
@@ -181,11 +229,11 @@ def _assess(scene: Scene, out, quiet: bool) -> dict:
             "twist_step_deg": ls.twist_step_deg if len(ls.twist_deg) > 1 else None,
             "twists": len(ls.twist_deg),
             "dtype": scene.dtype,
-            "method": "greedy",
+            "method": method,
             "surface_tension_N_m": m.surface_tension_N_m,
             "pad_angle_deg": m.pad_angle_deg,
             "substrate_angle_deg": m.substrate_angle_deg,
-            "delta_gamma_N_m": m.delta_gamma_N_m,
+            "delta_gamma_N_m": scene.delta_gamma_N_m,
             "landscape_MB": round(ls.energy.nbytes / 2**20, 1),
             "landscape_s": round(ls.stats["seconds"], 2),
         },
@@ -207,6 +255,37 @@ def _layout_row(record: dict | None) -> str:
     from patterns.layout import frame_note
 
     return f"\n<tr><th>layout</th><td>{html.escape(frame_note(record).removeprefix('frame: '))}</td></tr>"
+
+
+def _liquid_rows(warnings: list[str] | None) -> str:
+    """The report's list of the droplet's warnings (empty when there are none)."""
+    if not warnings:
+        return ""
+    items = "".join(f"<li>{html.escape(w)}</li>" for w in warnings)
+    return f"\n<h2>The droplet</h2>\n<ul class=\"warn\">{items}</ul>"
+
+
+def _model_note(summary: dict) -> str:
+    h = summary.get("meniscus_height_um")
+    if h is None:
+        return "Overlap model (energy = &Delta;&gamma; &times; overlap area)."
+    pinned = ", contact lines pinned at the pad edges" if summary.get("pinned") else ""
+    return (f"Finite meniscus, height meniscus_height_um = {h:.4g} um{pinned} (the overlap energy with every cusp "
+            "rounded over h; dashed in the force plot: the overlap model).")
+
+
+def _meniscus_rows(summary: dict) -> str:
+    k = summary.get("stiffness")
+    if not k:
+        return ""
+    o = summary["offset_from_centre"]
+    tw = "n/a" if k.get("twist_Nm_per_rad") is None else _fmt(k["twist_Nm_per_rad"], "N m/rad")
+    warn = summary.get("meniscus_warning")
+    warn_html = f'<p class="warn">warning: {html.escape(warn)}</p>' if warn else ""
+    return (f"<h2>Stiffness at alignment (finite meniscus)</h2><table><tr><th>k<sub>x</sub></th><td>{_fmt(k['x_N_per_m'], 'N/m')}</td></tr>"
+            f"<tr><th>k<sub>y</sub></th><td>{_fmt(k['y_N_per_m'], 'N/m')}</td></tr><tr><th>k<sub>twist</sub></th><td>{tw}</td></tr>"
+            f"<tr><th>offset of the minimum from the pattern centre</th><td>({o['x_um']:g} um, {o['y_um']:g} um, {o['twist_deg']:g} deg), "
+            f"{o['distance_um']:g} um</td></tr></table>{warn_html}\n")
 
 
 def _html(summary: dict, source: str) -> str:
@@ -243,7 +322,7 @@ img {{ max-width: 100%; border: 1px solid #ddd; }} .grid {{ display: grid; grid-
 .note {{ color: #555; font-size: .9em; }}
 </style></head><body>
 <h1>selfalign evaluation of <code>{e(source)}</code></h1>
-<p class="note">Overlap model (energy = &Delta;&gamma; &times; overlap area). Positions in um of the chip centre from the
+<p class="note">{_model_note(summary)} Positions in um of the chip centre from the
 pattern centre, x right, y up; twist in degrees, counter-clockwise positive. Computed in {summary['seconds']:.1f} s.</p>
 <h2>Inputs</h2>
 <div class="grid"><div><img src="pattern.png" alt="pattern as used"></div><div><table>
@@ -251,11 +330,11 @@ pattern centre, x right, y up; twist in degrees, counter-clockwise positive. Com
 <tr><th>chip</th><td>{s['chip_um'][0]:g} x {s['chip_um'][1]:g} um wettable footprint</td></tr>{_layout_row(summary.get("layout"))}
 <tr><th>liquid / wetting</th><td>surface tension {s['surface_tension_N_m'] * 1e3:g} mN/m, pad {s['pad_angle_deg']:g} deg, substrate {s['substrate_angle_deg']:g} deg: &Delta;&gamma; = {s['delta_gamma_N_m'] * 1e3:.4g} mN/m</td></tr>
 <tr><th>pose grid</th><td>{s['twists']} twists{f", step {s['twist_step_deg']:g} deg" if s['twist_step_deg'] else ""}; {s['dtype']}; landscape {s['landscape_MB']:g} MB in {s['landscape_s']:g} s</td></tr>
-</table></div></div>
+</table></div></div>{_liquid_rows(summary.get("liquid_warnings"))}
 <h2>Where the chip ends up</h2>
 <p>Global minimum of the energy at <b>({g['x_um']:g} um, {g['y_um']:g} um, {g['twist_deg']:g} deg)</b>,
 overlap {g['overlap_um2']:,.0f} um&sup2;, energy {_fmt(g['energy_J'], 'J')}.</p>
-<h2>Restoring force and torque near alignment</h2>
+{_meniscus_rows(summary)}<h2>Restoring force and torque near alignment</h2>
 <table><tr><th>chip displaced by</th><th>F<sub>x</sub></th><th>F<sub>y</sub></th></tr>{rows_force}{rows_torque}</table>
 <p>Maximum bias from which the force points back to the minimum all the way:
 +x {b['+x']:g} um, &minus;x {b['-x']:g} um, +y {b['+y']:g} um, &minus;y {b['-y']:g} um (twist held at the minimum's).
@@ -265,9 +344,9 @@ Plateaus (zero force): {e(plateaus)}.</p>
 <img src="landscape.png" alt="energy over x and y">
 <h2>Capture region and yield</h2>
 <p>Capture fraction: <b>{100 * cap['fraction']:.1f} %</b> of {cap['n']} greedy starts on a grid from {cap['grid_um']['from']:g} to {cap['grid_um']['to']:g} um
-in steps of {cap['grid_um']['step']:g} um in x and y, twist 0 ({e(cap_out)}).</p>
-<p>Yield under placement noise: <b>{100 * yl['fraction']:.1f} %</b> of {yl['n']} starts drawn normally around the aligned pose with
-&sigma; = {ps['x_um']:.3g} um, {ps['y_um']:.3g} um, {ps['twist_deg']:g} deg (seed {yl['seed']}): {e(outcomes)}; aligned runs: {e(err_txt)}.</p>
+in steps of {cap['grid_um']['step']:g} um in x and y around the global minimum, twist {cap['twist_deg']:g} deg ({e(cap_out)}).</p>
+<p>Yield under placement noise: <b>{100 * yl['fraction']:.1f} %</b> of {yl['n']} starts drawn normally around the aligned pose (the global minimum) with
+&sigma; = {ps['x_um']:.3g} um, {ps['y_um']:.3g} um, {ps['twist_deg']:g} deg (seed {yl['seed']}): {e(outcomes)}; aligned runs, final-pose error from the global minimum: {e(err_txt)}.</p>
 <img src="capture.png" alt="capture map">
 <p class="note">Written by selfalign. The numbers are in summary.json (units in the key names).</p>
 </body></html>

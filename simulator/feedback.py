@@ -47,6 +47,9 @@ class _NoBar:
     def update(self, k: int) -> None:
         return None
 
+    def set_postfix_str(self, text: str, refresh: bool = True) -> None:
+        return None
+
 
 def progress_bar(show: bool, total: int, desc: str, unit: str):
     """A tqdm bar on stderr over ``total`` ``unit``s, or a stand-in that shows nothing.

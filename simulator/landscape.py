@@ -68,6 +68,8 @@ class Landscape:
             and the energy is exactly 0; beyond an uncut end of a non-periodic twist
             axis lies the end of the twist range the scene asked for.
         stats: what the build did (rotations, seconds, bytes, backend, FFT size).
+        meniscus_height_um: the finite meniscus's height (um) the energy was built with,
+            None for the overlap model (:mod:`simulator.meniscus`).
     """
 
     energy: np.ndarray
@@ -81,6 +83,7 @@ class Landscape:
     cut: tuple = ((False, False), (False, False), (False, False))
     energy_scale_J: float = 0.0
     stats: dict = field(default_factory=dict)
+    meniscus_height_um: float | None = None
 
     @property
     def full_reach(self) -> bool:
@@ -162,9 +165,24 @@ class Landscape:
         """Restoring torque about z in N m: tau = -dE/dtwist (twist in radians, CCW +)."""
         return -self.gradient_at(x_um, y_um, twist_deg)[2]
 
+    def minimum_index(self) -> tuple[int, int, int]:
+        """Grid indices (it, iy, ix) of the global minimum: of the grid poses within the noise
+        floor of the lowest energy (ties), the one nearest the nominal pose (:func:`nominal_order`).
+
+        A tie is decided by where it lies, not by round-off, so a landscape and any set of
+        its boxes that holds every tie name the same pose (:mod:`simulator.optimum`).
+        """
+        e = self.energy
+        cand = np.flatnonzero(e <= float(e.min()) + self.noise_floor_J)
+        it, iy, ix = np.unravel_index(cand, e.shape)
+        if cand.size > 1:
+            k = nominal_order(self.x_um[ix], self.y_um[iy], self.twist_deg[it], self.um_per_px, self.twist_step_deg, self.period_deg)[0]
+            it, iy, ix = it[k : k + 1], iy[k : k + 1], ix[k : k + 1]
+        return int(it[0]), int(iy[0]), int(ix[0])
+
     def global_minimum(self) -> tuple[float, float, float, float]:
-        """(x_um, y_um, twist_deg, energy_J) of the lowest grid pose (first in index order on ties)."""
-        it, iy, ix = np.unravel_index(int(np.argmin(self.energy)), self.energy.shape)
+        """(x_um, y_um, twist_deg, energy_J) of the global minimum on this grid (:meth:`minimum_index`)."""
+        it, iy, ix = self.minimum_index()
         return float(self.x_um[ix]), float(self.y_um[iy]), float(self.twist_deg[it]), float(self.energy[it, iy, ix])
 
     def curve(self, axis: str, through: tuple[float, float, float], start: float, stop: float) -> dict:
@@ -209,6 +227,32 @@ class Landscape:
             "plateaus": runs(v, (force == 0) & ~detached),
             "no_contact": runs(v, detached),
         }
+
+
+#: The nominal ball of :func:`nominal_order`: poses within NOMINAL_BALL_PX px in x and y
+#: and NOMINAL_BALL_PX / NOMINAL_PX_PER_STEP twist steps of (0, 0, 0), the box that
+#: :func:`simulator.optimum.nominal_box` builds.
+NOMINAL_BALL_PX, NOMINAL_PX_PER_STEP = 16, 8
+
+
+def nominal_distance(x_um, y_um, twist_deg, um_per_px: float, twist_step_deg: float, period_deg: float):
+    """(r, twist steps) of poses from the nominal pose (0, 0, 0): r = max(|x|, |y|, 8 |twist|)
+    with x, y in px and the twist in steps, taken modulo the chip's symmetry period."""
+    p = float(period_deg)
+    tw = np.asarray(twist_deg, float)
+    ts = np.abs(np.mod(tw + p / 2, p) - p / 2) / twist_step_deg
+    xp, yp = np.abs(np.asarray(x_um, float)) / um_per_px, np.abs(np.asarray(y_um, float)) / um_per_px
+    r = np.maximum(np.maximum(xp, yp), NOMINAL_PX_PER_STEP * ts)
+    return np.round(r, 6), np.round(ts, 6)
+
+
+def nominal_order(x_um, y_um, twist_deg, um_per_px: float, twist_step_deg: float, period_deg: float) -> np.ndarray:
+    """Indices that sort poses by their distance from the nominal pose (0, 0, 0): by r of
+    :func:`nominal_distance`, then twist steps, then x^2 + y^2, then |twist|, twist, y, x."""
+    x, y, t = (np.asarray(v, float) for v in (x_um, y_um, twist_deg))
+    r, ts = nominal_distance(x, y, t, um_per_px, twist_step_deg, period_deg)
+    d2 = np.round((x / um_per_px) ** 2 + (y / um_per_px) ** 2, 6)
+    return np.lexsort((x, y, t, np.abs(t), d2, ts, r))
 
 
 def runs(values: np.ndarray, flat: np.ndarray, min_points: int = 3) -> list[list[float]]:

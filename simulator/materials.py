@@ -151,6 +151,10 @@ class Materials:
     pad_angle_deg: float = 30.0
     substrate_angle_deg: float = 60.0
     allow_repulsive: bool = False
+    #: The pad's receding and advancing contact angles (degrees) for contact-angle
+    #: hysteresis (:mod:`simulator.hysteresis`); None = not given.
+    pad_receding_deg: float | None = None
+    pad_advancing_deg: float | None = None
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
@@ -163,6 +167,14 @@ class Materials:
         set_(
             self, "substrate_angle_deg", _angle("substrate contact angle", self.substrate_angle_deg)
         )
+        if (self.pad_receding_deg is None) != (self.pad_advancing_deg is None):
+            raise InputError("give the pad's receding and advancing angles together (--hysteresis RECEDING:ADVANCING)")
+        if self.pad_receding_deg is not None:
+            from simulator.hysteresis import require_window
+
+            r, a = require_window(self.pad_receding_deg, self.pad_advancing_deg)
+            set_(self, "pad_receding_deg", r)
+            set_(self, "pad_advancing_deg", a)
         if not isinstance(self.allow_repulsive, bool | np.bool_):
             raise InputError(f"allow_repulsive must be true or false, got {self.allow_repulsive!r}")
         set_(self, "allow_repulsive", bool(self.allow_repulsive))
@@ -233,6 +245,11 @@ class Liquid:
         density_kg_m3: density, kg/m^3.
         volume_nl: droplet volume, nl. The default 20 nl is the source's four-pad
             volume (730 um pattern); the defect/jaggedness tests on 200 um used 0.5 nl.
+        height_um: the liquid's height under the chip (um) for the finite meniscus
+            (:mod:`simulator.meniscus`; TOML ``meniscus_height_um``); None = ``volume_nl``
+            over the chip's area.
+        pinned: contact lines held at the pad edges (liquid confined by a superhydrophobic
+            substrate): only liquid-air area changes, ``Delta_gamma = -2 gamma_LA``.
     """
 
     name: str = "water"
@@ -240,10 +257,20 @@ class Liquid:
     viscosity_Pa_s: float = WATER_VISCOSITY_PA_S
     density_kg_m3: float = WATER_DENSITY_KG_M3
     volume_nl: float = 20.0
+    height_um: float | None = None
+    pinned: bool = False
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
         set_(self, "name", str(self.name))
+        if not isinstance(self.pinned, bool | np.bool_):
+            raise InputError(f"liquid pinned must be true or false, got {self.pinned!r}")
+        set_(self, "pinned", bool(self.pinned))
+        if self.height_um is not None:
+            h = self.height_um
+            if isinstance(h, bool) or not isinstance(h, int | float | np.floating | np.integer) or not math.isfinite(h) or h <= 0:
+                raise InputError(f"meniscus height (--meniscus-height) must be a positive, finite number of um, got {h!r}")
+            set_(self, "height_um", float(h))
         set_(
             self,
             "surface_tension_N_m",
@@ -377,112 +404,24 @@ def parallelepiped_stiffness(
     return 2.0 * positive("surface tension", gamma, "N/m") * length / h
 
 
-def overflow_angle_deg(theta_edge_deg: float, theta_adv_pad_deg: float) -> float:
-    """Apparent angle at which liquid spills over a pad edge, ``(180 - theta_edge) + theta_adv_pad``.
-
-    PHYSICS.md 9.2 [Eq. 22]; ``theta_edge`` is the solid wedge angle (90 = vertical wall).
-    """
-    te = _angle("edge angle", theta_edge_deg)
-    ta = _angle("pad advancing angle", theta_adv_pad_deg)
-    return 180.0 - te + ta
-
-
-def overflow_bias_um(h_um: float, theta_edge_deg: float, theta_adv_pad_deg: float) -> float:
-    """Bias beyond which liquid overflows a protruding pad, ``h / tan(theta_edge - theta_adv_pad)``, um.
-
-    PHYSICS.md 9.4 [Eq. 23] and C12 (h 12.5 um, 90 deg, 60 deg -> 21.65 um). Returns
-    ``math.inf`` when ``theta_edge <= theta_adv_pad`` (the overflow angle is >= 180
-    and cannot be reached: condition 1), and 0 when ``theta_edge - theta_adv_pad >= 90``
-    (the flat-face meniscus is already past the pinning window at zero bias).
-    """
-    h = positive("meniscus height", h_um, "um")
-    diff = _angle("edge angle", theta_edge_deg) - _angle("pad advancing angle", theta_adv_pad_deg)
-    if diff <= 0:
-        return math.inf
-    if diff >= 90:
-        return 0.0
-    return h / math.tan(math.radians(diff))
+#: Moved to :mod:`simulator.liquid` (overflow of protruding pads, critical volume);
+#: still importable from here.
+_MOVED_TO_LIQUID = (
+    "OverflowConditions",
+    "critical_volume_nl",
+    "dimensionless_volume",
+    "overflow_angle_deg",
+    "overflow_bias_um",
+    "overflow_conditions",
+)
 
 
-@dataclass(frozen=True)
-class OverflowConditions:
-    """Which of the three no-overflow conditions of PHYSICS.md 9.4 hold.
+def __getattr__(name: str):
+    if name in _MOVED_TO_LIQUID:
+        from simulator import liquid
 
-    Attributes:
-        edge_confines: (1) ``theta_edge <= theta_adv_pad``: the edge can never be overrun.
-        chip_dewets: (2) ``theta_edge < theta_adv_pad + theta_chip``: the chip de-wets
-            before the liquid reaches the overflow angle.
-        bias_below_overflow: (3) ``|bias| < overflow_bias_um``.
-        overflow_bias_um: the bias of condition (3), um (inf under condition 1).
-    """
-
-    edge_confines: bool
-    chip_dewets: bool
-    bias_below_overflow: bool
-    overflow_bias_um: float
-
-    @property
-    def holding(self) -> tuple[int, ...]:
-        """Numbers (1, 2, 3) of the conditions that hold."""
-        flags = (self.edge_confines, self.chip_dewets, self.bias_below_overflow)
-        return tuple(i + 1 for i, f in enumerate(flags) if f)
-
-    @property
-    def overflows(self) -> bool:
-        """True when none of the conditions holds: the liquid overflows, alignment fails."""
-        return not self.holding
-
-
-def overflow_conditions(
-    theta_edge_deg: float,
-    theta_adv_pad_deg: float,
-    theta_chip_deg: float,
-    bias_um: float,
-    h_um: float,
-) -> OverflowConditions:
-    """Evaluate the no-overflow conditions (1)-(3) of PHYSICS.md 9.4 for one placement.
-
-    Args:
-        theta_edge_deg: solid wedge angle of the pad edge, degrees (90 = vertical wall).
-        theta_adv_pad_deg: advancing contact angle on the pad, degrees.
-        theta_chip_deg: the chip's *advancing* angle when the chip is placed with a
-            bias, or its *receding* angle when it is placed without bias and then
-            dragged sideways (the stricter case), degrees.
-        bias_um: lateral bias, um (its magnitude is used).
-        h_um: meniscus height, um (e.g. :func:`meniscus_height_um`).
-    """
-    te = _angle("edge angle", theta_edge_deg)
-    ta = _angle("pad advancing angle", theta_adv_pad_deg)
-    tc = _angle("chip contact angle", theta_chip_deg)
-    x = abs(float(bias_um))
-    if not math.isfinite(x):
-        raise InputError(f"bias must be a finite number of um, got {bias_um!r}")
-    xo = overflow_bias_um(h_um, te, ta)
-    return OverflowConditions(
-        edge_confines=te <= ta,
-        chip_dewets=te < ta + tc,
-        bias_below_overflow=x < xo,
-        overflow_bias_um=xo,
-    )
-
-
-def critical_volume_nl(v_nd: float, area_um2: float) -> float:
-    """Critical droplet volume ``V_crit = (V_ND A)^(3/2)`` of a segmented pattern, nl.
-
-    PHYSICS.md 8.3 [Eq. 17]. ``V_ND`` is dimensionless and comes from a fit for the
-    contact angles and relative gap in question (not reproduced here); ``A`` is the
-    pattern area in um^2, so ``(V_ND A)^(3/2)`` is in um^3 and is divided by 1e6.
-    """
-    v = positive("dimensionless volume V_ND", v_nd)
-    a = positive("pattern area", area_um2, "um^2")
-    return (v * a) ** 1.5 / UM3_PER_NL
-
-
-def dimensionless_volume(volume_nl: float, area_um2: float) -> float:
-    """Inverse of :func:`critical_volume_nl`: ``V_ND = V^(2/3) / A`` with V in um^3."""
-    v = positive("droplet volume", volume_nl, "nl")
-    a = positive("pattern area", area_um2, "um^2")
-    return (v * UM3_PER_NL) ** (2.0 / 3.0) / a
+        return getattr(liquid, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 __all__ = [
@@ -490,18 +429,12 @@ __all__ = [
     "Chip",
     "Liquid",
     "Materials",
-    "OverflowConditions",
     "couette_damping",
     "couette_rotational_damping",
     "couette_torsional_damping",
-    "critical_volume_nl",
     "delta_gamma",
-    "dimensionless_volume",
     "gamma_wet",
     "meniscus_height_um",
-    "overflow_angle_deg",
-    "overflow_bias_um",
-    "overflow_conditions",
     "parallelepiped_force",
     "parallelepiped_stiffness",
     "rectangle_polar_moment_um4",

@@ -66,7 +66,7 @@ def plot_pattern(mask: Mask, path: str | os.PathLike, title: str = "pattern as s
     fig, ax = plt.subplots(figsize=(4.6, 4.4))
     im = ax.imshow(mask.data, extent=mask.extent_um, cmap="gray", vmin=0, vmax=1, interpolation="nearest")
     ax.plot([0], [0], "+", color="C3", ms=10, mew=1.5)
-    ax.set(xlabel="x (um)", ylabel="y (um)", title=f"{title} ({mask.um_per_px:g} um/px)")
+    ax.set(xlabel="x (µm)", ylabel="y (µm)", title=f"{title} ({mask.um_per_px:g} µm/px)")
     fig.colorbar(im, ax=ax, shrink=0.8, label="wettability (1 = pad)")
     save_figure(fig, path)
 
@@ -383,8 +383,10 @@ def _scene_caption(scene, traj) -> str:
     cw, ch = (c.params.get("width_um"), c.params.get("height_um")) if chip == "rectangle" else (None, None)
     chip_txt = f"{cw:g} x {ch:g} µm chip" if cw else f"chip footprint {c.area_um2:,.0f} µm²"
     s = traj.start
+    grey = bool(np.any((p.data > 0.02) & (p.data < 0.98)))  # graded pads, or the anti-aliased edges
+    shades = ", lighter = graded" if grey else ""  # partly wettable: graded pads, anti-aliased edges
     return (f"pattern {w * p.um_per_px:g} x {h * p.um_per_px:g} µm at {p.um_per_px:g} µm/px (white = pad, "
-            f"grey = substrate, + = centre), {chip_txt}; start ({s[0]:g} µm, {s[1]:g} µm, {s[2]:g}°), twist CCW +")
+            f"grey = substrate{shades}, + = centre), {chip_txt}; start ({s[0]:g} µm, {s[1]:g} µm, {s[2]:g}°), twist CCW +")
 
 
 # ------------------------------------------------------------------ landscape plots
@@ -414,8 +416,15 @@ def plot_landscape(ls, path: str | os.PathLike, pattern: Mask | None = None) -> 
     s = ls.um_per_px
     extent = (ls.x_um[0] - s / 2, ls.x_um[-1] + s / 2, ls.y_um[0] - s / 2, ls.y_um[-1] + s / 2)
     gx, gy, gt, ge = ls.global_minimum()
+    # The star marks the global minimum where it is drawn: on the panel minimised over
+    # twist, and on the fixed-twist panel only when the minimum lies at that twist.
+    d = abs(gt - float(ls.twist_deg[k0]))
+    d = min(d % ls.period_deg, ls.period_deg - d % ls.period_deg)
+    stars = [d <= 1e-9] + [True] * (len(panels) - 1)
+    if not stars[0]:
+        panels[0] = (panels[0][0], f"{panels[0][1]} (the global minimum, at {gt:g}°, is on the right)")
     fig, axes = plt.subplots(1, len(panels), figsize=(5.2 * len(panels) + 1.2, 5.0), squeeze=False, layout="constrained")
-    for ax, (img, label) in zip(axes[0], panels, strict=True):
+    for ax, (img, label), star in zip(axes[0], panels, stars, strict=True):
         im = ax.imshow(img, origin="lower", extent=extent, cmap="viridis", vmin=vmin, vmax=vmax, interpolation="antialiased")
         if vmax > vmin:
             levels = np.linspace(vmin, vmax, 9)[1:-1]
@@ -423,13 +432,14 @@ def plot_landscape(ls, path: str | os.PathLike, pattern: Mask | None = None) -> 
                        linestyles="solid")
         if pattern is not None:
             ax.contour(*_outline(pattern), levels=[0.5], colors="#ff9f1c", linewidths=1.0)
-        ax.plot(gx, gy, marker="*", ms=14, mfc=CHIP_COLOUR, mec="white", mew=1.0, ls="none",
-                label=f"global minimum ({gx:g} µm, {gy:g} µm, {gt:g}°), {ge * J_TO_NJ:.3g} nJ")
+        if star:
+            ax.plot(gx, gy, marker="*", ms=14, mfc=CHIP_COLOUR, mec="white", mew=1.0, ls="none",
+                    label=f"global minimum ({gx:g} µm, {gy:g} µm, {gt:g}°), {ge * J_TO_NJ:.3g} nJ")
         ax.set_title(f"energy {label}", fontsize=10)
         ax.set_xlabel("chip centre x (µm)")
         ax.set_ylabel("chip centre y (µm)")
         ax.set_aspect("equal")
-    axes[0][0].legend(loc="upper left", fontsize=8, framealpha=0.85)
+    axes[0][stars.index(True)].legend(loc="upper left", fontsize=8, framealpha=0.85)
     cb = fig.colorbar(im, ax=axes[0].tolist(), shrink=0.85)
     cb.set_label("energy (nJ); lower = more overlap")
     note = "; orange = pattern outline" if pattern is not None else ""
@@ -463,19 +473,22 @@ def _line_range(values: np.ndarray, centre: float, span: float | None) -> tuple[
 
 
 def plot_forces(ls, path: str | os.PathLike, through: tuple[float, float, float] = (0.0, 0.0, 0.0),
-                span_um: float | None = None) -> None:
+                span_um: float | None = None, compare=None) -> None:
     """Energy and restoring force along x, along y (uN) and torque along twist (nN m) through a pose.
 
     Top row: energy (nJ); bottom row: force F = -dE/dx, -dE/dy (uN) and torque
     tau = -dE/dtwist (nN m, twist in radians). Shaded: plateaus, where the force is
     zero (energy changes below the noise floor: :meth:`Landscape.curve`); grey where
     the chip no longer touches the pattern. ``span_um`` limits the x and y lines to
-    ``through +- span_um`` (default: the whole landscape).
+    ``through +- span_um`` (default: the whole landscape). ``compare``: a second landscape
+    (the overlap model beside a finite meniscus) drawn dashed along the same lines.
     """
     plt = pyplot()
     if span_um is not None and not (np.isfinite(span_um) and span_um > 0):
         raise InputError(f"span_um must be a finite number > 0 um, got {span_um!r}")
     tx, ty, tt = (float(v) for v in through)
+    # Labels to 0.1 um and 0.1 degree (a refined minimum carries round-off digits).
+    lx, ly, lt = (round(v, 1) + 0.0 for v in (tx, ty, tt))
     curves = [ls.curve("x", through, *_line_range(ls.x_um, tx, span_um)),
               ls.curve("y", through, *_line_range(ls.y_um, ty, span_um))]
     if len(ls.twist_deg) > 1:
@@ -500,12 +513,21 @@ def plot_forces(ls, path: str | os.PathLike, through: tuple[float, float, float]
                 kinds.add("no contact" if no_contact else "plateau")
                 ax.axvspan(a, b, color="0.85" if no_contact else PLATEAU_COLOUR, alpha=0.6 if no_contact else 0.35, lw=0)
             ax.grid(alpha=0.3)
-        ax_e.plot(v, e_nj, color=PATH_COLOUR, lw=1.5)
+        h = getattr(ls, "meniscus_height_um", None)
+        label = f"meniscus h = {h:.3g} µm" if h else None
+        if compare is not None and (not twist or len(compare.twist_deg) > 1):
+            lo, hi = float(v[0]), float(v[-1])
+            ref = compare.curve(cur["axis"], through, lo, hi)
+            ax_e.plot(ref["values"], ref["energy_J"] * J_TO_NJ, color="0.35", lw=1.1, ls="--", label="overlap model (h → 0)")
+            ax_f.plot(ref["values"], ref["force"] * (NM_TO_NNM if twist else N_TO_UN), color="0.35", lw=1.1, ls="--")
+        ax_e.plot(v, e_nj, color=PATH_COLOUR, lw=1.5, label=label)
         ax_f.plot(v, f, color=CHIP_COLOUR, lw=1.5)
+        if compare is not None and col == min(1, len(curves) - 1):
+            ax_e.legend(loc="upper right", fontsize=8, framealpha=0.85)
         ax_f.axhline(0, color="k", lw=0.6)
         name = {"x": "x (µm)", "y": "y (µm)", "twist": "twist (°)"}[cur["axis"]]
-        fixed = {"x": f"y = {ty:g} µm, twist {tt:g}°", "y": f"x = {tx:g} µm, twist {tt:g}°",
-                 "twist": f"x = {tx:g} µm, y = {ty:g} µm"}[cur["axis"]]
+        fixed = {"x": f"y = {ly:g} µm, twist {lt:g}°", "y": f"x = {lx:g} µm, twist {lt:g}°",
+                 "twist": f"x = {lx:g} µm, y = {ly:g} µm"}[cur["axis"]]
         ax_e.set_title(f"along {cur['axis']} ({fixed})", fontsize=10)
         ax_f.set_xlabel(f"chip {name}")
         ax_e.set_ylabel("energy (nJ)")
@@ -516,7 +538,7 @@ def plot_forces(ls, path: str | os.PathLike, through: tuple[float, float, float]
     handles += [Patch(color="0.85", alpha=0.6, label="no contact")] if "no contact" in kinds else []
     if handles:
         axes[0, 0].legend(handles=handles, loc="lower left", fontsize=8, framealpha=0.85)
-    fig.suptitle(f"Energy and restoring force through ({tx:g} µm, {ty:g} µm, {tt:g}°); "
+    fig.suptitle(f"Energy and restoring force through ({lx:g} µm, {ly:g} µm, {lt:g}°); "
                  "force points towards lower energy", fontsize=11)
     save_figure(fig, path)
 
@@ -557,13 +579,13 @@ def plot_capture_map(cmap: np.ndarray, grid, scene, path, title: str = "") -> No
     for ax in axes.ravel()[len(show) :]:
         ax.set_visible(False)
     for ax, k in zip(axes.ravel(), show, strict=False):
-        panel = f"start twist {grid.twist_deg[k]:g} deg"
+        panel = f"start twist {grid.twist_deg[k]:g}°"
         if line:
-            along, fixed, cells = ("x", f"y = {ys[0]:g} um", cmap[k]) if ny == 1 else ("y", f"x = {xs[0]:g} um", cmap[k].T)
+            along, fixed, cells = ("x", f"y = {ys[0]:g} µm", cmap[k]) if ny == 1 else ("y", f"x = {xs[0]:g} µm", cmap[k].T)
             lo, hi = extent[:2] if ny == 1 else extent[2:]
             ax.imshow(cells, extent=(lo, hi, 0, 1), cmap=colors, norm=norm, interpolation="nearest", aspect="auto")
             ax.set_yticks([])
-            ax.set_xlabel(f"start {along} (um)")
+            ax.set_xlabel(f"start {along} (µm)")
             ax.set_title(f"{panel}, {fixed}", fontsize=10)
             continue
         ax.imshow(cmap[k], origin="lower", extent=extent, cmap=colors, norm=norm, interpolation="nearest", aspect="equal")
@@ -572,8 +594,8 @@ def plot_capture_map(cmap: np.ndarray, grid, scene, path, title: str = "") -> No
         ax.set_xlim(extent[0], extent[1])
         ax.set_ylim(extent[2], extent[3])
         ax.set_title(panel, fontsize=10)
-        ax.set_xlabel("start x (um)")
-        ax.set_ylabel("start y (um)")
+        ax.set_xlabel("start x (µm)")
+        ax.set_ylabel("start y (µm)")
     counts = np.bincount(cmap.ravel().astype(np.int64), minlength=len(OUTCOMES))
     handles = [Patch(color=OUTCOME_COLORS[k], label=f"{name} ({counts[k]:,})") for k, name in enumerate(OUTCOMES) if counts[k]]
     if not line:

@@ -9,7 +9,10 @@ TOML keys (all optional except ``pattern`` and one of ``chip`` / ``chip_size_um`
     pattern = "patterns/library/fourpad_730_50.png"   # PNG path (scale from pHYs), or .gds/.oas/.dxf
     layer = "1/0"                   # layout patterns: the pattern layer (DXF: its name); also
     # cell = "SITE", chip_layer = "2/0" (the chip from the layout), dxf_units = "um" | "mm" | "nm"
-    um_per_px = 1.0                 # the PNGs' scale (overrides their pHYs chunk)
+    um_per_px = 1.0                 # the scale of PNGs that store none (a file's own pHYs scale wins)
+    pattern_um_per_px = 1.0         # the same for the pattern alone; chip_um_per_px for the chip alone
+    override_scale = false          # true: um_per_px (and the two above) replace the files' stored scales
+    invert = false                  # the pattern image marks the pad in black (invert_chip: the chip image)
     resolution_um = 2.0             # simulate at this pixel size (resamples the pattern)
     chip = "chip.png"               # chip footprint PNG, or:
     chip_size_um = [730, 730]       # rectangular chip, exact geometry
@@ -36,6 +39,11 @@ TOML keys (all optional except ``pattern`` and one of ``chip`` / ``chip_size_um`
     viscosity_mPa_s = 1.0
     volume_nl = 20
     # chip_thickness_um = 50, chip_density_kg_m3 = 1200, damping_calibration = 1000 (top level; see materials.DAMPING_CALIBRATION)
+
+    [topography]                    # a protruding pad: the overflow check (simulator.liquid.Topography)
+    edge_angle_deg = 90             # solid wedge angle of the pad edge (90 = vertical wall)
+    pad_advancing_deg = 50          # default: the pad angle
+    chip_angle_deg = 60             # the chip's advancing angle (receding: the stricter case)
 """
 
 from __future__ import annotations
@@ -54,11 +62,14 @@ from patterns.errors import InputError, positive, require
 from patterns.mask import Mask
 from patterns.raster import mask_from_geometry
 from patterns.resources import check_budget_mb, default_budget_mb, price_raster
+from simulator.liquid import Topography, check_surface_tension_mN_m
 from simulator.materials import DAMPING_CALIBRATION, SU8_DENSITY_KG_M3, Liquid, Materials
 
 DTYPES = ("float32", "float64")
 #: Scene keys that choose what to read from a layout pattern (:class:`patterns.layout.LayoutSelection`).
 LAYOUT_KEYS = ("layer", "cell", "chip_layer", "dxf_units")
+#: Scene keys on how the pattern and chip images are read (:meth:`Scene.from_inputs`).
+IMAGE_KEYS = ("pattern_um_per_px", "chip_um_per_px", "override_scale", "invert", "invert_chip")
 
 
 def default_memory_budget_mb() -> float:
@@ -95,13 +106,21 @@ class Effects:
     """The physics a scene calls for; the engine computes nothing else.
 
     twist: rotate the chip (False: one rotation, twist fixed at 0).
+    hysteresis: contact-angle hysteresis of the pad (``materials.pad_receding_deg`` /
+        ``pad_advancing_deg``): the steppers stop where the restoring force falls below
+        the contact lines' pinning force (:mod:`simulator.hysteresis`).
+    meniscus: a liquid of finite height (:mod:`simulator.meniscus`): every cusp of the
+        overlap energy rounded over the meniscus height (False: the overlap model, h -> 0).
     """
 
     twist: bool = True
+    meniscus: bool = False
+    hysteresis: bool = False
 
     def __post_init__(self) -> None:
-        if not isinstance(self.twist, bool | np.bool_):
-            raise InputError(f"effects twist must be true or false, got {self.twist!r}")
+        for name in ("twist", "meniscus", "hysteresis"):
+            if not isinstance(getattr(self, name), bool | np.bool_):
+                raise InputError(f"effects {name} must be true or false, got {getattr(self, name)!r}")
 
 
 @dataclass(frozen=True, eq=False)
@@ -123,6 +142,8 @@ class Scene:
         chip_thickness_um, chip_density_kg_m3: the chip body (mass, inertia) for dynamics.
         damping_calibration: multiplier on the Couette damping estimate
             (see :data:`simulator.materials.DAMPING_CALIBRATION`).
+        topography: a protruding pad's edge angle (None: a flat pattern), for the
+            overflow check of :func:`simulator.liquid.scene_warnings`.
     """
 
     pattern: Mask
@@ -137,10 +158,11 @@ class Scene:
     chip_thickness_um: float = 50.0
     chip_density_kg_m3: float = SU8_DENSITY_KG_M3
     damping_calibration: float = DAMPING_CALIBRATION
+    topography: Topography | None = None
 
     def __post_init__(self) -> None:
         self.pattern.require_nonempty("pattern")
-        self.chip.require_nonempty("chip")
+        self.chip.require_nonempty("chip", "--invert-chip")
         require(self.dtype in DTYPES, f"dtype must be one of {DTYPES}, got {self.dtype!r}")
         if self.window_um is not None:
             positive("window_um", self.window_um, "um")
@@ -154,6 +176,52 @@ class Scene:
             f"chip scale {cs} um/px differs from pattern scale {ps} um/px; "
             "give both at one scale (Scene.from_inputs resamples a chip PNG for you)",
         )
+        if self.effects.meniscus:
+            _ = self.meniscus_height_um  # validated here: positive, finite, not above the chip
+        if self.effects.hysteresis:
+            require(self.materials.pad_receding_deg is not None,
+                    "contact-angle hysteresis needs the pad's receding and advancing angles: --hysteresis RECEDING:ADVANCING "
+                    "(or [materials] pad_receding_deg and pad_advancing_deg)")
+
+    @property
+    def delta_gamma_N_m(self) -> float:
+        """The energy per unit area of overlap (N/m, negative): the materials' Young
+        contrast, or ``-2 gamma_LA`` when the liquid is pinned at the pad edges."""
+        if self.liquid.pinned:
+            return -2.0 * self.materials.surface_tension_N_m
+        return self.materials.delta_gamma_N_m
+
+    @property
+    def chip_min_side_um(self) -> float:
+        """The smallest side (um) of the chip's wettable footprint's bounding box."""
+        if self.chip.geometry is not None:
+            x0, y0, x1, y1 = self.chip.geometry.bounds
+            return float(min(x1 - x0, y1 - y0))
+        from patterns.mask import nonzero_box
+
+        r0, r1, c0, c1 = nonzero_box(self.chip.data > 0.5) if (self.chip.data > 0.5).any() else nonzero_box(self.chip.data > 0)
+        return float(min(r1 - r0, c1 - c0)) * self.um_per_px
+
+    @property
+    def meniscus_height_um(self) -> float | None:
+        """The meniscus height (um) when the scene calls for the meniscus, else None: the
+        liquid's ``meniscus_height_um``, or its volume over the chip's wetted area."""
+        if not self.effects.meniscus:
+            return None
+        from simulator.meniscus import require_height
+
+        h, flag = self.liquid.height_um, "--meniscus-height"
+        if h is None:
+            area = self.chip.area_um2
+            require(area > 0, "the meniscus height needs a chip with a wetted area to divide the volume by; give --meniscus-height")
+            h, flag = self.liquid.meniscus_height_um(area), "--volume"
+        return require_height(h, self.chip_min_side_um, flag)
+
+    @property
+    def meniscus_height_px(self) -> float:
+        """The meniscus height in pixels (0 without the meniscus)."""
+        h = self.meniscus_height_um
+        return 0.0 if h is None else h / self.um_per_px
 
     @property
     def um_per_px(self) -> float:
@@ -226,11 +294,20 @@ class Scene:
         resolution_um: float | None = None,
         max_image_mpx: float | None = None,
         layout: Any = None,
+        pattern_um_per_px: float | None = None,
+        chip_um_per_px: float | None = None,
+        override_scale: bool = False,
+        invert: bool = False,
+        invert_chip: bool = False,
         **kwargs: Any,
     ) -> Scene:
         """Scene from a pattern (Mask, PNG or layout path) and a chip (Mask, PNG/layout path, size or layout layer).
 
-        ``um_per_px`` states the scale of the PNGs (default: their pHYs chunk).
+        ``um_per_px`` states the scale of PNGs that store none (their pHYs chunk wins);
+        ``pattern_um_per_px`` and ``chip_um_per_px`` state it for one file each (and win over
+        ``um_per_px``). A scale that contradicts a file's stored one is an InputError unless
+        ``override_scale``, which makes the given scales replace the stored ones.
+        ``invert`` / ``invert_chip`` read the pattern / chip image with black as wettable.
         ``resolution_um`` is the pixel size to simulate at (default: the pattern's):
         the pattern is resampled to it (:func:`resample_to_scale`). A chip PNG at
         another scale is resampled to the simulation scale the same way.
@@ -255,13 +332,22 @@ class Scene:
             budget = check_budget_mb(budget, "memory_budget_mb")
         layout = layout if layout is not None else LayoutSelection()
         layout_chip = None
+        p_scale, p_flag = (pattern_um_per_px, "--pattern-um-per-px") if pattern_um_per_px is not None else (um_per_px, "--um-per-px")
+        c_scale, c_flag = (chip_um_per_px, "--chip-um-per-px") if chip_um_per_px is not None else (um_per_px, "--um-per-px")
+
+        def image(path, scale, flag, hint, inv):
+            if override_scale:
+                return read_mask(path, um_per_px=scale, invert=inv, max_mpx=max_image_mpx, budget_mb=budget)
+            return read_mask(path, default_um_per_px=scale, scale_flag=flag, missing_hint=hint, invert=inv, max_mpx=max_image_mpx, budget_mb=budget)
+
         if is_layout(pattern):
-            pattern, layout_chip = layout_masks(pattern, layout, resolution_um or um_per_px or DEFAULT_UM_PER_PX, budget)
+            require(not invert, f"--invert reads a pattern image with black as the pad; {pattern} is a layout (its polygons are the pads)")
+            pattern, layout_chip = layout_masks(pattern, layout, resolution_um or p_scale or DEFAULT_UM_PER_PX, budget)
             resolution_um = None  # rasterized at it already
         else:
             layout.require_unused("the pattern" if isinstance(pattern, Mask) else f"the pattern {pattern}", units_ok=is_layout(chip))
             if not isinstance(pattern, Mask):
-                pattern = read_mask(pattern, um_per_px=um_per_px, max_mpx=max_image_mpx, budget_mb=budget)
+                pattern = image(pattern, p_scale, p_flag, "--um-per-px (or --pattern-um-per-px)", invert)
             elif um_per_px is not None:
                 pattern = Mask(pattern.data, um_per_px, pattern.geometry, pattern.params)
         if layout_chip is not None:
@@ -281,7 +367,7 @@ class Scene:
             if is_layout(chip):
                 chip = layout_chip_mask(chip, s, layout, budget)
             elif not isinstance(chip, Mask):
-                chip = read_mask(chip, um_per_px=um_per_px, max_mpx=max_image_mpx, budget_mb=budget)
+                chip = image(chip, c_scale, c_flag, "--chip-um-per-px (or --um-per-px)", invert_chip)
             chip = resample_to_scale(chip, s, budget)
         return cls(pattern=pattern, chip=chip, **kwargs)
 
@@ -301,7 +387,7 @@ class Scene:
         known = {
             "pattern", "chip", "chip_size_um", "um_per_px", "resolution_um", "dtype", "window_um", "memory_budget_mb", "materials", "twist",
             "effects", "liquid", "chip_thickness_um", "chip_density_kg_m3", "damping_calibration", "max_image_mpx",
-            *LAYOUT_KEYS,
+            "topography", *LAYOUT_KEYS, *IMAGE_KEYS,
         }
         unknown = set(doc) - known - {"simulate", "montecarlo", "accuracy"}
         require(not unknown, f"unknown scene keys {sorted(unknown)}; allowed: {sorted(known)}")
@@ -322,7 +408,8 @@ class Scene:
         if "materials" in doc:
             m = dict(doc["materials"])
             if "surface_tension_mN_m" in m:
-                m["surface_tension_N_m"] = float(m.pop("surface_tension_mN_m")) / 1000
+                where = "surface tension (--surface-tension, [materials] surface_tension_mN_m)"
+                m["surface_tension_N_m"] = check_surface_tension_mN_m(m.pop("surface_tension_mN_m"), where) / 1000
             kw["materials"] = Materials(**m)
         if "twist" in doc:
             kw["twist"] = TwistGrid(**doc["twist"])
@@ -331,10 +418,17 @@ class Scene:
         if "liquid" in doc:
             liq = dict(doc["liquid"])
             if "surface_tension_mN_m" in liq:
-                liq["surface_tension_N_m"] = float(liq.pop("surface_tension_mN_m")) / 1000
+                where = "[liquid] surface_tension_mN_m"
+                liq["surface_tension_N_m"] = check_surface_tension_mN_m(liq.pop("surface_tension_mN_m"), where) / 1000
             if "viscosity_mPa_s" in liq:
                 liq["viscosity_Pa_s"] = float(liq.pop("viscosity_mPa_s")) / 1000
+            if "meniscus_height_um" in liq:
+                liq["height_um"] = liq.pop("meniscus_height_um")
             kw["liquid"] = Liquid(**liq)
+        if "topography" in doc:
+            require("edge_angle_deg" in doc["topography"], "a protruding pad needs its edge angle: give --edge-angle DEG "
+                    "([topography] edge_angle_deg; 90 = vertical wall) with --pad-advancing / --chip-angle")
+            kw["topography"] = Topography(**doc["topography"])
         for key in ("dtype", "window_um", "memory_budget_mb", "chip_thickness_um", "chip_density_kg_m3", "damping_calibration"):
             if key in doc:
                 kw[key] = doc[key]
@@ -351,6 +445,7 @@ class Scene:
             resolution_um=doc.get("resolution_um"),
             max_image_mpx=doc.get("max_image_mpx"),
             layout=layout,
+            **{k: doc[k] for k in IMAGE_KEYS if k in doc},
             **kw,
         )
 

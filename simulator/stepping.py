@@ -98,6 +98,7 @@ class Grid:
     x0_um, y0_um, t0_deg: physical value of index 0. period_deg: chip symmetry.
     rg_px: the chip's radius of gyration in px (scales twist to a length).
     align_tol: (twist steps, px) within which a final pose counts as aligned.
+    pin: pinning work per grid step (J) along (twist, y, x); see :mod:`simulator.hysteresis`.
     """
 
     shape: tuple[int, int, int]
@@ -113,6 +114,9 @@ class Grid:
     period_deg: float
     rg_px: float
     align_tol: tuple[float, float] = (1.0, 1.0)
+    #: Contact-angle hysteresis: the pinning work over one grid step along (twist, y, x)
+    #: in J (:mod:`simulator.hysteresis`); zeros = none, today's stopping rules exactly.
+    pin: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     def to_pose(self, idx) -> np.ndarray:
         """Grid indices (..., 3) (it, iy, ix) -> physical poses (..., 3) (x_um, y_um, twist_deg)."""
@@ -170,10 +174,12 @@ def make_field(energy, grid: Grid, floor, best) -> Field:
     )
 
 
-def field_and_grid(ls: Landscape, rg_px: float, dtype=None) -> tuple[Field, Grid]:
-    """The stepper view of a landscape. ``rg_px``: chip radius of gyration in px."""
+def field_and_grid(ls: Landscape, rg_px: float, dtype=None, pin: tuple[float, float, float] = (0.0, 0.0, 0.0),
+                   align_tol: tuple[float, float] = (1.0, 1.0)) -> tuple[Field, Grid]:
+    """The stepper view of a landscape. ``rg_px``: chip radius of gyration in px; ``pin``:
+    the pinning work per grid step (J, twist/y/x) of contact-angle hysteresis."""
     e = ls.energy if dtype is None else ls.energy.astype(dtype)
-    it, iy, ix = np.unravel_index(int(np.argmin(ls.energy)), ls.energy.shape)
+    it, iy, ix = ls.minimum_index()  # the global minimum: ties decided by position (Landscape.minimum_index)
     grid = Grid(
         shape=tuple(int(n) for n in ls.energy.shape),
         wrap=bool(ls.wrap),
@@ -185,6 +191,8 @@ def field_and_grid(ls: Landscape, rg_px: float, dtype=None) -> tuple[Field, Grid
         t0_deg=float(ls.twist_deg[0]),
         period_deg=float(ls.period_deg),
         rg_px=float(rg_px),
+        pin=tuple(float(v) for v in pin),
+        align_tol=(float(align_tol[0]), float(align_tol[1])),
     )
     return make_field(e, grid, ls.noise_floor_J, [it, iy, ix]), grid
 
@@ -339,6 +347,9 @@ def greedy(field: Field, grid: Grid, start, max_steps: int, record: bool = True)
     Returns the final :class:`GreedyState`; ``path[:step + 1]`` is the path.
     """
     moves, rank = jnp.asarray(BLOCK_MOVES), jnp.asarray(TIE_RANK)
+    pin_work = None
+    if any(grid.pin):
+        pin_work = jnp.asarray(np.abs(np.asarray(BLOCK_MOVES, float)) @ np.asarray(grid.pin, float), field.dtype)
     start = clamp_start(grid, jnp.asarray(start, jnp.int32))
     n = max_steps + 1 if record else 1
     e0 = lookup(field, grid, *start)
@@ -350,7 +361,9 @@ def greedy(field: Field, grid: Grid, start, max_steps: int, record: bool = True)
 
     def body(s: GreedyState):
         at_edge = at_cut_edge(grid, s.idx)
-        e = neighbourhood(field, grid, s.idx)  # block order
+        e_true = neighbourhood(field, grid, s.idx)  # block order
+        # Hysteresis: a move is worth its energy plus the pinning work it costs.
+        e = e_true + pin_work if pin_work is not None else e_true
         best = jnp.min(e)
         # the first tie for the best in the documented order: the smallest tie rank
         r = jnp.min(jnp.where(e <= best + field.floor, rank, len(rank)))
@@ -361,7 +374,7 @@ def greedy(field: Field, grid: Grid, start, max_steps: int, record: bool = True)
         status = jnp.where(at_edge, EDGE, jnp.where(~moved, CONVERGED, jnp.where(step >= max_steps, MAX_STEPS, RUNNING)))
         new_idx = jnp.where(at_edge, s.idx, new_idx)
         step = jnp.where(at_edge, s.step, step)
-        energy = jnp.where(at_edge, s.energy, e[choice])
+        energy = jnp.where(at_edge, s.energy, e_true[choice])
         if record:
             p = s.path.at[step].set(new_idx)
             pe = s.path_energy.at[step].set(energy)
@@ -413,6 +426,7 @@ def gradient_descent(field: Field, grid: Grid, start, max_steps: int, record: bo
     # Metric: index units -> px. Twist index -> arc length in px.
     metric = jnp.asarray([grid.twist_px_per_step if grid.shape[0] > 1 else 1.0, 1.0, 1.0], dt)
     g_ref = reference_gradient(field, grid)
+    pin = jnp.asarray(grid.pin, dt) if any(grid.pin) else None
     n = max_steps + 1 if record else 1
     e0 = interpolate(field, grid, start)
     path = jnp.zeros((n, 3), dt).at[0].set(start)
@@ -421,7 +435,10 @@ def gradient_descent(field: Field, grid: Grid, start, max_steps: int, record: bo
     def body(s: GradientState):
         # Central differences and interpolation reach 2 indices out: stop short of a cut side.
         edge = at_cut_edge(grid, s.q, margin=2.0)
-        g = gradient(field, grid, s.q) / metric  # J per px
+        g_index = gradient(field, grid, s.q)  # J per index step
+        g = g_index / metric  # J per px
+        # Hysteresis: pinned where no axis's force beats its pinning force.
+        pinned = jnp.all(jnp.abs(g_index) <= pin) if pin is not None else jnp.asarray(False)
         # Zero force is tested per axis: squaring g (joules per px) underflows to 0 in
         # float32 for weak landscapes (|g| < 1e-19 J/px, e.g. 1e-12 N/m) and overflows for
         # strong ones, which would call a real slope flat.
@@ -442,7 +459,7 @@ def gradient_descent(field: Field, grid: Grid, start, max_steps: int, record: bo
 
         e_try = interpolate(field, grid, s.q + d / metric)
         scale, e_new = jax.lax.while_loop(try_cond, try_body, (jnp.asarray(1.0, dt), e_try))
-        accept = (e_new < s.energy) & ~flat & ~edge
+        accept = (e_new < s.energy) & ~flat & ~edge & ~pinned
         q = jnp.where(accept, s.q + scale * d / metric, s.q)
         energy = jnp.where(accept, e_new, s.energy)
         step = s.step + accept.astype(jnp.int32)
@@ -451,7 +468,7 @@ def gradient_descent(field: Field, grid: Grid, start, max_steps: int, record: bo
             p, pe = s.path.at[step].set(q), s.path_energy.at[step].set(energy)
         else:
             p, pe = s.path, s.path_energy
-        return GradientState(q, energy, step, status.astype(jnp.int32), p, pe, flat & ~accept & ~edge)
+        return GradientState(q, energy, step, status.astype(jnp.int32), p, pe, flat & ~accept & ~edge & ~pinned)
 
     init = GradientState(start, e0, jnp.int32(0), jnp.int32(MAX_STEPS if max_steps <= 0 else RUNNING), path, path_e, jnp.asarray(False))
     return jax.lax.while_loop(lambda s: s.status == RUNNING, body, init)

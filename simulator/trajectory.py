@@ -20,18 +20,17 @@ import numpy as np
 from patterns.errors import InputError
 from patterns.resources import require_fits
 from simulator import steppers, stepping
+from simulator.defaults import DEFAULT_MAX_STEPS, MAX_STEPS_LIMIT, METHODS  # noqa: F401  (re-exported)
 from simulator.engine import build_landscape
+from simulator.hysteresis import align_tolerance, pin_per_index
 from simulator.landscape import Landscape
+from simulator.optimum import global_minimum
 from simulator.posegrid import _twist_cut, axis_step, twist_axis
 from simulator.scene import Scene
 
-METHODS = ("greedy", "gradient", "overdamped", "inertial")
-DEFAULT_MAX_STEPS = 5000
 #: Largest |x|, |y| of a start in pixels (float32 holds every whole pixel up to 2**24, and
 #: int32 grid indices have room) and largest |twist| in degrees (as TwistGrid's range).
 MAX_START_PX, MAX_START_TWIST_DEG = 2**24, 3600.0
-#: Largest max_steps: step counters are int32.
-MAX_STEPS_LIMIT = 2**31 - 2
 #: Peak bytes per recorded step of one run (device buffers, their host copies and the
 #: Trajectory's float64 path and energies): stepping and dynamics.
 PATH_BYTES_PER_STEP = {"stepping": 96, "dynamics": 320}
@@ -55,6 +54,11 @@ class Trajectory:
     time_s: float | None = None
     t_s: np.ndarray | None = None
     cost: dict = field(default_factory=dict)
+    #: The scene's global minimum (x_um, y_um, twist_deg) the outcome was measured against.
+    optimum: tuple[float, float, float] | None = None
+    #: With a finite meniscus, the final pose of a gradient or dynamic run refined below the
+    #: grid (the minimum of the interpolated landscape next to it, :mod:`simulator.refine`).
+    refined: tuple[float, float, float] | None = None
 
     @property
     def start(self) -> tuple[float, float, float]:
@@ -83,6 +87,8 @@ class Trajectory:
             "time_s": self.time_s,
             "path": path,
             "cost": self.cost,
+            "optimum": None if self.optimum is None else pose(self.optimum),
+            "final_refined": None if self.refined is None else pose(self.refined),
         }
 
 
@@ -185,7 +191,8 @@ def simulate(
             ls = boxes.around(pose)
             if ls is None:  # moving the box would not move the chip: stop here
                 break
-        field, grid = stepping.field_and_grid(ls, rg)
+        pin = pin_per_index(scene, ls.um_per_px, ls.twist_step_deg)
+        field, grid = stepping.field_and_grid(ls, rg, pin=pin, align_tol=align_tolerance(ls, pin))
         run = steppers.jitted(method, _stiff(method, field, grid, dynamics))
         state = run(field, grid, dynamics, jnp.asarray(grid.to_index(pose)), max_steps)
         pieces.append(_to_trajectory(method, state, grid))
@@ -199,13 +206,14 @@ def simulate(
     if traj.steps >= max_steps and (status != stepping.CONVERGED or traj.steps > max_steps):
         status = stepping.MAX_STEPS
         traj = Trajectory(method, "", traj.path[: max_steps + 1], traj.energy_J[: max_steps + 1], max_steps, traj.time_s, None if traj.t_s is None else traj.t_s[: max_steps + 1])
-    # Outcome: flatness where the run ended; "aligned" against the global minimum.
+    # Outcome: flatness where the run ended; "aligned" against the scene's global minimum
+    # (simulator.optimum: the same pose every command uses, found without the full landscape).
     q_end = grid.to_index(np.asarray(traj.final))
     flat = bool(steppers.flat_at(field, grid, state.flat, q_end))
-    ref = landscape if landscape is not None else reference_landscape(scene, backend)
-    ref_field, ref_grid = stepping.field_and_grid(ref, rg)
-    q_ref = ref_grid.to_index(np.asarray(traj.final))
-    out = stepping.classify(ref_field, ref_grid, q_ref, float(traj.energy_J[-1]), status, flat)
+    opt = global_minimum(scene, landscape=landscape if landscape is not None else (ls if dynamic else None),
+                         evaluated=boxes.built, backend=backend)
+    best = jnp.asarray(grid.to_index(np.asarray(opt.pose)), field.dtype)
+    out = stepping.classify(field._replace(best=best), grid, q_end, float(traj.energy_J[-1]), status, flat)
     full = full_landscape_poses(scene) if landscape is None else landscape.energy.size
     cost = {
         "poses_computed": int(boxes.poses),
@@ -214,8 +222,19 @@ def simulate(
         "planes": boxes.planes,
         "landscape_s": boxes.seconds,
         "total_s": time.perf_counter() - t0,
+        "minimum_poses": int(opt.poses),
+        "minimum_s": opt.seconds,
+        "minimum_how": opt.how,
     }
-    return Trajectory(method, stepping.OUTCOMES[int(out)], traj.path, traj.energy_J, traj.steps, traj.time_s, traj.t_s, cost)
+    refined = None
+    outcome = stepping.OUTCOMES[int(out)]
+    if scene.meniscus_height_um is not None and not scene.effects.hysteresis and method != "greedy" and outcome in ("aligned", "local_minimum"):
+        from simulator.refine import refine_minimum
+
+        r = refine_minimum(ls, *traj.final)
+        refined = (r["x_um"], r["y_um"], r["twist_deg"])
+    return Trajectory(method, outcome, traj.path, traj.energy_J, traj.steps, traj.time_s, traj.t_s, cost,
+                      optimum=opt.pose, refined=refined)
 
 
 class _Boxes:
@@ -236,6 +255,8 @@ class _Boxes:
         self.template: Landscape | None = None
         self.last: tuple | None = None
         self.poses, self.planes, self.seconds = 0, 0, 0.0
+        #: The landscapes built for the current box (reused to find the global minimum).
+        self.built: list[Landscape] = []
 
     def count(self, ls: Landscape) -> None:
         self.poses += ls.energy.size
@@ -253,6 +274,7 @@ class _Boxes:
         half = int(np.ceil(((hi - lo) / 2).max()))
         self.box = ((int(center[0]), int(center[1])), half)
         self.planes_cache.clear()
+        self.built.clear()
 
     def around(self, pose: np.ndarray) -> Landscape | None:
         s = self.scene.um_per_px
@@ -276,6 +298,7 @@ class _Boxes:
             (cx, cy), half = self.box
             ls = build_landscape(self.scene, twists=self.axis[missing], center_px=(cx, cy), half_px=half, backend=self.backend)
             self.count(ls)
+            self.built.append(ls)
             self.template = ls
             self.planes_cache.update({j: ls.energy[i] for i, j in enumerate(missing)})
         t = self.template

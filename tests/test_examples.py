@@ -17,6 +17,7 @@ def test_every_example_is_covered():
         "montecarlo_fourpad.toml",
         "evaluate_defect.toml",
         "energy_fourpad.toml",
+        "sweep_fourpad.toml",
     }
 
 

@@ -155,7 +155,8 @@ def test_demo_out_refuses_a_directory_of_user_files(tmp_path, capsys):
 # ======================================================= 2. priced before allocation
 MEMORY_CASES = {
     "energy_chip_size_1e9": ["energy", "--pattern", FOUR_PAD, "--chip-size", "1e9", "--at", "0,0,0"],
-    "um_per_px_1e-6": ["energy", "--pattern", FOUR_PAD, "--chip-size", "730", "--at", "0,0,0", "--um-per-px", "1e-6"],
+    # The library PNG stores 1 um/px: a contradicting --um-per-px needs --override-scale (issue 14).
+    "um_per_px_1e-6": ["energy", "--pattern", FOUR_PAD, "--chip-size", "730", "--at", "0,0,0", "--um-per-px", "1e-6", "--override-scale"],
     "pattern_square_size_1e9": ["pattern", "square", "--size", "1e9", "-o", "{d}/big.png"],
     "max_steps_1e9_path_buffers": ["simulate", "--pattern", SQUARE, "--chip-size", "200", "--start", "10,10,0", "--max-steps", "1000000000"],
     "montecarlo_random_1e8": ["montecarlo", "--pattern", SQUARE, "--chip-size", "200", "--random", "100000000", "--spread", "10,10,1", "--memory-budget", "4096"],

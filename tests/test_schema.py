@@ -41,7 +41,8 @@ from simulator.schema import (
 )
 
 ROOT = Path(__file__).resolve().parent.parent
-EXAMPLES = sorted((ROOT / "examples").glob("*.toml"))
+# Scene files; the sweep file (a scene inside a [scene] table) is checked by tests/test_sweep.py.
+EXAMPLES = sorted(p for p in (ROOT / "examples").glob("*.toml") if not p.name.startswith("sweep_"))
 LIBRARY_PNGS = sorted((ROOT / "patterns" / "library").glob("*.png"))
 
 
@@ -137,7 +138,7 @@ def test_sections_cover_the_dataclass_fields():
     from simulator.scene import Effects, TwistGrid
 
     def toml_names(cls):
-        rename = {"surface_tension_N_m": "surface_tension_mN_m", "viscosity_Pa_s": "viscosity_mPa_s"}
+        rename = {"surface_tension_N_m": "surface_tension_mN_m", "viscosity_Pa_s": "viscosity_mPa_s", "height_um": "meniscus_height_um"}
         return {rename.get(f.name, f.name) for f in dataclasses.fields(cls)}
 
     assert set(SCHEMA["materials"]) == toml_names(Materials)

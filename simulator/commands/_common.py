@@ -22,8 +22,15 @@ def add_scene_args(p: argparse.ArgumentParser) -> None:
     g.add_argument("--pattern", help="pattern PNG (white = wettable pad) or layout (.gds, .oas, .dxf)")
     g.add_argument("--chip", help="chip footprint PNG (white = wettable), or a layout holding only the chip outline")
     g.add_argument("--chip-size", help="rectangular chip W[xH] in um, e.g. 730 or 730x500")
-    g.add_argument("--um-per-px", type=float, help="pixel size of the PNGs in um (default: their pHYs scale); "
-                   "for a layout, the raster's pixel size when --resolution is not given (default 1)")
+    g.add_argument("--um-per-px", type=float, help="pixel size in um of the PNGs that store no scale (a file's own pHYs "
+                   "scale wins; one that contradicts it is refused, see --override-scale); for a layout, the raster's "
+                   "pixel size when --resolution is not given (default 1)")
+    g.add_argument("--pattern-um-per-px", type=float, metavar="UM", help="the same for the pattern file alone (wins over --um-per-px)")
+    g.add_argument("--chip-um-per-px", type=float, metavar="UM", help="the same for the chip file alone (wins over --um-per-px)")
+    g.add_argument("--override-scale", action="store_true", help="let the scale flags replace the scales the files store")
+    g.add_argument("--invert", action="store_true", help="the pattern image marks the pad in black: take 1 - value "
+                   "(transparent pixels stay non-wettable)")
+    g.add_argument("--invert-chip", action="store_true", help="the same for the chip image")
     y = p.add_argument_group("layout patterns (.gds, .oas, .dxf)")
     y.add_argument("--layer", metavar="L/D", help="the pattern's layer/datatype, e.g. 1/0 (DXF: the layer name; default: the only layer)")
     y.add_argument("--cell", metavar="NAME", help="the cell to read (default: the single top cell; DXF: the model space, or a block)")
@@ -45,6 +52,25 @@ def add_scene_args(p: argparse.ArgumentParser) -> None:
     n.add_argument("--memory-budget", type=float, help="memory budget in MB for the landscape and every other large array "
                    "(default: half the available memory, at most 8192; never more than the machine has)")
     g.add_argument("--max-image-mpx", type=float, help="largest image to read, in megapixels (default 64)")
+    q = p.add_argument_group("liquid and meniscus")
+    q.add_argument("--volume", type=float, help="droplet volume in nl (default 20): the meniscus height V / A under the "
+                   "chip for --meniscus, and the film of the dynamic methods")
+    q.add_argument("--meniscus", action="store_true", help="finite meniscus: round the overlap energy's cusps over the "
+                   "liquid height (default off: the thin-film overlap model)")
+    q.add_argument("--meniscus-height", type=float, metavar="UM", help="the meniscus height in um (default: --volume "
+                   "over the chip's wetted area); implies --meniscus")
+    t = p.add_argument_group("protruding pads (the overflow check, docs/physics.md §9)")
+    t.add_argument("--edge-angle", type=float, metavar="DEG", help="the pads stand up from the substrate with this edge "
+                   "(solid wedge) angle in degrees, 90 = vertical wall: warn when the placement can overflow them")
+    t.add_argument("--pad-advancing", type=float, metavar="DEG", help="advancing contact angle on the pads in degrees "
+                   "(default: the advancing angle of --hysteresis, else --pad-angle)")
+    t.add_argument("--chip-angle", type=float, metavar="DEG", help="the chip's advancing contact angle in degrees "
+                   "(its receding angle for the stricter case; default: unknown)")
+    q.add_argument("--hysteresis", metavar="RECEDING:ADVANCING", help="contact-angle hysteresis of the pads, in degrees "
+                   "(e.g. 31:50): runs stop where the restoring force falls below the contact lines' pinning force "
+                   "gamma (cos theta_r - cos theta_a) per unit length (default off)")
+    q.add_argument("--pinned", action="store_true", help="contact lines held at the pad edges (liquid confined by a "
+                   "superhydrophobic substrate): the energy is the liquid-air area, Delta_gamma = -2 gamma")
 
 
 def _accuracy_help() -> str:
@@ -111,7 +137,16 @@ def scene_from_args(args: argparse.Namespace, note_frame: bool = True) -> Scene:
         ("materials", "allow_repulsive"): True if args.allow_repulsive else None,
         ("twist", "step_deg"): args.twist_step,
         ("effects", "twist"): False if args.no_twist else None,
+        ("effects", "meniscus"): True if (getattr(args, "meniscus", False) or getattr(args, "meniscus_height", None) is not None) else None,
+        ("liquid", "meniscus_height_um"): getattr(args, "meniscus_height", None),
+        ("liquid", "pinned"): True if getattr(args, "pinned", False) else None,
+        ("effects", "hysteresis"): True if getattr(args, "hysteresis", None) else None,
         (None, "um_per_px"): args.um_per_px,
+        (None, "pattern_um_per_px"): getattr(args, "pattern_um_per_px", None),
+        (None, "chip_um_per_px"): getattr(args, "chip_um_per_px", None),
+        (None, "override_scale"): True if getattr(args, "override_scale", False) else None,
+        (None, "invert"): True if getattr(args, "invert", False) else None,
+        (None, "invert_chip"): True if getattr(args, "invert_chip", False) else None,
         (None, "resolution_um"): args.resolution,
         (None, "window_um"): args.window,
         (None, "dtype"): args.dtype,
@@ -120,19 +155,31 @@ def scene_from_args(args: argparse.Namespace, note_frame: bool = True) -> Scene:
         (None, "layer"): getattr(args, "layer", None),
         (None, "cell"): getattr(args, "cell", None),
         (None, "dxf_units"): getattr(args, "dxf_units", None),
-        # Liquid and chip body: only commands with dynamics define these flags.
         ("liquid", "volume_nl"): getattr(args, "volume", None),
+        ("topography", "edge_angle_deg"): getattr(args, "edge_angle", None),
+        ("topography", "pad_advancing_deg"): getattr(args, "pad_advancing", None),
+        ("topography", "chip_angle_deg"): getattr(args, "chip_angle", None),
+        # Liquid and chip body: only commands with dynamics define these flags.
         ("liquid", "viscosity_mPa_s"): getattr(args, "viscosity", None),
         (None, "chip_thickness_um"): getattr(args, "chip_thickness", None),
         (None, "chip_density_kg_m3"): getattr(args, "chip_density", None),
         (None, "damping_calibration"): getattr(args, "damping_calibration", None),
     }
+    if getattr(args, "hysteresis", None):
+        from simulator.hysteresis import parse_window
+
+        r, a = parse_window(args.hysteresis)
+        flags[("materials", "pad_receding_deg")], flags[("materials", "pad_advancing_deg")] = r, a
     for (table, key), value in flags.items():
         if value is not None:
             (doc.setdefault(table, {}) if table else doc)[key] = value
     if getattr(args, "accuracy", None):
         doc["accuracy"] = args.accuracy
     scene = Scene.from_dict(doc, base=base)  # the accuracy preset applies here, as for Scene.from_toml
+    if "volume_nl" in (doc.get("liquid") or {}):  # a volume as typed: a film thicker than the chip is refused
+        from simulator.liquid import check_scene_volume
+
+        check_scene_volume(scene)
     warning = scene.accuracy_warning()
     if warning:
         print(f"warning: {warning}", file=sys.stderr)
@@ -141,6 +188,32 @@ def scene_from_args(args: argparse.Namespace, note_frame: bool = True) -> Scene:
 
         print(frame_note(scene.pattern.params["layout"]), file=sys.stderr)
     return scene
+
+
+def liquid_checks(args: argparse.Namespace, scene: Scene, method: str, biases_um: Any = None,
+                  placed: str = "the start") -> list[str]:
+    """The droplet checks of :mod:`simulator.liquid` for a volume the user gave (``--volume``
+    or ``[liquid] volume_nl``; :func:`scene_from_args` has refused a film thicker than the
+    chip): a note when ``method`` does not use the volume, and the warnings of
+    :func:`simulator.liquid.scene_warnings` (``biases_um``: per start, the larger of |x|, |y|),
+    each printed as one line on stderr and returned for the JSON (``liquid_warnings``)."""
+    from simulator.liquid import scene_warnings, volume_note
+
+    given = getattr(args, "volume", None) is not None or (
+        bool(args.scene) and "volume_nl" in (read_toml(args.scene).get("liquid") or {}))
+    if not given:
+        warns = []
+        if scene.topography is not None:
+            warns.append("overflow check skipped: the scene declares a protruding pad (edge angle) but no droplet "
+                         "volume; give --volume NL to check the placement against the overflow bias")
+    else:
+        note = volume_note(scene, method)
+        if note:
+            print(f"note: {note}", file=sys.stderr)
+        warns = scene_warnings(scene, biases_um, placed)
+    for w in warns:
+        print(f"warning: {w}", file=sys.stderr)
+    return warns
 
 
 def read_toml(path: str | os.PathLike) -> dict[str, Any]:
@@ -188,3 +261,25 @@ def write_json(path: str | os.PathLike, obj: Any) -> None:
     require_finite(obj, f"output {path}")
     with atomic_output(path) as tmp:
         tmp.write_text(json.dumps(obj, indent=2, allow_nan=False) + "\n")
+
+
+def write_csv(path: str | os.PathLike, columns: list[str], values: list) -> None:
+    """Write a table as CSV atomically: ``columns`` (names carry their units, e.g. ``x_um``)
+    and one array (or list of strings) per column, rows in order. Every number must be
+    finite (:func:`simulator.finite.require_finite`)."""
+    import numpy as np
+
+    from simulator.finite import require_finite
+
+    cols = [np.asarray(v) for v in values]
+    require_finite({c: v for c, v in zip(columns, cols, strict=True) if v.dtype.kind in "fiu"}, f"output {path}")
+    n = len(cols[0]) if cols else 0
+
+    def cell(v) -> str:
+        return f"{v:.10g}" if isinstance(v, float | np.floating) else str(v)
+
+    with atomic_output(path) as tmp, open(tmp, "w") as f:
+        f.write(",".join(columns) + "\n")
+        for i in range(0, n, 65536):
+            rows = zip(*(c[i : i + 65536].tolist() for c in cols), strict=True)
+            f.write("".join(",".join(cell(v) for v in row) + "\n" for row in rows))

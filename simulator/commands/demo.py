@@ -2,7 +2,7 @@
 
 A 730 um square chip released beyond one pad of the library's four-pad pattern
 (L = 730 um, gap 50 um, pads 340 um), turned by 8 degrees. Along x it starts on the
-plateau 340 < x < 390 um, where an untwisted chip feels no force (PHYSICS.md 6.3); it
+plateau 340 < x < 390 um, where an untwisted chip feels no force (docs/physics.md §6.3); it
 escapes by turning (6.4) and aligns. The same x-bias with neither y-bias nor twist
 stays stuck (check C9), which the summary reports for comparison.
 
@@ -16,18 +16,21 @@ from __future__ import annotations
 import argparse
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from patterns.library import library_path
 from patterns.outputs import atomic_output, check_output_dir, output_directory
 from simulator.feedback import announce, compiling
 from simulator.scene import Scene
-from simulator.trajectory import Trajectory, simulate
+
+if TYPE_CHECKING:
+    from simulator.trajectory import Trajectory
 
 #: The demo scene: library pattern, square chip side (um), start pose (um, um, deg).
 PATTERN = "four_pad_730_50"
 CHIP_UM = 730.0
 START = (380.0, 120.0, 8.0)
-#: The same x-bias without y-bias or twist: stuck on the plateau (PHYSICS.md C9).
+#: The same x-bias without y-bias or twist: stuck on the plateau (docs/physics.md C9).
 STUCK_START = (380.0, 0.0, 0.0)
 METHOD = "greedy"
 
@@ -50,13 +53,17 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
+    # JAX: imported when the run needs it (selfalign --help starts without it).
+    from simulator.trajectory import simulate
+
     out = check_output_dir(args.out, "--out", args.force)  # before any work
     scene = demo_scene()
     compiling(METHOD, args.quiet)
     traj = simulate(scene, START, method=METHOD)
     stuck = simulate(scene, STUCK_START, method=METHOD)
-    f = [round(v, 2) + 0.0 for v in traj.final]
-    print(f"{METHOD}: {traj.outcome} at ({f[0]:.2f} um, {f[1]:.2f} um, {f[2]:.2f} deg) after {traj.steps} steps")
+    from simulator.commands.simulate import end_line
+
+    print(end_line(scene, traj))
     from simulator.evaluate import evaluate
 
     with output_directory(out, "--out", args.force, command="demo") as tmp:
@@ -100,7 +107,7 @@ def write_summary(path: Path, scene: Scene, traj: Trajectory, stuck: Trajectory,
     h, w = scene.pattern.shape
     s = stuck.final
     lines = [
-        "selfalign demo: a chip escaping a four-pad plateau by twisting (PHYSICS.md 6.3, 6.4)",
+        "selfalign demo: a chip escaping a four-pad plateau by twisting (docs/physics.md §6.3, §6.4)",
         "",
         f"pattern      library {PATTERN}: four-pad, L = {CHIP_UM:g} um, gap {gap:g} um, pads {pad:g} um; "
         f"{w} x {h} px at {scene.um_per_px:g} um/px",

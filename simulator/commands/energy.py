@@ -14,7 +14,6 @@ from simulator.commands._common import (
     scene_from_args,
     write_json,
 )
-from simulator.landscape import build_landscape, twists_around
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -33,16 +32,21 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--from", dest="start", type=float, help="curve start (um, or degrees for twist)")
     p.add_argument("--to", dest="stop", type=float, help="curve end (um, or degrees for twist)")
     p.add_argument("--json", help="write the results as JSON to this file")
+    p.add_argument("--csv", help="write the poses (kind 'pose') and the curve samples (kind 'curve') as CSV: kind, x_um, "
+                   "y_um, twist_deg, overlap_um2, energy_J, force_x_N, force_y_N, torque_Nm")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    # The engine: imported when a run needs it (selfalign --help starts without it).
+    from simulator.landscape import build_landscape, twists_around
+
     poses = [parse_pose(a, "--at") for a in args.at] or ([(0.0, 0.0, 0.0)] if args.curve else [])
     if not poses:
         raise InputError("give at least one pose with --at X,Y,TWIST (um, um, degrees), or a --curve")
     if args.curve and (args.start is None or args.stop is None):
         raise InputError("--curve needs --from A --to B (um for x/y, degrees for twist)")
-    check_outputs(args, ("json",))
+    check_outputs(args, ("json", "csv"))
     scene = scene_from_args(args)
     twists = [p[2] for p in poses]
     if args.curve == "twist":
@@ -74,11 +78,13 @@ def run(args: argparse.Namespace) -> int:
     result = {
         "poses": rows,
         "delta_gamma_N_m": ls.delta_gamma,
+        "meniscus_height_um": ls.meniscus_height_um,
         "um_per_px": ls.um_per_px,
         "twist_step_deg": ls.twist_step_deg if len(ls.twist_deg) > 1 else None,
         "noise_floor_J": ls.noise_floor_J,
         "dtype": scene.dtype,
     }
+    cur = None
     if args.curve:
         cur = ls.curve(args.curve, poses[0], args.start, args.stop)
         unit = "deg" if args.curve == "twist" else "um"
@@ -106,7 +112,29 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         write_json(args.json, result)
         print(f"wrote {args.json}")
+    if args.csv:
+        _write_csv(args.csv, ls, poses, cur)
+        print(f"wrote {args.csv}")
     return 0
+
+
+def _write_csv(path, ls, poses: list, cur: dict | None) -> None:
+    """One row per pose, then one per curve sample, with the full force and torque at each."""
+    from simulator.commands._common import write_csv
+
+    x, y, t = (np.array(v, float) for v in zip(*poses, strict=True))
+    kind = ["pose"] * len(x)
+    if cur is not None:
+        n = len(cur["values"])
+        cx, cy, ct = (np.full(n, float(c)) for c in poses[0])
+        {"x": cx, "y": cy, "twist": ct}[cur["axis"]][:] = cur["values"]
+        x, y, t = np.concatenate([x, cx]), np.concatenate([y, cy]), np.concatenate([t, ct])
+        kind += ["curve"] * n
+    e = ls.energy_at(x, y, t)
+    fx, fy = ls.force_at(x, y, t)
+    tq = ls.torque_at(x, y, t)
+    cols = ["kind", "x_um", "y_um", "twist_deg", "overlap_um2", "energy_J", "force_x_N", "force_y_N", "torque_Nm"]
+    write_csv(path, cols, [kind, x, y, t, ls.overlap_um2(e), e, fx + 0.0, fy + 0.0, tq + 0.0])
 
 
 def _sampled(cur: dict, most: int = 21):

@@ -7,8 +7,8 @@ from pathlib import Path
 
 from patterns.errors import InputError
 from patterns.outputs import check_output_dir
-from simulator.commands._common import add_scene_args, input_paths, scene_from_args
-from simulator.evaluate import AUTO_LANDSCAPE_MB, evaluate
+from simulator.commands._common import add_scene_args, input_paths, liquid_checks, scene_from_args
+from simulator.defaults import AUTO_LANDSCAPE_MB
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -18,7 +18,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         description=(
             "Assess a pattern PNG or layout (.gds, .oas, .dxf: see --layer, --chip-layer): where the chip ends up (global minimum), the restoring force and torque "
             "near alignment, plateaus and the maximum bias along x and y, the capture fraction over a grid of "
-            "starts and the yield under placement noise (10 %% of the chip size, 2 deg). Writes summary.json, "
+            "starts around the global minimum and the yield under placement noise around it (10 % of the chip size, "
+            "2 deg). Writes summary.json, "
             "landscape.png, force.png, capture.png, pattern.png and report.html into --out. Without --chip, "
             "--chip-size or --chip-layer the chip is a rectangle the size of the pattern's wettable bounding box. Without "
             f"--resolution, a pattern whose landscape would exceed {AUTO_LANDSCAPE_MB:g} MB is simulated at a "
@@ -47,6 +48,7 @@ def run(args: argparse.Namespace) -> int:
     if not (args.chip or args.chip_size or args.chip_layer or args.scene):
         args.chip_size = _bbox_chip(args)
     scene = scene_from_args(args, note_frame=False)
+    liquid_warnings = liquid_checks(args, scene, "greedy", _noise_biases(scene), "the placement-noise starts")
     layout = scene.pattern.params.get("layout")
     if layout:
         from patterns.layout import frame_note
@@ -57,9 +59,12 @@ def run(args: argparse.Namespace) -> int:
 
     twist_axis(scene)  # a twist step that gives too many twists fails before the announcement
 
+    # JAX, the engine, matplotlib: imported when a run needs them.
+    from simulator.evaluate import evaluate
+
     compiling("greedy", args.quiet)
     summary = evaluate(scene, args.out, quiet=args.quiet, source=Path(args.pattern or args.scene).name, auto=args.resolution is None,
-                       force=args.force, inputs=tuple(inputs))
+                       force=args.force, inputs=tuple(inputs), liquid_warnings=liquid_warnings)
     g, cap, yl = summary["global_minimum"], summary["capture"], summary["yield"]
     b = summary["max_bias_um"]
     print(f"global minimum at ({g['x_um']:g} um, {g['y_um']:g} um, {g['twist_deg']:g} deg)")
@@ -67,6 +72,16 @@ def run(args: argparse.Namespace) -> int:
     print(f"capture fraction {100 * cap['fraction']:.1f} % of {cap['n']} grid starts; yield {100 * yl['fraction']:.1f} % under placement noise")
     print(f"wrote {Path(args.out) / 'report.html'} (and summary.json, landscape.png, force.png, capture.png, pattern.png)")
     return 0
+
+
+def _noise_biases(scene):
+    """Per yield start of evaluate (its placement noise, seed 0), the larger of |x|, |y| in um."""
+    from simulator.evaluate import NOISE_FRACTION, YIELD_STARTS, chip_size
+    from simulator.liquid import placement_biases
+    from simulator.starts import random_starts
+
+    w, h = chip_size(scene)
+    return placement_biases(random_starts(YIELD_STARTS, (NOISE_FRACTION * w, NOISE_FRACTION * h, 0.0), seed=0))
 
 
 def _bbox_chip(args: argparse.Namespace) -> str:
@@ -79,7 +94,11 @@ def _bbox_chip(args: argparse.Namespace) -> str:
         sel = LayoutSelection(layer=args.layer, cell=args.cell, dxf_units=args.dxf_units)
         x0, y0, x1, y1 = layout_geometry(args.pattern, sel, args.memory_budget)[0].bounds
         return f"{x1 - x0:.12g}x{y1 - y0:.12g}"
-    m = read_mask(args.pattern, um_per_px=args.um_per_px, max_mpx=args.max_image_mpx, budget_mb=args.memory_budget)
+    own = args.pattern_um_per_px is not None  # the scale rule of Scene.from_inputs: a file's own scale wins
+    scale, flag = (args.pattern_um_per_px, "--pattern-um-per-px") if own else (args.um_per_px, "--um-per-px")
+    kw = {"um_per_px": scale} if args.override_scale else {"default_um_per_px": scale, "scale_flag": flag,
+                                                           "missing_hint": "--um-per-px (or --pattern-um-per-px)"}
+    m = read_mask(args.pattern, invert=args.invert, max_mpx=args.max_image_mpx, budget_mb=args.memory_budget, **kw)
     m.require_nonempty(f"pattern {args.pattern}")
     w, h = footprint_um(m)
     return f"{w:g}x{h:g}"

@@ -20,12 +20,14 @@ from typing import NoReturn
 
 from patterns.errors import InputError, positive
 from patterns.geometry import DESIGNS, Design
+from simulator.cli import OneLineParser
 
 DEFAULT_MARGIN_UM = 10.0
 
 
-class _OneLineParser(argparse.ArgumentParser):
-    """Argument errors as one line (no usage block), exit code 2, like InputError."""
+class _OneLineParser(OneLineParser):
+    """Argument errors as one line (no usage block), exit code 2, like InputError; values
+    with a leading minus sign after a space, as every command (``--points "-100,-100;..."``)."""
 
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")

@@ -4,17 +4,20 @@ from __future__ import annotations
 
 import argparse
 
+import numpy as np
+
 from patterns.errors import InputError
 from simulator.commands._common import (
     add_scene_args,
     check_outputs,
+    liquid_checks,
     parse_pose,
     scene_from_args,
     write_json,
 )
+from simulator.defaults import DEFAULT_MAX_STEPS, METHODS
 from simulator.feedback import compiling
 from simulator.materials import DAMPING_CALIBRATION
-from simulator.trajectory import DEFAULT_MAX_STEPS, METHODS, price_run, simulate
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -23,7 +26,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="one trajectory from a start pose: path, energy curve, outcome",
         description=(
             "Move the chip from --start down the energy landscape and report where it ends. "
-            "greedy: 1 px / 1 twist-step moves to the lowest neighbour (PHYSICS.md 5.2); "
+            "greedy: 1 px / 1 twist-step moves to the lowest neighbour (docs/physics.md §5.2); "
             "gradient: steps along the force; overdamped / inertial: time-resolved dynamics "
             "with Couette damping (times in seconds)."
         ),
@@ -33,13 +36,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--method", choices=METHODS, default=None, help="stepper (default greedy)")
     p.add_argument("--max-steps", type=int, default=None, help=f"bound on moves or solver steps (default {DEFAULT_MAX_STEPS})")
     d = p.add_argument_group("liquid and chip body (dynamic methods)")
-    d.add_argument("--volume", type=float, help="droplet volume in nl (default 20)")
     d.add_argument("--viscosity", type=float, help="liquid viscosity in mPa s (default 1.0, water)")
     d.add_argument("--chip-thickness", type=float, help="chip thickness in um (default 50)")
     d.add_argument("--chip-density", type=float, help="chip density in kg/m^3 (default 1200, SU-8)")
     d.add_argument("--damping-calibration", type=float, help=f"multiplier on the Couette damping estimate (default {DAMPING_CALIBRATION:g})")
     o = p.add_argument_group("outputs")
     o.add_argument("--json", help="write the trajectory as JSON")
+    o.add_argument("--csv", help="write the path as CSV, one row per step: step, x_um, y_um, twist_deg, energy_J "
+                   "(and t_s for the dynamic methods)")
     o.add_argument("--plot", help="write the energy-versus-step (or time) curve as PNG")
     o.add_argument("--gif", help="write an animation of the chip moving over the pattern (GIF, at most 120 frames)")
     o.add_argument("--quiet", action="store_true", help="print only the results (no progress bars or waiting messages)")
@@ -48,6 +52,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from simulator.commands._common import read_toml
+
+    # JAX: imported when a run needs it (selfalign --help starts without it).
+    from simulator.trajectory import price_run, simulate
 
     doc = read_toml(args.scene) if args.scene else {}
     sim = doc.get("simulate", {})
@@ -59,6 +66,9 @@ def run(args: argparse.Namespace) -> int:
     max_steps = args.max_steps if args.max_steps is not None else sim.get("max_steps", DEFAULT_MAX_STEPS)
     _check_outputs(args)
     scene = scene_from_args(args)
+    from simulator.liquid import placement_biases
+
+    liquid_warnings = liquid_checks(args, scene, method, placement_biases(start), "the start")
     price_run(scene, method, max_steps)
     if method in ("overdamped", "inertial"):
         from simulator.dynamics import DynamicsParams
@@ -66,15 +76,19 @@ def run(args: argparse.Namespace) -> int:
         DynamicsParams.from_scene(scene)  # a liquid the model cannot take fails before compiling
     compiling(method, args.quiet)
     traj = simulate(scene, start, method=method, max_steps=max_steps)
-    f = [round(v, 2) + 0.0 for v in traj.final]  # no "-0.00"
-    time_txt = f", {traj.time_s * 1e3:.3g} ms" if traj.time_s is not None else ""
-    print(f"{method}: {traj.outcome} at ({f[0]:.2f} um, {f[1]:.2f} um, {f[2]:.2f} deg) after {traj.steps} steps{time_txt}")
+    print(end_line(scene, traj))
+    if traj.refined is not None:
+        r = [round(v, 1) + 0.0 for v in traj.refined]
+        print(f"refined below the grid (meniscus {scene.meniscus_height_um:.3g} um): ({r[0]:.1f} um, {r[1]:.1f} um, {r[2]:.1f} deg)")
     c = traj.cost
     if c.get("poses_computed"):
         print(f"landscape computed: {c['poses_computed']:,} of {c['poses_full']:,} poses ({100 * c['fraction_of_full']:.3g} %), {c['landscape_s']:.2f} s")
     if args.json:
-        write_json(args.json, traj.to_json())
+        write_json(args.json, traj.to_json() | {"liquid_warnings": liquid_warnings, "meniscus_height_um": scene.meniscus_height_um})
         print(f"wrote {args.json}")
+    if args.csv:
+        write_path_csv(args.csv, traj)
+        print(f"wrote {args.csv}")
     if args.plot:
         from simulator.render import plot_energy_curve
 
@@ -88,9 +102,47 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def write_path_csv(path, traj) -> None:
+    """The path, one row per recorded pose (the start is step 0), units in the header."""
+    from simulator.commands._common import write_csv
+
+    p = traj.path
+    cols, vals = ["step", "x_um", "y_um", "twist_deg", "energy_J"], [np.arange(len(p)), p[:, 0], p[:, 1], p[:, 2], traj.energy_J]
+    if traj.t_s is not None:
+        cols.append("t_s")
+        vals.append(traj.t_s)
+    write_csv(path, cols, vals)
+
+
+def end_line(scene, traj) -> str:
+    """'greedy: aligned at (x um, y um, t deg) after N steps', with the equivalent twist and
+    the chip's symmetry when the chip ended turned by a symmetry period or more (a square
+    at 90 deg is the square at 0 deg), and the global minimum it was measured against."""
+    f = [round(v, 2) + 0.0 for v in traj.final]  # no "-0.00"
+    time_txt = f", {traj.time_s * 1e3:.3g} ms" if traj.time_s is not None else ""
+    period = scene.twist_axis.period_deg
+    same = round(float(np.mod(traj.final[2] + period / 2, period) - period / 2), 2) + 0.0
+    twin = f" (twist {f[2]:g} deg = {same:g} deg for {chip_symmetry_words(scene, period)})" if abs(same - f[2]) > 1e-9 else ""
+    line = f"{traj.method}: {traj.outcome} at ({f[0]:.2f} um, {f[1]:.2f} um, {f[2]:.2f} deg){twin} after {traj.steps} steps{time_txt}"
+    if traj.optimum is not None and traj.outcome != "aligned":
+        g = [round(v, 2) + 0.0 for v in traj.optimum]
+        line += f"; the global minimum is at ({g[0]:g} um, {g[1]:g} um, {g[2]:g} deg)"
+    return line
+
+
+def chip_symmetry_words(scene, period: float) -> str:
+    """'a square chip', 'a rectangular chip', or 'a chip with 90-degree symmetry'."""
+    g = scene.chip.geometry
+    if g is not None and period in (90.0, 180.0):
+        x0, y0, x1, y1 = g.bounds
+        if abs(g.area - (x1 - x0) * (y1 - y0)) <= 1e-9 * g.area:
+            return "a square chip" if period == 90.0 else "a rectangular chip"
+    return f"a chip with {period:g}-degree symmetry"
+
+
 def _check_outputs(args: argparse.Namespace) -> None:
     """Fail before any work when an output cannot or must not be written."""
-    check_outputs(args, ("json", "plot", "gif"))
+    check_outputs(args, ("json", "csv", "plot", "gif"))
     if args.gif and not args.gif.lower().endswith(".gif"):
         raise InputError(f"--gif {args.gif}: the animation must end in .gif")
     if args.plot and not args.plot.lower().endswith((".png", ".svg", ".pdf")):

@@ -1,0 +1,24 @@
+"""Defaults and limits the command line quotes, in a module that imports nothing.
+
+The command modules (:mod:`simulator.commands`) register their flags with these values
+without importing JAX, the landscape engine or matplotlib, so that ``selfalign --help``
+and ``selfalign pattern`` start at once; :mod:`simulator.trajectory`,
+:mod:`simulator.montecarlo` and :mod:`simulator.evaluate` re-export them under their old
+names. ``tests/test_cli_usage.py`` checks that every default a help text quotes is the
+code's.
+"""
+
+#: Trajectory methods (:func:`simulator.trajectory.simulate`).
+METHODS = ("greedy", "gradient", "overdamped", "inertial")
+#: Default bound on moves or solver steps of one run.
+DEFAULT_MAX_STEPS = 5000
+#: Largest max_steps: step counters are int32.
+MAX_STEPS_LIMIT = 2**31 - 2
+#: The methods a Monte Carlo batch runs (:func:`simulator.montecarlo.run_batch`).
+BATCH_METHODS = ("greedy", "gradient")
+#: Starts per compiled batch (measured best on a 2-core CPU, see README "Monte Carlo").
+DEFAULT_CHUNK = 2048
+#: Largest chunk of starts compiled together.
+MAX_CHUNK = 2**20
+#: ``evaluate``: landscapes above this (MB) are built at a coarser resolution unless the user chose one.
+AUTO_LANDSCAPE_MB = 320.0

@@ -1,0 +1,159 @@
+"""Contact-angle hysteresis: the contact lines pin, so a chip stops short of the minimum.
+
+A contact line stays put while its contact angle lies between the receding and the
+advancing angle of the surface, ``theta_r <= theta <= theta_a``. When a chip moves, the
+contact line on its leading side advances and the one on its trailing side recedes; the
+most force the pair can hold back, per unit length of line across the motion, is the
+difference of their Young projections::
+
+    f_pin = gamma (cos theta_r - cos theta_a)        (N/m, >= 0)
+
+(Furmidge's sliding-drop criterion; for a pinned meniscus the same window holds the
+chip). Summed over the chip's contact line, each element of normal ``n`` moving with
+velocity ``v`` resists with ``f_pin / 2 * sign(v . n)`` (half for each of the pair), so
+the largest pinning force along an axis and the largest pinning torque are::
+
+    P_x = f_pin / 2 * oint |n_x| ds      (= f_pin * height of a rectangular chip)
+    P_y = f_pin / 2 * oint |n_y| ds      (= f_pin * width)
+    P_t = f_pin / 2 * oint |(z x r) . n| ds   (N m; = f_pin L^2 / 2 for a square of side L)
+
+The steppers use them as their stopping rule, axis by axis: a gradient or dynamic run
+stops at the first pose where the restoring force along every axis is at most its
+pinning force, ``|dE/dq_k| <= P_k`` (and, for the inertial method, where the kinetic
+energy left is at most the pinning work over one grid step); a greedy move is taken
+only if the energy it releases exceeds the pinning work ``sum_k P_k |dq_k|``. On a
+finite-meniscus landscape (a spring of stiffness ``k`` at alignment) the chip stops
+about ``P / k`` from the minimum: ``x = h (cos theta_r - cos theta_a) / 2`` for a square
+with pinned contact lines (``k = 2 gamma L / h``). With zero hysteresis every rule is
+today's exactly. On the overlap model's V-shaped well (force ``|Delta_gamma| L``
+everywhere) the chip either stops at once or goes all the way.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from patterns.errors import InputError
+from patterns.mask import Mask
+
+
+def parse_window(text: str, flag: str = "--hysteresis") -> tuple[float, float]:
+    """``RECEDING:ADVANCING`` in degrees -> (receding, advancing), checked."""
+    parts = str(text).split(":")
+    try:
+        r, a = (float(p) for p in parts)
+    except ValueError:
+        raise InputError(f"{flag} must be RECEDING:ADVANCING contact angles in degrees, e.g. 31:50, got {text!r}") from None
+    return require_window(r, a, flag)
+
+
+def require_window(receding_deg: float, advancing_deg: float, flag: str = "--hysteresis") -> tuple[float, float]:
+    for name, v in (("receding", receding_deg), ("advancing", advancing_deg)):
+        if not (isinstance(v, int | float) and math.isfinite(v) and 0 <= v <= 180):
+            raise InputError(f"{flag}: the {name} angle must be a contact angle in [0, 180] degrees, got {v!r}")
+    if receding_deg > advancing_deg:
+        raise InputError(
+            f"{flag}: the receding angle {receding_deg:g} deg is larger than the advancing angle {advancing_deg:g} deg; "
+            "give RECEDING:ADVANCING with receding <= advancing"
+        )
+    return float(receding_deg), float(advancing_deg)
+
+
+def pinning_force_per_length(gamma_N_m: float, receding_deg: float, advancing_deg: float) -> float:
+    """``gamma (cos theta_r - cos theta_a)`` in N/m."""
+    return gamma_N_m * (math.cos(math.radians(receding_deg)) - math.cos(math.radians(advancing_deg)))
+
+
+def contact_line_integrals_um(chip: Mask) -> tuple[float, float, float]:
+    """(oint |n_x| ds, oint |n_y| ds in um, oint |(z x r) . n| ds in um^2) of the chip's outline,
+    from its exact geometry or, for an image, from the mask's edges (pixel differences)."""
+    if chip.geometry is not None:
+        import shapely
+
+        sx = sy = st = 0.0
+        for poly in shapely.get_parts(chip.geometry):
+            rings = [poly.exterior, *poly.interiors]
+            for ring in rings:
+                c = np.asarray(ring.coords)
+                d = np.diff(c, axis=0)
+                # |n_x| ds = |dy|, |n_y| ds = |dx|; (z x r) . n ds = (-y, x) . (dy, -dx) = -(r . dr),
+                # linear along a segment: g(t) = (p0 + t d) . d, integrated exactly as |g|.
+                sx += float(np.abs(d[:, 1]).sum())
+                sy += float(np.abs(d[:, 0]).sum())
+                g0 = np.einsum("ij,ij->i", c[:-1], d)
+                g1 = np.einsum("ij,ij->i", c[1:], d)
+                same = g0 * g1 >= 0
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    cross = (g0 * g0 + g1 * g1) / (2 * np.abs(g1 - g0))
+                st += float(np.where(same, 0.5 * (np.abs(g0) + np.abs(g1)), cross).sum())
+        return sx, sy, st
+    s = chip.um_per_px
+    a = np.asarray(chip.data, float)
+    h, w = a.shape
+    gx = np.diff(a, axis=1, prepend=0.0, append=0.0)  # (h, w + 1): jumps across vertical pixel edges
+    gy = np.diff(a, axis=0, prepend=0.0, append=0.0)  # (h + 1, w)
+    xe = (np.arange(w + 1) - w / 2) * s  # vertical edges' x
+    yc = (h / 2 - np.arange(h) - 0.5) * s  # rows' centre y (y up)
+    xc = (np.arange(w) + 0.5 - w / 2) * s
+    ye = (h / 2 - np.arange(h + 1)) * s
+    sx = float(np.abs(gx).sum()) * s
+    sy = float(np.abs(gy).sum()) * s
+    # (z x r) . n ds: a vertical edge (normal x) at (xe, yc) contributes |y| |jump| s; a horizontal one |x|.
+    st = float((np.abs(gx) * np.abs(yc)[:, None]).sum() + (np.abs(gy) * np.abs(xc)[None, :]).sum()) * s
+    del xe, ye
+    return sx, sy, st
+
+
+def pinning(scene) -> tuple[float, float, float]:
+    """(P_twist in N m, P_y in N, P_x in N) of the scene's chip, or zeros without hysteresis."""
+    if not scene.effects.hysteresis:
+        return 0.0, 0.0, 0.0
+    m = scene.materials
+    f = pinning_force_per_length(m.surface_tension_N_m, m.pad_receding_deg, m.pad_advancing_deg)
+    sx, sy, st = contact_line_integrals_um(scene.chip)
+    return f / 2 * st * 1e-12, f / 2 * sy * 1e-6, f / 2 * sx * 1e-6
+
+
+def pin_per_index(scene, um_per_px: float, twist_step_deg: float) -> tuple[float, float, float]:
+    """Pinning work over one grid step along (twist, y, x), in J: the thresholds the
+    steppers compare ``|dE/dq_k|`` (J per index step) with."""
+    pt, py, px = pinning(scene)
+    return pt * math.radians(twist_step_deg), py * um_per_px * 1e-6, px * um_per_px * 1e-6
+
+
+#: A pinned chip within this many predicted stop distances of the minimum counts as aligned.
+ALIGN_MARGIN = 3.0
+
+
+def align_tolerance(ls, pin: tuple[float, float, float]) -> tuple[float, float]:
+    """(twist steps, px) within which a run that stopped counts as aligned: one step, or with
+    hysteresis :data:`ALIGN_MARGIN` times the distance ``P_k / c_k`` at which the well's
+    restoring force (curvature ``c_k`` per step^2 at the landscape's minimum) equals the
+    pinning force, whichever is larger. On the overlap model's V-shaped well ``c_k`` is
+    large and the tolerance stays one step."""
+    if not any(pin):
+        return 1.0, 1.0
+    e = np.asarray(ls.energy, np.float64)
+    it, iy, ix = ls.minimum_index()
+    nt, ny, nx = e.shape
+    d = []
+    for k, (i, n) in enumerate(((it, nt), (iy, ny), (ix, nx))):
+        if pin[k] <= 0 or n < 3:
+            d.append(0.0)
+            continue
+        lo, hi = i - 1, i + 1
+        if k == 0 and ls.wrap:
+            lo, hi = lo % n, hi % n
+        if lo < 0 or hi >= n:
+            d.append(0.0)
+            continue
+        idx = [it, iy, ix]
+        vals = []
+        for j in (lo, i, hi):
+            idx[k] = j
+            vals.append(e[tuple(idx)])
+        c = vals[0] + vals[2] - 2 * vals[1]
+        d.append(pin[k] / c if c > 0 else 0.0)
+    return max(1.0, ALIGN_MARGIN * d[0]), max(1.0, ALIGN_MARGIN * max(d[1], d[2]))

@@ -1,0 +1,227 @@
+"""The finite meniscus (simulator.meniscus): closed forms, the h -> 0 limit, sub-pixel
+minima, the CLI and its refusals."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from shapely import affinity
+from shapely.geometry import Polygon, box
+
+from patterns.errors import InputError
+from patterns.raster import mask_from_geometry
+from simulator import meniscus as mn
+from simulator.landscape import build_landscape
+from simulator.materials import Liquid
+from simulator.refine import refine_minimum, stiffness
+from simulator.scene import Effects, Scene, TwistGrid
+
+GAMMA = 0.0728
+
+
+def _scene(pattern_geom, chip_size=None, chip_geom=None, h=5.0, pinned=True, twist=(0.5, -2, 2), window=40.0, meniscus=True, s=1.0):
+    pat = mask_from_geometry(pattern_geom, s, margin_um=2)
+    kw = {"chip_size_um": chip_size} if chip_size is not None else {"chip": mask_from_geometry(chip_geom, s)}
+    tw = TwistGrid(*twist) if twist else TwistGrid()
+    return Scene.from_inputs(pat, **kw, effects=Effects(twist=bool(twist), meniscus=meniscus), liquid=Liquid(height_um=h, pinned=pinned),
+                             twist=tw, window_um=window, dtype="float64")
+
+
+def _centre(ls):
+    return int(np.argmin(np.abs(ls.twist_deg))), int(np.argmin(np.abs(ls.y_um))), int(np.argmin(np.abs(ls.x_um)))
+
+
+def test_kernel_is_normalised_and_has_the_flat_wall_profile():
+    h = 3.0
+    k = mn.kernel_image(h, 400)
+    assert k.sum() == pytest.approx(1.0, abs=2e-4)  # tail beyond 400 px: h^2 / r^2 ~ 6e-5
+    spec = mn.kernel_spectrum(64, 64, h)
+    assert spec[0, 0] == 1.0 and np.all(spec <= 1.0) and np.all(spec >= 0)
+    # Profile across a line: the 1-D marginal is h^2 / (2 (d^2 + h^2)^1.5).
+    d = np.arange(-400, 401)
+    prof = k.sum(axis=0)
+    assert np.allclose(prof[390:411], h**2 / (2 * (d[390:411] ** 2 + h**2) ** 1.5), rtol=2e-3)
+    assert np.allclose(mn.kernel_spectrum(32, 32, 1e-12), 1.0, atol=1e-12)
+
+
+def test_zero_height_limit_is_the_overlap_landscape_to_round_off():
+    sq = box(-40, -40, 40, 40)
+    on = build_landscape(_scene(sq, chip_size=80, h=1e-9))
+    off = build_landscape(_scene(sq, chip_size=80, meniscus=False))
+    assert on.energy.shape == off.energy.shape
+    assert np.max(np.abs(on.energy - off.energy)) <= 1e-12 * np.abs(off.energy).max()
+    assert off.meniscus_height_um is None and on.meniscus_height_um == pytest.approx(1e-9)
+
+
+def test_meniscus_off_is_bit_for_bit_the_overlap_model():
+    sq = box(-30, -30, 30, 30)
+    a = build_landscape(_scene(sq, chip_size=60, meniscus=False, pinned=False))
+    b = build_landscape(Scene.from_inputs(mask_from_geometry(sq, 1.0, margin_um=2), chip_size_um=60, twist=TwistGrid(0.5, -2, 2),
+                                          window_um=40.0, dtype="float64"))
+    assert np.array_equal(a.energy, b.energy)
+
+
+@pytest.mark.parametrize("h", [4.0, 8.0])
+def test_square_shift_energy_stiffness_and_saturation(h):
+    L = 200.0
+    ls = build_landscape(_scene(box(-L / 2, -L / 2, L / 2, L / 2), chip_size=L, h=h, twist=None, window=8 * h))
+    it, iy, ix = _centre(ls)
+    e = ls.energy[it, iy] - ls.energy[it, iy, ix]
+    x = ls.x_um
+    # Flat-wall energy 2 gamma L (sqrt(x^2 + h^2) - h), with the model's corner factor
+    # (1 - 2h / (pi L)) on the stiffness (the ends of the edges, derived in meniscus.py).
+    corner = 1 - 2 * h / (math.pi * L)
+    near = np.abs(x) <= 2 * h
+    cf = mn.flat_wall_energy_J(x, L, h, GAMMA)
+    assert np.allclose(e[near], cf[near], rtol=h / L * 1.5, atol=1e-3 * cf[near].max())
+    k = (e[ix + 1] + e[ix - 1]) / (1e-6) ** 2
+    assert k == pytest.approx(mn.flat_wall_stiffness_N_m(L, h, GAMMA) * corner, rel=2e-3)
+    # Far out the force saturates at 2 gamma (L - h) (edges shortened by about h at the corners).
+    F = -np.gradient(ls.energy[it, iy], x * 1e-6)
+    far = np.argmin(np.abs(x - 7 * h))
+    assert -F[far] == pytest.approx(2 * GAMMA * L * 1e-6 * (1 - h / L), rel=0.02)
+    assert abs(F[far]) < 2 * GAMMA * L * 1e-6
+    # The stiffness deficit against the flat wall shrinks like h / L.
+
+
+def test_rectangle_stiffness_follows_the_edge_across_the_shift():
+    a, b, h = 200.0, 100.0, 5.0
+    ls = build_landscape(_scene(box(-a / 2, -b / 2, a / 2, b / 2), chip_size=(a, b), h=h, twist=None, window=20))
+    k = stiffness(ls, 0.0, 0.0, 0.0)
+    # Along x the walls across the shift are the b-sides: 2 gamma b / h; along y, 2 gamma a / h.
+    assert k["x_N_per_m"] == pytest.approx(mn.flat_wall_stiffness_N_m(b, h, GAMMA) * (1 - 2 * h / (math.pi * b)), rel=0.01)
+    assert k["y_N_per_m"] == pytest.approx(mn.flat_wall_stiffness_N_m(a, h, GAMMA) * (1 - 2 * h / (math.pi * a)), rel=0.01)
+    assert k["x_N_per_m"] / k["y_N_per_m"] == pytest.approx(b / a, rel=0.03)
+
+
+def test_regular_hexagon_is_isotropic():
+    r = 80.0
+    hexagon = Polygon([(r * math.cos(math.radians(60 * i)), r * math.sin(math.radians(60 * i))) for i in range(6)])
+    ls = build_landscape(_scene(hexagon, chip_geom=hexagon, h=6.0, twist=None, window=20))
+    k = stiffness(ls, 0.0, 0.0, 0.0)
+    assert k["x_N_per_m"] == pytest.approx(k["y_N_per_m"], rel=0.01)
+    # Perimeter 6 r, stiffness sum_e L_e n n^T / h gamma: 3 r gamma / h along each axis (corners aside).
+    assert k["x_N_per_m"] == pytest.approx(2 * GAMMA * 3 * r / 2 / 6.0, rel=0.12)
+
+
+def test_twist_is_smooth_and_tends_to_the_flat_wall_stiffness():
+    L = 200.0
+    ratios = []
+    for h in (5.0, 10.0):
+        ls = build_landscape(_scene(box(-L / 2, -L / 2, L / 2, L / 2), chip_size=L, h=h, twist=(0.25, -2, 2), window=4))
+        it, iy, ix = _centre(ls)
+        e = ls.energy[:, iy, ix] - ls.energy[it, iy, ix]
+        # No cusp: energy even in twist, convex, and the first step rises no faster than quadratically.
+        assert np.allclose(e, e[::-1], rtol=1e-6, atol=1e-20)
+        assert e[it + 1] < e[it + 2] / 3.0
+        kt = stiffness(ls, 0.0, 0.0, 0.0)["twist_Nm_per_rad"]
+        ratios.append(kt / mn.flat_wall_twist_stiffness_Nm(L, h, GAMMA))
+    # gamma L^3 / (3 h) less a corner deficit of about 4.3 h / L (measured: 0.89 at h/L = 0.025, 0.78 at 0.05).
+    assert 0.85 < ratios[0] < 0.93 and 0.74 < ratios[1] < 0.83
+    assert (1 - ratios[1]) / (1 - ratios[0]) == pytest.approx(2.0, rel=0.15)
+
+
+@pytest.mark.parametrize(("sx", "sy"), [(0.3, -0.2), (0.45, 0.1)])
+def test_subpixel_shift_of_the_pattern_is_recovered(sx, sy):
+    L = 100.0
+    sc = _scene(affinity.translate(box(-L / 2, -L / 2, L / 2, L / 2), sx, sy), chip_size=L, h=4.0, pinned=False, window=10)
+    ls = build_landscape(sc)
+    g = ls.global_minimum()
+    assert (g[0], g[1]) == (0.0, 0.0)  # the grid cannot see it
+    r = refine_minimum(ls, *g[:3])
+    assert r["x_um"] == pytest.approx(sx, abs=0.1) and r["y_um"] == pytest.approx(sy, abs=0.1)
+    assert abs(r["twist_deg"]) < 0.1
+
+
+def test_defect_moves_the_minimum_towards_the_flatter_side():
+    # A 200 um pad missing a triangle (base 40 um) on its right edge: moving left costs
+    # less (the chip's right edge enters the notch), so the minimum moves left by about
+    # h r / sqrt(1 - r^2), r = (a - b) / (a + b) the slopes' asymmetry: 40 / 360.
+    L, base, depth, h = 200.0, 40.0, 20.0, 10.0
+    pad = box(-L / 2, -L / 2, L / 2, L / 2).difference(Polygon([(L / 2, -base / 2), (L / 2 - depth, 0), (L / 2, base / 2)]))
+    ls = build_landscape(_scene(pad, chip_size=L, h=h, twist=(1.0, -2, 2), window=20))
+    r = refine_minimum(ls, *ls.global_minimum()[:3])
+    rr = base / (2 * L - base)
+    expected = -h * rr / math.sqrt(1 - rr * rr)
+    assert r["x_um"] < -0.3
+    assert r["x_um"] == pytest.approx(expected, rel=0.5)
+    assert abs(r["y_um"]) < 0.05 and abs(r["twist_deg"]) < 0.05
+    # The overlap model cannot see it (PHYSICS check C11): its minimum stays at 0.
+    off = build_landscape(_scene(pad, chip_size=L, twist=(1.0, -2, 2), window=20, meniscus=False))
+    assert off.global_minimum()[:3] == (0.0, 0.0, 0.0)
+
+
+def test_height_from_volume_and_refusals():
+    sq = box(-100, -100, 100, 100)
+    sc = Scene.from_inputs(mask_from_geometry(sq, 2.0), chip_size_um=200, effects=Effects(meniscus=True), liquid=Liquid(volume_nl=0.9))
+    assert sc.meniscus_height_um == pytest.approx(22.5)
+    with pytest.raises(InputError, match="larger than the chip"):
+        Scene.from_inputs(mask_from_geometry(sq, 2.0), chip_size_um=200, effects=Effects(meniscus=True), liquid=Liquid(volume_nl=500))
+    for bad in (0.0, -1.0, float("nan"), float("inf")):
+        with pytest.raises(InputError, match="meniscus height"):
+            Liquid(height_um=bad)
+    assert mn.regime_warning(60.0, 200.0) and mn.regime_warning(40.0, 200.0) is None
+    # Off, the height is not asked for (an impossible volume does not matter).
+    assert Scene.from_inputs(mask_from_geometry(sq, 2.0), chip_size_um=200, liquid=Liquid(volume_nl=500)).meniscus_height_um is None
+
+
+def test_pinned_energy_scale_is_twice_the_surface_tension():
+    sq = box(-50, -50, 50, 50)
+    pinned = _scene(sq, chip_size=100, h=1e-9)
+    free = _scene(sq, chip_size=100, h=1e-9, pinned=False)
+    assert pinned.delta_gamma_N_m == pytest.approx(-2 * GAMMA)
+    assert free.delta_gamma_N_m == pytest.approx(free.materials.delta_gamma_N_m)
+
+
+def test_cli_evaluate_meniscus_reports_stiffness_and_offset(tmp_path, capsys):
+    from simulator.cli import main
+
+    out = tmp_path / "ev"
+    code = main(["evaluate", "--pattern", "patterns/library/defect_A_inward.png", "--chip-size", "200", "--meniscus", "--volume", "0.9",
+                 "--pinned", "--resolution", "4", "--twist-step", "2", "--out", str(out)])
+    assert code == 0
+    d = json.loads((out / "summary.json").read_text())
+    assert d["meniscus_height_um"] == pytest.approx(22.5)
+    k = d["stiffness"]
+    # 200 um square, pinned water: 2 gamma L / h = 1.29 N/m, less the corner deficit and the defect.
+    assert 0.9 < k["x_N_per_m"] < 1.3 and 0.9 < k["y_N_per_m"] < 1.3 and k["twist_Nm_per_rad"] > 0
+    assert d["offset_from_centre"]["x_um"] < 0 and d["global_minimum"]["refined"] is True
+
+
+@pytest.mark.parametrize(("flags", "needle"), [
+    (["--meniscus-height", "0"], "meniscus height"),
+    (["--meniscus-height", "nan"], "meniscus height"),
+    (["--meniscus-height", "300"], "larger than the chip"),
+    (["--meniscus", "--volume", "500"], "larger than the chip"),
+])
+def test_cli_refuses_bad_heights_in_one_line(flags, needle, capsys):
+    from simulator.cli import main
+
+    code = main(["energy", "--pattern", "patterns/library/square_200.png", "--chip-size", "200", "--at", "0,0,0", *flags])
+    err = capsys.readouterr().err
+    assert code == 2 and needle in err and len(err.strip().splitlines()) == 1
+
+
+def test_scene_file_means_what_the_flags_mean(tmp_path):
+    from simulator.cli import build_parser
+    from simulator.commands._common import scene_from_args
+    from simulator.commands.energy import register  # noqa: F401  (the energy parser has every scene flag)
+
+    toml = tmp_path / "s.toml"
+    pattern = Path("patterns/library/square_200.png").resolve()
+    toml.write_text(
+        f'pattern = "{pattern}"\nchip_size_um = 200\nresolution_um = 4\n[effects]\nmeniscus = true\nhysteresis = true\n'
+        '[liquid]\nmeniscus_height_um = 12.5\npinned = true\n[materials]\npad_receding_deg = 31\npad_advancing_deg = 50\n'
+    )
+    a = Scene.from_toml(toml)
+    args = build_parser().parse_args(["energy", "--pattern", "patterns/library/square_200.png", "--chip-size", "200", "--resolution", "4",
+                                      "--meniscus-height", "12.5", "--pinned", "--hysteresis", "31:50", "--at", "0,0,0"])
+    b = scene_from_args(args)
+    for s in (a, b):
+        assert s.meniscus_height_um == 12.5 and s.liquid.pinned and s.effects.meniscus and s.effects.hysteresis
+        assert (s.materials.pad_receding_deg, s.materials.pad_advancing_deg) == (31.0, 50.0)
+    assert a.um_per_px == b.um_per_px and np.array_equal(a.pattern.data, b.pattern.data)
