@@ -67,7 +67,15 @@ def run(args: argparse.Namespace) -> int:
                        force=args.force, inputs=tuple(inputs), liquid_warnings=liquid_warnings)
     g, cap, yl = summary["global_minimum"], summary["capture"], summary["yield"]
     b = summary["max_bias_um"]
-    print(f"global minimum at ({g['x_um']:g} um, {g['y_um']:g} um, {g['twist_deg']:g} deg)")
+    if g.get("refined"):  # below the grid (finite meniscus): to 0.1 um and 0.1 degree
+        x, y, t = (round(g[k], 1) + 0.0 for k in ("x_um", "y_um", "twist_deg"))
+        k = summary["stiffness"]
+        tw = "" if k["twist_Nm_per_rad"] is None else f", twist {k['twist_Nm_per_rad']:.3g} N m/rad"
+        print(f"global minimum at ({x:.1f} um, {y:.1f} um, {t:.1f} deg), refined below the grid "
+              f"(meniscus {summary['meniscus_height_um']:.3g} um)")
+        print(f"stiffness at alignment: x {k['x_N_per_m']:.3g} N/m, y {k['y_N_per_m']:.3g} N/m{tw}")
+    else:
+        print(f"global minimum at ({g['x_um']:g} um, {g['y_um']:g} um, {g['twist_deg']:g} deg)")
     print(f"max bias: +x {b['+x']:g} um, -x {b['-x']:g} um, +y {b['+y']:g} um, -y {b['-y']:g} um")
     print(f"capture fraction {100 * cap['fraction']:.1f} % of {cap['n']} grid starts; yield {100 * yl['fraction']:.1f} % under placement noise")
     print(f"wrote {Path(args.out) / 'report.html'} (and summary.json, landscape.png, force.png, capture.png, pattern.png)")
