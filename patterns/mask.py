@@ -79,3 +79,17 @@ def nonzero_box(data: np.ndarray) -> tuple[int, int, int, int]:
     rows = np.flatnonzero(data.any(axis=1))
     cols = np.flatnonzero(data.any(axis=0))
     return rows[0], rows[-1] + 1, cols[0], cols[-1] + 1
+
+
+def footprint_um(mask: Mask) -> tuple[float, float]:
+    """Width and height (um) of a mask's wettable footprint: exact for geometry, else the
+    bounding box of the pixels at least half covered (of every covered pixel when none is)."""
+    if mask.geometry is not None:
+        x0, y0, x1, y1 = mask.geometry.bounds
+        return x1 - x0, y1 - y0
+    d = mask.data >= 0.5
+    if not d.any():
+        d = mask.data > 0
+    rows, cols = np.flatnonzero(d.any(axis=1)), np.flatnonzero(d.any(axis=0))
+    s = mask.um_per_px
+    return (cols[-1] + 1 - cols[0]) * s, (rows[-1] + 1 - rows[0]) * s

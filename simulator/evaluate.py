@@ -35,6 +35,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from patterns.mask import footprint_um  # noqa: F401  (also imported from here)
 from patterns.outputs import check_output_dir, output_directory
 from simulator import montecarlo, render
 from simulator.defaults import AUTO_LANDSCAPE_MB  # noqa: F401  (re-exported; landscapes above it are coarsened)
@@ -56,18 +57,6 @@ def auto_resolution(scene: Scene, budget_mb: float = AUTO_LANDSCAPE_MB) -> Scene
         if estimate_bytes(s) / 2**20 <= budget_mb:
             return s
     return s
-
-
-def footprint_um(mask) -> tuple[float, float]:
-    """Width and height (um) of a mask's wettable footprint: exact for geometry, else the
-    bounding box of the pixels at least half covered."""
-    if mask.geometry is not None:
-        x0, y0, x1, y1 = mask.geometry.bounds
-        return x1 - x0, y1 - y0
-    d = mask.data >= 0.5
-    rows, cols = np.flatnonzero(d.any(axis=1)), np.flatnonzero(d.any(axis=0))
-    s = mask.um_per_px
-    return (cols[-1] + 1 - cols[0]) * s, (rows[-1] + 1 - rows[0]) * s
 
 
 def chip_size(scene: Scene) -> tuple[float, float]:

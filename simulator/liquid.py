@@ -335,13 +335,9 @@ def pad_count(mask) -> int:
 
 
 def _footprint_um(mask) -> tuple[float, float]:
-    """Width and height (um) of a mask's wettable footprint (exact for geometry)."""
-    if mask.geometry is not None:
-        x0, y0, x1, y1 = mask.geometry.bounds
-        return x1 - x0, y1 - y0
-    d = mask.data >= 0.5
-    rows, cols = np.flatnonzero(d.any(axis=1)), np.flatnonzero(d.any(axis=0))
-    return (cols[-1] + 1 - cols[0]) * mask.um_per_px, (rows[-1] + 1 - rows[0]) * mask.um_per_px
+    from patterns.mask import footprint_um
+
+    return footprint_um(mask)
 
 
 # --------------------------------------------------------------------- scene checks

@@ -146,8 +146,11 @@ def flat_wall_energy_J(x_um, edge_um: float, h_um: float, gamma_N_m: float) -> n
 
 
 def flat_wall_stiffness_N_m(edge_um: float, h_um: float, gamma_N_m: float) -> float:
-    """Small-shift stiffness ``2 gamma L / h`` (N/m) of two straight edges of length L."""
-    return 2 * gamma_N_m * edge_um / h_um
+    """Small-shift stiffness ``2 gamma L / h`` (N/m) of two straight edges of length L
+    (:func:`simulator.materials.parallelepiped_stiffness`)."""
+    from simulator.materials import parallelepiped_stiffness
+
+    return parallelepiped_stiffness(h_um, edge_um, gamma_N_m)
 
 
 def flat_wall_twist_stiffness_Nm(side_um: float, h_um: float, gamma_N_m: float) -> float:

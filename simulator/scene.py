@@ -193,14 +193,10 @@ class Scene:
 
     @property
     def chip_min_side_um(self) -> float:
-        """The smallest side (um) of the chip's wettable footprint's bounding box."""
-        if self.chip.geometry is not None:
-            x0, y0, x1, y1 = self.chip.geometry.bounds
-            return float(min(x1 - x0, y1 - y0))
-        from patterns.mask import nonzero_box
+        """The smallest side (um) of the chip's wettable footprint (:func:`patterns.mask.footprint_um`)."""
+        from patterns.mask import footprint_um
 
-        r0, r1, c0, c1 = nonzero_box(self.chip.data > 0.5) if (self.chip.data > 0.5).any() else nonzero_box(self.chip.data > 0)
-        return float(min(r1 - r0, c1 - c0)) * self.um_per_px
+        return float(min(footprint_um(self.chip)))
 
     @property
     def meniscus_height_um(self) -> float | None:
