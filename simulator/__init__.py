@@ -5,10 +5,10 @@ build_landscape, simulate``); each is loaded on first use, so ``import simulator
 is fast and imports neither JAX nor matplotlib. See ``docs/architecture.md`` for the
 modules behind them.
 
-JAX: the modules that run JAX code (:mod:`simulator.stepping`, :mod:`simulator.dynamics`
-and the GPU correlator) switch on ``jax_enable_x64`` when they are first imported, so
-that a float64 landscape stays float64 inside the steppers; float32 landscapes still
-compute in float32. Importing this package alone changes no JAX setting.
+JAX: importing this package, or any of its modules, changes no JAX setting. The
+first stepper run (:func:`simulator.stepping.make_field`, which every trajectory and
+batch goes through) and the GPU correlator switch on ``jax_enable_x64``, so that a
+float64 landscape stays float64; float32 landscapes still compute in float32.
 """
 
 from __future__ import annotations

@@ -45,6 +45,7 @@ from shapely.geometry.base import BaseGeometry
 
 from patterns.errors import InputError, positive
 from patterns.mask import Mask
+from simulator.tolerances import REL_TOL
 
 __all__ = [
     "DEFAULT_PRESET",
@@ -179,7 +180,7 @@ def feature_warning(pattern: Mask | BaseGeometry, um_per_px: float, min_px: floa
     s = positive("um_per_px", um_per_px, "um per px")
     need = positive("min_px", min_px, "px")
     f = smallest_feature_um(pattern)
-    if f >= need * s * (1 - 1e-9):
+    if f >= need * s * (1 - REL_TOL):
         return None
     return (
         f"the pattern's smallest feature is {f:.3g} um, only {f / s:.2g} px at {s:g} um/px; "
@@ -191,7 +192,7 @@ def _nice_down(v: float) -> str:
     """The largest of 1, 2, 2.5, 5 x 10^k not above v, as text."""
     k = math.floor(math.log10(v))
     for m in (5, 2.5, 2, 1):
-        if m * 10**k <= v * (1 + 1e-9):
+        if m * 10**k <= v * (1 + REL_TOL):
             return f"{m * 10**k:g}"
     return f"{10**k:g}"
 

@@ -283,6 +283,65 @@ def _correlate_into(cor: Correlator, stack: np.ndarray, energy: np.ndarray, idx:
         energy[mirror_idx] = mirror
 
 
+def correlate_planes(cor: Correlator, rasters, count: int, out: np.ndarray, scale: float, work: Workspace | None, chunk: int,
+                     twins: dict[int, int] | None = None, repeats: dict[int, int] | None = None, flip_rows: int | None = None,
+                     verify=None, progress=None) -> tuple[int, int]:
+    """Planes ``out[0:count]`` of a stack of chips, saving every transform their symmetry
+    allows: the one symmetry-saving path of :func:`simulator.engine.build_landscape` and
+    :func:`correlate_stack`.
+
+    Args:
+        rasters: ``rasters(sel)`` -> the (len(sel), h, w) chips of planes ``sel``.
+        twins: {i: j}: the chip of plane j is that of plane i upside down. Plane j comes
+            from plane i's spectrum (``mirror_out``), or, with ``flip_rows``, is plane i
+            upside down over its first ``flip_rows`` rows (the pattern is mirror-symmetric
+            too and the window centred on y = 0): no transform at all.
+        repeats: {j: i}: plane j equals plane i (a chip seen before), copied.
+        verify: for chips whose twin relation is not exact by construction,
+            ``verify(j, chip_i)`` -> the chip of plane j when it is *not* chip i upside
+            down (that plane is then transformed directly), else None.
+        progress: called with the number of planes done.
+
+    Returns (planes from a twin's spectrum, planes copied upside down).
+    """
+    twins, repeats = twins or {}, repeats or {}
+    paired = set(twins) | set(twins.values())
+    singles = [i for i in range(count) if i not in paired and i not in repeats]
+    pairs = sorted(twins.items())
+    n_mirror = n_copied = 0
+    for k in range(0, len(singles), chunk):
+        sel = singles[k : k + chunk]
+        _correlate_into(cor, rasters(sel), out, sel, scale, work=work)
+        if progress:
+            progress(len(sel))
+    for k in range(0, len(pairs), chunk):
+        sel = pairs[k : k + chunk]
+        pos, neg = [a for a, _ in sel], [b for _, b in sel]
+        stack = rasters(pos)
+        if flip_rows is not None:
+            _correlate_into(cor, stack, out, pos, scale, work=work)
+            for a, b in sel:
+                out[b, :flip_rows] = out[a, :flip_rows][::-1]
+            n_copied += len(sel)
+        else:
+            _correlate_into(cor, stack, out, pos, scale, mirror_idx=neg, work=work)
+            n_mirror += len(sel)
+        if verify is not None:
+            for b, img in zip(neg, stack, strict=True):
+                direct = verify(b, img)
+                if direct is not None:
+                    cor(direct[None], out=out[b : b + 1], scale=scale, work=work)
+                    if flip_rows is None:
+                        n_mirror -= 1
+                    else:
+                        n_copied -= 1
+        if progress:
+            progress(2 * len(sel))
+    for j, i in repeats.items():
+        out[j] = out[i]
+    return n_mirror, n_copied
+
+
 def correlate_stack(pattern: np.ndarray, chips: np.ndarray, dtype: str = "float32", backend: str = "auto", chunk: int = 8) -> np.ndarray:
     """Full linear cross-correlation of ``pattern`` (H, W) with each of ``chips`` (T, h, w).
 
@@ -312,24 +371,14 @@ def correlate_stack(pattern: np.ndarray, chips: np.ndarray, dtype: str = "float3
             twin.setdefault(j, i)
     pf = np.asarray(pattern, np.float64)
     pattern_mirror = bool(np.abs(pf - pf[::-1]).max() <= SAME_CHIP_TOL)
+    # Every other chip repeats a first one, or its twin (the first upside down).
+    repeats = {i: (twin[j] if mirrored else j) for i, (j, mirrored) in enumerate(rel) if i != j and twin.get(j) != i}
     out = np.empty((t, 2 * win.ry + 1, 2 * win.rx + 1), cor.dtype)
     work = cor.workspace(min(chunk, max(t, 1)), mirror=not pattern_mirror and bool(twin))
     H, W = hp + hc - 1, wp + wc - 1  # the full layout (a window of out)
-    firsts = [i for i in range(t) if rel[i][0] == i]
-    paired = [i for i in firsts if i in twin and not pattern_mirror]
-    for group, mirror in (([i for i in firsts if i not in paired], False), (paired, True)):
-        for k in range(0, len(group), chunk):
-            sel = group[k : k + chunk]
-            stack = chips[sel[0] : sel[-1] + 1] if _run(sel, 1) else chips[sel]
-            _correlate_into(cor, stack, out, sel, 1.0, mirror_idx=[twin[i] for i in sel] if mirror else None, work=work)
-    done = set(firsts) | {twin[i] for i in paired}
-    for i, (j, mirrored) in enumerate(rel):
-        if i in done:
-            continue
-        if not mirrored:
-            out[i] = out[j]
-        elif j in twin and twin[j] in done:
-            out[i] = out[twin[j]]
-        else:  # pattern mirror-symmetric: corr of the mirror image = corr upside down
-            out[i, :H] = out[j, :H][::-1]
+
+    def rasters(sel: list[int]) -> np.ndarray:
+        return chips[sel[0] : sel[-1] + 1] if _run(sel, 1) else chips[sel]
+
+    correlate_planes(cor, rasters, t, out, 1.0, work, chunk, twins=twin, repeats=repeats, flip_rows=H if pattern_mirror else None)
     return out[:, :H, :W]

@@ -47,6 +47,9 @@ GRID_POINTS = 1200
 #: Footprint-grid points before the golden-section refinement.
 FOOTPRINT_POINTS = 400
 _GOLDEN = (math.sqrt(5.0) - 1.0) / 2.0
+#: Relative slack (fraction of the edge's length) within which a drop's footprint side counts
+#: as at a pad or pattern edge: above the golden-section search's ~1e-9, below any real gap.
+EDGE_REL_TOL = 1e-6
 
 METHOD = (
     "reduced spherical-cap model: each drop is a spherical cap on the area of a centred square "
@@ -261,7 +264,7 @@ class CriticalVolume:
         return {
             "footprint_side_um": s,
             "apparent_angle_deg": float(cap_angle_deg(v, s * s)),
-            "pinned_at_pattern_edge": bool(abs(s - p.size_um) < 1e-6 * p.size_um),
+            "pinned_at_pattern_edge": bool(abs(s - p.size_um) < EDGE_REL_TOL * p.size_um),
         }
 
     def split_drops(self) -> list[dict]:
@@ -277,8 +280,8 @@ class CriticalVolume:
                 "volume_nl": float(vol / UM3_PER_NL),
                 "footprint_side_um": s,
                 "apparent_angle_deg": float(cap_angle_deg(vol, s * s)),
-                "spills_past_pad": bool(s > p.pad_um * (1 + 1e-6)),
-                "touches_neighbour": bool(s >= (p.pad_um + p.gap_um) * (1 - 1e-6)),
+                "spills_past_pad": bool(s > p.pad_um * (1 + EDGE_REL_TOL)),
+                "touches_neighbour": bool(s >= (p.pad_um + p.gap_um) * (1 - EDGE_REL_TOL)),
             })
         return out
 

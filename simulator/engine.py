@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -20,14 +21,14 @@ from simulator.correlator import (
     SAME_CHIP_TOL,
     Correlator,
     Window,
-    _correlate_into,
+    correlate_planes,
     fft_shape,
     work_bytes,
 )
 from simulator.feedback import progress_bar
 from simulator.materials import UM2
 from simulator.meniscus import CHIP_BLUR_MIN_PX, margin_px
-from simulator.posegrid import _axis_box, _twist_cut, twist_axis
+from simulator.posegrid import PoseGrid, TwistAxis, _axis_box, _twist_cut, evenly_spaced_axis
 from simulator.rotation import ChipRotator, _chip_reach_px, mirror_twins
 from simulator.scene import Scene
 
@@ -88,10 +89,24 @@ def _refuse_over_budget(scene: Scene, need: float, n_twists: int, ny: int, nx: i
         )
 
 
-def _box(scene: Scene, twists: np.ndarray | None, center_px: tuple[int, int] = (0, 0), half_px: int | None = None) -> dict:
+def _twist_run(scene: Scene, twists) -> tuple[TwistAxis, int, int, tuple[bool, bool]]:
+    """(axis, first index, count, cut ends) of the twists a build computes: the scene's
+    whole axis, a run of consecutive twists of it, or any other evenly spaced twists on an
+    axis of their own (InputError otherwise: a landscape's twists are one pose grid); the
+    cut ends say where the run stops short of the scene's twist range."""
+    axis = scene.twist_axis
+    if twists is None:
+        return axis, 0, axis.count, axis.cut_of(0, axis.count)
+    tw = np.atleast_1d(np.asarray(twists, float))
+    k0 = axis.locate(tw)
+    if k0 is not None:
+        return axis, k0, len(tw), axis.cut_of(k0, len(tw))
+    return evenly_spaced_axis(tw, axis), 0, len(tw), _twist_cut(axis.values(), axis.periodic, tw)
+
+
+def _box(scene: Scene, twists, center_px: tuple[int, int] = (0, 0), half_px: int | None = None) -> dict:
     """Twists and translation box of a build, and its landscape bytes: sizes only, no rotation."""
-    all_twists, wrap, period = twist_axis(scene)
-    twists = all_twists if twists is None else np.asarray(twists, float)
+    axis, t_first, n_twists, t_cut = _twist_run(scene, twists)
     pat = scene.pattern.data
     r0, r1, c0, c1 = nonzero_box(pat > 0)
     h, w = pat.shape
@@ -105,25 +120,56 @@ def _box(scene: Scene, twists: np.ndarray | None, center_px: tuple[int, int] = (
     limit = None if scene.window_um is None else math.ceil(scene.window_um / scene.um_per_px - 1e-9)
     cx, rx, x_lo, x_hi = _axis_box(math.ceil(reach[0] + chip_rx - 1e-9), limit, int(center_px[0]), half_px)
     cy, ry, y_lo, y_hi = _axis_box(math.ceil(reach[1] + chip_ry - 1e-9), limit, int(center_px[1]), half_px)
-    nbytes = len(twists) * (2 * ry + 1) * (2 * rx + 1) * np.dtype(scene.dtype).itemsize
-    return {
-        "twists": twists, "all_twists": all_twists, "wrap": wrap, "period": period, "origin": origin,
-        "crop": (r0, r1, c0, c1), "x": (cx, rx, x_lo, x_hi), "y": (cy, ry, y_lo, y_hi), "landscape_bytes": int(nbytes),
-        "margin": margin,
-    }
+    nbytes = n_twists * (2 * ry + 1) * (2 * rx + 1) * np.dtype(scene.dtype).itemsize
+    grid = PoseGrid(
+        shape=(n_twists, 2 * ry + 1, 2 * rx + 1),
+        um_per_px=scene.um_per_px,
+        twist=axis,
+        wrap=axis.periodic and n_twists == axis.count,
+        cut=(t_cut, (y_lo, y_hi), (x_lo, x_hi)),
+        rg_px=0.0,  # set by build_landscape once the budget is checked (it costs a pass over the chip)
+        x_first_px=cx - rx,
+        y_first_px=cy - ry,
+        t_first=t_first,
+    )
+    return {"grid": grid, "origin": origin, "crop": (r0, r1, c0, c1), "landscape_bytes": int(nbytes), "margin": margin}
 
 
 def require_landscape_fits(scene: Scene, twists: np.ndarray | None = None) -> None:
     """Refuse (InputError) a landscape over the memory budget or with too many twists, cheaply
     (no rotation, no allocation): for commands to call before announcing a long run."""
     b = _box(scene, twists)
-    _, rx, _, _ = b["x"]
-    _, ry, _, _ = b["y"]
-    _refuse_over_budget(scene, b["landscape_bytes"], len(b["twists"]), 2 * ry + 1, 2 * rx + 1)
+    t, ny, nx = b["grid"].shape
+    _refuse_over_budget(scene, b["landscape_bytes"], t, ny, nx)
+
+
+@dataclass(frozen=True, eq=False)
+class Plan:
+    """What a build will do, computed before the landscape is allocated (:func:`plan`).
+
+    grid: the landscape's pose grid. pattern_up: the cropped pattern, y up, that the chip
+    poses of the grid can reach. rotator: the chip raster at each twist. window: where
+    the grid lies in the correlation. landscape_bytes: the energy array's size.
+    meniscus_px: the meniscus blur left to the pattern side (px; 0 when the chip is
+    blurred, ``chip_blurred``).
+    """
+
+    grid: PoseGrid
+    pattern_up: np.ndarray
+    rotator: ChipRotator
+    window: Window
+    landscape_bytes: int
+    meniscus_px: float
+    chip_blurred: bool
+
+    @property
+    def twists(self) -> np.ndarray:
+        """The twists (degrees) the build rotates the chip to: the grid's."""
+        return self.grid.twist_deg()
 
 
 def plan(scene: Scene, twists: np.ndarray | None = None, center_px: tuple[int, int] = (0, 0), half_px: int | None = None,
-         check_budget: bool = True) -> dict:
+         check_budget: bool = True) -> Plan:
     """Everything the build will do, computed without allocating the landscape.
 
     Refuses (InputError) a landscape over the scene's memory budget before any chip
@@ -131,17 +177,19 @@ def plan(scene: Scene, twists: np.ndarray | None = None, center_px: tuple[int, i
     never allocates the landscape, e.g. :mod:`simulator.optimum`'s bound).
     """
     b = _box(scene, twists, center_px, half_px)
-    twists, all_twists, wrap, period, origin = b["twists"], b["all_twists"], b["wrap"], b["period"], b["origin"]
-    (r0, r1, c0, c1), (cx, rx, x_lo, x_hi), (cy, ry, y_lo, y_hi) = b["crop"], b["x"], b["y"]
+    grid, origin, (r0, r1, c0, c1) = b["grid"], b["origin"], b["crop"]
+    n_twists, ny, nx = grid.shape
+    rx, ry = nx // 2, ny // 2
+    cx, cy = grid.x_first_px + rx, grid.y_first_px + ry
     if check_budget:
-        _refuse_over_budget(scene, b["landscape_bytes"], len(twists), 2 * ry + 1, 2 * rx + 1)
+        _refuse_over_budget(scene, b["landscape_bytes"], n_twists, ny, nx)
     pat = scene.pattern.data
     parity = (int((2 * origin[1]) % 2), int((2 * origin[0]) % 2))
     # The meniscus blur: on the chip (rotated smoothly) from one pixel up; below a pixel on
     # the pattern, whose exact rasters then return the overlap model to round-off as h -> 0.
     h_px = scene.meniscus_height_px
     chip_blur = h_px if h_px >= CHIP_BLUR_MIN_PX else 0.0
-    rot = ChipRotator(scene.chip, twists, parity, blur_px=chip_blur, margin_px=b["margin"] if chip_blur else 0)
+    rot = ChipRotator(scene.chip, grid.twist_deg(), parity, blur_px=chip_blur, margin_px=b["margin"] if chip_blur else 0)
     hc, wc = rot.shape
     dx, dy = origin[0] - wc / 2 + cx, origin[1] - hc / 2 + cy
     assert dx == int(dx) and dy == int(dy), "pixel grids of chip and pattern must coincide"
@@ -158,20 +206,7 @@ def plan(scene: Scene, twists: np.ndarray | None = None, center_px: tuple[int, i
     if m:  # room for the blurred footprint, so that the meniscus blur does not wrap around
         pat_up = np.pad(pat_up, m)
         win = Window(rx=win.rx, ry=win.ry, dx=win.dx + m, dy=win.dy + m)
-    nbytes = b["landscape_bytes"]
-    return {
-        "twists": twists,
-        "wrap": wrap and len(twists) == len(all_twists),
-        "period": period,
-        "pattern_up": pat_up,
-        "rotator": rot,
-        "window": win,
-        "center_px": (cx, cy),
-        "cut": (_twist_cut(all_twists, wrap, twists), (y_lo, y_hi), (x_lo, x_hi)),
-        "landscape_bytes": int(nbytes),
-        "meniscus_px": h_px if not chip_blur else 0.0,  # blur left to the correlator (pattern side)
-        "chip_blurred": bool(chip_blur),
-    }
+    return Plan(grid, pat_up, rot, win, int(b["landscape_bytes"]), h_px if not chip_blur else 0.0, bool(chip_blur))
 
 
 def build_landscape(
@@ -201,77 +236,50 @@ def build_landscape(
     """
     t_start = time.perf_counter()
     p = plan(scene, twists, center_px, half_px)
-    win, rot = p["window"], p["rotator"]
+    win, rot = p.window, p.rotator
     _check_energy_range(scene)
     # Sizes first, allocation after: an over-budget request fails before any transform.
-    chunk = max(1, min(chunk, len(p["twists"])))
-    fft = fft_shape(p["pattern_up"].shape, rot.shape, win)
+    twists_deg = p.twists
+    chunk = max(1, min(chunk, len(twists_deg)))
+    fft = fft_shape(p.pattern_up.shape, rot.shape, win)
     # A chunk of mirror twins works on twice the twists (the twins' spectra and windows).
-    twins = mirror_twins(scene.twist_axis.mirror, p["twists"])
+    twins = mirror_twins(scene.twist_axis.mirror, twists_deg)
     per_chunk = chunk * (2 if twins else 1)
-    need = p["landscape_bytes"] + work_bytes(fft, 2 * win.ry + 1, scene.dtype, per_chunk, -(-len(p["twists"]) // chunk))
-    _refuse_over_budget(scene, need, len(p["twists"]), 2 * win.ry + 1, 2 * win.rx + 1)
-    cor = Correlator(p["pattern_up"], rot.shape, win, scene.dtype, backend, meniscus_px=p["meniscus_px"])
-    twists_deg = p["twists"]
+    need = p.landscape_bytes + work_bytes(fft, 2 * win.ry + 1, scene.dtype, per_chunk, -(-len(twists_deg) // chunk))
+    _refuse_over_budget(scene, need, len(twists_deg), 2 * win.ry + 1, 2 * win.rx + 1)
+    cor = Correlator(p.pattern_up, rot.shape, win, scene.dtype, backend, meniscus_px=p.meniscus_px)
     scale = scene.delta_gamma_N_m * scene.um_per_px**2 * UM2
     energy = np.empty((len(twists_deg), 2 * win.ry + 1, 2 * win.rx + 1), dtype=scene.dtype)
-    singles = [i for i in range(len(twists_deg)) if i not in twins and i not in twins.values()]
-    pairs = sorted(twins.items())
     # Exact geometry, and a blurred one (a mirror-symmetric image rotated by splines on a
     # mirror-symmetric grid): the raster at -alpha is the one at +alpha upside down.
     exact = scene.chip.geometry is not None
     # Pattern mirror-symmetric too (about y = 0) and the window centred on y = 0:
     # E(x, y, -alpha) = E(x, -y, +alpha), the twin's plane upside down, no transform.
     pat = scene.pattern.data
-    copy = exact and p["center_px"][1] == 0 and bool(np.abs(pat - pat[::-1]).max() <= SAME_CHIP_TOL)
-    n_mirror = n_copied = rotations = 0
-    work = cor.workspace(chunk, mirror=bool(pairs) and not copy)
+    copy = exact and p.grid.y_first_px + win.ry == 0 and bool(np.abs(pat - pat[::-1]).max() <= SAME_CHIP_TOL)
+    work = cor.workspace(chunk, mirror=bool(twins) and not copy)
+    rotations = 0
 
-    def rotate(t: float) -> np.ndarray:
+    def rasters(sel: list[int]) -> np.ndarray:
         nonlocal rotations
-        rotations += 1
-        return rot(t)
+        rotations += len(sel)
+        return np.stack([rot(twists_deg[k]) for k in sel])
+
+    def verify(b: int, img: np.ndarray) -> np.ndarray | None:
+        # A resampled PNG chip is checked pixel by pixel against its twin upside down.
+        direct = rasters([b])[0]
+        return direct if np.abs(direct - img[::-1]).max() > SAME_CHIP_TOL else None
 
     with progress_bar(progress, len(twists_deg), "landscape", "twist") as bar:
-        for i in range(0, len(singles), chunk):
-            sel = singles[i : i + chunk]
-            _correlate_into(cor, np.stack([rotate(twists_deg[k]) for k in sel]), energy, sel, scale, work=work)
-            bar.update(len(sel))
-        for i in range(0, len(pairs), chunk):
-            sel = pairs[i : i + chunk]
-            pos, neg = [a for a, _ in sel], [b for _, b in sel]
-            stack = np.stack([rotate(twists_deg[a]) for a in pos])
-            if copy:
-                _correlate_into(cor, stack, energy, pos, scale, work=work)
-                for a, b in sel:
-                    energy[b] = energy[a, ::-1]
-                n_copied += len(sel)
-            else:
-                _correlate_into(cor, stack, energy, pos, scale, mirror_idx=neg, work=work)
-                n_mirror += len(sel)
-            if not exact:
-                # The raster at -alpha is the one at +alpha upside down for exact,
-                # mirror-symmetric geometry; a resampled PNG chip is checked pixel by pixel.
-                for b, img in zip(neg, stack, strict=True):
-                    direct = rotate(twists_deg[b])
-                    if np.abs(direct - img[::-1]).max() > SAME_CHIP_TOL:
-                        cor(direct[None], out=energy[b : b + 1], scale=scale, work=work)
-                        n_mirror -= 1
-            bar.update(2 * len(sel))
+        n_mirror, n_copied = correlate_planes(cor, rasters, len(twists_deg), energy, scale, work, chunk, twins=twins,
+                                              flip_rows=energy.shape[1] if copy else None,
+                                              verify=None if exact else verify, progress=bar.update)
     from simulator.landscape import Landscape
 
-    s = scene.um_per_px
-    cx, cy = p["center_px"]
     return Landscape(
         energy=energy,
-        x_um=(np.arange(2 * win.rx + 1) - win.rx + cx) * s,
-        y_um=(np.arange(2 * win.ry + 1) - win.ry + cy) * s,
-        twist_deg=twists_deg,
-        wrap=p["wrap"],
-        period_deg=p["period"],
-        um_per_px=s,
+        grid=replace(p.grid, rg_px=scene.chip_rg_px),
         delta_gamma=scene.delta_gamma_N_m,
-        cut=p["cut"],
         energy_scale_J=energy_scale_J(scene),
         meniscus_height_um=scene.meniscus_height_um,
         stats={

@@ -37,10 +37,17 @@ from patterns.errors import InputError
 from patterns.resources import fmt_bytes
 from simulator.correlator import NOISE_FACTOR
 from simulator.materials import UM2
+from simulator.posegrid import PoseGrid
+from simulator.tolerances import WHOLE_TOL, floor_whole
 
 #: m^2 per um^2 (an alias of :data:`simulator.materials.UM2`, kept for old imports).
 UM2_TO_M2 = UM2
 
+
+
+def _frozen(a: np.ndarray) -> np.ndarray:
+    a.setflags(write=False)
+    return a
 
 
 #: Most samples of one energy curve.
@@ -53,37 +60,68 @@ class Landscape:
 
     Attributes:
         energy: (T, Ny, Nx) joules, ``[twist, y, x]``, y ascending.
-        x_um, y_um: (Nx,), (Ny,) translations of the chip centre (um), ascending.
-        twist_deg: (T,) twists (degrees), ascending, evenly spaced.
-        wrap: the twist axis covers one full symmetry period and is periodic.
-        period_deg: the chip's rotational symmetry period (degrees).
-        um_per_px: translation step (um).
+        grid: the :class:`~simulator.posegrid.PoseGrid` of the energy: its axes
+            (``x_um``, ``y_um``, ``twist_deg`` below), steps, periodicity (``wrap``), the
+            chip's symmetry period (``period_deg``) and cut sides (``cut``: True where the
+            grid was cut short on that side, a box or band of a larger grid, so the energy
+            beyond it is unknown; beyond an uncut x/y side the chip no longer touches the
+            pattern and the energy is exactly 0; beyond an uncut end of a non-periodic
+            twist axis lies the end of the twist range the scene asked for).
         delta_gamma: pad minus substrate wetting energy (N/m, negative).
         energy_scale_J: the largest |E| the scene can reach, |Delta_gamma| min(|P|, |C|)
             (PHYSICS.md C8); the noise floor scales with it, so every box or band of one
             scene shares one floor (0 = take max|E| of this grid).
-        cut: ((t_lo, t_hi), (y_lo, y_hi), (x_lo, x_hi)): True where the grid was cut
-            short on that side (a box or band of a larger grid), so the energy beyond it
-            is unknown. Beyond an uncut x/y side the chip no longer touches the pattern
-            and the energy is exactly 0; beyond an uncut end of a non-periodic twist
-            axis lies the end of the twist range the scene asked for.
         stats: what the build did (rotations, seconds, bytes, backend, FFT size).
         meniscus_height_um: the finite meniscus's height (um) the energy was built with,
             None for the overlap model (:mod:`simulator.meniscus`).
     """
 
     energy: np.ndarray
-    x_um: np.ndarray
-    y_um: np.ndarray
-    twist_deg: np.ndarray
-    wrap: bool
-    period_deg: float
-    um_per_px: float
+    grid: PoseGrid
     delta_gamma: float
-    cut: tuple = ((False, False), (False, False), (False, False))
     energy_scale_J: float = 0.0
     stats: dict = field(default_factory=dict)
     meniscus_height_um: float | None = None
+
+    def __post_init__(self) -> None:
+        if tuple(np.shape(self.energy)) != self.grid.shape:
+            raise ValueError(f"energy of shape {np.shape(self.energy)} on a pose grid of shape {self.grid.shape}")
+
+    # -- the pose grid's axes (read-only arrays, computed from the grid on each access)
+    @property
+    def x_um(self) -> np.ndarray:
+        """(Nx,) translations of the chip centre along x (um), ascending."""
+        return _frozen(self.grid.x_um())
+
+    @property
+    def y_um(self) -> np.ndarray:
+        """(Ny,) translations along y (um), ascending."""
+        return _frozen(self.grid.y_um())
+
+    @property
+    def twist_deg(self) -> np.ndarray:
+        """(T,) twists (degrees), ascending, evenly spaced."""
+        return _frozen(self.grid.twist_deg())
+
+    @property
+    def wrap(self) -> bool:
+        return self.grid.wrap
+
+    @property
+    def cut(self) -> tuple:
+        return self.grid.cut
+
+    @property
+    def period_deg(self) -> float:
+        return self.grid.period_deg
+
+    @property
+    def um_per_px(self) -> float:
+        return self.grid.um_per_px
+
+    @property
+    def twist_step_deg(self) -> float:
+        return self.grid.twist_step_deg
 
     @property
     def full_reach(self) -> bool:
@@ -94,10 +132,6 @@ class Landscape:
     @property
     def joules_per_px2(self) -> float:
         return self.delta_gamma * self.um_per_px**2 * UM2
-
-    @property
-    def twist_step_deg(self) -> float:
-        return axis_step(self.twist_deg)
 
     @property
     def noise_floor_J(self) -> float:
@@ -211,7 +245,7 @@ class Landscape:
                 f"the curve from {start:g} to {stop:g} at steps of {step:g} would have {samples:.3g} samples "
                 f"(about {fmt_bytes(samples * 96)}), more than {MAX_CURVE_SAMPLES:,}; narrow --from/--to"
             )
-        n = int(math.floor((stop - start) / step + 1e-9)) + 1
+        n = floor_whole((stop - start) / step) + 1
         v = start + step * np.arange(n)
         x, y, t = (np.full(n, float(c)) for c in through)
         {"x": x, "y": y, "twist": t}[axis][:] = v
@@ -282,7 +316,7 @@ def trilinear(e: np.ndarray, it, iy, ix, wrap: bool, cut=((False, False),) * 3) 
     inside = (iy >= 0) & (iy <= ny - 1) & (ix >= 0) & (ix <= nx - 1)
     unknown = (cut[1][0] & (iy < 0)) | (cut[1][1] & (iy > ny - 1)) | (cut[2][0] & (ix < 0)) | (cut[2][1] & (ix > nx - 1))
     if not wrap and nt > 1:
-        unknown |= (it < -1e-9) | (it > nt - 1 + 1e-9)
+        unknown |= (it < -WHOLE_TOL) | (it > nt - 1 + WHOLE_TOL)
     if np.any(unknown):
         raise InputError("pose outside the landscape's pose grid; widen the window (window_um) or the twist range")
     x0 = np.clip(np.floor(ix), 0, max(nx - 2, 0)).astype(int)
@@ -332,6 +366,7 @@ from simulator.engine import (  # noqa: E402
 )
 from simulator.posegrid import (  # noqa: E402
     MAX_TWISTS,
+    TwistAxis,
     _axis_box,
     _twist_cut,
     axis_step,
@@ -343,6 +378,7 @@ from simulator.rotation import ChipRotator, mirror_twins  # noqa: E402
 
 __all__ = [
     "BACKENDS", "MAX_CURVE_SAMPLES", "MAX_TWISTS", "NOISE_FACTOR", "SAME_CHIP_TOL", "UM2", "UM2_TO_M2", "ChipRotator", "Correlator", "Landscape",
+    "PoseGrid", "TwistAxis",
     "Window", "_axis_box", "_twist_cut", "axis_step", "build_landscape", "chip_relations", "chip_symmetry", "correlate_stack",
     "energy_scale_J", "estimate_bytes", "fft_shape", "mirror_twins", "plan", "require_landscape_fits", "runs", "trilinear",
     "twist_axis", "twists_around",

@@ -15,6 +15,11 @@ area of solid with liquid changes the energy by ``gamma_wet = -gamma_LA cos(thet
 and the overlap model only needs the pad/substrate difference ``Delta_gamma``. The
 overlap energy of a pose is ``E = Delta_gamma * A_ol`` (section 3.2); with
 ``Delta_gamma < 0`` minimum energy is maximum overlap.
+
+Modules: this one holds the wetting side (Young weights, :class:`Materials`); the units
+and reference constants are :mod:`simulator.constants`; the liquid, the chip body,
+damping and the parallelepiped formulas are :mod:`simulator.mechanics`. Every name is
+importable from here.
 """
 
 from __future__ import annotations
@@ -25,57 +30,27 @@ from dataclasses import dataclass
 import numpy as np
 
 from patterns.errors import InputError, positive
-
-#: m^2 per um^2: multiply an area in um^2 (an overlap in px^2 at 1 um/px) by
-#: ``Delta_gamma * UM2`` to get joules.
-UM2 = 1e-12
-UM = 1e-6
-UM3_PER_NL = 1e6
-
-WATER_SURFACE_TENSION_N_M = 0.0728
-WATER_VISCOSITY_PA_S = 1.0e-3
-WATER_DENSITY_KG_M3 = 998.0
-SU8_DENSITY_KG_M3 = 1200.0
-
-#: Multiplier on the Couette (uncoupled, linear-profile) damping estimate.
-#:
-#: Why a calibration factor exists: the Couette estimate ``c = mu A / h`` treats
-#: the liquid as a sheared film with a fixed linear velocity profile. For water it
-#: makes the chip a very lightly damped oscillator. For the source's two set-ups
-#: (PHYSICS.md section 11) a 1-D model with the parallelepiped force of section 3.3
-#: gives:
-#:
-#: ==========================================  =========  ==========  ===========
-#: set-up (SU-8 chip, water)                   zeta       factor 1    factor 30
-#: ==========================================  =========  ==========  ===========
-#: 200x200x50 um chip, 0.5 nl (h 12.5 um)      0.021      5 ms        0.2 ms
-#: 730x730x50 um chip, 20 nl (h 37.5 um)       0.024      24 ms       1.7 ms
-#: ==========================================  =========  ==========  ===========
-#:
-#: ``zeta = c / (2 sqrt(k0 m))`` is the damping ratio near alignment with
-#: ``k0 = 2 gamma L / h``. The times are for settling within 1 um, starting
-#: 40 um (small set-up) or 300 um (large set-up) off. With factor 1 the chip rings
-#: for tens of periods (period 0.2 ms and 0.7 ms).
-#:
-#: Measured water alignments of sub-millimetre chips are reported to take tens to
-#: hundreds of ms, so they are far slower than this estimate. Some known reasons:
-#: chip motion and internal flow are strongly coupled, and coupled models give much
-#: larger damping than uncoupled ones (PHYSICS.md section 4); contact lines dissipate
-#: energy and pin (hysteresis); the meniscus first has to spread over the chip; and
-#: the analytic stiffness overestimates the measured one (section 3.3). None of
-#: these is modelled, so one scalar multiplies the Couette value.
-#:
-#: The default of 1000 puts both set-ups in the measured range: the 200 um chip
-#: from (40, 40) um, 5 deg with 0.5 nl aligns in about 38 ms (overdamped and
-#: inertial runs of ``selfalign simulate`` agree), the 730 um chip with 20 nl in
-#: about 60 ms. The motion is then overdamped creep (zeta ~ 20): the inertial
-#: integrator switches to an implicit solver for it (see
-#: :func:`simulator.trajectory.simulate`). It is not fitted to one measurement:
-#: fit it to a measured alignment time when you have one (30 gives zeta ~ 0.7, a
-#: visible overshoot). It does not change where the chip ends up in the
-#: quasi-static simulator, which has no time scale (PHYSICS.md 3.2, limit 4).
-DAMPING_CALIBRATION = 1000.0
-
+from simulator.constants import (  # noqa: F401  (units and constants live in simulator.constants; importable from here)
+    SU8_DENSITY_KG_M3,
+    UM,
+    UM2,
+    UM3_PER_NL,
+    WATER_DENSITY_KG_M3,
+    WATER_SURFACE_TENSION_N_M,
+    WATER_VISCOSITY_PA_S,
+)
+from simulator.mechanics import (  # noqa: F401  (liquid, chip body and damping live in simulator.mechanics; importable from here)
+    DAMPING_CALIBRATION,
+    Chip,
+    Liquid,
+    couette_damping,
+    couette_rotational_damping,
+    couette_torsional_damping,
+    meniscus_height_um,
+    parallelepiped_force,
+    parallelepiped_stiffness,
+    rectangle_polar_moment_um4,
+)
 
 # --------------------------------------------------------------------------- checks
 
@@ -219,189 +194,6 @@ class Materials:
             raise InputError(f"grey level must lie in [0, 1], got {v!r}")
         cs, cp = _cos_deg(self.substrate_angle_deg), _cos_deg(self.pad_angle_deg)
         return math.degrees(math.acos(min(1.0, max(-1.0, cs + v * (cp - cs)))))
-
-
-# ------------------------------------------------------------------- liquid and chip
-
-
-def meniscus_height_um(volume_nl: float, area_um2: float) -> float:
-    """Flat-slab meniscus height ``h = V / A`` in um (PHYSICS.md 7.1).
-
-    20 nl on 730 x 730 um gives 37.53 um; 0.5 nl on 200 x 200 um gives 12.5 um.
-    """
-    v = positive("droplet volume", volume_nl, "nl")
-    a = positive("wetted area", area_um2, "um^2")
-    return v * UM3_PER_NL / a
-
-
-@dataclass(frozen=True)
-class Liquid:
-    """The alignment liquid (water by default) and its volume.
-
-    Attributes:
-        name: a label for reports.
-        surface_tension_N_m: liquid/air surface tension, N/m.
-        viscosity_Pa_s: dynamic viscosity, Pa s (water at 20 C: 1.0e-3).
-        density_kg_m3: density, kg/m^3.
-        volume_nl: droplet volume, nl. The default 20 nl is the source's four-pad
-            volume (730 um pattern); the defect/jaggedness tests on 200 um used 0.5 nl.
-        height_um: the liquid's height under the chip (um) for the finite meniscus
-            (:mod:`simulator.meniscus`; TOML ``meniscus_height_um``); None = ``volume_nl``
-            over the chip's area.
-        pinned: contact lines held at the pad edges (liquid confined by a superhydrophobic
-            substrate): only liquid-air area changes, ``Delta_gamma = -2 gamma_LA``.
-    """
-
-    name: str = "water"
-    surface_tension_N_m: float = WATER_SURFACE_TENSION_N_M
-    viscosity_Pa_s: float = WATER_VISCOSITY_PA_S
-    density_kg_m3: float = WATER_DENSITY_KG_M3
-    volume_nl: float = 20.0
-    height_um: float | None = None
-    pinned: bool = False
-
-    def __post_init__(self) -> None:
-        set_ = object.__setattr__
-        set_(self, "name", str(self.name))
-        if not isinstance(self.pinned, bool | np.bool_):
-            raise InputError(f"liquid pinned must be true or false, got {self.pinned!r}")
-        set_(self, "pinned", bool(self.pinned))
-        if self.height_um is not None:
-            h = self.height_um
-            if isinstance(h, bool) or not isinstance(h, int | float | np.floating | np.integer) or not math.isfinite(h) or h <= 0:
-                raise InputError(f"meniscus height (--meniscus-height) must be a positive, finite number of um, got {h!r}")
-            set_(self, "height_um", float(h))
-        set_(
-            self,
-            "surface_tension_N_m",
-            positive("surface tension", self.surface_tension_N_m, "N/m"),
-        )
-        set_(self, "viscosity_Pa_s", positive("viscosity", self.viscosity_Pa_s, "Pa s"))
-        set_(self, "density_kg_m3", positive("liquid density", self.density_kg_m3, "kg/m^3"))
-        set_(self, "volume_nl", positive("droplet volume", self.volume_nl, "nl"))
-
-    def meniscus_height_um(self, area_um2: float) -> float:
-        """``h = V / A`` in um for this droplet spread over ``area_um2``."""
-        return meniscus_height_um(self.volume_nl, area_um2)
-
-
-@dataclass(frozen=True)
-class Chip:
-    """A rectangular chip body (a cuboid), for mass and moment of inertia.
-
-    Attributes:
-        width_um, height_um: footprint along x and y, um.
-        thickness_um: along z, um (the source's SU-8 chips: 50 um).
-        density_kg_m3: body density, kg/m^3 (SU-8 about 1200, a value from outside the source).
-    """
-
-    width_um: float
-    height_um: float
-    thickness_um: float = 50.0
-    density_kg_m3: float = SU8_DENSITY_KG_M3
-
-    def __post_init__(self) -> None:
-        set_ = object.__setattr__
-        set_(self, "width_um", positive("chip width", self.width_um, "um"))
-        set_(self, "height_um", positive("chip height", self.height_um, "um"))
-        set_(self, "thickness_um", positive("chip thickness", self.thickness_um, "um"))
-        set_(self, "density_kg_m3", positive("chip density", self.density_kg_m3, "kg/m^3"))
-
-    @property
-    def area_um2(self) -> float:
-        """Footprint area, um^2."""
-        return self.width_um * self.height_um
-
-    @property
-    def mass_kg(self) -> float:
-        """``rho w h t``, kg (200 x 200 x 50 um SU-8: 2.4e-9 kg)."""
-        return self.density_kg_m3 * self.width_um * self.height_um * self.thickness_um * UM**3
-
-    @property
-    def moment_of_inertia_kg_m2(self) -> float:
-        """About the vertical axis through the centre, ``m (w^2 + h^2) / 12``, kg m^2."""
-        return self.mass_kg * (self.width_um**2 + self.height_um**2) * UM2 / 12.0
-
-    @property
-    def polar_moment_um4(self) -> float:
-        """Polar second moment of the footprint about its centre, ``A (w^2 + h^2) / 12``, um^4."""
-        return rectangle_polar_moment_um4(self.width_um, self.height_um)
-
-
-# ----------------------------------------------------------------------------- damping
-
-
-def rectangle_polar_moment_um4(width_um: float, height_um: float) -> float:
-    """``J = integral of r^2 dA = A (w^2 + h^2) / 12`` of a centred rectangle, um^4."""
-    w = positive("width", width_um, "um")
-    h = positive("height", height_um, "um")
-    return w * h * (w * w + h * h) / 12.0
-
-
-def couette_damping(viscosity_Pa_s: float, wetted_area_um2: float, h_um: float) -> float:
-    """Translational Couette damping ``c = mu A / h`` in N s/m (uncalibrated; PHYSICS.md 4).
-
-    Multiply by :data:`DAMPING_CALIBRATION` (or your own factor) before use.
-    """
-    mu = positive("viscosity", viscosity_Pa_s, "Pa s")
-    a = positive("wetted area", wetted_area_um2, "um^2")
-    h = positive("meniscus height", h_um, "um")
-    return mu * a * UM2 / (h * UM)
-
-
-def couette_torsional_damping(viscosity_Pa_s: float, polar_moment_um4: float, h_um: float) -> float:
-    """Rotational Couette damping ``c_t = mu J / h`` in N m s, any footprint (uncalibrated).
-
-    ``J`` is the polar second moment of the wetted footprint about the rotation axis, um^4.
-    """
-    mu = positive("viscosity", viscosity_Pa_s, "Pa s")
-    j = positive("polar moment", polar_moment_um4, "um^4")
-    h = positive("meniscus height", h_um, "um")
-    return mu * j * UM2 * UM2 / (h * UM)
-
-
-def couette_rotational_damping(
-    viscosity_Pa_s: float, width_um: float, height_um: float, h_um: float
-) -> float:
-    """Rotational Couette damping of a rectangular footprint, ``mu A (w^2 + h^2) / (12 h)``, N m s."""
-    return couette_torsional_damping(
-        viscosity_Pa_s, rectangle_polar_moment_um4(width_um, height_um), h_um
-    )
-
-
-# ------------------------------------------------------------------ analytic formulas
-
-
-def parallelepiped_force(
-    x_um: float | np.ndarray, h_um: float, L_um: float, gamma: float = WATER_SURFACE_TENSION_N_M
-) -> float | np.ndarray:
-    """Restoring force of the sheared-block meniscus, ``-2 gamma L x / sqrt(x^2 + h^2)`` in N.
-
-    PHYSICS.md 3.3 [Eq. 6] and C13: tends to ``-2 gamma L`` for ``x >> h``, has slope
-    ``-2 gamma L / h`` at 0 (:func:`parallelepiped_stiffness`) and equals
-    ``-sqrt(2) gamma L`` at ``x = h``.
-
-    Args:
-        x_um: bias along the axis, um (scalar or array).
-        h_um: meniscus height, um (> 0).
-        L_um: edge length perpendicular to the shift, um.
-        gamma: liquid/air surface tension, N/m.
-    """
-    h = positive("meniscus height", h_um, "um")
-    length = positive("edge length", L_um, "um")
-    g = positive("surface tension", gamma, "N/m")
-    x = np.asarray(x_um, dtype=np.float64)
-    f = -2.0 * g * length * UM * x / np.hypot(x, h)
-    return float(f) if f.ndim == 0 else f
-
-
-def parallelepiped_stiffness(
-    h_um: float, L_um: float, gamma: float = WATER_SURFACE_TENSION_N_M
-) -> float:
-    """Small-bias stiffness ``k0 = 2 gamma L / h`` of the sheared-block meniscus, N/m."""
-    h = positive("meniscus height", h_um, "um")
-    length = positive("edge length", L_um, "um")
-    return 2.0 * positive("surface tension", gamma, "N/m") * length / h
 
 
 #: Moved to :mod:`simulator.liquid` (overflow of protruding pads, critical volume);

@@ -32,6 +32,11 @@ Conventions:
   pose (0, 0, 0) instead: how far each pattern's minimum moves is what it measures.
 * Randomness: start poses are drawn on the host with ``numpy.random.default_rng(seed)``
   (:func:`random_starts`), all N at once, so the draws do not depend on the chunk size.
+
+Modules: this one runs the batches (:func:`run_batch`, :func:`run_realizations`); the
+result and its statistics (:class:`BatchResult`, :func:`summarize`, :func:`capture_map`,
+...) are :mod:`simulator.batch_stats`; the start poses are :mod:`simulator.starts`.
+Every name is importable from here.
 """
 
 from __future__ import annotations
@@ -42,7 +47,6 @@ import os
 import time
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
 
 import jax
 import jax.numpy as jnp
@@ -51,6 +55,15 @@ import numpy as np
 from patterns.errors import InputError, require
 from patterns.mask import Mask
 from simulator import steppers, stepping
+from simulator.batch_stats import (  # noqa: F401  (the result and its statistics live in simulator.batch_stats; importable from here)
+    BatchResult,
+    capture_map,
+    error_stats,
+    max_bias,
+    outcome_counts,
+    summarize,
+    twist_error,
+)
 from simulator.defaults import BATCH_METHODS as METHODS
 from simulator.defaults import DEFAULT_CHUNK, MAX_CHUNK  # noqa: F401  (re-exported)
 from simulator.feedback import progress_bar
@@ -74,37 +87,6 @@ from simulator.trajectory import DEFAULT_MAX_STEPS, MAX_STEPS_LIMIT, radius_of_g
 
 
 # --------------------------------------------------------------------- batch
-@dataclass(frozen=True)
-class BatchResult:
-    """Per-start results of a batch, in the order of the starts.
-
-    start: (N, 3) requested poses (x_um, y_um, twist_deg).
-    final: (N, 3) final poses (twist unwrapped: as the chip turned).
-    outcome: (N,) int8 index into :data:`simulator.stepping.OUTCOMES`.
-    steps: (N,) int32 moves (greedy) or accepted steps (gradient).
-    energy_J: (N,) final energy.
-    period_deg: the chip's rotational symmetry period (twist errors are modulo it).
-    optimum: (x_um, y_um, twist_deg) of the landscape's global minimum ("aligned").
-    """
-
-    method: str
-    start: np.ndarray
-    final: np.ndarray
-    outcome: np.ndarray
-    steps: np.ndarray
-    energy_J: np.ndarray
-    period_deg: float
-    optimum: tuple[float, float, float]
-    stats: dict = field(default_factory=dict)
-
-    @property
-    def n(self) -> int:
-        return len(self.outcome)
-
-    def outcome_names(self) -> np.ndarray:
-        return np.asarray(stepping.OUTCOMES)[self.outcome]
-
-
 def _one(field: stepping.Field, grid: stepping.Grid, start, method: str, max_steps: int):
     """One start -> (final q, steps, status, outcome, energy); the single run vmap maps."""
     s = steppers.stepper(method)(field, grid, None, start, max_steps, record=False)
@@ -277,111 +259,6 @@ def run_batch(
             "landscape_shape": tuple(int(v) for v in ls.energy.shape),
         },
     )
-
-
-# --------------------------------------------------------------------- statistics
-def twist_error(twist_deg, period_deg: float) -> np.ndarray:
-    """Twist relative to 0 modulo the symmetry period, in [-period/2, period/2) degrees."""
-    p = float(period_deg)
-    return np.mod(np.asarray(twist_deg, float) + p / 2, p) - p / 2
-
-
-def _stats(v: np.ndarray) -> dict | None:
-    """mean, mean |v|, standard deviation (population, ddof 0) and max |v|; None if empty."""
-    if v.size == 0:
-        return None
-    a = np.abs(v)
-    return {"mean": float(v.mean()), "mean_abs": float(a.mean()), "std": float(v.std()), "max_abs": float(a.max())}
-
-
-def error_stats(final: np.ndarray, period_deg: float, target=(0.0, 0.0, 0.0)) -> tuple[dict, dict]:
-    """Final-pose error relative to ``target`` (x_um, y_um, twist_deg; default the nominal
-    pose): ({"x": .., "y": ..} in um, {"twist": ..} in degrees, modulo the symmetry period)."""
-    final = np.asarray(final, float).reshape(-1, 3) - np.asarray(target, float)
-    return {"x": _stats(final[:, 0]), "y": _stats(final[:, 1])}, {"twist": _stats(twist_error(final[:, 2], period_deg))}
-
-
-def outcome_counts(outcome: np.ndarray) -> dict[str, int]:
-    """Counts per outcome name, every name of :data:`simulator.stepping.OUTCOMES` present."""
-    c = np.bincount(np.asarray(outcome, np.int64), minlength=len(stepping.OUTCOMES))
-    return {name: int(c[k]) for k, name in enumerate(stepping.OUTCOMES)}
-
-
-def capture_map(result: BatchResult, grid: StartGrid) -> np.ndarray:
-    """(T, Ny, Nx) outcome indices of a batch run on ``grid.poses()``, ``[twist, y, x]``."""
-    require(result.n == grid.size, f"the result has {result.n} starts but the grid {grid.size}")
-    return result.outcome.reshape(grid.shape)
-
-
-def max_bias(result: BatchResult, grid: StartGrid) -> tuple[dict, dict]:
-    """Largest bias along +x, -x, +y, -y (at twist 0) from which every start aligns.
-
-    On each half-axis through the origin (the grid row y = 0 for x, the column x = 0
-    for y), the starts are walked outward from the origin (the origin included when on
-    the grid): the bias is the largest |coordinate| up to which every start aligned, 0
-    if the nearest one failed, None if the grid has no start on that half-axis or no
-    twist 0. Returns (bias_um, limited_by_grid), the latter True where every start on
-    the half-axis aligned, so the true bias may be larger than the grid reaches.
-    """
-    cmap = capture_map(result, grid)
-    keys = ("+x", "-x", "+y", "-y")
-    bias: dict = dict.fromkeys(keys)
-    limited: dict = dict.fromkeys(keys)
-    tw, ys, xs = (np.asarray(a) for a in (grid.twist_deg, grid.y_um, grid.x_um))
-    k0 = np.flatnonzero(np.abs(tw) <= 1e-9)
-    if not k0.size:
-        return bias, limited
-    for key in keys:
-        along, across = (xs, ys) if key[1] == "x" else (ys, xs)
-        j = np.flatnonzero(np.abs(across) <= 1e-9)
-        if not j.size:
-            continue
-        line = cmap[k0[0], j[0], :] if key[1] == "x" else cmap[k0[0], :, j[0]]
-        sel = np.flatnonzero(along >= 0) if key[0] == "+" else np.flatnonzero(along <= 0)
-        if not np.any(np.abs(along[sel]) > 1e-9):
-            continue
-        sel = sel[np.argsort(np.abs(along[sel]))]
-        ok = line[sel] == stepping.OUTCOMES.index("aligned")
-        first_bad = int(np.argmin(ok)) if not ok.all() else len(ok)
-        bias[key] = float(np.abs(along[sel[first_bad - 1]])) if first_bad > 0 else 0.0
-        limited[key] = bool(ok.all())
-    return bias, limited
-
-
-def summarize(result: BatchResult, grid: StartGrid | None = None, target: str = "global_minimum") -> dict:
-    """The statistics of a batch, JSON-ready (units in the key names).
-
-    Keys: ``n``, ``method``, ``yield`` (fraction aligned), ``outcomes`` (counts),
-    ``error_um`` / ``error_deg`` (over all starts), ``aligned_error_um`` /
-    ``aligned_error_deg`` (over the aligned starts; None if none), ``optimum``
-    (the global minimum, where "aligned" is measured), ``error_target`` (the pose the
-    errors are measured from: ``kind`` "global_minimum", the optimum, or "nominal",
-    (0, 0, 0), with ``x_um``, ``y_um``, ``twist_deg``), and for a grid
-    ``max_bias_um`` / ``max_bias_limited_by_grid`` (:func:`max_bias`).
-    """
-    require(target in ("global_minimum", "nominal"), f"target must be 'global_minimum' or 'nominal', got {target!r}")
-    counts = outcome_counts(result.outcome)
-    goal = tuple(result.optimum) if target == "global_minimum" else (0.0, 0.0, 0.0)
-    err_um, err_deg = error_stats(result.final, result.period_deg, goal)
-    ok = result.outcome == stepping.OUTCOMES.index("aligned")
-    al_um, al_deg = error_stats(result.final[ok], result.period_deg, goal)
-    x, y, t = result.optimum
-    out = {
-        "n": result.n,
-        "method": result.method,
-        "yield": counts["aligned"] / result.n,
-        "outcomes": counts,
-        "error_um": err_um,
-        "error_deg": err_deg,
-        "aligned_error_um": al_um,
-        "aligned_error_deg": al_deg,
-        "optimum": {"x_um": x, "y_um": y, "twist_deg": t},
-        "error_target": {"kind": target, "x_um": goal[0], "y_um": goal[1], "twist_deg": goal[2]},
-        "period_deg": result.period_deg,
-    }
-    if grid is not None:
-        out["max_bias_um"], out["max_bias_limited_by_grid"] = max_bias(result, grid)
-    return out
 
 
 # --------------------------------------------------------------------- pattern realizations

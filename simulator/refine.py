@@ -24,6 +24,11 @@ import numpy as np
 BLOCK_XY, BLOCK_T = 4, 3
 #: The refined pose stays within this many grid steps of the grid pose it started from.
 REACH_STEPS = 1.5
+#: L-BFGS-B settings of :func:`refine_minimum`, on energies scaled to one grid step's change
+#: (about 1) and grid-index coordinates: stop when the scaled energy drops by under 1e-14
+#: relative (ftol) or its largest projected gradient is under 1e-10 (gtol); finite-difference
+#: step 1e-6 grid steps (eps).
+LBFGS_OPTIONS = {"ftol": 1e-14, "gtol": 1e-10, "eps": 1e-6}
 
 
 class _Local:
@@ -95,7 +100,7 @@ def refine_minimum(ls, x_um: float, y_um: float, twist_deg: float) -> dict:
     def g(v):
         return (f(v) - e0) / span
 
-    res = minimize(g, x0, method="L-BFGS-B", bounds=f.bounds, options={"ftol": 1e-14, "gtol": 1e-10, "eps": 1e-6})
+    res = minimize(g, x0, method="L-BFGS-B", bounds=f.bounds, options=dict(LBFGS_OPTIONS))
     best = res.x if res.fun <= 0 else x0
     x, y, t = f.pose(best)
     return {"x_um": x, "y_um": y, "twist_deg": t, "energy_J": float(f(best))}

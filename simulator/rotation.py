@@ -10,6 +10,7 @@ from shapely import affinity
 
 from patterns.mask import Mask, nonzero_box
 from patterns.raster import rasterize
+from simulator.tolerances import ceil_whole
 
 #: Spline order of the blurred chip's rotation: quadratic B-splines are C1 (no kinks in the
 #: energy against twist) at 9 taps a pixel, against 16 for cubic (measured 1.7x faster;
@@ -69,13 +70,13 @@ class ChipRotator:
         rx, ry = rx + margin_px, ry + margin_px
         # Canvas (H, W) with W % 2 == parity so chip and pattern pixel grids coincide;
         # just large enough for the twists asked for (a band of twists needs less).
-        self.shape = tuple(2 * math.ceil(r - 1e-9) + 2 + p for r, p in ((ry, parity[0]), (rx, parity[1])))
+        self.shape = tuple(2 * ceil_whole(r) + 2 + p for r, p in ((ry, parity[0]), (rx, parity[1])))
         # A chip image is resampled on the canvas of a full turn and cut to this one: OpenCV's
         # fixed-point bilinear weights (1/32 px) depend on where a pixel lies on the canvas, so
         # a band of twists (a smaller canvas) would otherwise get other rasters than the
         # whole axis, and a box of the landscape other energies than the full one.
         rad = max(_chip_reach_px(chip, True))
-        self._turn_shape = tuple(max(2 * math.ceil(rad - 1e-9) + 2 + p, n) for p, n in zip(parity, self.shape, strict=True))
+        self._turn_shape = tuple(max(2 * ceil_whole(rad) + 2 + p, n) for p, n in zip(parity, self.shape, strict=True))
         self._blurred = self._blur() if self.blur_px > 0 else None
         self._coeffs = None  # its cubic-spline coefficients, made at the first rotation
 

@@ -10,6 +10,7 @@ import numpy as np
 
 from patterns.errors import InputError, require
 from patterns.resources import require_fits
+from simulator.tolerances import floor_whole
 
 DISTRIBUTIONS = ("normal", "uniform")
 
@@ -30,7 +31,7 @@ def _axis(name: str, spec, unit: str) -> tuple[float, ...]:
     require(all(math.isfinite(v) for v in (a, b, d)), f"{name} must be finite numbers, got {spec!r} {unit}")
     require(d > 0, f"{name} step must be > 0 {unit}, got {d:g}")
     require(b >= a, f"{name} stop ({b:g}) must be >= start ({a:g}) {unit}")
-    n = int(math.floor((b - a) / d + 1e-9)) + 1
+    n = floor_whole((b - a) / d) + 1
     require(n <= MAX_STARTS, f"{name} has {n:,} values; at most {MAX_STARTS:,}")
     return tuple(float(v) for v in a + d * np.arange(n))
 

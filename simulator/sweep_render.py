@@ -49,7 +49,7 @@ UNIT_TEXT = {"um": "um", "nl": "nl", "deg": "deg", "mN_m": "mN/m", "N_m": "N/m",
 
 def column_label(column: str) -> str:
     """``stiffness_x_N_per_m`` -> ``stiffness x (N/m)``."""
-    from simulator.sweep import _split_unit
+    from simulator.sweep_columns import _split_unit
 
     name, unit = _split_unit(column)
     text = name.replace("_", " ")

@@ -25,8 +25,9 @@ from simulator.engine import build_landscape
 from simulator.hysteresis import align_tolerance, pin_per_index
 from simulator.landscape import Landscape
 from simulator.optimum import global_minimum
-from simulator.posegrid import _twist_cut, axis_step, twist_axis
+from simulator.posegrid import PoseGrid, consecutive_runs
 from simulator.scene import Scene
+from simulator.tolerances import DEG_TOL, tiny
 
 #: Largest |x|, |y| of a start in pixels (float32 holds every whole pixel up to 2**24, and
 #: int32 grid indices have room) and largest |twist| in degrees (as TwistGrid's range).
@@ -93,12 +94,9 @@ class Trajectory:
 
 
 def radius_of_gyration_px(scene: Scene) -> float:
-    """sqrt(polar moment / area) of the chip's wettable footprint about its centre (px)."""
-    d = scene.chip.data
-    h, w = d.shape
-    y, x = np.mgrid[0:h, 0:w]
-    r2 = (x + 0.5 - w / 2) ** 2 + (y + 0.5 - h / 2) ** 2
-    return float(math.sqrt((d * r2).sum() / d.sum()))
+    """sqrt(polar moment / area) of the chip's wettable footprint about its centre (px)
+    (:attr:`Scene.chip_rg_px`, computed once per scene)."""
+    return scene.chip_rg_px
 
 
 def _stiff(method: str, field, grid, params) -> bool:
@@ -107,9 +105,9 @@ def _stiff(method: str, field, grid, params) -> bool:
     solver (Kvaerno5) takes ~100 steps where an explicit one takes ~10^4."""
     if method != "inertial":
         return False
-    f_ref = float(field.scale) / (2 * grid.rg_px * grid.um_per_px * 1e-6)  # N
+    f_ref = float(stepping.reference_gradient(field, grid)) / (grid.um_per_px * 1e-6)  # N (J per px -> J per m)
     tau_m = params.mass_kg / params.damping_N_s_m
-    tau_c = params.damping_N_s_m * grid.um_per_px * 1e-6 / max(f_ref, 1e-30)
+    tau_c = params.damping_N_s_m * grid.um_per_px * 1e-6 / max(f_ref, tiny())
     return tau_m < 0.1 * tau_c
 
 
@@ -168,18 +166,22 @@ def simulate(
         dynamics = DynamicsParams.from_scene(scene)
     rg = radius_of_gyration_px(scene)
     t0 = time.perf_counter()
-    axis, wrap, _ = twist_axis(scene) if landscape is None else (landscape.twist_deg, landscape.wrap, None)
+    grid0 = landscape.grid if landscape is not None else None
+    axis = scene.twist_axis.values() if grid0 is None else landscape.twist_deg
+    wrap = scene.twist_axis.periodic if grid0 is None else grid0.wrap
     n = len(axis)
-    step = axis_step(axis)
+    step = (scene.twist_axis.step_deg if n > 1 else 1.0) if grid0 is None else grid0.twist_step_deg
     if not wrap and n > 1 and not (axis[0] - step / 2 <= start[2] <= axis[-1] + step / 2):
         raise InputError(f"start twist {start[2]:g} deg is outside the twist range {axis[0]:g}..{axis[-1]:g} deg")
-    if n == 1 and abs(start[2] - axis[0]) > 1e-9:
+    if n == 1 and abs(start[2] - axis[0]) > DEG_TOL:
         raise InputError(
             f"start twist {start[2]:g} deg: this scene has one twist ({axis[0]:g} deg, twist turned off), "
             f"so the start twist must be {axis[0]:g} deg; give that, or turn twist on"
         )
     pose = np.asarray(start, float)
-    boxes = _Boxes(scene, axis, wrap, band_steps, band_px, backend)
+    boxes = _BoxCost()
+    around = _box_landscapes(scene, band_steps, band_px, backend, boxes)
+    next(around)
     pieces = []
     while True:
         if landscape is not None:
@@ -188,7 +190,7 @@ def simulate(
             ls = build_landscape(scene, backend=backend)
             boxes.count(ls)
         else:
-            ls = boxes.around(pose)
+            ls = around.send(pose)
             if ls is None:  # moving the box would not move the chip: stop here
                 break
         pin = pin_per_index(scene, ls.um_per_px, ls.twist_step_deg)
@@ -237,94 +239,94 @@ def simulate(
                       optimum=opt.pose, refined=refined)
 
 
-class _Boxes:
-    """The part of the landscape one run needs, built as the chip goes.
+@dataclass
+class _BoxCost:
+    """What the boxes of one run cost (poses, planes, seconds) and the landscapes built for
+    the current box (reused to find the global minimum)."""
 
-    Translations: one square box holding the start, the aligned pose (0, 0) and a
-    margin of ``band_px``; grown (and rebuilt) only if the chip leaves it.
-    Twists: a band of +-``band_steps`` around the chip's twist, re-centred whenever
-    the chip reaches its end; every twist plane is computed once and cached.
-    """
-
-    def __init__(self, scene: Scene, axis: np.ndarray, wrap: bool, band_steps: int, band_px: int, backend: str):
-        self.scene, self.axis, self.wrap, self.backend = scene, axis, wrap, backend
-        self.band, self.margin = band_steps, band_px
-        self.step = axis_step(axis)
-        self.box: tuple[tuple[int, int], int] | None = None
-        self.planes_cache: dict[int, np.ndarray] = {}
-        self.template: Landscape | None = None
-        self.last: tuple | None = None
-        self.poses, self.planes, self.seconds = 0, 0, 0.0
-        #: The landscapes built for the current box (reused to find the global minimum).
-        self.built: list[Landscape] = []
+    poses: int = 0
+    planes: int = 0
+    seconds: float = 0.0
+    built: list = field(default_factory=list)
 
     def count(self, ls: Landscape) -> None:
         self.poses += ls.energy.size
         self.planes += ls.energy.shape[0]
         self.seconds += ls.stats["seconds"]
 
-    def _fit_box(self, pose_px: np.ndarray) -> None:
-        pts = [(0, 0), tuple(pose_px)]
-        if self.box is not None:
-            (cx, cy), h = self.box
-            pts += [(cx - h, cy - h), (cx + h, cy + h)]
-        pts = np.array(pts, float)
-        lo, hi = pts.min(axis=0) - self.margin, pts.max(axis=0) + self.margin
-        center = np.round((lo + hi) / 2).astype(int)
-        half = int(np.ceil(((hi - lo) / 2).max()))
-        self.box = ((int(center[0]), int(center[1])), half)
-        self.planes_cache.clear()
-        self.built.clear()
 
-    def around(self, pose: np.ndarray) -> Landscape | None:
-        s = self.scene.um_per_px
+def _fit_box(box, pose_px: np.ndarray, margin: int) -> tuple[tuple[int, int], int]:
+    """The square box (centre px, half-width px) holding the start, the aligned pose (0, 0),
+    the old box and a margin."""
+    pts = [(0, 0), tuple(pose_px)]
+    if box is not None:
+        (cx, cy), h = box
+        pts += [(cx - h, cy - h), (cx + h, cy + h)]
+    pts = np.array(pts, float)
+    lo, hi = pts.min(axis=0) - margin, pts.max(axis=0) + margin
+    center = np.round((lo + hi) / 2).astype(int)
+    return (int(center[0]), int(center[1])), int(np.ceil(((hi - lo) / 2).max()))
+
+
+def _outside(t: Landscape, pose_px: np.ndarray) -> bool:
+    """The pose lies on or next to a cut side of the box ``t``: the box must grow."""
+    s = t.um_per_px
+    x, y = pose_px * s
+    (xlo, xhi), (ylo, yhi) = t.cut[2], t.cut[1]
+    return bool(
+        (xlo and x <= t.x_um[0] + s) or (xhi and x >= t.x_um[-1] - s) or (ylo and y <= t.y_um[0] + s) or (yhi and y >= t.y_um[-1] - s)
+    )
+
+
+def _box_landscapes(scene: Scene, band_steps: int, band_px: int, backend: str, cost: _BoxCost):
+    """The part of the landscape one run needs, built as the chip goes: a generator that
+    is sent the chip's pose and yields the landscape around it (None: the same as last
+    time, so moving the box would not move the chip).
+
+    Translations: one square box holding the start, the aligned pose (0, 0) and a
+    margin of ``band_px``; grown (and rebuilt) only if the chip leaves it.
+    Twists: a band of +-``band_steps`` around the chip's twist, re-centred whenever
+    the chip reaches its end; every twist plane of the box is computed once (the plane
+    cache is this generator's own).
+    """
+    ta = scene.twist_axis
+    n, s = ta.count, scene.um_per_px
+    box, template, last = None, None, None
+    planes: dict[int, np.ndarray] = {}
+    pose = yield
+    while True:
         pose_px = np.round(pose[:2] / s)
-        if self.box is None or (self.template is not None and self._outside(pose_px)):
-            self._fit_box(pose_px)
-        n = len(self.axis)
-        k = int(round((pose[2] - self.axis[0]) / self.step)) if n > 1 else 0
-        lo, hi = k - self.band, k + self.band
-        if n == 1 or (self.wrap and hi - lo + 1 >= n):
+        if box is None or (template is not None and _outside(template, pose_px)):
+            box = _fit_box(box, pose_px, band_px)
+            planes.clear()
+            cost.built.clear()
+        k = int(round((pose[2] - float(ta.values_at(0))) / ta.step_deg)) if n > 1 else 0
+        lo, hi = k - band_steps, k + band_steps
+        if n == 1 or (ta.periodic and hi - lo + 1 >= n):
             lo, hi = 0, n - 1
-        elif not self.wrap:
+        elif not ta.periodic:
             lo, hi = max(lo, 0), min(hi, n - 1)
-        key = (lo, hi, self.box)
-        if key == self.last:
-            return None
-        self.last = key
+        if (lo, hi, box) == last:
+            pose = yield None
+            continue
+        last = (lo, hi, box)
         want = list(range(lo, hi + 1))
-        missing = sorted({j % n for j in want} - set(self.planes_cache))
-        if missing:
-            (cx, cy), half = self.box
-            ls = build_landscape(self.scene, twists=self.axis[missing], center_px=(cx, cy), half_px=half, backend=self.backend)
-            self.count(ls)
-            self.built.append(ls)
-            self.template = ls
-            self.planes_cache.update({j: ls.energy[i] for i, j in enumerate(missing)})
-        t = self.template
-        twists = self.axis[0] + self.step * np.asarray(want, float) if n > 1 else self.axis
-        full = len(want) == n
-        return Landscape(
-            energy=np.stack([self.planes_cache[j % n] for j in want]),
-            x_um=t.x_um,
-            y_um=t.y_um,
-            twist_deg=twists,
-            wrap=self.wrap and full,
-            period_deg=t.period_deg,
-            um_per_px=t.um_per_px,
-            delta_gamma=t.delta_gamma,
-            cut=(_twist_cut(self.axis, self.wrap, twists), t.cut[1], t.cut[2]),
-            energy_scale_J=t.energy_scale_J,
-            stats=t.stats,
-        )
-
-    def _outside(self, pose_px: np.ndarray) -> bool:
-        t = self.template
-        s = self.scene.um_per_px
-        x, y = pose_px * s
-        (xlo, xhi), (ylo, yhi) = t.cut[2], t.cut[1]
-        return bool(
-            (xlo and x <= t.x_um[0] + s) or (xhi and x >= t.x_um[-1] - s) or (ylo and y <= t.y_um[0] + s) or (yhi and y >= t.y_um[-1] - s)
+        (cx, cy), half = box
+        for run in consecutive_runs({j % n for j in want} - set(planes)):
+            ls = build_landscape(scene, twists=ta.values_at(np.asarray(run)), center_px=(cx, cy), half_px=half, backend=backend)
+            cost.count(ls)
+            cost.built.append(ls)
+            template = ls
+            planes.update({j: ls.energy[i] for i, j in enumerate(run)})
+        g = template.grid
+        grid = PoseGrid((len(want),) + g.shape[1:], g.um_per_px, ta, ta.periodic and len(want) == n,
+                        (ta.cut_of(lo, len(want)), g.cut[1], g.cut[2]), g.rg_px, g.x_first_px, g.y_first_px, lo)
+        pose = yield Landscape(
+            energy=np.stack([planes[j % n] for j in want]),
+            grid=grid,
+            delta_gamma=template.delta_gamma,
+            energy_scale_J=template.energy_scale_J,
+            stats=template.stats,
         )
 
 
@@ -335,14 +337,14 @@ def reference_landscape(scene: Scene, backend: str = "auto", reach_steps: int = 
     (0, 0, 0), as for a chip on its own pattern; pass a full landscape to
     :func:`simulate` when it does not.
     """
-    axis, wrap, _ = twist_axis(scene)
-    n = len(axis)
+    ta = scene.twist_axis
+    n = ta.count
     if n > 1:
-        k0 = int(np.argmin(np.abs(axis)))
+        k0 = int(np.argmin(np.abs(ta.values())))
         lo, hi = k0 - reach_steps, k0 + reach_steps
-        if not wrap:
+        if not ta.periodic:
             lo, hi = max(lo, 0), min(hi, n - 1)
-        twists = None if (wrap and hi - lo + 1 >= n) else axis[0] + axis_step(axis) * np.arange(lo, hi + 1)
+        twists = None if (ta.periodic and hi - lo + 1 >= n) else ta.values_at(np.arange(lo, hi + 1))
     else:
         twists = None
     return build_landscape(scene, twists=twists, center_px=(0, 0), half_px=half_px, backend=backend)

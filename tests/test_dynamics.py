@@ -48,15 +48,14 @@ def spring_field(k=K0, sign=1.0):
     x = (np.arange(NX) - XC) * UM_PER_PX * 1e-6
     e = np.broadcast_to(sign * 0.5 * k * x * x, (1, NY, NX)).astype(np.float32)
     floor = 32 * np.finfo(np.float32).eps * np.abs(e).max()
-    grid = Grid(
-        shape=(1, NY, NX),
+    grid = Grid.uniform(
+        (1, NY, NX),
         wrap=False,
         cut=((False, False), (True, True), (True, True)),
         um_per_px=UM_PER_PX,
         twist_step_deg=1.0,
-        x0_um=-XC * UM_PER_PX,
-        y0_um=-(NY // 2) * UM_PER_PX,
-        t0_deg=0.0,
+        x_first_px=-XC,
+        y_first_px=-(NY // 2),
         period_deg=90.0,
         rg_px=100.0,
     )

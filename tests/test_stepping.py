@@ -43,7 +43,7 @@ def reference(e: np.ndarray, wrap: bool, cut, it, iy, ix) -> float:
 
 
 def grid_for(wrap: bool, cut) -> Grid:
-    return Grid(shape=(T, NY, NX), wrap=wrap, cut=cut, um_per_px=1.0, twist_step_deg=1.0, x0_um=0.0, y0_um=0.0, t0_deg=0.0, period_deg=90.0, rg_px=3.0)
+    return Grid.uniform((T, NY, NX), wrap=wrap, cut=cut, um_per_px=1.0, twist_step_deg=1.0, period_deg=90.0, rg_px=3.0)
 
 
 CASES = [

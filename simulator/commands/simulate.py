@@ -18,6 +18,7 @@ from simulator.commands._common import (
 from simulator.defaults import DEFAULT_MAX_STEPS, METHODS
 from simulator.feedback import compiling
 from simulator.materials import DAMPING_CALIBRATION
+from simulator.tolerances import AREA_REL_TOL, DEG_TOL
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -122,7 +123,7 @@ def end_line(scene, traj) -> str:
     time_txt = f", {traj.time_s * 1e3:.3g} ms" if traj.time_s is not None else ""
     period = scene.twist_axis.period_deg
     same = round(float(np.mod(traj.final[2] + period / 2, period) - period / 2), 2) + 0.0
-    twin = f" (twist {f[2]:g} deg = {same:g} deg for {chip_symmetry_words(scene, period)})" if abs(same - f[2]) > 1e-9 else ""
+    twin = f" (twist {f[2]:g} deg = {same:g} deg for {chip_symmetry_words(scene, period)})" if abs(same - f[2]) > DEG_TOL else ""
     line = f"{traj.method}: {traj.outcome} at ({f[0]:.2f} um, {f[1]:.2f} um, {f[2]:.2f} deg){twin} after {traj.steps} steps{time_txt}"
     if traj.optimum is not None and traj.outcome != "aligned":
         g = [round(v, 2) + 0.0 for v in traj.optimum]
@@ -135,7 +136,7 @@ def chip_symmetry_words(scene, period: float) -> str:
     g = scene.chip.geometry
     if g is not None and period in (90.0, 180.0):
         x0, y0, x1, y1 = g.bounds
-        if abs(g.area - (x1 - x0) * (y1 - y0)) <= 1e-9 * g.area:
+        if abs(g.area - (x1 - x0) * (y1 - y0)) <= AREA_REL_TOL * g.area:
             return "a square chip" if period == 90.0 else "a rectangular chip"
     return f"a chip with {period:g}-degree symmetry"
 

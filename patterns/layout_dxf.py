@@ -1,0 +1,203 @@
+"""Reading DXF drawings with ezdxf (imported only when such a file is read).
+
+The model space or a block (``--cell``), INSERT and MINSERT expanded (a block's layer-0
+entities take the INSERT's layer), priced before it is flattened; units from
+``$INSUNITS`` or ``--dxf-units``; closed polylines (bulges sampled on the true arcs),
+circles, full ellipses, solids, traces, 3D faces and polyline-bounded hatches as outline
+rings snapped to the 1 nm grid; open or unsupported shapes recorded as the layer's problem.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from patterns.errors import InputError
+from patterns.layout_cell import Layout
+from patterns.layout_formats import (
+    _MAX_LISTED,
+    BYTES_PER_POLYGON,
+    DBU_UM,
+    DXF_UNITS,
+    INSUNITS,
+    MAX_DEPTH,
+    _count,
+    _on_grid,
+)
+from patterns.resources import require_fits
+
+
+# --------------------------------------------------------------------------- DXF
+def _read_dxf(path: Path, cell: str | None, dxf_units: str | None, budget_mb: float | None) -> Layout:
+    import ezdxf
+
+    log = logging.getLogger("ezdxf")
+    disabled, log.disabled = log.disabled, True  # ezdxf logs repairs; the result speaks for itself
+    try:
+        doc = ezdxf.readfile(str(path))
+    except Exception as err:  # noqa: BLE001 - any parser failure on user input is bad input
+        raise InputError(f"{path}: not a readable DXF file ({type(err).__name__}: {' '.join(str(err).split())[:200]}); "
+                         "export it again from the drawing program") from None
+    finally:
+        log.disabled = disabled
+    code = doc.header.get("$INSUNITS", 0)
+    if code:
+        if code not in INSUNITS:
+            raise InputError(f"{path}: $INSUNITS = {code} is not a length unit selfalign reads; save the drawing in um, mm or nm")
+        name, factor = INSUNITS[code]
+        if dxf_units is not None and not math.isclose(DXF_UNITS[dxf_units], factor):
+            raise InputError(f"{path}: the file states its units ($INSUNITS {name}) and --dxf-units says {dxf_units}; drop --dxf-units")
+        units = f"$INSUNITS {name}"
+    elif dxf_units is None:
+        raise InputError(f"{path}: the DXF file states no units ($INSUNITS); pass --dxf-units um, mm or nm")
+    else:
+        name, factor = dxf_units, DXF_UNITS[dxf_units]
+        units = f"--dxf-units {name} (the file states none)"
+    if cell is None:
+        space, cell_name = doc.modelspace(), "modelspace"
+    else:
+        space, cell_name = doc.blocks.get(cell), cell
+        if space is None:
+            blocks = [b for b in doc.blocks if not b.name.startswith("*")]
+            listed = ", ".join(f"{b.name} ({_count(len(b), 'entity')})".replace("entitys", "entities") for b in blocks[:_MAX_LISTED])
+            raise InputError(f"{path}: no block named {cell!r}; blocks present: {listed or 'none'} (or omit --cell for the model space)")
+    n = _dxf_size(space, doc, {}, ())
+    require_fits(f"flattening {cell_name} of {path} ({n:,} entities)", n * BYTES_PER_POLYGON * 4, "choose a smaller --cell", budget_mb)
+    rings: dict[str, list[np.ndarray]] = {layer.dxf.name: [] for layer in doc.layers if layer.dxf.name not in ("0", "Defpoints")}
+    problems: dict[str, str] = {}
+    try:
+        for layer, entity in _dxf_entities(space, None, 0):
+            ring, problem = _dxf_ring(entity, factor)
+            if problem:
+                problems.setdefault(layer, problem)
+            else:
+                rings.setdefault(layer, []).extend(_on_grid(r) for r in ring)
+    except ezdxf.DXFError as err:
+        raise InputError(f"{path}: cannot flatten {cell_name} ({err}); explode the block references in the drawing program") from None
+    return Layout(path, "dxf", cell_name, units, DBU_UM, rings, problems)
+
+
+def _dxf_size(space: Any, doc: Any, memo: dict, stack: tuple) -> int:
+    """Entities of ``space`` once every INSERT is expanded, counted without expanding them."""
+    total = 0
+    for e in space:
+        if e.dxftype() != "INSERT":
+            total += 1
+            continue
+        name = e.dxf.name
+        if name in stack or len(stack) > MAX_DEPTH:
+            raise InputError(f"block {name} inserts itself or nests deeper than {MAX_DEPTH} levels; fix the drawing")
+        if name not in memo:
+            block = doc.blocks.get(name)
+            memo[name] = 0 if block is None else _dxf_size(block, doc, memo, (*stack, name))
+        total += max(1, e.mcount) * memo[name]
+    return total
+
+
+def _dxf_entities(entities: Any, layer0: str | None, depth: int) -> Iterator[tuple[str, Any]]:
+    """(layer, entity) of every entity, INSERTs expanded; a block's layer-0 entities take the INSERT's layer."""
+    for e in entities:
+        layer = e.dxf.get("layer", "0")
+        if layer0 is not None and layer == "0":
+            layer = layer0
+        if e.dxftype() == "INSERT":
+            if depth > MAX_DEPTH:
+                raise InputError(f"block {e.dxf.name} nests deeper than {MAX_DEPTH} levels; fix the drawing")
+            for one in e.multi_insert():
+                yield from _dxf_entities(one.virtual_entities(), layer, depth + 1)
+        else:
+            yield layer, e
+
+
+_OPEN = ("LINE", "ARC", "SPLINE", "RAY", "XLINE")
+_IGNORED = ("TEXT", "MTEXT", "POINT", "DIMENSION", "LEADER", "MLEADER", "ATTRIB", "ATTDEF", "VIEWPORT", "IMAGE", "WIPEOUT")
+
+
+def _xy(points: Any) -> np.ndarray:
+    return np.array([(v[0], v[1]) for v in points], dtype=np.float64).reshape(-1, 2)
+
+
+def _bulged(xyb: np.ndarray, closed: bool, tol: float) -> np.ndarray:
+    """Vertices (n, 2) of a polyline whose segments may be arcs (bulge = tan(sweep / 4), CCW > 0).
+
+    Arcs are sampled on the true circle so that the chords stay within ``tol`` of it.
+    """
+    from ezdxf.math import bulge_center
+
+    out = []
+    n = len(xyb)
+    for i in range(n if closed else n - 1):
+        (x0, y0, b), (x1, y1) = xyb[i], xyb[(i + 1) % n][:2]
+        out.append((x0, y0))
+        if b == 0 or (x0 == x1 and y0 == y1):
+            continue
+        sweep = 4 * math.atan(b)
+        r = math.hypot(x1 - x0, y1 - y0) / (2 * abs(math.sin(sweep / 2)))
+        c = bulge_center((x0, y0), (x1, y1), b)
+        a0 = math.atan2(y0 - c.y, x0 - c.x)
+        steps = max(1, math.ceil(abs(sweep) / (2 * math.acos(max(-1.0, 1 - tol / r)))))
+        a = a0 + sweep * np.arange(1, steps) / steps
+        out.extend(zip((c.x + r * np.cos(a)).tolist(), (c.y + r * np.sin(a)).tolist(), strict=True))
+    if not closed and n:
+        out.append(tuple(xyb[-1][:2]))
+    return np.array(out, dtype=np.float64).reshape(-1, 2)
+
+
+def _to_wcs(e: Any, pts: np.ndarray) -> np.ndarray:
+    """Points in the entity's object coordinate system -> world coordinates (x, y)."""
+    ocs = e.ocs()
+    if not ocs.transform:
+        return pts
+    return _xy(ocs.points_to_wcs([(x, y, 0.0) for x, y in pts]))
+
+
+def _dxf_ring(e: Any, factor: float) -> tuple[list[np.ndarray], str | None]:
+    """(rings in um, None), ([], the problem), or ([], None) for an entity that is no outline (text)."""
+    kind, handle = e.dxftype(), e.dxf.get("handle", "?")
+    tol = DBU_UM / factor  # curves sampled within one database unit
+    if kind in _IGNORED:
+        return [], None
+    if kind in _OPEN:
+        return [], f"a {kind} (handle {handle}) is not a closed outline; join the outline into one closed polyline"
+    if kind == "LWPOLYLINE":
+        xyb, closed = np.array(e.get_points("xyb"), dtype=np.float64).reshape(-1, 3), e.closed
+    elif kind == "POLYLINE":
+        if not (e.is_2d_polyline or e.is_3d_polyline):
+            return [], f"a POLYLINE mesh (handle {handle}) is not an outline; draw the pad as a closed polyline"
+        xyb = np.array([(*v.dxf.location[:2], v.dxf.get("bulge", 0.0)) for v in e.vertices], dtype=np.float64).reshape(-1, 3)
+        closed = e.is_closed
+    if kind in ("LWPOLYLINE", "POLYLINE"):
+        ends_meet = len(xyb) > 1 and np.allclose(xyb[0, :2], xyb[-1, :2], rtol=0, atol=tol)
+        if len(xyb) and not closed and not ends_meet:
+            (x0, y0), (x1, y1) = _to_wcs(e, xyb[[0, -1], :2]) * factor
+            return [], (f"{kind} (handle {handle}) is open: it ends at ({x1:g}, {y1:g}) um, not at its start ({x0:g}, {y0:g}) um; "
+                        "close it (set its closed flag) in the drawing program")
+        rings = [_to_wcs(e, _bulged(xyb, closed or ends_meet, tol)) if not (kind == "POLYLINE" and e.is_3d_polyline)
+                 else xyb[:, :2]]
+    elif kind == "CIRCLE":
+        rings = [_xy(e.flattening(tol))]
+    elif kind == "ELLIPSE":
+        if not math.isclose(abs(e.dxf.end_param - e.dxf.start_param) % (2 * math.pi), 0, abs_tol=1e-12):
+            return [], f"an elliptic arc (handle {handle}) is not a closed outline; draw a full ellipse or a closed polyline"
+        rings = [_xy(e.flattening(tol))]
+    elif kind in ("SOLID", "TRACE", "3DFACE"):
+        rings = [_xy(e.wcs_vertices())]
+    elif kind == "HATCH":  # every polyline boundary; nested ones become holes (even-odd, as hatches fill)
+        rings = []
+        for b in e.paths:
+            if not hasattr(b, "vertices"):
+                return [], f"a HATCH (handle {handle}) bounded by edges; draw its outline as a closed polyline"
+            rings.append(_to_wcs(e, _bulged(np.array([(v[0], v[1], v[2] if len(v) > 2 else 0.0) for v in b.vertices]).reshape(-1, 3), True, tol)))
+    else:
+        return [], f"a {kind} (handle {handle}) is not an outline selfalign reads; draw the pad as a closed polyline"
+    out = []
+    for r in rings:
+        if len(r) > 1 and np.allclose(r[0], r[-1], rtol=0, atol=tol):
+            r = r[:-1]
+        out.append(r * factor)
+    return out, None
