@@ -30,6 +30,7 @@ import html
 import json
 import math
 import os
+import re
 import time
 from dataclasses import replace
 
@@ -263,6 +264,12 @@ def _model_note(summary: dict) -> str:
             "rounded over h; dashed in the force plot: the overlap model).")
 
 
+def _at(v: float) -> str:
+    """A refined pose coordinate (um or degrees) as the page shows it: to 0.001, no -0
+    (summary.json keeps every digit)."""
+    return f"{round(float(v), 3) + 0.0:g}"
+
+
 def _meniscus_rows(summary: dict) -> str:
     k = summary.get("stiffness")
     if not k:
@@ -273,12 +280,29 @@ def _meniscus_rows(summary: dict) -> str:
     warn_html = f'<p class="warn">warning: {html.escape(warn)}</p>' if warn else ""
     return (f"<h2>Stiffness at alignment (finite meniscus)</h2><table><tr><th>k<sub>x</sub></th><td>{_fmt(k['x_N_per_m'], 'N/m')}</td></tr>"
             f"<tr><th>k<sub>y</sub></th><td>{_fmt(k['y_N_per_m'], 'N/m')}</td></tr><tr><th>k<sub>twist</sub></th><td>{tw}</td></tr>"
-            f"<tr><th>offset of the minimum from the pattern centre</th><td>({o['x_um']:g} um, {o['y_um']:g} um, {o['twist_deg']:g} deg), "
-            f"{o['distance_um']:g} um</td></tr></table>{warn_html}\n")
+            f"<tr><th>offset of the minimum from the pattern centre</th><td>({_at(o['x_um'])} um, {_at(o['y_um'])} um, {_at(o['twist_deg'])} deg), "
+            f"{_at(o['distance_um'])} um</td></tr></table>{warn_html}\n")
+
+
+#: Unit words of the report's text (ASCII, as the command line prints them) and how a page shows them.
+_PAGE_UNITS = ((re.compile(r"(?<=\s)um(?=&sup2;)"), "µm"), (re.compile(r"(?<=\s)um(?=\b)"), "µm"),
+               (re.compile(r"(?<=\s)uN\b"), "µN"), (re.compile(r"(?<=\d) deg\b"), "°"))
+
+
+def _page_units(page: str) -> str:
+    """µm, µN and ° where the report's text writes um, uN and deg after a number (not in key names
+    such as ``meniscus_height_um``, which stay as the JSON spells them)."""
+    for pattern, unit in _PAGE_UNITS:
+        page = pattern.sub(unit, page)
+    return page
 
 
 def _html(summary: dict, source: str) -> str:
     """The one-page report: inputs, numbers with units, the four pictures."""
+    return _page_units(_html_ascii(summary, source))
+
+
+def _html_ascii(summary: dict, source: str) -> str:
     s, g = summary["settings"], summary["global_minimum"]
     f, b = summary["restoring_force_N"], summary["max_bias_um"]
     tq = summary["restoring_torque_Nm"]
@@ -321,7 +345,7 @@ pattern centre, x right, y up; twist in degrees, counter-clockwise positive. Com
 <tr><th>pose grid</th><td>{s['twists']} twists{f", step {s['twist_step_deg']:g} deg" if s['twist_step_deg'] else ""}; {s['dtype']}; landscape {s['landscape_MB']:g} MB in {s['landscape_s']:g} s</td></tr>
 </table></div></div>{_liquid_rows(summary.get("liquid_warnings"))}
 <h2>Where the chip ends up</h2>
-<p>Global minimum of the energy at <b>({g['x_um']:g} um, {g['y_um']:g} um, {g['twist_deg']:g} deg)</b>,
+<p>Global minimum of the energy at <b>({_at(g['x_um'])} um, {_at(g['y_um'])} um, {_at(g['twist_deg'])} deg)</b>,
 overlap {g['overlap_um2']:,.0f} um&sup2;, energy {_fmt(g['energy_J'], 'J')}.</p>
 {_meniscus_rows(summary)}<h2>Restoring force and torque near alignment</h2>
 <table><tr><th>chip displaced by</th><th>F<sub>x</sub></th><th>F<sub>y</sub></th></tr>{rows_force}{rows_torque}</table>
