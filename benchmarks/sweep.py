@@ -77,7 +77,7 @@ def main() -> int:
     n_axis = args.points_per_axis
     if args.loop_one_core:  # as a worker is: XLA on one thread, the FFTs and batches sized for one core
         os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} --xla_cpu_multi_thread_eigen=false".strip()
-        os.cpu_count = lambda: 1
+        os.environ["SELFALIGN_THREADS"] = "1"
         print(json.dumps(loop(n_axis)))
         return 0
     from simulator.sweep import sweep

@@ -10,7 +10,6 @@ asked for is transformed back along x.
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -19,6 +18,7 @@ import scipy.fft as sfft
 
 from patterns.errors import InputError
 from patterns.mask import nonzero_box
+from simulator.defaults import threads
 
 BACKENDS = ("auto", "scipy", "jax")
 #: Noise floor = NOISE_FACTOR * eps(dtype) * max|E|: a bound on FFT round-off
@@ -103,7 +103,7 @@ class Correlator:
         self.ny, self.nx = fft_shape(pattern.shape, chip_shape, window)
         self.chip_shape = (hc, wc)
         self.out_shape = (2 * window.ry + 1, 2 * window.rx + 1)
-        self.workers = os.cpu_count() or 1
+        self.workers = threads()
         # corr[m] = sum_k c[k] p[k + m]. With the flipped chip f[k] = c[hc - 1 - k],
         # F(f) = e^{-i w (hc - 1)} conj(C); the window starts at m0 = dy - ry.
         # kernel = P * e^{+i w (hc - 1)} * e^{+i w m0} so that corr[m0 + j] = IFFT(kernel F(f))[j].

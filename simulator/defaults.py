@@ -1,4 +1,4 @@
-"""Defaults and limits the command line quotes, in a module that imports nothing.
+"""Defaults and limits the command line quotes, in a module that imports nothing (but os).
 
 The command modules (:mod:`simulator.commands`) register their flags with these values
 without importing JAX, the landscape engine or matplotlib, so that ``selfalign --help``
@@ -7,6 +7,25 @@ and ``selfalign pattern`` start at once; :mod:`simulator.trajectory`,
 names. ``tests/test_cli_usage.py`` checks that every default a help text quotes is the
 code's.
 """
+
+import os
+
+#: Environment variable: how many threads this process's FFTs and batch runs may use.
+THREADS_ENV = "SELFALIGN_THREADS"
+
+
+def threads() -> int:
+    """Threads for the correlator's FFTs and for Monte Carlo chunks: ``SELFALIGN_THREADS``
+    when set (a whole number >= 1; a sweep's Dask workers set it to 1), else the CPU count."""
+    v = os.environ.get(THREADS_ENV, "").strip()
+    if not v:
+        return os.cpu_count() or 1
+    if not v.isdigit() or int(v) < 1:
+        from patterns.errors import InputError
+
+        raise InputError(f"{THREADS_ENV}={v!r} must be a whole number of threads >= 1; set it to e.g. 1, or unset it")
+    return int(v)
+
 
 #: Trajectory methods (:func:`simulator.trajectory.simulate`).
 METHODS = ("greedy", "gradient", "overdamped", "inertial")

@@ -43,7 +43,6 @@ from __future__ import annotations
 
 import functools
 import math
-import os
 import time
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
@@ -65,7 +64,7 @@ from simulator.batch_stats import (  # noqa: F401  (the result and its statistic
     twist_error,
 )
 from simulator.defaults import BATCH_METHODS as METHODS
-from simulator.defaults import DEFAULT_CHUNK, MAX_CHUNK  # noqa: F401  (re-exported)
+from simulator.defaults import DEFAULT_CHUNK, MAX_CHUNK, threads  # noqa: F401  (re-exported)
 from simulator.feedback import progress_bar
 from simulator.hysteresis import align_tolerance, pin_per_index
 from simulator.landscape import Landscape, build_landscape
@@ -226,7 +225,7 @@ def run_batch(
 
     t1 = time.perf_counter()
     chunks = range(0, n, chunk)
-    workers = max(1, min(int(workers or os.cpu_count() or 1), len(chunks)))
+    workers = max(1, min(int(workers or threads()), len(chunks)))
     with progress_bar(progress, n, method, "start") as bar:
         if workers == 1:
             for i in chunks:

@@ -18,6 +18,7 @@ import time
 from pathlib import Path
 
 from patterns.errors import InputError
+from simulator.defaults import THREADS_ENV
 from simulator.sweep_spec import AXES, _design_axes, _design_seed
 
 __all__ = ["assess_point", "point_scene", "run_point"]
@@ -37,8 +38,8 @@ def _cap_threads() -> None:
         return  # not in a worker: this process's own settings stand
     if "jax" not in sys.modules and XLA_ONE_THREAD not in os.environ.get("XLA_FLAGS", ""):
         os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {XLA_ONE_THREAD}".strip()
-    # The correlator's FFTs and the batch threads size themselves by os.cpu_count(): a worker counts one core.
-    os.cpu_count = lambda: 1
+    # The correlator's FFTs and the batch threads: one per worker (simulator.defaults.threads).
+    os.environ[THREADS_ENV] = "1"
 
 
 def point_scene(task: dict):

@@ -504,3 +504,19 @@ def test_the_files_the_readme_names_exist():
     assert "notebooks/d_accuracy_cost.ipynb" in named
     missing = sorted(p for p in named if not (ROOT / p).exists())
     assert not missing, missing
+
+
+def test_threads_come_from_selfalign_threads(capsys, monkeypatch):
+    from simulator import defaults
+    from simulator.correlator import Correlator, Window
+
+    monkeypatch.setenv("SELFALIGN_THREADS", "1")
+    assert defaults.threads() == 1
+    assert Correlator(np.ones((8, 8)), (3, 3), Window(2, 2, 3, 3), "float32", "scipy").workers == 1
+    monkeypatch.setenv("SELFALIGN_THREADS", "two")
+    rc, _, err = cli(["simulate", "--pattern", str(library_path("square_200")), "--chip-size", "200", "--start", "10,5,0", "--quiet"], capsys)
+    one_line_error(rc, err, "SELFALIGN_THREADS='two'", "whole number")
+    monkeypatch.delenv("SELFALIGN_THREADS")
+    import os
+
+    assert defaults.threads() == (os.cpu_count() or 1)
