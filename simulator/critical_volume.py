@@ -297,7 +297,7 @@ class CriticalVolume:
             f"(Bond number {bond:.2g}{'; too large: treat the volume as a rough estimate' if bond > 0.1 else ''})",
             "surface tension does not enter: the volume holds for any liquid with these contact angles",
             "against the source's method run in Surface Evolver (docs/physics.md §8) the critical volume agrees within 15 % "
-            "for pad angles of 30-85 deg and gaps of 5-20 %"
+            "for pad angles of 30-88 deg and gaps of 5-20 %"
             + ("; outside that, treat it as rough (the centred drop can split into lobes on the pads' inner corners, "
                "which square footprints cannot represent)" if p.pad_angle_deg < 30 or p.gap_um > 0.25 * p.size_um else ""),
             "static (Young) angles: contact-angle hysteresis, which lets a pad hold a drop up to its advancing angle, is not included",

@@ -6,7 +6,7 @@ A batch runs the *same* stepper functions as one trajectory
 start's final pose, step count and outcome are bit for bit those of
 ``simulate(scene, start, landscape=ls)`` (tested).
 
-The jit boundary is :func:`_run_chunk`: ``grid`` (a hashable :class:`~simulator.stepping.Grid`),
+The jit boundary is :func:`_run_chunk`: ``grid`` (the landscape's hashable :class:`~simulator.posegrid.PoseGrid`),
 ``method`` and ``max_steps`` are static (a new value recompiles); the landscape field and
 the (chunk, 3) start indices are traced. Starts are processed in chunks of a fixed size;
 the last chunk is padded (with copies of its first start, whose results are dropped) so
