@@ -30,7 +30,6 @@ import html
 import json
 import math
 import os
-import re
 import time
 from dataclasses import replace
 
@@ -284,25 +283,8 @@ def _meniscus_rows(summary: dict) -> str:
             f"{_at(o['distance_um'])} um</td></tr></table>{warn_html}\n")
 
 
-#: Unit words of the report's text (ASCII, as the command line prints them) and how a page shows them.
-_PAGE_UNITS = ((re.compile(r"(?<=\s)um(?=&sup2;)"), "µm"), (re.compile(r"(?<=\s)um(?=\b)"), "µm"),
-               (re.compile(r"(?<=\s)uN\b"), "µN"), (re.compile(r"(?<=\d) deg\b"), "°"))
-
-
-def _page_units(page: str) -> str:
-    """µm, µN and ° where the report's text writes um, uN and deg after a number (not in key names
-    such as ``meniscus_height_um``, which stay as the JSON spells them)."""
-    for pattern, unit in _PAGE_UNITS:
-        page = pattern.sub(unit, page)
-    return page
-
-
 def _html(summary: dict, source: str) -> str:
     """The one-page report: inputs, numbers with units, the four pictures."""
-    return _page_units(_html_ascii(summary, source))
-
-
-def _html_ascii(summary: dict, source: str) -> str:
     s, g = summary["settings"], summary["global_minimum"]
     f, b = summary["restoring_force_N"], summary["max_bias_um"]
     tq = summary["restoring_torque_Nm"]

@@ -87,11 +87,7 @@ def test_unwritable_output_directory(fourpad_png, tmp_path, capsys):
     assert "does not exist" in capsys.readouterr().err
 
 
-def test_report_page_writes_micrometres_and_degrees_but_keeps_key_names():
-    from simulator.evaluate import _at, _page_units
+def test_report_page_shows_a_refined_minimum_to_a_thousandth():
+    from simulator.evaluate import _at
 
-    text = ("pattern at 2 um/px, chip 730 x 730 um, overlap 5 um&sup2;, force 3 uN, pad 30 deg, twist in degrees, "
-            "maximum and minimum, meniscus_height_um = 37.5 um")
-    assert _page_units(text) == ("pattern at 2 µm/px, chip 730 x 730 µm, overlap 5 µm&sup2;, force 3 µN, pad 30°, twist in degrees, "
-                                 "maximum and minimum, meniscus_height_um = 37.5 µm")
     assert [_at(v) for v in (-0.000102256, 1.23456, -2.5e-07, 12.0)] == ["0", "1.235", "0", "12"]
