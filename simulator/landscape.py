@@ -152,11 +152,12 @@ class Landscape:
     # -- grid coordinates
     def fractional_index(self, x_um, y_um, twist_deg) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Continuous (it, iy, ix) grid coordinates of poses (twist wrapped if periodic)."""
-        ix = (np.asarray(x_um, float) - self.x_um[0]) / self.um_per_px
-        iy = (np.asarray(y_um, float) - self.y_um[0]) / self.um_per_px
-        it = (np.asarray(twist_deg, float) - self.twist_deg[0]) / self.twist_step_deg
+        g = self.grid  # as PoseGrid.to_index, for poses given as separate (broadcasting) arrays
+        ix = (np.asarray(x_um, float) - g.x0_um) / g.um_per_px
+        iy = (np.asarray(y_um, float) - g.y0_um) / g.um_per_px
+        it = (np.asarray(twist_deg, float) - g.t0_deg) / g.twist_step_deg
         if self.wrap:
-            it = np.mod(it, len(self.twist_deg))
+            it = np.mod(it, g.shape[0])
         return it, iy, ix
 
     def energy_at(self, x_um, y_um, twist_deg) -> np.ndarray:

@@ -128,7 +128,7 @@ class _Search:
         self.scene, self.backend = scene, backend
         ta = scene.twist_axis
         self.axis, self.wrap, self.period = ta.values(), ta.periodic, ta.period_deg
-        self.step = ta.step_deg if ta.count > 1 else 1.0
+        self.step = ta.grid_step_deg
         self.s = scene.um_per_px
         eps = np.finfo(scene.dtype).eps
         from simulator.correlator import NOISE_FACTOR

@@ -94,6 +94,12 @@ class TwistAxis:
     period_deg: float
     mirror: bool
 
+    @property
+    def grid_step_deg(self) -> float:
+        """The twist step (degrees) a pose grid on the whole axis uses: 1.0 for an axis of one
+        twist (no twist direction), as :attr:`PoseGrid.twist_step_deg`."""
+        return float(self.step_deg) if self.count > 1 else 1.0
+
     def values(self) -> np.ndarray:
         """The twists in degrees, ascending (one twist 0.0 when twist is off)."""
         return self.values_at(np.arange(self.count))

@@ -166,11 +166,10 @@ def simulate(
         dynamics = DynamicsParams.from_scene(scene)
     rg = radius_of_gyration_px(scene)
     t0 = time.perf_counter()
-    grid0 = landscape.grid if landscape is not None else None
-    axis = scene.twist_axis.values() if grid0 is None else landscape.twist_deg
-    wrap = scene.twist_axis.periodic if grid0 is None else grid0.wrap
+    ta = scene.twist_axis
+    axis, wrap, step = ((ta.values(), ta.periodic, ta.grid_step_deg) if landscape is None
+                        else (landscape.twist_deg, landscape.wrap, landscape.twist_step_deg))
     n = len(axis)
-    step = (scene.twist_axis.step_deg if n > 1 else 1.0) if grid0 is None else grid0.twist_step_deg
     if not wrap and n > 1 and not (axis[0] - step / 2 <= start[2] <= axis[-1] + step / 2):
         raise InputError(f"start twist {start[2]:g} deg is outside the twist range {axis[0]:g}..{axis[-1]:g} deg")
     if n == 1 and abs(start[2] - axis[0]) > DEG_TOL:
