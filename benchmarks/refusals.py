@@ -10,7 +10,12 @@ shared machine:
    of the landscape only and finishes in under 60 s
    (``tests/test_robustness.py::test_resources_4096_px_pattern_single_trajectory``).
 
-Usage: ``python benchmarks/refusals.py`` (best of 3 for item 1).
+3. Hostile scene files and PNG notes are refused in under 1 s each: a TOML array nested
+   5000 deep, a dotted key of 200,000 parts, a 50 MB scene file, a PNG note nested
+   60,000 deep (``tests/test_schema.py``, which asserts the stage each is refused at:
+   before parsing, before reading).
+
+Usage: ``python benchmarks/refusals.py`` (best of 3 for items 1 and 3).
 """
 
 from __future__ import annotations
@@ -29,7 +34,7 @@ from patterns.mask import Mask  # noqa: E402
 from patterns.raster import mask_from_geometry  # noqa: E402
 from simulator import Scene, build_landscape, simulate  # noqa: E402
 
-TARGETS_S = {"refuse over-budget landscape": 0.5, "4096 px greedy trajectory": 60.0}
+TARGETS_S = {"refuse over-budget landscape": 0.5, "4096 px greedy trajectory": 60.0, "refuse hostile scene files": 1.0}
 
 
 def refuse_seconds() -> float:
@@ -51,8 +56,37 @@ def trajectory_seconds() -> float:
     return time.perf_counter() - t0
 
 
+def hostile_files_seconds() -> float:
+    """The slowest of the hostile scene-file and PNG-note refusals (best of 3 each)."""
+    import tempfile
+
+    from patterns.metadata import parse_png_params
+    from simulator.schema import read_scene_file
+
+    texts = {"deep.toml": "x = " + "[" * 5000 + "]" * 5000 + "\n", "dotted.toml": "x" + ".a" * 200_000 + " = 1\n",
+             "big.toml": "x = [" + "0," * 25_000_000 + "]\n"}
+    worst = 0.0
+    with tempfile.TemporaryDirectory() as d:
+        calls = []
+        for name, text in texts.items():
+            (Path(d) / name).write_text(text)
+            calls.append(lambda p=Path(d) / name: read_scene_file(p))
+        calls.append(lambda: parse_png_params("[" * 60_000, "note.png"))
+        for call in calls:
+            best = float("inf")
+            for _ in range(3):
+                t0 = time.perf_counter()
+                try:
+                    call()
+                except InputError:
+                    best = min(best, time.perf_counter() - t0)
+            worst = max(worst, best)
+    return worst
+
+
 def main() -> int:
-    results = {"refuse over-budget landscape": refuse_seconds(), "4096 px greedy trajectory": trajectory_seconds()}
+    results = {"refuse over-budget landscape": refuse_seconds(), "4096 px greedy trajectory": trajectory_seconds(),
+               "refuse hostile scene files": hostile_files_seconds()}
     ok = True
     for name, seconds in results.items():
         target = TARGETS_S[name]

@@ -29,6 +29,7 @@ from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 from patterns.errors import InputError
+from patterns.hold import hold
 
 #: Marker file of an output directory: JSON listing the files selfalign wrote there.
 MARKER = ".selfalign-output.json"
@@ -229,6 +230,7 @@ def output_directory(path: str | os.PathLike, flag: str = "--out", force: bool =
     _PENDING.add(tmp)
     old: Path | None = None
     try:
+        hold("output")
         yield tmp
         files = [e for e in _listing(tmp) if not e.endswith("/")]
         (tmp / MARKER).write_text(json.dumps({"tool": "selfalign", "command": command, "files": files}, indent=1) + "\n")

@@ -25,6 +25,7 @@ import traceback
 import warnings
 
 from patterns.errors import InputError
+from patterns.hold import hold
 
 #: Subcommands, in the order ``selfalign --help`` lists them.
 COMMANDS = ("pattern", "energy", "simulate", "montecarlo", "evaluate", "sweep", "liquid", "demo")
@@ -126,6 +127,7 @@ def main(argv: list[str] | None = None) -> int:
     with _boundary():
         name = "command"
         try:
+            hold("startup")
             parser = build_parser()
             args = parser.parse_args(argv)
             name = args.command

@@ -52,6 +52,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from patterns.errors import InputError, require
+from patterns.hold import hold
 from patterns.mask import Mask
 from simulator import steppers, stepping
 from simulator.batch_stats import (  # noqa: F401  (the result and its statistics live in simulator.batch_stats; importable from here)
@@ -230,12 +231,14 @@ def run_batch(
         if workers == 1:
             for i in chunks:
                 bar.update(run(i))
+                hold("batch")
         else:
             # XLA runs one vmapped loop on one core: a thread per core keeps each busy.
             ex = ThreadPoolExecutor(workers)
             try:
                 for m in ex.map(run, chunks):
                     bar.update(m)
+                    hold("batch")
             finally:
                 ex.shutdown(wait=True, cancel_futures=True)
     dt = time.perf_counter() - t1

@@ -18,6 +18,7 @@ from collections.abc import Iterable
 from pathlib import Path
 
 from patterns.errors import InputError, require
+from patterns.hold import hold
 from simulator.sweep_columns import STATUS_COLUMNS, flatten
 from simulator.sweep_spec import SweepSpec
 
@@ -162,6 +163,7 @@ class _Store:
             _write_text(self.out / POINTS_DIR / f"{i:0{width}d}.json", json.dumps(doc, indent=1, allow_nan=False) + "\n")
             self._journal.write(json.dumps(row, allow_nan=False) + "\n")
             self._journal.flush()
+            hold("sweep-point")
             if time.monotonic() >= self._next_flush:
                 self.write_tables()
         return row

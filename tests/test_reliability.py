@@ -14,7 +14,6 @@ import signal
 import subprocess
 import sys
 import textwrap
-import time
 from pathlib import Path
 
 import numpy as np
@@ -463,47 +462,60 @@ def test_json_onto_a_symlink_keeps_the_link(tmp_path, capsys):
     assert (tmp_path / "l.json").is_symlink() and target.read_text() == "{}"
 
 
+def held_run(args: list[str], point: str, cwd: Path, env: dict | None = None) -> subprocess.Popen:
+    """Start the CLI with ``SELFALIGN_HOLD_AT=point`` and return once it holds there.
+
+    The process announces the hold on stderr and waits for a signal (patterns/hold.py),
+    so the test signals at a known stage of the run, however fast the machine is.
+    """
+    env = (env or os.environ) | {"SELFALIGN_HOLD_AT": point}
+    proc = subprocess.Popen([sys.executable, "-m", "simulator.cli", *args], cwd=cwd, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True, env=env)
+    seen = []
+    for line in proc.stderr:  # blocks until the hold line (or the end of a run that never got there)
+        seen.append(line)
+        if f"selfalign: holding at {point}" in line:  # after a progress bar's carriage returns
+            return proc
+    proc.wait(timeout=60)
+    pytest.fail(f"the run ended (exit {proc.returncode}) before holding at {point}: {''.join(seen)[-2000:]}")
+
+
 @pytest.mark.parametrize(
-    "name,args,sig",
+    "name,args,point,sig",
     [
-        ("evaluate", ["evaluate", FOUR_PAD, "--chip-size", "730", "--out", "ev", "--resolution", "2"], signal.SIGTERM),
-        ("evaluate", ["evaluate", FOUR_PAD, "--chip-size", "730", "--out", "ev", "--resolution", "2"], signal.SIGINT),
-        ("montecarlo", ["montecarlo", "--pattern", FOUR_PAD, "--chip-size", "730", "--random", "3000000", "--spread", "200,200,5",
-                        "--json", "mc.json", "--csv", "mc.csv"], signal.SIGTERM),
+        ("evaluate", ["evaluate", FOUR_PAD, "--chip-size", "730", "--out", "ev", "--resolution", "2"], "output", signal.SIGTERM),
+        ("evaluate", ["evaluate", FOUR_PAD, "--chip-size", "730", "--out", "ev", "--resolution", "2"], "output", signal.SIGINT),
+        ("montecarlo", ["montecarlo", "--pattern", FOUR_PAD, "--chip-size", "730", "--resolution", "4", "--random", "20000",
+                        "--spread", "200,200,5", "--json", "mc.json", "--csv", "mc.csv"], "batch", signal.SIGTERM),
+        ("montecarlo", ["montecarlo", "--pattern", FOUR_PAD, "--chip-size", "730", "--resolution", "4", "--random", "20000",
+                        "--spread", "200,200,5", "--json", "mc.json", "--csv", "mc.csv"], "batch", signal.SIGINT),
     ],
 )
-def test_sigterm_leaves_no_temporaries(tmp_path, name, args, sig):
-    # SIGTERM while the run works; the CLI turns it into an exception, so the temporary
-    # output (a hidden directory or file beside the target) is removed on the way out.
+def test_sigterm_leaves_no_temporaries(tmp_path, name, args, point, sig):
+    # The run holds where its work is under way (evaluate: its temporary output directory
+    # exists; montecarlo: the batch has run its first chunk); the signal arrives there.
+    # SIGTERM removes the temporaries and ends at once; Ctrl-C unwinds through them.
     run_dir = tmp_path / "run"
     run_dir.mkdir()
-    log = tmp_path / "stderr.txt"
-    with open(log, "w") as err_file:
-        proc = subprocess.Popen([sys.executable, "-m", "simulator.cli", *args], cwd=run_dir, stdout=subprocess.DEVNULL, stderr=err_file, text=True)
-        deadline = time.time() + 300
-        if name == "evaluate":  # wait for evaluate's temporary directory to exist
-            while time.time() < deadline and not any(p.name.startswith(".ev.") for p in run_dir.iterdir()):
-                time.sleep(0.05)
-            assert any(p.name.startswith(".ev.") for p in run_dir.iterdir())
-        else:  # wait for the batch to be running: the landscape is built and the stepper compiles
-            while time.time() < deadline and "compiling" not in log.read_text():
-                time.sleep(0.05)
-            time.sleep(1.0)
-        proc.send_signal(sig)
-        proc.wait(timeout=120)
-    err = log.read_text()
+    proc = held_run(args, point, run_dir)
+    if point == "output":
+        assert any(p.name.startswith(".ev.") for p in run_dir.iterdir())  # the temporary exists now
+    proc.send_signal(sig)
+    _, err = proc.communicate(timeout=120)
     assert proc.returncode == (143 if sig == signal.SIGTERM else 130), err[-2000:]
-    assert ("terminated" if sig == signal.SIGTERM else "interrupted") in err and "Traceback" not in err
+    lines = [x for x in err.replace("\r", "\n").splitlines() if x.strip()]  # a progress bar may close first
+    assert lines[-1] == ("selfalign: terminated (no partial output was kept)" if sig == signal.SIGTERM
+                         else "selfalign: interrupted (no partial output was kept)"), err[-2000:]
+    assert "Traceback" not in err and "Error" not in err
     assert listing(run_dir) == []
 
 
 def test_sigterm_while_starting_up_is_one_line(tmp_path):
-    # A signal that arrives while the command's modules are still being imported.
-    proc = subprocess.Popen([sys.executable, "-m", "simulator.cli", "energy", "--pattern", SQUARE, "--chip-size", "200", "--at", "0,0,0"],
-                            cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-    time.sleep(0.3)
+    # A signal that arrives before the command's modules are imported: the handler is
+    # already installed, so the exit is 143 with one line and nothing written.
+    proc = held_run(["energy", "--pattern", SQUARE, "--chip-size", "200", "--at", "0,0,0"], "startup", tmp_path)
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=120)
-    assert proc.returncode in (143, -signal.SIGTERM), err  # -15: before the handler was installed
-    assert "Traceback" not in err
+    assert proc.returncode == 143, err
+    assert err.strip().splitlines() == ["selfalign: terminated (no partial output was kept)"]
     assert listing(tmp_path) == []

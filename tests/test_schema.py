@@ -5,13 +5,13 @@ Regression tests named after the bugs they pin: string booleans read as True, un
 (a 10000-digit integer, 5000-deep arrays, a 25-million-element array, a FIFO).
 """
 
+import contextlib
 import dataclasses
 import json
 import math
 import os
 import tempfile
 import threading
-import time
 import tomllib
 from pathlib import Path
 
@@ -58,16 +58,32 @@ def refused(doc, *needles, source="scene.toml"):
     return msg
 
 
-def file_refused(path, *needles, within_s=2.0):
-    t0 = time.perf_counter()
-    with pytest.raises(InputError) as info:
-        read_scene_file(path)
-    elapsed = time.perf_counter() - t0
+def file_refused(path, *needles, before="validation"):
+    """The file is refused with one line; ``before`` names the stage it must not reach:
+    ``"parse"`` (tomllib never sees it) or ``"read"`` (its bytes are never read).
+
+    These stages, not times, are what the tests assert: how fast each refusal is belongs
+    to ``benchmarks/refusals.py`` (timed assertions flake on a shared machine)."""
+    import tracemalloc
+    from unittest import mock
+
+    def parsed(_text):
+        raise AssertionError("the file was parsed before it was refused")
+
+    with mock.patch.object(schema.tomllib, "loads", parsed) if before in ("parse", "read") else contextlib.nullcontext():
+        tracemalloc.start()
+        try:
+            with pytest.raises(InputError) as info:
+                read_scene_file(path)
+            _, peak = tracemalloc.get_traced_memory()
+        finally:
+            tracemalloc.stop()
     msg = str(info.value)
     assert len(msg.splitlines()) == 1, msg
     for needle in needles:
         assert needle in msg, (needle, msg)
-    assert elapsed < within_s, f"took {elapsed:.2f} s"
+    if before == "read":
+        assert peak < os.path.getsize(path) / 10, f"{peak:,} bytes allocated: the file was read"
     return msg
 
 
@@ -232,9 +248,9 @@ def test_10000_digit_integer(tmp_path):
 
 def test_5000_deep_toml_array(tmp_path):
     p = write(tmp_path, "x = " + "[" * 5000 + "]" * 5000 + "\n")
-    file_refused(p, str(p), "nested too deeply", within_s=1.0)
+    file_refused(p, str(p), "nested too deeply")
     p = write(tmp_path, "x = " + "{a = " * 3000 + "1" + "}" * 3000 + "\n", "inline.toml")
-    file_refused(p, "nested too deeply", within_s=1.0)
+    file_refused(p, "nested too deeply")
 
 
 def test_nesting_over_max_depth_is_refused_after_parsing(tmp_path):
@@ -251,7 +267,7 @@ def test_dotted_key_with_thousands_of_parts_refused_fast(tmp_path):
         ("header", "[" + ".".join(["a"] * 200_000) + "]\n"),
         ("quoted", "x" + '."a b"' * 100_000 + " = 1\n"),
     ]:
-        file_refused(write(tmp_path, text, f"{name}.toml"), "dotted key or table header", f"more than {MAX_DEPTH} parts", within_s=1.0)
+        file_refused(write(tmp_path, text, f"{name}.toml"), "dotted key or table header", f"more than {MAX_DEPTH} parts", before="parse")
     # dots inside strings, comments and floats are not keys
     text = 'pattern = "a.b.c.d.e.f.g.h.i.j.k.png"  # a.b.c.d.e.f.g.h.i.j.k\nwindow_um = 1.5\n[twist]\nstep_deg = 0.5\n'
     assert read_scene_file(write(tmp_path, text))["window_um"] == 1.5
@@ -266,7 +282,7 @@ def test_25_million_element_array_refused_fast(tmp_path):
             f.write(chunk)
         f.write(b"]\n")
     size = p.stat().st_size
-    msg = file_refused(p, f"{size:,} bytes", f"at most {MAX_SCENE_BYTES:,} bytes", within_s=0.5)
+    msg = file_refused(p, f"{size:,} bytes", f"at most {MAX_SCENE_BYTES:,} bytes", before="read")
     assert "1 MiB" in msg
 
 
@@ -290,7 +306,7 @@ def test_fifo_scene_file_is_refused_without_blocking(tmp_path):
 
     t = threading.Thread(target=read, daemon=True)
     t.start()
-    t.join(timeout=5)
+    t.join(timeout=60)  # a bound for a hang, not a speed target: the refusal is immediate
     if t.is_alive():  # blocked in open(): release it with a writer, then fail
         fd = os.open(fifo, os.O_WRONLY | os.O_NONBLOCK)
         os.close(fd)
@@ -461,10 +477,8 @@ def png_refused(func, arg, *needles):
 
 
 def test_deeply_nested_png_json():
-    t0 = time.perf_counter()
     png_refused(parse_png_params, "[" * 60_000, "nested too deeply")  # json.loads: RecursionError
     png_refused(parse_png_params, '{"a": ' + "[" * 20_000 + "]" * 20_000 + "}", "nested too deeply")
-    assert time.perf_counter() - t0 < 1.0
     depth = MAX_PARAMS_DEPTH + 1
     png_refused(parse_png_params, '{"a": ' + "[" * depth + "]" * depth + "}", "selfalign metadata a[0]", "levels deep")
     assert parse_png_params('{"a": ' + "[" * (MAX_PARAMS_DEPTH - 1) + "]" * (MAX_PARAMS_DEPTH - 1) + "}", PNG)
