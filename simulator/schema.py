@@ -169,7 +169,7 @@ SCHEMA: dict[str | None, dict[str, Kind]] = {
         "pinned": BOOL,
     },
     "topography": {  # a protruding pad (simulator.liquid.Topography): the overflow check
-        "edge_angle_deg": CONTACT_ANGLE_DEG,
+        "edge_angle_deg": number("(0, 180]", "deg"),  # a solid wedge: 0 is no solid
         "pad_advancing_deg": CONTACT_ANGLE_DEG,
         "chip_angle_deg": CONTACT_ANGLE_DEG,
     },
