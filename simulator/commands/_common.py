@@ -21,9 +21,9 @@ def finite_limit(flag: str, unit: str) -> Any:
         try:
             v = float(text)
         except ValueError:
-            v = math.nan
+            raise argparse.ArgumentTypeError(f"must be a finite number > 0 ({unit}), got {text!r}") from None
         if not (math.isfinite(v) and v > 0):
-            off = "; a limit cannot be switched off" if v > 0 else ""
+            off = "; a limit cannot be switched off" if not (math.isfinite(v) or v < 0) else ""  # nan, inf
             raise argparse.ArgumentTypeError(f"must be a finite number > 0 ({unit}), got {text!r}{off}")
         return v
     parse.__name__ = flag  # argparse names the type in its messages
