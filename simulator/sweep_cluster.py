@@ -135,9 +135,13 @@ def _handshake(address: str, timeout_s: float = CONNECT_TIMEOUT_S) -> None:
     import threading
 
     from distributed.comm import connect
+    from distributed.security import Security
+
+    tls = Security().get_connection_args("client")  # as Client() connects: the TLS settings of the Dask config
 
     async def probe() -> None:
-        comm = await connect(address, timeout=round(0.8 * timeout_s, 3))  # its own message (refused, unreachable) within the deadline
+        # connect's own message (refused, unreachable) comes within the deadline
+        comm = await connect(address, timeout=round(0.8 * timeout_s, 3), **tls)
         try:
             await comm.write({"op": "identity", "reply": True})
             reply = await comm.read()
