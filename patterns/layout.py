@@ -61,6 +61,7 @@ from patterns.layout_dxf import _read_dxf
 from patterns.layout_formats import BYTES_PER_POLYGON as BYTES_PER_POLYGON
 from patterns.layout_formats import BYTES_PER_VERTEX as BYTES_PER_VERTEX
 from patterns.layout_formats import DBU_UM as DBU_UM
+from patterns.layout_formats import DEFAULT_MAX_POLYGONS as DEFAULT_MAX_POLYGONS
 from patterns.layout_formats import (
     DXF_UNITS,
     NAMES,
@@ -104,12 +105,13 @@ DEFAULT_UM_PER_PX = 1.0
 
 
 def read_layout(path: str | os.PathLike, cell: str | None = None, dxf_units: str | None = None,
-                budget_mb: float | None = None) -> Layout:
+                budget_mb: float | None = None, max_polygons: int | None = None) -> Layout:
     """Read and flatten one cell of a GDSII, OASIS or DXF file (see the module notes).
 
     Raises:
         InputError: unreadable file, unknown cell or several top cells, missing or
-            conflicting DXF units, or a flattened cell over the memory budget.
+            conflicting DXF units, or a flattened cell over the memory budget or over
+            ``max_polygons`` polygons (default :data:`DEFAULT_MAX_POLYGONS`).
     """
     path = require_regular_file(path, "layout")
     fmt = layout_format(path)
@@ -120,8 +122,8 @@ def read_layout(path: str | os.PathLike, cell: str | None = None, dxf_units: str
     if dxf_units is not None and dxf_units not in DXF_UNITS:
         raise InputError(f"--dxf-units must be one of {', '.join(DXF_UNITS)}, got {dxf_units!r}")
     if fmt == "dxf":
-        return _read_dxf(path, cell, dxf_units, budget_mb)
-    return _read_gdstk(path, fmt, cell, budget_mb)
+        return _read_dxf(path, cell, dxf_units, budget_mb, max_polygons)
+    return _read_gdstk(path, fmt, cell, budget_mb, max_polygons)
 
 
 # --------------------------------------------------------------------------- the scene's view
@@ -134,7 +136,7 @@ def layout_geometry(path: str | os.PathLike, selection: LayoutSelection | None =
     the origin, with ``origin`` saying what it is.
     """
     sel = selection or LayoutSelection()
-    lay = read_layout(path, sel.cell, sel.dxf_units, budget_mb)
+    lay = read_layout(path, sel.cell, sel.dxf_units, budget_mb, sel.max_polygons)
     chip_key = lay.key(sel.chip_layer, "--chip-layer") if sel.chip_layer is not None else None
     if sel.layer is not None:
         key = lay.key(sel.layer)
@@ -208,10 +210,11 @@ def layout_chip_mask(path: str | os.PathLike, um_per_px: float, selection: Layou
                      budget_mb: float | None = None) -> Mask:
     """A chip footprint drawn in a layout of its own (``--chip chip.gds``): its only layer, centred on its bounding box.
 
-    Only ``selection.dxf_units`` applies (the cell is the single top cell).
+    Only ``selection.dxf_units`` and ``selection.max_polygons`` apply (the cell is the single top cell).
     """
     units = selection.dxf_units if selection is not None else None
-    chip, _, record = layout_geometry(path, LayoutSelection(dxf_units=units), budget_mb)
+    limit = selection.max_polygons if selection is not None else None
+    chip, _, record = layout_geometry(path, LayoutSelection(dxf_units=units, max_polygons=limit), budget_mb)
     return layout_mask(chip, um_per_px, f"the chip raster of {Path(path).name}", {"design": "layout", "layout": record}, budget_mb)
 
 

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 import shapely
-from shapely.geometry import MultiPolygon, Polygon
+from shapely.geometry import Polygon
 from shapely.geometry.base import BaseGeometry
 
 from patterns.errors import InputError
@@ -84,25 +84,51 @@ def _shoelace(r: np.ndarray) -> float:
 
 
 def _polygons(rings: list[np.ndarray], where: str) -> list[Polygon]:
-    """Valid polygons of the rings with an area; keyholes become holes; crossings are refused."""
+    """Valid polygons of the rings with an area; keyholes become holes; crossings are refused.
+
+    Built vectorized (one shapely call for every ring of the layer; a layer of a million small
+    polygons takes seconds, not minutes); only the rings that are not valid polygons as drawn
+    are looked at one by one.
+    """
+    if not rings:
+        return []
+    sizes = np.fromiter((len(r) for r in rings), dtype=np.int64, count=len(rings))
+    coords = np.concatenate([np.asarray(r, dtype=np.float64).reshape(-1, 2) for r in rings])
+    ring_of = np.repeat(np.arange(len(rings)), sizes)
+    finite = np.ones(len(rings), dtype=bool)
+    bad = ~np.isfinite(coords).all(axis=1)
+    finite[ring_of[bad]] = False
+    keep = np.ones(len(coords), dtype=bool)  # a ring that repeats its first vertex at its end: the repeat dropped
+    ends = np.cumsum(sizes) - 1
+    has = sizes > 1
+    closed = np.zeros(len(rings), dtype=bool)
+    closed[has] = (coords[ends[has]] == coords[ends[has] - sizes[has] + 1]).all(axis=1)
+    keep[ends[closed]] = False
+    use = np.flatnonzero((sizes - closed >= 3) & finite)
+    if not use.size:
+        return []
+    pick = np.isin(ring_of, use) & keep
+    # linearrings closes every ring (the rings are stored without their closing vertex).
+    polys = shapely.polygons(shapely.linearrings(coords[pick], indices=np.searchsorted(use, ring_of[pick])))
+    valid = shapely.is_valid(polys)
+    if valid.all():
+        return list(polys)
     out = []
-    for i, r in enumerate(rings):
-        if len(r) < 3 or not np.all(np.isfinite(r)):
-            continue
-        poly = Polygon(r)
-        if not poly.is_valid:
-            parts = [g for g in shapely.get_parts(shapely.make_valid(poly)) if isinstance(g, Polygon) and g.area > 0]
-            area = sum(g.area for g in parts)
-            if area == 0:
-                continue  # a degenerate polygon (a line): no area
-            if not math.isclose(area, abs(_shoelace(r)), rel_tol=1e-9, abs_tol=1e-12):  # a keyhole keeps its area, a crossing does not
-                m = re.search(r"\[([-\d.e+]+) ([-\d.e+]+)\]", shapely.is_valid_reason(poly))
-                near = f" near ({float(m[1]):.6g}, {float(m[2]):.6g}) um" if m else ""
-                raise InputError(f"{where}: polygon {i + 1} of {len(rings)} crosses itself{near}; "
-                                 "split it into simple polygons in the layout editor")
-            out.extend(parts)
-        else:
+    for i, poly, ok in zip(use.tolist(), polys, valid.tolist(), strict=True):
+        if ok:
             out.append(poly)
+            continue
+        r = rings[i]
+        parts = [g for g in shapely.get_parts(shapely.make_valid(poly)) if isinstance(g, Polygon) and g.area > 0]
+        area = sum(g.area for g in parts)
+        if area == 0:
+            continue  # a degenerate polygon (a line): no area
+        if not math.isclose(area, abs(_shoelace(r)), rel_tol=1e-9, abs_tol=1e-12):  # a keyhole keeps its area, a crossing does not
+            m = re.search(r"\[([-\d.e+]+) ([-\d.e+]+)\]", shapely.is_valid_reason(poly))
+            near = f" near ({float(m[1]):.6g}, {float(m[2]):.6g}) um" if m else ""
+            raise InputError(f"{where}: polygon {i + 1} of {len(rings)} crosses itself{near}; "
+                             "split it into simple polygons in the layout editor")
+        out.extend(parts)
     return out
 
 
@@ -121,7 +147,8 @@ def _merge(polys: list[Polygon], nested: bool) -> BaseGeometry:
         geom = polys[0]
     else:
         a, b = shapely.STRtree(polys).query(polys, predicate="intersects")
-        geom = MultiPolygon(polys) if np.all(a == b) else shapely.union_all(polys)  # disjoint: vertices kept as drawn
-    parts = [g for g in shapely.get_parts(geom) if isinstance(g, Polygon) and g.area > 0]
-    geom = parts[0] if len(parts) == 1 else MultiPolygon(parts)
+        geom = shapely.multipolygons(polys) if np.all(a == b) else shapely.union_all(polys)  # disjoint: vertices kept as drawn
+    parts = shapely.get_parts(geom)
+    parts = parts[(shapely.get_type_id(parts) == shapely.GeometryType.POLYGON) & (shapely.area(parts) > 0)]
+    geom = parts[0] if len(parts) == 1 else shapely.multipolygons(parts)
     return shapely.orient_polygons(geom)

@@ -22,18 +22,21 @@ from patterns.layout_cell import Layout
 from patterns.layout_formats import (
     _MAX_LISTED,
     BYTES_PER_POLYGON,
+    BYTES_PER_VERTEX,
     DBU_UM,
     DXF_UNITS,
     INSUNITS,
+    MAX_COORD_UM,
     MAX_DEPTH,
     _count,
     _on_grid,
+    require_polygon_count,
 )
 from patterns.resources import require_fits
 
 
 # --------------------------------------------------------------------------- DXF
-def _read_dxf(path: Path, cell: str | None, dxf_units: str | None, budget_mb: float | None) -> Layout:
+def _read_dxf(path: Path, cell: str | None, dxf_units: str | None, budget_mb: float | None, max_polygons: int | None = None) -> Layout:
     import ezdxf
 
     log = logging.getLogger("ezdxf")
@@ -67,12 +70,13 @@ def _read_dxf(path: Path, cell: str | None, dxf_units: str | None, budget_mb: fl
             listed = ", ".join(f"{b.name} ({_count(len(b), 'entity')})".replace("entitys", "entities") for b in blocks[:_MAX_LISTED])
             raise InputError(f"{path}: no block named {cell!r}; blocks present: {listed or 'none'} (or omit --cell for the model space)")
     n = _dxf_size(space, doc, {}, ())
+    require_polygon_count(n, f"{path}: {cell_name} (counting its entities)", max_polygons)
     require_fits(f"flattening {cell_name} of {path} ({n:,} entities)", n * BYTES_PER_POLYGON * 4, "choose a smaller --cell", budget_mb)
     rings: dict[str, list[np.ndarray]] = {layer.dxf.name: [] for layer in doc.layers if layer.dxf.name not in ("0", "Defpoints")}
     problems: dict[str, str] = {}
     try:
         for layer, entity in _dxf_entities(space, None, 0):
-            ring, problem = _dxf_ring(entity, factor)
+            ring, problem = _dxf_ring(entity, factor, budget_mb)
             if problem:
                 problems.setdefault(layer, problem)
             else:
@@ -122,10 +126,14 @@ def _xy(points: Any) -> np.ndarray:
     return np.array([(v[0], v[1]) for v in points], dtype=np.float64).reshape(-1, 2)
 
 
-def _bulged(xyb: np.ndarray, closed: bool, tol: float) -> np.ndarray:
-    """Vertices (n, 2) of a polyline whose segments may be arcs (bulge = tan(sweep / 4), CCW > 0).
+class _BadShape(InputError):
+    """A shape that cannot be read (its message continues "a LWPOLYLINE (handle 2A) ...")."""
 
-    Arcs are sampled on the true circle so that the chords stay within ``tol`` of it.
+
+def _arc_steps(xyb: np.ndarray, closed: bool, tol: float, factor: float) -> list[tuple[int, float, float, float, float, int]]:
+    """The arcs of a polyline, priced before any is sampled: (segment, centre x, centre y, radius,
+    start angle, chords) per bulged segment. An arc wider than :data:`MAX_COORD_UM` (a bulge near
+    +-inf, a full turn) or a bulge that is not a number is refused (InputError, the caller names the entity).
     """
     from ezdxf.math import bulge_center
 
@@ -133,16 +141,49 @@ def _bulged(xyb: np.ndarray, closed: bool, tol: float) -> np.ndarray:
     n = len(xyb)
     for i in range(n if closed else n - 1):
         (x0, y0, b), (x1, y1) = xyb[i], xyb[(i + 1) % n][:2]
-        out.append((x0, y0))
         if b == 0 or (x0 == x1 and y0 == y1):
             continue
+        if not math.isfinite(b):
+            raise _BadShape(f"has a bulge of {b:g} at vertex {i + 1}; give every arc a finite bulge (tan of a quarter of its sweep)")
         sweep = 4 * math.atan(b)
-        r = math.hypot(x1 - x0, y1 - y0) / (2 * abs(math.sin(sweep / 2)))
+        half = abs(math.sin(sweep / 2))
+        r = math.hypot(x1 - x0, y1 - y0) / (2 * half) if half > 0 else math.inf
+        if not r * factor <= MAX_COORD_UM:
+            raise _BadShape(f"has an arc of radius {r * factor:.3g} um (bulge {b:g}) at vertex {i + 1}, beyond the "
+                             f"{MAX_COORD_UM:,.0f} um (1 m) a layout may span; redraw the arc (its bulge is near a full turn) or check the units")
         c = bulge_center((x0, y0), (x1, y1), b)
-        a0 = math.atan2(y0 - c.y, x0 - c.x)
         steps = max(1, math.ceil(abs(sweep) / (2 * math.acos(max(-1.0, 1 - tol / r)))))
+        out.append((i, c.x, c.y, r, math.atan2(y0 - c.y, x0 - c.x), steps))
+    return out
+
+
+def _require_radius(r: float, factor: float) -> None:
+    """A circle's or ellipse's radius (drawing units) that can be sampled, else :class:`_BadShape` (before any sample)."""
+    if not abs(r) * factor <= MAX_COORD_UM:
+        raise _BadShape(f"has a radius of {abs(r) * factor:.3g} um, beyond the {MAX_COORD_UM:,.0f} um (1 m) a layout may span; check the drawing's units")
+
+
+def _bulged(xyb: np.ndarray, closed: bool, tol: float, factor: float = 1.0, budget_mb: float | None = None) -> np.ndarray:
+    """Vertices (n, 2) of a polyline whose segments may be arcs (bulge = tan(sweep / 4), CCW > 0).
+
+    Arcs are sampled on the true circle so that the chords stay within ``tol`` of it; the
+    samples are counted and priced against the memory budget before any is made.
+    """
+    arcs = {a[0]: a for a in _arc_steps(xyb, closed, tol, factor)}
+    total = len(xyb) + sum(a[5] for a in arcs.values())
+    require_fits(f"sampling the arcs of a polyline ({total:,} vertices within {tol * factor:g} um of the true arcs)",
+                 total * BYTES_PER_VERTEX, "draw the arcs as fewer or smaller arcs", budget_mb)
+    out = []
+    n = len(xyb)
+    for i in range(n if closed else n - 1):
+        x0, y0 = xyb[i][:2]
+        out.append((x0, y0))
+        if i not in arcs:
+            continue
+        _, cx, cy, r, a0, steps = arcs[i]
+        sweep = 4 * math.atan(xyb[i][2])
         a = a0 + sweep * np.arange(1, steps) / steps
-        out.extend(zip((c.x + r * np.cos(a)).tolist(), (c.y + r * np.sin(a)).tolist(), strict=True))
+        out.extend(zip((cx + r * np.cos(a)).tolist(), (cy + r * np.sin(a)).tolist(), strict=True))
     if not closed and n:
         out.append(tuple(xyb[-1][:2]))
     return np.array(out, dtype=np.float64).reshape(-1, 2)
@@ -156,9 +197,25 @@ def _to_wcs(e: Any, pts: np.ndarray) -> np.ndarray:
     return _xy(ocs.points_to_wcs([(x, y, 0.0) for x, y in pts]))
 
 
-def _dxf_ring(e: Any, factor: float) -> tuple[list[np.ndarray], str | None]:
-    """(rings in um, None), ([], the problem), or ([], None) for an entity that is no outline (text)."""
+def _dxf_ring(e: Any, factor: float, budget_mb: float | None = None) -> tuple[list[np.ndarray], str | None]:
+    """(rings in um, None), ([], the problem), or ([], None) for an entity that is no outline (text).
+
+    A ring that reaches beyond +-:data:`MAX_COORD_UM` or an arc that cannot be sampled is the
+    layer's problem (refused, one line, when that layer is read)."""
     kind, handle = e.dxftype(), e.dxf.get("handle", "?")
+    try:
+        rings, problem = _dxf_ring_of(e, kind, handle, factor, budget_mb)
+    except _BadShape as err:
+        return [], f"a {kind} (handle {handle}) {err}"
+    for r in rings:
+        big = np.abs(r[np.isfinite(r)])
+        if big.size and big.max() > MAX_COORD_UM:
+            return [], (f"a {kind} (handle {handle}) reaches {big.max():.3g} um from the origin, beyond the {MAX_COORD_UM:,.0f} um (1 m) "
+                        "a layout may span; check the drawing's units ($INSUNITS or --dxf-units) and coordinates")
+    return rings, problem
+
+
+def _dxf_ring_of(e: Any, kind: str, handle: str, factor: float, budget_mb: float | None) -> tuple[list[np.ndarray], str | None]:
     tol = DBU_UM / factor  # curves sampled within one database unit
     if kind in _IGNORED:
         return [], None
@@ -177,11 +234,13 @@ def _dxf_ring(e: Any, factor: float) -> tuple[list[np.ndarray], str | None]:
             (x0, y0), (x1, y1) = _to_wcs(e, xyb[[0, -1], :2]) * factor
             return [], (f"{kind} (handle {handle}) is open: it ends at ({x1:g}, {y1:g}) um, not at its start ({x0:g}, {y0:g}) um; "
                         "close it (set its closed flag) in the drawing program")
-        rings = [_to_wcs(e, _bulged(xyb, closed or ends_meet, tol)) if not (kind == "POLYLINE" and e.is_3d_polyline)
+        rings = [_to_wcs(e, _bulged(xyb, closed or ends_meet, tol, factor, budget_mb)) if not (kind == "POLYLINE" and e.is_3d_polyline)
                  else xyb[:, :2]]
     elif kind == "CIRCLE":
+        _require_radius(e.dxf.radius, factor)
         rings = [_xy(e.flattening(tol))]
     elif kind == "ELLIPSE":
+        _require_radius(e.dxf.major_axis.magnitude, factor)
         if not math.isclose(abs(e.dxf.end_param - e.dxf.start_param) % (2 * math.pi), 0, abs_tol=1e-12):
             return [], f"an elliptic arc (handle {handle}) is not a closed outline; draw a full ellipse or a closed polyline"
         rings = [_xy(e.flattening(tol))]
@@ -192,7 +251,8 @@ def _dxf_ring(e: Any, factor: float) -> tuple[list[np.ndarray], str | None]:
         for b in e.paths:
             if not hasattr(b, "vertices"):
                 return [], f"a HATCH (handle {handle}) bounded by edges; draw its outline as a closed polyline"
-            rings.append(_to_wcs(e, _bulged(np.array([(v[0], v[1], v[2] if len(v) > 2 else 0.0) for v in b.vertices]).reshape(-1, 3), True, tol)))
+            xyb = np.array([(v[0], v[1], v[2] if len(v) > 2 else 0.0) for v in b.vertices], dtype=np.float64).reshape(-1, 3)
+            rings.append(_to_wcs(e, _bulged(xyb, True, tol, factor, budget_mb)))
     else:
         return [], f"a {kind} (handle {handle}) is not an outline selfalign reads; draw the pad as a closed polyline"
     out = []

@@ -37,6 +37,12 @@ BYTES_PER_VERTEX, BYTES_PER_POLYGON = 200, 2000
 READ_FACTOR = {"gds": 4, "oas": 16, "dxf": 40}
 #: Deepest reference nesting followed.
 MAX_DEPTH = 64
+#: Most polygons (DXF: entities) a cell may hold once flattened, unless ``--max-polygons``
+#: (``max_polygons``) raises it: about 20 s of reading, merging and rasterizing per 100,000.
+DEFAULT_MAX_POLYGONS = 100_000
+#: Largest coordinate (and arc radius) a layout may have, um: 1 m. Beyond it a drawing's units
+#: are wrong (a chip pattern spans millimetres), and floats overflow on the way to a raster.
+MAX_COORD_UM = 1e6
 _MAX_LISTED = 12
 
 
@@ -93,12 +99,15 @@ class LayoutSelection:
     ``layer``/``chip_layer``: ``"L/D"`` for GDS/OASIS, a layer name for DXF; ``None`` takes the
     only layer (and no chip layer). ``cell``: None = the single top cell (DXF: model space).
     ``dxf_units``: ``"um"``, ``"mm"`` or ``"nm"``, used when a DXF file states no units.
+    ``max_polygons``: the most polygons the cell may hold once flattened (None:
+    :data:`DEFAULT_MAX_POLYGONS`); a limit, not a selection (:attr:`given` leaves it out).
     """
 
     layer: str | None = None
     cell: str | None = None
     chip_layer: str | None = None
     dxf_units: str | None = None
+    max_polygons: int | None = None
 
     def __post_init__(self) -> None:
         for name in ("layer", "cell", "chip_layer"):
@@ -107,6 +116,9 @@ class LayoutSelection:
                 raise InputError(f"{name} must be a non-empty string (a layer L/D, a DXF layer or a cell name), got {v!r}")
         if self.dxf_units is not None and self.dxf_units not in DXF_UNITS:
             raise InputError(f"dxf_units must be one of {', '.join(DXF_UNITS)}, got {self.dxf_units!r}")
+        m = self.max_polygons
+        if m is not None and (isinstance(m, bool) or not isinstance(m, int) or m < 1):
+            raise InputError(f"max_polygons (--max-polygons) must be a whole number >= 1, got {m!r}")
 
     @property
     def given(self) -> list[str]:
@@ -119,6 +131,14 @@ class LayoutSelection:
         if given:
             raise InputError(f"{', '.join(given)} apply to layout patterns (.gds, .oas, .dxf); {what} is not one")
 
+
+
+def require_polygon_count(n: int, what: str, limit: int | None) -> None:
+    """InputError unless ``n`` flattened polygons (counted from the hierarchy, before flattening) are within ``limit``."""
+    limit = DEFAULT_MAX_POLYGONS if limit is None else int(limit)
+    if n > limit:
+        raise InputError(f"{what} holds {n:,} polygons once flattened, over the limit of {limit:,} (reading, merging and "
+                         f"rasterizing take about 20 s per 100,000); choose a smaller --cell, or raise the limit with --max-polygons {n}")
 
 
 # --------------------------------------------------------------------------- units and counts

@@ -9,10 +9,12 @@ messages on stderr become the one-line refusal of an unreadable file.
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 import sys
 import tempfile
 import warnings
+import zlib
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -29,6 +31,7 @@ from patterns.layout_formats import (
     NAMES,
     _count,
     _fmt_len,
+    require_polygon_count,
 )
 from patterns.resources import require_fits
 
@@ -56,9 +59,80 @@ def _c_stderr() -> Iterator[list[str]]:
             out.append(tmp.read(2000).decode("utf-8", "replace"))
 
 
-def _read_gdstk(path: Path, fmt: str, cell: str | None, budget_mb: float | None) -> Layout:
+#: Length of an OASIS file's END record (SEMI P39: the last 256 bytes of every complete file).
+OASIS_END_BYTES = 256
+
+
+def _varint(b: bytes, i: int) -> tuple[int, int]:
+    """An OASIS unsigned integer at ``b[i]`` (7 bits a byte, low first): (value, next index); IndexError past the end."""
+    v = shift = 0
+    while True:
+        c = b[i]
+        i += 1
+        v |= (c & 0x7F) << shift
+        shift += 7
+        if c < 0x80:
+            return v, i
+        if shift > 63:
+            raise ValueError("an integer longer than 64 bits")
+
+
+def _oasis_incomplete(path: Path) -> str | None:
+    """Why an OASIS file is not complete (cut short, or its validation signature does not match), or None.
+
+    gdstk reads the records it can and stops without a word at a cut (or crashes): a truncated
+    file must be refused before it sees it. A complete file ends in its 256-byte END record:
+    the table offsets (when START says so), a padding string, the validation scheme and,
+    for CRC32 or checksum, the signature, which is checked too.
+    """
+    data = path.read_bytes()
+    start = len(b"%SEMI-OASIS\r\n")
+    try:
+        if data[start] != 1:
+            return "no START record after the magic"
+        n, i = _varint(data, start + 1)  # version a-string
+        i += n
+        kind, i = _varint(data, i)  # unit: a real
+        if kind in (0, 1, 2, 3):
+            _, i = _varint(data, i)
+        elif kind in (4, 5):
+            _, i = _varint(data, i)
+            _, i = _varint(data, i)
+        elif kind in (6, 7):
+            i += 4 if kind == 6 else 8
+        else:
+            return f"a START record with a unit of unknown real type {kind}"
+        offsets_in_end, i = _varint(data, i)
+        if len(data) < i + OASIS_END_BYTES:
+            return f"it is cut short at {len(data):,} bytes, too short to hold its {OASIS_END_BYTES}-byte END record"
+        j = len(data) - OASIS_END_BYTES
+        if data[j] != 2:
+            return f"it is cut short or damaged (its last {OASIS_END_BYTES} bytes are not an END record)"
+        j += 1
+        if offsets_in_end:
+            for _ in range(12):
+                _, j = _varint(data, j)
+        pad, j = _varint(data, j)
+        scheme, j = _varint(data, j + pad)
+        sig = 4 if scheme in (1, 2) else 0
+        if scheme not in (0, 1, 2) or j + sig != len(data):
+            return f"it is cut short or damaged (its last {OASIS_END_BYTES} bytes are not an END record)"
+    except (IndexError, ValueError):
+        return "it is cut short or damaged (a record runs past the end of the file)"
+    if scheme == 1 and zlib.crc32(data[:-4]) != int.from_bytes(data[-4:], "little"):
+        return "its CRC32 signature does not match its content (damaged or cut and padded)"
+    if scheme == 2 and sum(data[:-4]) % 2**32 != int.from_bytes(data[-4:], "little"):
+        return "its checksum does not match its content (damaged or cut and padded)"
+    return None
+
+
+def _read_gdstk(path: Path, fmt: str, cell: str | None, budget_mb: float | None, max_polygons: int | None = None) -> Layout:
     import gdstk
 
+    if fmt == "oas":
+        why = _oasis_incomplete(path)
+        if why:
+            raise InputError(f"{path}: not a complete OASIS file ({why}); copy or export it again")
     failure = None
     with _c_stderr() as said, warnings.catch_warnings():
         warnings.simplefilter("ignore")  # "Missing reference": refused below when the cell read needs it
@@ -87,8 +161,12 @@ def _read_gdstk(path: Path, fmt: str, cell: str | None, budget_mb: float | None)
         vertices, polygons = _flat_size(top, counts)
     except InputError as err:
         raise InputError(f"{path}: {err}") from None
+    require_polygon_count(polygons, f"{path}: cell {top.name}", max_polygons)
     require_fits(f"flattening cell {top.name} of {path} ({polygons:,} polygons, {vertices:,} vertices)",
                  vertices * BYTES_PER_VERTEX + polygons * BYTES_PER_POLYGON, "choose a smaller --cell", budget_mb)
+    for name, v in (("database unit", lib.precision), ("user unit", lib.unit)):
+        if not (math.isfinite(v) and v > 0):  # a zero unit would divide by zero below
+            raise InputError(f"{path}: the file's UNITS record gives a {name} of {v:g} m, not a length > 0; export it again from the layout editor")
     db_per_user = lib.unit / lib.precision  # user coordinates x this = database units
     if abs(db_per_user - round(db_per_user)) < 1e-9 * db_per_user:
         db_per_user = float(round(db_per_user))

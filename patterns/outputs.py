@@ -20,6 +20,7 @@ Rules, for every file and directory selfalign writes:
 from __future__ import annotations
 
 import contextlib
+import errno
 import json
 import os
 import shutil
@@ -97,7 +98,26 @@ def check_output_file(path: str | os.PathLike, flag: str, inputs: Iterable[str |
         raise InputError(f"{flag} {path}: directory {parent} does not exist; create it or choose another path")
     if not os.access(parent, os.W_OK):
         raise InputError(f"{flag} {path}: directory {parent} is not writable; choose another path")
+    probe_writable(parent, f"{flag} {path}")
     return p
+
+
+def probe_writable(directory: Path, what: str, kind: str = "file") -> None:
+    """InputError unless a file (``kind="dir"``: a directory) can really be made in ``directory``.
+
+    ``os.access`` answers yes for root on a read-only mount, /proc or /sys, where creating
+    the temporary fails later (after the work): so one is made and removed here, before any.
+    """
+    try:
+        if kind == "dir":
+            os.rmdir(tempfile.mkdtemp(prefix=".selfalign-probe.", dir=directory))
+        else:
+            fd, name = tempfile.mkstemp(prefix=".selfalign-probe.", dir=directory)
+            os.close(fd)
+            os.unlink(name)
+    except OSError as err:
+        why = "a file system that takes no new files" if err.errno == errno.ENOENT else (err.strerror or str(err))
+        raise InputError(f"{what}: cannot write in directory {directory} ({why}); choose another path") from None
 
 
 def check_distinct(outputs: dict[str, str | os.PathLike | None]) -> None:
@@ -200,6 +220,7 @@ def check_output_dir(path: str | os.PathLike, flag: str = "--out", force: bool =
         raise InputError(f"{flag} {path}: parent directory {out.parent} does not exist; create it first")
     if not os.access(parent, os.W_OK):
         raise InputError(f"{flag} {path}: parent directory {out.parent} is not writable")
+    probe_writable(parent, f"{flag} {path}", "dir")
     if out.is_dir():
         if not _writable_dir(out):
             raise InputError(f"{flag} {path}: directory is read-only; make it writable or choose another")

@@ -125,6 +125,8 @@ def price_raster(shape_hw: tuple[float, float], um_per_px: float, what: str, bud
 def price_image(width: int, height: int, path: os.PathLike | str, max_mpx: float | None = None, budget_mb: float | None = None) -> None:
     """Refuse an image whose decoded size is over the pixel limit or the memory budget."""
     limit = DEFAULT_MAX_IMAGE_MPX if max_mpx is None else float(max_mpx)
+    if not (math.isfinite(limit) and limit > 0):  # nan or inf would switch the guard off
+        raise InputError(f"the image limit (--max-image-mpx, max_image_mpx) must be a finite number of megapixels > 0, got {max_mpx!r}")
     mpx = width * height / 1e6
     if mpx > limit:
         raise InputError(

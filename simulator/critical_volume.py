@@ -103,6 +103,10 @@ def free_cap_base_um2(volume_um3, angle_deg):
 
 
 # ------------------------------------------------------------------ the pattern
+#: The pattern sizes (um) the calculation takes: 1 nm to 1 m (volumes go as L^3).
+MIN_SIZE_UM, MAX_SIZE_UM = 1e-3, 1e6
+
+
 @dataclass(frozen=True)
 class FourPad:
     """A four-pad pattern (PHYSICS.md 6.1) and its wetting.
@@ -122,6 +126,11 @@ class FourPad:
     def __post_init__(self) -> None:
         L = positive("--size (pattern size L)", self.size_um, "um")
         g = positive("--gap", self.gap_um, "um")
+        if not MIN_SIZE_UM <= L <= MAX_SIZE_UM:  # volumes go as L^3: 1e300 overflows, 1e-300 underflows to 0 nl
+            raise InputError(f"--size {L:g} um is outside {MIN_SIZE_UM:g} to {MAX_SIZE_UM:g} um (1 nm to 1 m), where the "
+                             "volumes (L^3) stay numbers; give the pattern's outer side in um")
+        if g < MIN_SIZE_UM:  # a gap of 1e-200 um divides by zero in the gap's wetting
+            raise InputError(f"--gap {g:g} um is below {MIN_SIZE_UM:g} um (1 nm); give the width of the gap in um")
         if g >= L:
             raise InputError(f"--gap {g:g} um must be smaller than --size {L:g} um (the four pads are (L - g) / 2 wide)")
         for flag, v in (("--pad-angle", self.pad_angle_deg), ("--substrate-angle", self.substrate_angle_deg)):

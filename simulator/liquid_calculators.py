@@ -100,12 +100,24 @@ def height_report(volume_nl: float, area_um2: float, sides_um: tuple[float, floa
 
 
 # --------------------------------------------------------------------- overflow (PHYSICS 9)
+def _edge_angle(name: str, value: float) -> float:
+    """A solid wedge angle in (0, 180] degrees (90 = vertical wall, 180 = no edge), else InputError.
+
+    0 is no solid at all: its overflow angle, 180 + the pad's advancing angle, is no angle a liquid has.
+    """
+    v = _angle(name, value)
+    if not v > 0:
+        raise InputError(f"{name} must be a solid wedge angle in (0, 180] degrees (90 = a vertical wall, 180 = no edge), "
+                         f"got {value!r}: a wedge of 0 degrees is no solid")
+    return v
+
+
 def overflow_angle_deg(theta_edge_deg: float, theta_adv_pad_deg: float) -> float:
     """Apparent angle at which liquid spills over a pad edge, ``(180 - theta_edge) + theta_adv_pad``.
 
     PHYSICS.md 9.2 [Eq. 22]; ``theta_edge`` is the solid wedge angle (90 = vertical wall).
     """
-    te = _angle("edge angle", theta_edge_deg)
+    te = _edge_angle("edge angle", theta_edge_deg)
     ta = _angle("pad advancing angle", theta_adv_pad_deg)
     return 180.0 - te + ta
 
@@ -119,7 +131,7 @@ def overflow_bias_um(h_um: float, theta_edge_deg: float, theta_adv_pad_deg: floa
     (the flat-face meniscus is already past the pinning window at zero bias).
     """
     h = positive("meniscus height", h_um, "um")
-    diff = _angle("edge angle", theta_edge_deg) - _angle("pad advancing angle", theta_adv_pad_deg)
+    diff = _edge_angle("edge angle", theta_edge_deg) - _angle("pad advancing angle", theta_adv_pad_deg)
     if diff <= 0:
         return math.inf
     if diff >= 90:
@@ -175,7 +187,7 @@ def overflow_conditions(
         bias_um: lateral bias, um (its magnitude is used).
         h_um: meniscus height, um (e.g. :func:`meniscus_height_um`).
     """
-    te = _angle("edge angle", theta_edge_deg)
+    te = _edge_angle("edge angle", theta_edge_deg)
     ta = _angle("pad advancing angle", theta_adv_pad_deg)
     tc = _angle("chip contact angle", theta_chip_deg)
     x = abs(float(bias_um))
@@ -218,7 +230,7 @@ def overflow_report(pad_advancing_deg: float, chip_angle_deg: float | tuple[floa
     ``over_chip_angle_range`` lists the pieces with one verdict each.
     """
     adv = _angle("--pad-advancing", pad_advancing_deg)
-    edge = _angle("--edge-angle", edge_angle_deg)
+    edge = _edge_angle("--edge-angle", edge_angle_deg)
     h = positive("--meniscus-height", h_um, "um")
     if bias_um is not None and not math.isfinite(float(bias_um)):
         raise InputError(f"--bias must be a finite number of um, got {bias_um!r}")
@@ -273,7 +285,7 @@ class Topography:
     chip_angle_deg: float | None = None
 
     def __post_init__(self) -> None:
-        _angle("edge_angle_deg (--edge-angle)", self.edge_angle_deg)
+        _edge_angle("edge_angle_deg (--edge-angle)", self.edge_angle_deg)
         if self.pad_advancing_deg is not None:
             _angle("pad_advancing_deg (--pad-advancing)", self.pad_advancing_deg)
         if self.chip_angle_deg is not None:

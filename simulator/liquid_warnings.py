@@ -71,17 +71,26 @@ def _footprint_um(mask) -> tuple[float, float]:
 # --------------------------------------------------------------------- scene checks
 def check_scene_volume(scene) -> None:
     """A typed volume whose film ``h = V / A`` is thicker than the chip's smallest side: InputError."""
-    v = scene.liquid.volume_nl
-    h = meniscus_height_um(v, scene.chip.area_um2)
     w, ht = _footprint_um(scene.chip)
-    side = min(w, ht)
+    require_film(scene.liquid.volume_nl, w, ht, scene.chip.area_um2)
+
+
+def require_film(volume_nl: float, w_um: float, h_um: float, area_um2: float | None = None, what: str | None = None) -> float:
+    """The film height ``h = V / A`` (um) of a typed volume under a ``w_um`` x ``h_um`` chip (wetted area
+    ``area_um2``, default w x h), or InputError when it is thicker than the chip's smallest side."""
+    v = volume_nl
+    area = w_um * h_um if area_um2 is None else area_um2
+    h = meniscus_height_um(v, area)
+    side = min(w_um, h_um)
     if h > side:
-        fit = THIN_FILM_FRACTION * side * scene.chip.area_um2 / UM3_PER_NL
+        fit = THIN_FILM_FRACTION * side * area / UM3_PER_NL
+        under = what or f"the {w_um:g} x {h_um:g} um chip"
         raise InputError(
-            f"--volume {v:g} nl under the {w:g} x {ht:g} um chip is a film h = V / A = {h:.6g} um thick, more than the "
+            f"--volume {v:g} nl under {under} is a film h = V / A = {h:.6g} um thick, more than the "
             f"chip's smallest side ({side:g} um): a drop, not a film; if you meant {v:g} pl, give --volume {v / 1000:g} "
             f"(1 nl = 1e6 um^3); a thin film (h below {100 * THIN_FILM_FRACTION:g} % of the side) takes at most {fit:.3g} nl"
         )
+    return h
 
 
 def volume_note(scene, method: str) -> str | None:

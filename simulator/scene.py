@@ -135,6 +135,10 @@ class Scene(SceneBuilders):
             f"chip scale {cs} um/px differs from pattern scale {ps} um/px; "
             "give both at one scale (Scene.from_inputs resamples a chip PNG for you)",
         )
+        if self.window_um is not None and self.window_um < ps:
+            # Below a pixel the pose grid has no translation to step to (and 1e-300 rounds to none at all).
+            raise InputError(f"window_um (--window) {self.window_um:g} um is below one pixel of the pose grid ({ps:g} um); "
+                             f"give at least {ps:g} um, or leave it out for the full reach")
         if self.effects.meniscus:
             _ = self.meniscus_height_um  # validated here: positive, finite, not above the chip
         if self.effects.hysteresis:

@@ -33,7 +33,7 @@ if TYPE_CHECKING:
     from simulator.scene import Scene
 
 #: Scene keys that choose what to read from a layout pattern (:class:`patterns.layout.LayoutSelection`).
-LAYOUT_KEYS = ("layer", "cell", "chip_layer", "dxf_units")
+LAYOUT_KEYS = ("layer", "cell", "chip_layer", "dxf_units", "max_polygons")
 #: Scene keys on how the pattern and chip images are read (:meth:`Scene.from_inputs`).
 IMAGE_KEYS = ("pattern_um_per_px", "chip_um_per_px", "override_scale", "invert", "invert_chip")
 

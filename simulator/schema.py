@@ -123,6 +123,7 @@ SCHEMA: dict[str | None, dict[str, Kind]] = {
         "cell": Text(200),
         "chip_layer": Text(200),
         "dxf_units": Choice(DXF_UNITS),
+        "max_polygons": integer("[1, 1e9]", "polygons"),  # a layout cell's flattened polygons (patterns.layout)
         "chip_size_um": Size(LENGTH_UM),
         "um_per_px": number(f"(0, {MAX_UM:g}]", "um per px"),  # as write_mask's pHYs range
         "pattern_um_per_px": number(f"(0, {MAX_UM:g}]", "um per px"),
@@ -168,7 +169,7 @@ SCHEMA: dict[str | None, dict[str, Kind]] = {
         "pinned": BOOL,
     },
     "topography": {  # a protruding pad (simulator.liquid.Topography): the overflow check
-        "edge_angle_deg": CONTACT_ANGLE_DEG,
+        "edge_angle_deg": number("(0, 180]", "deg"),  # a solid wedge: 0 is no solid
         "pad_advancing_deg": CONTACT_ANGLE_DEG,
         "chip_angle_deg": CONTACT_ANGLE_DEG,
     },

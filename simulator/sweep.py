@@ -90,6 +90,7 @@ from simulator.sweep_cluster import (  # noqa: F401  (the cluster lives in simul
     _run_here,
     _worker_env,
     dask_client,
+    worker_cap,
 )
 from simulator.sweep_columns import (  # noqa: F401  (the columns live in simulator.sweep_columns; importable from here)
     COMPONENTS,
@@ -191,7 +192,9 @@ def sweep(spec: str | os.PathLike | dict, out: str | os.PathLike | None = None, 
     try:
         done = store.done(retry_failed)
         todo = [spec.task(p) for p in spec.points() if p["point"] not in done]
-        n_workers = None if scheduler else min(workers or os.cpu_count() or 1, max(len(todo), 1))
+        n_workers, capped = (None, None) if scheduler else worker_cap(workers or os.cpu_count() or 1, len(todo))
+        if capped and workers and todo:
+            print(f"note: {capped}", file=sys.stderr, flush=True)
         with contextlib.ExitStack() as stack:
             t_cluster = time.perf_counter()
             client = stack.enter_context(dask_client(n_workers, scheduler)) if todo and workers != 0 else None

@@ -211,3 +211,20 @@ class _Store:
         if self._lock is not None:
             self._lock.close()
             self._lock = None
+
+
+def kept_points(out: str | os.PathLike) -> int:
+    """How many points the journal of the results directory ``out`` holds (finished, ok or
+    failed; a line cut short does not count): what a rerun resumes from."""
+    try:
+        data = (Path(out) / JOURNAL).read_bytes()
+    except OSError:
+        return 0
+    seen = set()
+    for line in data[: data.rfind(b"\n") + 1].splitlines():
+        try:
+            seen.add(int(json.loads(line)["point"]))
+        except (ValueError, KeyError, TypeError):
+            continue
+    return len(seen)
+

@@ -159,6 +159,8 @@ def simulate(
             f"start pose {tuple(start)} is out of range: |x| and |y| must be at most {reach_um:g} um "
             f"({MAX_START_PX} px) and |twist| at most {MAX_START_TWIST_DEG:g} deg"
         )
+    if landscape is None:
+        require_start_in_window(scene, start)
     dynamic = method in ("overdamped", "inertial")
     if dynamic and dynamics is None:
         from simulator.dynamics import DynamicsParams
@@ -277,6 +279,20 @@ def _outside(t: Landscape, pose_px: np.ndarray) -> bool:
     )
 
 
+def require_start_in_window(scene: Scene, start) -> None:
+    """InputError for a start beyond the scene's translation window (``window_um``): the pose grid
+    ends there, so there is no landscape to step on (the run would grow its box forever)."""
+    w = scene.window_um
+    if w is not None and max(abs(start[0]), abs(start[1])) > w:
+        raise InputError(f"start pose ({start[0]:g}, {start[1]:g}) um lies outside the translation window of +-{w:g} um "
+                         f"(--window / window_um); widen the window to at least {max(abs(start[0]), abs(start[1])):g} um, or leave it out")
+
+
+def _extent(t: Landscape) -> tuple[float, float, float, float]:
+    """The translations (um) a box landscape spans: x first, x last, y first, y last."""
+    return (float(t.x_um[0]), float(t.x_um[-1]), float(t.y_um[0]), float(t.y_um[-1]))
+
+
 def _box_landscapes(scene: Scene, band_steps: int, band_px: int, backend: str, cost: _BoxCost):
     """The part of the landscape one run needs, built as the chip goes: a generator that
     is sent the chip's pose and yields the landscape around it (None: the same as last
@@ -291,11 +307,14 @@ def _box_landscapes(scene: Scene, band_steps: int, band_px: int, backend: str, c
     ta = scene.twist_axis
     n, s = ta.count, scene.um_per_px
     box, template, last = None, None, None
+    stuck = False  # the box grew and the landscape did not: the window (window_um) cuts it, growing again is futile
     planes: dict[int, np.ndarray] = {}
     pose = yield
     while True:
         pose_px = np.round(pose[:2] / s)
-        if box is None or (template is not None and _outside(template, pose_px)):
+        before = None
+        if box is None or (template is not None and not stuck and _outside(template, pose_px)):
+            before = None if template is None else _extent(template)
             box = _fit_box(box, pose_px, band_px)
             planes.clear()
             cost.built.clear()
@@ -317,6 +336,8 @@ def _box_landscapes(scene: Scene, band_steps: int, band_px: int, backend: str, c
             cost.built.append(ls)
             template = ls
             planes.update({j: ls.energy[i] for i, j in enumerate(run)})
+        if before is not None and _extent(template) == before:
+            stuck = True
         g = template.grid
         grid = PoseGrid((len(want),) + g.shape[1:], g.um_per_px, ta, ta.periodic and len(want) == n,
                         (ta.cut_of(lo, len(want)), g.cut[1], g.cut[2]), g.rg_px, g.x_first_px, g.y_first_px, lo)

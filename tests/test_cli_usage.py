@@ -404,7 +404,7 @@ def _parsers():
 
 def _code_defaults() -> dict[str, object]:
     """The code's default for each flag whose argparse default is None (resolved downstream)."""
-    from patterns.layout import DEFAULT_UM_PER_PX
+    from patterns.layout import DEFAULT_MAX_POLYGONS, DEFAULT_UM_PER_PX
     from patterns.resources import DEFAULT_BUDGET_CAP_MB, DEFAULT_MAX_IMAGE_MPX
     from simulator import defaults
     from simulator.accuracy import DEFAULT_PRESET
@@ -424,6 +424,7 @@ def _code_defaults() -> dict[str, object]:
         "--around": ",".join(f"{v:g}" for v in inspect.signature(random_starts).parameters["around"].default),
         "--grid": inspect.signature(StartGrid.from_ranges).parameters["twist_deg"].default,
         "--memory-budget": DEFAULT_BUDGET_CAP_MB, "--density": liq.density_kg_m3, "--um-per-px": DEFAULT_UM_PER_PX,
+        "--max-polygons": DEFAULT_MAX_POLYGONS,
     }
 
 

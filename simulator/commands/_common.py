@@ -15,6 +15,35 @@ from patterns.outputs import atomic_output
 from simulator.scene import Scene
 
 
+def finite_limit(flag: str, unit: str) -> Any:
+    """An argparse type for a limit flag: a finite number > 0 (``nan`` or ``inf`` would switch the guard off)."""
+    def parse(text: str) -> float:
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be a finite number > 0 ({unit}), got {text!r}") from None
+        if not (math.isfinite(v) and v > 0):
+            off = "; a limit cannot be switched off" if not (math.isfinite(v) or v < 0) else ""  # nan, inf
+            raise argparse.ArgumentTypeError(f"must be a finite number > 0 ({unit}), got {text!r}{off}")
+        return v
+    parse.__name__ = flag  # argparse names the type in its messages
+    return parse
+
+
+def whole_limit(flag: str) -> Any:
+    """An argparse type for a count limit: a whole number >= 1."""
+    def parse(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be a whole number >= 1, got {text!r}") from None
+        if v < 1:
+            raise argparse.ArgumentTypeError(f"must be a whole number >= 1, got {text!r}")
+        return v
+    parse.__name__ = flag
+    return parse
+
+
 def add_scene_args(p: argparse.ArgumentParser) -> None:
     """Pattern, chip, scale, materials and pose-grid options (a TOML scene may give them)."""
     p.add_argument("scene", nargs="?", help="optional TOML scene file; flags given here override it")
@@ -37,6 +66,10 @@ def add_scene_args(p: argparse.ArgumentParser) -> None:
     y.add_argument("--chip-layer", metavar="L/D", help="read the chip outline from this layer: its position in the layout is "
                    "the aligned pose (default: no chip layer; the target is the pattern's bounding-box centre)")
     y.add_argument("--dxf-units", choices=("um", "mm", "nm"), help="units of a DXF file that states none ($INSUNITS)")
+    from patterns.layout_formats import DEFAULT_MAX_POLYGONS
+
+    y.add_argument("--max-polygons", type=whole_limit("--max-polygons"), metavar="N", help="most polygons the layout cell may "
+                   f"hold once flattened (default {DEFAULT_MAX_POLYGONS}; about 20 s of work per 100000)")
     g.add_argument("--resolution", type=float, help="simulate at this pixel size in um (resamples the pattern; default: its own)")
     m = p.add_argument_group("materials")
     m.add_argument("--surface-tension", type=float, help="liquid surface tension in mN/m (default 72.8, water)")
@@ -49,9 +82,9 @@ def add_scene_args(p: argparse.ArgumentParser) -> None:
     n.add_argument("--no-twist", action="store_true", help="keep the chip untwisted (computes one rotation)")
     n.add_argument("--window", type=float, help="translation half-width of the pose grid in um (default: full reach)")
     n.add_argument("--dtype", choices=("float32", "float64"), help="landscape precision (default float32)")
-    n.add_argument("--memory-budget", type=float, help="memory budget in MB for the landscape and every other large array "
+    n.add_argument("--memory-budget", type=finite_limit("--memory-budget", "MB"), help="memory budget in MB for the landscape and every other large array "
                    "(default: half the available memory, at most 8192; never more than the machine has)")
-    g.add_argument("--max-image-mpx", type=float, help="largest image to read, in megapixels (default 64)")
+    g.add_argument("--max-image-mpx", type=finite_limit("--max-image-mpx", "megapixels"), help="largest image to read, in megapixels (default 64)")
     q = p.add_argument_group("liquid and meniscus")
     q.add_argument("--volume", type=float, help="droplet volume in nl (default 20): the meniscus height V / A under the "
                    "chip for --meniscus, and the film of the dynamic methods")
@@ -155,6 +188,7 @@ def scene_from_args(args: argparse.Namespace, note_frame: bool = True) -> Scene:
         (None, "layer"): getattr(args, "layer", None),
         (None, "cell"): getattr(args, "cell", None),
         (None, "dxf_units"): getattr(args, "dxf_units", None),
+        (None, "max_polygons"): getattr(args, "max_polygons", None),
         ("liquid", "volume_nl"): getattr(args, "volume", None),
         ("topography", "edge_angle_deg"): getattr(args, "edge_angle", None),
         ("topography", "pad_advancing_deg"): getattr(args, "pad_advancing", None),

@@ -99,7 +99,7 @@ def _bbox_chip(args: argparse.Namespace) -> str:
     from simulator.evaluate import footprint_um
 
     if is_layout(args.pattern):
-        sel = LayoutSelection(layer=args.layer, cell=args.cell, dxf_units=args.dxf_units)
+        sel = LayoutSelection(layer=args.layer, cell=args.cell, dxf_units=args.dxf_units, max_polygons=args.max_polygons)
         x0, y0, x1, y1 = layout_geometry(args.pattern, sel, args.memory_budget)[0].bounds
         return f"{x1 - x0:.12g}x{y1 - y0:.12g}"
     own = args.pattern_um_per_px is not None  # the scale rule of Scene.from_inputs: a file's own scale wins

@@ -161,6 +161,11 @@ def run_height(args: argparse.Namespace) -> int:
     bias = _finite("--bias", args.bias, positive=False)
     if bias is not None and sides is None:
         raise InputError("--bias needs --chip-size (the parallelepiped force needs the chip's edge length)")
+    from simulator.liquid_warnings import require_film
+
+    # As simulate and evaluate: a film thicker than the chip is a typing slip (nl for pl), refused.
+    w, ht = sides if sides else (math.sqrt(area), math.sqrt(area))
+    require_film(v, w, ht, area, None if sides else f"{area:g} um^2 (a square of side {w:.4g} um)")
     r = height_report(v, area, sides, gamma, rho, bias)
     r["surface_tension_mN_m"], r["density_kg_m3"] = gamma * 1000, rho
     h = r["meniscus_height_um"]

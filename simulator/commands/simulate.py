@@ -55,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
     from simulator.commands._common import read_toml
 
     # JAX: imported when a run needs it (selfalign --help starts without it).
-    from simulator.trajectory import price_run, simulate
+    from simulator.trajectory import price_run, require_start_in_window, simulate
 
     doc = read_toml(args.scene) if args.scene else {}
     sim = doc.get("simulate", {})
@@ -71,6 +71,7 @@ def run(args: argparse.Namespace) -> int:
 
     liquid_warnings = liquid_checks(args, scene, method, placement_biases(start), "the start")
     price_run(scene, method, max_steps)
+    require_start_in_window(scene, start)
     if method in ("overdamped", "inertial"):
         from simulator.dynamics import DynamicsParams
 

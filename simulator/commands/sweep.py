@@ -3,7 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
+import os
+import signal
 import sys
+import threading
+from collections.abc import Iterator
 from pathlib import Path
 
 from simulator.sweep import CONNECT_TIMEOUT_S, DEFAULT_MAX_POINTS
@@ -37,15 +42,47 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+@contextlib.contextmanager
+def _sigterm_says_what_was_kept(out: str) -> Iterator[None]:
+    """While the sweep runs, SIGTERM ends it as the CLI's handler does (temporaries removed, at
+    once), but says how many finished points ``out`` keeps, and leaves no semaphore behind."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def terminate(signum, frame):
+        from patterns.outputs import remove_pending
+        from simulator.sweep_cluster import release_semaphores
+        from simulator.sweep_store import kept_points
+
+        remove_pending()
+        n = kept_points(out) if os.path.isdir(out) else 0
+        release_semaphores()
+        said = (f"{n} finished point{'s are' if n != 1 else ' is'} kept in {out} (rerun the same command to resume)" if n
+                else "no point had finished, none was kept")
+        os.write(2, f"selfalign sweep: terminated; {said}\n".encode())
+        os._exit(143)
+
+    previous = signal.signal(signal.SIGTERM, terminate)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
 def run(args: argparse.Namespace) -> int:
     from simulator.sweep import load_sweep, sweep
+    from simulator.sweep_store import kept_points
 
     spec = load_sweep(args.sweep_file)
     try:
-        table = sweep(spec, args.out, workers=args.workers, scheduler=args.scheduler, max_points=args.max_points,
-                      retry_failed=args.retry_failed, quiet=args.quiet)
+        with _sigterm_says_what_was_kept(args.out):
+            table = sweep(spec, args.out, workers=args.workers, scheduler=args.scheduler, max_points=args.max_points,
+                          retry_failed=args.retry_failed, quiet=args.quiet)
     except KeyboardInterrupt:
-        print(f"selfalign sweep: interrupted; the points that finished are in {args.out} (rerun the same command to resume)", file=sys.stderr)
+        n = kept_points(args.out) if os.path.isdir(args.out) else 0
+        print(f"selfalign sweep: interrupted; {n} finished point{'s are' if n != 1 else ' is'} kept in {args.out} "
+              "(rerun the same command to resume)", file=sys.stderr)
         return 130
     st = table.attrs["sweep"]
     where = f"{st['workers']} Dask workers" if st["workers"] else "this process"
