@@ -26,32 +26,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_helpers import cli, listing, one_line_error  # noqa: F401  (tests/cli_helpers.py)
 
 from patterns.errors import InputError
 from patterns.library import library_path
-from simulator.cli import main
 
 SQUARE = str(library_path("square_200"))  # 200 um square pad at 1 um/px
 ROOT = Path(__file__).resolve().parents[1]
 SWEEP = ROOT / "examples" / "sweep_fourpad.toml"  # 24 points
-
-
-def cli(args: list, capsys) -> tuple[int, str, str]:
-    rc = main([str(a) for a in args])
-    out, err = capsys.readouterr()
-    return rc, out, err
-
-
-def one_line_error(rc: int, err: str, *needles: str) -> None:
-    assert rc == 2, err
-    assert err.count("\n") == 1 and err.endswith("\n"), err
-    assert "Traceback" not in err and "internal error" not in err and "warning" not in err, err
-    for n in needles:
-        assert n in err, err
-
-
-def listing(d: Path) -> list[str]:
-    return sorted(str(p.relative_to(d)) for p in d.rglob("*"))
 
 
 #: Runs main() on each case in a fresh process: exit code, stderr, seconds and the peak RSS.
