@@ -3,7 +3,7 @@ PY ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: demo test lint library bench validate clean
+.PHONY: demo test lint library bench validate validate-pinned validate-defects validate-fourpad clean
 
 $(BIN)/selfalign: pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -27,10 +27,23 @@ library: $(BIN)/selfalign
 bench: $(BIN)/selfalign
 	$(BIN)/python benchmarks/landscape.py
 
-# Surface Evolver reference numbers for the finite-meniscus model (~20 min on one core).
-validate: $(BIN)/selfalign
-	@command -v evolver >/dev/null 2>&1 || { echo "make validate: Surface Evolver ('evolver') is not on PATH; install it with: apt-get install -y evolver-nox"; exit 1; }
+# Surface Evolver reference numbers (validation/README.md; hours on one core: pinned single pad
+# ~20 min, pinned defects ~20 min, four-pad paths with free contact lines ~2 h).
+EVOLVER_CHECK = @command -v evolver >/dev/null 2>&1 || { echo "make validate: Surface Evolver ('evolver') is not on PATH; install it with: apt-get install -y evolver-nox"; exit 1; }
+
+validate: validate-pinned validate-defects validate-fourpad
+
+validate-pinned: $(BIN)/selfalign
+	$(EVOLVER_CHECK)
 	$(BIN)/python validation/evolver.py --out validation/evolver_reference.csv
+
+validate-defects: $(BIN)/selfalign
+	$(EVOLVER_CHECK)
+	$(BIN)/python validation/evolver_defects.py --out validation/evolver_defects.csv
+
+validate-fourpad: $(BIN)/selfalign
+	$(EVOLVER_CHECK)
+	$(BIN)/python validation/evolver_fourpad.py --out validation/evolver_fourpad.csv
 
 clean:
 	rm -rf $(VENV) out .pytest_cache

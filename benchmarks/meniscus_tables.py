@@ -2,12 +2,16 @@
 
 * the 730/50 um four-pad x-curve at 20 nl (h = 37.5 um) against the overlap model:
   ``docs/images/meniscus_fourpad_x.png``;
+* the 730/50 and 730/100 um four-pads at 20 nl against Surface Evolver with free contact
+  lines (``validation/evolver_fourpad_levels.csv``, levels 2 and 3): force along x of the overlap model, the
+  meniscus model and the Evolver points, ``docs/images/meniscus_fourpad_evolver.png``;
+  the table of the three on stdout;
 * the defect library's offsets: each 200 um pattern of ``patterns/library`` under a
   200 um chip with 0.9 nl of water (h = 22.5 um), pinned contact lines, at 1 um/px and
   0.25 degree twists within +-3 degrees: the refined global minimum (a markdown table
   on stdout).
 
-Usage: ``python benchmarks/meniscus_tables.py [--skip-figure]``
+Usage: ``python benchmarks/meniscus_tables.py [--skip-figure] [--evolver-only]``
 """
 
 from __future__ import annotations
@@ -21,7 +25,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from simulator import render  # noqa: E402
+from simulator import render, render_style  # noqa: E402
 from simulator.landscape import build_landscape  # noqa: E402
 from simulator.materials import Liquid  # noqa: E402
 from simulator.refine import refine_minimum, stiffness  # noqa: E402
@@ -42,9 +46,77 @@ def figure(out: Path) -> None:
     print(f"four_pad_730_50, 730 um chip, 20 nl: h = {men.meniscus_height_um:.2f} um, stiffness x {k['x_N_per_m']:.3g} N/m; wrote {out}")
 
 
+def evolver_paths(level: str = "2") -> dict[int, list[dict]]:
+    """The stored Surface Evolver x paths of the 730 um four-pads at one refinement level, by gap (um)."""
+    import csv
+
+    rows: dict[int, list[dict]] = {}
+    with open(ROOT / "validation" / "evolver_fourpad_levels.csv", newline="") as f:
+        for r in csv.DictReader(f):
+            if r["path"] in ("x_730_50", "x_730_100") and r["level"] == level and float(r["y_um"]) == 0.0:
+                rows.setdefault(int(float(r["g_um"])), []).append(r)
+    return rows
+
+
+def evolver_figure(out: Path) -> None:
+    """Force along x on the 730/50 and 730/100 four-pads with 20 nl: overlap model,
+    meniscus model (h = V / A) and Surface Evolver (free contact lines, 30/60 degrees)."""
+    import numpy as np
+
+    plt = render_style.pyplot()
+    paths, finer = evolver_paths("2"), evolver_paths("3")
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2), layout="constrained", sharey=True)
+    print("| gap (um) | x (um) | Surface Evolver, level 2 (uN) | meniscus model (uN) | overlap model (uN) |")
+    print("|---:|---:|---:|---:|---:|")
+    for ax, gap in zip(axes, (50, 100), strict=True):
+        base = Scene.from_inputs(LIB / f"four_pad_730_{gap}.png", chip_size_um=730, resolution_um=2.0, effects=Effects(twist=False),
+                                 liquid=Liquid(volume_nl=20.0), window_um=520, dtype="float64")
+        men = base.replace(effects=replace(base.effects, meniscus=True))
+        over, mls = build_landscape(base), build_landscape(men)
+        xs = np.arange(0.0, 510.0, 2.0)
+        f_over = np.array([float(over.force_at(x, 0.0, 0.0)[0]) for x in xs]) * 1e6
+        f_men = np.array([float(mls.force_at(x, 0.0, 0.0)[0]) for x in xs]) * 1e6
+        se = sorted(paths.get(gap, []), key=lambda r: float(r["x_um"]))
+        sx = np.array([float(r["x_um"]) for r in se])
+        sf = np.array([float(r["force_x_N"]) for r in se]) * 1e6
+        ax.plot(xs, -f_over, "--", color="0.45", label="overlap model")
+        ax.plot(xs, -f_men, color=render_style.PATH_COLOUR, label=f"meniscus model (h = {men.meniscus_height_um:.1f} um)")
+        ax.plot(sx, -sf, "o", ms=4, color=render_style.CHIP_COLOUR, label="Surface Evolver, refinement level 2")
+        f3 = sorted(finer.get(gap, []), key=lambda r: float(r["x_um"]))
+        ax.plot([float(r["x_um"]) for r in f3], [-float(r["force_x_fd_N"]) * 1e6 for r in f3], "o", ms=7, mfc="none",
+                color=render_style.CHIP_COLOUR, label="Surface Evolver, level 3")
+        p = (730 - gap) / 2
+        ax.axvspan(p, p + gap, color=render_style.PLATEAU_COLOUR, alpha=0.25, lw=0, label="overlap model's flat part")
+        ax.set_title(f"four-pad 730/{gap} um, 730 um chip, 20 nl, pads 30 deg, substrate 60 deg", fontsize=9)
+        ax.set_xlabel("x (um)")
+        ax.grid(alpha=0.3)
+        for r in se:
+            x = float(r["x_um"])
+            print(f"| {gap} | {x:g} | {-float(r['force_x_N']) * 1e6:.2f} | {-float(mls.force_at(x, 0.0, 0.0)[0]) * 1e6:.2f} | "
+                  f"{-float(over.force_at(x, 0.0, 0.0)[0]) * 1e6:.2f} |")
+    axes[0].set_ylabel("restoring force -F_x (uN)")
+    axes[0].legend(fontsize=8, loc="lower left")
+    render_style.save_figure(fig, out)
+    print(f"wrote {out}", file=sys.stderr)
+
+
+def evolver_defects(volume_nl: float = 0.9) -> dict[str, tuple[float, float, float]]:
+    """Surface Evolver's equilibrium pose (x um, y um, twist deg) per library defect pattern."""
+    import csv
+
+    out = {}
+    with open(ROOT / "validation" / "evolver_defects.csv", newline="") as f:
+        for r in csv.DictReader(f):
+            if float(r["volume_nl"]) == volume_nl:
+                name = "square_200" if r["defect"] == "none" else f"defect_{r['defect']}_{r['kind']}"
+                out[name] = (float(r["x_um"]), float(r["y_um"]), float(r["twist_deg"]))
+    return out
+
+
 def table() -> None:
-    print("| pattern | global minimum x (um) | y (um) | twist (deg) | stiffness x (N/m) | y (N/m) | twist (N m/rad) |")
-    print("|---|---:|---:|---:|---:|---:|---:|")
+    se = evolver_defects(0.9)
+    print("| pattern | global minimum x (um) | y (um) | twist (deg) | Surface Evolver x, y (um), twist (deg) | stiffness x (N/m) | y (N/m) | twist (N m/rad) |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|")
     for name in DEFECTS:
         t0 = time.perf_counter()
         sc = Scene.from_inputs(LIB / f"{name}.png", chip_size_um=200, effects=Effects(meniscus=True),
@@ -52,7 +124,8 @@ def table() -> None:
         ls = build_landscape(sc)
         r = refine_minimum(ls, *ls.global_minimum()[:3])
         k = stiffness(ls, r["x_um"], r["y_um"], r["twist_deg"])
-        print(f"| {name} | {r['x_um']:+.1f} | {r['y_um']:+.1f} | {r['twist_deg']:+.2f} | {k['x_N_per_m']:.3g} | {k['y_N_per_m']:.3g} | "
+        ref = ", ".join(f"{v:+.2f}" for v in se[name]) if name in se else "—"
+        print(f"| {name} | {r['x_um']:+.2f} | {r['y_um']:+.2f} | {r['twist_deg']:+.2f} | {ref} | {k['x_N_per_m']:.3g} | {k['y_N_per_m']:.3g} | "
               f"{k['twist_Nm_per_rad']:.3g} |", flush=True)
         print(f"  ({time.perf_counter() - t0:.1f} s)", file=sys.stderr)
 
@@ -60,7 +133,11 @@ def table() -> None:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--skip-figure", action="store_true")
+    ap.add_argument("--evolver-only", action="store_true", help="only the four-pad figure and table against Surface Evolver")
     args = ap.parse_args(argv)
+    evolver_figure(ROOT / "docs" / "images" / "meniscus_fourpad_evolver.png")
+    if args.evolver_only:
+        return 0
     if not args.skip_figure:
         figure(ROOT / "docs" / "images" / "meniscus_fourpad_x.png")
     table()
