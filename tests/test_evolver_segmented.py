@@ -133,6 +133,27 @@ def test_fourpad_liquid_stays_on_the_far_pads_past_the_overlap_flat_part_onset(g
     assert all(r["left_pads_wetted"] == "True" for r in full)
 
 
+INWARD = _rows("evolver_fourpad_inward.csv")
+
+
+@pytest.mark.parametrize("gap,lo,hi", [(50, 370, 410), (100, 350, 420)])
+def test_fourpad_coming_inward_the_chip_meets_a_flat_part_the_outward_path_does_not(gap, lo, hi):
+    # The far pads' wetting has hysteresis. Coming inward from x = 500 um (the way a misplaced
+    # chip moves) the liquid has not reached the left pads: its trailing contact line rides
+    # on the gap, about 25 um beyond the chip edge, and nothing changes with x there, so the
+    # force is near zero: a flat part, shifted outwards from the overlap model's (p to p + g)
+    # by about that reach. Going outward the liquid still holds the left pads there and pulls.
+    inward = {float(r["x_um"]): r for r in INWARD if r["path"] == f"x_730_{gap}_inward" and r["level"] == "1"}
+    outward = {float(r["x_um"]): r for r in _path(f"x_730_{gap}", "1")}
+    inside = _interior_N(gap)
+    for x, r in inward.items():
+        if lo <= x <= hi:
+            assert abs(float(r["force_x_N"])) < 0.15 * inside and r["left_pads_wetted"] == "False", x
+        if 100 <= x <= 330:  # both branches wet every pad: the same force
+            assert float(r["force_x_N"]) == pytest.approx(float(outward[x]["force_x_N"]), abs=0.04 * inside), x
+    assert max(-float(outward[x]["force_x_N"]) for x in inward if lo <= x <= hi) > 0.3 * inside  # outward still pulls there
+
+
 # ----------------------------------------------------------------- the four-pad model comparison
 @functools.cache
 def _fourpad_landscapes(gap: int):
