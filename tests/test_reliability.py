@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from cli_helpers import cli, listing, one_line_error  # noqa: F401  (tests/cli_helpers.py)
+from cli_helpers import cli, listing, one_line_error, python_m  # noqa: F401  (tests/cli_helpers.py)
 from PIL import Image
 
 from patterns.library import library_path
@@ -452,7 +452,7 @@ def held_run(args: list[str], point: str, cwd: Path, env: dict | None = None) ->
     so the test signals at a known stage of the run, however fast the machine is.
     """
     env = (env or os.environ) | {"SELFALIGN_HOLD_AT": point}
-    proc = subprocess.Popen([sys.executable, "-m", "simulator.cli", *args], cwd=cwd, stdout=subprocess.DEVNULL,
+    proc = subprocess.Popen(python_m("simulator.cli", *args), cwd=cwd, stdout=subprocess.DEVNULL,
                             stderr=subprocess.PIPE, text=True, env=env)
     seen = []
     for line in proc.stderr:  # blocks until the hold line (or the end of a run that never got there)

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from cli_helpers import cli, listing, one_line_error  # noqa: F401  (tests/cli_helpers.py)
+from cli_helpers import cli, listing, one_line_error, python_m  # noqa: F401  (tests/cli_helpers.py)
 
 from patterns.errors import InputError
 from patterns.library import library_path
@@ -247,7 +247,7 @@ def _interrupted_sweep(tmp_path: Path, sig: signal.Signals) -> tuple[int, list[s
     journalled (``SELFALIGN_HOLD_AT=sweep-point:1``, patterns/hold.py); (rc, stderr lines, out).
     The hold line is read from the pipe as it comes, so nothing waits on a clock."""
     out = tmp_path / "out"
-    proc = subprocess.Popen([sys.executable, "-m", "simulator", "sweep", str(SWEEP), "--out", str(out), "--workers", "1"],
+    proc = subprocess.Popen(python_m("simulator", "sweep", SWEEP, "--out", out, "--workers", "1"),
                             cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True,
                             env=os.environ | {"SELFALIGN_HOLD_AT": "sweep-point:1"})
     seen = b""
