@@ -40,7 +40,7 @@ Measured per point, against :mod:`simulator.reference` (exact shapely overlap, f
   next to a kink of A(x) (a chip edge passing a pad edge at small twist), where the
   one-step difference straddles the kink, would dominate an RMS. Torque error likewise
   for dA/dtwist, 90th percentile in % of A_chip / 2 (the slope of the twist cusp,
-  PHYSICS.md C5);
+  docs/physics.md C5);
 * final-pose error: the raster stepper's final pose against the same stepper on the
   exact overlap with the same step sizes (:func:`simulator.reference.greedy` /
   :func:`~simulator.reference.gradient_descent`), from 12 random starts; translation (um)

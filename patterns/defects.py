@@ -1,6 +1,6 @@
-"""Imperfect squares: one triangular defect (PHYSICS.md 10.1) and jagged edges (10.2-10.3).
+"""Imperfect squares: one triangular defect (docs/physics.md §10) and jagged edges (10.2-10.3).
 
-Jagged designs (PHYSICS.md 10.2-10.3) are built edge by edge. Each edge has a *profile*
+Jagged designs (docs/physics.md §10-10.3) are built edge by edge. Each edge has a *profile*
 ``d(t)``: the outward offset of the edge line at position ``t`` along the edge, for
 ``t`` in ``[-L/2, L/2]``, measured in the frame of the right edge (``t = y``; the edge runs
 from the bottom-right to the top-right corner, the direction of a counter-clockwise walk).
@@ -29,7 +29,7 @@ from patterns.shapes import EDGES, _choice, _finish, _length, rotate_quarter, sq
 
 def defect(size: float = 200.0, *, kind: str, position: str = "middle", edge: str = "right",
            height: float, width: float) -> Polygon:
-    """Square of side ``size`` with one isosceles triangular defect (PHYSICS.md 10.1).
+    """Square of side ``size`` with one isosceles triangular defect (docs/physics.md §10).
 
     The triangle has its base (``width``) on the chosen ``edge`` and its apex ``height`` away
     from the edge, above the middle of the base; ``kind='outward'`` adds it outside the square,
@@ -56,7 +56,7 @@ def defect(size: float = 200.0, *, kind: str, position: str = "middle", edge: st
     return _finish(rotate_quarter(shape, EDGES.index(edge)), "defect")
 
 
-#: Named defect types of PHYSICS.md 10.1 on a 200 um square: position, height h_d, width w_d (um).
+#: Named defect types of docs/physics.md §10 on a 200 um square: position, height h_d, width w_d (um).
 DEFECT_TYPES: dict[str, tuple[str, float, float]] = {
     "A": ("middle", 10.0, 20.0),
     "B": ("corner", 30.0, 60.0),
@@ -65,7 +65,7 @@ DEFECT_TYPES: dict[str, tuple[str, float, float]] = {
 
 
 def defect_type(name: str, kind: str, size: float = 200.0, edge: str = "right") -> Polygon:
-    """The library defect type ``'A'``, ``'B'`` or ``'C'`` (PHYSICS.md 10.1), inward or outward."""
+    """The library defect type ``'A'``, ``'B'`` or ``'C'`` (docs/physics.md §10), inward or outward."""
     name = _choice("defect type", name, tuple(DEFECT_TYPES))
     position, h, w = DEFECT_TYPES[name]
     return defect(size=size, kind=kind, position=position, edge=edge, height=h, width=w)
@@ -112,7 +112,7 @@ def _triangle_wave(t: np.ndarray, pitch: float, phase: str) -> np.ndarray:
 
 def constant_jagged(size: float = 200.0, *, amplitude: float, pitch: float | None = None,
                     teeth: str = "centred", phase: str = "zero") -> Polygon:
-    """Square with every edge a regular zigzag (PHYSICS.md 10.2).
+    """Square with every edge a regular zigzag (docs/physics.md §10).
 
     Teeth are triangles of height ``amplitude`` (peak to valley, perpendicular to the edge)
     and base ``pitch`` along it (default ``2 * amplitude``: right-angled teeth, 45-degree
@@ -150,7 +150,7 @@ def constant_jagged(size: float = 200.0, *, amplitude: float, pitch: float | Non
 
 def random_jagged(size: float = 200.0, *, sigma: float, seed: int, pitch: float | None = None,
                   profile: str = "teeth") -> Polygon:
-    """Square whose edges carry peaks of random signed height (PHYSICS.md 10.3).
+    """Square whose edges carry peaks of random signed height (docs/physics.md §10).
 
     Each edge holds ``n = floor(size / pitch)`` peaks at a fixed ``pitch`` (default
     ``4 * sigma``), centred on the edge (the leftover ``size - n * pitch`` is split between the

@@ -4,14 +4,14 @@ Conventions (see :mod:`patterns.mask` for the image side):
 
 * Units are micrometres. The origin is the centre of the *nominal* (ideal) pattern, x right,
   y up. For defect and jagged designs the origin is the centre of the nominal square, not the
-  centroid of the defective shape (PHYSICS.md 1.2).
+  centroid of the defective shape (docs/physics.md §1).
 * Every builder returns a valid shapely geometry (``Polygon``, or ``MultiPolygon`` for the
   four-pad design) with counter-clockwise exterior rings, and raises
   :class:`patterns.errors.InputError` with a one-line message for impossible input.
 * Quarter turns are applied with exact integer matrices, so rotated copies of an edge carry
   bit-identical coordinates (4-fold symmetry holds to machine precision).
 
-Jagged designs (PHYSICS.md 10.2-10.3) are built edge by edge. Each edge has a *profile*
+Jagged designs (docs/physics.md §10-10.3) are built edge by edge. Each edge has a *profile*
 ``d(t)``: the outward offset of the edge line at position ``t`` along the edge, for
 ``t`` in ``[-L/2, L/2]``, measured in the frame of the right edge (``t = y``; the edge runs
 from the bottom-right to the top-right corner, the direction of a counter-clockwise walk).

@@ -91,7 +91,7 @@ def circle(diameter: float, segments: int = 1024) -> Polygon:
 
 
 def four_pad(size: float, gap: float) -> MultiPolygon:
-    """Four square pads of side ``p = (size - gap)/2`` (PHYSICS.md 6.1).
+    """Four square pads of side ``p = (size - gap)/2`` (docs/physics.md §6).
 
     The outer square has side ``size`` and includes the cross-shaped gap of width ``gap``;
     pads occupy ``[-L/2, -g/2] U [g/2, L/2]`` in x and in y; there is no border gap.

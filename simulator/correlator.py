@@ -143,7 +143,7 @@ class Correlator:
         mirror_out: if given, (B, 2 ry + 1, 2 rx + 1) that receives the same for each
         chip's mirror image ``chips[:, ::-1]`` (its raster upside down), whose spectrum
         is the chip's with the row frequencies negated and a phase ramp: one forward
-        transform serves both (PHYSICS.md: a mirror-symmetric chip at -alpha is the
+        transform serves both (docs/physics.md: a mirror-symmetric chip at -alpha is the
         mirror image of itself at +alpha).
         work: the :meth:`workspace` to compute in (default: one made for this call).
         """

@@ -1,4 +1,4 @@
-"""The critical droplet volume of a four-pad pattern, computed (PHYSICS.md 8; docs/physics.md §8).
+"""The critical droplet volume of a four-pad pattern, computed (docs/physics.md §8; docs/physics.md §8).
 
 Too little liquid on a segmented pattern splits onto single pads or leaves a pad dry.
 The *critical volume* is the smallest droplet for which one drop wetting all four pads
@@ -18,7 +18,7 @@ has a lower surface energy than the best split of the same liquid onto single pa
   square is substrate (the gap cross, and beyond ``L`` the surroundings). Where the weight
   per area jumps (a pad edge) the minimum sits on the edge for a range of volumes: the
   contact line is pinned there while the cap's angle lies between the two sides' angles,
-  which is Gibbs' condition (PHYSICS.md 2.3), not an added rule.
+  which is Gibbs' condition (docs/physics.md §2), not an added rule.
 * **Split.** A one-pad drop may spread past its pad onto the substrate, but not past the
   middle of the gap (``s <= p + g``): beyond, it touches its neighbour's liquid and the
   drops merge. The best split of a volume ``V`` onto the four pads (some may stay dry) is
@@ -109,7 +109,7 @@ MIN_SIZE_UM, MAX_SIZE_UM = 1e-3, 1e6
 
 @dataclass(frozen=True)
 class FourPad:
-    """A four-pad pattern (PHYSICS.md 6.1) and its wetting.
+    """A four-pad pattern (docs/physics.md §6) and its wetting.
 
     Attributes:
         size_um: outer side L of the pattern, gaps included, um.
@@ -260,7 +260,7 @@ class CriticalVolume:
 
     @property
     def dimensionless_volume(self) -> float:
-        """``V_ND = V^(2/3) / A`` with the pattern area ``A = L^2`` (PHYSICS.md 8.3)."""
+        """``V_ND = V^(2/3) / A`` with the pattern area ``A = L^2`` (docs/physics.md §8)."""
         return self.volume_um3 ** (2.0 / 3.0) / self.pattern.size_um**2
 
     def _at(self, values: np.ndarray) -> float:

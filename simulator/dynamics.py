@@ -1,11 +1,11 @@
-"""Time-resolved dynamics of the chip on the energy landscape (PHYSICS.md section 4).
+"""Time-resolved dynamics of the chip on the energy landscape (docs/physics.md section 4).
 
 Two steppers with the shape of :mod:`simulator.stepping` (pure functions of
 ``(field, grid, params, start, max_steps, record)``, a static :class:`~simulator.posegrid.PoseGrid`,
 a NamedTuple state out, jit- and vmap-able):
 
 * :func:`overdamped`: ``c v = F``, ``c_t w = tau`` (first order, no inertia);
-* :func:`inertial`: ``m a = F - c v``, ``I alpha = tau - c_t w`` (PHYSICS.md 4, Eq. 10).
+* :func:`inertial`: ``m a = F - c v``, ``I alpha = tau - c_t w`` (docs/physics.md §4, Eq. 10).
 
 F and tau are minus the gradient of the potential Phi below, converted to SI: one x or y
 index step is ``grid.um_per_px`` um, one twist index step is ``grid.twist_step_deg``

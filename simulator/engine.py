@@ -38,7 +38,7 @@ if TYPE_CHECKING:
 
 
 def energy_scale_J(scene: Scene) -> float:
-    """The largest |E| the scene can reach, ``|Delta_gamma| min(|P|, |C|)`` in J (PHYSICS.md C8)."""
+    """The largest |E| the scene can reach, ``|Delta_gamma| min(|P|, |C|)`` in J (docs/physics.md C8)."""
     return abs(scene.delta_gamma_N_m) * min(scene.pattern.area_um2, scene.chip.area_um2) * UM2
 
 

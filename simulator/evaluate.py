@@ -7,7 +7,7 @@
   ``near_um`` along +-x and +-y, and at +-``near_deg`` of twist;
 * the energy curves along x and y through the minimum, their plateaus and the
   maximum bias per direction: the largest |bias| up to which the force points back
-  to the minimum everywhere (PHYSICS.md 6.3);
+  to the minimum everywhere (docs/physics.md §6.3);
 * the capture fraction over a default grid of starts around the global minimum (at its
   twist): the fraction that ends aligned, and the capture map;
 * the yield under default placement noise: normal around the aligned pose (the global

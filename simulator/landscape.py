@@ -1,6 +1,6 @@
 """The energy landscape E[twist, y, x] by FFT cross-correlation.
 
-Model (PHYSICS.md 3.2): ``E(x, y, a) = Delta_gamma * sum_p chip_a(p - (x, y)) * w(p)``
+Model (docs/physics.md §3.2): ``E(x, y, a) = Delta_gamma * sum_p chip_a(p - (x, y)) * w(p)``
 with ``w`` the pattern mask (1 on pads, grey levels graded, 0 on substrate), so that
 ``E = Delta_gamma * A_ol`` in joules. For each twist the whole translation plane is
 one linear (zero-padded, never circular) cross-correlation.
@@ -69,7 +69,7 @@ class Landscape:
             twist axis lies the end of the twist range the scene asked for).
         delta_gamma: pad minus substrate wetting energy (N/m, negative).
         energy_scale_J: the largest |E| the scene can reach, |Delta_gamma| min(|P|, |C|)
-            (PHYSICS.md C8); the noise floor scales with it, so every box or band of one
+            (docs/physics.md C8); the noise floor scales with it, so every box or band of one
             scene shares one floor (0 = take max|E| of this grid).
         stats: what the build did (rotations, seconds, bytes, backend, FFT size).
         meniscus_height_um: the finite meniscus's height (um) the energy was built with,
@@ -192,7 +192,7 @@ class Landscape:
         return gx, gy, gt
 
     def force_at(self, x_um, y_um, twist_deg) -> tuple[np.ndarray, np.ndarray]:
-        """Restoring force (Fx, Fy) in N: F = -grad E (PHYSICS.md 3.4)."""
+        """Restoring force (Fx, Fy) in N: F = -grad E (docs/physics.md §3.4)."""
         gx, gy, _ = self.gradient_at(x_um, y_um, twist_deg)
         return -gx, -gy
 

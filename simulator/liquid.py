@@ -5,13 +5,13 @@ onto single pads, leaves a pad dry, or overflows the pad edge. This module holds
 calculators behind ``selfalign liquid`` and the checks the simulating commands run on
 a ``--volume`` (:func:`scene_warnings`):
 
-* :func:`height_report`: the flat-film meniscus height ``h = V / A`` (PHYSICS.md 7.1)
+* :func:`height_report`: the flat-film meniscus height ``h = V / A`` (docs/physics.md §7)
   and whether the thin-film picture holds (``h`` against the chip's smallest side and
   the capillary length), with the parallelepiped meniscus' spring (C13);
 * :func:`overflow_conditions` and :func:`overflow_report`: the no-overflow conditions
-  (1)-(3) of PHYSICS.md 9.4 for a protruding pad, over a range of chip angles;
+  (1)-(3) of docs/physics.md §9 for a protruding pad, over a range of chip angles;
 * :func:`simulator.critical_volume.critical_volume`: the smallest drop that wets all four
-  pads of a four-pad pattern (PHYSICS.md 8), computed from a reduced drop model;
+  pads of a four-pad pattern (docs/physics.md §8), computed from a reduced drop model;
 * :func:`four_pad_geometry`: a four-pad pattern recognised in any mask;
 * :class:`Topography`: a protruding pad's edge angle and the angles the overflow check needs.
 

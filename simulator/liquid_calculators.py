@@ -1,12 +1,12 @@
 """The droplet calculators behind ``selfalign liquid``: meniscus height, overflow, critical volume.
 
-* :func:`height_report`: the flat-film meniscus height ``h = V / A`` (PHYSICS.md 7.1)
+* :func:`height_report`: the flat-film meniscus height ``h = V / A`` (docs/physics.md §7)
   and whether the thin-film picture holds, with the parallelepiped meniscus' spring (C13);
 * :func:`overflow_conditions` and :func:`overflow_report`: the no-overflow conditions
-  (1)-(3) of PHYSICS.md 9.4 for a protruding pad, over a range of chip angles;
+  (1)-(3) of docs/physics.md §9 for a protruding pad, over a range of chip angles;
 * :class:`Topography`: a protruding pad's edge angle and the angles the overflow check needs;
 * :func:`critical_volume_nl` and :func:`dimensionless_volume`: ``V_crit = (V_ND A)^(3/2)``
-  (PHYSICS.md 8.3) and its inverse;
+  (docs/physics.md §8) and its inverse;
 * the numbers as typed: :func:`check_surface_tension_mN_m`, :func:`capillary_length_um`.
 
 Units as in :mod:`simulator.liquid`. The checks of a scene are in :mod:`simulator.liquid_warnings`.
@@ -64,7 +64,7 @@ def height_report(volume_nl: float, area_um2: float, sides_um: tuple[float, floa
     """The flat-film meniscus height and whether the thin-film picture holds (units in the keys).
 
     ``sides_um`` (the chip's width and height) adds the comparison with the smallest side
-    and the parallelepiped meniscus of PHYSICS.md 3.3 for a shift along x (edge length
+    and the parallelepiped meniscus of docs/physics.md §3.3 for a shift along x (edge length
     = the chip's height): its small-bias stiffness ``2 gamma L / h``, its large-bias limit
     ``-2 gamma L`` and, with ``bias_um``, the force ``-2 gamma L x / sqrt(x^2 + h^2)``.
     """
@@ -115,7 +115,7 @@ def _edge_angle(name: str, value: float) -> float:
 def overflow_angle_deg(theta_edge_deg: float, theta_adv_pad_deg: float) -> float:
     """Apparent angle at which liquid spills over a pad edge, ``(180 - theta_edge) + theta_adv_pad``.
 
-    PHYSICS.md 9.2 [Eq. 22]; ``theta_edge`` is the solid wedge angle (90 = vertical wall).
+    docs/physics.md §9 [Eq. 22]; ``theta_edge`` is the solid wedge angle (90 = vertical wall).
     """
     te = _edge_angle("edge angle", theta_edge_deg)
     ta = _angle("pad advancing angle", theta_adv_pad_deg)
@@ -125,7 +125,7 @@ def overflow_angle_deg(theta_edge_deg: float, theta_adv_pad_deg: float) -> float
 def overflow_bias_um(h_um: float, theta_edge_deg: float, theta_adv_pad_deg: float) -> float:
     """Bias beyond which liquid overflows a protruding pad, ``h / tan(theta_edge - theta_adv_pad)``, um.
 
-    PHYSICS.md 9.4 [Eq. 23] and C12 (h 12.5 um, 90 deg, 60 deg -> 21.65 um). Returns
+    docs/physics.md §9 [Eq. 23] and C12 (h 12.5 um, 90 deg, 60 deg -> 21.65 um). Returns
     ``math.inf`` when ``theta_edge <= theta_adv_pad`` (the overflow angle is >= 180
     and cannot be reached: condition 1), and 0 when ``theta_edge - theta_adv_pad >= 90``
     (the flat-face meniscus is already past the pinning window at zero bias).
@@ -141,7 +141,7 @@ def overflow_bias_um(h_um: float, theta_edge_deg: float, theta_adv_pad_deg: floa
 
 @dataclass(frozen=True)
 class OverflowConditions:
-    """Which of the three no-overflow conditions of PHYSICS.md 9.4 hold.
+    """Which of the three no-overflow conditions of docs/physics.md §9 hold.
 
     Attributes:
         edge_confines: (1) ``theta_edge <= theta_adv_pad``: the edge can never be overrun.
@@ -176,7 +176,7 @@ def overflow_conditions(
     bias_um: float,
     h_um: float,
 ) -> OverflowConditions:
-    """Evaluate the no-overflow conditions (1)-(3) of PHYSICS.md 9.4 for one placement.
+    """Evaluate the no-overflow conditions (1)-(3) of docs/physics.md §9 for one placement.
 
     Args:
         theta_edge_deg: solid wedge angle of the pad edge, degrees (90 = vertical wall).
@@ -221,7 +221,7 @@ def _verdict(edge: float, adv: float, chip: float, h: float, bias: float | None)
 
 def overflow_report(pad_advancing_deg: float, chip_angle_deg: float | tuple[float, float], edge_angle_deg: float,
                     h_um: float, bias_um: float | None = None) -> dict:
-    """The no-overflow conditions of PHYSICS.md 9.4 and the verdict (units in the keys).
+    """The no-overflow conditions of docs/physics.md §9 and the verdict (units in the keys).
 
     ``overflows`` is True, False, or ``"depends on the bias"`` when only condition (3) can
     hold and no bias is given (then ``overflow_bias_um`` is the largest safe bias). A chip
@@ -269,7 +269,7 @@ def overflow_report(pad_advancing_deg: float, chip_angle_deg: float | tuple[floa
 
 @dataclass(frozen=True)
 class Topography:
-    """A protruding pad: what the overflow check of PHYSICS.md 9.4 needs (degrees).
+    """A protruding pad: what the overflow check of docs/physics.md §9 needs (degrees).
 
     Attributes:
         edge_angle_deg: solid wedge angle of the pad edge (90 = vertical wall).
@@ -296,7 +296,7 @@ class Topography:
 def critical_volume_nl(v_nd: float, area_um2: float) -> float:
     """Critical droplet volume ``V_crit = (V_ND A)^(3/2)`` of a segmented pattern, nl.
 
-    PHYSICS.md 8.3 [Eq. 17]. ``V_ND`` is dimensionless and comes from a fit for the
+    docs/physics.md §8 [Eq. 17]. ``V_ND`` is dimensionless and comes from a fit for the
     contact angles and relative gap in question (or from
     :func:`simulator.critical_volume.critical_volume`); ``A`` is the pattern area in um^2,
     so ``(V_ND A)^(3/2)`` is in um^3 and is divided by 1e6.

@@ -19,7 +19,7 @@ from simulator.materials import UM3_PER_NL, meniscus_height_um
 
 # --------------------------------------------------------------------- pattern shape
 def four_pad_geometry(mask) -> tuple[float, float] | None:
-    """``(L, g)`` in um when ``mask`` is a 2 x 2 four-pad pattern (PHYSICS.md 6.1), else None.
+    """``(L, g)`` in um when ``mask`` is a 2 x 2 four-pad pattern (docs/physics.md §6), else None.
 
     Recognised from the pixels (any PNG or layout): four separate, filled, equal square
     pads on a 2 x 2 layout whose outer square is L and whose cross-shaped gap is g wide.
@@ -123,7 +123,7 @@ def scene_warnings(scene, biases_um=None, placed: str = "the start") -> list[str
     * for a scene with :class:`Topography` (a protruding pad): placement biases
       ``biases_um`` (per start, :func:`placement_biases`; or a function giving them, called
       only when needed) at or beyond the overflow bias
-      of PHYSICS.md 9.4, unless condition (1) or (2) rules overflow out.
+      of docs/physics.md §9, unless condition (1) or (2) rules overflow out.
     """
     from simulator.critical_volume import critical_volume
 

@@ -1,4 +1,4 @@
-"""Materials, liquid, chip body, damping and the closed-form checks of PHYSICS.md.
+"""Materials, liquid, chip body, damping and the closed-form checks of docs/physics.md.
 
 Units (one convention for the whole module):
 
@@ -10,7 +10,7 @@ Units (one convention for the whole module):
   (1 nl = 1e6 um^3), as everywhere else in selfalign.
 * Angles in degrees at every public boundary; radians only inside.
 
-Wetting weights follow Young's equation (PHYSICS.md section 2): covering a unit
+Wetting weights follow Young's equation (docs/physics.md section 2): covering a unit
 area of solid with liquid changes the energy by ``gamma_wet = -gamma_LA cos(theta)``,
 and the overlap model only needs the pad/substrate difference ``Delta_gamma``. The
 overlap energy of a pose is ``E = Delta_gamma * A_ol`` (section 3.2); with
@@ -74,7 +74,7 @@ def _cos_deg(theta_deg: float) -> float:
 
 
 def gamma_wet(theta_deg: float, gamma_la: float = WATER_SURFACE_TENSION_N_M) -> float:
-    """Energy per unit area of wetting a solid, ``-gamma_LA cos(theta)`` (PHYSICS.md 2.2).
+    """Energy per unit area of wetting a solid, ``-gamma_LA cos(theta)`` (docs/physics.md §2).
 
     Args:
         theta_deg: static contact angle of the liquid on the solid, degrees in [0, 180].
@@ -93,7 +93,7 @@ def delta_gamma(gamma_la: float, theta_pad_deg: float, theta_substrate_deg: floa
 
     Negative when the pad wets better than the substrate (``theta_p < theta_s``),
     which is the case where the overlap model pulls the chip onto the pad.
-    Water at 30/60 degrees gives -0.02665 N/m (PHYSICS.md C14).
+    Water at 30/60 degrees gives -0.02665 N/m (docs/physics.md C14).
     """
     g = positive("surface tension", gamma_la, "N/m")
     tp = _angle("pad contact angle", theta_pad_deg)
@@ -119,7 +119,7 @@ class Materials:
         substrate_angle_deg: contact angle on the substrate (black), degrees in [0, 180].
         allow_repulsive: accept ``Delta_gamma >= 0`` (pad no more wettable than the
             substrate). The overlap simulator then *minimises* overlap or feels no
-            force (PHYSICS.md C14), so it is rejected unless you ask for it.
+            force (docs/physics.md C14), so it is rejected unless you ask for it.
     """
 
     surface_tension_N_m: float = WATER_SURFACE_TENSION_N_M

@@ -5,7 +5,7 @@ meniscus height and pinning) with the flat-slab height :func:`meniscus_height_um
 :class:`Chip` (a cuboid body: mass, moment of inertia, polar moment), the Couette
 damping estimates and their calibration (:data:`DAMPING_CALIBRATION`), and the
 closed-form sheared-block meniscus (:func:`parallelepiped_force`,
-:func:`parallelepiped_stiffness`) of PHYSICS.md 3.3. Units as in
+:func:`parallelepiped_stiffness`) of docs/physics.md §3.3. Units as in
 :mod:`simulator.materials` (constants from :mod:`simulator.constants`), which
 re-exports every name here.
 """
@@ -33,7 +33,7 @@ from simulator.constants import (
 #: Why a calibration factor exists: the Couette estimate ``c = mu A / h`` treats
 #: the liquid as a sheared film with a fixed linear velocity profile. For water it
 #: makes the chip a very lightly damped oscillator. For the source's two set-ups
-#: (PHYSICS.md section 11) a 1-D model with the parallelepiped force of section 3.3
+#: (docs/physics.md section 11) a 1-D model with the parallelepiped force of section 3.3
 #: gives:
 #:
 #: ==========================================  =========  ==========  ===========
@@ -51,7 +51,7 @@ from simulator.constants import (
 #: Measured water alignments of sub-millimetre chips are reported to take tens to
 #: hundreds of ms, so they are far slower than this estimate. Some known reasons:
 #: chip motion and internal flow are strongly coupled, and coupled models give much
-#: larger damping than uncoupled ones (PHYSICS.md section 4); contact lines dissipate
+#: larger damping than uncoupled ones (docs/physics.md section 4); contact lines dissipate
 #: energy and pin (hysteresis); the meniscus first has to spread over the chip; and
 #: the analytic stiffness overestimates the measured one (section 3.3). None of
 #: these is modelled, so one scalar multiplies the Couette value.
@@ -64,7 +64,7 @@ from simulator.constants import (
 #: :func:`simulator.trajectory.simulate`). It is not fitted to one measurement:
 #: fit it to a measured alignment time when you have one (30 gives zeta ~ 0.7, a
 #: visible overshoot). It does not change where the chip ends up in the
-#: quasi-static simulator, which has no time scale (PHYSICS.md 3.2, limit 4).
+#: quasi-static simulator, which has no time scale (docs/physics.md §3.2, limit 4).
 DAMPING_CALIBRATION = 1000.0
 
 
@@ -72,7 +72,7 @@ DAMPING_CALIBRATION = 1000.0
 
 
 def meniscus_height_um(volume_nl: float, area_um2: float) -> float:
-    """Flat-slab meniscus height ``h = V / A`` in um (PHYSICS.md 7.1).
+    """Flat-slab meniscus height ``h = V / A`` in um (docs/physics.md §7).
 
     20 nl on 730 x 730 um gives 37.53 um; 0.5 nl on 200 x 200 um gives 12.5 um.
     """
@@ -186,7 +186,7 @@ def rectangle_polar_moment_um4(width_um: float, height_um: float) -> float:
 
 
 def couette_damping(viscosity_Pa_s: float, wetted_area_um2: float, h_um: float) -> float:
-    """Translational Couette damping ``c = mu A / h`` in N s/m (uncalibrated; PHYSICS.md 4).
+    """Translational Couette damping ``c = mu A / h`` in N s/m (uncalibrated; docs/physics.md §4).
 
     Multiply by :data:`DAMPING_CALIBRATION` (or your own factor) before use.
     """
@@ -224,7 +224,7 @@ def parallelepiped_force(
 ) -> float | np.ndarray:
     """Restoring force of the sheared-block meniscus, ``-2 gamma L x / sqrt(x^2 + h^2)`` in N.
 
-    PHYSICS.md 3.3 [Eq. 6] and C13: tends to ``-2 gamma L`` for ``x >> h``, has slope
+    docs/physics.md §3.3 [Eq. 6] and C13: tends to ``-2 gamma L`` for ``x >> h``, has slope
     ``-2 gamma L / h`` at 0 (:func:`parallelepiped_stiffness`) and equals
     ``-sqrt(2) gamma L`` at ``x = h``.
 

@@ -19,7 +19,7 @@ results go back to the caller's order. Neither changes any result.
 Conventions:
 
 * Poses are ``(x_um, y_um, twist_deg)`` of the chip centre relative to the pattern's
-  nominal centre, x right, y up, twist counter-clockwise positive (PHYSICS.md 1.2).
+  nominal centre, x right, y up, twist counter-clockwise positive (docs/physics.md §1).
   Greedy starts at the grid pose nearest the start (the landscape's pixel and twist
   step); gradient starts at the start itself.
 * Final twists are reported as the stepper turned (unwrapped, e.g. -90 degrees);
@@ -118,7 +118,7 @@ def _check_starts_fit(ls: Landscape, poses: np.ndarray) -> None:
 
 def _distance_in_steps(q: np.ndarray, best: np.ndarray, grid: stepping.Grid) -> np.ndarray:
     """max over axes of |q - best| in grid steps (twist modulo the period): a lower bound
-    on greedy's step count from q (PHYSICS.md C10), a rough one for gradient."""
+    on greedy's step count from q (docs/physics.md C10), a rough one for gradient."""
     d = np.abs(np.asarray(q, float) - best)
     period = grid.period_deg / grid.twist_step_deg
     d[:, 0] = np.abs(d[:, 0] - period * np.round(d[:, 0] / period))
@@ -279,7 +279,7 @@ def run_realizations(
     max_steps: int = DEFAULT_MAX_STEPS,
     progress: bool = False,
 ) -> list[dict]:
-    """Monte Carlo over random-jagged patterns (PHYSICS.md 10.3): one landscape per seed.
+    """Monte Carlo over random-jagged patterns (docs/physics.md §10): one landscape per seed.
 
     For each sigma and seed the pattern is ``patterns.geometry.random_jagged(size_um,
     sigma=sigma, seed=seed, pitch=pitch_um)`` rasterized at the chip's scale

@@ -2,23 +2,23 @@
 
 Everything here works on the exact shapely geometry of pattern and chip (micrometres,
 origin at the nominal pattern centre, x right, y up, twist counter-clockwise positive in
-degrees, PHYSICS.md 1.2), in float64:
+degrees, docs/physics.md §1), in float64:
 
 * :func:`overlap_um2` -- A_ol(x, y, twist) by polygon clipping, vectorized over poses
   (shapely 2: one ``shapely.intersection`` of an array of moved chips with the pattern);
-  :func:`energy_J` is ``Delta_gamma * A_ol`` (PHYSICS.md 3.2, Eq. 9).
+  :func:`energy_J` is ``Delta_gamma * A_ol`` (docs/physics.md §3.2, Eq. 9).
 * :func:`gradient_um2` -- dA/dx, dA/dy (um^2 per um) and dA/dtwist (um^2 per radian) by
   central differences of the exact overlap with small steps (default 1e-3 um and
   1e-3 degrees); :func:`force_N` and :func:`torque_Nm` are minus the energy gradient
-  (PHYSICS.md 3.4). At a kink (e.g. the V-shaped cusp of the twist well at 0,
-  PHYSICS.md C5) the central difference is the mean of the two one-sided slopes.
+  (docs/physics.md §3.4). At a kink (e.g. the V-shaped cusp of the twist well at 0,
+  docs/physics.md C5) the central difference is the mean of the two one-sided slopes.
 * :func:`greedy` and :func:`gradient_descent` -- the steppers of
   :mod:`simulator.stepping` on the exact overlap, with the grid spacing as parameters
   (``step_um``, ``step_deg``) so the reference matches a raster's pose grid. Slow (a few
   thousand overlaps per second) but exact up to float64 round-off: this is the
   yardstick for final poses.
 
-Tie rule (PHYSICS.md 5.3, as :mod:`simulator.stepping`): overlaps within ``tie_um2``
+Tie rule (docs/physics.md §5, as :mod:`simulator.stepping`): overlaps within ``tie_um2``
 (default 1e-9 um^2 per 40 000 um^2 of chip: above float64 clipping round-off -- the
 730/50 four-pad's plateau comes out flat to the last bit -- and far below any real change
 of one step) are equal; greedy keeps the
@@ -114,7 +114,7 @@ def overlap_um2(pattern: BaseGeometry, chip: BaseGeometry, poses) -> np.ndarray:
 
 
 def energy_J(pattern: BaseGeometry, chip: BaseGeometry, poses, materials: Materials | None = None) -> np.ndarray:
-    """E = Delta_gamma * A_ol (J) at each pose (PHYSICS.md Eq. 9), shape (N,)."""
+    """E = Delta_gamma * A_ol (J) at each pose (docs/physics.md Eq. 9), shape (N,)."""
     dg = (materials or Materials()).delta_gamma_N_m
     return dg * overlap_um2(pattern, chip, poses) * UM2
 
@@ -135,7 +135,7 @@ def gradient_um2(pattern: BaseGeometry, chip: BaseGeometry, poses, h_um: float =
 
 
 def force_N(pattern: BaseGeometry, chip: BaseGeometry, poses, materials: Materials | None = None, **steps) -> np.ndarray:
-    """(N, 2) restoring force (Fx, Fy) in N: F = -grad E (PHYSICS.md 3.4)."""
+    """(N, 2) restoring force (Fx, Fy) in N: F = -grad E (docs/physics.md §3.4)."""
     dg = (materials or Materials()).delta_gamma_N_m
     g = gradient_um2(pattern, chip, poses, **steps)
     return -dg * g[:, :2] * UM2 / 1e-6
@@ -186,7 +186,7 @@ class ExactOverlap:
     """Exact overlap on the pose grid ``(ix step_um, iy step_um, it step_deg)``, memoized.
 
     ``self(idx)`` takes an (M, 3) integer array of (it, iy, ix) and returns (M,) overlaps
-    (um^2), clipping only the poses not seen before (PHYSICS.md 5.2, step 3).
+    (um^2), clipping only the poses not seen before (docs/physics.md §5.2, step 3).
     """
 
     def __init__(self, pattern: BaseGeometry, chip: BaseGeometry, step_um: float = 1.0, step_deg: float = 1.0):
@@ -218,7 +218,7 @@ def greedy(
     tie_um2: float | None = None,
     evaluator: ExactOverlap | None = None,
 ) -> ReferenceRun:
-    """Greedy ascent on the exact overlap (PHYSICS.md 5.2) with the tie rule of 5.3.
+    """Greedy ascent on the exact overlap (docs/physics.md §5.2) with the tie rule of 5.3.
 
     Args:
         start: (x_um, y_um, twist_deg), snapped to the nearest grid pose (``np.round``,

@@ -11,7 +11,7 @@ Index units: ``ix``, ``iy`` are pixels from the window's first column/row;
 is *unwrapped* (it may leave [0, T) and is wrapped only for look-ups), so a
 trajectory reports the twist it actually turned through (e.g. -90 degrees).
 
-Ties (PHYSICS.md 5.3, DESIGN.md): energy differences at or below the landscape's
+Ties (docs/physics.md §5, DESIGN.md): energy differences at or below the landscape's
 noise floor are equal. Greedy keeps the current pose when it ties for the best;
 otherwise it takes the smallest move ``|dt| + |dy| + |dx|``, then the first in
 lexicographic order of ``(dt, dy, dx)`` from -1 to +1 (:data:`GREEDY_MOVES`). A move
@@ -85,7 +85,7 @@ class GreedyState(NamedTuple):
 
 
 def greedy(field: Field, grid: Grid, start, max_steps: int, record: bool = True) -> GreedyState:
-    """Greedy descent (PHYSICS.md 5.2): move to the lowest of the 27 neighbours.
+    """Greedy descent (docs/physics.md §5.2): move to the lowest of the 27 neighbours.
 
     Args:
         field, grid: the landscape (see :func:`field_and_grid`).
@@ -164,7 +164,7 @@ def gradient_descent(field: Field, grid: Grid, start, max_steps: int, record: bo
     """Steepest descent on the interpolated landscape with backtracking.
 
     Twist is measured as arc length at the chip's radius of gyration, so one metric
-    covers (x, y, twist). The trial step is proportional to the force (PHYSICS.md 5.4)
+    covers (x, y, twist). The trial step is proportional to the force (docs/physics.md §5)
     and at most 1 px long; it is halved until the energy decreases. The run stops on
     zero force (``flat``: a plateau or a minimum at the noise floor), when no halving
     down to ``min_step_px`` lowers the energy (the V-shaped cusp at alignment ends

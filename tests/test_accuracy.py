@@ -1,4 +1,4 @@
-"""Accuracy: the exact reference (PHYSICS.md C1, C5, C6, C9, C11), raster errors shrinking
+"""Accuracy: the exact reference (docs/physics.md C1, C5, C6, C9, C11), raster errors shrinking
 with the pixel size, presets meeting their stated bounds, feature-size guidance."""
 
 import math

@@ -1,7 +1,7 @@
 """Time-resolved dynamics (simulator.dynamics) against closed forms and invariants.
 
 Known answers: on a synthetic quadratic landscape ``E = k x^2 / 2`` (a linear spring with
-the parallelepiped stiffness k0 = 2 gamma L / h of PHYSICS.md C13) the overdamped run
+the parallelepiped stiffness k0 = 2 gamma L / h of docs/physics.md C13) the overdamped run
 follows ``x0 exp(-k t / c)`` and the inertial run the damped-oscillator closed form, both
 under- and overdamped. The smoothed potential of the steppers equals E plus a constant
 on a quadratic, so the only error is the integrator's: stated per test, relative to x0.
@@ -35,7 +35,7 @@ INERTIAL = jax.jit(dynamics.inertial, static_argnames=STATIC)
 PHI_GRAD = jax.jit(jax.vmap(dynamics.potential_and_gradient, (None, None, 0)), static_argnums=1)
 MAX_STEPS_N = 1000  # one buffer size everywhere: one compilation per model and field shape
 
-# The 200 x 200 x 50 um SU-8 chip on 0.5 nl of water (PHYSICS.md 11): h = 12.5 um.
+# The 200 x 200 x 50 um SU-8 chip on 0.5 nl of water (docs/physics.md §2): h = 12.5 um.
 K0 = materials.parallelepiped_stiffness(12.5, 200.0)  # N/m, 2.33
 MASS = materials.Chip(200.0, 200.0).mass_kg  # 2.4e-9 kg
 UM_PER_PX = 0.5
@@ -182,7 +182,7 @@ def plateau_field(a=1e-12):
     ],
 )
 def test_plateau_stops_overdamped_chips_and_inertia_can_cross_it(model, c, x0, stop_px, outcome):
-    # The quasi-static model cannot say what happens on a plateau (PHYSICS.md 3.2, limit 2);
+    # The quasi-static model cannot say what happens on a plateau (docs/physics.md §3.2, limit 2);
     # the dynamics can. Phi rounds the plateau edge at 55 px over +-1 px.
     field, grid = plateau_field()
     s = (OVERDAMPED if model == "overdamped" else INERTIAL)(

@@ -124,7 +124,7 @@ def test_middle_defect_apex_is_over_the_middle_of_the_base():
     assert g.boundary.distance(Point(40, 0)) < 1e-12
 
 
-# PHYSICS.md C11: exact polygon overlap of a 200 um chip with right-edge defects.
+# docs/physics.md C11: exact polygon overlap of a 200 um chip with right-edge defects.
 @pytest.mark.parametrize("name,kind,values", [
     ("C", "outward", (40000, 39919, 39800, 39688.75, 39688.75)),
     ("C", "inward", (36400, 36200, 36319, 36086.95, 36086.95)),

@@ -1,4 +1,4 @@
-"""The landscape engine against PHYSICS.md section 12 (C1-C8, C11) and exact polygon overlap.
+"""The landscape engine against docs/physics.md section 12 (C1-C8, C11) and exact polygon overlap.
 
 Rasters are exact area coverage (patterns.raster), so shapes whose edges lie on pixel
 boundaries give integer overlaps up to FFT round-off; rotated chips differ from the

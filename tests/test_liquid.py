@@ -1,11 +1,11 @@
 """Choosing the droplet (issue 18): ``selfalign liquid``, the droplet warnings of simulate,
 montecarlo and evaluate, and the sanity checks of numbers as typed.
 
-* C12 and C13 of PHYSICS.md 12 through ``selfalign liquid height`` / ``overflow``;
-* every branch of PHYSICS.md 9.4 through ``selfalign liquid overflow``: each condition
+* C12 and C13 of docs/physics.md §12 through ``selfalign liquid height`` / ``overflow``;
+* every branch of docs/physics.md §9 through ``selfalign liquid overflow``: each condition
   holding alone, none, "depends on the bias", and a chip-angle range across which
   condition (2) switches;
-* the critical volume (PHYSICS.md 8): the spherical-cap formulas against closed forms,
+* the critical volume (docs/physics.md §8): the spherical-cap formulas against closed forms,
   the critical volume rising with the gap and the substrate angle, falling again as the
   pad angle nears the substrate's, linear in the relative gap over 5-30 % within the
   tolerance the docs state, and scaling with the cube of the pattern size (exponent

@@ -1,4 +1,4 @@
-"""Materials, liquid, chip body, damping and the analytic checks C12-C14 of PHYSICS.md."""
+"""Materials, liquid, chip body, damping and the analytic checks C12-C14 of docs/physics.md."""
 
 from __future__ import annotations
 
@@ -22,7 +22,7 @@ WATER = 0.0728
     [(30, 60, -26.65, 2), (40, 60, -19.37, 2), (41, 89, -53.67, 2), (31, 159, -130.4, 1)],
 )
 def test_delta_gamma_worked_values(theta_p, theta_s, mn_per_m, places):
-    """PHYSICS.md 2.2 table and C14, to their printed precision."""
+    """docs/physics.md §2 table and C14, to their printed precision."""
     dg = m.delta_gamma(WATER, theta_p, theta_s)
     assert round(dg * 1e3, places) == mn_per_m
     assert round(m.Materials(WATER, theta_p, theta_s).delta_gamma_N_m * 1e3, places) == mn_per_m

@@ -133,7 +133,7 @@ def test_placement_noise_yield(fp):
 @pytest.mark.parametrize("method", ["greedy", "gradient"])
 def test_four_pad_capture_map_is_mirror_symmetric(method):
     # float64: in float32, real energy differences below the float32 noise floor count as
-    # ties, and the tie order (PHYSICS.md 5.3) is not mirror-invariant, so a few starts on
+    # ties, and the tie order (docs/physics.md §5) is not mirror-invariant, so a few starts on
     # basin boundaries (88 of 2601 here) end differently from their mirror images.
     scene = make_scene(200, 20, 2.0, 10.0, dtype="float64")
     g = mc.StartGrid.from_ranges((-200, 200, 8), (-200, 200, 8), 0.0)
@@ -145,7 +145,7 @@ def test_four_pad_capture_map_is_mirror_symmetric(method):
     np.testing.assert_array_equal(cmap, cmap.T)  # 4-fold: swap x and y
     if method == "greedy":
         bias, limited = mc.max_bias(r, g)
-        # PHYSICS.md 6.3 / C9: about one pad (p = 90 um); the plateau from p to p + g stops the chip.
+        # docs/physics.md §6.3 / C9: about one pad (p = 90 um); the plateau from p to p + g stops the chip.
         assert set(bias.values()) == {bias["+x"]} and 88 <= bias["+x"] <= 96 and not any(limited.values())
 
 

@@ -9,7 +9,7 @@ Case list (the tests are named after the cases):
 Plateaus and ties
   * test_plateau_four_pad_flat_part: starts on the flat part of the four-pad energy
     curve hold still (greedy, gradient; dynamics where the plateau is flat in every
-    direction), or escape through twist where a combined move gains (PHYSICS.md 6.4);
+    direction), or escape through twist where a combined move gains (docs/physics.md §6.4);
     float32 and float64 give the same outcome for every method.
   * test_tie_exact_diagonal_on_square: |x| = |y| on a square, a true tie between
     twisting either way: the documented rule, quadrant-mirrored paths, both dtypes.
@@ -184,7 +184,7 @@ def test_plateau_four_pad_flat_part(fp100, start):
     runs = {dt: run_all(s, start, landscape=ls) for dt, (s, ls) in fp100.items()}
     for dt, r in runs.items():
         if start == (52, -48, 0):
-            # On both axes' flat parts a combined twist move gains area (PHYSICS.md 6.4):
+            # On both axes' flat parts a combined twist move gains area (docs/physics.md §6.4):
             # greedy escapes and aligns; the gradient there is exactly zero.
             assert r["greedy"].final == (0, 0, 0) and r["greedy"].outcome == "aligned"
             assert r["gradient"].steps == 0 and r["gradient"].outcome == "plateau"

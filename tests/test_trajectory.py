@@ -1,4 +1,4 @@
-"""Greedy and gradient trajectories: PHYSICS.md C9 and C10 exactly, symmetry, monotone energy."""
+"""Greedy and gradient trajectories: docs/physics.md C9 and C10 exactly, symmetry, monotone energy."""
 
 import numpy as np
 import pytest

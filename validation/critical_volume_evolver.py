@@ -1,6 +1,6 @@
 """Surface Evolver check of the critical volume of a four-pad pattern (docs/physics.md §8).
 
-Runs the source's method (PHYSICS.md 8.2) in Surface Evolver (K. Brakke; Debian package
+Runs the source's method (docs/physics.md §8) in Surface Evolver (K. Brakke; Debian package
 ``evolver-nox``) and compares the critical volume with the reduced spherical-cap model of
 ``simulator/critical_volume.py``. Lengths in units of the pattern size L (volumes in L^3,
 energies in gamma L^2); the critical volume scales as L^3.

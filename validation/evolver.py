@@ -442,7 +442,7 @@ def reference_cases() -> list[Case]:
 
 def flat_wall_shift_energy(b: float, h: float, x: float) -> float:
     """Sheared-block (flat wall) energy change in J for a shift x (um) along
-    the a-side; b is the edge perpendicular to the shift (PHYSICS.md 3.3)."""
+    the a-side; b is the edge perpendicular to the shift (docs/physics.md §3.3)."""
     return 2 * GAMMA_N_PER_M * b * UM_TO_M * (math.hypot(x, h) - h) * UM_TO_M
 
 

@@ -2,7 +2,7 @@
 """Surface Evolver reference for the equilibrium pose over a pad with one triangular defect.
 
 A 200 um square chip face sits over a 200 um square pad that carries ONE triangular edge
-defect (PHYSICS.md 10.1, types A, B, C on the right edge, inward or outward; the geometry
+defect (docs/physics.md §10, types A, B, C on the right edge, inward or outward; the geometry
 is ``patterns.defects.defect_type``, so it is exactly the project's).  Liquid of volume
 ``V`` fills the gap.  Both contact lines are **pinned**: the liquid is held at the pad's
 boundary polygon (defect included) and at the chip's four edges.  Only the liquid-air
@@ -10,7 +10,7 @@ area counts, ``E = gamma * area`` with ``gamma = 0.072 N/m`` (lengths in um, so
 ``E[J] = gamma * area_um2 * 1e-12``); gravity is neglected.
 
 The chip pose -- centre ``(xshift, yshift)`` relative to the centre of the NOMINAL
-square, twist ``twdeg`` in degrees counter-clockwise seen from above (PHYSICS.md 1.2) --
+square, twist ``twdeg`` in degrees counter-clockwise seen from above (docs/physics.md §1) --
 and, by default, the chip height ``chipz`` are Evolver ``optimizing_parameter`` s.
 Evolver minimises the area over them together with the surface (gradient steps, then
 Newton steps with ``hessian_seek``, whose Hessian includes the parameters), so the

@@ -2,13 +2,13 @@
 """Surface Evolver reference: chip over a four-pad pattern, free substrate contact line.
 
 A square chip of side ``L`` (um) hangs on a liquid bridge over a four-pad pattern of outer
-size ``L`` with a cross-shaped gap of width ``g`` (PHYSICS.md 6.1: pads occupy
+size ``L`` with a cross-shaped gap of width ``g`` (docs/physics.md §6: pads occupy
 ``|x|, |y|`` in ``[g/2, L/2]``).  Pads have contact angle ``theta_p`` (30 deg), the
 substrate (gaps and outside) ``theta_s`` (60 deg).
 
 * Chip: its whole underside is wetted; the liquid-air surface is pinned on the chip's
   edges (Gibbs' inequality at the 90 deg edge: the contact line stays on the edge for
-  apparent angles 60..150 deg, PHYSICS.md 2.3).  The chip face is a fixed, zero-tension
+  apparent angles 60..150 deg, docs/physics.md §2).  The chip face is a fixed, zero-tension
   facet on the Evolver boundary 1 that moves with ``xshift``, ``yshift`` (chip centre)
   and ``chipz`` (chip height, an ``optimizing_parameter``: no vertical load).  No twist.
 * Substrate contact line: free on the plane z = 0 (constraint 1).  The wetting energy
