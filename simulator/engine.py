@@ -27,7 +27,7 @@ from simulator.correlator import (
 )
 from simulator.feedback import progress_bar
 from simulator.materials import UM2
-from simulator.meniscus import CHIP_BLUR_MIN_PX, margin_px
+from simulator.meniscus import CHIP_BLUR_MIN_PX
 from simulator.posegrid import PoseGrid, TwistAxis, _axis_box, _twist_cut, evenly_spaced_axis
 from simulator.rotation import ChipRotator, _chip_reach_px, mirror_twins
 from simulator.scene import Scene
@@ -115,7 +115,7 @@ def _box(scene: Scene, twists, center_px: tuple[int, int] = (0, 0), half_px: int
     reach = (max(w / 2 - c0, c1 - w / 2), max(h / 2 - r0, r1 - h / 2))
     chip_rx, chip_ry = _chip_reach_px(scene.chip, scene.effects.twist)
     # A finite meniscus widens the liquid footprint: poses that far beyond contact still feel it.
-    margin = margin_px(scene.meniscus_height_px)
+    margin = scene.meniscus_margin_px
     chip_rx, chip_ry = chip_rx + margin, chip_ry + margin
     limit = None if scene.window_um is None else math.ceil(scene.window_um / scene.um_per_px - 1e-9)
     cx, rx, x_lo, x_hi = _axis_box(math.ceil(reach[0] + chip_rx - 1e-9), limit, int(center_px[0]), half_px)
@@ -189,7 +189,8 @@ def plan(scene: Scene, twists: np.ndarray | None = None, center_px: tuple[int, i
     # the pattern, whose exact rasters then return the overlap model to round-off as h -> 0.
     h_px = scene.meniscus_height_px
     chip_blur = h_px if h_px >= CHIP_BLUR_MIN_PX else 0.0
-    rot = ChipRotator(scene.chip, grid.twist_deg(), parity, blur_px=chip_blur, margin_px=b["margin"] if chip_blur else 0)
+    rot = ChipRotator(scene.chip, grid.twist_deg(), parity, blur_px=chip_blur, margin_px=b["margin"] if chip_blur else 0,
+                      profile=scene.wall_profile)
     hc, wc = rot.shape
     dx, dy = origin[0] - wc / 2 + cx, origin[1] - hc / 2 + cy
     assert dx == int(dx) and dy == int(dy), "pixel grids of chip and pattern must coincide"

@@ -127,14 +127,30 @@ def pin_per_index(scene, um_per_px: float, twist_step_deg: float) -> tuple[float
 ALIGN_MARGIN = 3.0
 
 
-def align_tolerance(ls, pin: tuple[float, float, float]) -> tuple[float, float]:
+def align_tolerance(ls, pin: tuple[float, float, float], floats: bool = False) -> tuple[float, float]:
     """(twist steps, px) within which a run that stopped counts as aligned: one step, or with
     hysteresis :data:`ALIGN_MARGIN` times the distance ``P_k / c_k`` at which the well's
     restoring force (curvature ``c_k`` per step^2 at the landscape's minimum) equals the
     pinning force, whichever is larger. On the overlap model's V-shaped well ``c_k`` is
-    large and the tolerance stays one step."""
+    large and the tolerance stays one step.
+
+    ``floats``: the chip floats on the well's flat floor (free contact lines,
+    :class:`simulator.meniscus.WallProfile`): a run that stops anywhere on the floor
+    (:meth:`~simulator.landscape.Landscape.floor_extent`) is aligned, so the tolerance is at
+    least the floor's reach from the minimum."""
+    tol = (1.0, 1.0)
+    if floats:
+        it, iy, ix = ls.minimum_index()
+        (t0, t1), (y0, y1), (x0, x1) = ls.floor_extent()
+        tol = (max(1.0, float(max(it - t0, t1 - it))), max(1.0, float(max(iy - y0, y1 - iy, ix - x0, x1 - ix))))
     if not any(pin):
-        return 1.0, 1.0
+        return tol
+    hyst = _hysteresis_tolerance(ls, pin)
+    return max(tol[0], hyst[0]), max(tol[1], hyst[1])
+
+
+def _hysteresis_tolerance(ls, pin: tuple[float, float, float]) -> tuple[float, float]:
+    """:func:`align_tolerance` from the pinning alone."""
     e = np.asarray(ls.energy, np.float64)
     it, iy, ix = ls.minimum_index()
     nt, ny, nx = e.shape

@@ -215,6 +215,29 @@ class Landscape:
             it, iy, ix = it[k : k + 1], iy[k : k + 1], ix[k : k + 1]
         return int(it[0]), int(iy[0]), int(ix[0])
 
+    def floor_extent(self) -> tuple[tuple[int, int], tuple[int, int], tuple[int, int]]:
+        """Index ranges ((t0, t1), (y0, y1), (x0, x1)) of the global minimum's floor: the poses
+        within the noise floor of its energy, connected to it (faces of the grid cells).
+
+        A single pose for a cusp or a smooth well; a flat floor where the chip floats, as it
+        does within the reach of free contact lines (:class:`simulator.meniscus.WallProfile`).
+        """
+        from scipy import ndimage
+
+        it, iy, ix = self.minimum_index()
+        e = self.energy
+        low = e <= float(e[it, iy, ix]) + self.noise_floor_J
+        lab, _ = ndimage.label(low)
+        sel = np.nonzero(lab == lab[it, iy, ix])
+        return tuple((int(a.min()), int(a.max())) for a in sel)  # type: ignore[return-value]
+
+    def floor_range(self) -> dict:
+        """The floor of :meth:`floor_extent` in physical units: ``x_um``, ``y_um`` and
+        ``twist_deg`` as [first, last] pose."""
+        (t0, t1), (y0, y1), (x0, x1) = self.floor_extent()
+        return {"x_um": [float(self.x_um[x0]), float(self.x_um[x1])], "y_um": [float(self.y_um[y0]), float(self.y_um[y1])],
+                "twist_deg": [float(self.twist_deg[t0]), float(self.twist_deg[t1])]}
+
     def global_minimum(self) -> tuple[float, float, float, float]:
         """(x_um, y_um, twist_deg, energy_J) of the global minimum on this grid (:meth:`minimum_index`)."""
         it, iy, ix = self.minimum_index()

@@ -6,8 +6,11 @@ alignment jumps from +F to -F, the stiffness there is infinite and a defect chan
 the slope of the well but never the position of its bottom. A liquid bridge of
 height ``h`` rounds every such cusp over a bias of about ``h``.
 
-The model
----------
+Two footprints: ``K_h`` for contact lines pinned at the pad edges (``pinned``), and the
+wall profile for free contact lines (the default), each derived below.
+
+Pinned contact lines: the K_h blur
+----------------------------------
 Consider one straight chip edge over one parallel pattern edge, offset by ``d``
 along their normal, with the liquid pinned on both (the flat-wall, "parallelepiped"
 picture). The liquid-air wall between them is a plane strip of height ``h`` and
@@ -59,16 +62,72 @@ the model's; an error beyond the side itself). With
 ``pinned`` the contact lines are held at the pad edges (a liquid confined by a
 superhydrophobic substrate): only liquid-air area changes, ``Delta_gamma = -2
 gamma_LA`` for every pad whatever its contact angle. Without it the contact lines
-follow the wettability map and ``Delta_gamma`` comes from the contact angles, as in
-the overlap model; the rounding over ``h`` is the same.
+are free on the wettability map, ``Delta_gamma`` comes from the contact angles, and the
+footprint is the wall profile below, not the ``K_h`` blur.
 
 The height is the flat-slab estimate ``h = V / A`` (``A`` the chip's wetted area)
 unless it is given directly.
+
+Free contact lines: the wall profile
+------------------------------------
+Without ``pinned`` the liquid's contact line on the substrate is free: it stands where
+the wall meets the surface at the surface's own contact angle. With the chip's edge
+holding the top of a flat wall of height ``h``, a contact line a distance ``c`` beyond
+the chip edge costs, per unit length of edge, ``gamma sqrt(c^2 + h^2)`` of liquid-air wall
+and wets ``c`` of the surface under it. On a surface of Young angle ``theta`` the wall's
+energy is lowest at the reach ``c = h cot(theta)``. So on the usual wettable substrate
+the liquid reaches ``d_s = h cot(theta_s)`` beyond the chip, and on a pad the further
+``d_p = h cot(theta_p)``. Between the two, a pad edge holds the contact line (Gibbs'
+criterion: the wall's angle lies between the pad's and the substrate's).
+
+Take one pad edge a distance ``u`` beyond a chip edge, with the pad on the chip's side.
+Minimising over the contact line's position gives the energy against ``u``. Its slope
+is ``Delta_gamma f(u)``, with the *wall profile*
+
+    f(u) = 1                                                  u <= d_s
+    f(u) = (cos theta_p - u / sqrt(u^2 + h^2)) / (cos theta_p - cos theta_s)   d_s <= u <= d_p
+    f(u) = 0                                                  u >= d_p
+
+(``f`` falls from 1 to 0 while the edge holds the line). Summed over every pattern edge,
+this is the overlap energy of the pattern with a *liquid footprint* ``f(s)``. Here ``s``
+is the signed distance of a point from the chip's outline (negative inside):
+
+    E_h(x, y, alpha) = Delta_gamma * sum_p f(s_alpha(p - (x, y))) * w(p)
+
+It is built like the overlap landscape: the footprint is computed once from the
+unrotated chip (a Euclidean distance transform of its raster), rotated with the chip,
+and correlated with the pattern. What it gives:
+
+* a chip on a same-size pad floats freely for ``|x| < d_s`` (both lines on the substrate),
+  then the force rises to ``|Delta_gamma| L`` over ``d_s < |x| < d_p``;
+* a gap that the liquid's line can cross on the substrate (the four-pad's cross): zero force
+  while the line is on the gap. This is the flat part of the overlap model, moved outwards by
+  about ``d_s``. The pads beyond the line do not pull: ``f`` is zero beyond ``d_p``, so no tail;
+* ``theta_p -> 0``, ``theta_s -> 180`` deg: ``f(u) = (1 - u / sqrt(u^2 + h^2)) / 2``, the
+  pinned profile of ``k_h`` above. The pinned model is that limit (held at the pad edges
+  whatever the angles); the pinned scenes keep the ``K_h`` blur, a superposition of edges that
+  also gives the corners as Surface Evolver does;
+* ``h -> 0``: ``f`` tends to the chip's indicator, the overlap landscape.
+
+Assumptions: every chip edge holds its wall (a sharp edge pins); each edge's wall is
+flat and independent of the other edges (the ends of an edge are rounded by the distance
+field, radially about a corner). The profile is the equilibrium of one edge over one pad
+edge. Where two pad edges lie within ``d_p`` of one chip edge, their responses add.
+That holds for a pad the line leaves (the four-pad's outer ramp). It does not hold for a
+pad across a dry gap: there the real line snaps onto the pad when it touches it at
+``d_s``, but the sum makes it start pulling from ``d_p``. On the 730/50 four-pad this
+shortens the flat part (validation/FOURPAD_INWARD.md; docs/physics.md §3.3). The reach
+uses the flat-slab ``h`` and straight walls. Surface Evolver's curved walls reach a little
+further (25 um against 21.7 um on the 730 um chip at 20 nl). The model describes a chip
+coming in from its placement offset: the liquid wets what the chip has reached. A chip
+pulled outwards from alignment keeps the far pads wet longer (a hysteresis that Surface
+Evolver shows and that the model leaves out).
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -82,6 +141,80 @@ REGIME_FRACTION = 0.2
 #: The blurred pattern is kept (cropping, FFT padding, pose window) out to this many heights
 #: beyond the pattern: the kernel's mass beyond r is h^2 / (r^2 + h^2), 10 % at 3 h; across a straight edge 2.6 % lies beyond 3 h.
 MARGIN_HEIGHTS = 3.0
+
+
+#: The wall profile's footprint is cut (smoothly) beyond this many heights from the chip: a
+#: pad angle below 5.7 deg would otherwise reach further than 10 h.
+REACH_CAP_HEIGHTS = 10.0
+
+
+@dataclass(frozen=True)
+class WallProfile:
+    """The liquid footprint around a chip with free contact lines (module docstring).
+
+    h_px: the meniscus height in pixels; cos_pad, cos_substrate: the cosines of the pad's
+    and the substrate's Young angles (pad more wettable: ``cos_pad > cos_substrate``).
+    """
+
+    h_px: float
+    cos_pad: float
+    cos_substrate: float
+
+    @classmethod
+    def from_angles(cls, h_px: float, pad_deg: float, substrate_deg: float) -> WallProfile:
+        return cls(float(h_px), math.cos(math.radians(pad_deg)), math.cos(math.radians(substrate_deg)))
+
+    def reach_px(self, cos_theta: float) -> float:
+        """``h cot(theta)``: where a free line on a surface of this angle stands beyond the
+        chip edge (negative under the chip for theta > 90 deg), at most :data:`REACH_CAP_HEIGHTS` h."""
+        c = min(cos_theta, 1.0)
+        cap = REACH_CAP_HEIGHTS * self.h_px
+        if c >= 1.0:
+            return cap
+        return max(-cap, min(cap, self.h_px * c / math.sqrt(1.0 - c * c)))
+
+    @property
+    def substrate_reach_px(self) -> float:
+        """``d_s = h cot(theta_s)`` (px)."""
+        return self.reach_px(self.cos_substrate)
+
+    @property
+    def pad_reach_px(self) -> float:
+        """``d_p = h cot(theta_p)`` (px): beyond it the footprint is zero."""
+        return self.reach_px(self.cos_pad)
+
+    @property
+    def ramp_px(self) -> float:
+        """``d_p - d_s`` (px): the width over which a pad edge holds the line."""
+        return self.pad_reach_px - self.substrate_reach_px
+
+    @property
+    def margin_px(self) -> int:
+        """Pixels kept beyond the chip for the footprint: its reach and a smooth cut after it."""
+        return int(math.ceil(max(self.pad_reach_px, 0.0) * 1.5)) + 2
+
+    def __call__(self, s_px: np.ndarray) -> np.ndarray:
+        """``f(s)`` at signed distances ``s`` (px, negative inside the chip)."""
+        s = np.asarray(s_px, float)
+        h = self.h_px
+        with np.errstate(invalid="ignore", divide="ignore"):
+            ramp = (self.cos_pad - s / np.sqrt(s * s + h * h)) / (self.cos_pad - self.cos_substrate)
+        f = np.clip(ramp, 0.0, 1.0)
+        return np.where(s >= self.pad_reach_px, 0.0, np.where(s <= self.substrate_reach_px, 1.0, f))
+
+
+def signed_distance_px(img: np.ndarray) -> np.ndarray:
+    """Signed distance (px, negative inside) of every pixel centre from the outline of the
+    region ``img >= 0.5``: a Euclidean distance transform, the outline half a pixel beyond
+    the last pixel centre inside."""
+    from scipy.ndimage import distance_transform_edt
+
+    inside = np.asarray(img) >= 0.5
+    if not inside.any():
+        return np.full(inside.shape, np.inf)
+    out = distance_transform_edt(~inside) - 0.5
+    inn = distance_transform_edt(inside) - 0.5
+    return np.where(inside, -inn, out)
 
 
 def kernel_spectrum(ny: int, nx: int, h_px: float, dtype=np.float64) -> np.ndarray:

@@ -196,7 +196,7 @@ def run_batch(
     t_land = time.perf_counter() - t0
     _check_starts_fit(ls, poses)
     pin = pin_per_index(scene, ls.um_per_px, ls.twist_step_deg)
-    fld, grid = stepping.field_and_grid(ls, radius_of_gyration_px(scene), pin=pin, align_tol=align_tolerance(ls, pin))
+    fld, grid = stepping.field_and_grid(ls, radius_of_gyration_px(scene), pin=pin, align_tol=align_tolerance(ls, pin, floats=scene.wall_profile is not None))
     q0 = grid.to_index(poses)
     q0 = np.round(q0).astype(np.int32) if method == "greedy" else q0  # as simulate()
     n, chunk = len(poses), int(min(chunk, len(poses)))

@@ -62,9 +62,15 @@ class ChipRotator:
     crosses a pixel boundary.
     """
 
-    def __init__(self, chip: Mask, twists: np.ndarray, parity: tuple[int, int], blur_px: float = 0.0, margin_px: int = 0):
+    def __init__(self, chip: Mask, twists: np.ndarray, parity: tuple[int, int], blur_px: float = 0.0, margin_px: int = 0,
+                 profile=None):
         self.chip = chip
+        self.profile = profile
         self.blur_px = float(blur_px)
+        # Pixels between the samples of the smooth image's rotation: coarse for the K_h blur
+        # (smooth on the scale of h); every pixel for the wall profile, whose kinks where a pad
+        # edge takes and releases the contact line coarse splines would round off.
+        self.sample_px = coarse_step(self.blur_px) if profile is None else 1
         self.margin_px = int(margin_px)
         rx, ry = _rotated_extent_px(chip, twists)
         rx, ry = rx + margin_px, ry + margin_px
@@ -77,11 +83,12 @@ class ChipRotator:
         # whole axis, and a box of the landscape other energies than the full one.
         rad = max(_chip_reach_px(chip, True))
         self._turn_shape = tuple(max(2 * ceil_whole(rad) + 2 + p, n) for p, n in zip(parity, self.shape, strict=True))
-        self._blurred = self._blur() if self.blur_px > 0 else None
+        self._blurred = self._blur() if self.blur_px > 0 or profile is not None else None
         self._coeffs = None  # its cubic-spline coefficients, made at the first rotation
 
     def _blur(self) -> np.ndarray:
-        """The unrotated chip blurred by K_h on a canvas that holds it at every twist (y down)."""
+        """The unrotated chip blurred by K_h, or its free-contact-line footprint (a
+        :class:`simulator.meniscus.WallProfile`), on a canvas that holds it at every twist (y down)."""
         import scipy.fft as sfft
 
         from simulator.meniscus import kernel_spectrum
@@ -99,11 +106,17 @@ class ChipRotator:
                 img = self._resample(0.0, (ho, wo), c.data)
             else:
                 img[r0 : r0 + h, c0 : c0 + w] = c.data
-        # Doubled FFT canvas: the kernel's tail does not wrap onto the chip.
-        ny, nx = sfft.next_fast_len(2 * ho), sfft.next_fast_len(2 * wo, real=True)
-        spec = sfft.rfft2(img, s=(ny, nx)) * kernel_spectrum(ny, nx, self.blur_px)
-        # The blur's tails beyond the canvas land in the doubled part, never back on it.
-        out = sfft.irfft2(spec, s=(ny, nx))[:ho, :wo]
+        if self.profile is not None:
+            # Free contact lines: the wall profile of the distance from the chip's outline.
+            from simulator.meniscus import signed_distance_px
+
+            out = self.profile(signed_distance_px(img))
+        else:
+            # Doubled FFT canvas: the kernel's tail does not wrap onto the chip.
+            ny, nx = sfft.next_fast_len(2 * ho), sfft.next_fast_len(2 * wo, real=True)
+            spec = sfft.rfft2(img, s=(ny, nx)) * kernel_spectrum(ny, nx, self.blur_px)
+            # The blur's tails beyond the canvas land in the doubled part, never back on it.
+            out = sfft.irfft2(spec, s=(ny, nx))[:ho, :wo]
         # Kept within the margin around the chip's box (the footprint's tail cut there).
         r0, r1, c0, c1 = nonzero_box(img > 0)
         m = self.margin_px
@@ -120,6 +133,10 @@ class ChipRotator:
     def __call__(self, twist_deg: float) -> np.ndarray:
         c = self.chip
         if self._blurred is not None:
+            if self.profile is not None:
+                # The splines overshoot the wall profile's kinks by ~1e-4: clipped, the floor
+                # where the footprint is 1 stays exactly 1 at every twist (no spurious minima).
+                return np.clip(self._spline_rotate(twist_deg), 0.0, 1.0)[::-1]
             return self._spline_rotate(twist_deg)[::-1]
         if c.geometry is not None:
             g = c.geometry if twist_deg == 0 else affinity.rotate(c.geometry, twist_deg, origin=(0, 0))
@@ -144,7 +161,7 @@ class ChipRotator:
             self._xy = (u - (wo / 2 - 0.5), -(v - (ho / 2 - 0.5)))  # physical, y up, about the centre
         a = math.radians(twist_deg)
         ca, sa = math.cos(a), math.sin(a)
-        f = coarse_step(self.blur_px)
+        f = self.sample_px
         if f > 1:
             return self._coarse_rotate(ca, sa, f)
         x, y = self._xy

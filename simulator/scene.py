@@ -183,6 +183,27 @@ class Scene(SceneBuilders):
         return 0.0 if h is None else h / self.um_per_px
 
     @property
+    def wall_profile(self):
+        """The free-contact-line footprint (:class:`simulator.meniscus.WallProfile`) when the
+        scene's meniscus has free lines and a height of a pixel or more, else None (no
+        meniscus, pinned lines, or a height below a pixel: the ``K_h`` blur)."""
+        from simulator.meniscus import CHIP_BLUR_MIN_PX, WallProfile
+
+        h_px = self.meniscus_height_px
+        if self.liquid.pinned or h_px < CHIP_BLUR_MIN_PX:
+            return None
+        m = self.materials
+        return WallProfile.from_angles(h_px, m.pad_angle_deg, m.substrate_angle_deg)
+
+    @property
+    def meniscus_margin_px(self) -> int:
+        """Pixels beyond the chip that the meniscus's footprint reaches (0 without it)."""
+        from simulator.meniscus import margin_px
+
+        prof = self.wall_profile
+        return prof.margin_px if prof is not None else margin_px(self.meniscus_height_px)
+
+    @property
     def um_per_px(self) -> float:
         return self.pattern.um_per_px
 

@@ -195,7 +195,7 @@ def simulate(
             if ls is None:  # moving the box would not move the chip: stop here
                 break
         pin = pin_per_index(scene, ls.um_per_px, ls.twist_step_deg)
-        field, grid = stepping.field_and_grid(ls, rg, pin=pin, align_tol=align_tolerance(ls, pin))
+        field, grid = stepping.field_and_grid(ls, rg, pin=pin, align_tol=align_tolerance(ls, pin, floats=scene.wall_profile is not None))
         run = steppers.jitted(method, _stiff(method, field, grid, dynamics))
         state = run(field, grid, dynamics, jnp.asarray(grid.to_index(pose)), max_steps)
         pieces.append(_to_trajectory(method, state, grid))

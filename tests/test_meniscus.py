@@ -128,13 +128,32 @@ def test_twist_is_smooth_and_tends_to_the_flat_wall_stiffness():
 @pytest.mark.parametrize(("sx", "sy"), [(0.3, -0.2), (0.45, 0.1)])
 def test_subpixel_shift_of_the_pattern_is_recovered(sx, sy):
     L = 100.0
-    sc = _scene(affinity.translate(box(-L / 2, -L / 2, L / 2, L / 2), sx, sy), chip_size=L, h=4.0, pinned=False, window=10)
+    sc = _scene(affinity.translate(box(-L / 2, -L / 2, L / 2, L / 2), sx, sy), chip_size=L, h=4.0, pinned=True, window=10)
     ls = build_landscape(sc)
     g = ls.global_minimum()
     assert (g[0], g[1]) == (0.0, 0.0)  # the grid cannot see it
     r = refine_minimum(ls, *g[:3])
     assert r["x_um"] == pytest.approx(sx, abs=0.1) and r["y_um"] == pytest.approx(sy, abs=0.1)
     assert abs(r["twist_deg"]) < 0.1
+
+
+@pytest.mark.parametrize(("sx", "sy"), [(0.0, 0.0), (3.0, -2.0)])
+def test_free_contact_lines_float_the_chip_within_the_substrate_reach(sx, sy):
+    # Free lines on a wettable substrate stand d_s = h cot(theta_s) beyond the chip: a chip
+    # on a same-size pad feels no force while both lines of an axis stand on the substrate,
+    # |x - sx| < d_s, so the well has a flat floor of that half-width about the pad's centre.
+    L, h = 100.0, 8.0
+    sc = _scene(affinity.translate(box(-L / 2, -L / 2, L / 2, L / 2), sx, sy), chip_size=L, h=h, pinned=False, twist=None, window=20)
+    ds = h / math.tan(math.radians(sc.materials.substrate_angle_deg))
+    assert sc.wall_profile.substrate_reach_px * sc.um_per_px == pytest.approx(ds)
+    ls = build_landscape(sc)
+    fl = ls.floor_range()
+    for (lo, hi), c in ((fl["x_um"], sx), (fl["y_um"], sy)):
+        assert (lo + hi) / 2 == pytest.approx(c, abs=0.5)
+        assert hi - lo == pytest.approx(2 * ds, abs=2 * sc.um_per_px)
+    # Beyond the floor the force pulls back; on it there is none.
+    assert float(ls.force_at(sx + ds + 3, sy, 0.0)[0]) < 0 < float(ls.force_at(sx - ds - 3, sy, 0.0)[0])
+    assert float(ls.force_at(sx + ds - 2, sy, 0.0)[0]) == 0.0
 
 
 def test_defect_moves_the_minimum_towards_the_flatter_side():
@@ -190,6 +209,30 @@ def test_cli_evaluate_meniscus_reports_stiffness_and_offset(tmp_path, capsys):
     # 200 um square, pinned water: 2 gamma L / h = 1.29 N/m, less the corner deficit and the defect.
     assert 0.9 < k["x_N_per_m"] < 1.3 and 0.9 < k["y_N_per_m"] < 1.3 and k["twist_Nm_per_rad"] > 0
     assert d["offset_from_centre"]["x_um"] < 0 and d["global_minimum"]["refined"] is True
+
+
+def test_cli_evaluate_free_contact_lines_reports_the_floor_the_chip_floats_on(tmp_path, capsys):
+    # 200 um chip on the 200 um square, 0.9 nl (h = 22.5 um), free lines on the 60 deg
+    # substrate: d_s = h cot 60 = 13.0 um. The well's floor spans +-d_s (to a 2 um pixel),
+    # its stiffness is zero, every start on it is aligned, and the bias counts beyond it.
+    from simulator.cli import main
+
+    out = tmp_path / "ev"
+    code = main(["evaluate", "--pattern", "patterns/library/square_200.png", "--chip-size", "200", "--meniscus", "--volume", "0.9",
+                 "--resolution", "2", "--twist-step", "2", "--out", str(out)])
+    assert code == 0
+    d = json.loads((out / "summary.json").read_text())
+    ds = 22.5 / math.tan(math.radians(60))
+    assert d["contact_lines"] == "free" and d["contact_line_reach_um"]["substrate"] == pytest.approx(ds, rel=1e-3)
+    assert d["contact_line_reach_um"]["pad"] == pytest.approx(22.5 / math.tan(math.radians(30)), rel=1e-3)
+    fl = d["floating_range"]
+    for axis in ("x", "y"):
+        assert fl[f"{axis}_from_um"] == pytest.approx(-ds, abs=2.0) and fl[f"{axis}_to_um"] == pytest.approx(ds, abs=2.0)
+    assert d["stiffness"]["x_N_per_m"] == 0.0 and d["stiffness"]["y_N_per_m"] == 0.0
+    assert d["global_minimum"]["refined"] is False and (d["global_minimum"]["x_um"], d["global_minimum"]["y_um"]) == (0.0, 0.0)
+    assert min(d["max_bias_um"].values()) > 100 + ds  # beyond the floor, out to the pad's edge and the line's reach
+    assert d["yield"]["fraction"] == 1.0 and d["yield"]["outcomes"]["plateau"] == 0
+    assert "floats on the well's floor" in capsys.readouterr().out
 
 
 @pytest.mark.parametrize(("flags", "needle"), [
