@@ -64,9 +64,16 @@ def chip_size(scene: Scene) -> tuple[float, float]:
     return footprint_um(scene.chip)
 
 
-def max_bias_along(values: np.ndarray, force: np.ndarray, x0: float) -> tuple[float, float]:
-    """(+, -) largest |v - x0| with the force pointing back to x0 at every sample in between."""
+def max_bias_along(values: np.ndarray, force: np.ndarray, x0: float, floor: list[float] | None = None) -> tuple[float, float]:
+    """(+, -) largest |v - x0| with the force pointing back to x0 at every sample in between.
+
+    ``floor``: [first, last] of a flat floor around x0 (a chip floating within free contact
+    lines' reach): its samples count as arrived, whatever their force.
+    """
     out = []
+    if floor is not None:
+        keep = (values < floor[0] - 1e-9) | (values > floor[1] + 1e-9) | (np.abs(values - x0) < 1e-9)
+        values, force = values[keep], force[keep]
     # Samples within a hundredth of a step of x0 are x0 itself (a refined minimum sits
     # a round-off away from the samples through it).
     tiny = 0.01 * float(np.min(np.diff(values))) if len(values) > 1 else 0.0
@@ -125,14 +132,27 @@ def assess(scene: Scene, *, quiet: bool = True, pictures=None, method: str = "gr
     xm, ym, tm, em = ls.global_minimum()
     gx, gy, gt = xm, ym, tm  # the grid's global minimum: centre of the capture grid and of the placement noise
     meniscus = None
+    floating = None
     if ls.meniscus_height_um is not None:
-        # A smooth well: its minimum below the grid, and its stiffness there.
+        # A smooth well: its minimum below the grid, and its stiffness there. With free contact
+        # lines the well can have a flat floor (the chip floats within the lines' reach): then
+        # the floor is what is reported, and its pose nearest the nominal one (the grid's).
         from simulator.refine import refine_minimum, stiffness
 
-        r = refine_minimum(ls, xm, ym, tm)
-        xm, ym, tm, em = r["x_um"], r["y_um"], r["twist_deg"], r["energy_J"]
+        if scene.wall_profile is not None and any(b > a for a, b in ls.floor_extent()):
+            fr = ls.floor_range()
+            floating = {f"{k.split('_')[0]}_{end}_{k.split('_')[1]}": v[i] for k, v in fr.items() for i, end in enumerate(("from", "to"))}
+        else:
+            r = refine_minimum(ls, xm, ym, tm)
+            xm, ym, tm, em = r["x_um"], r["y_um"], r["twist_deg"], r["energy_J"]
         meniscus = {"stiffness": stiffness(ls, xm, ym, tm), "overlap": build_landscape(scene.replace(
             effects=replace(scene.effects, meniscus=False)), twists=np.array([ls.twist_deg[int(np.argmin(np.abs(ls.twist_deg - tm)))]]))}
+        if floating:  # on the floor the well is flat: no curvature where it spans the minimum (not round-off)
+            k = meniscus["stiffness"]
+            for key, axis, v in (("x_N_per_m", "x", xm), ("y_N_per_m", "y", ym), ("twist_Nm_per_rad", "twist", tm)):
+                unit = "deg" if axis == "twist" else "um"
+                if k.get(key) is not None and floating[f"{axis}_from_{unit}"] < v < floating[f"{axis}_to_{unit}"]:
+                    k[key] = 0.0
     w, h = chip_size(scene)
     near = max(2 * s, 0.02 * min(w, h))
     near_deg = max(ls.twist_step_deg, 1.0) if len(ls.twist_deg) > 1 else 0.0
@@ -149,7 +169,8 @@ def assess(scene: Scene, *, quiet: bool = True, pictures=None, method: str = "gr
     for axis, lo, hi in (("x", -reach_x, reach_x), ("y", -reach_y, reach_y)):
         c = ls.curve(axis, (xm, ym, tm), lo, hi)
         x0 = xm if axis == "x" else ym
-        plus, minus = max_bias_along(c["values"], c["force"], x0)
+        floor = [floating[f"{axis}_from_um"], floating[f"{axis}_to_um"]] if floating else None
+        plus, minus = max_bias_along(c["values"], c["force"], x0, floor=floor)
         curves[axis] = c
         biases[f"+{axis}"], biases[f"-{axis}"] = plus, minus
     # Capture fraction over a grid of starts around the global minimum (at its twist), and the
@@ -186,10 +207,15 @@ def assess(scene: Scene, *, quiet: bool = True, pictures=None, method: str = "gr
             "offset_from_centre": {"x_um": round(xm, 1) + 0.0, "y_um": round(ym, 1) + 0.0, "twist_deg": round(tm, 1) + 0.0,
                                    "distance_um": round(math.hypot(xm, ym), 1)},
             "meniscus_warning": regime_warning(ls.meniscus_height_um, scene.chip_min_side_um),
+            "contact_lines": "pinned" if scene.liquid.pinned else "free",
+            "floating_range": floating,
         }
+        prof = scene.wall_profile
+        if prof is not None:
+            extra["contact_line_reach_um"] = {"substrate": prof.substrate_reach_px * s, "pad": prof.pad_reach_px * s}
     return extra | {
         "global_minimum": {"x_um": xm, "y_um": ym, "twist_deg": tm, "energy_J": em, "overlap_um2": float(ls.overlap_um2(em)),
-                           "refined": meniscus is not None},
+                           "refined": meniscus is not None and floating is None},
         "restoring_force_N": {"bias_um": near, **forces},
         "restoring_torque_Nm": {"twist_deg": near_deg, **torques} if torques else None,
         "plateaus_um": {a: curves[a]["plateaus"] for a in ("x", "y")},
@@ -258,15 +284,24 @@ def _model_note(summary: dict) -> str:
     h = summary.get("meniscus_height_um")
     if h is None:
         return "Overlap model (energy = &Delta;&gamma; &times; overlap area)."
-    pinned = ", contact lines pinned at the pad edges" if summary.get("pinned") else ""
-    return (f"Finite meniscus, height meniscus_height_um = {h:.4g} um{pinned} (the overlap energy with every cusp "
-            "rounded over h; dashed in the force plot: the overlap model).")
+    if summary.get("pinned"):
+        return (f"Finite meniscus, height meniscus_height_um = {h:.4g} um, contact lines pinned at the pad edges (the overlap "
+                "energy with every cusp rounded over h; dashed in the force plot: the overlap model).")
+    r = summary.get("contact_line_reach_um")
+    reach = f", reaching {r['substrate']:.3g} um beyond the chip on the substrate and {r['pad']:.3g} um on a pad" if r else ""
+    return (f"Finite meniscus, height meniscus_height_um = {h:.4g} um, free contact lines{reach} (the overlap energy of the "
+            "liquid's footprint: flat where the lines stand on one surface, rising where a pad edge holds a line; dashed in the "
+            "force plot: the overlap model).")
 
 
 def _at(v: float) -> str:
     """A refined pose coordinate (um or degrees) as the page shows it: to 0.001, no -0
     (summary.json keeps every digit)."""
     return f"{round(float(v), 3) + 0.0:g}"
+
+
+def _span(fl: dict, axis: str, unit: str) -> str:
+    return f"{_at(fl[f'{axis}_from_{unit}'])} to {_at(fl[f'{axis}_to_{unit}'])} {unit}"
 
 
 def _meniscus_rows(summary: dict) -> str:
@@ -277,6 +312,11 @@ def _meniscus_rows(summary: dict) -> str:
     tw = "n/a" if k.get("twist_Nm_per_rad") is None else _fmt(k["twist_Nm_per_rad"], "N m/rad")
     warn = summary.get("meniscus_warning")
     warn_html = f'<p class="warn">warning: {html.escape(warn)}</p>' if warn else ""
+    fl = summary.get("floating_range")
+    if fl:
+        warn_html = (f"<p>The chip floats: the well's floor (no restoring force) spans x {_span(fl, 'x', 'um')}, "
+                     f"y {_span(fl, 'y', 'um')}, twist {_span(fl, 'twist', 'deg')}; a run that stops on it counts as "
+                     f"aligned. The stiffness is the floor's (zero where it is flat).</p>") + warn_html
     return (f"<h2>Stiffness at alignment (finite meniscus)</h2><table><tr><th>k<sub>x</sub></th><td>{_fmt(k['x_N_per_m'], 'N/m')}</td></tr>"
             f"<tr><th>k<sub>y</sub></th><td>{_fmt(k['y_N_per_m'], 'N/m')}</td></tr><tr><th>k<sub>twist</sub></th><td>{tw}</td></tr>"
             f"<tr><th>offset of the minimum from the pattern centre</th><td>({_at(o['x_um'])} um, {_at(o['y_um'])} um, {_at(o['twist_deg'])} deg), "

@@ -67,8 +67,8 @@ Columns carry their units: the axis values (``gap_um``, ``volume_nl``, ``method`
 point's ``point``, ``realization``, ``point_seed``, ``status`` ("ok" or "error"), ``error``,
 ``seconds``, and every number of the assessment's summary flattened by :func:`flatten`
 (``max_bias_plus_x_um``, ``capture_fraction``, ``yield_fraction``, ``settings_um_per_px``,
-...) with ``max_bias_x_um`` / ``max_bias_y_um`` (the smaller of the two directions) and
-``global_minimum_offset_um``.
+...) with ``max_bias_x_um`` / ``max_bias_y_um`` (the smaller of the two directions),
+``global_minimum_offset_um`` and, with free contact lines, ``floating_half_width_um``.
 """
 
 from __future__ import annotations

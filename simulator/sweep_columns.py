@@ -83,4 +83,7 @@ def flatten(summary: dict) -> dict[str, Any]:
     g = summary.get("global_minimum") or {}
     if isinstance(g.get("x_um"), int | float) and isinstance(g.get("y_um"), int | float):
         out["global_minimum_offset_um"] = float(math.hypot(g["x_um"], g["y_um"]))
+    fl = summary.get("floating_range")
+    if isinstance(fl, dict):  # free contact lines: the chip floats on the well's floor
+        out["floating_half_width_um"] = float(max(fl["x_to_um"] - fl["x_from_um"], fl["y_to_um"] - fl["y_from_um"]) / 2)
     return out

@@ -29,6 +29,7 @@ METRICS = (
     ("yield_fraction", "yield under placement noise (%)", 100.0),
     ("restoring_force_plus_x_x_N", "restoring force -Fx at the +x bias (uN)", -1e6),
     ("global_minimum_offset_um", "offset of the global minimum (um)", 1.0),
+    ("floating_half_width_um", "the chip floats within +- (um)", 1.0),
 )
 #: The most point rows the HTML table shows (the CSV has them all).
 MAX_ROWS = 1000

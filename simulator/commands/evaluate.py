@@ -76,6 +76,12 @@ def run(args: argparse.Namespace) -> int:
         print(f"stiffness at alignment: x {k['x_N_per_m']:.3g} N/m, y {k['y_N_per_m']:.3g} N/m{tw}")
     else:
         print(f"global minimum at ({g['x_um']:g} um, {g['y_um']:g} um, {g['twist_deg']:g} deg)")
+    fl = summary.get("floating_range")
+    if fl:
+        r = summary["contact_line_reach_um"]
+        print(f"the chip floats on the well's floor: x {fl['x_from_um']:g} to {fl['x_to_um']:g} um, y {fl['y_from_um']:g} to "
+              f"{fl['y_to_um']:g} um, twist {fl['twist_from_deg']:g} to {fl['twist_to_deg']:g} deg (free contact lines "
+              f"{r['substrate']:.3g} um beyond the chip on the substrate, {r['pad']:.3g} um on a pad)")
     print(f"max bias: +x {b['+x']:g} um, -x {b['-x']:g} um, +y {b['+y']:g} um, -y {b['-y']:g} um")
     print(f"capture fraction {100 * cap['fraction']:.1f} % of {cap['n']} grid starts; yield {100 * yl['fraction']:.1f} % under placement noise")
     print(f"wrote {Path(args.out) / 'report.html'} (and summary.json, landscape.png, force.png, capture.png, pattern.png)")
