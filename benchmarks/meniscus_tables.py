@@ -3,8 +3,10 @@
 * the 730/50 um four-pad x-curve at 20 nl (h = 37.5 um) against the overlap model:
   ``docs/images/meniscus_fourpad_x.png``;
 * the 730/50 and 730/100 um four-pads at 20 nl against Surface Evolver with free contact
-  lines (``validation/evolver_fourpad_levels.csv``, levels 2 and 3): force along x of the overlap model, the
-  meniscus model and the Evolver points, ``docs/images/meniscus_fourpad_evolver.png``;
+  lines (outward from alignment: ``validation/evolver_fourpad_levels.csv``, levels 2 and 3;
+  inward from x = 500 um: ``validation/evolver_fourpad_inward.csv``, level 1): force along x
+  of the overlap model, the meniscus model and the Evolver points,
+  ``docs/images/meniscus_fourpad_evolver.png``;
   the table of the three on stdout;
 * the defect library's offsets: each 200 um pattern of ``patterns/library`` under a
   200 um chip with 0.9 nl of water (h = 22.5 um), pinned contact lines, at 1 um/px and
@@ -58,16 +60,29 @@ def evolver_paths(level: str = "2") -> dict[int, list[dict]]:
     return rows
 
 
+def evolver_inward(level: str = "1") -> dict[int, list[dict]]:
+    """The stored Surface Evolver inward continuations (x = 500 -> 0 um) by gap (um)."""
+    import csv
+
+    rows: dict[int, list[dict]] = {}
+    with open(ROOT / "validation" / "evolver_fourpad_inward.csv", newline="") as f:
+        for r in csv.DictReader(f):
+            if r["path"] in ("x_730_50_inward", "x_730_100_inward") and r["level"] == level:
+                rows.setdefault(int(float(r["g_um"])), []).append(r)
+    return rows
+
+
 def evolver_figure(out: Path) -> None:
     """Force along x on the 730/50 and 730/100 four-pads with 20 nl: overlap model,
     meniscus model (h = V / A) and Surface Evolver (free contact lines, 30/60 degrees)."""
     import numpy as np
 
     plt = render_style.pyplot()
-    paths, finer = evolver_paths("2"), evolver_paths("3")
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2), layout="constrained", sharey=True)
-    print("| gap (um) | x (um) | Surface Evolver, level 2 (uN) | meniscus model (uN) | overlap model (uN) |")
-    print("|---:|---:|---:|---:|---:|")
+    paths, finer, inward = evolver_paths("2"), evolver_paths("3"), evolver_inward("1")
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.6), layout="constrained", sharey=True)
+    print("| gap (um) | x (um) | Surface Evolver inward, level 1 (uN) | Surface Evolver outward, level 2 (uN) | meniscus model (uN) "
+          "| overlap model (uN) |")
+    print("|---:|---:|---:|---:|---:|---:|")
     for ax, gap in zip(axes, (50, 100), strict=True):
         base = Scene.from_inputs(LIB / f"four_pad_730_{gap}.png", chip_size_um=730, resolution_um=2.0, effects=Effects(twist=False),
                                  liquid=Liquid(volume_nl=20.0), window_um=520, dtype="float64")
@@ -81,21 +96,24 @@ def evolver_figure(out: Path) -> None:
         sf = np.array([float(r["force_x_N"]) for r in se]) * 1e6
         ax.plot(xs, -f_over, "--", color="0.45", label="overlap model")
         ax.plot(xs, -f_men, color=render_style.PATH_COLOUR, label=f"meniscus model (h = {men.meniscus_height_um:.1f} um)")
-        ax.plot(sx, -sf, "o", ms=4, color=render_style.CHIP_COLOUR, label="Surface Evolver, refinement level 2")
+        ax.plot(sx, -sf, "o", ms=4, color=render_style.CHIP_COLOUR, label="Surface Evolver, outward from alignment (level 2)")
         f3 = sorted(finer.get(gap, []), key=lambda r: float(r["x_um"]))
         ax.plot([float(r["x_um"]) for r in f3], [-float(r["force_x_fd_N"]) * 1e6 for r in f3], "o", ms=7, mfc="none",
-                color=render_style.CHIP_COLOUR, label="Surface Evolver, level 3")
+                color=render_style.CHIP_COLOUR, label="Surface Evolver, outward (level 3)")
+        inw = {float(r["x_um"]): -float(r["force_x_N"]) * 1e6 for r in inward.get(gap, []) if float(r["x_um"]) > 1}
+        ax.plot(list(inw), list(inw.values()), "^", ms=5, color="black", label="Surface Evolver, inward from x = 500 um (level 1; x = 0 not relaxed, left out)")
         p = (730 - gap) / 2
         ax.axvspan(p, p + gap, color=render_style.PLATEAU_COLOUR, alpha=0.25, lw=0, label="overlap model's flat part")
         ax.set_title(f"four-pad 730/{gap} um, 730 um chip, 20 nl, pads 30 deg, substrate 60 deg", fontsize=9)
         ax.set_xlabel("x (um)")
         ax.grid(alpha=0.3)
-        for r in se:
-            x = float(r["x_um"])
-            print(f"| {gap} | {x:g} | {-float(r['force_x_N']) * 1e6:.2f} | {-float(mls.force_at(x, 0.0, 0.0)[0]) * 1e6:.2f} | "
+        out_f = {float(r["x_um"]): -float(r["force_x_N"]) * 1e6 for r in se}
+        for x in sorted(set(out_f) | set(inw)):
+            i, o = (f"{d[x]:.2f}" if x in d else "" for d in (inw, out_f))
+            print(f"| {gap} | {x:g} | {i} | {o} | {-float(mls.force_at(x, 0.0, 0.0)[0]) * 1e6:.2f} | "
                   f"{-float(over.force_at(x, 0.0, 0.0)[0]) * 1e6:.2f} |")
     axes[0].set_ylabel("restoring force -F_x (uN)")
-    axes[0].legend(fontsize=8, loc="lower left")
+    fig.legend(*axes[0].get_legend_handles_labels(), loc="outside lower center", ncol=3, fontsize=8)
     render_style.save_figure(fig, out)
     print(f"wrote {out}", file=sys.stderr)
 
