@@ -110,7 +110,9 @@ class ChipRotator:
             # Free contact lines: the wall profile of the distance from the chip's outline.
             from simulator.meniscus import signed_distance_px
 
-            out = self.profile(signed_distance_px(img))
+            sdf = signed_distance_px(img)
+            out = self.profile(sdf)
+            self._sdf = sdf
         else:
             # Doubled FFT canvas: the kernel's tail does not wrap onto the chip.
             ny, nx = sfft.next_fast_len(2 * ho), sfft.next_fast_len(2 * wo, real=True)
@@ -169,7 +171,21 @@ class ChipRotator:
         # Only where the blurred chip is (its box, a margin beyond the chip): zero elsewhere.
         inside = (np.abs(xi) <= self._half[0]) & (np.abs(yi) <= self._half[1])
         out = np.zeros(self.shape)
-        coords = np.array([-yi[inside] + (h / 2 - 0.5), xi[inside] + (w / 2 - 0.5)])
+        rows, cols = -yi[inside] + (h / 2 - 0.5), xi[inside] + (w / 2 - 0.5)
+        if self.profile is not None:
+            # The wall profile is 1 deep inside the chip and 0 beyond the pad reach: splines
+            # only in the band between (with 3 px for the splines' support and the nearest-pixel
+            # lookup), exactly 1 and 0 elsewhere; the band is a few per cent of the canvas.
+            s = self._sdf[np.clip(np.rint(rows), 0, h - 1).astype(np.intp), np.clip(np.rint(cols), 0, w - 1).astype(np.intp)]
+            prof = self.profile
+            lo, hi = min(prof.substrate_reach_px, 0.0) - 3.0, prof.pad_reach_px + 3.0
+            band = (s >= lo) & (s <= hi)
+            vals = (s < lo).astype(float)
+            vals[band] = ndimage.map_coordinates(self._coeffs, np.array([rows[band], cols[band]]), order=SPLINE_ORDER, mode="constant",
+                                                 cval=0.0, prefilter=False)
+            out[inside] = vals
+            return out
+        coords = np.array([rows, cols])
         out[inside] = ndimage.map_coordinates(self._coeffs, coords, order=SPLINE_ORDER, mode="constant", cval=0.0, prefilter=False)
         return out
 
