@@ -25,9 +25,13 @@ and proves it:
    bound is refined (k / 4) over the cells left, and what is left at the end is
    computed exactly. So every pose that could be lower, or tie, has been computed.
 
-Scenes the bound does not cover (a finite meniscus, whose energy is a blurred overlap;
-a repulsive pad, Delta_gamma > 0) are searched over the whole landscape, built in chunks
-of twists that fit the memory budget.
+A finite meniscus from one pixel of height up is the overlap of the pattern with the
+chip's footprint (the wall profile or the K_h-blurred chip, values in [0, 1], rotated by
+the engine's own rotator), so the same bounds hold with the footprint in place of the chip
+raster: its block maxima, and its mass in the absolute bound. Scenes the bound does not
+cover (a meniscus below one pixel, whose blur is on the pattern's side; a repulsive pad,
+Delta_gamma > 0) are searched over the whole landscape, built in chunks of twists that
+fit the memory budget.
 
 Modules: this one holds the result (:class:`GlobalMinimum`) and the search (steps 1 to
 3, the pieces built and what is left to compute); the cell bound of step 3
@@ -189,7 +193,7 @@ class _Search:
     # -- the search
     def run(self) -> str:
         scene = self.scene
-        if getattr(scene.effects, "meniscus", False) or _delta_gamma(scene) >= 0:
+        if _delta_gamma(scene) >= 0 or (getattr(scene.effects, "meniscus", False) and not _Bounds.covers_meniscus(scene)):
             return self._full()
         n = len(self.axis)
         k0 = int(np.argmin(np.abs(self.axis)))

@@ -32,10 +32,10 @@ class _Bounds:
                   <= sum_{a,b} W[a, b] Cd[a - m, b - n] =: U[m, n],
 
     one correlation of arrays k^2 times smaller than the landscape's. Values are in
-    [0, 1] (the overlap model), so every term is >= 0. A chip with exact geometry is
+    [0, 1] (the overlap model, and a meniscus's footprint), so every term is >= 0. A chip with exact geometry is
     rasterized at the block size (a block counts as 1 where the rotated outline, grown by
     1e-3 block, covers more than 1e-6 of it: the pixels the engine covers, but for slivers
-    far below the noise floor); a chip image is
+    far below the noise floor); a chip image, and a meniscus's footprint, is
     rotated as the engine rotates it and max-pooled.
     """
 
@@ -56,10 +56,25 @@ class _Bounds:
         self._fine: dict[int, np.ndarray] = {}
         self._spectra: dict = {}
 
+    @staticmethod
+    def covers_meniscus(scene: Scene) -> bool:
+        """Whether the bounds hold for the scene's meniscus: from one pixel of height up the
+        meniscus is all on the chip's side (its footprint, in [0, 1]); below, the pattern is
+        blurred in the correlation and the pattern's block sums do not bound it."""
+        from simulator.meniscus import CHIP_BLUR_MIN_PX
+
+        return scene.meniscus_height_px >= CHIP_BLUR_MIN_PX
+
+    @property
+    def footprint(self) -> bool:
+        """The chip side is a smooth footprint (a finite meniscus), not the chip's raster."""
+        return self.rot.profile is not None or self.rot.blur_px > 0
+
     def absolute_px(self) -> float:
-        """The largest overlap any pose can have, min(|P|, |C|) in px^2 (with a margin)."""
+        """The largest overlap any pose can have, min(|P|, |C|) in px^2 (with a margin); with
+        a meniscus |C| is the footprint's mass (the chip's area and the liquid beyond it)."""
         c = self.scene.chip
-        if c.geometry is not None:
+        if c.geometry is not None and not self.footprint:
             chip = max(float(c.data.sum()), c.geometry.area / self.s**2)
         else:
             chip = max(float(self.fine(j).sum()) for j in range(len(self.twists)))
@@ -87,7 +102,7 @@ class _Bounds:
         """Cd: the chip's block maxima at twist j, dilated by one block (+1 row and column)."""
         c = self.scene.chip
         hc, wc = self.rot.shape
-        if c.geometry is not None:
+        if c.geometry is not None and not self.footprint:
             from shapely import affinity
 
             from patterns.raster import rasterize
