@@ -1,32 +1,55 @@
-"""Contact-angle hysteresis: the contact lines pin, so a chip stops short of the minimum.
+"""Contact-angle hysteresis: contact lines that slide over a pad pin, so a chip can stop short.
 
-A contact line stays put while its contact angle lies between the receding and the
-advancing angle of the surface, ``theta_r <= theta <= theta_a``. When a chip moves, the
-contact line on its leading side advances and the one on its trailing side recedes; the
-most force the pair can hold back, per unit length of line across the motion, is the
-difference of their Young projections::
+A contact line that slides over a surface stays put while its contact angle lies between
+the surface's receding and advancing angles, ``theta_r <= theta <= theta_a``. When a chip
+moves, such a line on its leading side advances and one on its trailing side recedes;
+the most force the pair can hold back, per unit length of line across the motion, is
+the difference of their Young projections::
 
     f_pin = gamma (cos theta_r - cos theta_a)        (N/m, >= 0)
 
-(Furmidge's sliding-drop criterion; for a pinned meniscus the same window holds the
-chip). Summed over the chip's contact line, each element of normal ``n`` moving with
-velocity ``v`` resists with ``f_pin / 2 * sign(v . n)`` (half for each of the pair), so
-the largest pinning force along an axis and the largest pinning torque are::
+(Furmidge's sliding-drop criterion), ``f_pin / 2`` for each line. Summed over the whole
+outline (:func:`pinning`, the bound if every line slid)::
 
     P_x = f_pin / 2 * oint |n_x| ds      (= f_pin * height of a rectangular chip)
     P_y = f_pin / 2 * oint |n_y| ds      (= f_pin * width)
     P_t = f_pin / 2 * oint |(z x r) . n| ds   (N m; = f_pin L^2 / 2 for a square of side L)
 
-The steppers use them as their stopping rule, axis by axis: a gradient or dynamic run
-stops at the first pose where the restoring force along every axis is at most its
-pinning force, ``|dE/dq_k| <= P_k`` (and, for the inertial method, where the kinetic
-energy left is at most the pinning work over one grid step); a greedy move is taken
-only if the energy it releases exceeds the pinning work ``sum_k P_k |dq_k|``. On a
-finite-meniscus landscape (a spring of stiffness ``k`` at alignment) the chip stops
-about ``P / k`` from the minimum: ``x = h (cos theta_r - cos theta_a) / 2`` for a square
-with pinned contact lines (``k = 2 gamma L / h``). With zero hysteresis every rule is
-today's exactly. On the overlap model's V-shaped well (force ``|Delta_gamma| L``
-everywhere) the chip either stops at once or goes all the way.
+Which lines slide (docs/physics.md §5.3, :func:`sliding_shares`). A line held by an
+edge does not slide: its angle changes within the edge's Gibbs window and the energy
+model already holds that spring (the ``K_h`` blur, the wall profile's ramp), so only
+lines that slide over a pad add the pad's hysteresis:
+
+* the chip's own edge holds the top of every wall (a sharp edge pins): never;
+* pinned scenes (``--pinned``, a pad edge against a hydrophobic substrate): the foot of
+  every wall is held by a pad edge, so nothing slides and the pinning is zero. At
+  0.9 nl on a 200 um square (h = 22.5 um) the wall's angle at the pad edge stays within
+  the pad's window [31, 180) deg for shifts below h cot 31 deg = 37 um;
+* free lines (:class:`simulator.meniscus.WallProfile`): a line on a pad stands
+  ``d_p = h cot theta_p`` beyond the chip and slides over the pad with the chip; one that
+  a pad edge holds (the edge between ``d_s`` and ``d_p`` beyond the chip) does not; one on
+  the substrate at ``d_s`` slides over the substrate, whose hysteresis the scene does not
+  give (zero). Without a meniscus the line is at the chip's edge (``d_p = 0``).
+
+Each element of the outline counts with the pattern's value where its free line would
+stand on a pad, ``d_p`` beyond it along its normal, with the chip at its nominal pose
+(0, 0, 0): the pinning decides where a chip stops, and that is near where it rests.
+The shares are one number per axis for the whole run. On a same-size pad they are 0
+(free lines stand on the substrate at rest), in a pad wider than the chip by more than
+``d_p`` 1, without a meniscus 1/2 (the outline lies on the pad's edge: half of it moves
+over the pad either way). Away from rest the real shares change with the pose (a chip
+near its pad's edge has that side's line held by the edge); that dependence is left out.
+
+The steppers use the sliding lines' forces (:func:`pin_per_index`) as their stopping rule,
+axis by axis: a gradient or dynamic run stops at the first pose where the restoring force
+along every axis is at most its pinning force, ``|dE/dq_k| <= P_k`` (and, for the inertial
+method, where the kinetic energy left is at most the pinning work over one grid step); a
+greedy move is taken only if the energy it releases exceeds the pinning work
+``sum_k P_k |dq_k|``. With zero hysteresis, or no sliding line, every rule is today's
+exactly. Where lines slide and the well is a spring of stiffness ``k``, the chip stops
+about ``P / k`` short: for free lines in a pad wider than the chip, where the wall
+profile's force ``|Delta_gamma| L f(u)`` falls to ``f_pin L``, ``f(u) = f_pin /
+|Delta_gamma|``.
 """
 
 from __future__ import annotations
