@@ -231,7 +231,7 @@ def simulate(
     }
     refined = None
     outcome = stepping.OUTCOMES[int(out)]
-    if scene.meniscus_height_um is not None and not scene.effects.hysteresis and method != "greedy" and outcome in ("aligned", "local_minimum"):
+    if scene.meniscus_height_um is not None and not any(pin) and method != "greedy" and outcome in ("aligned", "local_minimum"):
         from simulator.refine import refine_minimum
 
         r = refine_minimum(ls, *traj.final)
