@@ -131,8 +131,20 @@ def _one(field: stepping.Field, grid: stepping.Grid, params, start, method: str,
 @functools.partial(jax.jit, static_argnames=("grid", "method", "max_steps", "stiff"))
 def _run_chunk(field: stepping.Field, params, starts: jax.Array, grid: stepping.Grid, method: str, max_steps: int, stiff: bool = False):
     """The jit boundary: vmap of :func:`_one` over a (chunk, 3) array of start indices
-    (``params`` traced and shared by every lane)."""
-    return jax.vmap(lambda s: _one(field, grid, params, s, method, max_steps, stiff))(starts)
+    (``params`` traced and shared by every lane).
+
+    A stiff inertial run (the implicit solver, diffrax Kvaerno5) is mapped one start after
+    the other (``jax.lax.map``) instead: under vmap diffrax re-evaluates the first stage
+    of every lane while any lane is still on its first step
+    (``eqxi.unvmap_any(first_step | made_jump)`` in its Runge-Kutta step), and for an
+    implicit solver that fresh value differs from the carried first-same-as-last one by
+    the root finder's tolerance, so a lane's path would depend on its neighbours
+    (measured: up to 4e-4 um and 3x the steps after 1 s). Explicit solvers carry the
+    same value either way, so their lanes are independent and equal single runs."""
+    def one(s):
+        return _one(field, grid, params, s, method, max_steps, stiff)
+
+    return jax.lax.map(one, starts) if stiff else jax.vmap(one)(starts)
 
 
 def _check_starts_fit(ls: Landscape, poses: np.ndarray) -> None:
@@ -321,6 +333,7 @@ def run_batch(
             "steps_per_s": float(steps.sum()) / dt,
             "chunk": chunk,
             "landscape_shape": tuple(int(v) for v in ls.energy.shape),
+            "stiff": stiff,  # dynamics: the implicit solver, starts mapped one after the other (_run_chunk)
         },
         time_s=time_s,
     )

@@ -296,12 +296,12 @@ def run(args: argparse.Namespace) -> int:
             write_csv(stack.enter_context(atomic_output(args.csv)), result, OUTCOMES)
         if args.json:
             stack.enter_context(atomic_output(args.json)).write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n")
-        if args.map:
-            plot_capture_map(mc.capture_map(result, grid), grid, scene, args.map, title=_map_title(args, summary))
-        if args.time_plot:
+        if args.time_plot:  # moved into place with the files above, when every output is ready
             from simulator.render import plot_time_to_align
 
-            plot_time_to_align(result.time_to_align_s, args.time_plot, title=_time_title(args, summary))
+            plot_time_to_align(result.time_to_align_s, stack.enter_context(atomic_output(args.time_plot)), title=_time_title(args, summary))
+        if args.map:
+            plot_capture_map(mc.capture_map(result, grid), grid, scene, args.map, title=_map_title(args, summary))
     for flag in ("csv", "json", "map", "time_plot"):
         if getattr(args, flag):
             print(f"wrote {getattr(args, flag)}")
