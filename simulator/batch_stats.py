@@ -1,11 +1,13 @@
 """The result of a Monte Carlo batch, and the statistics read off it.
 
 Owns :class:`BatchResult` (per-start requested and final poses, outcomes, steps,
-energies, the optimum "aligned" is measured from) and what the commands report from
-one: twist errors modulo the symmetry period (:func:`twist_error`), error statistics
-(:func:`error_stats`), outcome counts (:func:`outcome_counts`), the capture map of a
-start grid (:func:`capture_map`), the largest bias that still aligns
-(:func:`max_bias`) and the JSON-ready summary (:func:`summarize`). Conventions as in
+energies, for the dynamics the simulated time of each run, the optimum "aligned" is
+measured from) and what the commands report from one: twist errors modulo the symmetry
+period (:func:`twist_error`), error statistics (:func:`error_stats`), outcome counts
+(:func:`outcome_counts`), the distribution of the time to align (:func:`time_stats`,
+:func:`time_histogram`), the capture map of a start grid (:func:`capture_map`), the
+largest bias that still aligns (:func:`max_bias`) and the JSON-ready summary
+(:func:`summarize`). Conventions as in
 :mod:`simulator.montecarlo`, which runs the batches and re-exports every name here.
 """
 
@@ -31,6 +33,8 @@ class BatchResult:
     energy_J: (N,) final energy.
     period_deg: the chip's rotational symmetry period (twist errors are modulo it).
     optimum: (x_um, y_um, twist_deg) of the landscape's global minimum ("aligned").
+    time_s: (N,) simulated time (s) at the end of each run, for the dynamic methods
+        (overdamped, inertial); None for greedy and gradient, which have no time.
     """
 
     method: str
@@ -42,10 +46,21 @@ class BatchResult:
     period_deg: float
     optimum: tuple[float, float, float]
     stats: dict = field(default_factory=dict)
+    time_s: np.ndarray | None = None
 
     @property
     def n(self) -> int:
         return len(self.outcome)
+
+    @property
+    def time_to_align_s(self) -> np.ndarray | None:
+        """(N,) time to align, s: the simulated time at which an aligned run came to rest
+        (the solver's stop test: force and kinetic energy below the landscape's noise
+        floor, or on the floor a chip floats on), NaN for the starts that did not align;
+        None for the steppers."""
+        if self.time_s is None:
+            return None
+        return np.where(self.outcome == stepping.OUTCOMES.index("aligned"), self.time_s, np.nan)
 
     def outcome_names(self) -> np.ndarray:
         return np.asarray(stepping.OUTCOMES)[self.outcome]
@@ -64,6 +79,34 @@ def _stats(v: np.ndarray) -> dict | None:
         return None
     a = np.abs(v)
     return {"mean": float(v.mean()), "mean_abs": float(a.mean()), "std": float(v.std()), "max_abs": float(a.max())}
+
+
+#: Percentiles of the time to align that the summaries report (median and 90th).
+TIME_PERCENTILES = (50, 90)
+
+
+def time_stats(times_s) -> dict | None:
+    """Distribution of the times to align (s) of the starts that aligned (NaN entries are
+    the others): ``n``, ``median``, ``p90`` (90th percentile, numpy's linear
+    interpolation), ``mean``, ``min``, ``max``; None when none aligned."""
+    t = np.asarray(times_s, float)
+    t = t[np.isfinite(t)]
+    if t.size == 0:
+        return None
+    med, p90 = np.percentile(t, TIME_PERCENTILES)
+    return {"n": int(t.size), "median": float(med), "p90": float(p90), "mean": float(t.mean()), "min": float(t.min()), "max": float(t.max())}
+
+
+def time_histogram(times_s, bins: int = 20) -> dict | None:
+    """Histogram of the times to align (s) of the aligned starts: ``edges_s`` (bins + 1
+    edges from 0 to the largest time) and ``counts``; None when none aligned."""
+    t = np.asarray(times_s, float)
+    t = t[np.isfinite(t)]
+    if t.size == 0:
+        return None
+    hi = float(t.max()) if t.max() > 0 else 1.0
+    counts, edges = np.histogram(t, bins=bins, range=(0.0, hi))
+    return {"edges_s": [float(v) for v in edges], "counts": [int(v) for v in counts]}
 
 
 def error_stats(final: np.ndarray, period_deg: float, target=(0.0, 0.0, 0.0)) -> tuple[dict, dict]:
@@ -128,8 +171,10 @@ def summarize(result: BatchResult, grid: StartGrid | None = None, target: str = 
     ``aligned_error_deg`` (over the aligned starts; None if none), ``optimum``
     (the global minimum, where "aligned" is measured), ``error_target`` (the pose the
     errors are measured from: ``kind`` "global_minimum", the optimum, or "nominal",
-    (0, 0, 0), with ``x_um``, ``y_um``, ``twist_deg``), and for a grid
-    ``max_bias_um`` / ``max_bias_limited_by_grid`` (:func:`max_bias`).
+    (0, 0, 0), with ``x_um``, ``y_um``, ``twist_deg``), for a grid
+    ``max_bias_um`` / ``max_bias_limited_by_grid`` (:func:`max_bias`), and for the
+    dynamic methods ``time_to_align_s``: :func:`time_stats` of the aligned starts' times
+    (seconds of simulated time; None if none aligned).
     """
     require(target in ("global_minimum", "nominal"), f"target must be 'global_minimum' or 'nominal', got {target!r}")
     counts = outcome_counts(result.outcome)
@@ -151,6 +196,8 @@ def summarize(result: BatchResult, grid: StartGrid | None = None, target: str = 
         "error_target": {"kind": target, "x_um": goal[0], "y_um": goal[1], "twist_deg": goal[2]},
         "period_deg": result.period_deg,
     }
+    if result.time_s is not None:
+        out["time_to_align_s"] = time_stats(result.time_to_align_s)
     if grid is not None:
         out["max_bias_um"], out["max_bias_limited_by_grid"] = max_bias(result, grid)
     return out

@@ -33,10 +33,16 @@ METHODS = ("greedy", "gradient", "overdamped", "inertial")
 DEFAULT_MAX_STEPS = 5000
 #: Largest max_steps: step counters are int32.
 MAX_STEPS_LIMIT = 2**31 - 2
-#: The methods a Monte Carlo batch runs (:func:`simulator.montecarlo.run_batch`).
-BATCH_METHODS = ("greedy", "gradient")
-#: Starts per compiled batch (measured best on a 2-core CPU, see README "Monte Carlo").
+#: The methods a Monte Carlo batch runs (:func:`simulator.montecarlo.run_batch`): every
+#: trajectory method, the dynamics (overdamped, inertial) included.
+BATCH_METHODS = METHODS
+#: The time-resolved methods (they need :class:`simulator.dynamics_params.DynamicsParams`).
+DYNAMIC_METHODS = ("overdamped", "inertial")
+#: Starts per compiled batch of the steppers (measured best on a 2-core CPU, see README "Monte Carlo").
 DEFAULT_CHUNK = 2048
+#: Starts per compiled batch of the dynamics (a vmapped solver runs until its slowest
+#: lane stops, and the bar advances per chunk; see README "Monte Carlo").
+DEFAULT_DYNAMICS_CHUNK = 64
 #: Largest chunk of starts compiled together.
 MAX_CHUNK = 2**20
 #: ``evaluate``: landscapes above this (MB) are built at a coarser resolution unless the user chose one.

@@ -15,7 +15,11 @@
   twist;
 
 and writes ``summary.json``, ``landscape.png``, ``force.png``, ``capture.png``,
-``pattern.png`` (the input as used) and ``report.html`` into a directory. Everything
+``pattern.png`` (the input as used) and ``report.html`` into a directory. The capture
+and yield runs use greedy steps by default; ``method`` chooses gradient or the dynamics
+(overdamped, inertial: batched, with the chip's mass and damping from the scene), which
+also report the time each start takes to align (``time_to_align_s``: median, 90th
+percentile, ...) and draw its histogram (``time_to_align.png``). Everything
 is written into a temporary directory beside it and renamed into place at the end,
 so a failure leaves no partial directory; an existing directory is never replaced
 unless asked (``force``) and only when it holds a previous selfalign output.
@@ -88,8 +92,11 @@ def max_bias_along(values: np.ndarray, force: np.ndarray, x0: float, floor: list
 
 
 def evaluate(scene: Scene, out_dir: str | os.PathLike, quiet: bool = False, source: str = "", auto: bool = True,
-             force: bool = False, inputs: tuple = (), liquid_warnings: list[str] | None = None) -> dict:
+             force: bool = False, inputs: tuple = (), liquid_warnings: list[str] | None = None, method: str = "greedy") -> dict:
     """Assess ``scene`` and write the report into ``out_dir``.
+
+    ``method``: how the capture and yield starts run (:data:`simulator.montecarlo.METHODS`;
+    default greedy); the dynamics add ``time_to_align.png`` and the times to the report.
 
     ``liquid_warnings`` (:func:`simulator.liquid.scene_warnings`) go into the summary
     (``liquid_warnings``, a list of one-line strings) and the report.
@@ -105,7 +112,7 @@ def evaluate(scene: Scene, out_dir: str | os.PathLike, quiet: bool = False, sour
     if auto:
         scene = auto_resolution(scene)
     with output_directory(out_dir, "--out", force, inputs, command="evaluate") as tmp:
-        summary = assess(scene, quiet=quiet, pictures=tmp)
+        summary = assess(scene, quiet=quiet, pictures=tmp, method=method)
         summary["settings"] |= {"source_um_per_px": native, "resolution_auto": bool(auto and scene.um_per_px != native)}
         if "layout" in scene.pattern.params:  # a layout pattern: file, cell, layers, units, and where the origin is
             summary["layout"] = scene.pattern.params["layout"]
@@ -126,7 +133,15 @@ def assess(scene: Scene, *, quiet: bool = True, pictures=None, method: str = "gr
     The defaults are evaluate's: greedy steps, the yield's placement noise (sigma x, y in um
     and twist in degrees; default 10 % of the chip size and 2 degrees) drawn with ``seed``
     0, ``yield_starts`` starts, and a capture grid of about ``grid_cells`` starts per side.
+    ``method`` "overdamped" or "inertial" runs the starts through the dynamics
+    (:func:`simulator.montecarlo.run_batch`, parameters from the scene) and adds
+    ``time_to_align_s`` (:func:`simulator.batch_stats.time_stats`, seconds of simulated
+    time; None when no start aligned) to ``capture`` and ``yield``, and
+    ``time_to_align.png`` (the yield starts' histogram) to ``pictures``.
     """
+    from patterns.errors import require
+
+    require(method in montecarlo.METHODS, f"method must be one of {', '.join(montecarlo.METHODS)}, got {method!r}")
     s = scene.um_per_px
     ls = build_landscape(scene, progress=not quiet)
     xm, ym, tm, em = ls.global_minimum()
@@ -195,8 +210,11 @@ def assess(scene: Scene, *, quiet: bool = True, pictures=None, method: str = "gr
         render.plot_landscape(ls, out / "landscape.png", pattern=scene.pattern)
         render.plot_forces(ls, out / "force.png", through=(xm, ym, tm), compare=meniscus["overlap"] if meniscus else None)
         render.plot_capture_map(
-            montecarlo.capture_map(cap, grid), grid, scene, out / "capture.png", title=f"capture map: capture fraction {100 * cap_sum['yield']:.1f} % of {cap_sum['n']} grid starts"
+            montecarlo.capture_map(cap, grid), grid, scene, out / "capture.png", title=f"capture map ({method}): capture fraction {100 * cap_sum['yield']:.1f} % of {cap_sum['n']} grid starts"
         )
+        if yl.time_s is not None:
+            render.plot_time_to_align(yl.time_to_align_s, out / "time_to_align.png",
+                                      title=f"time to align ({method}): {yl_sum['outcomes']['aligned']:,} of {yl_sum['n']:,} placement-noise starts aligned")
     m = scene.materials
     extra = {}
     if meniscus:
@@ -227,7 +245,7 @@ def assess(scene: Scene, *, quiet: bool = True, pictures=None, method: str = "gr
             "grid_um": {"from": -n * step, "to": n * step, "step": step},  # about the centre
             "center": {"x_um": gx, "y_um": gy},
             "twist_deg": gt,
-        },
+        } | ({"time_to_align_s": cap_sum["time_to_align_s"]} if "time_to_align_s" in cap_sum else {}),
         "yield": {
             "fraction": yl_sum["yield"],
             "n": yl_sum["n"],
@@ -236,7 +254,7 @@ def assess(scene: Scene, *, quiet: bool = True, pictures=None, method: str = "gr
             "seed": seed,
             "error_um": yl_sum.get("aligned_error_um"),
             "error_deg": yl_sum.get("aligned_error_deg"),
-        },
+        } | ({"time_to_align_s": yl_sum["time_to_align_s"]} if "time_to_align_s" in yl_sum else {}),
         "settings": {
             "um_per_px": s,
             "pattern_px": list(scene.pattern.shape),
@@ -323,6 +341,22 @@ def _meniscus_rows(summary: dict) -> str:
             f"{_at(o['distance_um'])} um</td></tr></table>{warn_html}\n")
 
 
+def _time_text(t: dict | None) -> str:
+    if t is None:
+        return "no start aligned"
+    return (f"median <b>{1e3 * t['median']:.3g} ms</b>, 90th percentile <b>{1e3 * t['p90']:.3g} ms</b>, "
+            f"range {1e3 * t['min']:.3g} to {1e3 * t['max']:.3g} ms over {t['n']:,} aligned starts")
+
+
+def _time_rows(cap: dict, yl: dict) -> str:
+    """The report's section on the time to align (dynamics only; empty for the steppers)."""
+    if "time_to_align_s" not in yl:
+        return ""
+    return (f"\n<h2>Time to align</h2>\n<p>Simulated time until an aligned run comes to rest (the solver's stop test), "
+            f"placement-noise starts: {_time_text(yl['time_to_align_s'])}; capture grid: {_time_text(cap.get('time_to_align_s'))}.</p>\n"
+            f'<img src="time_to_align.png" alt="histogram of the time to align">')
+
+
 def _html(summary: dict, source: str) -> str:
     """The one-page report: inputs, numbers with units, the four pictures."""
     s, g = summary["settings"], summary["global_minimum"]
@@ -378,11 +412,11 @@ Plateaus (zero force): {e(plateaus)}.</p>
 <h2>Energy landscape</h2>
 <img src="landscape.png" alt="energy over x and y">
 <h2>Capture region and yield</h2>
-<p>Capture fraction: <b>{100 * cap['fraction']:.1f} %</b> of {cap['n']} greedy starts on a grid from {cap['grid_um']['from']:g} to {cap['grid_um']['to']:g} um
+<p>Capture fraction: <b>{100 * cap['fraction']:.1f} %</b> of {cap['n']} {e(s['method'])} starts on a grid from {cap['grid_um']['from']:g} to {cap['grid_um']['to']:g} um
 in steps of {cap['grid_um']['step']:g} um in x and y around the global minimum, twist {cap['twist_deg']:g} deg ({e(cap_out)}).</p>
 <p>Yield under placement noise: <b>{100 * yl['fraction']:.1f} %</b> of {yl['n']} starts drawn normally around the aligned pose (the global minimum) with
 &sigma; = {ps['x_um']:.3g} um, {ps['y_um']:.3g} um, {ps['twist_deg']:g} deg (seed {yl['seed']}): {e(outcomes)}; aligned runs, final-pose error from the global minimum: {e(err_txt)}.</p>
-<img src="capture.png" alt="capture map">
+<img src="capture.png" alt="capture map">{_time_rows(cap, yl)}
 <p class="note">Written by selfalign. The numbers are in summary.json (units in the key names).</p>
 </body></html>
 """

@@ -1,14 +1,22 @@
 """Many starts at once: yields, outcome counts, error statistics and capture maps.
 
 A batch runs the *same* stepper functions as one trajectory
-(:func:`simulator.stepping.greedy`, :func:`simulator.stepping.gradient_descent`, with
+(:func:`simulator.steppers.stepper`: :func:`simulator.stepping.greedy`,
+:func:`simulator.stepping.gradient_descent`, and the dynamics
+:func:`simulator.dynamics.overdamped` and :func:`simulator.dynamics.inertial`, with
 ``record=False``) under ``jax.jit(jax.vmap(...))`` on one landscape built once, so every
-start's final pose, step count and outcome are bit for bit those of
-``simulate(scene, start, landscape=ls)`` (tested).
+start's final pose, step count and outcome are those of
+``simulate(scene, start, method, landscape=ls)`` (tested: bit for bit for the steppers,
+to 1e-6 um for the dynamics, which also give the same simulated time). The dynamics take
+:class:`~simulator.dynamics_params.DynamicsParams` (default: from the scene, as
+``simulate`` takes them) and the solver ``simulate`` would choose (the implicit one for a
+stiff inertial run); a vmapped solver runs until its slowest lane stops, so their chunks
+are smaller (:data:`DEFAULT_DYNAMICS_CHUNK`), and the solver's state per lane is priced
+against the memory budget before anything is built (:func:`price_dynamics_lanes`).
 
 The jit boundary is :func:`_run_chunk`: ``grid`` (the landscape's hashable :class:`~simulator.posegrid.PoseGrid`),
-``method`` and ``max_steps`` are static (a new value recompiles); the landscape field and
-the (chunk, 3) start indices are traced. Starts are processed in chunks of a fixed size;
+``method``, ``max_steps`` and ``stiff`` are static (a new value recompiles); the landscape
+field, the dynamics parameters and the (chunk, 3) start indices are traced. Starts are processed in chunks of a fixed size;
 the last chunk is padded (with copies of its first start, whose results are dropped) so
 one compiled program serves the whole run, and memory stays bounded by the chunk.
 Starts run grouped by their distance from the global minimum (similar run lengths
@@ -21,15 +29,21 @@ Conventions:
 * Poses are ``(x_um, y_um, twist_deg)`` of the chip centre relative to the pattern's
   nominal centre, x right, y up, twist counter-clockwise positive (docs/physics.md §1).
   Greedy starts at the grid pose nearest the start (the landscape's pixel and twist
-  step); gradient starts at the start itself.
+  step); gradient and the dynamics start at the start itself.
 * Final twists are reported as the stepper turned (unwrapped, e.g. -90 degrees);
   twist *errors* are taken modulo the chip's symmetry period into
   ``[-period/2, period/2)``.
 * "aligned" is :func:`simulator.stepping.classify` against the landscape's global
-  minimum (:mod:`simulator.optimum`), and the error statistics of a batch are measured
+  minimum (:mod:`simulator.optimum`), within the tolerance of
+  :func:`simulator.hysteresis.align_tolerance` (anywhere on the floor a chip floats on,
+  with free contact lines), for every method alike, and the error statistics of a batch are measured
   from that same pose, the target the run reports (``error_target``). Pooled over
   random-jagged patterns (:func:`run_realizations`) they are measured from the nominal
   pose (0, 0, 0) instead: how far each pattern's minimum moves is what it measures.
+* Time (dynamics): ``BatchResult.time_s`` is each run's simulated time at its end, and
+  ``time_to_align_s`` that time for the starts that aligned (the run came to rest at
+  the aligned pose), NaN for the others; summaries report its median and 90th
+  percentile (:func:`time_stats`).
 * Randomness: start poses are drawn on the host with ``numpy.random.default_rng(seed)``
   (:func:`random_starts`), all N at once, so the draws do not depend on the chunk size.
 
@@ -54,6 +68,7 @@ import numpy as np
 from patterns.errors import InputError, require
 from patterns.hold import hold
 from patterns.mask import Mask
+from patterns.resources import require_fits
 from simulator import steppers, stepping
 from simulator.batch_stats import (  # noqa: F401  (the result and its statistics live in simulator.batch_stats; importable from here)
     BatchResult,
@@ -62,10 +77,18 @@ from simulator.batch_stats import (  # noqa: F401  (the result and its statistic
     max_bias,
     outcome_counts,
     summarize,
+    time_histogram,
+    time_stats,
     twist_error,
 )
 from simulator.defaults import BATCH_METHODS as METHODS
-from simulator.defaults import DEFAULT_CHUNK, MAX_CHUNK, threads  # noqa: F401  (re-exported)
+from simulator.defaults import (  # noqa: F401  (re-exported)
+    DEFAULT_CHUNK,
+    DEFAULT_DYNAMICS_CHUNK,
+    DYNAMIC_METHODS,
+    MAX_CHUNK,
+    threads,
+)
 from simulator.feedback import progress_bar
 from simulator.hysteresis import align_tolerance, pin_per_index
 from simulator.landscape import Landscape, build_landscape
@@ -83,21 +106,45 @@ from simulator.starts import (  # noqa: F401  (start poses live in simulator.sta
     price_starts,
     random_starts,
 )
-from simulator.trajectory import DEFAULT_MAX_STEPS, MAX_STEPS_LIMIT, radius_of_gyration_px
+from simulator.trajectory import DEFAULT_MAX_STEPS, MAX_STEPS_LIMIT, _stiff, radius_of_gyration_px
+
+#: Peak bytes per start of a dynamics batch beyond :data:`BATCH_BYTES_PER_START`: its time.
+TIME_BYTES_PER_START = 16
+#: Peak bytes per lane of a vmapped dynamics chunk (the solver's state, stages, controller
+#: and event; XLA's temporaries): measured with JAX's compiled memory analysis at 0.6-1.5 KB
+#: (explicit solver) and 3-6 KB (the implicit one of stiff inertial runs), float32-float64.
+DYNAMICS_BYTES_PER_LANE = 16384
 
 
 # --------------------------------------------------------------------- batch
-def _one(field: stepping.Field, grid: stepping.Grid, start, method: str, max_steps: int):
-    """One start -> (final q, steps, status, outcome, energy); the single run vmap maps."""
-    s = steppers.stepper(method)(field, grid, None, start, max_steps, record=False)
+def _one(field: stepping.Field, grid: stepping.Grid, params, start, method: str, max_steps: int, stiff: bool):
+    """One start -> (final q, steps, status, outcome, energy, time_s); the single run vmap maps.
+
+    ``params``: the :class:`~simulator.dynamics_params.DynamicsParams` of a dynamic method
+    (None for greedy and gradient); ``time_s`` is the simulated time at the end of a
+    dynamic run (NaN for the steppers)."""
+    s = steppers.stepper(method, stiff)(field, grid, params, start, max_steps, record=False)
     status, out = steppers.finish(field, grid, s, max_steps)
-    return s.q, s.step, status, out, s.energy
+    return s.q, s.step, status, out, s.energy, s.time_s
 
 
-@functools.partial(jax.jit, static_argnames=("grid", "method", "max_steps"))
-def _run_chunk(field: stepping.Field, starts: jax.Array, grid: stepping.Grid, method: str, max_steps: int):
-    """The jit boundary: vmap of :func:`_one` over a (chunk, 3) array of start indices."""
-    return jax.vmap(lambda s: _one(field, grid, s, method, max_steps))(starts)
+@functools.partial(jax.jit, static_argnames=("grid", "method", "max_steps", "stiff"))
+def _run_chunk(field: stepping.Field, params, starts: jax.Array, grid: stepping.Grid, method: str, max_steps: int, stiff: bool = False):
+    """The jit boundary: vmap of :func:`_one` over a (chunk, 3) array of start indices
+    (``params`` traced and shared by every lane).
+
+    A stiff inertial run (the implicit solver, diffrax Kvaerno5) is mapped one start after
+    the other (``jax.lax.map``) instead: under vmap diffrax re-evaluates the first stage
+    of every lane while any lane is still on its first step
+    (``eqxi.unvmap_any(first_step | made_jump)`` in its Runge-Kutta step), and for an
+    implicit solver that fresh value differs from the carried first-same-as-last one by
+    the root finder's tolerance, so a lane's path would depend on its neighbours
+    (measured: up to 4e-4 um and 3x the steps after 1 s). Explicit solvers carry the
+    same value either way, so their lanes are independent and equal single runs."""
+    def one(s):
+        return _one(field, grid, params, s, method, max_steps, stiff)
+
+    return jax.lax.map(one, starts) if stiff else jax.vmap(one)(starts)
 
 
 def _check_starts_fit(ls: Landscape, poses: np.ndarray) -> None:
@@ -157,49 +204,74 @@ def run_batch(
     method: str = "greedy",
     *,
     landscape: Landscape | None = None,
-    chunk: int = DEFAULT_CHUNK,
+    chunk: int | None = None,
     max_steps: int = DEFAULT_MAX_STEPS,
     progress: bool = True,
     workers: int | None = None,
+    dynamics=None,
 ) -> BatchResult:
     """Run every start to its end on one landscape.
 
     Args:
         scene: what to simulate.
         starts: (N, 3) poses (x_um, y_um, twist_deg), or a :class:`StartGrid`.
-        method: "greedy" or "gradient".
+        method: "greedy", "gradient", "overdamped" or "inertial" (the dynamics of
+            :mod:`simulator.dynamics`, ``jax.vmap`` of the single-run solver).
         landscape: the landscape to run on; default ``build_landscape(scene)`` (the full
             landscape, built once).
-        chunk: starts per compiled batch (at most N); memory is bounded by it.
-        max_steps: bound on moves per start.
+        chunk: starts per compiled batch (at most N); memory is bounded by it. Default
+            :data:`DEFAULT_CHUNK` for the steppers, :data:`DEFAULT_DYNAMICS_CHUNK` for
+            the dynamics.
+        max_steps: bound on moves per start (solver steps for the dynamics).
         progress: a tqdm bar over the starts, advanced per chunk (on stderr).
         workers: threads that run chunks at once (default: one per CPU core). Lanes
             are independent, so the results do not depend on it.
+        dynamics: :class:`simulator.dynamics_params.DynamicsParams` of the dynamic
+            methods (default: ``DynamicsParams.from_scene(scene)``, as
+            :func:`simulator.trajectory.simulate` takes them); ignored by the steppers.
 
     Returns:
-        A :class:`BatchResult`; ``stats`` holds seconds, starts and steps per second.
+        A :class:`BatchResult`; ``stats`` holds seconds, starts and steps per second;
+        for the dynamics ``time_s`` holds each start's simulated time at its end
+        (:attr:`BatchResult.time_to_align_s`: that time for the aligned starts).
     """
     require(method in METHODS, f"method must be one of {', '.join(METHODS)}, got {method!r}")
+    dynamic = method in DYNAMIC_METHODS
+    if chunk is None:
+        chunk = DEFAULT_DYNAMICS_CHUNK if dynamic else DEFAULT_CHUNK
     for name, v in (("chunk", chunk), ("max steps", max_steps)):
         if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < 1:
             raise InputError(f"{name} must be a whole number >= 1, got {v!r}")
     require(max_steps <= MAX_STEPS_LIMIT, f"max steps must be at most {MAX_STEPS_LIMIT:,} (the step counter is 32-bit), got {max_steps:,}")
     require(chunk <= MAX_CHUNK, f"chunk must be at most {MAX_CHUNK:,} starts, got {chunk:,}")
+    per_start = BATCH_BYTES_PER_START + (TIME_BYTES_PER_START if dynamic else 0)
     if isinstance(starts, StartGrid):
-        price_starts(starts.size, scene.memory_budget_mb)
+        price_starts(starts.size, scene.memory_budget_mb, per_start)
     if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int | np.integer) or workers < 1):
         raise InputError(f"workers must be a whole number >= 1 or None, got {workers!r}")
     poses = _as_poses(starts)
-    price_starts(len(poses), scene.memory_budget_mb)
+    price_starts(len(poses), scene.memory_budget_mb, per_start)
+    n, chunk = len(poses), int(min(chunk, len(poses)))
+    workers = max(1, min(int(workers or threads()), -(-n // chunk)))
+    if dynamic:
+        # The solver's state per lane, for every chunk in flight: priced before the
+        # landscape is built or anything compiled. The parameters as the single run takes them.
+        price_dynamics_lanes(chunk * workers, scene.memory_budget_mb)
+        if dynamics is None:
+            from simulator.dynamics_params import DynamicsParams
+
+            dynamics = DynamicsParams.from_scene(scene)
+    else:
+        dynamics = None
     t0 = time.perf_counter()
     ls = build_landscape(scene, progress=progress) if landscape is None else landscape
     t_land = time.perf_counter() - t0
     _check_starts_fit(ls, poses)
     pin = pin_per_index(scene, ls.um_per_px, ls.twist_step_deg)
     fld, grid = stepping.field_and_grid(ls, radius_of_gyration_px(scene), pin=pin, align_tol=align_tolerance(ls, pin, floats=scene.wall_profile is not None))
+    stiff = bool(_stiff(method, fld, grid, dynamics)) if dynamic else False  # the solver simulate() would choose
     q0 = grid.to_index(poses)
     q0 = np.round(q0).astype(np.int32) if method == "greedy" else q0  # as simulate()
-    n, chunk = len(poses), int(min(chunk, len(poses)))
     # A vmapped while loop runs until its slowest lane stops: starts run grouped by run
     # length and position (_run_order) and are scattered back. Lanes are independent, so
     # the order changes no result.
@@ -209,6 +281,7 @@ def run_batch(
     steps = np.empty(n, np.int32)
     outcome = np.empty(n, np.int8)
     energy = np.empty(n, np.float64)
+    time_s = np.empty(n, np.float64) if dynamic else None
 
     def run(i: int) -> int:
         """Chunk starting at i: run, then scatter its results (disjoint rows per chunk)."""
@@ -216,17 +289,18 @@ def run_batch(
         m = len(block)
         if m < chunk:  # pad with the block's first start: one compiled shape
             block = np.concatenate([block, np.repeat(block[:1], chunk - m, axis=0)])
-        q, st, _, out, e = _run_chunk(fld, jnp.asarray(block), grid=grid, method=method, max_steps=int(max_steps))
+        q, st, _, out, e, ts = _run_chunk(fld, dynamics, jnp.asarray(block), grid=grid, method=method, max_steps=int(max_steps), stiff=stiff)
         dest = order[i : i + m]
         final_q[dest] = np.asarray(q)[:m]
         steps[dest] = np.asarray(st)[:m]
         outcome[dest] = np.asarray(out)[:m]
         energy[dest] = np.asarray(e)[:m]
+        if time_s is not None:
+            time_s[dest] = np.asarray(ts)[:m]
         return m
 
     t1 = time.perf_counter()
     chunks = range(0, n, chunk)
-    workers = max(1, min(int(workers or threads()), len(chunks)))
     with progress_bar(progress, n, method, "start") as bar:
         if workers == 1:
             for i in chunks:
@@ -259,8 +333,17 @@ def run_batch(
             "steps_per_s": float(steps.sum()) / dt,
             "chunk": chunk,
             "landscape_shape": tuple(int(v) for v in ls.energy.shape),
+            "stiff": stiff,  # dynamics: the implicit solver, starts mapped one after the other (_run_chunk)
         },
+        time_s=time_s,
     )
+
+
+def price_dynamics_lanes(lanes: int, budget_mb: float | None) -> None:
+    """Refuse a dynamics batch whose solver states (``lanes`` = chunk x threads in flight,
+    :data:`DYNAMICS_BYTES_PER_LANE` each) would not fit the memory budget."""
+    require_fits(f"the solver states of {lanes:,} dynamics runs at once", float(lanes) * DYNAMICS_BYTES_PER_LANE,
+                 "use a smaller --chunk", budget_mb)
 
 
 # --------------------------------------------------------------------- pattern realizations
@@ -275,7 +358,7 @@ def run_realizations(
     margin_um: float = 10.0,
     method: str = "greedy",
     scene_options: dict | None = None,
-    chunk: int = DEFAULT_CHUNK,
+    chunk: int | None = None,
     max_steps: int = DEFAULT_MAX_STEPS,
     progress: bool = False,
 ) -> list[dict]:
@@ -323,6 +406,7 @@ def run_realizations(
             energy_J=np.concatenate([p.energy_J for p in parts]),
             period_deg=parts[0].period_deg,
             optimum=(math.nan,) * 3,
+            time_s=None if parts[0].time_s is None else np.concatenate([p.time_s for p in parts]),
         )
         summary = summarize(pooled, target="nominal")  # each pattern's own shift is the error
         summary.pop("optimum")

@@ -313,3 +313,26 @@ def plot_capture_map(cmap: np.ndarray, grid, scene, path, title: str = "") -> No
     shown = f" ({len(show)} of {t} twists shown)" if len(show) < t else ""
     fig.suptitle(f"{title}{shown}\neach cell: the chip centre's start position; colour: how the run from there ended", fontsize=10)
     save_figure(fig, path)
+
+
+def plot_time_to_align(times_s, path: str | os.PathLike, title: str = "", bins: int = 20) -> None:
+    """Histogram of the time to align (ms) of a dynamics batch's aligned starts (NaN entries,
+    the starts that did not align, are left out), with the median and the 90th percentile
+    marked (:func:`simulator.batch_stats.time_stats`). Written atomically."""
+    from simulator.batch_stats import time_histogram, time_stats
+
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(6.4, 3.8), constrained_layout=True)
+    hist, st = time_histogram(times_s, bins), time_stats(times_s)
+    if hist is None:
+        ax.text(0.5, 0.5, "no start aligned", ha="center", va="center", transform=ax.transAxes)
+    else:
+        edges = 1e3 * np.asarray(hist["edges_s"])
+        ax.bar(edges[:-1], hist["counts"], width=np.diff(edges), align="edge", color="#4c72b0", edgecolor="white", linewidth=0.5)
+        for v, label, style in ((st["median"], "median", "-"), (st["p90"], "90th percentile", "--")):
+            ax.axvline(1e3 * v, color="black", ls=style, lw=1, label=f"{label} {1e3 * v:.3g} ms")
+        ax.legend(fontsize=9)
+    ax.set_xlabel("time to align (ms, simulated)")
+    ax.set_ylabel("aligned starts")
+    ax.set_title(title, fontsize=10)
+    save_figure(fig, path)

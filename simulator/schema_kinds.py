@@ -40,7 +40,7 @@ MAX_SEED = 2**63 - 1
 DTYPES = ("float32", "float64")  # simulator.scene.DTYPES
 ACCURACY_PRESETS = ("fast", "balanced", "precise")  # simulator.accuracy.PRESETS
 SIMULATE_METHODS = ("greedy", "gradient", "overdamped", "inertial")  # simulator.trajectory.METHODS
-MONTECARLO_METHODS = ("greedy", "gradient")  # simulator.montecarlo.METHODS
+MONTECARLO_METHODS = ("greedy", "gradient", "overdamped", "inertial")  # simulator.montecarlo.METHODS
 DISTRIBUTIONS = ("normal", "uniform")  # simulator.montecarlo.DISTRIBUTIONS
 DXF_UNITS = ("um", "mm", "nm")  # patterns.layout.DXF_UNITS
 

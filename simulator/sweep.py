@@ -69,6 +69,11 @@ point's ``point``, ``realization``, ``point_seed``, ``status`` ("ok" or "error")
 (``max_bias_plus_x_um``, ``capture_fraction``, ``yield_fraction``, ``settings_um_per_px``,
 ...) with ``max_bias_x_um`` / ``max_bias_y_um`` (the smaller of the two directions),
 ``global_minimum_offset_um`` and, with free contact lines, ``floating_half_width_um``.
+A point run with ``method`` "overdamped" or "inertial" (the dynamics, batched) also has
+the distribution of the time to align of its aligned starts, in seconds of simulated time:
+``yield_time_to_align_median_s``, ``yield_time_to_align_p90_s`` (and ``_mean_s``,
+``_min_s``, ``_max_s``, ``_n``; the same with ``capture_`` for the capture grid); the
+steppers have no time, so their rows leave these empty.
 """
 
 from __future__ import annotations

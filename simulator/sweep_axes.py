@@ -71,7 +71,8 @@ def _scene_axes() -> dict[str, AxisKind]:
                                        _interval("[0, 1e6]", "um")),
         "placement_sigma_deg": AxisKind("placement_sigma_deg", "number", "placement noise in twist, standard deviation (deg); default 2",
                                         _interval("[0, 3600]", "deg")),
-        "method": AxisKind("method", "choice", "stepper of the capture and yield runs", _choice_check(METHODS), METHODS),
+        "method": AxisKind("method", "choice", "stepper of the capture and yield runs: greedy, gradient, or the dynamics overdamped, inertial",
+                           _choice_check(METHODS), METHODS),
         "resolution_um": AxisKind("resolution_um", "number", "pixel size simulated at (um)", _interval("(0, 1e6]", "um per px")),
         "twist_step_deg": AxisKind("twist_step_deg", "number", "twist grid step (deg)", _interval("(0, 90]", "deg")),
     }

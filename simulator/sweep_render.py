@@ -30,6 +30,8 @@ METRICS = (
     ("restoring_force_plus_x_x_N", "restoring force -Fx at the +x bias (uN)", -1e6),
     ("global_minimum_offset_um", "offset of the global minimum (um)", 1.0),
     ("floating_half_width_um", "the chip floats within +- (um)", 1.0),
+    ("yield_time_to_align_median_s", "time to align, median (ms)", 1e3),
+    ("yield_time_to_align_p90_s", "time to align, 90th percentile (ms)", 1e3),
 )
 #: The most point rows the HTML table shows (the CSV has them all).
 MAX_ROWS = 1000

@@ -205,7 +205,7 @@ def test_unknown_simulate_key_metod_is_refused():
         ({"simulate": {"start": [1, 2]}}, ["[simulate] start = [1, 2]", "[x, y, twist]", "got 2 elements"]),
         ({"simulate": {"start": [0, 0, 4000]}}, ["twist must be a number from -3600 to 3600 deg"]),
         ({"simulate": {"method": "newton"}}, ['"greedy", "gradient", "overdamped", "inertial"']),
-        ({"montecarlo": {"method": "inertial"}}, ['must be one of "greedy", "gradient"']),
+        ({"montecarlo": {"method": "newton"}}, ['must be one of "greedy", "gradient", "overdamped", "inertial"']),
         ({"montecarlo": {"random": 2.5}}, ["[montecarlo] random = 2.5", "whole number"]),
         ({"montecarlo": {"random": 0}}, ["from 1 to 1e8"]),
         ({"montecarlo": {"seed": -1}}, ["[montecarlo] seed = -1", "from 0 to"]),

@@ -8,7 +8,7 @@ from pathlib import Path
 from patterns.errors import InputError
 from patterns.outputs import check_output_dir
 from simulator.commands._common import add_scene_args, input_paths, liquid_checks, scene_from_args
-from simulator.defaults import AUTO_LANDSCAPE_MB
+from simulator.defaults import AUTO_LANDSCAPE_MB, BATCH_METHODS, DYNAMIC_METHODS
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -23,13 +23,17 @@ def register(sub: argparse._SubParsersAction) -> None:
             "landscape.png, force.png, capture.png, pattern.png and report.html into --out. Without --chip, "
             "--chip-size or --chip-layer the chip is a rectangle the size of the pattern's wettable bounding box. Without "
             f"--resolution, a pattern whose landscape would exceed {AUTO_LANDSCAPE_MB:g} MB is simulated at a "
-            "coarser whole multiple of its pixel size (the report says which)."
+            "coarser whole multiple of its pixel size (the report says which). The capture and yield starts run greedy steps; "
+            "--method gradient, overdamped or inertial chooses another stepper, the dynamics (the chip's mass and damping from "
+            "the scene) also reporting the time each start takes to align (median, 90th percentile, time_to_align.png)."
         ),
     )
     p.add_argument("image", nargs="?", metavar="PATTERN", help="the pattern PNG or layout (.gds, .oas, .dxf), or give --pattern / a TOML scene")
     add_scene_args(p)
     p.add_argument("--out", required=True, metavar="DIR", help="output directory: new, or empty (never '.', an input's directory or a link)")
     p.add_argument("--force", action="store_true", help="replace --out if it holds a previous selfalign output (and nothing else)")
+    p.add_argument("--method", choices=BATCH_METHODS, default="greedy",
+                   help="how the capture and yield starts run: greedy, gradient, or the dynamics overdamped, inertial (default greedy)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=run)
 
@@ -48,7 +52,7 @@ def run(args: argparse.Namespace) -> int:
     if not (args.chip or args.chip_size or args.chip_layer or args.scene):
         args.chip_size = _bbox_chip(args)
     scene = scene_from_args(args, note_frame=False)
-    liquid_warnings = liquid_checks(args, scene, "greedy", _noise_biases(scene), "the placement-noise starts")
+    liquid_warnings = liquid_checks(args, scene, args.method, _noise_biases(scene), "the placement-noise starts")
     layout = scene.pattern.params.get("layout")
     if layout:
         from patterns.layout import frame_note
@@ -58,13 +62,17 @@ def run(args: argparse.Namespace) -> int:
     from simulator.posegrid import twist_axis
 
     twist_axis(scene)  # a twist step that gives too many twists fails before the announcement
+    if args.method in DYNAMIC_METHODS:
+        from simulator.dynamics_params import DynamicsParams
+
+        DynamicsParams.from_scene(scene)  # a liquid the model cannot take fails before compiling
 
     # JAX, the engine, matplotlib: imported when a run needs them.
     from simulator.evaluate import evaluate
 
-    compiling("greedy", args.quiet)
+    compiling(args.method, args.quiet)
     summary = evaluate(scene, args.out, quiet=args.quiet, source=Path(args.pattern or args.scene).name, auto=args.resolution is None,
-                       force=args.force, inputs=tuple(inputs), liquid_warnings=liquid_warnings)
+                       force=args.force, inputs=tuple(inputs), liquid_warnings=liquid_warnings, method=args.method)
     g, cap, yl = summary["global_minimum"], summary["capture"], summary["yield"]
     b = summary["max_bias_um"]
     if g.get("refined"):  # below the grid (finite meniscus): to 0.1 um and 0.1 degree
@@ -83,8 +91,14 @@ def run(args: argparse.Namespace) -> int:
               f"{fl['y_to_um']:g} um, twist {fl['twist_from_deg']:g} to {fl['twist_to_deg']:g} deg (free contact lines "
               f"{r['substrate']:.3g} um beyond the chip on the substrate, {r['pad']:.3g} um on a pad)")
     print(f"max bias: +x {b['+x']:g} um, -x {b['-x']:g} um, +y {b['+y']:g} um, -y {b['-y']:g} um")
-    print(f"capture fraction {100 * cap['fraction']:.1f} % of {cap['n']} grid starts; yield {100 * yl['fraction']:.1f} % under placement noise")
-    print(f"wrote {Path(args.out) / 'report.html'} (and summary.json, landscape.png, force.png, capture.png, pattern.png)")
+    print(f"capture fraction {100 * cap['fraction']:.1f} % of {cap['n']} grid starts; yield {100 * yl['fraction']:.1f} % under placement noise ({args.method})")
+    pics = "landscape.png, force.png, capture.png, pattern.png"
+    if "time_to_align_s" in yl:
+        from simulator.commands.montecarlo import time_line
+
+        print(f"{time_line(yl['time_to_align_s'])} (placement-noise starts)")
+        pics += ", time_to_align.png"
+    print(f"wrote {Path(args.out) / 'report.html'} (and summary.json, {pics})")
     return 0
 
 

@@ -21,7 +21,13 @@ from simulator.commands._common import (
     scene_from_args,
 )
 from simulator.defaults import BATCH_METHODS as METHODS
-from simulator.defaults import DEFAULT_CHUNK, DEFAULT_MAX_STEPS, MAX_STEPS_LIMIT
+from simulator.defaults import (
+    DEFAULT_CHUNK,
+    DEFAULT_DYNAMICS_CHUNK,
+    DEFAULT_MAX_STEPS,
+    DYNAMIC_METHODS,
+    MAX_STEPS_LIMIT,
+)
 from simulator.finite import require_finite
 from simulator.posegrid import axis_step
 from simulator.render import plot_capture_map  # matplotlib is imported when it draws
@@ -38,7 +44,10 @@ def register(sub: argparse._SubParsersAction) -> None:
             "Run many start poses down one energy landscape (built once) and report the yield "
             "(fraction aligned), the outcome counts and the final-pose errors, measured from the "
             "global minimum that 'aligned' refers to (printed with them). Starts: a regular --grid "
-            "(capture map, maximum bias) or --random placements around a nominal pose."
+            "(capture map, maximum bias) or --random placements around a nominal pose. With --method "
+            "overdamped or inertial the starts run the time-resolved dynamics (the chip's mass, inertia and "
+            "damping from the scene, as in simulate) and the time each start takes to align is reported: "
+            "its median and 90th percentile, per start in --csv, a histogram in --time-plot."
         ),
     )
     add_scene_args(p)
@@ -59,14 +68,17 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--distribution", choices=DISTRIBUTIONS, help="random start distribution per coordinate (default normal)")
     s.add_argument("--seed", type=int, help="seed of numpy.random.default_rng for --random (default 0)")
     r = p.add_argument_group("runs")
-    r.add_argument("--method", choices=METHODS, help="stepper (default greedy)")
-    r.add_argument("--max-steps", type=int, help=f"bound on moves per start (default {DEFAULT_MAX_STEPS})")
-    r.add_argument("--chunk", type=int, help=f"starts per compiled batch (default {DEFAULT_CHUNK}); results do not depend on it")
+    r.add_argument("--method", choices=METHODS, help="stepper: greedy, gradient, or the dynamics overdamped, inertial (default greedy)")
+    r.add_argument("--max-steps", type=int, help=f"bound on moves (solver steps for the dynamics) per start (default {DEFAULT_MAX_STEPS})")
+    r.add_argument("--chunk", type=int, help=f"starts per compiled batch (default {DEFAULT_CHUNK}, dynamics {DEFAULT_DYNAMICS_CHUNK}); "
+                   "results do not depend on it")
     r.add_argument("--quiet", action="store_true", help="no progress bars")
     o = p.add_argument_group("outputs (written only when the whole run succeeds)")
     o.add_argument("--json", help="summary statistics as JSON")
-    o.add_argument("--csv", help="one row per start: start and final pose, outcome, steps")
+    o.add_argument("--csv", help="one row per start: start and final pose, outcome, steps (dynamics: and time_to_align_s)")
     o.add_argument("--map", help="capture map picture (.png, .svg or .pdf; needs --grid)")
+    o.add_argument("--time-plot", metavar="PICTURE",
+                   help="histogram of the time to align of the aligned starts (.png, .svg or .pdf; needs --method overdamped or inertial)")
     p.set_defaults(func=run)
 
 
@@ -152,10 +164,12 @@ def _options(args: argparse.Namespace) -> dict:
         "seed": pick("seed", "seed"),
         "method": pick("method", "method", "greedy"),
         "max_steps": pick("max_steps", "max_steps", DEFAULT_MAX_STEPS),
-        "chunk": pick("chunk", "chunk", DEFAULT_CHUNK),
+        "chunk": pick("chunk", "chunk", None),
     }
     if opt["method"] not in METHODS:
         raise InputError(f"method must be one of {', '.join(METHODS)}, got {opt['method']!r}")
+    if opt["chunk"] is None:
+        opt["chunk"] = DEFAULT_DYNAMICS_CHUNK if opt["method"] in DYNAMIC_METHODS else DEFAULT_CHUNK
     if opt["distribution"] not in (None, *DISTRIBUTIONS):
         raise InputError(f"distribution must be one of {', '.join(DISTRIBUTIONS)}, got {opt['distribution']!r}")
     for key in ("max_steps", "chunk"):
@@ -207,14 +221,19 @@ def _axis_doc(values: tuple[float, ...]) -> dict:
     return {"from": values[0], "to": values[-1], "step": step, "count": len(values)}
 
 
-def _check_outputs(args: argparse.Namespace, is_grid: bool) -> None:
+def _check_outputs(args: argparse.Namespace, is_grid: bool, method: str) -> None:
     """Fail before any work when an output cannot or must not be written."""
-    check_outputs(args, ("json", "csv", "map"))
+    check_outputs(args, ("json", "csv", "map", "time_plot"))
     if args.map:
         if not is_grid:
             raise InputError("--map needs --grid starts (a capture map is drawn over the start grid)")
         if Path(args.map).suffix.lower() not in MAP_SUFFIXES:
             raise InputError(f"--map {args.map}: the picture must end in {', '.join(MAP_SUFFIXES)}")
+    if args.time_plot:
+        if method not in DYNAMIC_METHODS:
+            raise InputError(f"--time-plot needs --method overdamped or inertial (the {method} stepper has no time)")
+        if Path(args.time_plot).suffix.lower() not in MAP_SUFFIXES:
+            raise InputError(f"--time-plot {args.time_plot}: the picture must end in {', '.join(MAP_SUFFIXES)}")
 
 
 # --------------------------------------------------------------------- run
@@ -226,7 +245,7 @@ def run(args: argparse.Namespace) -> int:
     opt = _options(args)
     starts, desc, seed = _starts(opt)
     grid = starts if isinstance(starts, StartGrid) else None
-    _check_outputs(args, grid is not None)
+    _check_outputs(args, grid is not None, opt["method"])
     scene = scene_from_args(args)
     from simulator.liquid import placement_biases
 
@@ -235,6 +254,12 @@ def run(args: argparse.Namespace) -> int:
     from simulator.feedback import compiling
 
     require_landscape_fits(scene)
+    if opt["method"] in DYNAMIC_METHODS:
+        from simulator.dynamics_params import DynamicsParams
+
+        n = starts.size if grid is not None else len(starts)
+        mc.price_dynamics_lanes(min(opt["chunk"], n) * max(1, min(mc.threads(), -(-n // opt["chunk"]))), scene.memory_budget_mb)
+        DynamicsParams.from_scene(scene)  # a liquid the model cannot take fails before compiling
 
     compiling(opt["method"], args.quiet)
     result = mc.run_batch(scene, starts, opt["method"], chunk=opt["chunk"], max_steps=opt["max_steps"], progress=not args.quiet)
@@ -261,6 +286,8 @@ def run(args: argparse.Namespace) -> int:
         "starts_per_s": st["starts_per_s"],
         "liquid_warnings": liquid_warnings,
     }
+    if result.time_s is not None:
+        doc["time_to_align_histogram"] = mc.time_histogram(result.time_to_align_s)
     require_finite(doc, "montecarlo summary")
     require_finite({"start": result.start, "final": result.final}, "montecarlo starts")
     _print_summary(summary | {"seed": seed}, result, desc, st)
@@ -269,9 +296,13 @@ def run(args: argparse.Namespace) -> int:
             write_csv(stack.enter_context(atomic_output(args.csv)), result, OUTCOMES)
         if args.json:
             stack.enter_context(atomic_output(args.json)).write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n")
+        if args.time_plot:  # moved into place with the files above, when every output is ready
+            from simulator.render import plot_time_to_align
+
+            plot_time_to_align(result.time_to_align_s, stack.enter_context(atomic_output(args.time_plot)), title=_time_title(args, summary))
         if args.map:
             plot_capture_map(mc.capture_map(result, grid), grid, scene, args.map, title=_map_title(args, summary))
-    for flag in ("csv", "json", "map"):
+    for flag in ("csv", "json", "map", "time_plot"):
         if getattr(args, flag):
             print(f"wrote {getattr(args, flag)}")
     return 0
@@ -303,6 +334,8 @@ def _print_summary(summary: dict, result, desc: dict, st: dict) -> None:
             f"y {e_um['y']['mean']:.3g} +- {e_um['y']['std']:.3g} um ({e_um['y']['max_abs']:.3g} um), "
             f"twist {e_deg['twist']['mean']:.3g} +- {e_deg['twist']['std']:.3g} deg ({e_deg['twist']['max_abs']:.3g} deg)"
         )
+    if "time_to_align_s" in summary:
+        print(time_line(summary["time_to_align_s"]))
     if "max_bias_um" in summary:
         b, lim = summary["max_bias_um"], summary["max_bias_limited_by_grid"]
         if any(v is not None for v in b.values()):
@@ -310,17 +343,28 @@ def _print_summary(summary: dict, result, desc: dict, st: dict) -> None:
             print("max bias at twist 0 (every grid start up to it aligned): " + ", ".join(items))
 
 
+def time_line(t: dict | None) -> str:
+    """The printed line on the time to align of the aligned starts (ms)."""
+    if t is None:
+        return "time to align: no start aligned"
+    return (f"time to align ({t['n']:,} aligned starts, simulated): median {1e3 * t['median']:.3g} ms, "
+            f"90th percentile {1e3 * t['p90']:.3g} ms, max {1e3 * t['max']:.3g} ms")
+
+
 def write_csv(path: Path, result, outcomes) -> None:
-    """One row per start: start pose, final pose (twist unwrapped), outcome name, steps."""
+    """One row per start: start pose, final pose (twist unwrapped), outcome name, steps, and
+    for the dynamics the time to align in seconds (empty where the start did not align)."""
     names = np.asarray(outcomes)[result.outcome]
-    head = "start_x_um,start_y_um,start_twist_deg,final_x_um,final_y_um,final_twist_deg,outcome,steps\n"
+    times = result.time_to_align_s
+    head = "start_x_um,start_y_um,start_twist_deg,final_x_um,final_y_um,final_twist_deg,outcome,steps" + (",time_to_align_s" if times is not None else "") + "\n"
     with open(path, "w") as f:
         f.write(head)
         for i in range(0, result.n, 65536):
             s, e = result.start[i : i + 65536], result.final[i : i + 65536]
+            t = [""] * len(s) if times is None else ["," + (f"{v:.10g}" if np.isfinite(v) else "") for v in times[i : i + 65536].tolist()]
             rows = [
-                f"{a[0]:.10g},{a[1]:.10g},{a[2]:.10g},{b[0]:.10g},{b[1]:.10g},{b[2]:.10g},{o},{k}\n"
-                for a, b, o, k in zip(s.tolist(), e.tolist(), names[i : i + 65536], result.steps[i : i + 65536].tolist(), strict=True)
+                f"{a[0]:.10g},{a[1]:.10g},{a[2]:.10g},{b[0]:.10g},{b[1]:.10g},{b[2]:.10g},{o},{k}{tt}\n"
+                for a, b, o, k, tt in zip(s.tolist(), e.tolist(), names[i : i + 65536], result.steps[i : i + 65536].tolist(), t, strict=True)
             ]
             f.write("".join(rows))
 
@@ -329,3 +373,8 @@ def write_csv(path: Path, result, outcomes) -> None:
 def _map_title(args: argparse.Namespace, summary: dict) -> str:
     name = Path(args.pattern).name if args.pattern else (Path(args.scene).name if args.scene else "")
     return f"{name}: capture map, {summary['method']}, yield {100 * summary['yield']:.1f} % of {summary['n']:,} starts"
+
+
+def _time_title(args: argparse.Namespace, summary: dict) -> str:
+    name = Path(args.pattern).name if args.pattern else (Path(args.scene).name if args.scene else "")
+    return f"{name}: time to align, {summary['method']}, {summary['outcomes']['aligned']:,} of {summary['n']:,} starts aligned"
