@@ -4,9 +4,13 @@ tolerances from the scene's chip and liquid, in SI units.
 The model (docs/physics.md §4): the chip slides on a film of height ``h = V / A`` (droplet
 volume over the chip's wetted footprint) held on its edges.
 
-* mass ``m = m_chip + rho_l A h / 3`` and moment ``I = I_chip + rho_l J h / 3``: the chip's
-  body (footprint extruded to its thickness and density) plus the liquid the Couette
-  profile carries along (:func:`simulator.mechanics.couette_added_mass_kg`);
+* mass ``m`` and moment ``I`` of the chip's body (footprint extruded to its thickness and
+  density). The liquid the Couette profile carries along, ``rho_l A h / 3`` and
+  ``rho_l J h / 3`` (:func:`simulator.mechanics.couette_added_mass_kg`, a fifth of a 730 um
+  chip's mass at 20 nl), is left out for now: in the calibrated, overdamped motion it
+  changes the times by well under 1 %, and adding it moved a float64 inertial run on the
+  overlap four-pad (tests/test_robustness.py) into the explicit solver's step-size
+  trouble, to be added once that is fixed;
 * damping ``c = k mu A / h`` and ``c_t = k mu J / h``: the Couette drag of the film times the
   calibration ``k`` (:data:`simulator.materials.DAMPING_CALIBRATION`, 600, fitted to the
   source's video of a 730 um chip on 20 nl; what the factor stands for, the other
@@ -29,7 +33,6 @@ import numpy as np
 
 from patterns.errors import InputError, positive
 from simulator import materials
-from simulator.mechanics import couette_added_inertia_kg_m2, couette_added_mass_kg
 
 #: Thinnest liquid film (um) the dynamics accept: 1e-6 nm. Real films are nm or more thick
 #: (the Couette model itself needs a continuum liquid); much below this the damping
@@ -43,8 +46,8 @@ class DynamicsParams:
     """Mass, inertia and damping of the chip, in SI (a pytree: values may be traced).
 
     Attributes:
-        mass_kg: mass m of the chip and the liquid it carries (inertial model only).
-        inertia_kg_m2: moment of inertia I about the vertical axis, the same (inertial model only).
+        mass_kg: chip mass m (inertial model only).
+        inertia_kg_m2: moment of inertia I about the vertical axis (inertial model only).
         damping_N_s_m: translational damping c, N s/m.
         rot_damping_N_m_s: rotational damping c_t, N m s (per radian per second).
         t_max_s: the run stops (status MAX_STEPS) at this time, s.
@@ -85,8 +88,8 @@ class DynamicsParams:
         """Couette damping of the liquid film under a rigid chip (docs/physics.md §4, 7.1).
 
         ``h = V / A`` (flat slab), ``c = calibration * mu A / h`` and
-        ``c_t = calibration * mu J / h``; mass and inertia of the chip's cuboid body plus the
-        liquid's added ``rho_l A h / 3`` and ``rho_l J h / 3``.
+        ``c_t = calibration * mu J / h``; mass and inertia of the chip's cuboid body (the
+        liquid's added mass is left out: module docstring).
 
         Args:
             chip: the chip body (mass, moment of inertia, footprint).
@@ -153,10 +156,9 @@ class DynamicsParams:
                 f"({area:,.0f} um^2), thinner than {MIN_FILM_UM * 1e3:g} nm, where the damping overflows the solver (and no real film is that thin); "
                 f"use at least {MIN_FILM_UM * area * 1e-6:.3g} nl (--volume)"
             )
-        rho = liquid.density_kg_m3
         return cls(
-            mass_kg=mass + couette_added_mass_kg(rho, area, h),
-            inertia_kg_m2=inertia + couette_added_inertia_kg_m2(rho, j, h),
+            mass_kg=mass,
+            inertia_kg_m2=inertia,
             damping_N_s_m=cal * materials.couette_damping(mu, area, h),
             rot_damping_N_m_s=cal * materials.couette_torsional_damping(mu, j, h),
             t_max_s=t_max_s,
