@@ -1,5 +1,25 @@
 """Parameters of the time-resolved dynamics (:mod:`simulator.dynamics`): mass, damping and
-tolerances from the scene's chip and liquid, in SI units."""
+tolerances from the scene's chip and liquid, in SI units.
+
+The model (docs/physics.md §4): the chip slides on a film of height ``h = V / A`` (droplet
+volume over the chip's wetted footprint) held on its edges.
+
+* mass ``m`` and moment ``I`` of the chip's body (footprint extruded to its thickness and
+  density). The liquid the Couette profile carries along, ``rho_l A h / 3`` and
+  ``rho_l J h / 3`` (:func:`simulator.mechanics.couette_added_mass_kg`, a fifth of a 730 um
+  chip's mass at 20 nl), is left out for now: in the calibrated, overdamped motion it
+  changes the times by well under 1 %, and adding it moved a float64 inertial run on the
+  overlap four-pad (tests/test_robustness.py) into the explicit solver's step-size
+  trouble, to be added once that is fixed;
+* damping ``c = k mu A / h`` and ``c_t = k mu J / h``: the Couette drag of the film times the
+  calibration ``k`` (:data:`simulator.materials.DAMPING_CALIBRATION`, 600, fitted to the
+  source's video of a 730 um chip on 20 nl; what the factor stands for, the other
+  dissipation estimated term by term and the fit are documented there).
+
+J is the footprint's polar moment about the chip centre. The same factor multiplies both
+dampings: the moving contact lines, the largest term besides the film, have the film's
+twist-to-shift ratio ``J / A`` on a square.
+"""
 
 from __future__ import annotations
 
@@ -68,14 +88,15 @@ class DynamicsParams:
         """Couette damping of the liquid film under a rigid chip (docs/physics.md §4, 7.1).
 
         ``h = V / A`` (flat slab), ``c = calibration * mu A / h`` and
-        ``c_t = calibration * mu J / h``; mass and inertia of the chip's cuboid body.
+        ``c_t = calibration * mu J / h``; mass and inertia of the chip's cuboid body (the
+        liquid's added mass is left out: module docstring).
 
         Args:
             chip: the chip body (mass, moment of inertia, footprint).
             liquid: viscosity and droplet volume.
             wetted_area_um2: area A of the liquid film, um^2 (default: the chip footprint).
             calibration: multiplier on both Couette values; the default
-                :data:`simulator.materials.DAMPING_CALIBRATION` (1000) and why it exists
+                :data:`simulator.materials.DAMPING_CALIBRATION` (600) and why it exists
                 are documented there. 1 gives the bare (lightly damped) estimate.
             t_max_s: time limit of a run, s.
             polar_moment_um4: polar second moment J of the film about the chip centre,

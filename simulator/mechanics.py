@@ -30,11 +30,38 @@ from simulator.constants import (
 
 #: Multiplier on the Couette (uncoupled, linear-profile) damping estimate.
 #:
-#: Why a calibration factor exists: the Couette estimate ``c = mu A / h`` treats
-#: the liquid as a sheared film with a fixed linear velocity profile. For water it
-#: makes the chip a very lightly damped oscillator. For the source's two set-ups
-#: (docs/physics.md section 11) a 1-D model with the parallelepiped force of section 3.3
-#: gives:
+#: The damping model (docs/physics.md §4). The chip slides on a film of height
+#: ``h = V / A``; with the liquid held on the chip's edges and the substrate at rest, the
+#: film is sheared, and the textbook (Newton, plane Couette) drag is ``c = mu A / h``, with
+#: the twist analogue ``c_t = mu J / h`` (J the footprint's polar moment).
+#: What else dissipates, estimated for the source's large set-up (730 um SU-8 chip, 20 nl
+#: of water, h = 37.5 um, chip speed about 1.5 mm/s in the video):
+#:
+#: * unsteady shear: the film's viscous time ``h^2 / nu`` is 1.4 ms against the 0.1-0.3 s
+#:   of the motion, so the linear (quasi-steady) profile holds and Couette is the film's
+#:   drag; only a ring-down at ms periods would see the larger Stokes-layer drag;
+#: * the meniscus wedges at the moving contact lines (Cox, "The dynamics of the spreading
+#:   of liquids on a solid surface", 1986; de Gennes, "Wetting: statics and dynamics",
+#:   1985): per unit length of line moving normal to itself ``3 mu ln(l / a) / theta`` (ln
+#:   about 12, theta the 60 deg substrate angle): 0.034 Pa s, on the two edges across the
+#:   motion ``c = 2 L * 0.034``, 3.5 times the film's Couette value;
+#: * contact-line friction of the molecular-kinetic theory (Blake and Haynes, "Kinetics of
+#:   liquid/liquid displacement", 1969): coefficients of 0.01-1 Pa s per unit length are
+#:   reported for water, 1 to 100 times the Couette value here;
+#: * squeeze flow: vertical motion of the chip, absent from the lateral model (it delays
+#:   the start while the released chip settles on the droplet, which is not simulated).
+#:
+#: The lines add ``2 zeta L`` across a shift and ``zeta L^3 / 3`` in twist for a square,
+#: the same ratio ``J / A = L^2 / 6`` as the film's, so one multiplier on both Couette values
+#: is the model: how fast the chip twists per micrometre it moves does not depend on it.
+#: Coupled chip-flow computations and measured alignments of water both show much more
+#: damping than the uncoupled film (docs/physics.md §4; Mastrangeli, Zhou, Sariola and
+#: Lambert, "Surface tension-driven self-alignment", Soft Matter 2017, review the models),
+#: so the factor is fitted to a measurement rather than built from the terms above.
+#:
+#: Bare Couette (factor 1) makes the chip a very lightly damped oscillator. For the
+#: source's two set-ups (docs/physics.md section 11) a 1-D model with the parallelepiped
+#: force of section 3.3 gives:
 #:
 #: ==========================================  =========  ==========  ===========
 #: set-up (SU-8 chip, water)                   zeta       factor 1    factor 30
@@ -46,26 +73,24 @@ from simulator.constants import (
 #: ``zeta = c / (2 sqrt(k0 m))`` is the damping ratio near alignment with
 #: ``k0 = 2 gamma L / h``. The times are for settling within 1 um, starting
 #: 40 um (small set-up) or 300 um (large set-up) off. With factor 1 the chip rings
-#: for tens of periods (period 0.2 ms and 0.7 ms).
+#: for tens of periods (period 0.2 ms and 0.7 ms), and it would cross the 730 um
+#: four-pad in about 2 ms.
 #:
-#: Measured water alignments of sub-millimetre chips are reported to take tens to
-#: hundreds of ms, so they are far slower than this estimate. Some known reasons:
-#: chip motion and internal flow are strongly coupled, and coupled models give much
-#: larger damping than uncoupled ones (docs/physics.md section 4); contact lines dissipate
-#: energy and pin (hysteresis); the meniscus first has to spread over the chip; and
-#: the analytic stiffness overestimates the measured one (section 3.3). None of
-#: these is modelled, so one scalar multiplies the Couette value.
-#:
-#: The default of 1000 puts both set-ups in the measured range: the 200 um chip
-#: from (40, 40) um, 5 deg with 0.5 nl aligns in about 38 ms (overdamped and
-#: inertial runs of ``selfalign simulate`` agree), the 730 um chip with 20 nl in
-#: about 60 ms. The motion is then overdamped creep (zeta ~ 20): the inertial
-#: integrator switches to an implicit solver for it (see
-#: :func:`simulator.trajectory.simulate`). It is not fitted to one measurement:
-#: fit it to a measured alignment time when you have one (30 gives zeta ~ 0.7, a
-#: visible overshoot). It does not change where the chip ends up in the
-#: quasi-static simulator, which has no time scale (docs/physics.md §3.2, limit 4).
-DAMPING_CALIBRATION = 1000.0
+#: The fit: the source's high-speed video of the 730 um chip on the 730/100 four-pad with
+#: 20 nl (docs/physics.md §6.4) shows it aligned about 1/3 s after release from a 500 um
+#: x-bias, a mean speed of about 1.5 mm/s. On the finite meniscus (``--meniscus``, 2 um/px,
+#: 1 deg twists) overdamped runs from the starts that reach alignment, (380 um, 0, 1 deg)
+#: and (380, 5 um, 0), reach the floating floor after 540 and 615 ms at factor 1000 and,
+#: the path being the same at any factor, after 324 and 369 ms at 600 (the inertial model:
+#: 323 and 372 ms), with a peak speed of 2.0 mm/s on the pads. From 500 um the chip stops on
+#: the meniscus's flat part (382-434 um: no force, and a twist decays on the way there) at
+#: any factor that takes longer than a few ms (docs/physics.md §4). The motion is overdamped
+#: creep (zeta about 14 at 600): the inertial integrator switches to an implicit solver for
+#: it (see :func:`simulator.trajectory.simulate`). It is one fit to one video: fit your own
+#: factor to a measured alignment time when you have one (30 gives zeta ~ 0.7, a visible
+#: overshoot). It does not change where the chip ends up in the quasi-static simulator,
+#: which has no time scale (docs/physics.md §3.2, limit 4).
+DAMPING_CALIBRATION = 600.0
 
 
 # ------------------------------------------------------------------- liquid and chip
@@ -205,6 +230,28 @@ def couette_torsional_damping(viscosity_Pa_s: float, polar_moment_um4: float, h_
     j = positive("polar moment", polar_moment_um4, "um^4")
     h = positive("meniscus height", h_um, "um")
     return mu * j * UM2 * UM2 / (h * UM)
+
+
+def couette_added_mass_kg(density_kg_m3: float, wetted_area_um2: float, h_um: float) -> float:
+    """Liquid carried by a chip shearing a film: ``rho A h / 3`` in kg (docs/physics.md §4).
+
+    The Couette profile ``u(z) = v z / h`` holds kinetic energy ``rho A h v^2 / 6``, the
+    energy of a third of the film moving with the chip. Quasi-steady: valid once the motion
+    is slower than the film's viscous time ``h^2 / nu`` (1.4 ms for 37.5 um of water).
+    20 nl under a 730 um chip: 6.7e-9 kg, a fifth of the 50 um SU-8 chip's mass.
+    """
+    rho = positive("liquid density", density_kg_m3, "kg/m^3")
+    a = positive("wetted area", wetted_area_um2, "um^2")
+    h = positive("meniscus height", h_um, "um")
+    return rho * a * UM2 * h * UM / 3.0
+
+
+def couette_added_inertia_kg_m2(density_kg_m3: float, polar_moment_um4: float, h_um: float) -> float:
+    """The twist analogue of :func:`couette_added_mass_kg`: ``rho h J / 3`` in kg m^2."""
+    rho = positive("liquid density", density_kg_m3, "kg/m^3")
+    j = positive("polar moment", polar_moment_um4, "um^4")
+    h = positive("meniscus height", h_um, "um")
+    return rho * h * UM * j * UM2 * UM2 / 3.0
 
 
 def couette_rotational_damping(

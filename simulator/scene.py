@@ -38,7 +38,7 @@ TOML keys (all optional except ``pattern`` and one of ``chip`` / ``chip_size_um`
     [liquid]                        # for the dynamic methods
     viscosity_mPa_s = 1.0
     volume_nl = 20
-    # chip_thickness_um = 50, chip_density_kg_m3 = 1200, damping_calibration = 1000 (top level; see materials.DAMPING_CALIBRATION)
+    # chip_thickness_um = 50, chip_density_kg_m3 = 1200, damping_calibration = 600 (top level; see materials.DAMPING_CALIBRATION)
 
     [topography]                    # a protruding pad: the overflow check (simulator.liquid.Topography)
     edge_angle_deg = 90             # solid wedge angle of the pad edge (90 = vertical wall)

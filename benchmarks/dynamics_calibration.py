@@ -1,0 +1,106 @@
+"""The calibrated dynamics against the source's video (not a test).
+
+A 730 um SU-8 chip on the 730/100 um four-pad with 20 nl of water, finite meniscus (free
+contact lines), 2 um/px, 1 deg twist steps, the default damping calibration
+(``simulator.materials.DAMPING_CALIBRATION``). Writes
+``docs/images/dynamics_fourpad_730_100.png``: x, y and twist against time for the
+500 um x-bias of the video (it stops on the meniscus's flat part) and for the starts
+that reach alignment, with the video's frame times (135, 290 and about 326 ms), and
+prints the table of the README's dynamics section.
+
+Usage: ``python benchmarks/dynamics_calibration.py [--out docs/images] [--no-inertial]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from patterns.library import library_path  # noqa: E402
+from simulator import materials, pyplot, save_figure  # noqa: E402
+from simulator.landscape import build_landscape  # noqa: E402
+from simulator.scene import Scene  # noqa: E402
+from simulator.scene_parts import Effects  # noqa: E402
+from simulator.trajectory import simulate  # noqa: E402
+
+FRAMES_MS = (135.0, 290.0, 326.0)  # the source's video frames; aligned at about 326 ms
+STARTS = [(500.0, 0.0, 0.0), (500.0, 0.0, 2.0), (500.0, 5.0, 0.0), (380.0, 0.0, 0.0), (380.0, 0.0, 1.0), (380.0, 5.0, 0.0)]
+
+
+def align_time_s(traj, floor) -> float:
+    """First time within 1 um of the floating floor (interpolated between steps; inf if never)."""
+    p, t = traj.path, traj.t_s
+    out = np.maximum(np.abs(p[:, 0]) - floor["x_um"][1], np.abs(p[:, 1]) - floor["y_um"][1]) - 1.0
+    if not (out <= 0).any():
+        return float("inf")
+    k = int(np.argmax(out <= 0))
+    return 0.0 if k == 0 else float(t[k - 1] + (t[k] - t[k - 1]) * out[k - 1] / (out[k - 1] - out[k]))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--out", default=str(ROOT / "docs" / "images"))
+    ap.add_argument("--no-inertial", action="store_true", help="overdamped runs only (faster)")
+    args = ap.parse_args()
+    scene = Scene.from_inputs(library_path("four_pad_730_100"), chip_size_um=730, resolution_um=2.0,
+                              effects=Effects(meniscus=True), liquid=materials.Liquid(volume_nl=20.0))
+    ls = build_landscape(scene)
+    floor = ls.floor_range()
+    print(f"damping calibration {scene.damping_calibration:g}; the chip floats within +-{floor['x_um'][1]:g} um")
+    methods = ("overdamped",) if args.no_inertial else ("overdamped", "inertial")
+    runs = {}
+    print("| start (um, um, deg) | model | outcome | final (um, um, deg) | on the floor after (ms) | largest twist (deg, at ms, at x um) |")
+    print("|---|---|---|---|---:|---|")
+    for start in STARTS:
+        for method in methods:
+            t = simulate(scene, start, method=method, landscape=ls, max_steps=20000)
+            runs[start, method] = t
+            ta = align_time_s(t, floor)
+            k = int(np.argmax(np.abs(t.path[:, 2])))
+            f = ", ".join(f"{v:.1f}" for v in t.final)
+            ta_txt = "never" if not np.isfinite(ta) else f"{ta * 1e3:.0f}"
+            print(f"| ({start[0]:g}, {start[1]:g}, {start[2]:g}) | {method} | {t.outcome} | ({f}) | {ta_txt} | "
+                  f"{t.path[k, 2]:.2f} at {t.t_s[k] * 1e3:.0f} ms, x {t.path[k, 0]:.0f} |", flush=True)
+
+    plt = pyplot()
+    fig, axes = plt.subplots(3, 1, figsize=(9, 9), sharex=True)
+    colours = dict(zip(STARTS, ("0.55", "0.3", "C7", "C0", "C3", "C2"), strict=True))
+    for start in STARTS:
+        t = runs[start, "overdamped"]
+        label = f"({start[0]:g}, {start[1]:g} um, {start[2]:g} deg)"
+        style = "--" if start[0] == 500.0 else "-"
+        for ax, col in zip(axes, range(3), strict=True):
+            ax.plot(t.t_s * 1e3, t.path[:, col], style, color=colours[start], label=label)
+        if "inertial" in methods:
+            ti = runs[start, "inertial"]
+            axes[0].plot(ti.t_s * 1e3, ti.path[:, 0], ":", color="k", lw=0.8)
+    axes[0].axhspan(382, 434, color="C1", alpha=0.15, label="flat part (no force)")
+    for ax in axes:
+        for f in FRAMES_MS:
+            ax.axvline(f, color="C1", lw=1)
+        ax.axvspan(200, 400, color="C2", alpha=0.06)
+        ax.grid(alpha=0.3)
+    axes[0].axhspan(-floor["x_um"][1], floor["x_um"][1], color="C2", alpha=0.2, label="floating floor (aligned)")
+    axes[0].set_ylabel("x (um)")
+    axes[1].set_ylabel("y (um)")
+    axes[2].set_ylabel("twist (deg)")
+    axes[2].set_xlabel("time (ms); orange lines: the video's frames at 135, 290, 326 ms")
+    axes[0].legend(fontsize=7, ncol=2, loc="upper right")
+    axes[0].set_xlim(0, 800)
+    fig.suptitle(f"730 um chip, 730/100 um four-pad, 20 nl, meniscus, overdamped (dotted: inertial x), "
+                 f"damping x{scene.damping_calibration:g}", fontsize=10)
+    fig.tight_layout()
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    save_figure(fig, out / "dynamics_fourpad_730_100.png", dpi=80)
+    print(f"wrote {out / 'dynamics_fourpad_730_100.png'}")
+
+
+if __name__ == "__main__":
+    main()
