@@ -21,6 +21,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+import optimistix as optx
 
 from simulator.potential import potential_and_gradient
 from simulator.stepping import Field, Grid, at_cut_edge, interpolate, reference_gradient
@@ -99,6 +100,69 @@ def _vf_inertial(s, y, args):
     d, u = y
     _, grad = potential_and_gradient(field, grid, co.q0 + d)
     return u, -co.drive * grad - co.damp * u
+
+
+# The inertial model split for an IMEX solver (:data:`IMEX`): the force is the explicit
+# term, the kinematics and the damping (linear, with a constant Jacobian) the implicit one.
+# The implicit solve then never sees the force: the force is piecewise smooth (its
+# Jacobian jumps at every grid line) and, in float32, quantized by the rounding of the
+# position q0 + d (one unit in the last place of an index of a few hundred is 1.5e-5 to
+# 6e-5 grid steps; times a stiff axis, such as the rounded V of the energy across y = 0 of
+# a four-pad chip, a jump of 1e-5 of the reference force). A Newton iteration on the whole
+# vector field (Kvaerno5) stalled on those jumps, or oscillated across them, and each
+# failed solve rejected the step and cut it five-fold: the step-size collapse of the
+# calibrated (heavily damped) inertial runs.
+def _vf_force(s, y, args):
+    """Explicit part of the split inertial model: ``(0, -drive * grad Phi)``."""
+    field, grid, co = args
+    d, u = y
+    _, grad = potential_and_gradient(field, grid, co.q0 + d)
+    return jnp.zeros_like(u), -co.drive * grad
+
+
+def _vf_damping(s, y, args):
+    """Implicit part of the split inertial model: ``(u, -damp * u)``, linear in the state."""
+    field, grid, co = args
+    d, u = y
+    return u, -co.damp * u
+
+
+#: The IMEX (additive Runge-Kutta) solvers the inertial model is split for.
+IMEX = (diffrax.KenCarp3, diffrax.KenCarp4, diffrax.KenCarp5)
+
+#: Tolerance of the implicit stages' Newton (chord) iteration, relative and absolute, in
+#: units of the state. The implicit part is linear, so one iteration solves it to round-off
+#: and this tolerance only decides when to stop: the iteration stops once a correction is
+#: below 1e-4 of it (diffrax's VeryChord, float32) and must see that happen above round-off
+#: (eps / 1e-2 = 1.2e-5 < 1e-4). With the step-size controller's own tolerances (1.2e-5 in
+#: float32) the corrections stall at round-off, a unit in the last place, and the solve
+#: fails (measured: corrections repeating at 2.6e-4 of the tolerance).
+ROOT_TOL = 1e-2
+
+
+def stiff_solver():
+    """The solver for heavily damped inertial runs: diffrax KenCarp5 (IMEX, 5th order) on
+    the split model, with a Newton tolerance the implicit stages can meet (:data:`ROOT_TOL`)."""
+    return diffrax.KenCarp5(root_finder=diffrax.VeryChord(rtol=ROOT_TOL, atol=ROOT_TOL))
+
+
+def _weighted_rms(weights, err):
+    """RMS norm of the scaled error ``(d, u)`` with the velocity errors weighted per axis."""
+    d, u = err
+    return optx.rms_norm((d, weights * u))
+
+
+def error_norm(co: _Coeffs):
+    """The step-size controller's norm for the inertial state ``(d, u)``.
+
+    A velocity error matters through the distance it carries the chip before the damping
+    removes it: ``1 / damp`` time units where ``damp > 1`` (heavy damping), about one
+    time unit otherwise. So velocity errors are weighted by ``1 / max(1, damp)``: lightly
+    damped runs keep the plain RMS norm; in heavily damped ones the velocity, slaved to the
+    force (``u = drive F / damp``), is not asked for more relative accuracy than the force
+    has (its round-off, up to the landscape's noise floor, was 3e-5 of the velocity while
+    the tolerance asked for 1.2e-5: the steps shrank to a twentieth of a grid step)."""
+    return jax.tree_util.Partial(_weighted_rms, 1.0 / jnp.maximum(co.damp, 1.0))
 
 
 def _split(y, inertial: bool):
