@@ -45,7 +45,13 @@ one grid step, ``|dPhi/dq_k|``, is at most the landscape's noise floor, and (b) 
 kinetic energy is at most the noise floor (the speed whose kinetic energy is
 round-off); where the integrator's position tolerance is coarser than the floor (float64)
 the threshold is the work of the reference force over that tolerance instead (see
-``_stop_flags``). The same test at the start ends a run with no force before any step (a
+``_stop_flags``). It also ends where the chip is at rest within
+:data:`simulator.dynamics_ode.REST_TOL_STEPS` (1/20) of a grid step of a stable rest point
+of Phi (positive-definite Hessian; :func:`simulator.dynamics_ode._near_rest`): the force
+falls linearly towards such a point and the force test alone waited out the whole
+exponential approach (on the rounded edge of the floor a finite meniscus floats the chip
+on, time constants of 0.2 s: runs ran out of ``t_max_s`` there). The same tests at the
+start end a run with no force before any step (a
 no-contact start). Reaching a cut side of the grid (``grid.cut``: the window or twist
 band was cut from a larger one; :func:`simulator.stepping.at_cut_edge`), or passing the
 end of a non-periodic twist axis (a wall), ends it with status EDGE, as for the other

@@ -23,7 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from simulator.potential import potential_and_gradient
+from simulator.potential import _OFFSETS, _kernel, _node_energy, potential_and_gradient
 from simulator.stepping import Field, Grid, at_cut_edge, interpolate, reference_gradient
 
 
@@ -82,10 +82,83 @@ def _stop_flags(field: Field, grid: Grid, co: _Coeffs, q, grad, kinetic):
         pin = jnp.asarray(field.pin, q.dtype)
         work = jnp.min(jnp.where(active & (pin > 0), pin, jnp.inf))
         converged = converged | (jnp.all(jnp.abs(grad) <= jnp.maximum(pin, f_stop)) & (kinetic <= jnp.maximum(work, ke_stop)))
+    converged = converged | _near_rest(field, grid, q, grad, kinetic)
     edge = at_cut_edge(grid, q)
     if not grid.wrap and grid.shape[0] > 1:
         edge = edge | (q[0] < 0) | (q[0] > grid.shape[0] - 1)
     return converged, edge
+
+
+#: A run also stops when Phi's stable rest point lies within this many grid steps along
+#: every axis (:func:`_near_rest`).
+REST_TOL_STEPS = 0.05
+
+
+def _hessian(field: Field, grid: Grid, q):
+    """Phi's Hessian at q (J per index step squared), one-sided where it jumps.
+
+    Phi is C1 and piecewise quadratic (:mod:`simulator.potential`): its second derivative
+    along an axis jumps at every grid line. Within a cell (``frac`` in [0, 1)) the kernel's
+    second derivative on the four nodes is ``(1/2, -1/2, -1/2, 1/2)``; the mixed terms use
+    the kernel's (continuous) first derivative. Autodiff of the gradient takes a branch of
+    ``abs`` and ``maximum`` at a grid line that belongs to no cell (on a node it returned
+    the energy itself, 1e5 times the true curvature)."""
+    dt = field.dtype
+    q = jnp.asarray(q, dt)
+    base = jnp.floor(q)
+    frac = q - base
+    b = base.astype(jnp.int32)
+    off = jnp.asarray(_OFFSETS, jnp.int32)
+    d2 = jnp.asarray([0.5, -0.5, -0.5, 0.5], dt)
+    ws, dws, d2s, idx = [], [], [], []
+    for k in range(3):
+        w, dw = _kernel(frac[k] - off.astype(dt))
+        if k == 0 and grid.shape[0] == 1:
+            ws.append(jnp.asarray([0.0, 1.0, 0.0, 0.0], dt))
+            dws.append(jnp.zeros(4, dt))
+            d2s.append(jnp.zeros(4, dt))
+            idx.append(jnp.zeros(4, jnp.int32))
+        else:
+            ws.append(w)
+            dws.append(dw)
+            d2s.append(d2)
+            idx.append(b[k] + off)
+    e = _node_energy(field, grid, idx[0][:, None, None], idx[1][None, :, None], idx[2][None, None, :])
+
+    def term(a, c):
+        f = [ws[0], ws[1], ws[2]]
+        if a == c:
+            f[a] = d2s[a]
+        else:
+            f[a], f[c] = dws[a], dws[c]
+        return jnp.einsum("i,j,k,ijk->", f[0], f[1], f[2], e)
+
+    return jnp.stack([jnp.stack([term(a, c) for c in range(3)]) for a in range(3)])
+
+
+def _near_rest(field: Field, grid: Grid, q, grad, kinetic):
+    """True where the chip is at rest within :data:`REST_TOL_STEPS` of a stable rest point.
+
+    Near a stable rest point the force falls linearly with the distance to it, so the
+    chip approaches it exponentially and the force test of :func:`_stop_flags` (at the
+    noise floor) is met only after many time constants. Where Phi's Hessian H (active
+    axes) is positive definite, the rest point is ``q - H^-1 grad``; the run stops when
+    that step is at most :data:`REST_TOL_STEPS` along every axis and the kinetic energy
+    could lift the chip at most that far up the softest direction
+    (``kinetic <= lambda_min tol^2 / 2``). Measured: the floating floor of the wall-profile
+    meniscus (730/100 four-pad, 20 nl) is approached on the rounded edge of Phi, one grid
+    step wide, with a time constant of 0.2 s at 5 um/px; runs from (300, 0, 0) ran out of
+    their second inside the floor."""
+    active = _active(grid, q.dtype) > 0
+    mask = active[:, None] & active[None, :]
+    h = jnp.where(mask, _hessian(field, grid, q), 0.0)
+    h = 0.5 * (h + h.T)
+    scale = jnp.maximum(jnp.max(jnp.abs(h)), jnp.finfo(q.dtype).tiny)
+    h = jnp.where(mask, h, jnp.eye(3, dtype=q.dtype) * scale)  # inactive axes: stiff, no motion
+    lam = jnp.linalg.eigvalsh(h)[0]
+    step = jnp.linalg.solve(h, jnp.where(active, grad, 0.0))
+    tol = jnp.asarray(REST_TOL_STEPS, q.dtype)
+    return (lam > 0) & jnp.all(jnp.abs(step) <= tol) & (kinetic <= 0.5 * lam * tol * tol)
 
 
 # ----------------------------------------------------------------- vector fields
