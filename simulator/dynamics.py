@@ -22,11 +22,20 @@ relative to the displacement and ``atol`` is in grid steps; defaults from the dt
 (:func:`default_tolerances`). The controller is guarded (:class:`_GuardedController`): a
 step is also rejected when it raises ``Phi + kinetic`` by more than the noise floor or
 moves more than one grid step along any axis, so the energy never rises along the
-recorded path by construction and no step jumps over a feature of the landscape. The
-problem is not stiff for the calibrated water parameters (damping ratio about 0.6,
-twist and translation rates within a factor of a few). For heavily overdamped
-*inertial* runs (damping ratio >> 1) pass ``solver=diffrax.Kvaerno5()`` (measured at
-damping ratio 50: 176 steps, where Tsit5 runs out of 4000) or use :func:`overdamped`.
+recorded path by construction and no step jumps over a feature of the landscape.
+
+Heavily damped inertial runs (the calibrated water parameters: the velocity relaxes in
+``m / c``, microseconds, while the chip creeps a grid step in milliseconds) are stiff for an
+explicit solver. Pass ``solver=stiff_solver()`` (what :mod:`simulator.steppers` does when
+:func:`simulator.trajectory._stiff` says so): diffrax KenCarp5, an IMEX Runge-Kutta method,
+on the model split into the force (explicit) and the kinematics with the damping
+(implicit, linear). Its Newton iteration then solves a linear system and never sees the
+force, which is only piecewise smooth and, in float32, quantized by the rounding of the
+position (an implicit solver on the whole field, Kvaerno5, stalled on those jumps and cut
+its steps to nothing in the middle of a pad: 2 174 steps for 29 um of a 730 um four-pad
+chip). In the inertial model the controller weights velocity errors by ``1 / max(1,
+damp)`` (:func:`simulator.dynamics_ode.error_norm`): the distance a velocity error carries
+the chip before the damping removes it; lightly damped runs keep the plain RMS norm.
 Steps are recorded at every accepted solver step (``SaveAt(steps=True)``, a
 ``max_steps`` buffer).
 
@@ -36,7 +45,13 @@ one grid step, ``|dPhi/dq_k|``, is at most the landscape's noise floor, and (b) 
 kinetic energy is at most the noise floor (the speed whose kinetic energy is
 round-off); where the integrator's position tolerance is coarser than the floor (float64)
 the threshold is the work of the reference force over that tolerance instead (see
-``_stop_flags``). The same test at the start ends a run with no force before any step (a
+``_stop_flags``). It also ends where the chip is at rest within
+:data:`simulator.dynamics_ode.REST_TOL_STEPS` (1/20) of a grid step of a stable rest point
+of Phi (positive-definite Hessian; :func:`simulator.dynamics_ode._near_rest`): the force
+falls linearly towards such a point and the force test alone waited out the whole
+exponential approach (on the rounded edge of the floor a finite meniscus floats the chip
+on, time constants of 0.2 s: runs ran out of ``t_max_s`` there). The same tests at the
+start end a run with no force before any step (a
 no-contact start). Reaching a cut side of the grid (``grid.cut``: the window or twist
 band was cut from a larger one; :func:`simulator.stepping.at_cut_edge`), or passing the
 end of a non-periodic twist axis (a wall), ends it with status EDGE, as for the other
@@ -60,9 +75,11 @@ from typing import NamedTuple
 import diffrax
 import jax
 import jax.numpy as jnp
+import optimistix as optx
 
 from patterns.errors import InputError
 from simulator.dynamics_ode import (
+    IMEX,
     _active,
     _axis_scales,
     _Coeffs,
@@ -74,8 +91,12 @@ from simulator.dynamics_ode import (
     _stop_flags,
     _stop_inertial,
     _stop_overdamped,
+    _vf_damping,
+    _vf_force,
     _vf_inertial,
     _vf_overdamped,
+    error_norm,
+    stiff_solver,
 )
 
 # Parameters (simulator.dynamics_params) and the potential Phi (simulator.potential), re-exported.
@@ -180,14 +201,19 @@ def _run(
     )
     zeros = jnp.zeros(3, dt)
     y0 = (zeros, zeros) if inertial else zeros
-    term = diffrax.ODETerm(_vf_inertial if inertial else _vf_overdamped)
+    if isinstance(solver, IMEX):
+        if not inertial:
+            raise InputError("an IMEX solver (KenCarp) splits the inertial model; the overdamped one has no damping term to split")
+        term = diffrax.MultiTerm(diffrax.ODETerm(_vf_force), diffrax.ODETerm(_vf_damping))
+    else:
+        term = diffrax.ODETerm(_vf_inertial if inertial else _vf_overdamped)
     save_fn = _save_inertial if inertial else _save_overdamped
     saveat = (
         diffrax.SaveAt(t0=True, steps=True, fn=save_fn)
         if record
         else diffrax.SaveAt(t1=True, fn=save_fn)
     )
-    pid = diffrax.PIDController(rtol=rtol, atol=atol)
+    pid = diffrax.PIDController(rtol=rtol, atol=atol, norm=error_norm(co) if inertial else optx.rms_norm)
     sol = diffrax.diffeqsolve(
         term,
         diffrax.Tsit5() if solver is None else solver,
@@ -310,4 +336,5 @@ __all__ = [
     "overdamped",
     "potential",
     "potential_and_gradient",
+    "stiff_solver",
 ]

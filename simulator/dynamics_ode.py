@@ -21,8 +21,9 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+import optimistix as optx
 
-from simulator.potential import potential_and_gradient
+from simulator.potential import _OFFSETS, _kernel, _node_energy, potential_and_gradient
 from simulator.stepping import Field, Grid, at_cut_edge, interpolate, reference_gradient
 
 
@@ -81,10 +82,83 @@ def _stop_flags(field: Field, grid: Grid, co: _Coeffs, q, grad, kinetic):
         pin = jnp.asarray(field.pin, q.dtype)
         work = jnp.min(jnp.where(active & (pin > 0), pin, jnp.inf))
         converged = converged | (jnp.all(jnp.abs(grad) <= jnp.maximum(pin, f_stop)) & (kinetic <= jnp.maximum(work, ke_stop)))
+    converged = converged | _near_rest(field, grid, q, grad, kinetic)
     edge = at_cut_edge(grid, q)
     if not grid.wrap and grid.shape[0] > 1:
         edge = edge | (q[0] < 0) | (q[0] > grid.shape[0] - 1)
     return converged, edge
+
+
+#: A run also stops when Phi's stable rest point lies within this many grid steps along
+#: every axis (:func:`_near_rest`).
+REST_TOL_STEPS = 0.05
+
+
+def _hessian(field: Field, grid: Grid, q):
+    """Phi's Hessian at q (J per index step squared), one-sided where it jumps.
+
+    Phi is C1 and piecewise quadratic (:mod:`simulator.potential`): its second derivative
+    along an axis jumps at every grid line. Within a cell (``frac`` in [0, 1)) the kernel's
+    second derivative on the four nodes is ``(1/2, -1/2, -1/2, 1/2)``; the mixed terms use
+    the kernel's (continuous) first derivative. Autodiff of the gradient takes a branch of
+    ``abs`` and ``maximum`` at a grid line that belongs to no cell (on a node it returned
+    the energy itself, 1e5 times the true curvature)."""
+    dt = field.dtype
+    q = jnp.asarray(q, dt)
+    base = jnp.floor(q)
+    frac = q - base
+    b = base.astype(jnp.int32)
+    off = jnp.asarray(_OFFSETS, jnp.int32)
+    d2 = jnp.asarray([0.5, -0.5, -0.5, 0.5], dt)
+    ws, dws, d2s, idx = [], [], [], []
+    for k in range(3):
+        w, dw = _kernel(frac[k] - off.astype(dt))
+        if k == 0 and grid.shape[0] == 1:
+            ws.append(jnp.asarray([0.0, 1.0, 0.0, 0.0], dt))
+            dws.append(jnp.zeros(4, dt))
+            d2s.append(jnp.zeros(4, dt))
+            idx.append(jnp.zeros(4, jnp.int32))
+        else:
+            ws.append(w)
+            dws.append(dw)
+            d2s.append(d2)
+            idx.append(b[k] + off)
+    e = _node_energy(field, grid, idx[0][:, None, None], idx[1][None, :, None], idx[2][None, None, :])
+
+    def term(a, c):
+        f = [ws[0], ws[1], ws[2]]
+        if a == c:
+            f[a] = d2s[a]
+        else:
+            f[a], f[c] = dws[a], dws[c]
+        return jnp.einsum("i,j,k,ijk->", f[0], f[1], f[2], e)
+
+    return jnp.stack([jnp.stack([term(a, c) for c in range(3)]) for a in range(3)])
+
+
+def _near_rest(field: Field, grid: Grid, q, grad, kinetic):
+    """True where the chip is at rest within :data:`REST_TOL_STEPS` of a stable rest point.
+
+    Near a stable rest point the force falls linearly with the distance to it, so the
+    chip approaches it exponentially and the force test of :func:`_stop_flags` (at the
+    noise floor) is met only after many time constants. Where Phi's Hessian H (active
+    axes) is positive definite, the rest point is ``q - H^-1 grad``; the run stops when
+    that step is at most :data:`REST_TOL_STEPS` along every axis and the kinetic energy
+    could lift the chip at most that far up the softest direction
+    (``kinetic <= lambda_min tol^2 / 2``). Measured: the floating floor of the wall-profile
+    meniscus (730/100 four-pad, 20 nl) is approached on the rounded edge of Phi, one grid
+    step wide, with a time constant of 0.2 s at 5 um/px; runs from (300, 0, 0) ran out of
+    their second inside the floor."""
+    active = _active(grid, q.dtype) > 0
+    mask = active[:, None] & active[None, :]
+    h = jnp.where(mask, _hessian(field, grid, q), 0.0)
+    h = 0.5 * (h + h.T)
+    scale = jnp.maximum(jnp.max(jnp.abs(h)), jnp.finfo(q.dtype).tiny)
+    h = jnp.where(mask, h, jnp.eye(3, dtype=q.dtype) * scale)  # inactive axes: stiff, no motion
+    lam = jnp.linalg.eigvalsh(h)[0]
+    step = jnp.linalg.solve(h, jnp.where(active, grad, 0.0))
+    tol = jnp.asarray(REST_TOL_STEPS, q.dtype)
+    return (lam > 0) & jnp.all(jnp.abs(step) <= tol) & (kinetic <= 0.5 * lam * tol * tol)
 
 
 # ----------------------------------------------------------------- vector fields
@@ -99,6 +173,69 @@ def _vf_inertial(s, y, args):
     d, u = y
     _, grad = potential_and_gradient(field, grid, co.q0 + d)
     return u, -co.drive * grad - co.damp * u
+
+
+# The inertial model split for an IMEX solver (:data:`IMEX`): the force is the explicit
+# term, the kinematics and the damping (linear, with a constant Jacobian) the implicit one.
+# The implicit solve then never sees the force: the force is piecewise smooth (its
+# Jacobian jumps at every grid line) and, in float32, quantized by the rounding of the
+# position q0 + d (one unit in the last place of an index of a few hundred is 1.5e-5 to
+# 6e-5 grid steps; times a stiff axis, such as the rounded V of the energy across y = 0 of
+# a four-pad chip, a jump of 1e-5 of the reference force). A Newton iteration on the whole
+# vector field (Kvaerno5) stalled on those jumps, or oscillated across them, and each
+# failed solve rejected the step and cut it five-fold: the step-size collapse of the
+# calibrated (heavily damped) inertial runs.
+def _vf_force(s, y, args):
+    """Explicit part of the split inertial model: ``(0, -drive * grad Phi)``."""
+    field, grid, co = args
+    d, u = y
+    _, grad = potential_and_gradient(field, grid, co.q0 + d)
+    return jnp.zeros_like(u), -co.drive * grad
+
+
+def _vf_damping(s, y, args):
+    """Implicit part of the split inertial model: ``(u, -damp * u)``, linear in the state."""
+    field, grid, co = args
+    d, u = y
+    return u, -co.damp * u
+
+
+#: The IMEX (additive Runge-Kutta) solvers the inertial model is split for.
+IMEX = (diffrax.KenCarp3, diffrax.KenCarp4, diffrax.KenCarp5)
+
+#: Tolerance of the implicit stages' Newton (chord) iteration, relative and absolute, in
+#: units of the state. The implicit part is linear, so one iteration solves it to round-off
+#: and this tolerance only decides when to stop: the iteration stops once a correction is
+#: below 1e-4 of it (diffrax's VeryChord, float32) and must see that happen above round-off
+#: (eps / 1e-2 = 1.2e-5 < 1e-4). With the step-size controller's own tolerances (1.2e-5 in
+#: float32) the corrections stall at round-off, a unit in the last place, and the solve
+#: fails (measured: corrections repeating at 2.6e-4 of the tolerance).
+ROOT_TOL = 1e-2
+
+
+def stiff_solver():
+    """The solver for heavily damped inertial runs: diffrax KenCarp5 (IMEX, 5th order) on
+    the split model, with a Newton tolerance the implicit stages can meet (:data:`ROOT_TOL`)."""
+    return diffrax.KenCarp5(root_finder=diffrax.VeryChord(rtol=ROOT_TOL, atol=ROOT_TOL))
+
+
+def _weighted_rms(weights, err):
+    """RMS norm of the scaled error ``(d, u)`` with the velocity errors weighted per axis."""
+    d, u = err
+    return optx.rms_norm((d, weights * u))
+
+
+def error_norm(co: _Coeffs):
+    """The step-size controller's norm for the inertial state ``(d, u)``.
+
+    A velocity error matters through the distance it carries the chip before the damping
+    removes it: ``1 / damp`` time units where ``damp > 1`` (heavy damping), about one
+    time unit otherwise. So velocity errors are weighted by ``1 / max(1, damp)``: lightly
+    damped runs keep the plain RMS norm; in heavily damped ones the velocity, slaved to the
+    force (``u = drive F / damp``), is not asked for more relative accuracy than the force
+    has (its round-off, up to the landscape's noise floor, was 3e-5 of the velocity while
+    the tolerance asked for 1.2e-5: the steps shrank to a twentieth of a grid step)."""
+    return jax.tree_util.Partial(_weighted_rms, 1.0 / jnp.maximum(co.damp, 1.0))
 
 
 def _split(y, inertial: bool):

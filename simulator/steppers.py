@@ -74,16 +74,16 @@ def _dynamic(method: str, solver, field, grid, params, start, max_steps: int, re
 def stepper(method: str, stiff: bool = False):
     """The run function of ``method`` with the shared signature (not jitted).
 
-    ``stiff`` (inertial only) selects the implicit solver (diffrax Kvaerno5).
+    ``stiff`` (inertial only) selects the IMEX solver (:func:`simulator.dynamics.stiff_solver`).
     """
     if method == "greedy":
         return _greedy
     if method == "gradient":
         return _gradient
     if method in DYNAMIC:
-        import diffrax
+        from simulator.dynamics import stiff_solver
 
-        return functools.partial(_dynamic, method, diffrax.Kvaerno5() if stiff and method == "inertial" else None)
+        return functools.partial(_dynamic, method, stiff_solver() if stiff and method == "inertial" else None)
     raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
 
 
@@ -98,12 +98,10 @@ def dynamics_jitted(method: str, stiff: bool = False):
     """The jitted dynamics function itself, returning its full
     :class:`simulator.dynamics.DynamicsState` (potential, kinetic energy, velocity), with
     the solver :func:`stepper` would choose; for diagnostics and tests."""
-    import diffrax
-
     from simulator import dynamics
 
     fn = dynamics.overdamped if method == "overdamped" else dynamics.inertial
-    solver = diffrax.Kvaerno5() if stiff and method == "inertial" else None
+    solver = dynamics.stiff_solver() if stiff and method == "inertial" else None
     return jax.jit(functools.partial(fn, solver=solver), static_argnames=("grid", "max_steps", "record"))
 
 

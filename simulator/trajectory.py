@@ -101,8 +101,8 @@ def radius_of_gyration_px(scene: Scene) -> float:
 
 def _stiff(method: str, field, grid, params) -> bool:
     """An inertial run is stiff when inertia relaxes (m / c) much faster than the chip
-    creeps one pixel under a typical force (overdamped, c s / F): then an implicit
-    solver (Kvaerno5) takes ~100 steps where an explicit one takes ~10^4."""
+    creeps one pixel under a typical force (overdamped, c s / F): then the IMEX solver
+    (:func:`simulator.dynamics.stiff_solver`) takes ~100 steps where an explicit one takes ~10^4."""
     if method != "inertial":
         return False
     f_ref = float(stepping.reference_gradient(field, grid)) / (grid.um_per_px * 1e-6)  # N (J per px -> J per m)

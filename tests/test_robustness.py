@@ -73,6 +73,7 @@ from patterns.mask import Mask
 from patterns.raster import mask_from_geometry
 from simulator import dynamics, steppers, stepping, trajectory
 from simulator.dynamics import DynamicsParams
+from simulator.dynamics_ode import REST_TOL_STEPS
 from simulator.landscape import build_landscape
 from simulator.materials import Liquid, Materials
 from simulator.scene import Effects, Scene, TwistGrid
@@ -375,7 +376,11 @@ def test_extreme_surface_tension(fp100, gamma):
             b = simulate(t_scene, START, "overdamped", landscape=t_ls, dynamics=pb)
             assert_finite(b)
             assert a.outcome == b.outcome
-            np.testing.assert_allclose(b.final, a.final, atol=1e-2)
+            # The dynamics stop within REST_TOL_STEPS of a grid step of the rest point (the
+            # tail of the exponential approach is cut there), so paths that differ by
+            # round-off end that close: 1/20 px, 1/20 twist step.
+            tol = REST_TOL_STEPS * np.array([s.um_per_px, s.um_per_px, s.twist_axis.step_deg])
+            assert np.all(np.abs(np.subtract(b.final, a.final)) <= tol)
             assert b.time_s * ratio == pytest.approx(a.time_s, rel=0.05)
 
 
@@ -395,6 +400,8 @@ def test_extreme_scale(fp100, k):
         px = b.path / [k, k, 1]
         if m == "greedy":
             np.testing.assert_allclose(px, a.path, rtol=0, atol=1e-9)
+        elif m in ("overdamped", "inertial"):  # within REST_TOL_STEPS of a grid step (see above)
+            assert np.all(np.abs(px[-1] - a.path[-1]) <= REST_TOL_STEPS * np.array([1.0, 1.0, ref_s.twist_axis.step_deg]))
         else:
             np.testing.assert_allclose(px[-1], a.path[-1], atol=1e-2)
         if m == "overdamped":
@@ -441,6 +448,9 @@ def test_extreme_twist_near_180(periods):
                 assert a.outcome == b.outcome, (period, up, m)
                 if m == "greedy":
                     np.testing.assert_array_equal(b.path, a.path - [0, 0, 360])
+                elif m == "overdamped":  # within REST_TOL_STEPS of a grid step (see above)
+                    tol = REST_TOL_STEPS * np.array([s.um_per_px, s.um_per_px, s.twist_axis.step_deg])
+                    assert np.all(np.abs(np.subtract(b.final, np.subtract(a.final, [0, 0, 360]))) <= tol)
                 else:
                     np.testing.assert_allclose(b.final, np.subtract(a.final, [0, 0, 360]), atol=2e-2)
                 assert a.steps > 0
