@@ -250,12 +250,15 @@ def align_tolerance(ls, pin: tuple[float, float, float], floats: bool = False) -
     ``floats``: the chip floats on the well's flat floor (free contact lines,
     :class:`simulator.meniscus.WallProfile`): a run that stops anywhere on the floor
     (:meth:`~simulator.landscape.Landscape.floor_extent`) is aligned, so the tolerance is at
-    least the floor's reach from the minimum."""
+    least the floor's reach from the minimum, and one step more (a continuous run stops on
+    the interpolated edge of the floor, inside the cell beyond its last grid pose)."""
     tol = (1.0, 1.0)
     if floats:
         it, iy, ix = ls.minimum_index()
         (t0, t1), (y0, y1), (x0, x1) = ls.floor_extent()
-        tol = (max(1.0, float(max(it - t0, t1 - it))), max(1.0, float(max(iy - y0, y1 - iy, ix - x0, x1 - ix))))
+        # The floor's last grid pose, and the cell beyond it, where a continuous run stops
+        # on the interpolated edge of the floor.
+        tol = (max(1.0, float(max(it - t0, t1 - it)) + 1.0), max(1.0, float(max(iy - y0, y1 - iy, ix - x0, x1 - ix)) + 1.0))
     if not any(pin):
         return tol
     hyst = _hysteresis_tolerance(ls, pin)

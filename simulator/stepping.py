@@ -231,7 +231,10 @@ def classify(field: Field, grid: Grid, q, energy, status, flat) -> jax.Array:
     compared modulo the chip's symmetry period. no_contact: zero overlap (|E| at or
     below the floor). plateau: stopped with zero force or a flat direction (a move
     that leaves the energy unchanged).
-    local_minimum: stopped anywhere else. max_steps: ran out of steps.
+    local_minimum: stopped anywhere else. max_steps: ran out of steps (or, for the
+    dynamics, of time), except where the tolerance is wider than a step (the floor a chip
+    floats on, a hysteresis window) and the run ended inside it: there it is aligned, as
+    a chip that creeps about on the floor is.
     """
     q = jnp.asarray(q, field.dtype)
     period = grid.period_deg / grid.twist_step_deg
@@ -239,8 +242,11 @@ def classify(field: Field, grid: Grid, q, energy, status, flat) -> jax.Array:
     dtw = dtw - period * jnp.round(dtw / period)
     near = (jnp.abs(dtw) <= field.align_tol[0] + 1e-6) & jnp.all(jnp.abs(q[1:] - field.best[1:]) <= field.align_tol[1] + 1e-6)
     no_contact = jnp.abs(energy) <= field.floor
+    ran_out = status == MAX_STEPS
+    if max(field.align_tol) > 1.0:  # static: a floor or a hysteresis window
+        ran_out = ran_out & ~near
     out = jnp.where(
-        status == MAX_STEPS,
+        ran_out,
         4,
         jnp.where(no_contact, 3, jnp.where(near, 0, jnp.where(flat, 1, 2))),
     )

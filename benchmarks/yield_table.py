@@ -1,0 +1,77 @@
+"""The yield table of the README: yield against the nominal placement bias, one column per model.
+
+The 730/50 and 730/100 um four-pads under a 730 um chip, 20 nl of water (h = 37.5 um),
+4 um/px and 2 degree twist steps; at each nominal bias, ``--starts`` placements with
+normal noise of 10 um in x and y and 2 degrees in twist (seed 0, the same draws for every
+column). Columns: the overlap model with greedy steps, the finite meniscus (free contact
+lines) with gradient steps, and the finite meniscus with overdamped dynamics, without and
+with the pad's contact-angle hysteresis (receding 25, advancing 35 degrees around the 30
+degree pad). Each column's landscape is built once and every bias runs on it; the time
+of a column is its landscape plus its batches (compilation included, once per column).
+
+Usage: ``python benchmarks/yield_table.py [--starts N] [--resolution UM]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from simulator.landscape import build_landscape  # noqa: E402
+from simulator.materials import Liquid, Materials  # noqa: E402
+from simulator.montecarlo import run_batch, summarize  # noqa: E402
+from simulator.scene import Effects, Scene, TwistGrid  # noqa: E402
+from simulator.starts import random_starts  # noqa: E402
+
+BIASES = [(50, 0), (100, 0), (300, 0), (400, 0), (500, 0), (600, 0), (50, 50), (100, 100), (200, -200), (300, -300)]
+COLUMNS = [
+    ("overlap, greedy", dict(meniscus=False, hysteresis=False), "greedy"),
+    ("meniscus, gradient", dict(meniscus=True, hysteresis=False), "gradient"),
+    ("meniscus, overdamped", dict(meniscus=True, hysteresis=False), "overdamped"),
+    ("meniscus, overdamped, hysteresis 25/35", dict(meniscus=True, hysteresis=True), "overdamped"),
+]
+
+
+def scene(gap: int, meniscus: bool, hysteresis: bool, resolution: float) -> Scene:
+    mat = Materials(pad_receding_deg=25.0, pad_advancing_deg=35.0) if hysteresis else Materials()
+    return Scene.from_inputs(ROOT / "patterns" / "library" / f"four_pad_730_{gap}.png", chip_size_um=730, resolution_um=resolution,
+                             effects=Effects(meniscus=meniscus, hysteresis=hysteresis), liquid=Liquid(volume_nl=20.0),
+                             materials=mat, twist=TwistGrid(2.0, -45.0, 45.0))
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--starts", type=int, default=200, help="placements per bias (default 200)")
+    ap.add_argument("--resolution", type=float, default=4.0, help="um per pixel (default 4)")
+    args = ap.parse_args(argv)
+    for gap in (50, 100):
+        yields: dict[str, list[float]] = {}
+        seconds: dict[str, float] = {}
+        for name, eff, method in COLUMNS:
+            t0 = time.perf_counter()
+            sc = scene(gap, eff["meniscus"], eff["hysteresis"], args.resolution)
+            ls = build_landscape(sc)
+            ys = []
+            for bx, by in BIASES:
+                starts = random_starts(args.starts, (10.0, 10.0, 2.0), seed=0, around=(float(bx), float(by), 0.0))
+                res = run_batch(sc, starts, method, landscape=ls, progress=False)
+                ys.append(summarize(res)["yield"])
+            seconds[name] = time.perf_counter() - t0
+            yields[name] = ys
+            print(f"  730/{gap} {name}: {seconds[name]:.1f} s", file=sys.stderr, flush=True)
+        print(f"\n730/{gap} um four-pad, 20 nl, {args.starts} placements per bias (sigma 10 um, 10 um, 2 deg), {args.resolution:g} um/px, 2 deg twists\n")
+        print("| nominal bias (um) | " + " | ".join(n for n, _, _ in COLUMNS) + " |")
+        print("|---|" + "---:|" * len(COLUMNS))
+        for i, (bx, by) in enumerate(BIASES):
+            print(f"| ({bx}, {by}) | " + " | ".join(f"{100 * yields[n][i]:.1f} %" for n, _, _ in COLUMNS) + " |")
+        print("| time (s) | " + " | ".join(f"{seconds[n]:.0f}" for n, _, _ in COLUMNS) + " |", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
