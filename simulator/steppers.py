@@ -118,4 +118,5 @@ def flat_at(field, grid, flat, q) -> jax.Array:
 def finish(field, grid, state: RunState, max_steps: int) -> tuple[jax.Array, jax.Array]:
     """(status, outcome index into stepping.OUTCOMES) of a run, on the landscape it ran on."""
     status = ran_out(state.step, state.status, max_steps)
-    return status, stepping.classify(field, grid, state.q, state.energy, status, flat_at(field, grid, state.flat, state.q))
+    timed_out = jnp.isfinite(state.time_s) & (state.step < max_steps)  # a dynamic run out of time, not steps
+    return status, stepping.classify(field, grid, state.q, state.energy, status, flat_at(field, grid, state.flat, state.q), timed_out)

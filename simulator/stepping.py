@@ -224,7 +224,7 @@ def gradient_descent(field: Field, grid: Grid, start, max_steps: int, record: bo
 
 
 # ----------------------------------------------------------------- outcome
-def classify(field: Field, grid: Grid, q, energy, status, flat) -> jax.Array:
+def classify(field: Field, grid: Grid, q, energy, status, flat, timed_out=False) -> jax.Array:
     """Outcome index into :data:`OUTCOMES` for a final pose q (fractional indices).
 
     aligned: within ``field.align_tol`` (twist steps, px) of the global minimum, twist
@@ -234,7 +234,9 @@ def classify(field: Field, grid: Grid, q, energy, status, flat) -> jax.Array:
     local_minimum: stopped anywhere else. max_steps: ran out of steps (or, for the
     dynamics, of time), except where the tolerance is wider than a step (the floor a chip
     floats on, a hysteresis window) and the run ended inside it: there it is aligned, as
-    a chip that creeps about on the floor is.
+    a chip that creeps about on the floor is. ``timed_out``: a dynamic run whose simulated
+    time ran out (not its steps); ending on a plateau it is a plateau (the chip creeps on
+    it), not max_steps.
     """
     q = jnp.asarray(q, field.dtype)
     period = grid.period_deg / grid.twist_step_deg
@@ -242,7 +244,7 @@ def classify(field: Field, grid: Grid, q, energy, status, flat) -> jax.Array:
     dtw = dtw - period * jnp.round(dtw / period)
     near = (jnp.abs(dtw) <= field.align_tol[0] + 1e-6) & jnp.all(jnp.abs(q[1:] - field.best[1:]) <= field.align_tol[1] + 1e-6)
     no_contact = jnp.abs(energy) <= field.floor
-    ran_out = status == MAX_STEPS
+    ran_out = (status == MAX_STEPS) & ~(jnp.asarray(timed_out) & jnp.asarray(flat))
     if max(field.align_tol) > 1.0:  # static: a floor or a hysteresis window
         ran_out = ran_out & ~near
     out = jnp.where(

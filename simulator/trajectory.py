@@ -216,7 +216,8 @@ def simulate(
     opt = global_minimum(scene, landscape=landscape if landscape is not None else (ls if dynamic else None),
                          evaluated=boxes.built, backend=backend)
     best = jnp.asarray(grid.to_index(np.asarray(opt.pose)), field.dtype)
-    out = stepping.classify(field._replace(best=best), grid, q_end, float(traj.energy_J[-1]), status, flat)
+    timed_out = dynamic and traj.steps < max_steps  # the simulated time ran out, not the steps
+    out = stepping.classify(field._replace(best=best), grid, q_end, float(traj.energy_J[-1]), status, flat, timed_out)
     full = full_landscape_poses(scene) if landscape is None else landscape.energy.size
     cost = {
         "poses_computed": int(boxes.poses),

@@ -73,3 +73,17 @@ def test_phi_hessian_is_the_derivative_of_its_gradient():
     # on a grid line (a node of the start) the one-sided value, not autodiff's branch
     q = jnp.asarray(grid.to_index([300.0, 0.0, 0.0]), jnp.float32)
     assert abs(float(dynamics_ode._hessian(field, grid, q)[2, 2])) < 1e-3 * float(stepping.reference_gradient(field, grid))
+
+
+def test_with_twists_the_run_that_creeps_on_the_plateau_until_its_time_is_up_is_a_plateau():
+    # With a twist axis the potential averages the landscape over +-1 twist step, so the
+    # overlap plateau is exactly flat only at twist 0 and the chip creeps along it until
+    # the simulated second is up (measured at 2, 4 and 5 um/px: it ends within 386-400 um).
+    # That is a stop on a plateau, reported as one, not as running out of steps.
+    argv = ["simulate", "--pattern", str(library_path("four_pad_730_100")), "--chip-size", "730", "--volume", "20",
+            "--resolution", "5", "--twist-step", "2"]
+    sc = scene_from_args(build_parser().parse_args(argv))
+    t = simulate(sc, (500.0, 0.0, 0.0), method="inertial")
+    assert t.steps < DEFAULT_MAX_STEPS  # not out of steps: out of time
+    assert t.time_s == pytest.approx(1.0)  # the default t_max_s
+    assert t.outcome == "plateau" and 315.0 <= t.final[0] <= 415.0  # on the overlap model's flat part (p to p + g)

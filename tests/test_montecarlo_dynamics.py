@@ -69,12 +69,15 @@ def test_batch_dynamics_equal_single_runs_start_by_start(request, case, method):
         assert r.steps[i] == traj.steps
         assert r.time_s[i] == pytest.approx(traj.time_s, rel=1e-6, abs=1e-12)
     names = set(r.outcome_names())
-    assert names == ({"aligned", "no_contact"} if case == "overlap" else {"aligned", "max_steps"})
+    # On the floating floor every run ends aligned: those that creep on the floor until their
+    # simulated second is up end inside it (simulator.stepping.classify), not out of time.
+    assert names == ({"aligned", "no_contact"} if case == "overlap" else {"aligned"})
     # the start at the aligned pose: aligned at once; the time to align is the aligned runs' time, NaN elsewhere
     assert r.outcome_names()[0] == "aligned" and r.time_s[0] == 0.0
     ok = r.outcome == stepping.OUTCOMES.index("aligned")
     assert np.array_equal(r.time_to_align_s[ok], r.time_s[ok]) and np.isnan(r.time_to_align_s[~ok]).all()
-    assert (r.time_s[ok] < 1.0).all() and np.count_nonzero(r.time_s[ok] > 0) >= 2
+    # a run that creeps on the floor until its second is up reports that second (an upper bound)
+    assert (r.time_s[ok] <= 1.0).all() and np.count_nonzero((r.time_s[ok] > 0) & (r.time_s[ok] < 1.0)) >= 2
 
 
 def test_time_to_align_distribution_in_the_summary(overlap):
