@@ -28,6 +28,7 @@ budget and build: :func:`build_landscape`). This module holds the
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -222,6 +223,12 @@ class Landscape:
         A single pose for a cusp or a smooth well; a flat floor where the chip floats, as it
         does within the reach of free contact lines (:class:`simulator.meniscus.WallProfile`).
         """
+        return self._floor
+
+    @functools.cached_property
+    def _floor(self) -> tuple[tuple[int, int], tuple[int, int], tuple[int, int]]:
+        """:meth:`floor_extent`, labelled once per landscape (1.6 s on a 90 x 985 x 985 one;
+        evaluate asks for it four times)."""
         from scipy import ndimage
 
         it, iy, ix = self.minimum_index()
