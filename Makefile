@@ -18,8 +18,15 @@ test: $(BIN)/selfalign
 	$(BIN)/python -m pytest -q tests
 	$(BIN)/python -m pytest -q --nbmake notebooks
 
-lint: $(BIN)/selfalign
+# The lint tools (the `dev` extra: pyright, the SciPy stubs, pre-commit) on top of the test environment.
+$(BIN)/pyright: $(BIN)/selfalign
+	$(BIN)/pip install --quiet -e '.[dev]'
+	@touch $@
+
+lint: $(BIN)/pyright
 	$(BIN)/ruff check .
+	$(BIN)/pyright --pythonpath $(BIN)/python
+	$(BIN)/ruff format --check .
 
 library: $(BIN)/selfalign
 	$(BIN)/python -m patterns.library

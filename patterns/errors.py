@@ -11,6 +11,7 @@ from __future__ import annotations
 import os
 import stat
 from pathlib import Path
+from typing import SupportsFloat, SupportsIndex
 
 
 class InputError(ValueError):
@@ -23,7 +24,7 @@ def require(condition: bool, message: str) -> None:
         raise InputError(message)
 
 
-def positive(name: str, value: float, unit: str = "") -> float:
+def positive(name: str, value: SupportsFloat | SupportsIndex | str, unit: str = "") -> float:
     """Return ``value`` as float if it is finite and > 0, else raise InputError."""
     try:
         v = float(value)

@@ -158,7 +158,7 @@ class Correlator:
                 mirror_out[...] = np.asarray(self._jax_fn(chips[:, ::-1])) * scale
             return out
         flipped = chips[:, ::-1, ::-1]
-        nz = flipped.any(axis=0)
+        nz = np.asarray(flipped.any(axis=0))  # (hc, wc): which chip pixels any chip covers
         if not nz.any():
             out[...] = 0
             if mirror_out is not None:
@@ -176,8 +176,9 @@ class Correlator:
         if mirror_out is not None:
             # The mirror image's flipped rows are f[hc - 1 - k]:
             # F'(ky) = exp(-2 pi i ky (hc - 1) / ny) F(-ky), the ramp folded into a kernel.
-            mk = work.mkernel
-            mspec = work.mspec[: len(chips)]
+            mk, mspec = work.mkernel, work.mspec
+            assert mk is not None and mspec is not None  # a mirror workspace (made above if not given)
+            mspec = mspec[: len(chips)]
             np.multiply(spec[:, :1], mk[:1], out=mspec[:, :1])
             np.multiply(spec[:, :0:-1], mk[1:], out=mspec[:, 1:])  # rows ky -> -ky mod ny
             self._inverse(mspec, mirror_out, scale)

@@ -243,6 +243,7 @@ def _twist_cut(axis: np.ndarray, wrap: bool, twists: np.ndarray) -> tuple[bool, 
     if len(axis) == 1:
         return False, False
     if wrap:
-        return (len(twists) < len(axis),) * 2
+        cut = len(twists) < len(axis)
+        return cut, cut
     eps = DEG_TOL * max(1.0, abs(axis).max())
     return bool(twists[0] > axis[0] + eps), bool(twists[-1] < axis[-1] - eps)

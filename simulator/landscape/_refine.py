@@ -100,7 +100,7 @@ def refine_minimum(ls, x_um: float, y_um: float, twist_deg: float) -> dict:
     def g(v):
         return (f(v) - e0) / span
 
-    res = minimize(g, x0, method="L-BFGS-B", bounds=f.bounds, options=dict(LBFGS_OPTIONS))
+    res = minimize(g, x0, method="L-BFGS-B", bounds=f.bounds, options=dict(LBFGS_OPTIONS))  # pyright: ignore[reportCallIssue, reportArgumentType]  (scipy-stubs wants its private TypedDict)
     best = res.x if res.fun <= 0 else x0
     x, y, t = f.pose(best)
     return {"x_um": x, "y_um": y, "twist_deg": t, "energy_J": float(f(best))}

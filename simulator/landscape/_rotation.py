@@ -76,13 +76,14 @@ class ChipRotator:
         rx, ry = rx + margin_px, ry + margin_px
         # Canvas (H, W) with W % 2 == parity so chip and pattern pixel grids coincide;
         # just large enough for the twists asked for (a band of twists needs less).
-        self.shape = tuple(2 * ceil_whole(r) + 2 + p for r, p in ((ry, parity[0]), (rx, parity[1])))
+        self.shape = (2 * ceil_whole(ry) + 2 + parity[0], 2 * ceil_whole(rx) + 2 + parity[1])
         # A chip image is resampled on the canvas of a full turn and cut to this one: OpenCV's
         # fixed-point bilinear weights (1/32 px) depend on where a pixel lies on the canvas, so
         # a band of twists (a smaller canvas) would otherwise get other rasters than the
         # whole axis, and a box of the landscape other energies than the full one.
         rad = max(_chip_reach_px(chip, True))
-        self._turn_shape = tuple(max(2 * ceil_whole(rad) + 2 + p, n) for p, n in zip(parity, self.shape, strict=True))
+        turn = 2 * ceil_whole(rad) + 2
+        self._turn_shape = (max(turn + parity[0], self.shape[0]), max(turn + parity[1], self.shape[1]))
         self._blurred = self._blur() if self.blur_px > 0 or profile is not None else None
         self._coeffs = None  # its cubic-spline coefficients, made at the first rotation
 
@@ -159,6 +160,7 @@ class ChipRotator:
         as steps in the energy at small twists)."""
         from scipy import ndimage
 
+        assert self._blurred is not None  # only a blurred chip is rotated by splines
         ho, wo = self.shape
         h, w = self._blurred.shape
         if self._coeffs is None:
@@ -199,6 +201,7 @@ class ChipRotator:
         map of the coarse samples, so the result stays smooth in the twist."""
         from scipy import ndimage
 
+        assert self._blurred is not None and self._coeffs is not None  # set up by _spline_rotate
         ho, wo = self.shape
         h, w = self._blurred.shape
         # The coarse grid covers the smooth image at every twist (the radius of its cut box)

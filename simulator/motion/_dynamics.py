@@ -216,20 +216,21 @@ def _run(
         args=(field, grid, co),
         saveat=saveat,
         stepsize_controller=_GuardedController(
-            inner=pid, rtol=pid.rtol, atol=pid.atol, norm=pid.norm, inertial=inertial
+            inner=pid, rtol=rtol, atol=atol, norm=pid.norm, inertial=inertial
         ),
         event=diffrax.Event(_stop_inertial if inertial else _stop_overdamped),
         max_steps=max_steps,
         throw=False,
     )
     step = jnp.asarray(sol.stats["num_accepted_steps"], jnp.int32)
-    ys = sol.ys
+    ts, ys = sol.ts, sol.ys
+    assert ts is not None and ys is not None  # saveat asks for both
     if record:
         final = jax.tree_util.tree_map(lambda a: a[step], ys)
-        t_final = sol.ts[step]
+        t_final = ts[step]
     else:
         final = jax.tree_util.tree_map(lambda a: a[0], ys)
-        t_final = sol.ts[0]
+        t_final = ts[0]
     q = final["q"]
     _, grad = potential_and_gradient(field, grid, q)
     converged, edge = _stop_flags(field, grid, co, q, grad, final["kinetic"])
@@ -244,7 +245,7 @@ def _run(
             return jnp.where(mask, a, jnp.nan)
 
         path, pe, pp, pk = buf(ys["q"]), buf(ys["energy"]), buf(ys["potential"]), buf(ys["kinetic"])
-        pt = buf(sol.ts * tau)
+        pt = buf(ts * tau)
     else:
         phi0, _ = potential_and_gradient(field, grid, q0)
         path, pe, pp = q0[None], _energy(field, grid, q0)[None], phi0[None]

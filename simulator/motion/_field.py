@@ -28,7 +28,7 @@ def enable_float64() -> None:
     """Let a float64 landscape stay float64 inside the steppers: JAX's ``jax_enable_x64``,
     switched on where a stepper's view of a landscape is made (:func:`make_field`), not
     when a module is imported. float32 landscapes still compute in float32."""
-    if not jax.config.jax_enable_x64:
+    if not jax.config.jax_enable_x64:  # pyright: ignore[reportAttributeAccessIssue]  (a flag JAX's Config stub does not list)
         jax.config.update("jax_enable_x64", True)
 
 
@@ -109,7 +109,7 @@ def make_field(energy, grid: PoseGrid, floor, best, pin: tuple[float, float, flo
         floor=jnp.asarray(floor, dt),
         best=jnp.asarray(best, dt),
         scale=jnp.asarray(np.abs(energy).max() if energy.size else 0.0, dt),
-        pin=tuple(float(v) for v in pin),
+        pin=(float(pin[0]), float(pin[1]), float(pin[2])),
         align_tol=(float(align_tol[0]), float(align_tol[1])),
     )
 

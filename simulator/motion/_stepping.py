@@ -218,7 +218,7 @@ def gradient_descent(field: Field, grid: Grid, start, max_steps: int, record: bo
 
 
 # ----------------------------------------------------------------- outcome
-def classify(field: Field, grid: Grid, q, energy, status, flat, timed_out=False) -> jax.Array:
+def classify(field: Field, grid: Grid, q, energy, status, flat, timed_out: bool | jax.Array = False) -> jax.Array:
     """Outcome index into :data:`OUTCOMES` for a final pose q (fractional indices).
 
     aligned: within ``field.align_tol`` (twist steps, px) of the global minimum, twist

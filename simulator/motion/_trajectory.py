@@ -74,11 +74,13 @@ class Trajectory:
 
     @property
     def start(self) -> tuple[float, float, float]:
-        return tuple(float(v) for v in self.path[0])
+        x, y, t = self.path[0]
+        return float(x), float(y), float(t)
 
     @property
     def final(self) -> tuple[float, float, float]:
-        return tuple(float(v) for v in self.path[-1])
+        x, y, t = self.path[-1]
+        return float(x), float(y), float(t)
 
     def to_json(self) -> dict:
         def pose(p):
@@ -348,6 +350,7 @@ def _box_landscapes(scene: Scene, band_steps: int, band_px: int, backend: str, c
             cost.built.append(ls)
             template = ls
             planes.update({j: ls.energy[i] for i, j in enumerate(run)})
+        assert template is not None  # built on the first pass (its planes were empty)
         if before is not None and _extent(template) == before:
             stuck = True
         g = template.grid
@@ -407,6 +410,7 @@ def _join(method: str, pieces: list[Trajectory]) -> Trajectory:
     if pieces[0].t_s is not None:
         offs, ts = 0.0, [pieces[0].t_s]
         for prev, p in zip(pieces, pieces[1:], strict=False):
+            assert prev.t_s is not None and p.t_s is not None  # every piece of a dynamic run is timed
             offs += prev.t_s[-1]
             ts.append(p.t_s[1:] + offs)
         t_s = np.concatenate(ts)
