@@ -1,19 +1,11 @@
-"""What the reliability suites share: run the CLI in-process, check a one-line refusal,
-list what a directory holds."""
+"""What the bad-input and interruption suites share besides the ``run_cli`` fixture
+(``tests/conftest.py``): check a one-line refusal, list what a directory holds, run
+``python -m`` with Ctrl-C restored."""
 
 from __future__ import annotations
 
 import sys
 from pathlib import Path
-
-from simulator.cli import main
-
-
-def cli(args: list, capsys) -> tuple[int, str, str]:
-    """``selfalign ARGS`` in this process: (exit code, stdout, stderr)."""
-    rc = main([str(a) for a in args])
-    out, err = capsys.readouterr()
-    return rc, out, err
 
 
 def one_line_error(rc: int, err: str, *needles: str) -> None:

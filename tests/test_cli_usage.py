@@ -49,12 +49,6 @@ ROOT = Path(__file__).resolve().parents[1]
 SQUARE = str(library_path("square_200"))  # 200 um square pad at 1 um/px
 
 
-def cli(args, capsys) -> tuple[int, str, str]:
-    rc = main([str(a) for a in args])
-    out, err = capsys.readouterr()
-    return rc, out, err
-
-
 def one_line_error(rc: int, err: str, *needles: str) -> None:
     assert rc == 2, err
     assert err.count("\n") == 1 and "Traceback" not in err, err
@@ -85,10 +79,10 @@ FAST = ["--chip-size", "200", "--twist-step", "5"]
 
 
 @pytest.mark.parametrize("case", sorted(CASES))
-def test_simulate_aligns_at_the_scenes_global_minimum(case, pads, tmp_path, capsys):
+def test_simulate_aligns_at_the_scenes_global_minimum(case, pads, tmp_path, run_cli):
     png, start, opt, twists = CASES[case]
     out = tmp_path / "t.json"
-    rc, stdout, err = cli(["simulate", "--pattern", pads / png, *FAST, "--start", start, "--json", out, "--quiet"], capsys)
+    rc, stdout, err = run_cli(["simulate", "--pattern", pads / png, *FAST, "--start", start, "--json", out, "--quiet"])
     assert rc == 0, err
     doc = json.loads(out.read_text())
     assert doc["outcome"] == "aligned" and stdout.startswith("greedy: aligned at"), stdout
@@ -98,12 +92,12 @@ def test_simulate_aligns_at_the_scenes_global_minimum(case, pads, tmp_path, caps
 
 
 @pytest.mark.parametrize("case", sorted(CASES))
-def test_montecarlo_aligns_and_measures_errors_from_the_minimum(case, pads, tmp_path, capsys):
+def test_montecarlo_aligns_and_measures_errors_from_the_minimum(case, pads, tmp_path, run_cli):
     png, _, opt, _ = CASES[case]
     out = tmp_path / "mc.json"
     around = f"{opt[0] - 10:g},{opt[1] + 10:g},{opt[2] + 5:g}"
-    rc, stdout, err = cli(["montecarlo", "--pattern", pads / png, *FAST, "--random", "40", "--spread", "4,4,2",
-                           "--around", around, "--seed", "1", "--json", out, "--quiet"], capsys)
+    rc, stdout, err = run_cli(["montecarlo", "--pattern", pads / png, *FAST, "--random", "40", "--spread", "4,4,2",
+                               "--around", around, "--seed", "1", "--json", out, "--quiet"])
     assert rc == 0, err
     doc = json.loads(out.read_text())
     assert doc["yield"] >= 0.9, doc["outcomes"]
@@ -117,7 +111,7 @@ def test_montecarlo_aligns_and_measures_errors_from_the_minimum(case, pads, tmp_
 
 
 @pytest.mark.parametrize("case", sorted(CASES))
-def test_evaluate_reports_the_minimum_and_measures_around_it(case, pads, tmp_path, capsys, monkeypatch):
+def test_evaluate_reports_the_minimum_and_measures_around_it(case, pads, tmp_path, run_cli, monkeypatch):
     import simulator.batch._evaluate as evaluating
     from simulator.render import plot_capture_map
 
@@ -126,7 +120,7 @@ def test_evaluate_reports_the_minimum_and_measures_around_it(case, pads, tmp_pat
     monkeypatch.setattr(evaluating, "plot_capture_map", lambda *a, **k: (titles.append(k.get("title", "")), draw(*a, **k)))
     png, _, opt, _ = CASES[case]
     rep = tmp_path / "rep"
-    rc, stdout, err = cli(["evaluate", pads / png, *FAST, "--out", rep, "--quiet"], capsys)
+    rc, stdout, err = run_cli(["evaluate", pads / png, *FAST, "--out", rep, "--quiet"])
     assert rc == 0, err
     s = json.loads((rep / "summary.json").read_text())
     g = s["global_minimum"]
@@ -226,10 +220,10 @@ def scaled(tmp_path_factory):
     (["--um-per-px", "1", "--override-scale"], 8100.0),  # the old behaviour, asked for: a 90 um pad
     (["--pattern-um-per-px", "2", "--chip-um-per-px", "1"], 32400.0),
 ])
-def test_a_files_scale_wins_and_flags_set_what_files_lack(scaled, flags, overlap, tmp_path, capsys):
+def test_a_files_scale_wins_and_flags_set_what_files_lack(scaled, flags, overlap, tmp_path, run_cli):
     out = tmp_path / "e.json"
-    rc, _, err = cli(["energy", "--pattern", scaled / "pat2.png", "--chip", scaled / "chip.png", "--no-twist", "--at", "0,0,0",
-                      "--json", out, *flags], capsys)
+    rc, _, err = run_cli(["energy", "--pattern", scaled / "pat2.png", "--chip", scaled / "chip.png", "--no-twist", "--at", "0,0,0",
+                          "--json", out, *flags])
     assert rc == 0, err
     assert json.loads(out.read_text())["poses"][0]["overlap_um2"] == pytest.approx(overlap, rel=1e-6)  # float32
 
@@ -239,8 +233,8 @@ def test_a_files_scale_wins_and_flags_set_what_files_lack(scaled, flags, overlap
     (["--pattern-um-per-px", "1", "--chip-um-per-px", "1"], ["--pattern-um-per-px 1 contradicts it"]),
     ([], ["chip.png has no scale", "--chip-um-per-px"]),
 ])
-def test_a_contradicting_or_missing_scale_is_one_line(scaled, flags, needles, capsys):
-    rc, _, err = cli(["energy", "--pattern", scaled / "pat2.png", "--chip", scaled / "chip.png", "--no-twist", "--at", "0,0,0", *flags], capsys)
+def test_a_contradicting_or_missing_scale_is_one_line(scaled, flags, needles, run_cli):
+    rc, _, err = run_cli(["energy", "--pattern", scaled / "pat2.png", "--chip", scaled / "chip.png", "--no-twist", "--at", "0,0,0", *flags])
     one_line_error(rc, err, *needles)
 
 
@@ -304,14 +298,14 @@ def test_every_negative_value_form_parses(argv, dest, value):
     assert getattr(build_parser().parse_args(argv), dest) == value
 
 
-def test_negative_values_after_a_space_run(tmp_path, capsys):
+def test_negative_values_after_a_space_run(tmp_path, capsys, run_cli):
     out = tmp_path / "e.json"
-    rc, _, err = cli(["energy", "--pattern", SQUARE, "--chip-size", "200", "--resolution", "4", "--at", "-40,25,0",
-                      "--curve", "x", "--from", "-60", "--to", "-12", "--json", out], capsys)
+    rc, _, err = run_cli(["energy", "--pattern", SQUARE, "--chip-size", "200", "--resolution", "4", "--at", "-40,25,0",
+                          "--curve", "x", "--from", "-60", "--to", "-12", "--json", out])
     assert rc == 0, err
     doc = json.loads(out.read_text())
     assert doc["poses"][0]["x_um"] == -40 and doc["curve"]["values_um"][0] == -60
-    rc, _, err = cli(["pattern", "polygon", "--points", "-100,-100;100,-100;0,100", "-o", tmp_path / "tri.png"], capsys)
+    rc, _, err = run_cli(["pattern", "polygon", "--points", "-100,-100;100,-100;0,100", "-o", tmp_path / "tri.png"])
     assert rc == 0, err
     # a word that is not a number still reads as an option
     with pytest.raises(SystemExit) as exit_:
@@ -356,10 +350,10 @@ def test_pyproject_lists_every_package_and_the_library_files():
 
 
 # ============================================================ 7. CSV outputs
-def test_simulate_csv_is_the_path_with_units(tmp_path, capsys):
+def test_simulate_csv_is_the_path_with_units(tmp_path, run_cli):
     j, c = tmp_path / "t.json", tmp_path / "t.csv"
-    rc, out, err = cli(["simulate", "--pattern", SQUARE, "--chip-size", "200", "--resolution", "4", "--twist-step", "5",
-                        "--start", "-40,24,5", "--json", j, "--csv", c, "--quiet"], capsys)
+    rc, out, err = run_cli(["simulate", "--pattern", SQUARE, "--chip-size", "200", "--resolution", "4", "--twist-step", "5",
+                            "--start", "-40,24,5", "--json", j, "--csv", c, "--quiet"])
     assert rc == 0, err
     assert f"wrote {c}" in out
     rows = list(csv.DictReader(c.read_text().splitlines()))
@@ -371,10 +365,10 @@ def test_simulate_csv_is_the_path_with_units(tmp_path, capsys):
         assert float(r["energy_J"]) == pytest.approx(p["energy_J"], rel=1e-9)
 
 
-def test_energy_csv_holds_poses_and_curve_with_units(tmp_path, capsys):
+def test_energy_csv_holds_poses_and_curve_with_units(tmp_path, run_cli):
     j, c = tmp_path / "e.json", tmp_path / "e.csv"
-    rc, _, err = cli(["energy", "--pattern", SQUARE, "--chip-size", "200", "--resolution", "4", "--at", "-40,24,0", "--at", "0,0,0",
-                      "--curve", "x", "--from", "-60", "--to", "60", "--json", j, "--csv", c], capsys)
+    rc, _, err = run_cli(["energy", "--pattern", SQUARE, "--chip-size", "200", "--resolution", "4", "--at", "-40,24,0", "--at", "0,0,0",
+                          "--curve", "x", "--from", "-60", "--to", "60", "--json", j, "--csv", c])
     assert rc == 0, err
     rows = list(csv.DictReader(c.read_text().splitlines()))
     assert list(rows[0]) == ["kind", "x_um", "y_um", "twist_deg", "overlap_um2", "energy_J", "force_x_N", "force_y_N", "torque_Nm"]
@@ -467,33 +461,33 @@ def test_help_texts_print_no_doubled_percent():
         assert "%%" not in parser.format_help(), " ".join(path)
 
 
-def test_all_black_masks_name_the_invert_flags_and_invert_works(tmp_path, capsys):
+def test_all_black_masks_name_the_invert_flags_and_invert_works(tmp_path, run_cli):
     ink = np.full((120, 120), 255, np.uint8)
     ink[10:110, 10:110] = 0  # a black 100 um pad on white
     Image.fromarray(ink).save(tmp_path / "ink.png", dpi=(25400, 25400))
     Image.fromarray(np.zeros((50, 50), np.uint8)).save(tmp_path / "black.png", dpi=(25400, 25400))
     out = tmp_path / "e.json"
-    rc, _, err = cli(["energy", "--pattern", tmp_path / "ink.png", "--invert", "--chip-size", "100", "--no-twist", "--at", "0,0,0", "--json", out], capsys)
+    rc, _, err = run_cli(["energy", "--pattern", tmp_path / "ink.png", "--invert", "--chip-size", "100", "--no-twist", "--at", "0,0,0", "--json", out])
     assert rc == 0, err
     assert json.loads(out.read_text())["poses"][0]["overlap_um2"] == pytest.approx(100 * 100)
-    rc, _, err = cli(["energy", "--pattern", tmp_path / "black.png", "--chip-size", "10", "--at", "0,0,0"], capsys)
+    rc, _, err = run_cli(["energy", "--pattern", tmp_path / "black.png", "--chip-size", "10", "--at", "0,0,0"])
     one_line_error(rc, err, "all black", "--invert")
-    rc, _, err = cli(["energy", "--pattern", SQUARE, "--chip", tmp_path / "black.png", "--at", "0,0,0"], capsys)
+    rc, _, err = run_cli(["energy", "--pattern", SQUARE, "--chip", tmp_path / "black.png", "--at", "0,0,0"])
     one_line_error(rc, err, "all black", "--invert-chip")
-    rc, _, err = cli(["energy", "--pattern", SQUARE, "--chip", tmp_path / "ink.png", "--invert-chip", "--no-twist", "--at", "0,0,0", "--json", out], capsys)
+    rc, _, err = run_cli(["energy", "--pattern", SQUARE, "--chip", tmp_path / "ink.png", "--invert-chip", "--no-twist", "--at", "0,0,0", "--json", out])
     assert rc == 0, err
 
 
-def test_a_grid_flag_replaces_the_scenes_random_starts(tmp_path, capsys):
+def test_a_grid_flag_replaces_the_scenes_random_starts(tmp_path, run_cli):
     toml = tmp_path / "mc.toml"
     toml.write_text(f'pattern = "{SQUARE}"\nchip_size_um = 200\nresolution_um = 4\n[twist]\nstep_deg = 10\n'
                     "[montecarlo]\nrandom = 20\nspread = [10, 10, 1]\naround = [20, 0, 0]\nseed = 3\n")
     out = tmp_path / "mc.json"
-    rc, _, err = cli(["montecarlo", toml, "--grid", "-40:40:20,-40:40:20", "--json", out, "--quiet"], capsys)
+    rc, _, err = run_cli(["montecarlo", toml, "--grid", "-40:40:20,-40:40:20", "--json", out, "--quiet"])
     assert rc == 0, err
     doc = json.loads(out.read_text())
     assert doc["starts"]["kind"] == "grid" and doc["n"] == 25 and doc["seed"] is None
-    rc, _, err = cli(["montecarlo", toml, "--json", out, "--quiet"], capsys)  # the scene's own random starts
+    rc, _, err = run_cli(["montecarlo", toml, "--json", out, "--quiet"])  # the scene's own random starts
     assert rc == 0, err
     assert json.loads(out.read_text())["starts"]["kind"] == "random"
 
@@ -507,7 +501,7 @@ def test_the_files_the_readme_names_exist():
     assert not missing, missing
 
 
-def test_threads_come_from_selfalign_threads(capsys, monkeypatch):
+def test_threads_come_from_selfalign_threads(run_cli, monkeypatch):
     from simulator.core import threads
     from simulator.landscape import Correlator, Window
 
@@ -515,7 +509,7 @@ def test_threads_come_from_selfalign_threads(capsys, monkeypatch):
     assert threads() == 1
     assert Correlator(np.ones((8, 8)), (3, 3), Window(2, 2, 3, 3), "float32", "scipy").workers == 1
     monkeypatch.setenv("SELFALIGN_THREADS", "two")
-    rc, _, err = cli(["simulate", "--pattern", str(library_path("square_200")), "--chip-size", "200", "--start", "10,5,0", "--quiet"], capsys)
+    rc, _, err = run_cli(["simulate", "--pattern", str(library_path("square_200")), "--chip-size", "200", "--start", "10,5,0", "--quiet"])
     one_line_error(rc, err, "SELFALIGN_THREADS='two'", "whole number")
     monkeypatch.delenv("SELFALIGN_THREADS")
     import os

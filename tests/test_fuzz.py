@@ -34,7 +34,7 @@ POSES = ["0,0,0", "1,2,3", "-40,25,0", "1e9,0,0", "nan,0,0", "1,2", "1,2,3,4", "
 RANGES = ["-10:10:5,-10:10:5", "0,0", "0:0:0,0", "-1e9:1e9:1e-3,0", "1:0:1,0", "a:b:c,0", "0,0,0:90:1e-6", "-4:4:2,-4:4:2,0"]
 
 
-def run_cli(args: list[str], workdir: Path) -> tuple[int, str, int]:
+def run_traced(args: list[str], workdir: Path) -> tuple[int, str, int]:
     """main(args) in ``workdir``: (exit code, stderr, peak traced bytes)."""
     err = io.StringIO()
     cwd = os.getcwd()
@@ -130,7 +130,7 @@ def test_fuzz_cli_flags(args):
         d = Path(tmp)
         small_pattern(d)
         outputs = {a.split("=", 1)[1] for a in args if a.startswith(("--json=", "--csv="))}
-        rc, err, peak = run_cli(args, d)
+        rc, err, peak = run_traced(args, d)
         check_run(rc, err, peak, d, {"pad.png"}, outputs)
 
 
@@ -168,7 +168,7 @@ def test_fuzz_toml_scene(text):
         d = Path(tmp)
         small_pattern(d)
         (d / "scene.toml").write_text(text)
-        rc, err, peak = run_cli(["energy", "scene.toml", "--at", "0,0,0", "--json", "e.json"], d)
+        rc, err, peak = run_traced(["energy", "scene.toml", "--at", "0,0,0", "--json", "e.json"], d)
         check_run(rc, err, peak, d, {"pad.png", "scene.toml"}, {"e.json"})
 
 
@@ -234,6 +234,6 @@ def test_fuzz_png_through_the_cli(data):
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(tmp)
         (d / "in.png").write_bytes(data)
-        rc, err, peak = run_cli(["energy", "--pattern", "in.png", "--um-per-px", "1", "--chip-size", "5", "--at", "0,0,0",
+        rc, err, peak = run_traced(["energy", "--pattern", "in.png", "--um-per-px", "1", "--chip-size", "5", "--at", "0,0,0",
                                  "--memory-budget", "512", "--json", "e.json"], d)
         check_run(rc, err, peak, d, {"in.png"}, {"e.json"})

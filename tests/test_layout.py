@@ -52,12 +52,6 @@ DESIGN_PARAMS = {
 }
 
 
-def cli(args, capsys):
-    rc = main([str(a) for a in args])
-    out, err = capsys.readouterr()
-    return rc, out, err
-
-
 def one_line_error(rc, err, *needles):
     assert rc == 2, err
     assert err.count("\n") == 1 and err.endswith("\n"), err
@@ -120,10 +114,10 @@ def test_round_trip_design_to_the_database_unit(tmp_path, name, suffix):
     assert back.is_valid and len(shapely.get_parts(back)) == len(shapely.get_parts(design))
 
 
-def test_pattern_command_writes_gds_and_dxf(tmp_path, capsys):
+def test_pattern_command_writes_gds_and_dxf(tmp_path, run_cli):
     for suffix, layer in ((".gds", "layer 1/0"), (".dxf", "layer PATTERN")):
         out = tmp_path / f"fourpad{suffix}"
-        rc, text, err = cli(["pattern", "four-pad", "--size", "730", "--gap", "50", "-o", out], capsys)
+        rc, text, err = run_cli(["pattern", "four-pad", "--size", "730", "--gap", "50", "-o", out])
         assert rc == 0, err
         assert layer in text and "4 polygons" in text and "database unit 1 nm" in text and "area 462400 um^2" in text
         g, chip, record = layout_geometry(out)
@@ -132,7 +126,7 @@ def test_pattern_command_writes_gds_and_dxf(tmp_path, capsys):
     assert (lib.unit, lib.precision) == (1e-6, 1e-9) and [c.name for c in lib.top_level()] == ["four_pad"]
     assert {(p.layer, p.datatype) for p in lib.cells[0].polygons} == {(1, 0)}
     assert ezdxf.readfile(tmp_path / "fourpad.dxf").header["$INSUNITS"] == 13  # micrometres
-    rc, _, err = cli(["pattern", "square", "--size", "10", "-o", tmp_path / "x.txt"], capsys)
+    rc, _, err = run_cli(["pattern", "square", "--size", "10", "-o", tmp_path / "x.txt"])
     one_line_error(rc, err, ".gds, .oas or .dxf")
     assert not (tmp_path / "x.txt").exists()
 
@@ -293,11 +287,11 @@ def test_chip_layer_keeps_the_pattern_placement_relative_to_the_chip(tmp_path):
     assert "bounding box" in record["origin"]
 
 
-def test_chip_layer_reproduces_the_known_offset_in_energy_and_toml(tmp_path, capsys):
+def test_chip_layer_reproduces_the_known_offset_in_energy_and_toml(tmp_path, run_cli):
     path = offset_site(tmp_path)
     out = tmp_path / "e.json"
-    rc, _, err = cli(["energy", "--pattern", path, "--layer", "1/0", "--chip-layer", "2/0", "--resolution", "2",
-                      "--at", "30,-20,0", "--at", "0,0,0", "--json", out], capsys)
+    rc, _, err = run_cli(["energy", "--pattern", path, "--layer", "1/0", "--chip-layer", "2/0", "--resolution", "2",
+                          "--at", "30,-20,0", "--at", "0,0,0", "--json", out])
     assert rc == 0, err
     assert "poses are relative to the centre of the chip outline on layer 2/0, at layout (1000, 500) um" in err
     poses = json.loads(out.read_text())["poses"]
@@ -308,15 +302,15 @@ def test_chip_layer_reproduces_the_known_offset_in_energy_and_toml(tmp_path, cap
     s = Scene.from_toml(scene)
     assert s.chip.geometry.bounds == (-100, -100, 100, 100) and s.pattern.params["layout"]["origin_um"] == [1000, 500]
     scene.write_text('pattern = "offset.gds"\nlayer = "1/0"\ndxf_units = "cm"\n')
-    rc, _, err = cli(["energy", scene, "--chip-size", "200", "--at", "0,0,0"], capsys)
+    rc, _, err = run_cli(["energy", scene, "--chip-size", "200", "--at", "0,0,0"])
     one_line_error(rc, err, 'dxf_units = "cm"', '"um", "mm", "nm"')
 
 
-def test_evaluate_gds_written_by_gdstk_finds_the_offset(tmp_path, capsys):
+def test_evaluate_gds_written_by_gdstk_finds_the_offset(tmp_path, run_cli):
     path = offset_site(tmp_path)
     rep = tmp_path / "rep"
-    rc, out, err = cli(["evaluate", path, "--layer", "1/0", "--chip-layer", "2/0", "--out", rep, "--quiet",
-                        "--resolution", "5", "--twist-step", "3"], capsys)
+    rc, out, err = run_cli(["evaluate", path, "--layer", "1/0", "--chip-layer", "2/0", "--out", rep, "--quiet",
+                            "--resolution", "5", "--twist-step", "3"])
     assert rc == 0, err
     assert out.startswith("frame: offset.gds cell TOP layer 1/0 (1 polygon, user unit 1 um, database unit 1 nm)")
     s = json.loads((rep / "summary.json").read_text())
@@ -326,10 +320,10 @@ def test_evaluate_gds_written_by_gdstk_finds_the_offset(tmp_path, capsys):
     assert "chip outline on layer 2/0" in (rep / "report.html").read_text()
 
 
-def test_evaluate_the_example_site(tmp_path, capsys):
+def test_evaluate_the_example_site(tmp_path, run_cli):
     rep = tmp_path / "rep"
-    rc, out, err = cli(["evaluate", SITE, "--layer", "1/0", "--chip-layer", "2/0", "--out", rep, "--quiet",
-                        "--resolution", "4", "--twist-step", "2"], capsys)
+    rc, out, err = run_cli(["evaluate", SITE, "--layer", "1/0", "--chip-layer", "2/0", "--out", rep, "--quiet",
+                            "--resolution", "4", "--twist-step", "2"])
     assert rc == 0, err
     assert "poses are relative to the centre of the chip outline on layer 2/0, at layout (1500, 800) um" in out
     s = json.loads((rep / "summary.json").read_text())
@@ -337,8 +331,8 @@ def test_evaluate_the_example_site(tmp_path, capsys):
     assert (g["x_um"], g["y_um"], g["twist_deg"]) == (0.0, 0.0, 0.0)
     assert s["layout"]["area_um2"] == 4 * 180 * 180 and s["layout"]["polygons"] == 4
     # Without a chip layer the target is the pads' bounding-box centre, and the output says so.
-    rc, out, err = cli(["evaluate", SITE, "--layer", "1/0", "--out", tmp_path / "rep2", "--quiet", "--resolution", "8",
-                        "--no-twist"], capsys)
+    rc, out, err = run_cli(["evaluate", SITE, "--layer", "1/0", "--out", tmp_path / "rep2", "--quiet", "--resolution", "8",
+                            "--no-twist"])
     assert rc == 0, err
     assert "the centre of the pattern's bounding box (no chip layer), at layout (1500, 800) um" in out
 
@@ -422,7 +416,7 @@ def test_bad_layout_input_is_one_line_and_writes_nothing(tmp_path, capfd, case):
     assert sorted(p.name for p in tmp_path.iterdir()) == before  # no --out, no temporaries
 
 
-def test_the_suggested_scale_fits(tmp_path, capsys):
-    rc, _, err = cli(["energy", "--pattern", SITE, "--layer", "1/0", "--chip-layer", "2/0", "--resolution", "0.5",
-                      "--memory-budget", "64", "--no-twist", "--at", "0,0,0"], capsys)
+def test_the_suggested_scale_fits(tmp_path, run_cli):
+    rc, _, err = run_cli(["energy", "--pattern", SITE, "--layer", "1/0", "--chip-layer", "2/0", "--resolution", "0.5",
+                          "--memory-budget", "64", "--no-twist", "--at", "0,0,0"])
     assert rc == 0, err

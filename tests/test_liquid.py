@@ -45,14 +45,16 @@ GAMMA = 0.0728
 LINEARITY_TOLERANCE = 0.05
 
 
-def run_json(argv, capsys) -> dict:
-    assert main(argv + ["--json"]) == 0
-    return json.loads(capsys.readouterr().out)
+def run_json(argv, run_cli) -> dict:
+    rc, out, _ = run_cli(argv + ["--json"])
+    assert rc == 0
+    return json.loads(out)
 
 
-def refused(argv, capsys, *words) -> str:
-    assert main(argv) == 2
-    err = capsys.readouterr().err.strip()
+def refused(argv, run_cli, *words) -> str:
+    rc, _, err = run_cli(argv)
+    assert rc == 2
+    err = err.strip()
     assert len(err.splitlines()) == 1, err
     for w in words:
         assert w in err, (w, err)
@@ -60,46 +62,46 @@ def refused(argv, capsys, *words) -> str:
 
 
 # ------------------------------------------------------------------ C12, C13 via the CLI
-def test_c12_meniscus_height_through_the_cli(capsys):
-    big = run_json(["liquid", "height", "--volume", "20", "--chip-size", "730"], capsys)
+def test_c12_meniscus_height_through_the_cli(run_cli):
+    big = run_json(["liquid", "height", "--volume", "20", "--chip-size", "730"], run_cli)
     assert round(big["meniscus_height_um"], 2) == 37.53
     assert big["thin_film_holds"] is True and big["smallest_side_um"] == 730
-    small = run_json(["liquid", "height", "--volume", "0.5", "--area", "40000"], capsys)
+    small = run_json(["liquid", "height", "--volume", "0.5", "--area", "40000"], run_cli)
     assert small["meniscus_height_um"] == pytest.approx(12.5, abs=1e-12)
     assert small["capillary_length_um"] == pytest.approx(math.sqrt(GAMMA / (998 * 9.80665)) * 1e6)
     # 0.9 nl under the 200 um chip of the defect experiment: 22.5 um, past 10 % of the side.
-    exp = run_json(["liquid", "height", "--volume", "0.9", "--chip-size", "200"], capsys)
+    exp = run_json(["liquid", "height", "--volume", "0.9", "--chip-size", "200"], run_cli)
     assert exp["meniscus_height_um"] == pytest.approx(22.5) and exp["h_over_smallest_side"] == pytest.approx(0.1125)
     assert exp["thin_film_holds"] is False and "11.2 %" in exp["thin_film_notes"][0]
 
 
-def test_c12_overflow_bias_through_the_cli(capsys):
+def test_c12_overflow_bias_through_the_cli(run_cli):
     r = run_json(["liquid", "overflow", "--pad-advancing", "60", "--edge-angle", "90", "--chip-angle", "20",
-                  "--meniscus-height", "12.5"], capsys)
+                  "--meniscus-height", "12.5"], run_cli)
     assert round(r["overflow_bias_um"], 2) == 21.65 and r["overflow_angle_deg"] == 150
     # theta_edge <= theta_adv: never (no overflow bias at all), condition 1.
     for edge in ("60", "45"):
         n = run_json(["liquid", "overflow", "--pad-advancing", "60", "--edge-angle", edge, "--chip-angle", "20",
-                      "--meniscus-height", "12.5"], capsys)
+                      "--meniscus-height", "12.5"], run_cli)
         assert n["overflow_bias_um"] is None and 1 in n["conditions_holding"] and n["overflows"] is False
     # h from the volume: 0.5 nl under 200 um is 12.5 um, the same 21.65 um.
     v = run_json(["liquid", "overflow", "--pad-advancing", "60", "--edge-angle", "90", "--chip-angle", "20",
-                  "--volume", "0.5", "--chip-size", "200"], capsys)
+                  "--volume", "0.5", "--chip-size", "200"], run_cli)
     assert v["meniscus_height_um"] == pytest.approx(12.5) and round(v["overflow_bias_um"], 2) == 21.65
 
 
-def test_c13_parallelepiped_force_through_the_cli(capsys):
+def test_c13_parallelepiped_force_through_the_cli(run_cli):
     L = 730.0
     base = ["liquid", "height", "--volume", "20", "--chip-size", "730"]
-    r = run_json(base, capsys)["parallelepiped"]
+    r = run_json(base, run_cli)["parallelepiped"]
     h = 2e7 / L**2  # 20 nl under 730 um: h = 37.53 um
     assert r["stiffness_N_per_m"] == pytest.approx(2 * GAMMA * L / h, rel=1e-12)
     assert r["force_limit_N"] == pytest.approx(-2 * GAMMA * L * 1e-6, rel=1e-12)
-    at_h = run_json(base + ["--bias", repr(h)], capsys)["parallelepiped"]["force_N"]
+    at_h = run_json(base + ["--bias", repr(h)], run_cli)["parallelepiped"]["force_N"]
     assert at_h == pytest.approx(-math.sqrt(2) * GAMMA * L * 1e-6, rel=1e-12)  # F(h) = -sqrt(2) gamma L
-    far = run_json(base + ["--bias", repr(1e5 * h)], capsys)["parallelepiped"]["force_N"]
+    far = run_json(base + ["--bias", repr(1e5 * h)], run_cli)["parallelepiped"]["force_N"]
     assert far == pytest.approx(r["force_limit_N"], rel=1e-9)  # -> -2 gamma L
-    tiny = run_json(base + ["--bias", repr(1e-6 * h)], capsys)["parallelepiped"]["force_N"]
+    tiny = run_json(base + ["--bias", repr(1e-6 * h)], run_cli)["parallelepiped"]["force_N"]
     assert tiny / (1e-6 * h * 1e-6) == pytest.approx(-r["stiffness_N_per_m"], rel=1e-9)  # slope -2 gamma L / h
 
 
@@ -119,37 +121,37 @@ OVER = ["liquid", "overflow", "--meniscus-height", "12.5"]
         (50, 45, 10, 1e6, [1, 2], False),  # sloped edge: (1) and (2), (3) does not apply
     ],
 )
-def test_each_branch_of_the_overflow_conditions(capsys, adv, edge, chip, bias, holding, verdict):
+def test_each_branch_of_the_overflow_conditions(run_cli, adv, edge, chip, bias, holding, verdict):
     r = run_json(OVER + ["--pad-advancing", str(adv), "--edge-angle", str(edge), "--chip-angle", str(chip),
-                         "--bias", repr(bias)], capsys)
+                         "--bias", repr(bias)], run_cli)
     assert r["conditions_holding"] == holding and r["overflows"] is verdict
 
 
-def test_only_condition_3_can_hold_depends_on_the_bias(capsys):
-    r = run_json(OVER + ["--pad-advancing", "60", "--edge-angle", "90", "--chip-angle", "20"], capsys)
+def test_only_condition_3_can_hold_depends_on_the_bias(capsys, run_cli):
+    r = run_json(OVER + ["--pad-advancing", "60", "--edge-angle", "90", "--chip-angle", "20"], run_cli)
     assert r["overflows"] == "depends on the bias" and r["conditions_holding"] == []
     assert round(r["overflow_bias_um"], 2) == 21.65 and r["bias_um"] is None
     # Past the pinning window at zero bias (edge - adv >= 90): overflows whatever the bias.
-    z = run_json(OVER + ["--pad-advancing", "10", "--edge-angle", "120", "--chip-angle", "20"], capsys)
+    z = run_json(OVER + ["--pad-advancing", "10", "--edge-angle", "120", "--chip-angle", "20"], run_cli)
     assert z["overflow_bias_um"] == 0 and z["overflows"] is True
     assert main(OVER + ["--pad-advancing", "60", "--edge-angle", "90", "--chip-angle", "20"]) == 0
     assert "depends on the bias" in capsys.readouterr().out
 
 
-def test_chip_angle_range_across_which_condition_2_switches(capsys):
+def test_chip_angle_range_across_which_condition_2_switches(capsys, run_cli):
     argv = OVER + ["--pad-advancing", "60", "--edge-angle", "90", "--chip-angle", "10:50"]
-    r = run_json(argv + ["--bias", "30"], capsys)
+    r = run_json(argv + ["--bias", "30"], run_cli)
     assert r["condition_2_switch_chip_angle_deg"] == 30  # theta_edge - theta_adv
     lo, hi = r["over_chip_angle_range"]
     assert (lo["chip_angle_from_deg"], lo["chip_angle_to_deg"], lo["conditions_holding"], lo["overflows"]) == (10, 30, [], True)
     assert (hi["chip_angle_from_deg"], hi["chip_angle_to_deg"], hi["conditions_holding"], hi["overflows"]) == (30, 50, [2], False)
     assert hi["from_excluded"] is True and r["overflows"] == "depends on the chip angle"
     # Below the overflow bias, condition 3 holds throughout: one verdict over the range.
-    safe = run_json(argv + ["--bias", "5"], capsys)
+    safe = run_json(argv + ["--bias", "5"], run_cli)
     assert safe["overflows"] is False and safe["conditions_holding"] == [3]
     assert [p["conditions_holding"] for p in safe["over_chip_angle_range"]] == [[3], [2, 3]]
     # A range that does not reach the switch: one piece.
-    one = run_json(OVER + ["--pad-advancing", "60", "--edge-angle", "90", "--chip-angle", "35:60", "--bias", "30"], capsys)
+    one = run_json(OVER + ["--pad-advancing", "60", "--edge-angle", "90", "--chip-angle", "35:60", "--bias", "30"], run_cli)
     assert len(one["over_chip_angle_range"]) == 1 and one["overflows"] is False
     assert one["condition_2_switch_chip_angle_deg"] is None
     # The text names the switch.
@@ -177,8 +179,8 @@ def test_overflow_agrees_with_the_python_conditions():
         (["--pad-advancing", "60", "--edge-angle", "90", "--chip-angle", "20", "--volume", "500", "--chip-size", "200"], ["--volume 500", "smallest side"]),
     ],
 )
-def test_overflow_bad_input(capsys, argv, words):
-    refused(["liquid", "overflow"] + argv, capsys, *words)
+def test_overflow_bad_input(run_cli, argv, words):
+    refused(["liquid", "overflow"] + argv, run_cli, *words)
 
 
 # ------------------------------------------------------------------ spherical caps
@@ -272,8 +274,8 @@ def vcrit(L, g, tp, ts) -> float:
     return critical_volume(L, g, tp, ts).critical_volume_nl
 
 
-def test_critical_volume_through_the_cli(capsys):
-    r = run_json(["liquid", "critical-volume", "--size", "710", "--gap", "71", "--pad-angle", "41", "--substrate-angle", "89"], capsys)
+def test_critical_volume_through_the_cli(capsys, run_cli):
+    r = run_json(["liquid", "critical-volume", "--size", "710", "--gap", "71", "--pad-angle", "41", "--substrate-angle", "89"], run_cli)
     assert r["critical_volume_nl"] == pytest.approx(vcrit(710, 71, 41, 89), rel=1e-12)
     assert r["dimensionless_volume_V_ND"] == pytest.approx((r["critical_volume_nl"] * 1e6) ** (2 / 3) / 710**2)
     assert "spherical-cap" in r["method"] and r["assumptions"] and r["validity"]
@@ -352,8 +354,8 @@ def test_critical_volume_scales_with_the_cube_of_the_pattern_size():
     (["--size", "-710", "--gap", "71", "--pad-angle", "41", "--substrate-angle", "89"], ["--size"]),
     (["--size", "710", "--gap", "71", "--pad-angle", "41", "--substrate-angle", "89", "--surface-tension", "0.0728"], ["--surface-tension", "72.8"]),
 ])
-def test_critical_volume_bad_input(capsys, argv, words):
-    refused(["liquid", "critical-volume"] + argv, capsys, *words)
+def test_critical_volume_bad_input(run_cli, argv, words):
+    refused(["liquid", "critical-volume"] + argv, run_cli, *words)
 
 
 # ------------------------------------------------------------------ the pattern's shape
@@ -440,28 +442,28 @@ def test_evaluate_puts_the_warnings_in_the_summary_and_the_report(fourpad, tmp_p
 
 
 # ------------------------------------------------------------------ numbers as typed
-def test_surface_tension_typed_in_n_per_m_is_refused(capsys):
+def test_surface_tension_typed_in_n_per_m_is_refused(run_cli):
     square = str(library_path("square_200"))
-    err = refused(["simulate", *fast(square), "--start", "10,0,0", "--surface-tension", "0.0728"], capsys, "--surface-tension",
+    err = refused(["simulate", *fast(square), "--start", "10,0,0", "--surface-tension", "0.0728"], run_cli, "--surface-tension",
                   "0.0728 mN/m", "looks like N/m", "72.8")
     assert "selfalign simulate: error:" in err
-    refused(["simulate", *fast(square), "--start", "10,0,0", "--surface-tension", "5000"], capsys, "5000", "above 1000 mN/m")
-    refused(["liquid", "height", "--volume", "1", "--area", "1e4", "--surface-tension", "0.0728"], capsys, "72.8")
+    refused(["simulate", *fast(square), "--start", "10,0,0", "--surface-tension", "5000"], run_cli, "5000", "above 1000 mN/m")
+    refused(["liquid", "height", "--volume", "1", "--area", "1e4", "--surface-tension", "0.0728"], run_cli, "72.8")
 
 
-def test_surface_tension_in_a_scene_file_is_checked(tmp_path, capsys):
+def test_surface_tension_in_a_scene_file_is_checked(tmp_path, run_cli):
     scene = tmp_path / "s.toml"
     scene.write_text(f'pattern = "{library_path("square_200")}"\nchip_size_um = [200, 200]\n[materials]\nsurface_tension_mN_m = 0.0728\n')
-    refused(["simulate", str(scene), "--start", "10,0,0", "--quiet"], capsys, "surface_tension_mN_m", "72.8")
+    refused(["simulate", str(scene), "--start", "10,0,0", "--quiet"], run_cli, "surface_tension_mN_m", "72.8")
 
 
-def test_a_volume_thicker_than_the_chip_is_refused(capsys):
+def test_a_volume_thicker_than_the_chip_is_refused(run_cli):
     # 500 nl under a 200 um chip: a 12.5 mm film.
     square = str(library_path("square_200"))
-    refused(["simulate", *fast(square), "--start", "10,0,0", "--volume", "500"], capsys, "--volume 500", "12500 um thick", "--volume 0.5",
+    refused(["simulate", *fast(square), "--start", "10,0,0", "--volume", "500"], run_cli, "--volume 500", "12500 um thick", "--volume 0.5",
             "smallest side", "at most 0.8 nl")
     refused(["liquid", "overflow", "--pad-advancing", "60", "--edge-angle", "90", "--chip-angle", "20", "--volume", "500",
-             "--chip-size", "200"], capsys, "--volume 500")
+             "--chip-size", "200"], run_cli, "--volume 500")
 
 
 def test_volume_with_a_dynamic_method_gives_no_note(capsys):

@@ -129,14 +129,6 @@ def fp_png(tmp_path_factory):
 BASE = ["montecarlo", "--chip-size", "200", "--twist-step", "10", "--quiet"]
 
 
-def cli(args: list[str]) -> int:
-    """The command's exit code, also for a usage error (argparse exits)."""
-    try:
-        return main(args)
-    except SystemExit as err:
-        return int(err.code)
-
-
 def test_cli_montecarlo_method_inertial(fp_png, tmp_path, capsys):
     j, c, p = tmp_path / "mc.json", tmp_path / "mc.csv", tmp_path / "t.png"
     rc = main(BASE + ["--pattern", str(fp_png), "--random", "40", "--spread", "60,60,5", "--around", "120,0,0", "--seed", "2",
@@ -171,19 +163,18 @@ def test_cli_montecarlo_method_inertial(fp_png, tmp_path, capsys):
         (["--method", "inertial", "--random", "2000", "--chunk", "2000", "--memory-budget", "8"], "solver states of"),
     ],
 )
-def test_cli_bad_method_or_output_one_line_exit_2_no_files(fp_png, tmp_path, capsys, extra, match):
+def test_cli_bad_method_or_output_one_line_exit_2_no_files(fp_png, tmp_path, run_cli, extra, match):
     out = tmp_path / "out"
     out.mkdir()
     extra = [e.replace("OUT", str(out)) for e in extra]
     starts = [] if "--random" in extra else ["--grid", "0:40:20,0"]
     spread = ["--spread", "1,1,0"] if "--random" in extra else []
-    rc = cli(BASE + ["--pattern", str(fp_png), "--json", str(out / "s.json"), *starts, *spread] + extra)
-    err = capsys.readouterr().err
+    rc, _, err = run_cli(BASE + ["--pattern", str(fp_png), "--json", str(out / "s.json"), *starts, *spread] + extra)
     assert rc == 2 and match in err and len(err.strip().splitlines()) == 1, err
     assert list(out.iterdir()) == []
 
 
-def test_cli_evaluate_method_overdamped(tmp_path, capsys):
+def test_cli_evaluate_method_overdamped(tmp_path, capsys, run_cli):
     out = tmp_path / "ev"
     rc = main(["evaluate", str(SQUARE), "--chip-size", "200", "--resolution", "10", "--no-twist", "--method", "overdamped",
                "--out", str(out), "--quiet"])
@@ -198,8 +189,7 @@ def test_cli_evaluate_method_overdamped(tmp_path, capsys):
     assert "Time to align" in page and 'src="time_to_align.png"' in page and "overdamped starts" in page
     assert "time to align" in capsys.readouterr().out
     # the flag is refused in one line when the method is not one of the four
-    rc = cli(["evaluate", str(SQUARE), "--chip-size", "200", "--method", "newton", "--out", str(tmp_path / "bad")])
-    err = capsys.readouterr().err
+    rc, _, err = run_cli(["evaluate", str(SQUARE), "--chip-size", "200", "--method", "newton", "--out", str(tmp_path / "bad")])
     assert rc == 2 and len(err.strip().splitlines()) == 1 and "invalid choice: 'newton'" in err and not (tmp_path / "bad").exists()
 
 

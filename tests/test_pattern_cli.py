@@ -8,18 +8,6 @@ from PIL import Image
 
 from patterns.geometry import DESIGNS, build
 from patterns.io import read_mask
-from simulator.cli import main
-
-
-def run(argv, capsys):
-    """Run the CLI in-process: (exit code, stdout, stderr)."""
-    try:
-        rc = main(argv)
-    except SystemExit as exc:  # argparse's own exits
-        rc = exc.code
-    out, err = capsys.readouterr()
-    return rc, out, err
-
 
 DESIGN_ARGS = {
     "square": (["--size", "200"], {"size": 200}),
@@ -41,10 +29,10 @@ def test_every_design_is_covered():
 
 @pytest.mark.parametrize("design", list(DESIGN_ARGS))
 @pytest.mark.parametrize("um_per_px", ["1", "0.5"])
-def test_each_design_writes_a_scaled_png(tmp_path, capsys, design, um_per_px):
+def test_each_design_writes_a_scaled_png(tmp_path, run_cli, design, um_per_px):
     flags, params = DESIGN_ARGS[design]
     out = tmp_path / f"{design}.png"
-    rc, stdout, err = run(["pattern", design, *flags, "--um-per-px", um_per_px, "-o", str(out)], capsys)
+    rc, stdout, err = run_cli(["pattern", design, *flags, "--um-per-px", um_per_px, "-o", str(out)])
     assert (rc, err) == (0, "")
     mask = read_mask(out)
     assert mask.um_per_px == float(um_per_px)
@@ -55,10 +43,10 @@ def test_each_design_writes_a_scaled_png(tmp_path, capsys, design, um_per_px):
     assert [p.name for p in tmp_path.iterdir()] == [out.name]  # no temporary left behind
 
 
-def test_four_pad_example(tmp_path, capsys, monkeypatch):
+def test_four_pad_example(tmp_path, run_cli, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    rc, stdout, err = run(["pattern", "four-pad", "--size", "730", "--gap", "50", "--um-per-px", "1",
-                           "-o", "fourpad.png"], capsys)
+    rc, stdout, err = run_cli(["pattern", "four-pad", "--size", "730", "--gap", "50", "--um-per-px", "1",
+                               "-o", "fourpad.png"])
     assert rc == 0 and err == ""
     with Image.open("fourpad.png") as im:
         assert im.mode == "I;16"
@@ -73,23 +61,23 @@ def test_four_pad_example(tmp_path, capsys, monkeypatch):
     assert "750 x 750 px" in stdout and "462400 um^2" in stdout
 
 
-def test_margin_sets_the_canvas(tmp_path, capsys):
+def test_margin_sets_the_canvas(tmp_path, run_cli):
     out = tmp_path / "sq.png"
-    rc, _, _ = run(["pattern", "square", "--size", "100", "--margin", "0", "-o", str(out)], capsys)
+    rc, _, _ = run_cli(["pattern", "square", "--size", "100", "--margin", "0", "-o", str(out)])
     assert rc == 0 and read_mask(out).shape == (100, 100)
 
 
-def test_defaults_and_provenance(tmp_path, capsys):
+def test_defaults_and_provenance(tmp_path, run_cli):
     out = tmp_path / "cj.png"
-    assert run(["pattern", "constant-jagged", "--amplitude", "5", "-o", str(out)], capsys)[0] == 0
+    assert run_cli(["pattern", "constant-jagged", "--amplitude", "5", "-o", str(out)])[0] == 0
     params = read_mask(out).params
     assert params["parameters"]["size"] == {"value": 200.0, "unit": "um"}
     assert params["parameters"]["pitch"] == {"value": 10.0, "unit": "um"}
     assert params["um_per_px"] == 1.0 and params["margin_um"] == 10.0
 
 
-def test_list_describes_every_design_with_units(capsys):
-    rc, out, err = run(["pattern", "--list"], capsys)
+def test_list_describes_every_design_with_units(run_cli):
+    rc, out, err = run_cli(["pattern", "--list"])
     assert rc == 0 and err == ""
     for name, design in DESIGNS.items():
         assert f"{name}: " in out
@@ -120,9 +108,9 @@ BAD = [
 
 
 @pytest.mark.parametrize("args,match", BAD)
-def test_bad_input_is_one_line_exit_2_and_no_file(tmp_path, capsys, args, match):
+def test_bad_input_is_one_line_exit_2_and_no_file(tmp_path, run_cli, args, match):
     out = tmp_path / "out.png"
-    rc, stdout, err = run(["pattern", *args, "-o", str(out)], capsys)
+    rc, stdout, err = run_cli(["pattern", *args, "-o", str(out)])
     assert rc == 2
     assert err.count("\n") == 1 and "Traceback" not in err
     assert re.search(match, err), err
@@ -135,18 +123,18 @@ def test_bad_input_is_one_line_exit_2_and_no_file(tmp_path, capsys, args, match)
     ("adir", r"adir: is a directory"),
     ("out.jpg", r"must end in \.png"),
 ])
-def test_bad_output_path(tmp_path, capsys, target, match):
+def test_bad_output_path(tmp_path, run_cli, target, match):
     (tmp_path / "afile").write_text("x")
     (tmp_path / "adir").mkdir()
-    rc, _, err = run(["pattern", "square", "--size", "20", "-o", str(tmp_path / target)], capsys)
+    rc, _, err = run_cli(["pattern", "square", "--size", "20", "-o", str(tmp_path / target)])
     assert rc == 2 and err.count("\n") == 1
     assert re.search(match, err), err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["adir", "afile"]
     assert list((tmp_path / "adir").iterdir()) == []
 
 
-def test_missing_output_and_missing_design(capsys):
-    rc, _, err = run(["pattern", "square", "--size", "20"], capsys)
+def test_missing_output_and_missing_design(run_cli):
+    rc, _, err = run_cli(["pattern", "square", "--size", "20"])
     assert rc == 2 and "-o OUT.png is required" in err and err.count("\n") == 1
-    rc, _, err = run(["pattern"], capsys)
+    rc, _, err = run_cli(["pattern"])
     assert rc == 2 and "name a design (square, rectangle" in err and "--list" in err

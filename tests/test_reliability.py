@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from cli_helpers import cli, listing, one_line_error, python_m  # noqa: F401  (tests/cli_helpers.py)
+from cli_helpers import listing, one_line_error, python_m  # noqa: F401  (tests/cli_helpers.py)
 from PIL import Image
 
 from patterns.library import library_path
@@ -43,93 +43,93 @@ def evaluate_args(pattern, out, *extra):
     return ["evaluate", pattern, "--chip-size", "40", "--out", out, "--quiet", *extra]
 
 
-def test_evaluate_out_existing_directory_with_user_files_is_kept(small_png, tmp_path, capsys):
+def test_evaluate_out_existing_directory_with_user_files_is_kept(small_png, tmp_path, run_cli):
     keep = tmp_path / "results"
     keep.mkdir()
     (keep / "notes.txt").write_text("mine")
-    rc, _, err = cli(evaluate_args(small_png, keep), capsys)
+    rc, _, err = run_cli(evaluate_args(small_png, keep))
     one_line_error(rc, err, "not empty", "--force")
-    rc, _, err = cli(evaluate_args(small_png, keep, "--force"), capsys)
+    rc, _, err = run_cli(evaluate_args(small_png, keep, "--force"))
     one_line_error(rc, err, "did not write")
     assert listing(keep) == ["notes.txt"] and (keep / "notes.txt").read_text() == "mine"
     assert listing(tmp_path) == ["pad.png", "results", "results/notes.txt"]  # no temporaries
 
 
-def test_evaluate_out_dot_keeps_the_working_directory(small_png, tmp_path, capsys, monkeypatch):
+def test_evaluate_out_dot_keeps_the_working_directory(small_png, tmp_path, run_cli, monkeypatch):
     monkeypatch.chdir(tmp_path)
     before = listing(tmp_path)
     for out in (".", "..", "./", str(tmp_path)):
-        rc, _, err = cli(evaluate_args("pad.png", out), capsys)
+        rc, _, err = run_cli(evaluate_args("pad.png", out))
         one_line_error(rc, err, "working directory")
     assert listing(tmp_path) == before
 
 
-def test_evaluate_out_dotdot_keeps_the_parent_tree(small_png, tmp_path, capsys, monkeypatch):
+def test_evaluate_out_dotdot_keeps_the_parent_tree(small_png, tmp_path, run_cli, monkeypatch):
     sub = tmp_path / "sub"
     sub.mkdir()
     monkeypatch.chdir(sub)
-    rc, _, err = cli(evaluate_args(small_png, ".."), capsys)
+    rc, _, err = run_cli(evaluate_args(small_png, ".."))
     one_line_error(rc, err, "working directory")
     assert (tmp_path / "pad.png").exists() and sub.is_dir()
 
 
-def test_evaluate_out_symlink_is_refused(small_png, tmp_path, capsys):
+def test_evaluate_out_symlink_is_refused(small_png, tmp_path, run_cli):
     target = tmp_path / "real"
     target.mkdir()
     (tmp_path / "link").symlink_to(target)
-    rc, _, err = cli(evaluate_args(small_png, tmp_path / "link"), capsys)
+    rc, _, err = run_cli(evaluate_args(small_png, tmp_path / "link"))
     one_line_error(rc, err, "symbolic link")
     assert (tmp_path / "link").is_symlink() and listing(target) == []
 
 
-def test_evaluate_out_the_inputs_directory_is_refused(small_png, tmp_path, capsys):
-    rc, _, err = cli(evaluate_args(small_png, tmp_path), capsys)
+def test_evaluate_out_the_inputs_directory_is_refused(small_png, tmp_path, run_cli):
+    rc, _, err = run_cli(evaluate_args(small_png, tmp_path))
     one_line_error(rc, err)
     assert small_png.exists()
 
 
-def test_evaluate_out_new_directory_then_force_replaces_only_its_own_output(small_png, tmp_path, capsys):
+def test_evaluate_out_new_directory_then_force_replaces_only_its_own_output(small_png, tmp_path, run_cli):
     out = tmp_path / "ev"
-    assert cli(evaluate_args(small_png, out), capsys)[0] == 0
+    assert run_cli(evaluate_args(small_png, out))[0] == 0
     marker = json.loads((out / MARKER).read_text())
     assert set(marker["files"]) == {"summary.json", "report.html", "landscape.png", "force.png", "capture.png", "pattern.png"}
     first = (out / "summary.json").stat().st_mtime_ns
-    rc, _, err = cli(evaluate_args(small_png, out), capsys)  # exists: refused without --force
+    rc, _, err = run_cli(evaluate_args(small_png, out))  # exists: refused without --force
     one_line_error(rc, err, "--force")
-    assert cli(evaluate_args(small_png, out, "--force"), capsys)[0] == 0
+    assert run_cli(evaluate_args(small_png, out, "--force"))[0] == 0
     assert (out / "summary.json").stat().st_mtime_ns >= first
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ev", "pad.png"]  # the old copy is gone, nothing hidden left
     (out / "extra.txt").write_text("a user's file")
-    rc, _, err = cli(evaluate_args(small_png, out, "--force"), capsys)
+    rc, _, err = run_cli(evaluate_args(small_png, out, "--force"))
     one_line_error(rc, err, "did not write")
     assert (out / "extra.txt").exists()
 
 
-def test_evaluate_out_existing_empty_directory_is_filled_keeping_its_mode(small_png, tmp_path, capsys):
+def test_evaluate_out_existing_empty_directory_is_filled_keeping_its_mode(small_png, tmp_path, run_cli):
     out = tmp_path / "empty"
     out.mkdir()
     out.chmod(0o750)
-    assert cli(evaluate_args(small_png, out), capsys)[0] == 0
+    assert run_cli(evaluate_args(small_png, out))[0] == 0
     assert (out / "report.html").exists() and (out.stat().st_mode & 0o777) == 0o750
 
 
-def test_evaluate_out_read_only_empty_directory_is_not_replaced(small_png, tmp_path, capsys):
+def test_evaluate_out_read_only_empty_directory_is_not_replaced(small_png, tmp_path, run_cli):
     ro = tmp_path / "ro"
     ro.mkdir()
     ro.chmod(0o555)
     try:
-        rc, _, err = cli(evaluate_args(small_png, ro), capsys)
+        rc, _, err = run_cli(evaluate_args(small_png, ro))
         one_line_error(rc, err, "read-only")
         assert (ro.stat().st_mode & 0o777) == 0o555 and listing(ro) == []
     finally:
         ro.chmod(0o755)
 
 
-def test_demo_out_refuses_a_directory_of_user_files(tmp_path, capsys):
+def test_demo_out_refuses_a_directory_of_user_files(tmp_path, run_cli):
     out = tmp_path / "out"
     out.mkdir()
     (out / "thesis.tex").write_text("x")
-    rc, _, err = cli(["demo", "--out", out, "--force", "--quiet"], capsys)
+    rc, _, err = run_cli(["demo", "--out", out, "--force", "--quiet"])
     one_line_error(rc, err, "did not write")
     assert listing(out) == ["thesis.tex"]
 
@@ -211,14 +211,14 @@ def test_memory_peak_of_all_refusals_stays_small(memory_runs):
 
 
 # ======================================================= 3. one line instead of a traceback
-def test_png_selfalign_chunk_nested_json(tmp_path, capsys):
+def test_png_selfalign_chunk_nested_json(tmp_path, run_cli):
     from PIL import PngImagePlugin
 
     info = PngImagePlugin.PngInfo()
     info.add_text("selfalign", "[" * 50000 + "]" * 50000)
     p = tmp_path / "nested.png"
     Image.fromarray(np.full((20, 20), 255, np.uint8)).save(p, pnginfo=info, dpi=(0.0254 * 1e6,) * 2)
-    rc, _, err = cli(["energy", "--pattern", p, "--chip-size", "10", "--at", "0,0,0"], capsys)
+    rc, _, err = run_cli(["energy", "--pattern", p, "--chip-size", "10", "--at", "0,0,0"])
     one_line_error(rc, err, "nested too deeply")
 
 
@@ -242,24 +242,24 @@ def scene_file(tmp_path: Path, body: str) -> Path:
         ("toml_max_steps_1e12", "[simulate]\nmax_steps = 1000000000000\nstart = [1, 2, 3]\n", "max_steps"),
     ],
 )
-def test_toml_scene_errors_are_one_line(tmp_path, capsys, name, body, needle):
+def test_toml_scene_errors_are_one_line(tmp_path, run_cli, name, body, needle):
     p = scene_file(tmp_path, body)
     if name == "toml_chip_size_three_numbers":
         p.write_text(f'pattern = "{SQUARE}"\nchip_size_um = [1, 2, 3]\n')
     if name == "toml_pattern_42":
         p.write_text("pattern = 42\nchip_size_um = 200\n")
-    rc, _, err = cli(["simulate", p, "--start", "1,2,3"], capsys)
+    rc, _, err = run_cli(["simulate", p, "--start", "1,2,3"])
     one_line_error(rc, err, needle)
     assert listing(tmp_path) == ["scene.toml"]
 
 
-def test_toml_file_with_25_million_element_array_is_refused_fast(tmp_path, capsys):
+def test_toml_file_with_25_million_element_array_is_refused_fast(tmp_path, run_cli):
     p = tmp_path / "scene.toml"
     with open(p, "w") as f:
         f.write(f'pattern = "{SQUARE}"\nchip_size_um = 200\nx = [')
         f.write("0," * 25_000_000)
         f.write("]\n")
-    rc, _, err = cli(["energy", p, "--at", "0,0,0"], capsys)
+    rc, _, err = run_cli(["energy", p, "--at", "0,0,0"])
     one_line_error(rc, err, "at most 1,048,576 bytes")  # refused on its size, before parsing
 
 
@@ -276,24 +276,24 @@ def in_thread(fn):
     return box[0]
 
 
-def test_fifo_as_scene_file_does_not_hang(tmp_path, capsys):
+def test_fifo_as_scene_file_does_not_hang(tmp_path, run_cli):
     fifo = tmp_path / "scene.toml"
     os.mkfifo(fifo)
-    rc, _, err = in_thread(lambda: cli(["energy", fifo, "--at", "0,0,0"], capsys))
+    rc, _, err = in_thread(lambda: run_cli(["energy", fifo, "--at", "0,0,0"]))
     one_line_error(rc, err, "FIFO")
 
 
-def test_fifo_as_pattern_does_not_hang(tmp_path, capsys):
+def test_fifo_as_pattern_does_not_hang(tmp_path, run_cli):
     fifo = tmp_path / "p.png"
     os.mkfifo(fifo)
-    rc, _, err = in_thread(lambda: cli(["energy", "--pattern", fifo, "--chip-size", "10", "--at", "0,0,0"], capsys))
+    rc, _, err = in_thread(lambda: run_cli(["energy", "--pattern", fifo, "--chip-size", "10", "--at", "0,0,0"]))
     one_line_error(rc, err, "FIFO")
 
 
-def test_evaluate_1x1_px_pattern(tmp_path, capsys):
+def test_evaluate_1x1_px_pattern(tmp_path, run_cli):
     p = tmp_path / "one.png"
     Image.fromarray(np.array([[255]], np.uint8)).save(p, dpi=(0.0254 * 1e6,) * 2)  # 1 um/px
-    rc, out, err = cli(["evaluate", p, "--out", tmp_path / "ev", "--quiet"], capsys)
+    rc, out, err = run_cli(["evaluate", p, "--out", tmp_path / "ev", "--quiet"])
     assert rc == 0, err
     summary = json.loads((tmp_path / "ev" / "summary.json").read_text())
     assert summary["global_minimum"]["overlap_um2"] == pytest.approx(1.0, abs=1e-6)
@@ -386,20 +386,20 @@ def test_python_api_refuses_string_booleans():
 
 
 # ======================================================= 5. finite outputs
-def test_overdamped_volume_1e300_writes_no_nan(tmp_path, capsys):
+def test_overdamped_volume_1e300_writes_no_nan(tmp_path, run_cli):
     out = tmp_path / "v.json"
-    rc, _, err = cli(["simulate", "--pattern", SQUARE, "--chip-size", "200", "--start", "10,10,0", "--method", "overdamped",
-                      "--volume", "1e-300", "--json", out, "--quiet"], capsys)
+    rc, _, err = run_cli(["simulate", "--pattern", SQUARE, "--chip-size", "200", "--start", "10,10,0", "--method", "overdamped",
+                          "--volume", "1e-300", "--json", out, "--quiet"])
     one_line_error(rc, err, "--volume", "thinner than")
     assert not out.exists()
 
 
-def test_equal_angles_with_allow_repulsive_print_no_nan(tmp_path, capsys):
+def test_equal_angles_with_allow_repulsive_print_no_nan(tmp_path, run_cli):
     args = ["--chip-size", "200", "--pad-angle", "50", "--substrate-angle", "50", "--allow-repulsive"]
-    rc, out, err = cli(["energy", "--pattern", SQUARE, "--at", "0,0,0", *args], capsys)
+    rc, out, err = run_cli(["energy", "--pattern", SQUARE, "--at", "0,0,0", *args])
     one_line_error(rc, err, "no wettability contrast")
     assert "nan" not in out
-    rc, _, err = cli(["evaluate", SQUARE, "--out", tmp_path / "ev", "--quiet", *args], capsys)
+    rc, _, err = run_cli(["evaluate", SQUARE, "--out", tmp_path / "ev", "--quiet", *args])
     one_line_error(rc, err, "no wettability contrast")
     assert listing(tmp_path) == []
 
@@ -414,33 +414,33 @@ def test_non_finite_result_is_refused_before_writing(tmp_path):
 
 
 # ======================================================= 7. unsafe output targets
-def test_json_onto_a_device_node_keeps_the_node(capsys):
-    rc, _, err = cli(["energy", "--pattern", SQUARE, "--chip-size", "200", "--at", "0,0,0", "--json", "/dev/null"], capsys)
+def test_json_onto_a_device_node_keeps_the_node(run_cli):
+    rc, _, err = run_cli(["energy", "--pattern", SQUARE, "--chip-size", "200", "--at", "0,0,0", "--json", "/dev/null"])
     one_line_error(rc, err, "not a regular file")
     assert Path("/dev/null").is_char_device()
 
 
-def test_json_and_csv_onto_the_input_pattern(tmp_path, capsys):
+def test_json_and_csv_onto_the_input_pattern(tmp_path, run_cli):
     pat = tmp_path / "pad.png"
     pat.write_bytes(Path(SQUARE).read_bytes())
     before = pat.read_bytes()
     for args in (["energy", "--pattern", pat, "--chip-size", "200", "--at", "0,0,0", "--json", pat],
                  ["montecarlo", "--pattern", pat, "--chip-size", "200", "--grid", "0,0", "--csv", pat],
                  ["simulate", "--pattern", pat, "--chip-size", "200", "--start", "1,1,0", "--plot", pat]):
-        rc, _, err = cli(args, capsys)
+        rc, _, err = run_cli(args)
         one_line_error(rc, err, "is an input")
     scene = tmp_path / "s.toml"
     scene.write_text('pattern = "pad.png"\nchip_size_um = 200\n')
-    rc, _, err = cli(["energy", scene, "--at", "0,0,0", "--json", tmp_path / "pad.png"], capsys)
+    rc, _, err = run_cli(["energy", scene, "--at", "0,0,0", "--json", tmp_path / "pad.png"])
     one_line_error(rc, err, "is an input")
     assert pat.read_bytes() == before and listing(tmp_path) == ["pad.png", "s.toml"]
 
 
-def test_json_onto_a_symlink_keeps_the_link(tmp_path, capsys):
+def test_json_onto_a_symlink_keeps_the_link(tmp_path, run_cli):
     target = tmp_path / "t.json"
     target.write_text("{}")
     (tmp_path / "l.json").symlink_to(target)
-    rc, _, err = cli(["energy", "--pattern", SQUARE, "--chip-size", "200", "--at", "0,0,0", "--json", tmp_path / "l.json"], capsys)
+    rc, _, err = run_cli(["energy", "--pattern", SQUARE, "--chip-size", "200", "--at", "0,0,0", "--json", tmp_path / "l.json"])
     one_line_error(rc, err, "symbolic link")
     assert (tmp_path / "l.json").is_symlink() and target.read_text() == "{}"
 

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from cli_helpers import cli, listing, one_line_error, python_m  # noqa: F401  (tests/cli_helpers.py)
+from cli_helpers import listing, one_line_error, python_m  # noqa: F401  (tests/cli_helpers.py)
 
 from patterns.errors import InputError
 from patterns.library import library_path
@@ -92,11 +92,11 @@ def silent_scheduler():
         c.close()
 
 
-def test_scheduler_that_accepts_and_never_answers_is_refused_within_the_handshake_timeout(silent_scheduler, tmp_path, capsys):
+def test_scheduler_that_accepts_and_never_answers_is_refused_within_the_handshake_timeout(silent_scheduler, tmp_path, run_cli):
     from simulator.sweep import CONNECT_TIMEOUT_S
 
     t0 = time.perf_counter()
-    rc, _, err = cli(["sweep", SWEEP, "--out", tmp_path / "out", "--scheduler", silent_scheduler, "--quiet"], capsys)
+    rc, _, err = run_cli(["sweep", SWEEP, "--out", tmp_path / "out", "--scheduler", silent_scheduler, "--quiet"])
     elapsed = time.perf_counter() - t0
     one_line_error(rc, err, "cannot reach a Dask scheduler within 3 s", "no answer to the handshake")
     assert CONNECT_TIMEOUT_S == 3.0 and elapsed < 30  # the handshake's own 3 s bound (93 s before)
@@ -104,21 +104,21 @@ def test_scheduler_that_accepts_and_never_answers_is_refused_within_the_handshak
 
 
 @pytest.mark.parametrize("window", ["1e-3", "1e-300", "0.5"])
-def test_simulate_window_below_a_pixel_is_refused(window, tmp_path, capsys):
+def test_simulate_window_below_a_pixel_is_refused(window, tmp_path, run_cli):
     t0 = time.perf_counter()
-    rc, out, err = cli(["simulate", "--pattern", SQUARE, "--chip-size", "200", "--start", "40,40,0", "--window", window,
-                        "--json", tmp_path / "t.json"], capsys)
+    rc, out, err = run_cli(["simulate", "--pattern", SQUARE, "--chip-size", "200", "--start", "40,40,0", "--window", window,
+                            "--json", tmp_path / "t.json"])
     one_line_error(rc, err, "below one pixel", "--window", "give at least 1 um")
     assert out == "" and listing(tmp_path) == [] and time.perf_counter() - t0 < 30  # no end after 60 s before
 
 
-def test_simulate_start_outside_the_window_is_refused_and_one_on_its_edge_ends(tmp_path, capsys):
-    rc, _, err = cli(["simulate", "--pattern", SQUARE, "--chip-size", "200", "--start", "40,40,0", "--window", "5"], capsys)
+def test_simulate_start_outside_the_window_is_refused_and_one_on_its_edge_ends(tmp_path, run_cli):
+    rc, _, err = run_cli(["simulate", "--pattern", SQUARE, "--chip-size", "200", "--start", "40,40,0", "--window", "5"])
     one_line_error(rc, err, "outside the translation window of +-5 um", "at least 40 um")
     # On the window's edge: the box around the chip cannot grow past the window; the run ends (it looped before).
     t0 = time.perf_counter()
-    rc, out, err = cli(["simulate", "--pattern", SQUARE, "--chip-size", "200", "--start", "5,5,0", "--window", "5",
-                        "--json", tmp_path / "t.json"], capsys)
+    rc, out, err = run_cli(["simulate", "--pattern", SQUARE, "--chip-size", "200", "--start", "5,5,0", "--window", "5",
+                            "--json", tmp_path / "t.json"])
     assert rc == 0, err
     assert time.perf_counter() - t0 < 120
     doc = json.loads((tmp_path / "t.json").read_text())
@@ -196,7 +196,7 @@ def test_dxf_arc_of_bulge_1e9_is_priced_before_it_is_sampled(tmp_path):
 
 
 # ============================================================== 4. crashes become one-line refusals
-def test_gds_database_unit_0_is_refused(tmp_path, capsys):
+def test_gds_database_unit_0_is_refused(tmp_path, run_cli):
     import gdstk
 
     lib = gdstk.Library(unit=1e-6, precision=1e-9)
@@ -206,7 +206,7 @@ def test_gds_database_unit_0_is_refused(tmp_path, capsys):
     units = data.index(bytes([0x00, 0x14, 0x03, 0x05]))  # the UNITS record: two 8-byte reals
     data[units + 12 : units + 20] = bytes(8)  # database unit 0
     (tmp_path / "dbu0.gds").write_bytes(bytes(data))
-    rc, _, err = cli(["energy", "--pattern", tmp_path / "dbu0.gds", "--chip-size", "200", "--at", "0,0,0"], capsys)
+    rc, _, err = run_cli(["energy", "--pattern", tmp_path / "dbu0.gds", "--chip-size", "200", "--at", "0,0,0"])
     one_line_error(rc, err, "database unit of 0 m", "export it again")
 
 
@@ -214,14 +214,14 @@ def test_gds_database_unit_0_is_refused(tmp_path, capsys):
     ("coords_1e300", [(0, 0, 0), (1e300, 0, 0), (1e300, 1e300, 0), (0, 1e300, 0)], "reaches 1e+300 um"),
     ("bulge_1e12", [(0, 0, 0), (100, 0, 1e12), (100, 100, 0), (0, 100, 0)], "bulge 1e+12"),
 ])
-def test_dxf_overflowing_shapes_are_refused(name, points, needle, tmp_path, capsys):
+def test_dxf_overflowing_shapes_are_refused(name, points, needle, tmp_path, run_cli):
     _dxf(tmp_path / f"{name}.dxf", points)
-    rc, _, err = cli(["energy", "--pattern", tmp_path / f"{name}.dxf", "--chip-size", "200", "--at", "0,0,0"], capsys)
+    rc, _, err = run_cli(["energy", "--pattern", tmp_path / f"{name}.dxf", "--chip-size", "200", "--at", "0,0,0"])
     one_line_error(rc, err, needle, "1,000,000 um (1 m)")
 
 
-def test_critical_volume_size_1e300_is_refused(capsys):
-    rc, out, err = cli(["liquid", "critical-volume", "--size", "1e300", "--gap", "10", "--pad-angle", "30", "--substrate-angle", "60"], capsys)
+def test_critical_volume_size_1e300_is_refused(run_cli):
+    rc, out, err = run_cli(["liquid", "critical-volume", "--size", "1e300", "--gap", "10", "--pad-angle", "30", "--substrate-angle", "60"])
     one_line_error(rc, err, "--size 1e+300 um is outside 0.001 to 1e+06 um")
     assert out == ""
 
@@ -233,8 +233,8 @@ def test_critical_volume_size_1e300_is_refused(capsys):
     ["sweep", str(SWEEP), "--out", "/proc/sw", "--workers", "0", "--quiet"],
     ["liquid", "height", "--volume", "0.5", "--chip-size", "200", "--json", "/proc/h.json"],
 ])
-def test_output_in_a_directory_that_takes_no_files_is_refused_before_any_work(args, capsys):
-    rc, out, err = cli(args, capsys)
+def test_output_in_a_directory_that_takes_no_files_is_refused_before_any_work(args, run_cli):
+    rc, out, err = run_cli(args)
     # The message comes from the output check made before any work (patterns.outputs.probe_writable);
     # after the work, the same failure used to be an internal error.
     one_line_error(rc, err, "cannot write in directory /proc", "choose another path")
@@ -296,7 +296,7 @@ def test_sigterm_on_a_sweep_says_how_many_points_were_kept(tmp_path):
 
 
 # ============================================================== 6. inputs that slipped past a check
-def test_truncated_oasis_file_is_refused(tmp_path, capsys):
+def test_truncated_oasis_file_is_refused(tmp_path, run_cli):
     import gdstk
 
     lib = gdstk.Library(unit=1e-6, precision=1e-9)
@@ -306,9 +306,9 @@ def test_truncated_oasis_file_is_refused(tmp_path, capsys):
     lib.write_oas(str(tmp_path / "full.oas"))
     data = (tmp_path / "full.oas").read_bytes()
     (tmp_path / "half.oas").write_bytes(data[: len(data) // 2])
-    rc, _, err = cli(["energy", "--pattern", tmp_path / "full.oas", "--chip-size", "200", "--at", "0,0,0"], capsys)
+    rc, _, err = run_cli(["energy", "--pattern", tmp_path / "full.oas", "--chip-size", "200", "--at", "0,0,0"])
     assert rc == 0, err
-    rc, _, err = cli(["energy", "--pattern", tmp_path / "half.oas", "--chip-size", "200", "--at", "0,0,0"], capsys)
+    rc, _, err = run_cli(["energy", "--pattern", tmp_path / "half.oas", "--chip-size", "200", "--at", "0,0,0"])
     one_line_error(rc, err, "not a complete OASIS file", "copy or export it again")
 
 
@@ -336,29 +336,29 @@ def _write(p: Path, data: bytes) -> Path:
     return p
 
 
-def test_liquid_height_of_a_film_thicker_than_the_chip_is_refused(capsys):
-    rc, out, err = cli(["liquid", "height", "--volume", "500", "--chip-size", "200"], capsys)
+def test_liquid_height_of_a_film_thicker_than_the_chip_is_refused(run_cli):
+    rc, out, err = run_cli(["liquid", "height", "--volume", "500", "--chip-size", "200"])
     one_line_error(rc, err, "12500 um thick", "more than the chip's smallest side", "--volume 0.5")
     assert out == ""
-    rc, out, err = cli(["liquid", "height", "--volume", "500", "--area", "40000"], capsys)
+    rc, out, err = run_cli(["liquid", "height", "--volume", "500", "--area", "40000"])
     one_line_error(rc, err, "12500 um thick")
-    rc, out, err = cli(["liquid", "height", "--volume", "0.5", "--chip-size", "200"], capsys)
+    rc, out, err = run_cli(["liquid", "height", "--volume", "0.5", "--chip-size", "200"])
     assert rc == 0 and "h = V / A = 12.5 um" in out, err
 
 
-def test_liquid_overflow_edge_angle_0_is_refused(capsys):
-    rc, out, err = cli(["liquid", "overflow", "--pad-advancing", "50", "--chip-angle", "30", "--edge-angle", "0",
-                        "--meniscus-height", "12.5"], capsys)
+def test_liquid_overflow_edge_angle_0_is_refused(run_cli):
+    rc, out, err = run_cli(["liquid", "overflow", "--pad-advancing", "50", "--chip-angle", "30", "--edge-angle", "0",
+                            "--meniscus-height", "12.5"])
     one_line_error(rc, err, "--edge-angle must be a solid wedge angle in (0, 180]")
     assert out == ""
 
 
-def test_critical_volume_of_a_1e300_um_pattern_is_refused_without_a_numpy_warning(capsys):
-    rc, out, err = cli(["liquid", "critical-volume", "--size", "1e-300", "--gap", "1e-301", "--pad-angle", "30",
-                        "--substrate-angle", "60"], capsys)
+def test_critical_volume_of_a_1e300_um_pattern_is_refused_without_a_numpy_warning(run_cli):
+    rc, out, err = run_cli(["liquid", "critical-volume", "--size", "1e-300", "--gap", "1e-301", "--pad-angle", "30",
+                            "--substrate-angle", "60"])
     one_line_error(rc, err, "--size 1e-300 um is outside")  # "split at every volume up to 0 nl" and a warning before
-    rc, out, err = cli(["liquid", "critical-volume", "--size", "200", "--gap", "1e-200", "--pad-angle", "30",
-                        "--substrate-angle", "60"], capsys)
+    rc, out, err = run_cli(["liquid", "critical-volume", "--size", "200", "--gap", "1e-200", "--pad-angle", "30",
+                            "--substrate-angle", "60"])
     one_line_error(rc, err, "--gap 1e-200 um is below 0.001 um")
 
 
