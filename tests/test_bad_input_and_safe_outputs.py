@@ -1,4 +1,5 @@
-"""Issue 15, one regression test per reproduction: nothing lost, nothing crashes.
+"""Bad input and safe outputs (issue 15), one regression test per reproduction: nothing
+lost, nothing crashes.
 
 Every bad input gives exit code 2 and exactly one line on stderr with no traceback,
 writes nothing, and is refused before memory is allocated. The memory cases run in

@@ -1,5 +1,5 @@
-"""Issue 26, items 2 to 6: one regression test per reproduction (hangs, guards, crashes,
-interruptions, inputs that slipped past a check).
+"""Hangs, guards and interruptions (issue 26, items 2 to 6): one regression test per
+reproduction (hangs, guards, crashes, interruptions, inputs that slipped past a check).
 
 Each bad input gives exit code 2 and exactly one line on stderr with no traceback and
 writes nothing; where the item names a bound, the test asserts it: time against a
