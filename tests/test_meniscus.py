@@ -169,7 +169,7 @@ def test_defect_moves_the_minimum_towards_the_flatter_side():
     assert r["x_um"] < -0.3
     assert r["x_um"] == pytest.approx(expected, rel=0.5)
     assert abs(r["y_um"]) < 0.05 and abs(r["twist_deg"]) < 0.05
-    # The overlap model cannot see it (PHYSICS check C11): its minimum stays at 0.
+    # The overlap model cannot see it (docs/physics.md C11): its minimum stays at 0.
     off = build_landscape(_scene(pad, chip_size=L, twist=(1.0, -2, 2), window=20, meniscus=False))
     assert off.global_minimum()[:3] == (0.0, 0.0, 0.0)
 
