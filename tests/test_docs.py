@@ -1,4 +1,4 @@
-"""The manual: every citation of docs/physics.md resolves.
+"""The manual: every citation of docs/physics.md resolves, the README stays short.
 
 A citation is a section (``docs/physics.md §3.3``, ``§9``, ``section 4``, ``§10-10.3``),
 an equation label (``[Eq. 22]``, ``Eq. 9``), a check (``C5``, ``C1-C14``) or a numbered
@@ -6,7 +6,9 @@ item of a section (``§5.2, step 3``, ``§3.2, limit 2``), in the code (``simula
 ``patterns/``) and in the rest of the repository's text (tests, benchmarks, validation,
 examples, notebooks, the manual's pages). Each must exist in docs/physics.md: a heading
 ``## §N ...``, an equation label ``[Eq. N]`` (in the cited section when one is named), a
-row ``| CN |`` of the checks table, a list item ``N.`` of the section.
+row ``| CN |`` of the checks table, a list item ``N.`` of the section. The site build
+itself (``mkdocs build --strict``, run by ``make test`` and ``make docs``) fails on a
+broken link between the pages.
 """
 
 from __future__ import annotations
@@ -210,7 +212,55 @@ def test_every_citation_elsewhere_resolves():
 def test_no_citation_of_the_external_reference():
     """The code and the pages cite docs/physics.md, never the working notes it was written from."""
     pattern = re.compile(r"(?<![\"'])PHYSICS(?:\.md|\s+\d|\s+check)|DESIGN\.md|STYLE\.md")
-    files = _text_files(CODE_DIRS + TEXT_DIRS) + [ROOT / "README.md", ROOT / "Makefile"]
+    files = _text_files(CODE_DIRS + TEXT_DIRS) + [ROOT / "README.md", ROOT / "Makefile", ROOT / "mkdocs.yml"]
     hits = [f"{p.relative_to(ROOT)}:{i}: {line.strip()}" for p in files if p.exists() and p.name != "test_docs.py"
             for i, line in enumerate(p.read_text(encoding="utf-8", errors="replace").splitlines(), 1) if pattern.search(line)]
     assert not hits, "\n".join(hits)
+
+
+def test_pages_the_code_names_exist():
+    named = set()
+    for p in _text_files(CODE_DIRS):
+        named |= set(re.findall(r"\bdocs/[\w/.-]+?\.(?:md|png|gif)\b", p.read_text(encoding="utf-8")))
+    assert "docs/physics.md" in named
+    missing = sorted(n for n in named if not (ROOT / n).exists())
+    assert not missing, missing
+
+
+def test_the_readme_is_short_and_starts_with_the_two_commands():
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    assert len(text.splitlines()) < 200
+    commands = re.findall(r"^(make \w+)", text, re.M)
+    assert commands[:2] == ["make demo", "make test"]
+    assert len(re.findall(r"!\[[^\]]*\]\(", text)) == 1  # one picture
+    links = re.findall(r"\]\(([^)#\s]+)(?:#[^)]*)?\)", text)
+    assert "docs/physics.md" in links and "docs/benchmarks.md" in links
+    missing = [link for link in links if "://" not in link and not (ROOT / link).exists()]
+    assert not missing, missing
+
+
+def _hooks():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("docs_hooks", ROOT / "docs" / "hooks.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_benchmark_tables_come_from_the_results_files():
+    import json
+
+    hooks = _hooks()
+    markers = {m.group(1) for p in (ROOT / "docs").rglob("*.md") for m in hooks.MARKER.finditer(p.read_text(encoding="utf-8"))}
+    assert markers == set(hooks.TABLES)  # every table is shown, and every marker has a table
+    landscape = hooks.render("landscape")
+    for r in json.loads((ROOT / "benchmarks/results/landscape.json").read_text())["rows"]:
+        assert f"| {r['N']} | {hooks.LANDSCAPE_METHODS[r['method']]} | {r['twists']} | {hooks._g(r['seconds'])}" in landscape
+    sweep = json.loads((ROOT / "benchmarks/results/sweep.json").read_text())
+    assert f"| {sweep['loop']['seconds']:.1f} | {sweep['loop']['points_per_s']:.2f} |" in hooks.render("sweep")
+    accuracy = json.loads((ROOT / "benchmarks/results/accuracy.json").read_text())
+    base = next(r for r in accuracy["rows"] if r["knob"] == "baseline")
+    assert f"{hooks._acc(base['energy_rms_pct'])} / {hooks._acc(base['force_p90_pct'])} / {hooks._acc(base['landscape_s'])}" \
+        in hooks.render("accuracy")
+    assert "| knob | value | energy RMS %" in hooks.render("accuracy-details")
