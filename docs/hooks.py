@@ -10,6 +10,8 @@
   GitHub. The build copies each such file into the site under ``repo/`` and points the
   link there; a link to a file that does not exist is a warning, so ``mkdocs build
   --strict`` fails on it as on any broken link between pages.
+* Docstrings. The API reference renders the docstrings as Markdown; their Sphinx roles
+  (``:func:`name```, ``:class:`~pkg.Name```) are shown as the plain code they name.
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ RESULTS = ROOT / "benchmarks" / "results"
 MARKER = re.compile(r"^<!-- table: ([\w-]+) -->$", re.M)
 LINK = re.compile(r"(\]\()([^)\s#]+)(#[^)\s]*)?(\))")
 REPO_PREFIX = "repo"
+ROLE = re.compile(r":(?:py:)?(?:func|mod|class|meth|data|attr|exc|obj):<code>(~?)([^<]*)</code>")
 
 log = logging.getLogger("mkdocs.hooks.selfalign")
 
@@ -252,6 +255,10 @@ def on_page_markdown(markdown, page, config, files):
         return f"{m.group(1)}{new}{m.group(3) or ''}{m.group(4)}"
 
     return LINK.sub(link, markdown)
+
+
+def on_page_content(html, page, config, files):
+    return ROLE.sub(lambda m: f"<code>{m.group(2).split('.')[-1] if m.group(1) else m.group(2)}</code>", html)
 
 
 if __name__ == "__main__":
