@@ -28,7 +28,7 @@ Each scene holds the full twist period of the chip (90 degrees, periodic) and tr
 within ``reach + 50`` um of the centre (``window_um``); poses and starts have twists within
 +-10 degrees.
 
-Measured per point, against :mod:`simulator.reference` (exact shapely overlap, float64):
+Measured per point, against :mod:`simulator.testing` (exact shapely overlap, float64):
 
 * energy error: |A_raster - A_exact| at 200 random poses (uniform in the reach and the
   twist spread; ``Landscape.energy_at``: trilinear interpolation, so the pose grid's
@@ -42,8 +42,8 @@ Measured per point, against :mod:`simulator.reference` (exact shapely overlap, f
   for dA/dtwist, 90th percentile in % of A_chip / 2 (the slope of the twist cusp,
   docs/physics.md C5);
 * final-pose error: the raster stepper's final pose against the same stepper on the
-  exact overlap with the same step sizes (:func:`simulator.reference.greedy` /
-  :func:`~simulator.reference.gradient_descent`), from 12 random starts; translation (um)
+  exact overlap with the same step sizes (:func:`simulator.testing.greedy` /
+  :func:`~simulator.testing.gradient_descent`), from 12 random starts; translation (um)
   and twist (degrees, modulo 90), max over the starts;
 * cost: wall time and peak memory of the full landscape (``build_landscape``), of one
   trajectory (``simulate`` without a landscape: the boxes it needs; warm, i.e. after one
@@ -51,7 +51,7 @@ Measured per point, against :mod:`simulator.reference` (exact shapely overlap, f
   landscape, after a warm-up chunk compiled it). Times are the best of up to 5 runs
   (repeated while the runs so far took under 3 s): the machine may be shared.
 
-The presets of :mod:`simulator.accuracy` are measured as three more points per case.
+The presets of :mod:`simulator.scene` are measured as three more points per case.
 
 Peak memory is the rise of the process's resident set (Linux VmHWM, reset through
 ``/proc/self/clear_refs`` before each measured call; where that is not allowed, the rise
@@ -203,9 +203,10 @@ def _best_of(fn, first_s: float, budget_s: float = 3.0, repeats: int = 5) -> flo
 
 def measure_point(case: str, knobs: dict, settings: dict) -> dict:
     """Everything about one point that needs the raster engine (run in a fresh process)."""
+    from simulator.batch import random_starts, run_batch
+    from simulator.core import DEFAULT_CHUNK
     from simulator.landscape import UM2_TO_M2, build_landscape
-    from simulator.montecarlo import DEFAULT_CHUNK, random_starts, run_batch
-    from simulator.trajectory import radius_of_gyration_px, simulate
+    from simulator.motion import radius_of_gyration_px, simulate
 
     k = Knobs(**knobs)
     scene = _scene(case, k)
@@ -279,34 +280,34 @@ def measure_point(case: str, knobs: dict, settings: dict) -> dict:
 
 @functools.cache
 def _reference_field(case: str, n: int) -> tuple[np.ndarray, np.ndarray]:
-    from simulator import reference
+    from simulator.testing import gradient_um2, overlap_um2
 
     pattern, chip = _geometry(case)
     poses = _poses(case, n, SEED)
-    return reference.overlap_um2(pattern, chip, poses), reference.gradient_um2(pattern, chip, poses)
+    return overlap_um2(pattern, chip, poses), gradient_um2(pattern, chip, poses)
 
 
 def _reference_final(case: str, k: Knobs, start: tuple, rg_um: float, a_max: float) -> tuple[float, float, float]:
-    from simulator import reference
+    from simulator.testing import gradient_descent, greedy
 
     pattern, chip = _geometry(case)
     if k.method == "greedy":
         ev = _evaluator(case, k.um_per_px, k.twist_step_deg)
-        return reference.greedy(pattern, chip, start, k.um_per_px, k.twist_step_deg, evaluator=ev).final
-    run = reference.gradient_descent(pattern, chip, start, k.um_per_px, k.twist_step_deg, rg_um=rg_um, force_scale_um2=a_max)
+        return greedy(pattern, chip, start, k.um_per_px, k.twist_step_deg, evaluator=ev).final
+    run = gradient_descent(pattern, chip, start, k.um_per_px, k.twist_step_deg, rg_um=rg_um, force_scale_um2=a_max)
     return run.final
 
 
 @functools.cache
 def _evaluator(case: str, step_um: float, step_deg: float):
-    from simulator.reference import ExactOverlap
+    from simulator.testing import ExactOverlap
 
     return ExactOverlap(*_geometry(case), step_um, step_deg)
 
 
 @functools.cache
 def _feature(case: str) -> float:
-    from simulator.accuracy import smallest_feature_um
+    from simulator.scene import smallest_feature_um
 
     return smallest_feature_um(_geometry(case)[0])
 
@@ -354,18 +355,17 @@ def preset_library_check(n_poses: int, presets: list[str] | None = None) -> list
     from patterns.geometry import build, square
     from patterns.library import LIBRARY
     from patterns.raster import mask_from_geometry
-    from simulator import reference
-    from simulator.accuracy import PRESETS, apply_preset, smallest_feature_um
     from simulator.landscape import UM2_TO_M2, build_landscape
-    from simulator.scene import Scene, TwistGrid
+    from simulator.scene import PRESETS, Scene, TwistGrid, apply_preset, smallest_feature_um
+    from simulator.testing import gradient_um2, overlap_um2
 
     rows = []
     poses = np.random.default_rng(SEED + 3).uniform(-1.0, 1.0, (n_poses, 3)) * [60.0, 60.0, 10.0]
     for stem, design, params in LIBRARY:
         geom = build(design, **params)
         chip = square(params["size"])
-        a_ref = reference.overlap_um2(geom, chip, poses)
-        g_ref = reference.gradient_um2(geom, chip, poses)
+        a_ref = overlap_um2(geom, chip, poses)
+        g_ref = gradient_um2(geom, chip, poses)
         feature = smallest_feature_um(geom)
         for name in presets or list(PRESETS):
             k = apply_preset(name, {}, feature_um=feature)
@@ -399,7 +399,7 @@ def _points(case: str, sweep: dict, presets: bool) -> list[tuple[str, object, Kn
     for knob, values in sweep.items():
         pts += [(knob, v, replace(BASELINE, **{knob: v})) for v in values]
     if presets:
-        from simulator.accuracy import PRESETS, apply_preset, smallest_feature_um
+        from simulator.scene import PRESETS, apply_preset, smallest_feature_um
 
         feature = smallest_feature_um(_geometry(case)[0])
         for name in PRESETS:
@@ -504,7 +504,7 @@ def markdown(result: dict) -> str:
         f"{' (--quick)' if st['quick'] else ''}; {st['poses']} poses for energy/force errors, "
         f"{st['starts']} starts for final-pose errors, {st['mc']:,} Monte Carlo starts.",
         "Baseline: 1 um/px, 1 degree, float32, exact coverage, exact chip rotation, greedy. "
-        "Errors against exact polygon overlap (simulator.reference). Energy: % of chip area; force: % of "
+        "Errors against exact polygon overlap (simulator.testing). Energy: % of chip area; force: % of "
         "chip side (p50/p90: median / 90th percentile over the poses; a few poses next to a kink of "
         "A(x), where the one-grid-step difference straddles the kink, dominate the max); torque: % of A_chip/2; pose: max over starts. Times: seconds, best of up to 5 runs "
         "(trajectory warm; MC after a warm-up chunk); rel. cost: landscape time over the baseline's (the baseline and "
@@ -629,7 +629,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--quick", action="store_true", help="reduced sweep: fewer points, poses, starts and MC starts (about 3 minutes)")
     ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results", help="output folder (default benchmarks/results/)")
     ap.add_argument("--cases", nargs="+", choices=list(CASES), default=list(CASES), help="which patterns")
-    ap.add_argument("--no-presets", action="store_true", help="skip measuring the presets of simulator.accuracy")
+    ap.add_argument("--no-presets", action="store_true", help="skip measuring the presets of simulator.scene")
     args = ap.parse_args(argv)
     result = run(args.quick, args.out, args.cases, not args.no_presets)
     print(f"sweep took {result['sweep_seconds']:.0f} s; wrote {args.out}/accuracy.json, accuracy.md, accuracy_pareto.png")

@@ -2,7 +2,7 @@
 
 A 730 um SU-8 chip on the 730/100 um four-pad with 20 nl of water, finite meniscus (free
 contact lines), 2 um/px, 1 deg twist steps, the default damping calibration
-(``simulator.materials.DAMPING_CALIBRATION``). Writes
+(``simulator.physics.DAMPING_CALIBRATION``). Writes
 ``docs/images/dynamics_fourpad_730_100.png``: x, y and twist against time for the
 500 um x-bias of the video (it stops on the meniscus's flat part) and for the starts
 that reach alignment, with the video's frame times (135, 290 and about 326 ms), and
@@ -23,11 +23,14 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from patterns.library import library_path  # noqa: E402
-from simulator import materials, pyplot, save_figure  # noqa: E402
+from simulator import pyplot, save_figure
 from simulator.landscape import build_landscape  # noqa: E402
-from simulator.scene import Scene  # noqa: E402
-from simulator.scene_parts import Effects  # noqa: E402
-from simulator.trajectory import simulate  # noqa: E402
+from simulator.motion import simulate  # noqa: E402
+from simulator.physics import Liquid
+from simulator.scene import (
+    Effects,
+    Scene,
+)
 
 FRAMES_MS = (135.0, 290.0, 326.0)  # the source's video frames; aligned at about 326 ms
 STARTS = [(500.0, 0.0, 0.0), (500.0, 0.0, 2.0), (500.0, 5.0, 0.0), (380.0, 0.0, 0.0), (380.0, 0.0, 1.0), (380.0, 5.0, 0.0)]
@@ -49,7 +52,7 @@ def main() -> None:
     ap.add_argument("--no-inertial", action="store_true", help="overdamped runs only (faster)")
     args = ap.parse_args()
     scene = Scene.from_inputs(library_path("four_pad_730_100"), chip_size_um=730, resolution_um=2.0,
-                              effects=Effects(meniscus=True), liquid=materials.Liquid(volume_nl=20.0))
+                              effects=Effects(meniscus=True), liquid=Liquid(volume_nl=20.0))
     ls = build_landscape(scene)
     floor = ls.floor_range()
     print(f"damping calibration {scene.damping_calibration:g}; the chip floats within +-{floor['x_um'][1]:g} um")

@@ -27,10 +27,20 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from simulator import render, render_style  # noqa: E402
-from simulator.landscape import build_landscape  # noqa: E402
-from simulator.materials import Liquid  # noqa: E402
-from simulator.refine import refine_minimum, stiffness  # noqa: E402
+from simulator.landscape import (  # noqa: E402
+    build_landscape,
+    refine_minimum,
+    stiffness,
+)
+from simulator.physics import Liquid  # noqa: E402
+from simulator.render import (
+    CHIP_COLOUR,
+    PATH_COLOUR,
+    PLATEAU_COLOUR,
+    plot_forces,
+    pyplot,
+    save_figure,
+)
 from simulator.scene import Effects, Scene, TwistGrid  # noqa: E402
 
 LIB = ROOT / "patterns" / "library"
@@ -43,7 +53,7 @@ def figure(out: Path) -> None:
                              liquid=Liquid(volume_nl=20.0))
     men = base.replace(effects=replace(base.effects, meniscus=True))
     a, b = build_landscape(base), build_landscape(men)
-    render.plot_forces(b, out, through=(0.0, 0.0, 0.0), compare=a)
+    plot_forces(b, out, through=(0.0, 0.0, 0.0), compare=a)
     k = stiffness(b, 0.0, 0.0, 0.0)
     print(f"four_pad_730_50, 730 um chip, 20 nl: h = {men.meniscus_height_um:.2f} um, stiffness x {k['x_N_per_m']:.3g} N/m; wrote {out}")
 
@@ -77,7 +87,7 @@ def evolver_figure(out: Path) -> None:
     meniscus model (h = V / A) and Surface Evolver (free contact lines, 30/60 degrees)."""
     import numpy as np
 
-    plt = render_style.pyplot()
+    plt = pyplot()
     paths, finer, inward = evolver_paths("2"), evolver_paths("3"), evolver_inward("1")
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.6), layout="constrained", sharey=True)
     print("| gap (um) | x (um) | Surface Evolver inward, level 1 (uN) | Surface Evolver outward, level 2 (uN) | meniscus model (uN) "
@@ -95,15 +105,15 @@ def evolver_figure(out: Path) -> None:
         sx = np.array([float(r["x_um"]) for r in se])
         sf = np.array([float(r["force_x_N"]) for r in se]) * 1e6
         ax.plot(xs, -f_over, "--", color="0.45", label="overlap model")
-        ax.plot(xs, -f_men, color=render_style.PATH_COLOUR, label=f"meniscus model (h = {men.meniscus_height_um:.1f} um)")
-        ax.plot(sx, -sf, "o", ms=4, color=render_style.CHIP_COLOUR, label="Surface Evolver, outward from alignment (level 2)")
+        ax.plot(xs, -f_men, color=PATH_COLOUR, label=f"meniscus model (h = {men.meniscus_height_um:.1f} um)")
+        ax.plot(sx, -sf, "o", ms=4, color=CHIP_COLOUR, label="Surface Evolver, outward from alignment (level 2)")
         f3 = sorted(finer.get(gap, []), key=lambda r: float(r["x_um"]))
         ax.plot([float(r["x_um"]) for r in f3], [-float(r["force_x_fd_N"]) * 1e6 for r in f3], "o", ms=7, mfc="none",
-                color=render_style.CHIP_COLOUR, label="Surface Evolver, outward (level 3)")
+                color=CHIP_COLOUR, label="Surface Evolver, outward (level 3)")
         inw = {float(r["x_um"]): -float(r["force_x_N"]) * 1e6 for r in inward.get(gap, []) if float(r["x_um"]) > 1}
         ax.plot(list(inw), list(inw.values()), "^", ms=5, color="black", label="Surface Evolver, inward from x = 500 um (level 1; x = 0 not relaxed, left out)")
         p = (730 - gap) / 2
-        ax.axvspan(p, p + gap, color=render_style.PLATEAU_COLOUR, alpha=0.25, lw=0, label="overlap model's flat part")
+        ax.axvspan(p, p + gap, color=PLATEAU_COLOUR, alpha=0.25, lw=0, label="overlap model's flat part")
         ax.set_title(f"four-pad 730/{gap} um, 730 um chip, 20 nl, pads 30 deg, substrate 60 deg", fontsize=9)
         ax.set_xlabel("x (um)")
         ax.grid(alpha=0.3)
@@ -114,7 +124,7 @@ def evolver_figure(out: Path) -> None:
                   f"{-float(over.force_at(x, 0.0, 0.0)[0]) * 1e6:.2f} |")
     axes[0].set_ylabel("restoring force -F_x (uN)")
     fig.legend(*axes[0].get_legend_handles_labels(), loc="outside lower center", ncol=3, fontsize=8)
-    render_style.save_figure(fig, out)
+    save_figure(fig, out)
     print(f"wrote {out}", file=sys.stderr)
 
 

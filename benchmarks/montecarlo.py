@@ -8,8 +8,8 @@ The job: run N starts to their end on one precomputed landscape and classify the
   which the period maps onto -45). The landscape is built once (time reported, not
   counted in the runs).
 * Starts: uniform in x, y in [-400, 400] um and twist in [-30, 30] degrees, from
-  ``numpy.random.default_rng(0)`` (:func:`simulator.montecarlo.random_starts`).
-* ``batch``: :func:`simulator.montecarlo.run_batch` (jit(vmap(stepper)), chunks of
+  ``numpy.random.default_rng(0)`` (:func:`simulator.batch.random_starts`).
+* ``batch``: :func:`simulator.batch.run_batch` (jit(vmap(stepper)), chunks of
   ``--chunk`` starts, one thread per core, progress bar off), best of ``--repeats``
   calls after a first call that compiles (its time is reported in the notes).
 * ``loop``: the same stepper jit'ed for one start (``record=False``) called in a
@@ -46,11 +46,12 @@ import numpy as np
 import simulator  # noqa: F401  (x64 on)
 from patterns.geometry import four_pad, square
 from patterns.raster import mask_from_geometry
-from simulator import montecarlo as mc
-from simulator import stepping
+from simulator.batch import random_starts, run_batch
+from simulator.batch._montecarlo import _one
+from simulator.core import DEFAULT_CHUNK, DEFAULT_MAX_STEPS, METHODS
 from simulator.landscape import build_landscape
+from simulator.motion import field_and_grid, radius_of_gyration_px
 from simulator.scene import Scene, TwistGrid
-from simulator.trajectory import DEFAULT_MAX_STEPS, radius_of_gyration_px
 
 ROOT = Path(__file__).resolve().parents[1]
 MARK_OPEN, MARK_CLOSE = "<!-- bench:montecarlo -->", "<!-- /bench:montecarlo -->"
@@ -68,7 +69,7 @@ def make_scene() -> Scene:
 @functools.partial(jax.jit, static_argnames=("grid", "method", "max_steps"))
 def _single(field, start, grid, method, max_steps):
     """One start, jit'ed alone: the loop baseline (same code as one vmap lane)."""
-    return mc._one(field, grid, start, method, max_steps)
+    return _one(field, grid, start, method, max_steps)
 
 
 def time_loop(fld, grid, q0: np.ndarray, method: str, n: int, repeats: int) -> tuple[float, int]:
@@ -91,8 +92,8 @@ def time_loop(fld, grid, q0: np.ndarray, method: str, n: int, repeats: int) -> t
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--n", type=int, nargs="+", default=[1000, 10000, 100000], help="numbers of starts")
-    ap.add_argument("--methods", nargs="+", default=["greedy", "gradient"], choices=mc.METHODS)
-    ap.add_argument("--chunk", type=int, default=mc.DEFAULT_CHUNK)
+    ap.add_argument("--methods", nargs="+", default=["greedy", "gradient"], choices=METHODS)
+    ap.add_argument("--chunk", type=int, default=DEFAULT_CHUNK)
     ap.add_argument("--loop-starts", type=int, default=300, help="starts the Python loop is timed on")
     ap.add_argument("--repeats", type=int, default=3, help="timings per figure; the best is reported")
     ap.add_argument("--page", "--readme", dest="readme", type=Path, default=ROOT / "docs" / "benchmarks.md")
@@ -104,8 +105,8 @@ def main(argv: list[str] | None = None) -> int:
     t = time.perf_counter()
     ls = build_landscape(scene)
     t_land = time.perf_counter() - t
-    fld, grid = stepping.field_and_grid(ls, radius_of_gyration_px(scene))
-    starts = mc.random_starts(max(args.n), (400, 400, 30), seed=0, distribution="uniform")
+    fld, grid = field_and_grid(ls, radius_of_gyration_px(scene))
+    starts = random_starts(max(args.n), (400, 400, 30), seed=0, distribution="uniform")
     rows, notes = [], [f"landscape {ls.energy.shape} float32 built once in {t_land:.2f} s"]
     for method in args.methods:
         q0 = grid.to_index(starts)
@@ -115,9 +116,9 @@ def main(argv: list[str] | None = None) -> int:
         first = True
         for n in args.n:
             t = time.perf_counter()
-            mc.run_batch(scene, starts[:n], method, landscape=ls, chunk=args.chunk, progress=False)
+            run_batch(scene, starts[:n], method, landscape=ls, chunk=args.chunk, progress=False)
             warm = time.perf_counter() - t
-            runs = [mc.run_batch(scene, starts[:n], method, landscape=ls, chunk=args.chunk, progress=False) for _ in range(args.repeats)]
+            runs = [run_batch(scene, starts[:n], method, landscape=ls, chunk=args.chunk, progress=False) for _ in range(args.repeats)]
             r = min(runs, key=lambda b: b.stats["run_s"])
             s = r.stats["run_s"]
             if first:

@@ -61,7 +61,7 @@ def hostile_files_seconds() -> float:
     import tempfile
 
     from patterns.metadata import parse_png_params
-    from simulator.schema import read_scene_file
+    from simulator.scene import read_scene_file
 
     texts = {"deep.toml": "x = " + "[" * 5000 + "]" * 5000 + "\n", "dotted.toml": "x" + ".a" * 200_000 + " = 1\n",
              "big.toml": "x = [" + "0," * 25_000_000 + "]\n"}

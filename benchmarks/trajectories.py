@@ -23,8 +23,8 @@ sys.path.insert(0, str(ROOT))
 from patterns.library import library_path  # noqa: E402
 from simulator import pyplot, save_figure  # noqa: E402
 from simulator.landscape import build_landscape  # noqa: E402
+from simulator.motion import simulate  # noqa: E402
 from simulator.scene import Scene  # noqa: E402
-from simulator.trajectory import simulate  # noqa: E402
 
 METHODS = ("greedy", "gradient", "overdamped", "inertial")
 

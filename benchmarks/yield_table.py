@@ -22,11 +22,14 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from simulator.batch import (  # noqa: E402
+    random_starts,
+    run_batch,
+    summarize,
+)
 from simulator.landscape import build_landscape  # noqa: E402
-from simulator.materials import Liquid, Materials  # noqa: E402
-from simulator.montecarlo import run_batch, summarize  # noqa: E402
+from simulator.physics import Liquid, Materials  # noqa: E402
 from simulator.scene import Effects, Scene, TwistGrid  # noqa: E402
-from simulator.starts import random_starts  # noqa: E402
 
 BIASES = [(50, 0), (100, 0), (300, 0), (400, 0), (500, 0), (600, 0), (50, 50), (100, 100), (200, -200), (300, -300)]
 COLUMNS = [

@@ -58,12 +58,14 @@ from shapely.geometry.base import BaseGeometry
 from patterns.errors import InputError, positive, require_regular_file
 from patterns.layout_cell import Layout
 from patterns.layout_dxf import _read_dxf
-from patterns.layout_formats import BYTES_PER_POLYGON as BYTES_PER_POLYGON
-from patterns.layout_formats import BYTES_PER_VERTEX as BYTES_PER_VERTEX
-from patterns.layout_formats import DBU_UM as DBU_UM
-from patterns.layout_formats import DEFAULT_MAX_POLYGONS as DEFAULT_MAX_POLYGONS
 from patterns.layout_formats import (
+    BYTES_PER_POLYGON as BYTES_PER_POLYGON,
+    BYTES_PER_VERTEX as BYTES_PER_VERTEX,
+    DBU_UM as DBU_UM,
+    DEFAULT_MAX_POLYGONS as DEFAULT_MAX_POLYGONS,
     DXF_UNITS,
+    INSUNITS as INSUNITS,
+    MAX_DEPTH as MAX_DEPTH,
     NAMES,
     READ_FACTOR,
     SUFFIXES,
@@ -73,8 +75,6 @@ from patterns.layout_formats import (
     is_layout,
     layout_format,
 )
-from patterns.layout_formats import INSUNITS as INSUNITS
-from patterns.layout_formats import MAX_DEPTH as MAX_DEPTH
 from patterns.layout_gds import _read_gdstk
 from patterns.layout_write import WRITE_DXF_LAYER, WRITE_LAYER, snap, write_layout
 from patterns.mask import Mask

@@ -10,7 +10,7 @@ there, a note over :data:`MAX_PARAMS_CHARS` characters, or one nested deeper tha
 :class:`~patterns.errors.InputError` naming the PNG file and the key. Unknown keys are
 kept as they are.
 
-Also here, because both the scene schema (:mod:`simulator.schema`) and this module
+Also here, because both the scene schema (:mod:`simulator.scene`) and this module
 need them and ``patterns`` is the lower layer: :func:`show_value` (a short one-line
 rendering of a value for messages) and :func:`check_nesting` (an iterative depth and
 size check of parsed JSON/TOML data).

@@ -2,11 +2,13 @@
 
 The names users call are importable from here (``from simulator import Scene,
 build_landscape, simulate``); each is loaded on first use, so ``import simulator``
-is fast and imports neither JAX nor matplotlib. See ``docs/architecture.md`` for the
-modules behind them.
+is fast and imports neither JAX nor matplotlib. ``simulator/__init__.pyi`` declares their
+types for editors. The packages behind them (``simulator.core``, ``.scene``, ``.physics``,
+``.liquid``, ``.landscape``, ``.motion``, ``.batch``, ``.sweep``, ``.render``, ``.testing``)
+are described in ``docs/architecture.md``; each package's ``__init__`` is its public face.
 
 JAX: importing this package, or any of its modules, changes no JAX setting. The
-first stepper run (:func:`simulator.stepping.make_field`, which every trajectory and
+first stepper run (:func:`simulator.motion.make_field`, which every trajectory and
 batch goes through) and the GPU correlator switch on ``jax_enable_x64``, so that a
 float64 landscape stays float64; float32 landscapes still compute in float32.
 """
@@ -14,24 +16,30 @@ float64 landscape stays float64; float32 landscapes still compute in float32.
 from __future__ import annotations
 
 import importlib
+from importlib.metadata import PackageNotFoundError, version
+
+try:
+    __version__ = version("selfalign")
+except PackageNotFoundError:  # a source tree that was never installed
+    __version__ = "0+unknown"
 
 #: Public name -> the module that defines it ("module:name" where the name differs).
 _EXPORTS = {
     # what to simulate
     "Scene": "simulator.scene", "TwistGrid": "simulator.scene", "Effects": "simulator.scene",
-    "Materials": "simulator.materials", "Liquid": "simulator.materials", "UM2": "simulator.materials",
+    "Materials": "simulator.physics", "Liquid": "simulator.physics", "UM2": "simulator.core",
     # the energy landscape
-    "build_landscape": "simulator.engine", "estimate_bytes": "simulator.engine", "Landscape": "simulator.landscape",
-    "global_minimum": "simulator.optimum", "GlobalMinimum": "simulator.optimum",
+    "build_landscape": "simulator.landscape", "estimate_bytes": "simulator.landscape", "Landscape": "simulator.landscape",
+    "global_minimum": "simulator.landscape", "GlobalMinimum": "simulator.landscape",
     # trajectories and batches
-    "simulate": "simulator.trajectory", "Trajectory": "simulator.trajectory",
-    "run_batch": "simulator.montecarlo", "StartGrid": "simulator.montecarlo", "random_starts": "simulator.montecarlo",
-    "summarize": "simulator.montecarlo", "capture_map": "simulator.montecarlo", "run_realizations": "simulator.montecarlo",
-    "BatchResult": "simulator.montecarlo",
+    "simulate": "simulator.motion", "Trajectory": "simulator.motion",
+    "run_batch": "simulator.batch", "StartGrid": "simulator.batch", "random_starts": "simulator.batch",
+    "summarize": "simulator.batch", "capture_map": "simulator.batch", "run_realizations": "simulator.batch",
+    "BatchResult": "simulator.batch",
     # assessment and accuracy
-    "evaluate": "simulator.evaluate", "assess": "simulator.evaluate", "exact_overlap_um2": "simulator.reference:overlap_um2",
-    "PRESETS": "simulator.accuracy", "apply_preset": "simulator.accuracy", "feature_warning": "simulator.accuracy",
-    "smallest_feature_um": "simulator.accuracy",
+    "evaluate": "simulator.batch", "assess": "simulator.batch", "exact_overlap_um2": "simulator.testing:overlap_um2",
+    "PRESETS": "simulator.scene", "apply_preset": "simulator.scene", "feature_warning": "simulator.scene",
+    "smallest_feature_um": "simulator.scene",
     # design sweeps
     "sweep": "simulator.sweep", "load_sweep": "simulator.sweep",
     # pictures

@@ -11,32 +11,39 @@ from patterns.geometry import build, defect_type, four_pad, random_jagged, squar
 from patterns.library import LIBRARY
 from patterns.mask import Mask
 from patterns.raster import mask_from_geometry
-from simulator import reference
-from simulator.accuracy import KNOBS, PRESETS, apply_preset, feature_warning, smallest_feature_um
 from simulator.landscape import UM2_TO_M2, build_landscape
-from simulator.scene import Scene, TwistGrid
+from simulator.scene import (
+    KNOBS,
+    PRESETS,
+    Scene,
+    TwistGrid,
+    apply_preset,
+    feature_warning,
+    smallest_feature_um,
+)
+from simulator.testing import force_N, gradient_descent, gradient_um2, greedy, overlap_um2
 
 SQ = square(200)
 
 
 # ------------------------------------------------------------------ reference: known answers
 def test_c1_square_on_square():
-    assert reference.overlap_um2(SQ, SQ, (40, 25, 0))[0] == pytest.approx(28_000, abs=1e-9)
+    assert overlap_um2(SQ, SQ, (40, 25, 0))[0] == pytest.approx(28_000, abs=1e-9)
     rng = np.random.default_rng(0)
     xy = rng.uniform(-220, 220, (50, 2))
-    a = reference.overlap_um2(SQ, SQ, np.column_stack([xy, np.zeros(50)]))
+    a = overlap_um2(SQ, SQ, np.column_stack([xy, np.zeros(50)]))
     u = np.clip(200 - np.abs(xy), 0, None)
     np.testing.assert_allclose(a, u[:, 0] * u[:, 1], atol=1e-8)
 
 
 @pytest.mark.parametrize("alpha, area", [(0.5, 39_826.98), (1, 39_656.97), (5, 38_399.68), (10, 37_063.53), (30, 33_811.98), (45, 33_137.08)])
 def test_c5_pure_twist(alpha, area):
-    a = reference.overlap_um2(SQ, SQ, (0, 0, alpha))[0]
+    a = overlap_um2(SQ, SQ, (0, 0, alpha))[0]
     t = math.radians(alpha)
     exact = 200**2 * (1 - (math.cos(t) + math.sin(t) - 1) ** 2 / math.sin(2 * t))
     assert a == pytest.approx(exact, rel=1e-12)
     assert round(a, 2) == area
-    assert reference.overlap_um2(SQ, SQ, (0, 0, -alpha))[0] == pytest.approx(a, rel=1e-12)
+    assert overlap_um2(SQ, SQ, (0, 0, -alpha))[0] == pytest.approx(a, rel=1e-12)
 
 
 C11 = {
@@ -49,15 +56,15 @@ C11 = {
 
 @pytest.mark.parametrize("key", list(C11))
 def test_c11_defect_table(key):
-    a = reference.overlap_um2(defect_type(*key), SQ, [(0, 0, 0), (1, 0, 0), (-1, 0, 0), (0, 0, 1), (0, 0, -1)])
+    a = overlap_um2(defect_type(*key), SQ, [(0, 0, 0), (1, 0, 0), (-1, 0, 0), (0, 0, 1), (0, 0, -1)])
     np.testing.assert_array_equal(np.round(a, 2), C11[key])
 
 
 def test_c6_twist_coupling_and_force_units():
-    g = reference.gradient_um2(SQ, SQ, [(40, 25, 0), (25, 40, 0), (50, 10, 0), (10, 80, 0)])
+    g = gradient_um2(SQ, SQ, [(40, 25, 0), (25, 40, 0), (50, 10, 0), (10, 80, 0)])
     np.testing.assert_allclose(g[:, 2], [1012.5, -1012.5, 2800, -3850], rtol=1e-6)
     np.testing.assert_allclose(g[0, :2], [-175, -160], rtol=1e-9)  # dA/dx = -(L - |y|) for x > 0
-    f = reference.force_N(SQ, SQ, [(40, 25, 0)])[0]
+    f = force_N(SQ, SQ, [(40, 25, 0)])[0]
     dg = -0.0728 * (math.cos(math.radians(30)) - math.cos(math.radians(60)))
     assert f[0] == pytest.approx(dg * 175 * 1e-6, rel=1e-6)  # restoring: points to -x
 
@@ -65,20 +72,20 @@ def test_c6_twist_coupling_and_force_units():
 def test_c9_greedy_on_exact_overlap():
     fp = four_pad(200, 20)
     for start, final, steps in [((89, 0, 0), (0, 0, 0), 89), ((100, 0, 0), (100, 0, 0), 0), ((120, 0, 5), (110, 0, 0), 10)]:
-        run = reference.greedy(fp, SQ, start)
+        run = greedy(fp, SQ, start)
         assert run.final == final and run.steps == steps and run.status == "converged"
-    assert reference.greedy(fp, SQ, (91, 0, 0)).final == (0, 0, 0)  # the escape at the plateau end
+    assert greedy(fp, SQ, (91, 0, 0)).final == (0, 0, 0)  # the escape at the plateau end
 
 
 def test_greedy_step_sizes_follow_the_grid():
-    run = reference.greedy(SQ, SQ, (41, -19, 3.2), step_um=2.0, step_deg=0.5)
+    run = greedy(SQ, SQ, (41, -19, 3.2), step_um=2.0, step_deg=0.5)
     assert run.final == (0, 0, 0)
     assert np.all(np.abs(np.diff(run.path, axis=0)) <= [2, 2, 0.5])
     assert np.allclose(run.path[:, :2] % 2, 0) and np.allclose(run.path[:, 2] % 0.5, 0)
 
 
 def test_gradient_descent_reaches_the_minimum():
-    run = reference.gradient_descent(SQ, SQ, (30.3, -12.7, 4.0))
+    run = gradient_descent(SQ, SQ, (30.3, -12.7, 4.0))
     assert np.all(np.abs(run.final) < [0.05, 0.05, 0.05])
     assert np.all(np.diff(run.overlap_um2) > 0)
 
@@ -98,7 +105,7 @@ def _energy_error(geom, chip, s, poses, **kw) -> float:
     """RMS |A_raster - A_exact| / A_chip at the poses."""
     ls = build_landscape(_scene(geom, chip, s, **kw))
     a = ls.energy_at(*poses.T) / (ls.delta_gamma * UM2_TO_M2)
-    return float(np.sqrt(np.mean((a - reference.overlap_um2(geom, chip, poses)) ** 2)) / chip.area)
+    return float(np.sqrt(np.mean((a - overlap_um2(geom, chip, poses)) ** 2)) / chip.area)
 
 
 POSES = np.random.default_rng(7).uniform(-1, 1, (60, 3)) * [60, 60, 10]

@@ -5,8 +5,8 @@ import json
 import pytest
 
 from patterns.library import library_path
-from simulator.accuracy import PRESETS, apply_preset
 from simulator.cli import main
+from simulator.scene import PRESETS, apply_preset
 
 FOURPAD = str(library_path("four_pad_730_50"))
 JAGGED = str(library_path("random_jagged_s2"))

@@ -4,7 +4,7 @@ One test (or a few) per point of the issue:
 
 1. the global minimum is the scene's, wherever the pads lie: an off-centre square pad and
    an L-shaped pad whose optimum is turned by 45 degrees align in ``simulate``,
-   ``montecarlo`` and ``evaluate``, and :func:`simulator.optimum.global_minimum` (which a
+   ``montecarlo`` and ``evaluate``, and :func:`simulator.landscape.global_minimum` (which a
    single run uses, without the full landscape) names the full landscape's pose;
 2. a file's stored scale wins, ``--pattern-um-per-px`` / ``--chip-um-per-px`` set what a
    file lacks, a contradicting flag is refused unless ``--override-scale``;
@@ -42,7 +42,7 @@ from patterns.library import library_path
 from patterns.mask import Mask
 from patterns.raster import mask_from_geometry
 from simulator.cli import build_parser, main
-from simulator.materials import Materials
+from simulator.physics import Materials
 from simulator.scene import Effects, Scene, TwistGrid
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -118,11 +118,12 @@ def test_montecarlo_aligns_and_measures_errors_from_the_minimum(case, pads, tmp_
 
 @pytest.mark.parametrize("case", sorted(CASES))
 def test_evaluate_reports_the_minimum_and_measures_around_it(case, pads, tmp_path, capsys, monkeypatch):
-    from simulator import render
+    import simulator.batch._evaluate as evaluating
+    from simulator.render import plot_capture_map
 
     titles = []
-    draw = render.plot_capture_map
-    monkeypatch.setattr(render, "plot_capture_map", lambda *a, **k: (titles.append(k.get("title", "")), draw(*a, **k)))
+    draw = plot_capture_map
+    monkeypatch.setattr(evaluating, "plot_capture_map", lambda *a, **k: (titles.append(k.get("title", "")), draw(*a, **k)))
     png, _, opt, _ = CASES[case]
     rep = tmp_path / "rep"
     rc, stdout, err = cli(["evaluate", pads / png, *FAST, "--out", rep, "--quiet"], capsys)
@@ -159,8 +160,7 @@ def _scenes():
 
 @pytest.mark.parametrize("name, scene", list(_scenes()), ids=[n for n, _ in _scenes()])
 def test_global_minimum_without_the_full_landscape_is_the_full_landscapes(name, scene):
-    from simulator.engine import build_landscape
-    from simulator.optimum import global_minimum
+    from simulator.landscape import build_landscape, global_minimum
 
     ls = build_landscape(scene)
     want = ls.global_minimum()
@@ -176,8 +176,8 @@ def test_global_minimum_without_the_full_landscape_is_the_full_landscapes(name, 
 def test_cell_bound_is_an_upper_bound_on_every_pose():
     # The proof's inequality, checked on every cell of two small scenes (exact chip, chip image)
     # against the float64 landscape: the bound never falls below the overlap it bounds.
-    from simulator.engine import build_landscape
-    from simulator.optimum import _Bounds
+    from simulator.landscape import build_landscape
+    from simulator.landscape._overlap_bound import _Bounds
 
     scenes = [Scene(pattern=mask_from_geometry(four_pad(100, 10), 1.0, margin_um=5), chip=mask_from_geometry(square(70), 1.0),
                     twist=TwistGrid(15.0), dtype="float64"),
@@ -197,8 +197,8 @@ def test_cell_bound_is_an_upper_bound_on_every_pose():
 
 def test_landscape_picture_stars_the_minimum_only_where_it_is(monkeypatch, tmp_path):
     # The global minimum of the L-shaped pad is at -45 deg: the 0 deg panel has no star.
-    from simulator import render
-    from simulator.engine import build_landscape
+    from simulator.landscape import build_landscape
+    from simulator.render import _figures as render
 
     figs = []
     monkeypatch.setattr(render, "save_figure", lambda fig, path: figs.append(fig))
@@ -256,7 +256,7 @@ def test_scene_keys_follow_the_same_rule(scaled, tmp_path):
 
 # ============================================================ 3. words
 def _traj(final, outcome="aligned"):
-    from simulator.trajectory import Trajectory
+    from simulator.motion import Trajectory
 
     path = np.array([[40.0, 0.0, 0.0], final])
     return Trajectory("greedy", outcome, path, np.zeros(2), 1, optimum=(0.0, 0.0, 0.0))
@@ -320,7 +320,7 @@ def test_negative_values_after_a_space_run(tmp_path, capsys):
 
 
 # ============================================================ 5. start-up
-HEAVY = ("jax", "jaxlib", "matplotlib", "diffrax", "scipy.signal", "simulator.engine", "simulator.landscape", "simulator.trajectory")
+HEAVY = ("jax", "jaxlib", "matplotlib", "diffrax", "scipy.signal", "simulator.landscape._build", "simulator.landscape._landscape", "simulator.motion._trajectory")
 PROBE = """
 import contextlib, io, json, sys
 from simulator.cli import main
@@ -406,10 +406,10 @@ def _code_defaults() -> dict[str, object]:
     """The code's default for each flag whose argparse default is None (resolved downstream)."""
     from patterns.layout import DEFAULT_MAX_POLYGONS, DEFAULT_UM_PER_PX
     from patterns.resources import DEFAULT_BUDGET_CAP_MB, DEFAULT_MAX_IMAGE_MPX
-    from simulator import defaults
-    from simulator.accuracy import DEFAULT_PRESET
-    from simulator.materials import Liquid, Materials
-    from simulator.starts import StartGrid, random_starts
+    from simulator.batch import StartGrid, random_starts
+    from simulator.core import DEFAULT_CHUNK, DEFAULT_MAX_STEPS, METHODS
+    from simulator.physics import Liquid, Materials
+    from simulator.scene import DEFAULT_PRESET
 
     scene_fields = Scene.__dataclass_fields__
     m, liq = Materials(), Liquid()
@@ -418,8 +418,8 @@ def _code_defaults() -> dict[str, object]:
         "--twist-step": TwistGrid().step_deg, "--dtype": scene_fields["dtype"].default, "--max-image-mpx": DEFAULT_MAX_IMAGE_MPX,
         "--accuracy": DEFAULT_PRESET, "--volume": liq.volume_nl, "--viscosity": liq.viscosity_Pa_s * 1e3,
         "--chip-thickness": scene_fields["chip_thickness_um"].default, "--chip-density": scene_fields["chip_density_kg_m3"].default,
-        "--damping-calibration": scene_fields["damping_calibration"].default, "--max-steps": defaults.DEFAULT_MAX_STEPS,
-        "--chunk": defaults.DEFAULT_CHUNK, "--method": defaults.METHODS[0], "--seed": 0,
+        "--damping-calibration": scene_fields["damping_calibration"].default, "--max-steps": DEFAULT_MAX_STEPS,
+        "--chunk": DEFAULT_CHUNK, "--method": METHODS[0], "--seed": 0,
         "--distribution": inspect.signature(random_starts).parameters["distribution"].default,
         "--around": ",".join(f"{v:g}" for v in inspect.signature(random_starts).parameters["around"].default),
         "--grid": inspect.signature(StartGrid.from_ranges).parameters["twist_deg"].default,
@@ -509,11 +509,11 @@ def test_the_files_the_readme_names_exist():
 
 
 def test_threads_come_from_selfalign_threads(capsys, monkeypatch):
-    from simulator import defaults
-    from simulator.correlator import Correlator, Window
+    from simulator.core import threads
+    from simulator.landscape import Correlator, Window
 
     monkeypatch.setenv("SELFALIGN_THREADS", "1")
-    assert defaults.threads() == 1
+    assert threads() == 1
     assert Correlator(np.ones((8, 8)), (3, 3), Window(2, 2, 3, 3), "float32", "scipy").workers == 1
     monkeypatch.setenv("SELFALIGN_THREADS", "two")
     rc, _, err = cli(["simulate", "--pattern", str(library_path("square_200")), "--chip-size", "200", "--start", "10,5,0", "--quiet"], capsys)
@@ -521,4 +521,4 @@ def test_threads_come_from_selfalign_threads(capsys, monkeypatch):
     monkeypatch.delenv("SELFALIGN_THREADS")
     import os
 
-    assert defaults.threads() == (os.cpu_count() or 1)
+    assert threads() == (os.cpu_count() or 1)

@@ -1,4 +1,4 @@
-"""Time-resolved dynamics (simulator.dynamics) against closed forms and invariants.
+"""Time-resolved dynamics (simulator.motion) against closed forms and invariants.
 
 Known answers: on a synthetic quadratic landscape ``E = k x^2 / 2`` (a linear spring with
 the parallelepiped stiffness k0 = 2 gamma L / h of docs/physics.md C13) the overdamped run
@@ -23,21 +23,36 @@ import pytest
 from patterns.errors import InputError
 from patterns.geometry import square
 from patterns.raster import mask_from_geometry
-from simulator import dynamics, materials, stepping
-from simulator.dynamics import DynamicsParams
 from simulator.landscape import build_landscape
+from simulator.motion import (
+    CONVERGED,
+    EDGE,
+    MAX_STEPS,
+    OUTCOMES,
+    DynamicsParams,
+    Grid,
+    classify,
+    field_and_grid,
+    gradient,
+    inertial,
+    interpolate,
+    make_field,
+    overdamped,
+    potential,
+    potential_and_gradient,
+)
+from simulator.physics import DAMPING_CALIBRATION, Chip, Liquid, parallelepiped_stiffness
 from simulator.scene import Scene, TwistGrid
-from simulator.stepping import CONVERGED, EDGE, MAX_STEPS, Grid, make_field
 
 STATIC = ("grid", "max_steps", "record")
-OVERDAMPED = jax.jit(dynamics.overdamped, static_argnames=STATIC)
-INERTIAL = jax.jit(dynamics.inertial, static_argnames=STATIC)
-PHI_GRAD = jax.jit(jax.vmap(dynamics.potential_and_gradient, (None, None, 0)), static_argnums=1)
+OVERDAMPED = jax.jit(overdamped, static_argnames=STATIC)
+INERTIAL = jax.jit(inertial, static_argnames=STATIC)
+PHI_GRAD = jax.jit(jax.vmap(potential_and_gradient, (None, None, 0)), static_argnums=1)
 MAX_STEPS_N = 1000  # one buffer size everywhere: one compilation per model and field shape
 
 # The 200 x 200 x 50 um SU-8 chip on 0.5 nl of water (docs/physics.md §2): h = 12.5 um.
-K0 = materials.parallelepiped_stiffness(12.5, 200.0)  # N/m, 2.33
-MASS = materials.Chip(200.0, 200.0).mass_kg  # 2.4e-9 kg
+K0 = parallelepiped_stiffness(12.5, 200.0)  # N/m, 2.33
+MASS = Chip(200.0, 200.0).mass_kg  # 2.4e-9 kg
 UM_PER_PX = 0.5
 NX, NY, XC = 201, 5, 100  # spring minimum at ix = XC, iy = NY // 2
 X0_PX = 80.0  # start 40 um off
@@ -114,7 +129,7 @@ def test_potential_is_the_spring_plus_a_constant_and_its_gradient_the_central_di
         np.asarray(phi), 0.5 * k_idx * dx * dx + k_idx / 4, rtol=1e-5, atol=1e-6 * k_idx
     )
     np.testing.assert_allclose(np.asarray(grad[:, 2]), k_idx * dx, rtol=1e-5, atol=1e-5 * k_idx)
-    central = jax.jit(jax.vmap(stepping.gradient, (None, None, 0)), static_argnums=1)(
+    central = jax.jit(jax.vmap(gradient, (None, None, 0)), static_argnums=1)(
         field, grid, q
     )
     np.testing.assert_allclose(
@@ -191,7 +206,7 @@ def test_plateau_stops_overdamped_chips_and_inertia_can_cross_it(model, c, x0, s
     assert int(s.status) == CONVERGED
     assert abs(float(s.q[2]) - XC - stop_px) <= 1.0
     assert (
-        stepping.OUTCOMES[int(stepping.classify(field, grid, s.q, s.energy, s.status, s.flat))]
+        OUTCOMES[int(classify(field, grid, s.q, s.energy, s.status, s.flat))]
         == outcome
     )
     if outcome == "plateau":
@@ -213,7 +228,7 @@ def test_runs_out_of_time_or_steps():
     assert float(s.time_s) < 1e-2 and float(s.time_s) == float(s.path_t[int(s.step)])
     np.testing.assert_array_equal(np.asarray(s.q), np.asarray(s.path[int(s.step)]))
     with pytest.raises(InputError, match="max_steps"):
-        dynamics.overdamped(field, grid, params(9.6e-5), spring_start(), 0)
+        overdamped(field, grid, params(9.6e-5), spring_start(), 0)
 
 
 def test_reaching_a_cut_side_stops_with_edge():
@@ -235,7 +250,7 @@ def test_vmap_over_starts_equals_single_runs_and_record_off_keeps_the_end():
     p = params(3e-5)
     starts = jnp.stack([spring_start(d) for d in (80.0, -55.5, 7.25, 0.0)])
     batch = jax.jit(
-        jax.vmap(dynamics.inertial, in_axes=(None, None, None, 0, None, None)),
+        jax.vmap(inertial, in_axes=(None, None, None, 0, None, None)),
         static_argnums=(1, 4, 5),
     )
     out = batch(field, grid, p, starts, MAX_STEPS_N, False)
@@ -251,26 +266,26 @@ def test_vmap_over_starts_equals_single_runs_and_record_off_keeps_the_end():
 
 # ------------------------------------------------------------------ parameters
 def test_params_from_physics_is_the_calibrated_couette_estimate():
-    chip, liquid = materials.Chip(200.0, 200.0), materials.Liquid(volume_nl=0.5)
+    chip, liquid = Chip(200.0, 200.0), Liquid(volume_nl=0.5)
     p = DynamicsParams.from_physics(chip, liquid, 200.0 * 200.0, calibration=30.0)
     # c = 30 mu A / h with h = V / A = 12.5 um
     assert p.damping_N_s_m == pytest.approx(30 * 1e-3 * 4e-8 / 12.5e-6)
     assert p.rot_damping_N_m_s == pytest.approx(30 * 1e-3 * (4e-8 * 8e-8 / 12) / 12.5e-6)
     default = DynamicsParams.from_physics(chip, liquid, 200.0 * 200.0)
-    assert default.damping_N_s_m == pytest.approx(p.damping_N_s_m * materials.DAMPING_CALIBRATION / 30)
+    assert default.damping_N_s_m == pytest.approx(p.damping_N_s_m * DAMPING_CALIBRATION / 30)
     assert p.mass_kg == pytest.approx(2.4e-9) and p.inertia_kg_m2 == pytest.approx(
         2.4e-9 * 8e-8 / 12
     )
     assert p.damping_ratio(K0) == pytest.approx(
         30 * 0.0214, rel=0.01
-    )  # materials.DAMPING_CALIBRATION table
+    )  # DAMPING_CALIBRATION table
     bare = DynamicsParams.from_physics(chip, liquid, calibration=1.0)
     assert bare.damping_N_s_m == pytest.approx(p.damping_N_s_m / 30)
 
 
 def test_params_from_scene_match_the_cuboid(square_200):
     _, _, p = square_200  # from_scene of a 200 um square chip mask at 2 um/px
-    q = DynamicsParams.from_physics(materials.Chip(200.0, 200.0), materials.Liquid(volume_nl=0.5), calibration=30.0)
+    q = DynamicsParams.from_physics(Chip(200.0, 200.0), Liquid(volume_nl=0.5), calibration=30.0)
     for name in ("mass_kg", "inertia_kg_m2", "damping_N_s_m", "rot_damping_N_m_s", "t_max_s"):
         assert getattr(p, name) == pytest.approx(getattr(q, name), rel=1e-9), name
 
@@ -282,7 +297,7 @@ def test_params_reject_bad_values():
         )
     with pytest.raises(InputError, match="damping calibration"):
         DynamicsParams.from_physics(
-            materials.Chip(200.0, 200.0), materials.Liquid(), calibration=0.0
+            Chip(200.0, 200.0), Liquid(), calibration=0.0
         )
 
 
@@ -294,11 +309,11 @@ def square_200():
         pattern=mask_from_geometry(square(200), 2.0, margin_um=10.0),
         chip=mask_from_geometry(square(200), 2.0),
         twist=TwistGrid(step_deg=5.0),
-        liquid=materials.Liquid(volume_nl=0.5),
+        liquid=Liquid(volume_nl=0.5),
         damping_calibration=30.0,  # underdamped (zeta ~ 0.65): the explicit solver's regime
     )
     rg_px = 200.0 / math.sqrt(6.0) / 2.0  # radius of gyration of the square, px
-    field, grid = stepping.field_and_grid(build_landscape(scene), rg_px)
+    field, grid = field_and_grid(build_landscape(scene), rg_px)
     return field, grid, DynamicsParams.from_scene(scene)
 
 
@@ -309,7 +324,7 @@ def test_phi_gradient_is_its_autodiff_gradient(square_200):
     )
     _, grad = PHI_GRAD(field, grid, q)
     auto = jax.jit(
-        jax.vmap(jax.grad(dynamics.potential, argnums=2), (None, None, 0)), static_argnums=1
+        jax.vmap(jax.grad(potential, argnums=2), (None, None, 0)), static_argnums=1
     )(field, grid, q)
     np.testing.assert_allclose(
         np.asarray(grad), np.asarray(auto), rtol=1e-4, atol=float(field.floor)
@@ -323,8 +338,8 @@ def test_square_aligns_from_30_20_5(square_200):
     start = jnp.asarray(grid.to_index([30.0, 20.0, 5.0]), jnp.float32)
     s = INERTIAL(field, grid, p, start, MAX_STEPS_N)
     assert int(s.status) == CONVERGED and float(s.time_s) < float(p.t_max_s)
-    outcome = stepping.OUTCOMES[
-        int(stepping.classify(field, grid, s.q, s.energy, s.status, s.flat))
+    outcome = OUTCOMES[
+        int(classify(field, grid, s.q, s.energy, s.status, s.flat))
     ]
     assert outcome == "aligned"
     x, y, twist = grid.to_pose(np.asarray(s.q))
@@ -333,7 +348,7 @@ def test_square_aligns_from_30_20_5(square_200):
     )
     assert_energy_never_rises(s, float(field.floor))
     # the energy the other steppers report, at the end of the path
-    assert float(s.energy) == pytest.approx(float(stepping.interpolate(field, grid, s.q)), rel=1e-6)
+    assert float(s.energy) == pytest.approx(float(interpolate(field, grid, s.q)), rel=1e-6)
 
 
 def test_no_contact_start_returns_immediately(square_200):
@@ -343,6 +358,6 @@ def test_no_contact_start_returns_immediately(square_200):
     assert int(s.step) == 0 and int(s.status) == CONVERGED and float(s.time_s) == 0.0
     np.testing.assert_array_equal(np.asarray(s.q), np.asarray(start))
     assert (
-        stepping.OUTCOMES[int(stepping.classify(field, grid, s.q, s.energy, s.status, s.flat))]
+        OUTCOMES[int(classify(field, grid, s.q, s.energy, s.status, s.flat))]
         == "no_contact"
     )

@@ -2,7 +2,7 @@
 
 The case of the source's high-speed video: a 730 um SU-8 chip on the 730/100 um four-pad
 with 20 nl of water (h = 37.5 um), free contact lines (the wall profile of
-simulator.meniscus), the default damping calibration. The video shows the chip aligned
+simulator.physics), the default damping calibration. The video shows the chip aligned
 about 1/3 s after release from a 500 um x-bias, twisting on the way.
 
 What is checked:
@@ -27,12 +27,10 @@ import numpy as np
 import pytest
 
 from patterns.library import library_path
-from simulator import materials
-from simulator.dynamics import DynamicsParams
 from simulator.landscape import build_landscape
-from simulator.scene import Scene, TwistGrid
-from simulator.scene_parts import Effects
-from simulator.trajectory import simulate
+from simulator.motion import DynamicsParams, simulate
+from simulator.physics import DAMPING_CALIBRATION, Liquid
+from simulator.scene import Effects, Scene, TwistGrid
 
 
 def _scene(viscosity_Pa_s=1e-3):
@@ -42,7 +40,7 @@ def _scene(viscosity_Pa_s=1e-3):
         resolution_um=4.0,
         twist=TwistGrid(step_deg=2.0),
         effects=Effects(meniscus=True),
-        liquid=materials.Liquid(volume_nl=20.0, viscosity_Pa_s=viscosity_Pa_s),
+        liquid=Liquid(volume_nl=20.0, viscosity_Pa_s=viscosity_Pa_s),
     )
 
 
@@ -72,8 +70,8 @@ def _run(scene, ls, start, method="overdamped", t_max_s=1.0):
 
 
 def test_default_calibration_is_the_fitted_one():
-    assert materials.DAMPING_CALIBRATION == 600.0
-    assert _scene().damping_calibration == materials.DAMPING_CALIBRATION
+    assert DAMPING_CALIBRATION == 600.0
+    assert _scene().damping_calibration == DAMPING_CALIBRATION
 
 
 @pytest.mark.parametrize("start", [(380.0, 0.0, 1.0), (370.0, 0.0, 0.0)])

@@ -2,11 +2,11 @@
 
 The calibrated water parameters damp the chip heavily (the velocity relaxes in m / c, a
 few microseconds, while it creeps a grid step in milliseconds), so inertial runs use the
-IMEX solver (simulator.dynamics.stiff_solver). Before it, the implicit solver's Newton
+IMEX solver (simulator.motion.stiff_solver). Before it, the implicit solver's Newton
 iteration stalled on the float32-quantized force and cut its steps to nothing in the
 middle of a pad: from (500, 0, 0) the overlap scene ran out of its 5000 solver steps at
 x = 471 um. And a chip approaching the wall profile's floating floor crept on Phi's
-rounded edge until its second was up (simulator.dynamics_ode._near_rest stops it within
+rounded edge until its second was up (simulator.motion._near_rest stops it within
 a twentieth of a grid step of its rest point).
 
 10 um/px and twist off keep this fast (one compilation per scene): the starts lie on the
@@ -19,12 +19,18 @@ import numpy as np
 import pytest
 
 from patterns.library import library_path
-from simulator import dynamics_ode, stepping
 from simulator.cli import build_parser
 from simulator.commands._common import scene_from_args
-from simulator.defaults import DEFAULT_MAX_STEPS
-from simulator.engine import build_landscape
-from simulator.trajectory import radius_of_gyration_px, simulate
+from simulator.core import DEFAULT_MAX_STEPS
+from simulator.landscape import build_landscape
+from simulator.motion import (
+    field_and_grid,
+    potential_and_gradient,
+    radius_of_gyration_px,
+    reference_gradient,
+    simulate,
+)
+from simulator.motion._dynamics_ode import _hessian
 
 
 def four_pad_scene(meniscus: bool):
@@ -60,19 +66,19 @@ def test_inertial_run_from_300_um_aligns(scene):
 def test_phi_hessian_is_the_derivative_of_its_gradient():
     scene = four_pad_scene(True)
     ls = build_landscape(scene)
-    field, grid = stepping.field_and_grid(ls, radius_of_gyration_px(scene))
+    field, grid = field_and_grid(ls, radius_of_gyration_px(scene))
     rng = np.random.default_rng(1)
     for x in (15.0, 17.5, 300.0, 425.0):  # the floor's rounded edge, a pad, the flat part's edge
         q = jnp.asarray(grid.to_index([x, 0.0, 0.0]), jnp.float32) + jnp.asarray([0.0, *rng.uniform(0.05, 0.95, 2)], jnp.float32)
-        h = np.asarray(dynamics_ode._hessian(field, grid, q))
+        h = np.asarray(_hessian(field, grid, q))
         for k in (1, 2):
             e = jnp.zeros(3, jnp.float32).at[k].set(1e-2)
-            fd = (np.asarray(dynamics_ode.potential_and_gradient(field, grid, q + e)[1])
-                  - np.asarray(dynamics_ode.potential_and_gradient(field, grid, q - e)[1])) / 2e-2
-            np.testing.assert_allclose(h[k, 1:], fd[1:], rtol=1e-2, atol=1e-3 * float(stepping.reference_gradient(field, grid)))
+            fd = (np.asarray(potential_and_gradient(field, grid, q + e)[1])
+                  - np.asarray(potential_and_gradient(field, grid, q - e)[1])) / 2e-2
+            np.testing.assert_allclose(h[k, 1:], fd[1:], rtol=1e-2, atol=1e-3 * float(reference_gradient(field, grid)))
     # on a grid line (a node of the start) the one-sided value, not autodiff's branch
     q = jnp.asarray(grid.to_index([300.0, 0.0, 0.0]), jnp.float32)
-    assert abs(float(dynamics_ode._hessian(field, grid, q)[2, 2])) < 1e-3 * float(stepping.reference_gradient(field, grid))
+    assert abs(float(_hessian(field, grid, q)[2, 2])) < 1e-3 * float(reference_gradient(field, grid))
 
 
 def test_with_twists_the_run_that_creeps_on_the_plateau_until_its_time_is_up_is_a_plateau():

@@ -8,7 +8,7 @@ from patterns.geometry import four_pad, square
 from patterns.io import write_mask
 from patterns.raster import mask_from_geometry
 from simulator.cli import main
-from simulator.materials import Materials
+from simulator.physics import Materials
 
 
 @pytest.fixture(scope="module")

@@ -88,6 +88,6 @@ def test_unwritable_output_directory(fourpad_png, tmp_path, capsys):
 
 
 def test_report_page_shows_a_refined_minimum_to_a_thousandth():
-    from simulator.evaluate import _at
+    from simulator.batch._evaluate import _at
 
     assert [_at(v) for v in (-0.000102256, 1.23456, -2.5e-07, 12.0)] == ["0", "1.235", "0", "12"]

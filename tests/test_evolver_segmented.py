@@ -24,9 +24,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from simulator.landscape import build_landscape
-from simulator.materials import Liquid
-from simulator.refine import refine_minimum
+from simulator.landscape import build_landscape, refine_minimum
+from simulator.physics import Liquid
 from simulator.scene import Effects, Scene, TwistGrid
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -1,4 +1,4 @@
-"""Contact-angle hysteresis (simulator.hysteresis): pinning forces from the contact lines that
+"""Contact-angle hysteresis (simulator.physics): pinning forces from the contact lines that
 slide over a pad (none in a pinned scene), the stopping rule of every stepper, zero width =
 today's rule exactly."""
 
@@ -13,10 +13,20 @@ from shapely.geometry import box
 from patterns.errors import InputError
 from patterns.mask import Mask
 from patterns.raster import mask_from_geometry
-from simulator import hysteresis as hy
-from simulator.materials import Liquid, Materials
+from simulator.motion import simulate
+from simulator.physics import (
+    Liquid,
+    Materials,
+    contact_line_integrals_um,
+    line_reach_um,
+    parse_window,
+    pin_per_index,
+    pinning,
+    pinning_force_per_length,
+    sliding_pinning,
+    sliding_shares,
+)
 from simulator.scene import Effects, Scene
-from simulator.trajectory import simulate
 
 GAMMA = 0.0728
 
@@ -35,12 +45,12 @@ def _dcos(w):
 
 
 def test_pinning_forces_of_a_rectangle_and_a_square():
-    f = hy.pinning_force_per_length(GAMMA, 31, 50)
+    f = pinning_force_per_length(GAMMA, 31, 50)
     assert f == pytest.approx(GAMMA * (math.cos(math.radians(31)) - math.cos(math.radians(50))))
     a, b = 200.0, 100.0
     geo = Scene.from_inputs(mask_from_geometry(box(-a / 2, -b / 2, a / 2, b / 2), 1.0), chip_size_um=(a, b),
                             materials=Materials(pad_receding_deg=31, pad_advancing_deg=50), effects=Effects(hysteresis=True))
-    pt, py, px = hy.pinning(geo)
+    pt, py, px = pinning(geo)
     # Furmidge: P = f * (width across the motion). Torque: f/2 * oint |(z x r) . n| ds; the
     # a-edges give 2 int |x| dx = a^2 / 2, the b-edges b^2 / 2.
     assert px == pytest.approx(f * b * 1e-6) and py == pytest.approx(f * a * 1e-6)
@@ -49,17 +59,17 @@ def test_pinning_forces_of_a_rectangle_and_a_square():
     L = 200.0
     sq = Scene.from_inputs(mask_from_geometry(box(-L / 2, -L / 2, L / 2, L / 2), 1.0), chip_size_um=L,
                            materials=Materials(pad_receding_deg=31, pad_advancing_deg=50), effects=Effects(hysteresis=True))
-    assert hy.pinning(sq)[0] == pytest.approx(f * L**2 / 2 * 1e-12)
+    assert pinning(sq)[0] == pytest.approx(f * L**2 / 2 * 1e-12)
     # A chip image gives the same integrals as its exact geometry (pixel-aligned square).
     img = Mask(mask_from_geometry(box(-L / 2, -L / 2, L / 2, L / 2), 1.0).data, 1.0)
-    assert np.allclose(hy.contact_line_integrals_um(img), hy.contact_line_integrals_um(sq.chip), rtol=1e-9)
+    assert np.allclose(contact_line_integrals_um(img), contact_line_integrals_um(sq.chip), rtol=1e-9)
 
 
 def test_window_parsing_and_refusals():
-    assert hy.parse_window("31:50") == (31.0, 50.0)
+    assert parse_window("31:50") == (31.0, 50.0)
     for bad in ("50", "50:31", "a:b", "-1:20", "10:190"):
         with pytest.raises(InputError):
-            hy.parse_window(bad)
+            parse_window(bad)
     with pytest.raises(InputError, match="receding and advancing"):
         Materials(pad_receding_deg=30)
     with pytest.raises(InputError, match="hysteresis needs"):
@@ -71,27 +81,27 @@ def test_which_contact_lines_slide():
     # Pinned: every line is held by an edge (the chip's, the pad's), whatever the pad.
     for pad in (200.0, 300.0):
         sc = _scene(pinned=True, pad=pad)
-        assert hy.sliding_shares(sc) == (0.0, 0.0, 0.0) and hy.sliding_pinning(sc) == (0.0, 0.0, 0.0)
-        assert hy.pin_per_index(sc, 2.0, 1.0) == (0.0, 0.0, 0.0) and any(hy.pinning(sc))
+        assert sliding_shares(sc) == (0.0, 0.0, 0.0) and sliding_pinning(sc) == (0.0, 0.0, 0.0)
+        assert pin_per_index(sc, 2.0, 1.0) == (0.0, 0.0, 0.0) and any(pinning(sc))
     # Free lines, same-size pad: the lines stand on the substrate at d_s = h cot 60 deg beyond the
     # chip (d_p = h cot 30 deg = 34.6 um beyond it is substrate): nothing slides over the pad.
     free = _scene(pinned=False)
-    assert hy.line_reach_um(free) == pytest.approx(20.0 / math.tan(math.radians(30)))
-    assert hy.sliding_shares(free) == (0.0, 0.0, 0.0)
+    assert line_reach_um(free) == pytest.approx(20.0 / math.tan(math.radians(30)))
+    assert sliding_shares(free) == (0.0, 0.0, 0.0)
     # Free lines on a pad 50 um wider than the chip on each side (> d_p = 17.3 um at h = 10): all slide.
     inside = _scene(h=10.0, pinned=False, pad=300.0)
-    assert hy.sliding_shares(inside) == (1.0, 1.0, 1.0) and hy.sliding_pinning(inside) == hy.pinning(inside)
+    assert sliding_shares(inside) == (1.0, 1.0, 1.0) and sliding_pinning(inside) == pinning(inside)
     # ... but at h = 40 um d_p = 69 um lies beyond that pad's edge: the edge holds every line.
-    assert hy.sliding_shares(_scene(h=40.0, pinned=False, pad=300.0)) == (0.0, 0.0, 0.0)
+    assert sliding_shares(_scene(h=40.0, pinned=False, pad=300.0)) == (0.0, 0.0, 0.0)
     # The overlap model (no meniscus): the line at the chip's edge, which lies on the pad's edge
     # at rest; half of it moves over the pad whichever way the chip goes.
     L = 200.0
     ov = Scene.from_inputs(mask_from_geometry(box(-L / 2, -L / 2, L / 2, L / 2), 1.0, margin_um=4), chip_size_um=L, materials=mat,
                            effects=Effects(hysteresis=True))
-    assert np.allclose(hy.sliding_shares(ov), 0.5, atol=0.01)
+    assert np.allclose(sliding_shares(ov), 0.5, atol=0.01)
     # A chip image gives the shares of its exact geometry.
     img = ov.replace(chip=Mask(mask_from_geometry(box(-L / 2, -L / 2, L / 2, L / 2), 1.0).data, 1.0))
-    assert np.allclose(hy.sliding_shares(img), hy.sliding_shares(ov), atol=0.01)
+    assert np.allclose(sliding_shares(img), sliding_shares(ov), atol=0.01)
 
 
 @pytest.mark.parametrize("pinned", [True, False])
@@ -151,7 +161,7 @@ def test_free_lines_on_the_pad_stop_where_the_force_falls_to_the_pinning_force(m
         d_p = h / math.tan(math.radians(30))
         for w in ((40.0, 50.0), (31.0, 50.0)):
             sc = _scene(h=h, window=w, pinned=False, pad=300.0)
-            assert hy.sliding_shares(sc) == (1.0, 1.0, 1.0)
+            assert sliding_shares(sc) == (1.0, 1.0, 1.0)
             t = simulate(sc, (48.0, 0.0, 0.0), method=method)
             c = cp - _dcos(w)
             u = h * c / math.sqrt(1 - c * c)
@@ -176,7 +186,7 @@ def test_free_lines_on_a_same_size_pad_are_not_held_by_its_hysteresis():
 
 
 def test_montecarlo_applies_the_same_pinning():
-    from simulator.montecarlo import random_starts, run_batch, summarize
+    from simulator.batch import random_starts, run_batch, summarize
 
     starts = random_starts(200, (15.0, 15.0, 0.0), seed=3)
     starts[:, 2] = 0.0

@@ -21,12 +21,11 @@ from simulator.landscape import (
     Window,
     build_landscape,
     chip_relations,
-    chip_symmetry,
     correlate_stack,
     twist_axis,
 )
-from simulator.materials import Materials
-from simulator.scene import Effects, Scene, TwistGrid
+from simulator.physics import Materials
+from simulator.scene import Effects, Scene, TwistGrid, chip_symmetry
 
 
 def scene(pattern_geom, chip_geom, um_per_px=1.0, margin=10.0, **kw):

@@ -365,8 +365,7 @@ def test_layout_chip_file_and_content_sniffing(tmp_path, capsys):
 
 
 def test_schema_and_scene_agree_on_the_layout_keys():
-    from simulator.schema import DXF_UNITS as SCHEMA_UNITS
-    from simulator.schema import SCHEMA
+    from simulator.scene import DXF_UNITS as SCHEMA_UNITS, SCHEMA
 
     assert set(LAYOUT_KEYS) <= set(SCHEMA[None]) and tuple(DXF_UNITS) == SCHEMA_UNITS
 

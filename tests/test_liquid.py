@@ -26,9 +26,18 @@ from patterns.geometry import four_pad
 from patterns.io import write_mask
 from patterns.library import library_path
 from patterns.raster import mask_from_geometry
-from simulator import critical_volume as cvm
 from simulator import liquid
 from simulator.cli import main
+from simulator.liquid import (
+    GRID_POINTS,
+    FourPad,
+    cap_angle_deg,
+    cap_area_um2,
+    cap_height_um,
+    critical_volume,
+    free_cap_base_um2,
+    minimise_footprint,
+)
 
 GAMMA = 0.0728
 #: Largest relative deviation of V_ND from its straight-line fit over relative gaps
@@ -177,44 +186,44 @@ def test_cap_formulas_are_exact():
     a = 100.0
     base = math.pi * a * a
     hemi = 2 * math.pi * a**3 / 3
-    assert cvm.cap_height_um(hemi, base) == pytest.approx(a, rel=1e-12)
-    assert cvm.cap_area_um2(hemi, base) == pytest.approx(2 * math.pi * a * a, rel=1e-12)
-    assert cvm.cap_angle_deg(hemi, base) == pytest.approx(90, rel=1e-12)
+    assert cap_height_um(hemi, base) == pytest.approx(a, rel=1e-12)
+    assert cap_area_um2(hemi, base) == pytest.approx(2 * math.pi * a * a, rel=1e-12)
+    assert cap_angle_deg(hemi, base) == pytest.approx(90, rel=1e-12)
     # Any angle: V = pi h (3a^2 + h^2) / 6 and A = 2 pi R h with R = a / sin(theta).
     for theta in (5.0, 30.0, 60.0, 120.0, 170.0):
         t = math.radians(theta)
         R = a / math.sin(t)
         h = R * (1 - math.cos(t))
         v = math.pi * h * (3 * a * a + h * h) / 6
-        assert cvm.cap_height_um(v, base) == pytest.approx(h, rel=1e-10)
-        assert cvm.cap_area_um2(v, base) == pytest.approx(2 * math.pi * R * h, rel=1e-10)
-        assert cvm.cap_angle_deg(v, base) == pytest.approx(theta, rel=1e-10)
-        assert cvm.free_cap_base_um2(v, theta) == pytest.approx(base, rel=1e-10)
+        assert cap_height_um(v, base) == pytest.approx(h, rel=1e-10)
+        assert cap_area_um2(v, base) == pytest.approx(2 * math.pi * R * h, rel=1e-10)
+        assert cap_angle_deg(v, base) == pytest.approx(theta, rel=1e-10)
+        assert free_cap_base_um2(v, theta) == pytest.approx(base, rel=1e-10)
         # At fixed volume dA_LV/dB = cos(theta): Young's condition is the minimum of the energy.
         d = 1e-6 * base
-        slope = (cvm.cap_area_um2(v, base + d) - cvm.cap_area_um2(v, base - d)) / (2 * d)
+        slope = (cap_area_um2(v, base + d) - cap_area_um2(v, base - d)) / (2 * d)
         assert slope == pytest.approx(math.cos(t), abs=1e-6)
 
 
 def test_a_free_drop_settles_at_young_angle_and_pins_at_a_pad_edge():
     # One-pad drop: small drops sit inside the pad at the pad angle; larger ones pin on the edge
     # with an angle between the pad's and the substrate's (Gibbs), then spill at the substrate angle.
-    p = cvm.FourPad(1000.0, 100.0, 40.0, 100.0)
+    p = FourPad(1000.0, 100.0, 40.0, 100.0)
     pad = p.pad_um
-    v_fit = float(cvm.free_cap_base_um2(1.0, 40.0))  # base per unit volume^(2/3) at 40 deg
+    v_fit = float(free_cap_base_um2(1.0, 40.0))  # base per unit volume^(2/3) at 40 deg
     v_edge = (pad * pad / v_fit) ** 1.5  # the free 40-degree cap that just covers the pad's area
     for v, expect in ((0.3 * v_edge, "free"), (3 * v_edge, "pinned")):
-        e, s = cvm.minimise_footprint(p, np.array([v]), "one")
-        angle = float(cvm.cap_angle_deg(v, s[0] ** 2))
+        e, s = minimise_footprint(p, np.array([v]), "one")
+        angle = float(cap_angle_deg(v, s[0] ** 2))
         if expect == "free":
             assert s[0] < pad and angle == pytest.approx(40, abs=1e-4)
         else:
             assert s[0] == pytest.approx(pad, rel=1e-9) and 40 < angle < 100
     # Energy of the free drop: the closed form gamma (A_LV - cos theta B) of a 40-degree cap.
     v = 0.3 * v_edge
-    b = float(cvm.free_cap_base_um2(v, 40.0))
-    e, _ = cvm.minimise_footprint(p, np.array([v]), "one")
-    assert e[0] == pytest.approx(float(cvm.cap_area_um2(v, b)) - math.cos(math.radians(40)) * b, rel=1e-9)
+    b = float(free_cap_base_um2(v, 40.0))
+    e, _ = minimise_footprint(p, np.array([v]), "one")
+    assert e[0] == pytest.approx(float(cap_area_um2(v, b)) - math.cos(math.radians(40)) * b, rel=1e-9)
 
 
 #: Surface Evolver 2.70's energy of a unit-volume sessile drop at 60 degrees (the data file
@@ -235,8 +244,8 @@ SESSILE_FE = (
 
 def test_sessile_drop_agrees_with_surface_evolver():
     # Its energy A_LV - cos(theta) A_base against the spherical-cap formula (SE's mesh is a little above).
-    b = float(cvm.free_cap_base_um2(1.0, 60.0))
-    e_cap = float(cvm.cap_area_um2(1.0, b)) - 0.5 * b
+    b = float(free_cap_base_um2(1.0, 60.0))
+    e_cap = float(cap_area_um2(1.0, b)) - 0.5 * b
     assert e_cap == pytest.approx(2.6046985, rel=1e-6)
     assert 0 <= (SESSILE_SE_ENERGY - e_cap) / e_cap < 2e-3
 
@@ -260,7 +269,7 @@ def test_critical_volume_against_stored_surface_evolver():
 
 # ------------------------------------------------------------------ critical volume
 def vcrit(L, g, tp, ts) -> float:
-    return cvm.critical_volume(L, g, tp, ts).critical_volume_nl
+    return critical_volume(L, g, tp, ts).critical_volume_nl
 
 
 def test_critical_volume_through_the_cli(capsys):
@@ -275,7 +284,7 @@ def test_critical_volume_through_the_cli(capsys):
 
 
 def test_at_the_critical_volume_the_energies_cross():
-    cv = cvm.critical_volume(730, 50, 30, 60)
+    cv = critical_volume(730, 50, 30, 60)
     en, v = cv.energies, cv.volume_um3
     d = en.middle - en.split
     below, above = en.volumes_um3 < 0.97 * v, en.volumes_um3 > 1.03 * v
@@ -291,8 +300,8 @@ def test_at_the_critical_volume_the_energies_cross():
 
 
 def test_critical_volume_grid_converges():
-    a = cvm.critical_volume(710, 71, 41, 89).critical_volume_nl
-    b = cvm.critical_volume(710, 71, 41, 89, points=2 * cvm.GRID_POINTS).critical_volume_nl
+    a = critical_volume(710, 71, 41, 89).critical_volume_nl
+    b = critical_volume(710, 71, 41, 89, points=2 * GRID_POINTS).critical_volume_nl
     assert abs(a - b) / b < 1e-4
 
 

@@ -1,4 +1,4 @@
-"""The finite meniscus (simulator.meniscus): closed forms, the h -> 0 limit, sub-pixel
+"""The finite meniscus (simulator.physics): closed forms, the h -> 0 limit, sub-pixel
 minima, the CLI and its refusals."""
 
 from __future__ import annotations
@@ -14,10 +14,16 @@ from shapely.geometry import Polygon, box
 
 from patterns.errors import InputError
 from patterns.raster import mask_from_geometry
-from simulator import meniscus as mn
-from simulator.landscape import build_landscape
-from simulator.materials import Liquid
-from simulator.refine import refine_minimum, stiffness
+from simulator.landscape import build_landscape, refine_minimum, stiffness
+from simulator.physics import (
+    Liquid,
+    flat_wall_energy_J,
+    flat_wall_stiffness_N_m,
+    flat_wall_twist_stiffness_Nm,
+    kernel_image,
+    kernel_spectrum,
+    regime_warning,
+)
 from simulator.scene import Effects, Scene, TwistGrid
 
 GAMMA = 0.0728
@@ -37,15 +43,15 @@ def _centre(ls):
 
 def test_kernel_is_normalised_and_has_the_flat_wall_profile():
     h = 3.0
-    k = mn.kernel_image(h, 400)
+    k = kernel_image(h, 400)
     assert k.sum() == pytest.approx(1.0, abs=2e-4)  # tail beyond 400 px: h^2 / r^2 ~ 6e-5
-    spec = mn.kernel_spectrum(64, 64, h)
+    spec = kernel_spectrum(64, 64, h)
     assert spec[0, 0] == 1.0 and np.all(spec <= 1.0) and np.all(spec >= 0)
     # Profile across a line: the 1-D marginal is h^2 / (2 (d^2 + h^2)^1.5).
     d = np.arange(-400, 401)
     prof = k.sum(axis=0)
     assert np.allclose(prof[390:411], h**2 / (2 * (d[390:411] ** 2 + h**2) ** 1.5), rtol=2e-3)
-    assert np.allclose(mn.kernel_spectrum(32, 32, 1e-12), 1.0, atol=1e-12)
+    assert np.allclose(kernel_spectrum(32, 32, 1e-12), 1.0, atol=1e-12)
 
 
 def test_zero_height_limit_is_the_overlap_landscape_to_round_off():
@@ -76,10 +82,10 @@ def test_square_shift_energy_stiffness_and_saturation(h):
     # (1 - 2h / (pi L)) on the stiffness (the ends of the edges, derived in meniscus.py).
     corner = 1 - 2 * h / (math.pi * L)
     near = np.abs(x) <= 2 * h
-    cf = mn.flat_wall_energy_J(x, L, h, GAMMA)
+    cf = flat_wall_energy_J(x, L, h, GAMMA)
     assert np.allclose(e[near], cf[near], rtol=h / L * 1.5, atol=1e-3 * cf[near].max())
     k = (e[ix + 1] + e[ix - 1]) / (1e-6) ** 2
-    assert k == pytest.approx(mn.flat_wall_stiffness_N_m(L, h, GAMMA) * corner, rel=2e-3)
+    assert k == pytest.approx(flat_wall_stiffness_N_m(L, h, GAMMA) * corner, rel=2e-3)
     # Far out the force saturates at 2 gamma (L - h) (edges shortened by about h at the corners).
     F = -np.gradient(ls.energy[it, iy], x * 1e-6)
     far = np.argmin(np.abs(x - 7 * h))
@@ -93,8 +99,8 @@ def test_rectangle_stiffness_follows_the_edge_across_the_shift():
     ls = build_landscape(_scene(box(-a / 2, -b / 2, a / 2, b / 2), chip_size=(a, b), h=h, twist=None, window=20))
     k = stiffness(ls, 0.0, 0.0, 0.0)
     # Along x the walls across the shift are the b-sides: 2 gamma b / h; along y, 2 gamma a / h.
-    assert k["x_N_per_m"] == pytest.approx(mn.flat_wall_stiffness_N_m(b, h, GAMMA) * (1 - 2 * h / (math.pi * b)), rel=0.01)
-    assert k["y_N_per_m"] == pytest.approx(mn.flat_wall_stiffness_N_m(a, h, GAMMA) * (1 - 2 * h / (math.pi * a)), rel=0.01)
+    assert k["x_N_per_m"] == pytest.approx(flat_wall_stiffness_N_m(b, h, GAMMA) * (1 - 2 * h / (math.pi * b)), rel=0.01)
+    assert k["y_N_per_m"] == pytest.approx(flat_wall_stiffness_N_m(a, h, GAMMA) * (1 - 2 * h / (math.pi * a)), rel=0.01)
     assert k["x_N_per_m"] / k["y_N_per_m"] == pytest.approx(b / a, rel=0.03)
 
 
@@ -119,7 +125,7 @@ def test_twist_is_smooth_and_tends_to_the_flat_wall_stiffness():
         assert np.allclose(e, e[::-1], rtol=1e-6, atol=1e-20)
         assert e[it + 1] < e[it + 2] / 3.0
         kt = stiffness(ls, 0.0, 0.0, 0.0)["twist_Nm_per_rad"]
-        ratios.append(kt / mn.flat_wall_twist_stiffness_Nm(L, h, GAMMA))
+        ratios.append(kt / flat_wall_twist_stiffness_Nm(L, h, GAMMA))
     # gamma L^3 / (3 h) less a corner deficit of about 4.3 h / L (measured: 0.89 at h/L = 0.025, 0.78 at 0.05).
     assert 0.85 < ratios[0] < 0.93 and 0.74 < ratios[1] < 0.83
     assert (1 - ratios[1]) / (1 - ratios[0]) == pytest.approx(2.0, rel=0.15)
@@ -183,7 +189,7 @@ def test_height_from_volume_and_refusals():
     for bad in (0.0, -1.0, float("nan"), float("inf")):
         with pytest.raises(InputError, match="meniscus height"):
             Liquid(height_um=bad)
-    assert mn.regime_warning(60.0, 200.0) and mn.regime_warning(40.0, 200.0) is None
+    assert regime_warning(60.0, 200.0) and regime_warning(40.0, 200.0) is None
     # Off, the height is not asked for (an impossible volume does not matter).
     assert Scene.from_inputs(mask_from_geometry(sq, 2.0), chip_size_um=200, liquid=Liquid(volume_nl=500)).meniscus_height_um is None
 

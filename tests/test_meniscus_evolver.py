@@ -14,7 +14,7 @@ from shapely.geometry import box
 
 from patterns.raster import mask_from_geometry
 from simulator.landscape import build_landscape
-from simulator.materials import Liquid, Materials
+from simulator.physics import Liquid, Materials
 from simulator.scene import Effects, Scene, TwistGrid
 
 CSV = Path(__file__).resolve().parents[1] / "validation" / "evolver_reference.csv"

@@ -1,5 +1,5 @@
-"""The global minimum of a meniscus scene without its whole landscape (simulator.optimum,
-simulator.overlap_bound): the footprint's block maxima and mass bound the energy as the
+"""The global minimum of a meniscus scene without its whole landscape (simulator.landscape,
+simulator.landscape): the footprint's block maxima and mass bound the energy as the
 chip raster's do, and every box of the landscape agrees with the landscape to round-off."""
 
 from __future__ import annotations
@@ -9,9 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from simulator.landscape import build_landscape
-from simulator.materials import Liquid
-from simulator.optimum import global_minimum
+from simulator.landscape import build_landscape, global_minimum
+from simulator.physics import Liquid
 from simulator.scene import Effects, Scene
 
 LIB = Path(__file__).resolve().parents[1] / "patterns" / "library"

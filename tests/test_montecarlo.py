@@ -11,12 +11,28 @@ import pytest
 from patterns.geometry import four_pad, square
 from patterns.io import write_mask
 from patterns.raster import mask_from_geometry
-from simulator import montecarlo as mc
-from simulator import stepping
+from simulator.batch import (
+    BatchResult,
+    StartGrid,
+    capture_map,
+    max_bias,
+    random_starts,
+    run_batch,
+    run_realizations,
+    summarize,
+    twist_error,
+)
 from simulator.cli import main
 from simulator.landscape import build_landscape
+from simulator.motion import (
+    OUTCOMES,
+    field_and_grid,
+    gradient_descent,
+    greedy,
+    radius_of_gyration_px,
+    simulate,
+)
 from simulator.scene import Scene, TwistGrid
-from simulator.trajectory import radius_of_gyration_px, simulate
 
 
 def make_scene(L, g, um_per_px, step_deg, **kw):
@@ -39,8 +55,8 @@ def fp():
 @pytest.fixture(scope="module")
 def starts():
     """Grid starts (aligned, plateau, no-contact, diagonal ties) and random placements."""
-    g = mc.StartGrid.from_ranges((-240, 240, 40), (-120, 200, 40), (-20, 20, 20)).poses()
-    r = mc.random_starts(60, (80, 80, 15), seed=11)
+    g = StartGrid.from_ranges((-240, 240, 40), (-120, 200, 40), (-20, 20, 20)).poses()
+    r = random_starts(60, (80, 80, 15), seed=11)
     return np.concatenate([g, r, [[100, 0, 0], [92, 0, 0], [60, 60, 0], [60, -60, 0]]])
 
 
@@ -48,9 +64,9 @@ def starts():
 @pytest.mark.parametrize("method", ["greedy", "gradient"])
 def test_batch_equals_single_runs_bit_for_bit(fp, starts, method):
     scene, ls = fp
-    r = mc.run_batch(scene, starts, method, landscape=ls, chunk=64, progress=False)
-    fld, grid = stepping.field_and_grid(ls, radius_of_gyration_px(scene))
-    fn = stepping.greedy if method == "greedy" else stepping.gradient_descent
+    r = run_batch(scene, starts, method, landscape=ls, chunk=64, progress=False)
+    fld, grid = field_and_grid(ls, radius_of_gyration_px(scene))
+    fn = greedy if method == "greedy" else gradient_descent
     single = jax.jit(fn, static_argnames=("grid", "max_steps", "record"))
     pick = np.random.default_rng(0).choice(len(starts), 24, replace=False)
     for n, i in enumerate(pick):
@@ -70,53 +86,53 @@ def test_batch_equals_single_runs_bit_for_bit(fp, starts, method):
 
 def test_same_seed_same_bits_and_chunk_and_workers_change_nothing(fp):
     scene, ls = fp
-    a = mc.random_starts(300, (60, 60, 20), seed=5, around=(20, -10, 0))
-    b = mc.random_starts(300, (60, 60, 20), seed=5, around=(20, -10, 0))
+    a = random_starts(300, (60, 60, 20), seed=5, around=(20, -10, 0))
+    b = random_starts(300, (60, 60, 20), seed=5, around=(20, -10, 0))
     assert a.tobytes() == b.tobytes()
-    assert not np.array_equal(a, mc.random_starts(300, (60, 60, 20), seed=6, around=(20, -10, 0)))
-    ref = mc.run_batch(scene, a, landscape=ls, chunk=300, progress=False, workers=1)
+    assert not np.array_equal(a, random_starts(300, (60, 60, 20), seed=6, around=(20, -10, 0)))
+    ref = run_batch(scene, a, landscape=ls, chunk=300, progress=False, workers=1)
     for chunk, workers in [(7, 2), (64, 1), (1000, 2)]:
-        r = mc.run_batch(scene, b, landscape=ls, chunk=chunk, progress=False, workers=workers)
+        r = run_batch(scene, b, landscape=ls, chunk=chunk, progress=False, workers=workers)
         for k in ("final", "outcome", "steps", "energy_J"):
             assert getattr(r, k).tobytes() == getattr(ref, k).tobytes(), (k, chunk)
-    assert mc.summarize(ref) == mc.summarize(r)
+    assert summarize(ref) == summarize(r)
 
 
 # ------------------------------------------------------------------ starts
 def test_random_starts_distributions():
-    u = mc.random_starts(20000, (10, 20, 5), seed=1, around=(100, -50, 3), distribution="uniform")
+    u = random_starts(20000, (10, 20, 5), seed=1, around=(100, -50, 3), distribution="uniform")
     assert np.all(np.abs(u - [100, -50, 3]) <= [10, 20, 5])
     assert np.abs(u.mean(axis=0) - [100, -50, 3]).max() < 0.5
-    n = mc.random_starts(20000, (10, 20, 0), seed=1)
+    n = random_starts(20000, (10, 20, 0), seed=1)
     np.testing.assert_allclose(n.std(axis=0), [10, 20, 0], rtol=0.03, atol=1e-12)
     assert np.all(n[:, 2] == 0)  # zero spread: exactly the nominal value
     for bad in [dict(n=0), dict(spread=(-1, 0, 0)), dict(seed=-1), dict(distribution="cauchy")]:
         kw = dict(n=10, spread=(1, 1, 1), seed=0) | bad
         with pytest.raises(ValueError, match="must|one of"):
-            mc.random_starts(**kw)
+            random_starts(**kw)
 
 
 def test_start_grid_order_and_errors():
-    g = mc.StartGrid.from_ranges((0, 4, 2), 5.0, (-10, 10, 10))
+    g = StartGrid.from_ranges((0, 4, 2), 5.0, (-10, 10, 10))
     assert g.shape == (3, 1, 3) and g.x_um == (0.0, 2.0, 4.0)
     p = g.poses()
     assert p[:3].tolist() == [[0, 5, -10], [2, 5, -10], [4, 5, -10]]  # x fastest, twist slowest
     with pytest.raises(ValueError, match="step must be > 0"):
-        mc.StartGrid.from_ranges((0, 4, 0), 0)
+        StartGrid.from_ranges((0, 4, 0), 0)
     with pytest.raises(ValueError, match="stop"):
-        mc.StartGrid.from_ranges((4, 0, 1), 0)
+        StartGrid.from_ranges((4, 0, 1), 0)
 
 
 def test_twist_error_modulo_period():
-    np.testing.assert_array_equal(mc.twist_error([-90, 45, -45, 44, 100], 90), [0, -45, -45, 44, 10])
+    np.testing.assert_array_equal(twist_error([-90, 45, -45, 44, 100], 90), [0, -45, -45, 44, 10])
 
 
 # ------------------------------------------------------------------ physics
 def test_square_yield_is_one_inside_capture_region():
     s = make_scene(200, 0, 4.0, 10.0)
-    g = mc.StartGrid.from_ranges((-120, 120, 8), (-120, 120, 8), (-20, 20, 10))
-    r = mc.run_batch(s, g, progress=False)
-    summ = mc.summarize(r, g)
+    g = StartGrid.from_ranges((-120, 120, 8), (-120, 120, 8), (-20, 20, 10))
+    r = run_batch(s, g, progress=False)
+    summ = summarize(r, g)
     assert summ["yield"] == 1.0 and summ["outcomes"]["aligned"] == g.size
     assert summ["aligned_error_um"]["x"]["max_abs"] == 0 and summ["aligned_error_deg"]["twist"]["max_abs"] == 0
     assert all(summ["max_bias_limited_by_grid"].values())  # every start aligned, up to the grid edge
@@ -124,10 +140,10 @@ def test_square_yield_is_one_inside_capture_region():
 
 def test_placement_noise_yield(fp):
     scene, ls = fp
-    exact = mc.run_batch(scene, mc.random_starts(50, (0, 0, 0), seed=0, around=(40, 20, 0)), landscape=ls, progress=False)
-    assert mc.summarize(exact)["yield"] == 1.0
-    wide = mc.run_batch(scene, mc.random_starts(400, (60, 60, 10), seed=0, around=(80, 0, 0)), landscape=ls, progress=False)
-    assert 0.2 < mc.summarize(wide)["yield"] < 1.0
+    exact = run_batch(scene, random_starts(50, (0, 0, 0), seed=0, around=(40, 20, 0)), landscape=ls, progress=False)
+    assert summarize(exact)["yield"] == 1.0
+    wide = run_batch(scene, random_starts(400, (60, 60, 10), seed=0, around=(80, 0, 0)), landscape=ls, progress=False)
+    assert 0.2 < summarize(wide)["yield"] < 1.0
 
 
 @pytest.mark.parametrize("method", ["greedy", "gradient"])
@@ -136,24 +152,24 @@ def test_four_pad_capture_map_is_mirror_symmetric(method):
     # ties, and the tie order (docs/physics.md §5) is not mirror-invariant, so a few starts on
     # basin boundaries (88 of 2601 here) end differently from their mirror images.
     scene = make_scene(200, 20, 2.0, 10.0, dtype="float64")
-    g = mc.StartGrid.from_ranges((-200, 200, 8), (-200, 200, 8), 0.0)
-    r = mc.run_batch(scene, g, method, progress=False)
-    cmap = mc.capture_map(r, g)[0]
+    g = StartGrid.from_ranges((-200, 200, 8), (-200, 200, 8), 0.0)
+    r = run_batch(scene, g, method, progress=False)
+    cmap = capture_map(r, g)[0]
     assert 0 < np.mean(cmap == 0) < 1
     np.testing.assert_array_equal(cmap, cmap[:, ::-1])  # mirror x (twist 0 maps to itself)
     np.testing.assert_array_equal(cmap, cmap[::-1, :])  # mirror y
     np.testing.assert_array_equal(cmap, cmap.T)  # 4-fold: swap x and y
     if method == "greedy":
-        bias, limited = mc.max_bias(r, g)
+        bias, limited = max_bias(r, g)
         # docs/physics.md §6.3 / C9: about one pad (p = 90 um); the plateau from p to p + g stops the chip.
         assert set(bias.values()) == {bias["+x"]} and 88 <= bias["+x"] <= 96 and not any(limited.values())
 
 
 def test_max_bias_walks_out_from_the_origin():
-    g = mc.StartGrid.from_ranges((-6, 6, 2), 0.0)  # x = -6 .. 6 at y = 0
+    g = StartGrid.from_ranges((-6, 6, 2), 0.0)  # x = -6 .. 6 at y = 0
     out = np.array([1, 0, 0, 0, 0, 1, 0], np.int8)  # aligned except x = -6 and x = 4
-    r = mc.BatchResult("greedy", g.poses(), g.poses(), out, np.zeros(7, np.int32), np.zeros(7), 90.0, (0, 0, 0))
-    bias, limited = mc.max_bias(r, g)
+    r = BatchResult("greedy", g.poses(), g.poses(), out, np.zeros(7, np.int32), np.zeros(7), 90.0, (0, 0, 0))
+    bias, limited = max_bias(r, g)
     assert bias == {"+x": 2.0, "-x": 4.0, "+y": None, "-y": None}
     assert limited == {"+x": False, "-x": False, "+y": None, "-y": None}
 
@@ -161,22 +177,22 @@ def test_max_bias_walks_out_from_the_origin():
 def test_starts_outside_the_twist_range_or_window_are_refused():
     s = make_scene(200, 20, 4.0, 10.0).replace(twist=TwistGrid(step_deg=10, min_deg=-20, max_deg=20))
     with pytest.raises(ValueError, match="twist range"):
-        mc.run_batch(s, [[0, 0, 40]], progress=False)
+        run_batch(s, [[0, 0, 40]], progress=False)
     with pytest.raises(ValueError, match="every start twist must be 0"):
-        mc.run_batch(s.replace(effects=s.effects.__class__(twist=False)), [[0, 0, 10]], progress=False)
+        run_batch(s.replace(effects=s.effects.__class__(twist=False)), [[0, 0, 10]], progress=False)
     with pytest.raises(ValueError, match="translation window"):
-        mc.run_batch(s.replace(window_um=100), [[150, 0, 0]], progress=False)
+        run_batch(s.replace(window_um=100), [[150, 0, 0]], progress=False)
 
 
 def test_realizations_per_sigma():
     chip = mask_from_geometry(square(200), 4.0)
-    starts = mc.StartGrid.from_ranges((-40, 40, 40), (-40, 40, 40), 0.0)
-    out = mc.run_realizations([2.0, 8.0], [0, 1], chip, starts, scene_options={"twist": TwistGrid(step_deg=10)})
+    starts = StartGrid.from_ranges((-40, 40, 40), (-40, 40, 40), 0.0)
+    out = run_realizations([2.0, 8.0], [0, 1], chip, starts, scene_options={"twist": TwistGrid(step_deg=10)})
     assert [o["sigma_um"] for o in out] == [2.0, 8.0]
     for o in out:
         assert o["n"] == 2 * starts.size and o["seeds"] == [0, 1] and len(o["optima"]) == 2
         assert set(o) >= {"yield", "outcomes", "error_um", "error_deg", "aligned_error_um"}
-    again = mc.run_realizations([8.0], [1], chip, starts, scene_options={"twist": TwistGrid(step_deg=10)})
+    again = run_realizations([8.0], [1], chip, starts, scene_options={"twist": TwistGrid(step_deg=10)})
     assert again[0]["optima"][0] == out[1]["optima"][1]
 
 
@@ -197,7 +213,7 @@ def test_cli_grid_json_csv_map(fp_png, tmp_path, capsys):
     assert rc == 0
     doc = json.loads(j.read_text())
     assert {"n", "yield", "outcomes", "error_um", "error_deg", "seed", "max_bias_um"} <= set(doc)
-    assert doc["n"] == 21 * 21 * 3 and doc["seed"] is None and set(doc["outcomes"]) == set(stepping.OUTCOMES)
+    assert doc["n"] == 21 * 21 * 3 and doc["seed"] is None and set(doc["outcomes"]) == set(OUTCOMES)
     assert set(doc["error_um"]) == {"x", "y"} and set(doc["error_deg"]["twist"]) == {"mean", "mean_abs", "std", "max_abs"}
     lines = c.read_text().splitlines()
     assert lines[0] == "start_x_um,start_y_um,start_twist_deg,final_x_um,final_y_um,final_twist_deg,outcome,steps"

@@ -14,15 +14,13 @@ from patterns.errors import InputError
 from patterns.geometry import four_pad, square
 from patterns.io import write_mask
 from patterns.raster import mask_from_geometry
-from simulator import montecarlo as mc
-from simulator import stepping
+from simulator.batch import assess, random_starts, run_batch, summarize, time_histogram, time_stats
 from simulator.cli import main
-from simulator.evaluate import assess
 from simulator.landscape import build_landscape
-from simulator.materials import Liquid
+from simulator.motion import OUTCOMES, simulate
+from simulator.physics import Liquid
 from simulator.scene import Effects, Scene, TwistGrid
 from simulator.sweep import flatten
-from simulator.trajectory import simulate
 
 ROOT = Path(__file__).resolve().parents[1]
 SQUARE = ROOT / "patterns" / "library" / "square_200.png"
@@ -57,7 +55,7 @@ def floating():
 def test_batch_dynamics_equal_single_runs_start_by_start(request, case, method):
     scene, ls, starts = request.getfixturevalue(case)
     # chunk 4 on two threads: a padded last chunk, lanes of different lengths side by side
-    r = mc.run_batch(scene, starts, method, landscape=ls, chunk=4, workers=2, progress=False)
+    r = run_batch(scene, starts, method, landscape=ls, chunk=4, workers=2, progress=False)
     assert r.time_s is not None and r.time_s.shape == (len(starts),)
     # the floating chip's inertial runs are stiff (implicit solver, mapped start by start); the others vmapped
     assert r.stats["stiff"] == (case == "floating" and method == "inertial")
@@ -70,11 +68,11 @@ def test_batch_dynamics_equal_single_runs_start_by_start(request, case, method):
         assert r.time_s[i] == pytest.approx(traj.time_s, rel=1e-6, abs=1e-12)
     names = set(r.outcome_names())
     # On the floating floor every run ends aligned: those that creep on the floor until their
-    # simulated second is up end inside it (simulator.stepping.classify), not out of time.
+    # simulated second is up end inside it (simulator.motion.classify), not out of time.
     assert names == ({"aligned", "no_contact"} if case == "overlap" else {"aligned"})
     # the start at the aligned pose: aligned at once; the time to align is the aligned runs' time, NaN elsewhere
     assert r.outcome_names()[0] == "aligned" and r.time_s[0] == 0.0
-    ok = r.outcome == stepping.OUTCOMES.index("aligned")
+    ok = r.outcome == OUTCOMES.index("aligned")
     assert np.array_equal(r.time_to_align_s[ok], r.time_s[ok]) and np.isnan(r.time_to_align_s[~ok]).all()
     # a run that creeps on the floor until its second is up reports that second (an upper bound)
     assert (r.time_s[ok] <= 1.0).all() and np.count_nonzero((r.time_s[ok] > 0) & (r.time_s[ok] < 1.0)) >= 2
@@ -82,31 +80,31 @@ def test_batch_dynamics_equal_single_runs_start_by_start(request, case, method):
 
 def test_time_to_align_distribution_in_the_summary(overlap):
     scene, ls, starts = overlap
-    r = mc.run_batch(scene, starts, "overdamped", landscape=ls, chunk=4, progress=False)
-    t = mc.summarize(r)["time_to_align_s"]
-    aligned = r.time_s[r.outcome == stepping.OUTCOMES.index("aligned")]
+    r = run_batch(scene, starts, "overdamped", landscape=ls, chunk=4, progress=False)
+    t = summarize(r)["time_to_align_s"]
+    aligned = r.time_s[r.outcome == OUTCOMES.index("aligned")]
     assert t["n"] == len(aligned) == 7
     assert t["median"] == pytest.approx(np.median(aligned)) and t["p90"] == pytest.approx(np.percentile(aligned, 90))
     assert t["min"] == 0.0 and t["max"] == aligned.max() and t["min"] <= t["median"] <= t["p90"] <= t["max"]
-    h = mc.time_histogram(r.time_to_align_s, bins=5)
+    h = time_histogram(r.time_to_align_s, bins=5)
     assert sum(h["counts"]) == 7 and h["edges_s"][0] == 0.0 and h["edges_s"][-1] == aligned.max() and len(h["edges_s"]) == 6
     # the steppers have no time: no key, no per-start times
-    g = mc.run_batch(scene, starts, "greedy", landscape=ls, progress=False)
-    assert g.time_s is None and g.time_to_align_s is None and "time_to_align_s" not in mc.summarize(g)
-    assert mc.time_stats([np.nan, np.nan]) is None and mc.time_histogram([np.nan]) is None
+    g = run_batch(scene, starts, "greedy", landscape=ls, progress=False)
+    assert g.time_s is None and g.time_to_align_s is None and "time_to_align_s" not in summarize(g)
+    assert time_stats([np.nan, np.nan]) is None and time_histogram([np.nan]) is None
 
 
 def test_dynamics_parameters_are_the_scenes_unless_given(overlap):
     """Default parameters: DynamicsParams.from_scene, as simulate takes them; others change the times."""
-    from simulator.dynamics_params import DynamicsParams
+    from simulator.motion import DynamicsParams
 
     scene, ls, starts = overlap
-    a = mc.run_batch(scene, starts[:4], "overdamped", landscape=ls, progress=False)
+    a = run_batch(scene, starts[:4], "overdamped", landscape=ls, progress=False)
     p = DynamicsParams.from_scene(scene)
-    b = mc.run_batch(scene, starts[:4], "overdamped", landscape=ls, progress=False, dynamics=p)
+    b = run_batch(scene, starts[:4], "overdamped", landscape=ls, progress=False, dynamics=p)
     assert a.time_s.tobytes() == b.time_s.tobytes() and a.final.tobytes() == b.final.tobytes()
     slow = DynamicsParams(p.mass_kg, p.inertia_kg_m2, 2 * p.damping_N_s_m, 2 * p.rot_damping_N_m_s, p.t_max_s)
-    c = mc.run_batch(scene, starts[:4], "overdamped", landscape=ls, progress=False, dynamics=slow)
+    c = run_batch(scene, starts[:4], "overdamped", landscape=ls, progress=False, dynamics=slow)
     moved = a.time_s > 0
     assert np.allclose(c.time_s[moved], 2 * a.time_s[moved], rtol=0.05)  # overdamped: time scales with the damping
 
@@ -114,10 +112,10 @@ def test_dynamics_parameters_are_the_scenes_unless_given(overlap):
 def test_bad_method_and_memory_price_are_refused_before_any_work(overlap):
     scene, ls, starts = overlap
     with pytest.raises(InputError, match="method must be one of greedy, gradient, overdamped, inertial"):
-        mc.run_batch(scene, starts, "newton", landscape=ls, progress=False)
+        run_batch(scene, starts, "newton", landscape=ls, progress=False)
     tight = scene.replace(memory_budget_mb=1.0)
     with pytest.raises(InputError, match="solver states of 1,000 dynamics runs"):
-        mc.run_batch(tight, mc.random_starts(1000, (1, 1, 0), seed=0), "inertial", chunk=1000, workers=1, progress=False)
+        run_batch(tight, random_starts(1000, (1, 1, 0), seed=0), "inertial", chunk=1000, workers=1, progress=False)
 
 
 # ------------------------------------------------------------------ CLI

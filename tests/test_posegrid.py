@@ -1,4 +1,4 @@
-"""The pose grid (simulator.posegrid.PoseGrid): one object per landscape, carried by the
+"""The pose grid (simulator.landscape.PoseGrid): one object per landscape, carried by the
 Landscape and passed to the steppers; its axes, validation, hashing and the twists a
 build accepts."""
 
@@ -14,10 +14,9 @@ import pytest
 from patterns.errors import InputError
 from patterns.geometry import four_pad, square
 from patterns.raster import mask_from_geometry
-from simulator import stepping
-from simulator.engine import build_landscape, plan
-from simulator.posegrid import PoseGrid, TwistAxis, consecutive_runs
-from simulator.scene import Scene, TwistGrid
+from simulator.landscape import PoseGrid, build_landscape, consecutive_runs, plan
+from simulator.motion import field_and_grid
+from simulator.scene import Scene, TwistAxis, TwistGrid
 
 
 def scene(step_deg=5.0, **kw) -> Scene:
@@ -39,7 +38,7 @@ def test_landscape_axes_are_its_grid_and_steps_are_the_scenes_exactly():
     np.testing.assert_allclose(g.to_index(g.to_pose(idx)), idx, atol=1e-12)
     np.testing.assert_array_equal(g.to_pose(idx)[:, 0], ls.x_um[idx[:, 2]])
     # The steppers' view carries the same grid.
-    field, grid = stepping.field_and_grid(ls)
+    field, grid = field_and_grid(ls)
     assert grid is g and field.pin == (0.0, 0.0, 0.0)
 
 
@@ -111,7 +110,7 @@ def test_twist_axis_values_locate_and_runs():
 
 
 def test_importing_the_package_changes_no_jax_setting():
-    code = ("import jax, simulator, simulator.stepping, simulator.dynamics, simulator.trajectory, simulator.montecarlo; "
+    code = ("import jax, simulator, simulator.motion, simulator.motion, simulator.motion, simulator.batch; "
             "print(jax.config.jax_enable_x64)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True)
     assert out.stdout.strip() == "False"

@@ -376,7 +376,7 @@ def test_scene_from_toml_in_python_refuses_string_booleans(tmp_path):
 
 def test_python_api_refuses_string_booleans():
     from patterns.errors import InputError
-    from simulator.materials import Materials
+    from simulator.physics import Materials
     from simulator.scene import Effects
 
     with pytest.raises(InputError, match="true or false"):

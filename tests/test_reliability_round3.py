@@ -93,7 +93,7 @@ def silent_scheduler():
 
 
 def test_scheduler_that_accepts_and_never_answers_is_refused_within_the_handshake_timeout(silent_scheduler, tmp_path, capsys):
-    from simulator.sweep_cluster import CONNECT_TIMEOUT_S
+    from simulator.sweep import CONNECT_TIMEOUT_S
 
     t0 = time.perf_counter()
     rc, _, err = cli(["sweep", SWEEP, "--out", tmp_path / "out", "--scheduler", silent_scheduler, "--quiet"], capsys)
@@ -363,9 +363,9 @@ def test_critical_volume_of_a_1e300_um_pattern_is_refused_without_a_numpy_warnin
 
 
 def test_sweep_workers_are_capped_by_cores_and_memory_and_say_so(monkeypatch, tmp_path, capsys):
-    import simulator.sweep as sw
+    import simulator.sweep._run as sw
     from patterns import resources
-    from simulator.sweep_cluster import WORKER_MEMORY_MB, worker_cap
+    from simulator.sweep import WORKER_MEMORY_MB, worker_cap
 
     monkeypatch.setattr(os, "cpu_count", lambda: 2)
     monkeypatch.setattr(resources, "available_memory_bytes", lambda: 64 * 2**30)

@@ -13,15 +13,24 @@ from patterns.geometry import build
 from patterns.library import library_path
 from patterns.mask import Mask
 from patterns.raster import mask_from_geometry
-from simulator import feedback, render
 from simulator.cli import main
+from simulator.core import announce_once
 from simulator.landscape import build_landscape
+from simulator.motion import Trajectory, simulate
+from simulator.render import (
+    CHIP_COLOUR,
+    TrajectoryAnimation,
+    chip_outline,
+    frame_indices,
+    plot_forces,
+    plot_landscape,
+    write_trajectory_gif,
+)
 from simulator.scene import Effects, Scene
-from simulator.trajectory import Trajectory, simulate
 
 SQUARE = str(library_path("square_200"))
 START = (40.0, -30.0, 6.0)
-CHIP_RGB = np.array(to_rgb(render.CHIP_COLOUR)) * 255
+CHIP_RGB = np.array(to_rgb(CHIP_COLOUR)) * 255
 
 
 @pytest.fixture(scope="module")
@@ -45,28 +54,28 @@ def _fake(n: int, t_s=None) -> Trajectory:
 
 @pytest.mark.parametrize("n, most", [(1, 120), (50, 120), (120, 120), (121, 120), (5000, 120), (5000, 2)])
 def test_frame_indices_keep_first_and_last_within_the_limit(n, most):
-    idx = render.frame_indices(_fake(n), most)
+    idx = frame_indices(_fake(n), most)
     assert idx[0] == 0 and idx[-1] == n - 1 and len(idx) <= most
     assert len(idx) == min(n, most) and np.all(np.diff(idx) > 0)
 
 
 def test_frame_indices_of_dynamics_are_even_in_time():
     t = np.concatenate([np.linspace(0, 1e-3, 900), np.linspace(1.1e-3, 1e-2, 100)])  # dense start
-    idx = render.frame_indices(_fake(1000, t), 20)
+    idx = frame_indices(_fake(1000, t), 20)
     assert idx[0] == 0 and idx[-1] == 999 and len(idx) <= 20
     assert np.ptp(np.diff(t[idx])[1:-1]) < 2e-4  # gaps of about 0.5 ms, not 900 frames of the start
 
 
 def test_frame_indices_bad_limit():
     with pytest.raises(InputError, match="max_frames"):
-        render.frame_indices(_fake(10), 1)
+        frame_indices(_fake(10), 1)
 
 
 def test_chip_outline_of_a_png_keeps_its_area_and_hole():
     data = np.zeros((60, 80))
     data[10:50, 10:70] = 1
     data[20:30, 20:40] = 0  # a hole, left of and above the centre
-    geom = render.chip_outline(Mask(data, 2.0))
+    geom = chip_outline(Mask(data, 2.0))
     assert geom.area == pytest.approx(data.sum() * 4.0, rel=0.03)
     assert len(geom.interiors) == 1
     hole = geom.interiors[0].centroid  # rows 20..30, cols 20..40: x = (30 - 40) 2, y = (30 - 25) 2
@@ -75,7 +84,7 @@ def test_chip_outline_of_a_png_keeps_its_area_and_hole():
 
 def test_chip_outline_of_exact_geometry_is_the_geometry(run):
     scene, _ = run
-    assert render.chip_outline(scene.chip) is scene.chip.geometry
+    assert chip_outline(scene.chip) is scene.chip.geometry
 
 
 # ---------------------------------------------------------------- the GIF
@@ -89,12 +98,12 @@ def _chip_pixels(frame: np.ndarray, box: tuple[slice, slice]) -> np.ndarray:
 def test_gif_frames_show_the_chip_at_the_start_and_final_poses(run, tmp_path):
     scene, traj = run
     out = tmp_path / "t.gif"
-    n = render.write_trajectory_gif(scene, traj, out, max_frames=12)
+    n = write_trajectory_gif(scene, traj, out, max_frames=12)
     frames = iio.imread(out, index=None)
     assert n == len(frames) == 12
     assert iio.immeta(out)["loop"] == 0
 
-    anim = render.TrajectoryAnimation(scene, traj, max_frames=12)  # same layout as the GIF
+    anim = TrajectoryAnimation(scene, traj, max_frames=12)  # same layout as the GIF
     assert frames.shape[1:] == (440, 880, 3)
     (c0, r1), (c1, r0) = anim.pixel_of(anim.ax.get_xlim(), anim.ax.get_ylim())
     box = (slice(int(r0) + 3, int(r1) - 2), slice(int(c0) + 3, int(c1) - 2))  # inside the left axes
@@ -128,10 +137,10 @@ def test_gif_of_dynamics_titles_time_and_holds_the_last_frame(run, tmp_path):
     path = np.column_stack([np.linspace(30, 0, 30), np.zeros(30), np.linspace(5, 0, 30)])
     traj = Trajectory("overdamped", "aligned", path, np.linspace(-8e-10, -1e-9, 30), 29, 4e-3, t)
     out = tmp_path / "d.gif"
-    assert render.write_trajectory_gif(scene, traj, out, max_frames=10, fps=10, hold_s=1.0) == 10
+    assert write_trajectory_gif(scene, traj, out, max_frames=10, fps=10, hold_s=1.0) == 10
     meta = [iio.immeta(out, index=i) for i in (0, 1, 9)]
     assert [m["duration"] for m in meta] == [1000, 100, 1000]
-    anim = render.TrajectoryAnimation(scene, traj, max_frames=10)
+    anim = TrajectoryAnimation(scene, traj, max_frames=10)
     assert "t = 4.00 ms" in anim.title_of(29)
     anim.close()
 
@@ -140,18 +149,18 @@ def test_gif_of_dynamics_titles_time_and_holds_the_last_frame(run, tmp_path):
 def test_gif_bad_arguments(run, tmp_path, kwargs, message):
     scene, traj = run
     with pytest.raises(InputError, match=message):
-        render.write_trajectory_gif(scene, traj, tmp_path / "x.gif", **kwargs)
+        write_trajectory_gif(scene, traj, tmp_path / "x.gif", **kwargs)
     with pytest.raises(InputError, match="must end in .gif"):
-        render.write_trajectory_gif(scene, traj, tmp_path / "x.png")
+        write_trajectory_gif(scene, traj, tmp_path / "x.png")
     assert not list(tmp_path.iterdir())
 
 
 # ---------------------------------------------------------------- landscape and force plots
 def test_plot_landscape_and_forces_write_pngs(small_landscape, tmp_path):
     ls, pattern = small_landscape
-    render.plot_landscape(ls, tmp_path / "l.png", pattern=pattern)
-    render.plot_forces(ls, tmp_path / "f.png")
-    render.plot_forces(ls, tmp_path / "g.png", through=(0, 30, 5), span_um=150)
+    plot_landscape(ls, tmp_path / "l.png", pattern=pattern)
+    plot_forces(ls, tmp_path / "f.png")
+    plot_forces(ls, tmp_path / "g.png", through=(0, 30, 5), span_um=150)
     for name in ("l.png", "f.png", "g.png"):
         img = iio.imread(tmp_path / name)
         assert img.ndim == 3 and min(img.shape[:2]) > 300
@@ -161,14 +170,14 @@ def test_plot_landscape_and_forces_write_pngs(small_landscape, tmp_path):
 def test_plots_of_an_untwisted_landscape(tmp_path):
     scene = Scene.from_inputs(SQUARE, chip_size_um=200, effects=Effects(twist=False))
     ls = build_landscape(scene, half_px=60)
-    render.plot_landscape(ls, tmp_path / "l.png")
-    render.plot_forces(ls, tmp_path / "f.png", span_um=50)
+    plot_landscape(ls, tmp_path / "l.png")
+    plot_forces(ls, tmp_path / "f.png", span_um=50)
     assert iio.imread(tmp_path / "l.png").ndim == 3 and iio.imread(tmp_path / "f.png").ndim == 3
 
 
 def test_plot_forces_bad_span(small_landscape, tmp_path):
     with pytest.raises(InputError, match="span_um"):
-        render.plot_forces(small_landscape[0], tmp_path / "f.png", span_um=-1)
+        plot_forces(small_landscape[0], tmp_path / "f.png", span_um=-1)
     assert not (tmp_path / "f.png").exists()
 
 
@@ -214,8 +223,8 @@ def test_simulate_gif_bad_output_fails_before_any_work(gif, tmp_path, capsys, mo
 
 
 def test_announce_once_prints_on_stderr_once_and_respects_quiet(capsys):
-    feedback.announce_once("test message 8e1f", quiet=True)
-    feedback.announce_once("test message 8e1f")  # quiet calls do not use up the message
-    feedback.announce_once("test message 8e1f")
+    announce_once("test message 8e1f", quiet=True)
+    announce_once("test message 8e1f")  # quiet calls do not use up the message
+    announce_once("test message 8e1f")
     captured = capsys.readouterr()
     assert captured.out == "" and captured.err == "test message 8e1f\n"

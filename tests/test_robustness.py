@@ -62,8 +62,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 import shapely
-from hypothesis import given, settings
-from hypothesis import strategies as st
+from hypothesis import given, settings, strategies as st
 from shapely import affinity
 from shapely.geometry import Polygon
 
@@ -71,13 +70,29 @@ from patterns.errors import InputError
 from patterns.geometry import defect, four_pad, rectangle, square
 from patterns.mask import Mask
 from patterns.raster import mask_from_geometry
-from simulator import dynamics, steppers, stepping, trajectory
-from simulator.dynamics import DynamicsParams
-from simulator.dynamics_ode import REST_TOL_STEPS
+from simulator.core import DEFAULT_MAX_STEPS
 from simulator.landscape import build_landscape
-from simulator.materials import Liquid, Materials
+from simulator.motion import (
+    CONVERGED,
+    EDGE,
+    MAX_STEPS,
+    OUTCOMES,
+    REST_TOL_STEPS,
+    DynamicsParams,
+    classify,
+    dynamics_jitted,
+    field_and_grid,
+    gradient_descent,
+    greedy,
+    inertial,
+    is_stiff,
+    on_plateau,
+    overdamped,
+    radius_of_gyration_px,
+    simulate,
+)
+from simulator.physics import Liquid, Materials
 from simulator.scene import Effects, Scene, TwistGrid
-from simulator.trajectory import radius_of_gyration_px, simulate
 
 DTYPES = ("float32", "float64")
 METHODS = ("greedy", "gradient", "overdamped", "inertial")
@@ -85,10 +100,10 @@ METHODS = ("greedy", "gradient", "overdamped", "inertial")
 #: their own shape run these three; inertial runs where it shares a compilation.
 QUICK = ("greedy", "gradient", "overdamped")
 STATIC = ("grid", "max_steps", "record")
-GREEDY = jax.jit(stepping.greedy, static_argnames=STATIC)
-GRADIENT = jax.jit(stepping.gradient_descent, static_argnames=STATIC)
-OVERDAMPED = jax.jit(dynamics.overdamped, static_argnames=STATIC)
-INERTIAL = jax.jit(dynamics.inertial, static_argnames=STATIC)
+GREEDY = jax.jit(greedy, static_argnames=STATIC)
+GRADIENT = jax.jit(gradient_descent, static_argnames=STATIC)
+OVERDAMPED = jax.jit(overdamped, static_argnames=STATIC)
+INERTIAL = jax.jit(inertial, static_argnames=STATIC)
 
 
 def scene(pattern_geom, chip_geom, um_per_px=1.0, margin=None, **kw):
@@ -98,7 +113,7 @@ def scene(pattern_geom, chip_geom, um_per_px=1.0, margin=None, **kw):
 
 def assert_finite(t, max_steps=5000):
     """No NaN or infinity anywhere in a trajectory's outputs, and the run ended."""
-    assert t.outcome in stepping.OUTCOMES
+    assert t.outcome in OUTCOMES
     assert 0 <= t.steps <= max_steps and len(t.path) == len(t.energy_J) == t.steps + 1
     assert np.all(np.isfinite(t.path)) and np.all(np.isfinite(t.energy_J))
     if t.t_s is not None:
@@ -146,7 +161,7 @@ def assert_dynamics_sane(state, floor):
         if name.startswith("path"):
             a = a[: int(state.step) + 1]
         assert np.all(np.isfinite(a)), name
-    assert int(state.status) in (stepping.CONVERGED, stepping.MAX_STEPS, stepping.EDGE)
+    assert int(state.status) in (CONVERGED, MAX_STEPS, EDGE)
     h = mechanical(state)
     tol = mechanical_tolerance(state, floor)
     assert np.all(np.diff(h) <= tol), f"rise {np.diff(h).max():.3g} J > floor {floor:.3g} J"
@@ -486,15 +501,15 @@ def test_extreme_max_steps_reached(fp100):
 @pytest.fixture(scope="module")
 def fp100_field(fp100):
     s, ls = fp100["float32"]
-    return (s, ls) + stepping.field_and_grid(ls, radius_of_gyration_px(s))
+    return (s, ls) + field_and_grid(ls, radius_of_gyration_px(s))
 
 
 def run_dynamics(s, field, grid, method, pose=START):
     """One dynamics run as simulate does it (the same compiled function: simulate's
     solver choice, stiff runs implicit), returning the full state."""
     p = DynamicsParams.from_scene(s)
-    fn = steppers.dynamics_jitted(method, trajectory._stiff(method, field, grid, p))
-    return fn(field, grid, p, jnp.asarray(grid.to_index(np.asarray(pose, float))), trajectory.DEFAULT_MAX_STEPS), p
+    fn = dynamics_jitted(method, is_stiff(method, field, grid, p))
+    return fn(field, grid, p, jnp.asarray(grid.to_index(np.asarray(pose, float))), DEFAULT_MAX_STEPS), p
 
 
 def test_dynamics_stiff_meniscus(fp100_field):
@@ -507,7 +522,7 @@ def test_dynamics_stiff_meniscus(fp100_field):
         assert_dynamics_sane(state, float(field.floor))
         assert float(state.time_s) <= p.t_max_s * (1 + 1e-6) and int(state.step) >= 1
         assert float(state.energy) < float(state.path_energy[0])  # it moved downhill
-    assert trajectory._stiff("inertial", field, grid, DynamicsParams.from_scene(s))
+    assert is_stiff("inertial", field, grid, DynamicsParams.from_scene(s))
 
 
 def test_dynamics_nearly_zero_damping(fp100_field):
@@ -517,7 +532,7 @@ def test_dynamics_nearly_zero_damping(fp100_field):
     s = s.replace(damping_calibration=1e-6)
     state, p = run_dynamics(s, field, grid, "inertial")
     assert_dynamics_sane(state, float(field.floor))
-    assert int(state.status) == stepping.MAX_STEPS and float(state.kinetic) > 0
+    assert int(state.status) == MAX_STEPS and float(state.kinetic) > 0
     t = simulate(s, START, method="inertial", landscape=ls)
     assert_finite(t)
     assert t.outcome == "max_steps"
@@ -530,7 +545,7 @@ def test_dynamics_heavy_damping(fp100_field):
     for m in ("overdamped", "inertial"):
         state, p = run_dynamics(s, field, grid, m)
         assert_dynamics_sane(state, float(field.floor))
-        assert int(state.status) == stepping.MAX_STEPS and float(state.time_s) == pytest.approx(p.t_max_s, rel=1e-5)
+        assert int(state.status) == MAX_STEPS and float(state.time_s) == pytest.approx(p.t_max_s, rel=1e-5)
         assert float(state.energy) < float(state.path_energy[0])
 
 
@@ -582,7 +597,7 @@ def test_property_landscape_matches_exact_overlap(pattern, chip, um_per_px, pose
 
 def random_field(pattern, chip):
     s, ls = random_scene(pattern, chip)
-    field, grid = stepping.field_and_grid(ls, RG)
+    field, grid = field_and_grid(ls, RG)
     return s, field, grid
 
 
@@ -600,11 +615,11 @@ def test_property_steppers_terminate_finite(pattern, chip, start):
     for m, r in runs.items():
         pose = r.idx if m == "greedy" else r.q
         n = int(r.step)
-        assert 0 <= n <= MAXP and int(r.status) in (stepping.CONVERGED, stepping.MAX_STEPS), m  # full landscape: no EDGE
+        assert 0 <= n <= MAXP and int(r.status) in (CONVERGED, MAX_STEPS), m  # full landscape: no EDGE
         for a in (pose, r.energy, r.path[: n + 1], r.path_energy[: n + 1]):
             assert np.all(np.isfinite(np.asarray(a))), m
-        flat = getattr(r, "flat", False) | stepping.on_plateau(field, grid, jnp.round(pose).astype(jnp.int32))
-        assert 0 <= int(stepping.classify(field, grid, pose, r.energy, r.status, flat)) < len(stepping.OUTCOMES)
+        flat = getattr(r, "flat", False) | on_plateau(field, grid, jnp.round(pose).astype(jnp.int32))
+        assert 0 <= int(classify(field, grid, pose, r.energy, r.status, flat)) < len(OUTCOMES)
 
 
 @settings(max_examples=30, deadline=None)
@@ -616,7 +631,7 @@ def test_property_energy_never_increases(pattern, chip, start):
         assert np.all(np.isfinite(e)) and np.all(np.diff(e) < 0)
 
 
-BATCH_GREEDY = jax.jit(jax.vmap(stepping.greedy, in_axes=(None, None, 0, None, None)), static_argnums=(1, 3, 4))
+BATCH_GREEDY = jax.jit(jax.vmap(greedy, in_axes=(None, None, 0, None, None)), static_argnums=(1, 3, 4))
 
 
 @settings(max_examples=20, deadline=None)
@@ -657,7 +672,7 @@ import simulator
 from patterns.geometry import four_pad, square
 from patterns.raster import mask_from_geometry
 from simulator.scene import Scene
-from simulator.trajectory import simulate
+from simulator.motion import simulate
 s = Scene(pattern=mask_from_geometry(four_pad(4096, 96), 1.0), chip=mask_from_geometry(square(4000), 1.0))
 t = simulate(s, (90, -70, 1), method="greedy", max_steps=100)
 print(json.dumps({"shape": s.pattern.shape, "final": t.final, "steps": t.steps, "outcome": t.outcome,

@@ -1,4 +1,4 @@
-"""The scene-file schema (simulator.schema) and the PNG metadata note (patterns.metadata).
+"""The scene-file schema (simulator.scene) and the PNG metadata note (patterns.metadata).
 
 Regression tests named after the bugs they pin: string booleans read as True, unknown
 [simulate] keys ignored, wrong types, and files that crashed or hung the TOML reader
@@ -16,8 +16,7 @@ import tomllib
 from pathlib import Path
 
 import pytest
-from hypothesis import given, settings
-from hypothesis import strategies as st
+from hypothesis import given, settings, strategies as st
 from PIL import Image
 
 from patterns.errors import InputError
@@ -30,12 +29,12 @@ from patterns.metadata import (
     show_value,
     validate_png_params,
 )
-from simulator import schema
-from simulator.schema import (
+from simulator.scene import (
     MAX_ARRAY_ITEMS,
     MAX_DEPTH,
     MAX_SCENE_BYTES,
     SCHEMA,
+    _schema as schema,
     read_scene_file,
     validate_scene,
 )
@@ -136,21 +135,24 @@ def test_scenes_written_by_tests_and_docs_validate(tmp_path, text):
 
 
 def test_choices_and_limits_match_the_code_downstream():
-    from simulator import accuracy, montecarlo, scene, trajectory
+    from simulator.batch import DISTRIBUTIONS, MAX_STARTS, MAX_TWIST_DEG
+    from simulator.core import BATCH_METHODS, MAX_CHUNK, MAX_STEPS_LIMIT, METHODS
+    from simulator.motion import MAX_START_TWIST_DEG
+    from simulator.scene import DTYPES, PRESETS
 
-    assert schema.DTYPES == scene.DTYPES
-    assert schema.ACCURACY_PRESETS == tuple(accuracy.PRESETS)
-    assert schema.SIMULATE_METHODS == trajectory.METHODS
-    assert schema.MONTECARLO_METHODS == montecarlo.METHODS
-    assert schema.DISTRIBUTIONS == montecarlo.DISTRIBUTIONS
-    assert schema.MAX_STARTS == montecarlo.MAX_STARTS
-    assert schema.MAX_STEPS == getattr(trajectory, "MAX_STEPS_LIMIT", schema.MAX_STEPS)
-    assert schema.MAX_CHUNK == getattr(montecarlo, "MAX_CHUNK", schema.MAX_CHUNK)
-    assert schema.MAX_TWIST_DEG == trajectory.MAX_START_TWIST_DEG == montecarlo.MAX_TWIST_DEG
+    assert schema.DTYPES == DTYPES
+    assert schema.ACCURACY_PRESETS == tuple(PRESETS)
+    assert schema.SIMULATE_METHODS == METHODS
+    assert schema.MONTECARLO_METHODS == BATCH_METHODS
+    assert schema.DISTRIBUTIONS == DISTRIBUTIONS
+    assert schema.MAX_STARTS == MAX_STARTS
+    assert schema.MAX_STEPS == MAX_STEPS_LIMIT
+    assert schema.MAX_CHUNK == MAX_CHUNK
+    assert schema.MAX_TWIST_DEG == MAX_START_TWIST_DEG == MAX_TWIST_DEG
 
 
 def test_sections_cover_the_dataclass_fields():
-    from simulator.materials import Liquid, Materials
+    from simulator.physics import Liquid, Materials
     from simulator.scene import Effects, TwistGrid
 
     def toml_names(cls):

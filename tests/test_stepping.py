@@ -7,7 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from simulator.stepping import (
+from simulator.motion import (
     BLOCK_MOVES,
     GREEDY_MOVES,
     PAD,

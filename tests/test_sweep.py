@@ -16,8 +16,8 @@ import pytest
 import simulator
 from patterns.geometry import four_pad
 from patterns.raster import mask_from_geometry
+from simulator.batch import assess
 from simulator.cli import main
-from simulator.evaluate import assess
 from simulator.scene import Scene
 from simulator.sweep import dask_client, flatten, load_sweep, sweep
 

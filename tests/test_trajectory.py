@@ -6,9 +6,8 @@ import pytest
 from patterns.geometry import four_pad, square
 from patterns.raster import mask_from_geometry
 from simulator.landscape import build_landscape
+from simulator.motion import GREEDY_MOVES, simulate
 from simulator.scene import Scene, TwistGrid
-from simulator.stepping import GREEDY_MOVES
-from simulator.trajectory import simulate
 
 
 def make_scene(L, g, dtype="float32", um_per_px=1.0, **kw):

@@ -41,8 +41,17 @@ import tempfile
 
 import numpy as np
 
+from simulator.core import UM3_PER_NL
+from simulator.liquid import (
+    FourPad,
+    cap_area_um2,
+    critical_volume,
+    free_cap_base_um2,
+    min_plus,
+    minimise_footprint,
+)
+
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
-from simulator import critical_volume as cvm  # noqa: E402
 
 DELTA = 0.02
 VOLUMES = [round(v, 4) for v in np.arange(0.004, 0.1161, 0.008)]
@@ -123,8 +132,8 @@ re := {{ refine edges where on_constraint 1 }}
 
 def evolve(kind: str, g: float, tp: float, ts: float) -> np.ndarray:
     """(volume, energy) rows of one kind of drop over VOLUMES, by continuation."""
-    p = cvm.FourPad(1.0, g, tp, ts)
-    s0 = float(cvm.minimise_footprint(p, np.array([VOLUMES[0]]), kind)[1][0])  # a start near the answer
+    p = FourPad(1.0, g, tp, ts)
+    s0 = float(minimise_footprint(p, np.array([VOLUMES[0]]), kind)[1][0])  # a start near the answer
     step = "g 200; u; V; g 100; hessian_seek; g 100; u; V; g 100; hessian_seek; g 50;"
     cmds = ["integral_order_1d := 8;", "r; re; g 100; u; V; g 100;",
             "r; re; g 200; u; V; g 100; hessian_seek; g 100; hessian_seek;", "re; g 100; u; V; g 100; hessian_seek;"]
@@ -142,8 +151,8 @@ def evolve(kind: str, g: float, tp: float, ts: float) -> np.ndarray:
 
 
 def free_cap_energy(v, theta_deg):
-    b = cvm.free_cap_base_um2(v, theta_deg)
-    return cvm.cap_area_um2(v, b) - math.cos(math.radians(theta_deg)) * b
+    b = free_cap_base_um2(v, theta_deg)
+    return cap_area_um2(v, b) - math.cos(math.radians(theta_deg)) * b
 
 
 def crossing(mid: np.ndarray, one: np.ndarray, tp: float, n: int = 3000) -> float | None:
@@ -153,8 +162,8 @@ def crossing(mid: np.ndarray, one: np.ndarray, tp: float, n: int = 3000) -> floa
     small = v < one[0, 0]
     e1[small] = free_cap_energy(np.maximum(v[small], 1e-12), tp)
     e1[0] = 0.0
-    two, _ = cvm.min_plus(e1, e1)
-    split, _ = cvm.min_plus(two, two)
+    two, _ = min_plus(e1, e1)
+    split, _ = min_plus(two, two)
     em = np.interp(v, mid[:, 0], mid[:, 1])
     em[v < mid[0, 0]] = np.inf
     d = em - split
@@ -174,7 +183,7 @@ def main() -> int:
         mid, one = evolve("middle", g, tp, ts), evolve("one", g, tp, ts)
         converged = bool(np.all(np.diff(mid[:, 1]) > 0) and np.all(np.diff(one[:, 1]) > 0))
         v_se = crossing(mid, one, tp)
-        v_model = cvm.critical_volume(1.0, g, tp, ts).critical_volume_nl * cvm.UM3_PER_NL
+        v_model = critical_volume(1.0, g, tp, ts).critical_volume_nl * UM3_PER_NL
         rows.append({"relative_gap": g, "pad_angle_deg": tp, "substrate_angle_deg": ts,
                      "evolver_critical_volume_L3": "" if v_se is None else f"{v_se:.5f}",
                      "model_critical_volume_L3": f"{v_model:.5f}",

@@ -107,7 +107,7 @@ def add_scene_args(p: argparse.ArgumentParser) -> None:
 
 
 def _accuracy_help() -> str:
-    from simulator.accuracy import DEFAULT_PRESET, PRESETS
+    from simulator.scene import DEFAULT_PRESET, PRESETS
 
     return (
         f"accuracy preset (default {DEFAULT_PRESET}) setting the pixel size, twist step and dtype "
@@ -200,7 +200,7 @@ def scene_from_args(args: argparse.Namespace, note_frame: bool = True) -> Scene:
         (None, "damping_calibration"): getattr(args, "damping_calibration", None),
     }
     if getattr(args, "hysteresis", None):
-        from simulator.hysteresis import parse_window
+        from simulator.physics import parse_window
 
         r, a = parse_window(args.hysteresis)
         flags[("materials", "pad_receding_deg")], flags[("materials", "pad_advancing_deg")] = r, a
@@ -251,8 +251,8 @@ def liquid_checks(args: argparse.Namespace, scene: Scene, method: str, biases_um
 
 
 def read_toml(path: str | os.PathLike) -> dict[str, Any]:
-    """Read and validate a TOML scene file (:func:`simulator.schema.read_scene_file`)."""
-    from simulator.schema import read_scene_file
+    """Read and validate a TOML scene file (:func:`simulator.scene.read_scene_file`)."""
+    from simulator.scene import read_scene_file
 
     return read_scene_file(path)
 
@@ -290,7 +290,7 @@ def check_outputs(args: argparse.Namespace, flags: tuple[str, ...]) -> None:
 
 def write_json(path: str | os.PathLike, obj: Any) -> None:
     """Write JSON atomically (no half-written file on failure); every number must be finite."""
-    from simulator.finite import require_finite
+    from simulator.core import require_finite
 
     require_finite(obj, f"output {path}")
     with atomic_output(path) as tmp:
@@ -300,10 +300,10 @@ def write_json(path: str | os.PathLike, obj: Any) -> None:
 def write_csv(path: str | os.PathLike, columns: list[str], values: list) -> None:
     """Write a table as CSV atomically: ``columns`` (names carry their units, e.g. ``x_um``)
     and one array (or list of strings) per column, rows in order. Every number must be
-    finite (:func:`simulator.finite.require_finite`)."""
+    finite (:func:`simulator.core.require_finite`)."""
     import numpy as np
 
-    from simulator.finite import require_finite
+    from simulator.core import require_finite
 
     cols = [np.asarray(v) for v in values]
     require_finite({c: v for c, v in zip(columns, cols, strict=True) if v.dtype.kind in "fiu"}, f"output {path}")

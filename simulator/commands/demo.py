@@ -20,11 +20,11 @@ from typing import TYPE_CHECKING
 
 from patterns.library import library_path
 from patterns.outputs import atomic_output, check_output_dir, output_directory
-from simulator.feedback import announce, compiling
+from simulator.core import announce, compiling
 from simulator.scene import Scene
 
 if TYPE_CHECKING:
-    from simulator.trajectory import Trajectory
+    from simulator.motion import Trajectory
 
 #: The demo scene: library pattern, square chip side (um), start pose (um, um, deg).
 PATTERN = "four_pad_730_50"
@@ -54,7 +54,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     # JAX: imported when the run needs it (selfalign --help starts without it).
-    from simulator.trajectory import simulate
+    from simulator.motion import simulate
 
     out = check_output_dir(args.out, "--out", args.force)  # before any work
     scene = demo_scene()
@@ -64,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
     from simulator.commands.simulate import end_line
 
     print(end_line(scene, traj))
-    from simulator.evaluate import evaluate
+    from simulator.batch import evaluate
 
     with output_directory(out, "--out", args.force, command="demo") as tmp:
         files = write_trajectory_files(tmp, scene, traj, args.quiet)

@@ -8,7 +8,7 @@ from pathlib import Path
 from patterns.errors import InputError
 from patterns.outputs import check_output_dir
 from simulator.commands._common import add_scene_args, input_paths, liquid_checks, scene_from_args
-from simulator.defaults import AUTO_LANDSCAPE_MB, BATCH_METHODS, DYNAMIC_METHODS
+from simulator.core import AUTO_LANDSCAPE_MB, BATCH_METHODS, DYNAMIC_METHODS
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -58,17 +58,17 @@ def run(args: argparse.Namespace) -> int:
         from patterns.layout import frame_note
 
         print(frame_note(layout))
-    from simulator.feedback import compiling
-    from simulator.posegrid import twist_axis
+    from simulator.core import compiling
+    from simulator.landscape import twist_axis
 
     twist_axis(scene)  # a twist step that gives too many twists fails before the announcement
     if args.method in DYNAMIC_METHODS:
-        from simulator.dynamics_params import DynamicsParams
+        from simulator.motion import DynamicsParams
 
         DynamicsParams.from_scene(scene)  # a liquid the model cannot take fails before compiling
 
     # JAX, the engine, matplotlib: imported when a run needs them.
-    from simulator.evaluate import evaluate
+    from simulator.batch import evaluate
 
     compiling(args.method, args.quiet)
     summary = evaluate(scene, args.out, quiet=args.quiet, source=Path(args.pattern or args.scene).name, auto=args.resolution is None,
@@ -104,9 +104,8 @@ def run(args: argparse.Namespace) -> int:
 
 def _noise_biases(scene):
     """Per yield start of evaluate (its placement noise, seed 0), the larger of |x|, |y| in um."""
-    from simulator.evaluate import NOISE_FRACTION, YIELD_STARTS, chip_size
+    from simulator.batch import NOISE_FRACTION, YIELD_STARTS, chip_size, random_starts
     from simulator.liquid import placement_biases
-    from simulator.starts import random_starts
 
     w, h = chip_size(scene)
     return placement_biases(random_starts(YIELD_STARTS, (NOISE_FRACTION * w, NOISE_FRACTION * h, 0.0), seed=0))
@@ -116,7 +115,7 @@ def _bbox_chip(args: argparse.Namespace) -> str:
     """Default chip: the size of the pattern's wettable bounding box (W x H um)."""
     from patterns.io import read_mask
     from patterns.layout import LayoutSelection, is_layout, layout_geometry
-    from simulator.evaluate import footprint_um
+    from patterns.mask import footprint_um
 
     if is_layout(args.pattern):
         sel = LayoutSelection(layer=args.layer, cell=args.cell, dxf_units=args.dxf_units, max_polygons=args.max_polygons)

@@ -5,7 +5,7 @@
                               (--meniscus-height UM | --volume NL --chip-size W[xH]) [--bias UM] [--json [FILE]]
     selfalign liquid critical-volume --size L --gap G --pad-angle DEG --substrate-angle DEG [--json [FILE]]
 
-The calculators of :mod:`simulator.liquid` and :mod:`simulator.critical_volume`; no
+The calculators of :mod:`simulator.liquid` and :mod:`simulator.liquid`; no
 landscape, so the command starts and answers fast. ``--json`` alone prints the JSON
 (units in every key) instead of the text; ``--json FILE`` writes it and prints the text.
 """
@@ -129,7 +129,7 @@ def _liquid(args: argparse.Namespace) -> tuple[float, float]:
 
 
 def _emit(args: argparse.Namespace, doc: dict, lines: list[str]) -> int:
-    from simulator.finite import require_finite
+    from simulator.core import require_finite
 
     require_finite(doc, "the answer")
     text = json.dumps(doc, indent=2, allow_nan=False) + "\n"
@@ -161,7 +161,7 @@ def run_height(args: argparse.Namespace) -> int:
     bias = _finite("--bias", args.bias, positive=False)
     if bias is not None and sides is None:
         raise InputError("--bias needs --chip-size (the parallelepiped force needs the chip's edge length)")
-    from simulator.liquid_warnings import require_film
+    from simulator.liquid import require_film
 
     # As simulate and evaluate: a film thicker than the chip is a typing slip (nl for pl), refused.
     w, ht = sides if sides else (math.sqrt(area), math.sqrt(area))
@@ -188,7 +188,7 @@ def run_height(args: argparse.Namespace) -> int:
 # ----------------------------------------------------------------------- overflow
 def run_overflow(args: argparse.Namespace) -> int:
     from simulator.liquid import overflow_report
-    from simulator.materials import meniscus_height_um
+    from simulator.physics import meniscus_height_um
 
     _liquid(args)
     chip = _chip_angle(args.chip_angle)
@@ -229,7 +229,7 @@ def run_overflow(args: argparse.Namespace) -> int:
 
 # ----------------------------------------------------------------------- critical volume
 def run_critical_volume(args: argparse.Namespace) -> int:
-    from simulator.critical_volume import critical_volume
+    from simulator.liquid import critical_volume
 
     gamma, rho = _liquid(args)
     size, gap = _finite("--size", args.size), _finite("--gap", args.gap)

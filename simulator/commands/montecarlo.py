@@ -12,6 +12,7 @@ import numpy as np
 
 from patterns.errors import InputError
 from patterns.outputs import atomic_output
+from simulator.batch import DISTRIBUTIONS, MAX_STARTS, StartGrid
 from simulator.commands._common import (
     add_scene_args,
     check_outputs,
@@ -20,18 +21,17 @@ from simulator.commands._common import (
     read_toml,
     scene_from_args,
 )
-from simulator.defaults import BATCH_METHODS as METHODS
-from simulator.defaults import (
+from simulator.core import (
+    BATCH_METHODS as METHODS,
     DEFAULT_CHUNK,
     DEFAULT_DYNAMICS_CHUNK,
     DEFAULT_MAX_STEPS,
     DYNAMIC_METHODS,
     MAX_STEPS_LIMIT,
+    require_finite,
 )
-from simulator.finite import require_finite
-from simulator.posegrid import axis_step
+from simulator.landscape import axis_step
 from simulator.render import plot_capture_map  # matplotlib is imported when it draws
-from simulator.starts import DISTRIBUTIONS, MAX_STARTS, StartGrid
 
 MAP_SUFFIXES = (".png", ".svg", ".pdf")
 
@@ -186,7 +186,7 @@ def _options(args: argparse.Namespace) -> dict:
 
 def _starts(opt: dict):
     """(StartGrid or (N, 3) poses, JSON description, seed) from the options."""
-    from simulator.starts import random_starts
+    from simulator.batch import random_starts
 
     if (opt["grid"] is None) == (opt["random"] is None):
         raise InputError("give exactly one of --grid X0:X1:DX,Y0:Y1:DY[,TWISTS] or --random N --spread SX,SY,STWIST")
@@ -239,8 +239,15 @@ def _check_outputs(args: argparse.Namespace, is_grid: bool, method: str) -> None
 # --------------------------------------------------------------------- run
 def run(args: argparse.Namespace) -> int:
     # JAX, the engine, matplotlib: imported when a run needs them (selfalign --help starts without).
-    from simulator import montecarlo as mc
-    from simulator.stepping import OUTCOMES
+    from simulator.batch import (
+        capture_map,
+        price_dynamics_lanes,
+        run_batch,
+        summarize,
+        time_histogram,
+    )
+    from simulator.core import threads
+    from simulator.motion import OUTCOMES
 
     opt = _options(args)
     starts, desc, seed = _starts(opt)
@@ -250,20 +257,20 @@ def run(args: argparse.Namespace) -> int:
     from simulator.liquid import placement_biases
 
     liquid_warnings = liquid_checks(args, scene, opt["method"], lambda: placement_biases(starts), "the starts")
-    from simulator.engine import require_landscape_fits
-    from simulator.feedback import compiling
+    from simulator.core import compiling
+    from simulator.landscape import require_landscape_fits
 
     require_landscape_fits(scene)
     if opt["method"] in DYNAMIC_METHODS:
-        from simulator.dynamics_params import DynamicsParams
+        from simulator.motion import DynamicsParams
 
         n = starts.size if grid is not None else len(starts)
-        mc.price_dynamics_lanes(min(opt["chunk"], n) * max(1, min(mc.threads(), -(-n // opt["chunk"]))), scene.memory_budget_mb)
+        price_dynamics_lanes(min(opt["chunk"], n) * max(1, min(threads(), -(-n // opt["chunk"]))), scene.memory_budget_mb)
         DynamicsParams.from_scene(scene)  # a liquid the model cannot take fails before compiling
 
     compiling(opt["method"], args.quiet)
-    result = mc.run_batch(scene, starts, opt["method"], chunk=opt["chunk"], max_steps=opt["max_steps"], progress=not args.quiet)
-    summary = mc.summarize(result, grid)
+    result = run_batch(scene, starts, opt["method"], chunk=opt["chunk"], max_steps=opt["max_steps"], progress=not args.quiet)
+    summary = summarize(result, grid)
     st = result.stats
     doc = summary | {
         "seed": seed,
@@ -287,7 +294,7 @@ def run(args: argparse.Namespace) -> int:
         "liquid_warnings": liquid_warnings,
     }
     if result.time_s is not None:
-        doc["time_to_align_histogram"] = mc.time_histogram(result.time_to_align_s)
+        doc["time_to_align_histogram"] = time_histogram(result.time_to_align_s)
     require_finite(doc, "montecarlo summary")
     require_finite({"start": result.start, "final": result.final}, "montecarlo starts")
     _print_summary(summary | {"seed": seed}, result, desc, st)
@@ -297,11 +304,13 @@ def run(args: argparse.Namespace) -> int:
         if args.json:
             stack.enter_context(atomic_output(args.json)).write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n")
         if args.time_plot:  # moved into place with the files above, when every output is ready
+            from simulator.batch import time_histogram, time_stats
             from simulator.render import plot_time_to_align
 
-            plot_time_to_align(result.time_to_align_s, stack.enter_context(atomic_output(args.time_plot)), title=_time_title(args, summary))
+            times = result.time_to_align_s
+            plot_time_to_align(time_histogram(times), time_stats(times), stack.enter_context(atomic_output(args.time_plot)), title=_time_title(args, summary))
         if args.map:
-            plot_capture_map(mc.capture_map(result, grid), grid, scene, args.map, title=_map_title(args, summary))
+            plot_capture_map(capture_map(result, grid), grid, scene, args.map, title=_map_title(args, summary))
     for flag in ("csv", "json", "map", "time_plot"):
         if getattr(args, flag):
             print(f"wrote {getattr(args, flag)}")

@@ -15,10 +15,8 @@ from simulator.commands._common import (
     scene_from_args,
     write_json,
 )
-from simulator.defaults import DEFAULT_MAX_STEPS, METHODS
-from simulator.feedback import compiling
-from simulator.materials import DAMPING_CALIBRATION
-from simulator.tolerances import AREA_REL_TOL, DEG_TOL
+from simulator.core import AREA_REL_TOL, DEFAULT_MAX_STEPS, DEG_TOL, METHODS, compiling
+from simulator.physics import DAMPING_CALIBRATION
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -55,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
     from simulator.commands._common import read_toml
 
     # JAX: imported when a run needs it (selfalign --help starts without it).
-    from simulator.trajectory import price_run, require_start_in_window, simulate
+    from simulator.motion import price_run, require_start_in_window, simulate
 
     doc = read_toml(args.scene) if args.scene else {}
     sim = doc.get("simulate", {})
@@ -73,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
     price_run(scene, method, max_steps)
     require_start_in_window(scene, start)
     if method in ("overdamped", "inertial"):
-        from simulator.dynamics import DynamicsParams
+        from simulator.motion import DynamicsParams
 
         DynamicsParams.from_scene(scene)  # a liquid the model cannot take fails before compiling
     compiling(method, args.quiet)

@@ -52,8 +52,7 @@ def _sigterm_says_what_was_kept(out: str) -> Iterator[None]:
 
     def terminate(signum, frame):
         from patterns.outputs import remove_pending
-        from simulator.sweep_cluster import release_semaphores
-        from simulator.sweep_store import kept_points
+        from simulator.sweep import kept_points, release_semaphores
 
         remove_pending()
         n = kept_points(out) if os.path.isdir(out) else 0
@@ -71,8 +70,7 @@ def _sigterm_says_what_was_kept(out: str) -> Iterator[None]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from simulator.sweep import load_sweep, sweep
-    from simulator.sweep_store import kept_points
+    from simulator.sweep import kept_points, load_sweep, sweep
 
     spec = load_sweep(args.sweep_file)
     try:

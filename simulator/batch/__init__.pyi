@@ -1,0 +1,32 @@
+"""Types of ``simulator.batch``'s names, loaded on first use (SPEC 1 lazy loading)."""
+
+from ._evaluate import (
+    NOISE_FRACTION as NOISE_FRACTION,
+    NOISE_TWIST_DEG as NOISE_TWIST_DEG,
+    YIELD_STARTS as YIELD_STARTS,
+    assess as assess,
+    auto_resolution as auto_resolution,
+    chip_size as chip_size,
+    evaluate as evaluate,
+)
+from ._montecarlo import (
+    price_dynamics_lanes as price_dynamics_lanes,
+    run_batch as run_batch,
+    run_realizations as run_realizations,
+)
+from ._starts import (
+    DISTRIBUTIONS as DISTRIBUTIONS,
+    MAX_STARTS as MAX_STARTS,
+    MAX_TWIST_DEG as MAX_TWIST_DEG,
+    StartGrid as StartGrid,
+    random_starts as random_starts,
+)
+from ._stats import (
+    BatchResult as BatchResult,
+    capture_map as capture_map,
+    max_bias as max_bias,
+    summarize as summarize,
+    time_histogram as time_histogram,
+    time_stats as time_stats,
+    twist_error as twist_error,
+)

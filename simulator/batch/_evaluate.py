@@ -1,0 +1,434 @@
+"""A complete assessment of one pattern: numbers, pictures and a one-page report.
+
+:func:`evaluate` computes, for a scene:
+
+* the global minimum pose of the energy;
+* the restoring force (N) and torque (N m) near alignment: at a bias of
+  ``near_um`` along +-x and +-y, and at +-``near_deg`` of twist;
+* the energy curves along x and y through the minimum, their plateaus and the
+  maximum bias per direction: the largest |bias| up to which the force points back
+  to the minimum everywhere (docs/physics.md §6.3);
+* the capture fraction over a default grid of starts around the global minimum (at its
+  twist): the fraction that ends aligned, and the capture map;
+* the yield under default placement noise: normal around the aligned pose (the global
+  minimum) with standard deviations of 10 % of the chip size in x and y and 2 degrees of
+  twist;
+
+and writes ``summary.json``, ``landscape.png``, ``force.png``, ``capture.png``,
+``pattern.png`` (the input as used) and ``report.html`` into a directory. The capture
+and yield runs use greedy steps by default; ``method`` chooses gradient or the dynamics
+(overdamped, inertial: batched, with the chip's mass and damping from the scene), which
+also report the time each start takes to align (``time_to_align_s``: median, 90th
+percentile, ...) and draw its histogram (``time_to_align.png``). Everything
+is written into a temporary directory beside it and renamed into place at the end,
+so a failure leaves no partial directory; an existing directory is never replaced
+unless asked (``force``) and only when it holds a previous selfalign output.
+
+:func:`assess` computes the same numbers without writing anything (pictures only when
+asked): one point of a design sweep (:mod:`simulator.sweep`).
+"""
+
+from __future__ import annotations
+
+import html
+import json
+import math
+import os
+import time
+from dataclasses import replace
+
+import numpy as np
+
+from patterns.mask import footprint_um
+from patterns.outputs import check_output_dir, output_directory
+from simulator.batch._montecarlo import run_batch
+from simulator.batch._starts import StartGrid, random_starts
+from simulator.batch._stats import capture_map, summarize, time_histogram, time_stats
+from simulator.core import (
+    AUTO_LANDSCAPE_MB,
+    METHODS,
+    require_finite,
+)
+from simulator.landscape import build_landscape, estimate_bytes
+from simulator.physics import regime_warning
+from simulator.render import (
+    plot_capture_map,
+    plot_forces,
+    plot_landscape,
+    plot_pattern,
+    plot_time_to_align,
+)
+from simulator.scene import Scene
+
+#: Placement noise (fractions of the chip size, and degrees) for the default yield.
+NOISE_FRACTION, NOISE_TWIST_DEG = 0.10, 2.0
+YIELD_STARTS = 2000
+GRID_CELLS = 25
+
+
+def auto_resolution(scene: Scene, budget_mb: float = AUTO_LANDSCAPE_MB) -> Scene:
+    """The scene at the finest whole multiple of its pixel size whose landscape fits ``budget_mb``."""
+    for k in range(1, 17):
+        s = scene if k == 1 else scene.at_resolution(scene.um_per_px * k)
+        if estimate_bytes(s) / 2**20 <= budget_mb:
+            return s
+    return s
+
+
+def chip_size(scene: Scene) -> tuple[float, float]:
+    """Width and height (um) of the chip's wettable footprint."""
+    return footprint_um(scene.chip)
+
+
+def max_bias_along(values: np.ndarray, force: np.ndarray, x0: float, floor: list[float] | None = None) -> tuple[float, float]:
+    """(+, -) largest |v - x0| with the force pointing back to x0 at every sample in between.
+
+    ``floor``: [first, last] of a flat floor around x0 (a chip floating within free contact
+    lines' reach): its samples count as arrived, whatever their force.
+    """
+    out = []
+    if floor is not None:
+        keep = (values < floor[0] - 1e-9) | (values > floor[1] + 1e-9) | (np.abs(values - x0) < 1e-9)
+        values, force = values[keep], force[keep]
+    # Samples within a hundredth of a step of x0 are x0 itself (a refined minimum sits
+    # a round-off away from the samples through it).
+    tiny = 0.01 * float(np.min(np.diff(values))) if len(values) > 1 else 0.0
+    for sign in (1, -1):
+        sel = (values - x0) * sign > tiny
+        v, f = (values[sel] - x0) * sign, force[sel] * sign
+        order = np.argsort(v)
+        v, f = v[order], f[order]
+        bad = np.flatnonzero(f >= 0)  # zero force (plateau) or pushing away
+        out.append(float(v[bad[0] - 1]) if bad.size and bad[0] > 0 else (0.0 if bad.size else float(v[-1]) if v.size else 0.0))
+    return out[0], out[1]
+
+
+def evaluate(scene: Scene, out_dir: str | os.PathLike, quiet: bool = False, source: str = "", auto: bool = True,
+             force: bool = False, inputs: tuple = (), liquid_warnings: list[str] | None = None, method: str = "greedy") -> dict:
+    """Assess ``scene`` and write the report into ``out_dir``.
+
+    ``method``: how the capture and yield starts run (:data:`simulator.batch.METHODS`;
+    default greedy); the dynamics add ``time_to_align.png`` and the times to the report.
+
+    ``liquid_warnings`` (:func:`simulator.liquid.scene_warnings`) go into the summary
+    (``liquid_warnings``, a list of one-line strings) and the report.
+
+    ``out_dir`` is created atomically (see :func:`patterns.outputs.output_directory`): it
+    must not exist, or be an empty directory, or with ``force`` hold nothing but a
+    previous selfalign output. ``inputs`` (files the scene was read from) are never
+    inside it. A failure leaves ``out_dir`` as it was.
+    """
+    t_start = time.perf_counter()
+    check_output_dir(out_dir, "--out", force, inputs)  # before any work
+    native = scene.um_per_px
+    if auto:
+        scene = auto_resolution(scene)
+    with output_directory(out_dir, "--out", force, inputs, command="evaluate") as tmp:
+        summary = assess(scene, quiet=quiet, pictures=tmp, method=method)
+        summary["settings"] |= {"source_um_per_px": native, "resolution_auto": bool(auto and scene.um_per_px != native)}
+        if "layout" in scene.pattern.params:  # a layout pattern: file, cell, layers, units, and where the origin is
+            summary["layout"] = scene.pattern.params["layout"]
+        summary["liquid_warnings"] = list(liquid_warnings or [])
+        summary["seconds"] = round(time.perf_counter() - t_start, 2)
+        require_finite(summary, "evaluate summary")
+        (tmp / "summary.json").write_text(json.dumps(summary, indent=2, allow_nan=False) + "\n")
+        (tmp / "report.html").write_text(_html(summary, source))
+    return summary
+
+
+def assess(scene: Scene, *, quiet: bool = True, pictures=None, method: str = "greedy", seed: int = 0,
+           placement_sigma: tuple[float, float, float] | None = None, yield_starts: int = YIELD_STARTS,
+           grid_cells: int = GRID_CELLS) -> dict:
+    """The numbers of :func:`evaluate` for ``scene`` (no resolution change, nothing written
+    unless ``pictures`` names a directory for the four pictures).
+
+    The defaults are evaluate's: greedy steps, the yield's placement noise (sigma x, y in um
+    and twist in degrees; default 10 % of the chip size and 2 degrees) drawn with ``seed``
+    0, ``yield_starts`` starts, and a capture grid of about ``grid_cells`` starts per side.
+    ``method`` "overdamped" or "inertial" runs the starts through the dynamics
+    (:func:`simulator.batch.run_batch`, parameters from the scene) and adds
+    ``time_to_align_s`` (:func:`simulator.batch.time_stats`, seconds of simulated
+    time; None when no start aligned) to ``capture`` and ``yield``, and
+    ``time_to_align.png`` (the yield starts' histogram) to ``pictures``.
+    """
+    from patterns.errors import require
+
+    require(method in METHODS, f"method must be one of {', '.join(METHODS)}, got {method!r}")
+    s = scene.um_per_px
+    ls = build_landscape(scene, progress=not quiet)
+    xm, ym, tm, em = ls.global_minimum()
+    gx, gy, gt = xm, ym, tm  # the grid's global minimum: centre of the capture grid and of the placement noise
+    meniscus = None
+    floating = None
+    if ls.meniscus_height_um is not None:
+        # A smooth well: its minimum below the grid, and its stiffness there. With free contact
+        # lines the well can have a flat floor (the chip floats within the lines' reach): then
+        # the floor is what is reported, and its pose nearest the nominal one (the grid's).
+        from simulator.landscape import refine_minimum, stiffness
+
+        if scene.wall_profile is not None and any(b > a for a, b in ls.floor_extent()):
+            fr = ls.floor_range()
+            floating = {f"{k.split('_')[0]}_{end}_{k.split('_')[1]}": v[i] for k, v in fr.items() for i, end in enumerate(("from", "to"))}
+        else:
+            r = refine_minimum(ls, xm, ym, tm)
+            xm, ym, tm, em = r["x_um"], r["y_um"], r["twist_deg"], r["energy_J"]
+        meniscus = {"stiffness": stiffness(ls, xm, ym, tm), "overlap": build_landscape(scene.replace(
+            effects=replace(scene.effects, meniscus=False)), twists=np.array([ls.twist_deg[int(np.argmin(np.abs(ls.twist_deg - tm)))]]))}
+        if floating:  # on the floor the well is flat: no curvature where it spans the minimum (not round-off)
+            k = meniscus["stiffness"]
+            for key, axis, v in (("x_N_per_m", "x", xm), ("y_N_per_m", "y", ym), ("twist_Nm_per_rad", "twist", tm)):
+                unit = "deg" if axis == "twist" else "um"
+                if k.get(key) is not None and floating[f"{axis}_from_{unit}"] < v < floating[f"{axis}_to_{unit}"]:
+                    k[key] = 0.0
+    w, h = chip_size(scene)
+    near = max(2 * s, 0.02 * min(w, h))
+    near_deg = max(ls.twist_step_deg, 1.0) if len(ls.twist_deg) > 1 else 0.0
+    forces = {}
+    for label, dx, dy in (("+x", near, 0), ("-x", -near, 0), ("+y", 0, near), ("-y", 0, -near)):
+        fx, fy = ls.force_at(xm + dx, ym + dy, tm)
+        forces[label] = [float(fx) + 0.0, float(fy) + 0.0]  # no -0.0
+    torques = {}
+    if near_deg:
+        for label, d in (("+", near_deg), ("-", -near_deg)):
+            torques[label] = float(ls.torque_at(xm, ym, tm + d)) + 0.0
+    curves, biases = {}, {}
+    reach_x, reach_y = float(ls.x_um[-1]), float(ls.y_um[-1])
+    for axis, lo, hi in (("x", -reach_x, reach_x), ("y", -reach_y, reach_y)):
+        c = ls.curve(axis, (xm, ym, tm), lo, hi)
+        x0 = xm if axis == "x" else ym
+        floor = [floating[f"{axis}_from_um"], floating[f"{axis}_to_um"]] if floating else None
+        plus, minus = max_bias_along(c["values"], c["force"], x0, floor=floor)
+        curves[axis] = c
+        biases[f"+{axis}"], biases[f"-{axis}"] = plus, minus
+    # Capture fraction over a grid of starts around the global minimum (at its twist), and the
+    # yield under placement noise around it: the target a gripper aims at.
+    span = 0.6 * max(w, h)
+    step = max(s, round(2 * span / (grid_cells - 1) / s) * s)
+    n = int(span // step)
+    grid = StartGrid.from_ranges((gx - n * step, gx + n * step, step), (gy - n * step, gy + n * step, step), gt)
+    cap = run_batch(scene, grid, method, landscape=ls, progress=not quiet)
+    cap_sum = summarize(cap, grid)
+    noise = (NOISE_FRACTION * w, NOISE_FRACTION * h, NOISE_TWIST_DEG) if placement_sigma is None else tuple(float(v) for v in placement_sigma)
+    if len(ls.twist_deg) == 1:
+        noise = (noise[0], noise[1], 0.0)
+    starts = random_starts(yield_starts, noise, seed=seed, around=(gx, gy, gt))
+    if len(ls.twist_deg) == 1:
+        starts[:, 2] = 0.0
+    yl = run_batch(scene, starts, method, landscape=ls, progress=not quiet)
+    yl_sum = summarize(yl)
+    if pictures is not None:
+        out = pictures
+        plot_pattern(scene.pattern, out / "pattern.png")
+        plot_landscape(ls, out / "landscape.png", pattern=scene.pattern)
+        plot_forces(ls, out / "force.png", through=(xm, ym, tm), compare=meniscus["overlap"] if meniscus else None)
+        plot_capture_map(
+            capture_map(cap, grid), grid, scene, out / "capture.png", title=f"capture map ({method}): capture fraction {100 * cap_sum['yield']:.1f} % of {cap_sum['n']} grid starts"
+        )
+        if yl.time_s is not None:
+            plot_time_to_align(time_histogram(yl.time_to_align_s), time_stats(yl.time_to_align_s), out / "time_to_align.png",
+                                      title=f"time to align ({method}): {yl_sum['outcomes']['aligned']:,} of {yl_sum['n']:,} placement-noise starts aligned")
+    m = scene.materials
+    extra = {}
+    if meniscus:
+        extra = {
+            "meniscus_height_um": ls.meniscus_height_um,
+            "pinned": scene.liquid.pinned,
+            "stiffness": meniscus["stiffness"],
+            "offset_from_centre": {"x_um": round(xm, 1) + 0.0, "y_um": round(ym, 1) + 0.0, "twist_deg": round(tm, 1) + 0.0,
+                                   "distance_um": round(math.hypot(xm, ym), 1)},
+            "meniscus_warning": regime_warning(ls.meniscus_height_um, scene.chip_min_side_um),
+            "contact_lines": "pinned" if scene.liquid.pinned else "free",
+            "floating_range": floating,
+        }
+        prof = scene.wall_profile
+        if prof is not None:
+            extra["contact_line_reach_um"] = {"substrate": prof.substrate_reach_px * s, "pad": prof.pad_reach_px * s}
+    return extra | {
+        "global_minimum": {"x_um": xm, "y_um": ym, "twist_deg": tm, "energy_J": em, "overlap_um2": float(ls.overlap_um2(em)),
+                           "refined": meniscus is not None and floating is None},
+        "restoring_force_N": {"bias_um": near, **forces},
+        "restoring_torque_Nm": {"twist_deg": near_deg, **torques} if torques else None,
+        "plateaus_um": {a: curves[a]["plateaus"] for a in ("x", "y")},
+        "max_bias_um": biases,
+        "capture": {
+            "fraction": cap_sum["yield"],
+            "n": cap_sum["n"],
+            "outcomes": cap_sum["outcomes"],
+            "grid_um": {"from": -n * step, "to": n * step, "step": step},  # about the centre
+            "center": {"x_um": gx, "y_um": gy},
+            "twist_deg": gt,
+        } | ({"time_to_align_s": cap_sum["time_to_align_s"]} if "time_to_align_s" in cap_sum else {}),
+        "yield": {
+            "fraction": yl_sum["yield"],
+            "n": yl_sum["n"],
+            "outcomes": yl_sum["outcomes"],
+            "placement_sigma": {"x_um": noise[0], "y_um": noise[1], "twist_deg": noise[2]},
+            "seed": seed,
+            "error_um": yl_sum.get("aligned_error_um"),
+            "error_deg": yl_sum.get("aligned_error_deg"),
+        } | ({"time_to_align_s": yl_sum["time_to_align_s"]} if "time_to_align_s" in yl_sum else {}),
+        "settings": {
+            "um_per_px": s,
+            "pattern_px": list(scene.pattern.shape),
+            "chip_um": [w, h],
+            "twist_step_deg": ls.twist_step_deg if len(ls.twist_deg) > 1 else None,
+            "twists": len(ls.twist_deg),
+            "dtype": scene.dtype,
+            "method": method,
+            "surface_tension_N_m": m.surface_tension_N_m,
+            "pad_angle_deg": m.pad_angle_deg,
+            "substrate_angle_deg": m.substrate_angle_deg,
+            "delta_gamma_N_m": scene.delta_gamma_N_m,
+            "landscape_MB": round(ls.energy.nbytes / 2**20, 1),
+            "landscape_s": round(ls.stats["seconds"], 2),
+        },
+    }
+
+
+def _fmt(v, unit: str, digits: int = 4) -> str:
+    if v is None:
+        return "n/a"
+    if isinstance(v, float) and (abs(v) < 1e-3 or abs(v) >= 1e4) and v != 0:
+        return f"{v:.{digits - 1}e} {unit}"
+    return f"{v:.{digits}g} {unit}"
+
+
+def _layout_row(record: dict | None) -> str:
+    """The report's row on a layout pattern's cell, layers, units and origin (empty for images)."""
+    if not record:
+        return ""
+    from patterns.layout import frame_note
+
+    return f"\n<tr><th>layout</th><td>{html.escape(frame_note(record).removeprefix('frame: '))}</td></tr>"
+
+
+def _liquid_rows(warnings: list[str] | None) -> str:
+    """The report's list of the droplet's warnings (empty when there are none)."""
+    if not warnings:
+        return ""
+    items = "".join(f"<li>{html.escape(w)}</li>" for w in warnings)
+    return f"\n<h2>The droplet</h2>\n<ul class=\"warn\">{items}</ul>"
+
+
+def _model_note(summary: dict) -> str:
+    h = summary.get("meniscus_height_um")
+    if h is None:
+        return "Overlap model (energy = &Delta;&gamma; &times; overlap area)."
+    if summary.get("pinned"):
+        return (f"Finite meniscus, height meniscus_height_um = {h:.4g} um, contact lines pinned at the pad edges (the overlap "
+                "energy with every cusp rounded over h; dashed in the force plot: the overlap model).")
+    r = summary.get("contact_line_reach_um")
+    reach = f", reaching {r['substrate']:.3g} um beyond the chip on the substrate and {r['pad']:.3g} um on a pad" if r else ""
+    return (f"Finite meniscus, height meniscus_height_um = {h:.4g} um, free contact lines{reach} (the overlap energy of the "
+            "liquid's footprint: flat where the lines stand on one surface, rising where a pad edge holds a line; dashed in the "
+            "force plot: the overlap model).")
+
+
+def _at(v: float) -> str:
+    """A refined pose coordinate (um or degrees) as the page shows it: to 0.001, no -0
+    (summary.json keeps every digit)."""
+    return f"{round(float(v), 3) + 0.0:g}"
+
+
+def _span(fl: dict, axis: str, unit: str) -> str:
+    return f"{_at(fl[f'{axis}_from_{unit}'])} to {_at(fl[f'{axis}_to_{unit}'])} {unit}"
+
+
+def _meniscus_rows(summary: dict) -> str:
+    k = summary.get("stiffness")
+    if not k:
+        return ""
+    o = summary["offset_from_centre"]
+    tw = "n/a" if k.get("twist_Nm_per_rad") is None else _fmt(k["twist_Nm_per_rad"], "N m/rad")
+    warn = summary.get("meniscus_warning")
+    warn_html = f'<p class="warn">warning: {html.escape(warn)}</p>' if warn else ""
+    fl = summary.get("floating_range")
+    if fl:
+        warn_html = (f"<p>The chip floats: the well's floor (no restoring force) spans x {_span(fl, 'x', 'um')}, "
+                     f"y {_span(fl, 'y', 'um')}, twist {_span(fl, 'twist', 'deg')}; a run that stops on it counts as "
+                     f"aligned. The stiffness is the floor's (zero where it is flat).</p>") + warn_html
+    return (f"<h2>Stiffness at alignment (finite meniscus)</h2><table><tr><th>k<sub>x</sub></th><td>{_fmt(k['x_N_per_m'], 'N/m')}</td></tr>"
+            f"<tr><th>k<sub>y</sub></th><td>{_fmt(k['y_N_per_m'], 'N/m')}</td></tr><tr><th>k<sub>twist</sub></th><td>{tw}</td></tr>"
+            f"<tr><th>offset of the minimum from the pattern centre</th><td>({_at(o['x_um'])} um, {_at(o['y_um'])} um, {_at(o['twist_deg'])} deg), "
+            f"{_at(o['distance_um'])} um</td></tr></table>{warn_html}\n")
+
+
+def _time_text(t: dict | None) -> str:
+    if t is None:
+        return "no start aligned"
+    return (f"median <b>{1e3 * t['median']:.3g} ms</b>, 90th percentile <b>{1e3 * t['p90']:.3g} ms</b>, "
+            f"range {1e3 * t['min']:.3g} to {1e3 * t['max']:.3g} ms over {t['n']:,} aligned starts")
+
+
+def _time_rows(cap: dict, yl: dict) -> str:
+    """The report's section on the time to align (dynamics only; empty for the steppers)."""
+    if "time_to_align_s" not in yl:
+        return ""
+    return (f"\n<h2>Time to align</h2>\n<p>Simulated time until an aligned run comes to rest (the solver's stop test), "
+            f"placement-noise starts: {_time_text(yl['time_to_align_s'])}; capture grid: {_time_text(cap.get('time_to_align_s'))}.</p>\n"
+            f'<img src="time_to_align.png" alt="histogram of the time to align">')
+
+
+def _html(summary: dict, source: str) -> str:
+    """The one-page report: inputs, numbers with units, the four pictures."""
+    s, g = summary["settings"], summary["global_minimum"]
+    f, b = summary["restoring_force_N"], summary["max_bias_um"]
+    tq = summary["restoring_torque_Nm"]
+    cap, yl = summary["capture"], summary["yield"]
+    e = html.escape
+    rows_force = "".join(
+        f"<tr><td>{e(k)} {f['bias_um']:.3g} um</td><td>{_fmt(v[0] * 1e6, 'uN')}</td><td>{_fmt(v[1] * 1e6, 'uN')}</td></tr>"
+        for k, v in f.items()
+        if k != "bias_um"
+    )
+    rows_torque = (
+        "".join(f"<tr><td>twist {k}{tq['twist_deg']:g} deg</td><td colspan=2>{_fmt(v * 1e9, 'nN m')}</td></tr>" for k, v in tq.items() if k != "twist_deg")
+        if tq
+        else "<tr><td colspan=3>twist not simulated</td></tr>"
+    )
+    plateaus = "; ".join(f"{a}: " + (", ".join(f"[{p[0]:g}, {p[1]:g}] um" for p in pl) or "none") for a, pl in summary["plateaus_um"].items())
+    outcomes = ", ".join(f"{k} {v}" for k, v in yl["outcomes"].items() if v)
+    cap_out = ", ".join(f"{k} {v}" for k, v in cap["outcomes"].items() if v)
+    ps = yl["placement_sigma"]
+    err = yl.get("error_um") or {}
+    err_txt = ", ".join(f"{k}: mean |error| {v['mean_abs']:.3g} um" for k, v in err.items() if v) or "n/a"
+    auto = " (coarsened automatically to keep the landscape small; pass --resolution to choose)" if s.get("resolution_auto") else ""
+    return f"""<!doctype html>
+<html lang="en"><head><meta charset="utf-8"><title>selfalign evaluation: {e(source)}</title>
+<style>
+body {{ font-family: system-ui, sans-serif; max-width: 1100px; margin: 2em auto; color: #222; line-height: 1.4; }}
+h1 {{ font-size: 1.5em; }} h2 {{ font-size: 1.15em; margin-top: 1.6em; border-bottom: 1px solid #ccc; }}
+table {{ border-collapse: collapse; margin: .5em 0; }} td, th {{ border: 1px solid #ccc; padding: 3px 10px; text-align: left; }}
+img {{ max-width: 100%; border: 1px solid #ddd; }} .grid {{ display: grid; grid-template-columns: 1fr 1fr; gap: 1em; }}
+.note {{ color: #555; font-size: .9em; }}
+</style></head><body>
+<h1>selfalign evaluation of <code>{e(source)}</code></h1>
+<p class="note">{_model_note(summary)} Positions in um of the chip centre from the
+pattern centre, x right, y up; twist in degrees, counter-clockwise positive. Computed in {summary['seconds']:.1f} s.</p>
+<h2>Inputs</h2>
+<div class="grid"><div><img src="pattern.png" alt="pattern as used"></div><div><table>
+<tr><th>pattern</th><td>{e(source)}, {s['pattern_px'][1]} x {s['pattern_px'][0]} px at {s['um_per_px']:g} um/px{e(auto)} (file scale {s['source_um_per_px']:g} um/px)</td></tr>
+<tr><th>chip</th><td>{s['chip_um'][0]:g} x {s['chip_um'][1]:g} um wettable footprint</td></tr>{_layout_row(summary.get("layout"))}
+<tr><th>liquid / wetting</th><td>surface tension {s['surface_tension_N_m'] * 1e3:g} mN/m, pad {s['pad_angle_deg']:g} deg, substrate {s['substrate_angle_deg']:g} deg: &Delta;&gamma; = {s['delta_gamma_N_m'] * 1e3:.4g} mN/m</td></tr>
+<tr><th>pose grid</th><td>{s['twists']} twists{f", step {s['twist_step_deg']:g} deg" if s['twist_step_deg'] else ""}; {s['dtype']}; landscape {s['landscape_MB']:g} MB in {s['landscape_s']:g} s</td></tr>
+</table></div></div>{_liquid_rows(summary.get("liquid_warnings"))}
+<h2>Where the chip ends up</h2>
+<p>Global minimum of the energy at <b>({_at(g['x_um'])} um, {_at(g['y_um'])} um, {_at(g['twist_deg'])} deg)</b>,
+overlap {g['overlap_um2']:,.0f} um&sup2;, energy {_fmt(g['energy_J'], 'J')}.</p>
+{_meniscus_rows(summary)}<h2>Restoring force and torque near alignment</h2>
+<table><tr><th>chip displaced by</th><th>F<sub>x</sub></th><th>F<sub>y</sub></th></tr>{rows_force}{rows_torque}</table>
+<p>Maximum bias from which the force points back to the minimum all the way:
++x {b['+x']:g} um, &minus;x {b['-x']:g} um, +y {b['+y']:g} um, &minus;y {b['-y']:g} um (twist held at the minimum's).
+Plateaus (zero force): {e(plateaus)}.</p>
+<img src="force.png" alt="energy, force and torque curves">
+<h2>Energy landscape</h2>
+<img src="landscape.png" alt="energy over x and y">
+<h2>Capture region and yield</h2>
+<p>Capture fraction: <b>{100 * cap['fraction']:.1f} %</b> of {cap['n']} {e(s['method'])} starts on a grid from {cap['grid_um']['from']:g} to {cap['grid_um']['to']:g} um
+in steps of {cap['grid_um']['step']:g} um in x and y around the global minimum, twist {cap['twist_deg']:g} deg ({e(cap_out)}).</p>
+<p>Yield under placement noise: <b>{100 * yl['fraction']:.1f} %</b> of {yl['n']} starts drawn normally around the aligned pose (the global minimum) with
+&sigma; = {ps['x_um']:.3g} um, {ps['y_um']:.3g} um, {ps['twist_deg']:g} deg (seed {yl['seed']}): {e(outcomes)}; aligned runs, final-pose error from the global minimum: {e(err_txt)}.</p>
+<img src="capture.png" alt="capture map">{_time_rows(cap, yl)}
+<p class="note">Written by selfalign. The numbers are in summary.json (units in the key names).</p>
+</body></html>
+"""

@@ -1,0 +1,36 @@
+"""Types of ``simulator.landscape``'s names, loaded on first use (SPEC 1 lazy loading)."""
+
+from ._build import (
+    build_landscape as build_landscape,
+    estimate_bytes as estimate_bytes,
+    plan as plan,
+    require_landscape_fits as require_landscape_fits,
+)
+from ._correlator import (
+    Correlator as Correlator,
+    Window as Window,
+    chip_relations as chip_relations,
+    correlate_stack as correlate_stack,
+)
+from ._landscape import (
+    MAX_CURVE_SAMPLES as MAX_CURVE_SAMPLES,
+    UM2_TO_M2 as UM2_TO_M2,
+    Landscape as Landscape,
+    runs as runs,
+    trilinear as trilinear,
+)
+from ._optimum import (
+    GlobalMinimum as GlobalMinimum,
+    global_minimum as global_minimum,
+)
+from ._posegrid import (
+    PoseGrid as PoseGrid,
+    axis_step as axis_step,
+    consecutive_runs as consecutive_runs,
+    twist_axis as twist_axis,
+    twists_around as twists_around,
+)
+from ._refine import (
+    refine_minimum as refine_minimum,
+    stiffness as stiffness,
+)

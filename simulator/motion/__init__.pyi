@@ -1,0 +1,58 @@
+"""Types of ``simulator.motion``'s names, loaded on first use (SPEC 1 lazy loading)."""
+
+from ._dynamics import (
+    DynamicsState as DynamicsState,
+    inertial as inertial,
+    overdamped as overdamped,
+)
+from ._dynamics_ode import (
+    REST_TOL_STEPS as REST_TOL_STEPS,
+)
+from ._dynamics_params import (
+    DynamicsParams as DynamicsParams,
+)
+from ._field import (
+    PAD as PAD,
+    Field as Field,
+    Grid as Grid,
+    block as block,
+    field_and_grid as field_and_grid,
+    gradient as gradient,
+    interpolate as interpolate,
+    lookup as lookup,
+    make_field as make_field,
+    neighbourhood as neighbourhood,
+)
+from ._potential import (
+    potential as potential,
+    potential_and_gradient as potential_and_gradient,
+)
+from ._steppers import (
+    dynamics_jitted as dynamics_jitted,
+    finish as finish,
+    stepper as stepper,
+)
+from ._stepping import (
+    BLOCK_MOVES as BLOCK_MOVES,
+    CONVERGED as CONVERGED,
+    EDGE as EDGE,
+    GREEDY_MOVES as GREEDY_MOVES,
+    MAX_STEPS as MAX_STEPS,
+    OUTCOMES as OUTCOMES,
+    STAY as STAY,
+    TIE_RANK as TIE_RANK,
+    classify as classify,
+    gradient_descent as gradient_descent,
+    greedy as greedy,
+    on_plateau as on_plateau,
+    reference_gradient as reference_gradient,
+)
+from ._trajectory import (
+    MAX_START_TWIST_DEG as MAX_START_TWIST_DEG,
+    Trajectory as Trajectory,
+    is_stiff as is_stiff,
+    price_run as price_run,
+    radius_of_gyration_px as radius_of_gyration_px,
+    require_start_in_window as require_start_in_window,
+    simulate as simulate,
+)

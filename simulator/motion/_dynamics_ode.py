@@ -1,0 +1,368 @@
+"""The ODE the dynamics integrate, as diffrax sees it.
+
+Owns the per-axis coefficients in nondimensional time (:class:`_Coeffs`, from
+:func:`_axis_scales`, :func:`_reference_force`, :func:`_active`), the stopping test
+(:func:`_stop_flags`), the vector fields of the overdamped and inertial models, what is
+saved at each step (:func:`_save`, with the landscape energy :func:`_energy`), the stop
+event (:func:`_stop`) and the guarded step-size controller (:class:`_GuardedController`:
+no rise of ``Phi + kinetic`` above the floor, at most one grid step per step). The
+physics, units and rules are those of :mod:`simulator.motion`, which runs the solver
+(``diffrax.diffeqsolve``) on these pieces.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import NamedTuple
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+
+from simulator.motion._field import Field, Grid, at_cut_edge, interpolate
+from simulator.motion._potential import _OFFSETS, _kernel, _node_energy, potential_and_gradient
+from simulator.motion._stepping import reference_gradient
+
+
+class _Coeffs(NamedTuple):
+    """Per-axis coefficients (it, iy, ix) in nondimensional time s = t / tau."""
+
+    q0: jax.Array  # start, index steps
+    drive: jax.Array  # overdamped: tau / (c_k s_k^2); inertial: tau^2 / (m_k s_k^2)
+    damp: jax.Array  # inertial: c_k tau / m_k
+    ke: jax.Array  # kinetic energy per (index step / tau)^2: m_k s_k^2 / (2 tau^2)
+    tau: jax.Array  # time unit, s
+    f_ref: jax.Array  # reference |dE/dq| per axis, J per index step
+    rtol: jax.Array  # step-size controller tolerances (atol in index steps)
+    atol: jax.Array
+
+
+def _axis_scales(grid: Grid) -> np.ndarray:
+    """SI length of one index step along (it, iy, ix): radians, metres, metres."""
+    return np.array(
+        [math.radians(grid.twist_step_deg), grid.um_per_px * 1e-6, grid.um_per_px * 1e-6]
+    )
+
+
+def _reference_force(field: Field, grid: Grid, dt) -> jax.Array:
+    """Typical |dE/dq| per index step (J), as in stepping.gradient_descent: a chip edge of
+    length 2 rg sliding over a pad, for x and y; times the arc per twist step for twist."""
+    g = jnp.maximum(reference_gradient(field, grid), jnp.finfo(dt).tiny / jnp.finfo(dt).eps)
+    return g * jnp.asarray([max(grid.twist_px_per_step, 1e-6), 1.0, 1.0], dt)
+
+
+def _active(grid: Grid, dt) -> jax.Array:
+    return jnp.asarray([grid.shape[0] > 1, True, True], dt)
+
+
+def _stop_flags(field: Field, grid: Grid, co: _Coeffs, q, grad, kinetic):
+    """(converged, at_edge) at pose q with Phi gradient ``grad`` and kinetic energy (J).
+
+    converged: the force along every axis, as the energy change over one grid step
+    ``|dPhi/dq_k|``, and the kinetic energy are both at most ``max(floor, f_ref * delta)``
+    (kinetic: with the smallest active ``f_ref``). ``delta = atol + rtol * max|q - q0|`` is
+    the position error the step-size controller allows per step, in grid steps; below
+    it an explicit solver cannot resolve the approach to rest (it hovers at that size
+    instead of converging), and ``f_ref * delta`` is the work of the reference force over
+    that distance. In float32 the noise floor is the larger term; in float64 the
+    tolerance term keeps runs finite.
+    at_edge: on or past a cut side of the grid (as the other steppers), or past the end
+    of a non-periodic twist axis (a wall)."""
+    delta = co.atol + co.rtol * jnp.max(jnp.abs(q - co.q0))
+    f_stop = jnp.maximum(field.floor, co.f_ref * delta)
+    active = _active(grid, q.dtype) > 0
+    ke_stop = jnp.maximum(field.floor, jnp.min(jnp.where(active, co.f_ref, jnp.inf)) * delta)
+    converged = jnp.all(jnp.abs(grad) <= f_stop) & (kinetic <= ke_stop)
+    if any(field.pin):
+        # Hysteresis (simulator.physics): pinned where no axis's force beats its pinning
+        # force and the kinetic energy left is below the pinning work over one grid step.
+        pin = jnp.asarray(field.pin, q.dtype)
+        work = jnp.min(jnp.where(active & (pin > 0), pin, jnp.inf))
+        converged = converged | (jnp.all(jnp.abs(grad) <= jnp.maximum(pin, f_stop)) & (kinetic <= jnp.maximum(work, ke_stop)))
+    converged = converged | _near_rest(field, grid, q, grad, kinetic)
+    edge = at_cut_edge(grid, q)
+    if not grid.wrap and grid.shape[0] > 1:
+        edge = edge | (q[0] < 0) | (q[0] > grid.shape[0] - 1)
+    return converged, edge
+
+
+#: A run also stops when Phi's stable rest point lies within this many grid steps along
+#: every axis (:func:`_near_rest`).
+REST_TOL_STEPS = 0.05
+
+
+def _hessian(field: Field, grid: Grid, q):
+    """Phi's Hessian at q (J per index step squared), one-sided where it jumps.
+
+    Phi is C1 and piecewise quadratic (:mod:`simulator.motion`): its second derivative
+    along an axis jumps at every grid line. Within a cell (``frac`` in [0, 1)) the kernel's
+    second derivative on the four nodes is ``(1/2, -1/2, -1/2, 1/2)``; the mixed terms use
+    the kernel's (continuous) first derivative. Autodiff of the gradient takes a branch of
+    ``abs`` and ``maximum`` at a grid line that belongs to no cell (on a node it returned
+    the energy itself, 1e5 times the true curvature)."""
+    dt = field.dtype
+    q = jnp.asarray(q, dt)
+    base = jnp.floor(q)
+    frac = q - base
+    b = base.astype(jnp.int32)
+    off = jnp.asarray(_OFFSETS, jnp.int32)
+    d2 = jnp.asarray([0.5, -0.5, -0.5, 0.5], dt)
+    ws, dws, d2s, idx = [], [], [], []
+    for k in range(3):
+        w, dw = _kernel(frac[k] - off.astype(dt))
+        if k == 0 and grid.shape[0] == 1:
+            ws.append(jnp.asarray([0.0, 1.0, 0.0, 0.0], dt))
+            dws.append(jnp.zeros(4, dt))
+            d2s.append(jnp.zeros(4, dt))
+            idx.append(jnp.zeros(4, jnp.int32))
+        else:
+            ws.append(w)
+            dws.append(dw)
+            d2s.append(d2)
+            idx.append(b[k] + off)
+    e = _node_energy(field, grid, idx[0][:, None, None], idx[1][None, :, None], idx[2][None, None, :])
+
+    def term(a, c):
+        f = [ws[0], ws[1], ws[2]]
+        if a == c:
+            f[a] = d2s[a]
+        else:
+            f[a], f[c] = dws[a], dws[c]
+        return jnp.einsum("i,j,k,ijk->", f[0], f[1], f[2], e)
+
+    return jnp.stack([jnp.stack([term(a, c) for c in range(3)]) for a in range(3)])
+
+
+def _near_rest(field: Field, grid: Grid, q, grad, kinetic):
+    """True where the chip is at rest within :data:`REST_TOL_STEPS` of a stable rest point.
+
+    Near a stable rest point the force falls linearly with the distance to it, so the
+    chip approaches it exponentially and the force test of :func:`_stop_flags` (at the
+    noise floor) is met only after many time constants. Where Phi's Hessian H (active
+    axes) is positive definite, the rest point is ``q - H^-1 grad``; the run stops when
+    that step is at most :data:`REST_TOL_STEPS` along every axis and the kinetic energy
+    could lift the chip at most that far up the softest direction
+    (``kinetic <= lambda_min tol^2 / 2``). Measured: the floating floor of the wall-profile
+    meniscus (730/100 four-pad, 20 nl) is approached on the rounded edge of Phi, one grid
+    step wide, with a time constant of 0.2 s at 5 um/px; runs from (300, 0, 0) ran out of
+    their second inside the floor."""
+    active = _active(grid, q.dtype) > 0
+    mask = active[:, None] & active[None, :]
+    h = jnp.where(mask, _hessian(field, grid, q), 0.0)
+    h = 0.5 * (h + h.T)
+    scale = jnp.maximum(jnp.max(jnp.abs(h)), jnp.finfo(q.dtype).tiny)
+    h = jnp.where(mask, h, jnp.eye(3, dtype=q.dtype) * scale)  # inactive axes: stiff, no motion
+    lam = jnp.linalg.eigvalsh(h)[0]
+    step = jnp.linalg.solve(h, jnp.where(active, grad, 0.0))
+    tol = jnp.asarray(REST_TOL_STEPS, q.dtype)
+    return (lam > 0) & jnp.all(jnp.abs(step) <= tol) & (kinetic <= 0.5 * lam * tol * tol)
+
+
+# ----------------------------------------------------------------- vector fields
+def _vf_overdamped(s, y, args):
+    field, grid, co = args  # grid arrives through args as a static (hashable) leaf
+    _, grad = potential_and_gradient(field, grid, co.q0 + y)
+    return -co.drive * grad
+
+
+def _vf_inertial(s, y, args):
+    field, grid, co = args
+    d, u = y
+    _, grad = potential_and_gradient(field, grid, co.q0 + d)
+    return u, -co.drive * grad - co.damp * u
+
+
+# The inertial model split for an IMEX solver (:data:`IMEX`): the force is the explicit
+# term, the kinematics and the damping (linear, with a constant Jacobian) the implicit one.
+# The implicit solve then never sees the force: the force is piecewise smooth (its
+# Jacobian jumps at every grid line) and, in float32, quantized by the rounding of the
+# position q0 + d (one unit in the last place of an index of a few hundred is 1.5e-5 to
+# 6e-5 grid steps; times a stiff axis, such as the rounded V of the energy across y = 0 of
+# a four-pad chip, a jump of 1e-5 of the reference force). A Newton iteration on the whole
+# vector field (Kvaerno5) stalled on those jumps, or oscillated across them, and each
+# failed solve rejected the step and cut it five-fold: the step-size collapse of the
+# calibrated (heavily damped) inertial runs.
+def _vf_force(s, y, args):
+    """Explicit part of the split inertial model: ``(0, -drive * grad Phi)``."""
+    field, grid, co = args
+    d, u = y
+    _, grad = potential_and_gradient(field, grid, co.q0 + d)
+    return jnp.zeros_like(u), -co.drive * grad
+
+
+def _vf_damping(s, y, args):
+    """Implicit part of the split inertial model: ``(u, -damp * u)``, linear in the state."""
+    field, grid, co = args
+    d, u = y
+    return u, -co.damp * u
+
+
+#: The IMEX (additive Runge-Kutta) solvers the inertial model is split for.
+IMEX = (diffrax.KenCarp3, diffrax.KenCarp4, diffrax.KenCarp5)
+
+#: Tolerance of the implicit stages' Newton (chord) iteration, relative and absolute, in
+#: units of the state. The implicit part is linear, so one iteration solves it to round-off
+#: and this tolerance only decides when to stop: the iteration stops once a correction is
+#: below 1e-4 of it (diffrax's VeryChord, float32) and must see that happen above round-off
+#: (eps / 1e-2 = 1.2e-5 < 1e-4). With the step-size controller's own tolerances (1.2e-5 in
+#: float32) the corrections stall at round-off, a unit in the last place, and the solve
+#: fails (measured: corrections repeating at 2.6e-4 of the tolerance).
+ROOT_TOL = 1e-2
+
+
+def stiff_solver():
+    """The solver for heavily damped inertial runs: diffrax KenCarp5 (IMEX, 5th order) on
+    the split model, with a Newton tolerance the implicit stages can meet (:data:`ROOT_TOL`)."""
+    return diffrax.KenCarp5(root_finder=diffrax.VeryChord(rtol=ROOT_TOL, atol=ROOT_TOL))
+
+
+def _weighted_rms(weights, err):
+    """RMS norm of the scaled error ``(d, u)`` with the velocity errors weighted per axis."""
+    d, u = err
+    return optx.rms_norm((d, weights * u))
+
+
+def error_norm(co: _Coeffs):
+    """The step-size controller's norm for the inertial state ``(d, u)``.
+
+    A velocity error matters through the distance it carries the chip before the damping
+    removes it: ``1 / damp`` time units where ``damp > 1`` (heavy damping), about one
+    time unit otherwise. So velocity errors are weighted by ``1 / max(1, damp)``: lightly
+    damped runs keep the plain RMS norm; in heavily damped ones the velocity, slaved to the
+    force (``u = drive F / damp``), is not asked for more relative accuracy than the force
+    has (its round-off, up to the landscape's noise floor, was 3e-5 of the velocity while
+    the tolerance asked for 1.2e-5: the steps shrank to a twentieth of a grid step)."""
+    return jax.tree_util.Partial(_weighted_rms, 1.0 / jnp.maximum(co.damp, 1.0))
+
+
+def _split(y, inertial: bool):
+    return y if inertial else (y, jnp.zeros_like(y))
+
+
+def _energy(field: Field, grid: Grid, q):
+    """Landscape energy E (:func:`simulator.motion.interpolate`) at q, read at the nearest
+    point of the grid where q has passed a wall (a cut side, an end of a bounded twist
+    axis): the run stops there with EDGE and reports the edge value, as Phi repeats it,
+    never the wall's +inf."""
+    lo, hi = [], []
+    for k, n in enumerate(grid.shape):
+        walls = (True, True) if k == 0 and not grid.wrap else grid.cut[k]
+        lo.append(0.0 if walls[0] else -np.inf)
+        hi.append(n - 1.0 if walls[1] else np.inf)
+    return interpolate(field, grid, jnp.clip(q, jnp.asarray(lo, q.dtype), jnp.asarray(hi, q.dtype)))
+
+
+def _save(y, args, inertial: bool):
+    field, grid, co = args
+    d, u = _split(y, inertial)
+    q = co.q0 + d
+    phi, _ = potential_and_gradient(field, grid, q)
+    return {
+        "q": q,
+        "v": u / co.tau,
+        "energy": _energy(field, grid, q),
+        "potential": phi,
+        "kinetic": jnp.sum(co.ke * u * u),
+    }
+
+
+def _stop(y, args, inertial: bool):
+    field, grid, co = args
+    d, u = _split(y, inertial)
+    q = co.q0 + d
+    _, grad = potential_and_gradient(field, grid, q)
+    converged, edge = _stop_flags(field, grid, co, q, grad, jnp.sum(co.ke * u * u))
+    return converged | edge
+
+
+# Module-level functions (not closures made per call), so that eager calls hit
+# diffrax's compilation cache: it keys on function identity.
+def _save_overdamped(s, y, args):
+    return _save(y, args, False)
+
+
+def _save_inertial(s, y, args):
+    return _save(y, args, True)
+
+
+def _stop_overdamped(s, y, args, **kwargs):
+    return _stop(y, args, False)
+
+
+def _stop_inertial(s, y, args, **kwargs):
+    return _stop(y, args, True)
+
+
+def _mechanical(y, args, inertial: bool):
+    """Mechanical energy Phi + kinetic (J) of a solver state."""
+    field, grid, co = args
+    d, u = _split(y, inertial)
+    return potential_and_gradient(field, grid, co.q0 + d)[0] + jnp.sum(co.ke * u * u)
+
+
+class _GuardedController(diffrax.AbstractAdaptiveStepSizeController):
+    """A PID controller that also rejects a step which (a) raises the mechanical energy
+    more than the noise floor above the lowest value accepted so far or (b) moves more
+    than one grid step along any axis.
+
+    Why: the force is piecewise linear between grid nodes. A step that spans several
+    cells can skip a narrow feature (a plateau, a ridge, the cusp) while the embedded
+    error estimate, which assumes a smooth right-hand side, stays small: measured, a
+    lightly damped chip crossing a four-pad-like plateau gained 0.2 pixel-forces of
+    energy in one 44 px step. Capping the motion at one cell per step makes every kink
+    visible to the estimate (the same step bound as the greedy and gradient steppers);
+    the energy test makes the Lyapunov property hold on every accepted step. A rejected
+    step is retried from the same point with a shorter step; after an accepted step the
+    next one is capped so that at the same speed it moves about 0.9 grid steps.
+    """
+
+    inner: diffrax.PIDController
+    rtol: float
+    atol: float
+    norm: Callable
+    inertial: bool = eqx.field(static=True)
+
+    def wrap(self, direction):
+        return self
+
+    def init(self, terms, t0, t1, y0, dt0, args, func, error_order):
+        t1, inner = self.inner.init(terms, t0, t1, y0, dt0, args, func, error_order)
+        return t1, (inner, _mechanical(y0, args, self.inertial))
+
+    def adapt_step_size(
+        self, t0, t1, y0, y1_candidate, args, y_error, error_order, controller_state
+    ):
+        # The state carries the lowest mechanical energy accepted so far: the rise is
+        # measured from it, not from the last step, so rises within the floor cannot add
+        # up over a long (lightly damped, ringing) run (measured before: 3 floors above
+        # the lowest value after 4700 steps).
+        controller_state, lowest = controller_state
+        keep, next_t0, next_t1, made_jump, state, result = self.inner.adapt_step_size(
+            t0, t1, y0, y1_candidate, args, y_error, error_order, controller_state
+        )
+        field = args[0]
+        d0, _ = _split(y0, self.inertial)
+        d1, _ = _split(y1_candidate, self.inertial)
+        moved = jnp.max(jnp.abs(d1 - d0))
+        h1 = _mechanical(y1_candidate, args, self.inertial)
+        rise = h1 - lowest
+        ok = (rise <= field.floor) & (moved <= 1.0) & jnp.isfinite(rise)
+        dt = t1 - t0
+        veto = keep & ~ok
+        shrink = jnp.clip(0.9 / jnp.maximum(moved, 1e-30), 0.1, 0.5)
+        next_t0 = jnp.where(veto, t0, next_t0)
+        next_t1 = jnp.where(veto, t0 + dt * shrink, next_t1)
+        state = jax.tree_util.tree_map(
+            lambda old, new: jnp.where(veto, old, new) if isinstance(new, jax.Array) else new,
+            controller_state,
+            state,
+        )
+        keep = keep & ok
+        lowest = jnp.where(keep, jnp.minimum(lowest, h1), lowest)
+        cap = dt * 0.9 / jnp.maximum(moved, 1e-30)
+        next_t1 = jnp.where(keep, next_t0 + jnp.minimum(next_t1 - next_t0, cap), next_t1)
+        return keep, next_t0, next_t1, made_jump, (state, lowest), result

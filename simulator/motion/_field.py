@@ -1,0 +1,253 @@
+"""The steppers' view of a landscape, and exact reads of it.
+
+Owns the :class:`Field` (the landscape padded on every side with what lies beyond it, a
+JAX pytree; :func:`pad_energy`, :func:`make_field`, :func:`field_and_grid`) on its static
+:class:`~simulator.landscape.PoseGrid` (:data:`Grid`), and every look-up the steppers and
+the dynamics make on it: energies at integer grid indices (:func:`lookup`, and the
+(3, 3, 3) and (4, 4, 4) blocks of :func:`neighbourhood` and :func:`block`), trilinear
+interpolation (:func:`interpolate`) and the noise-floored gradient (:func:`gradient`)
+at fractional indices, and the tests on the grid's cut sides (:func:`at_cut_edge`,
+:func:`clamp_start`). Index units as in :mod:`simulator.motion`, which holds the
+steppers and re-exports every name here.
+"""
+
+from __future__ import annotations
+
+import functools
+import itertools
+from dataclasses import dataclass, replace
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from simulator.landscape import Landscape, PoseGrid
+
+
+def enable_float64() -> None:
+    """Let a float64 landscape stay float64 inside the steppers: JAX's ``jax_enable_x64``,
+    switched on where a stepper's view of a landscape is made (:func:`make_field`), not
+    when a module is imported. float32 landscapes still compute in float32."""
+    if not jax.config.jax_enable_x64:
+        jax.config.update("jax_enable_x64", True)
+
+
+#: Cells of padding on every side of :attr:`Field.padded` (see :func:`pad_energy`): enough
+#: for a (4, 4, 4) block around any clipped base index (:func:`block`).
+PAD = 4
+
+
+@functools.partial(jax.tree_util.register_dataclass, data_fields=["padded", "floor", "best", "scale"],
+                   meta_fields=["pin", "align_tol"])
+@dataclass(frozen=True)
+class Field:
+    """The landscape arrays a stepper reads, and the rules that end a run on them.
+
+    padded: (T + 2 PAD, Ny + 2 PAD, Nx + 2 PAD) joules, ``[twist, y, x]``: the landscape
+        with what lies beyond each side written in (:func:`pad_energy`), so a look-up is
+        one gather with no bounds logic. Node (it, iy, ix) is ``padded[it + PAD, iy +
+        PAD, ix + PAD]``.
+    floor: noise floor (J): differences at or below it are ties.
+    best: (3,) grid indices (it, iy, ix) of the global minimum.
+    scale: max |E| over the landscape (J), the energy scale of force references.
+    pin: contact-angle hysteresis, the pinning work over one grid step along (twist, y,
+        x) in J (:mod:`simulator.physics`); zeros = none, today's stopping rules
+        exactly. Static (part of the pytree's structure): jit compiles the rule in or out.
+    align_tol: (twist steps, px) within which a final pose counts as aligned (static).
+    """
+
+    padded: jax.Array
+    floor: jax.Array
+    best: jax.Array
+    scale: jax.Array
+    pin: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    align_tol: tuple[float, float] = (1.0, 1.0)
+
+    @property
+    def dtype(self):
+        return self.padded.dtype
+
+    def _replace(self, **changes) -> Field:
+        """A copy with some fields changed (as a NamedTuple's ``_replace``)."""
+        return replace(self, **changes)
+
+
+#: The steppers' static grid is the landscape's :class:`~simulator.landscape.PoseGrid`.
+Grid = PoseGrid
+
+
+def pad_energy(energy: np.ndarray, wrap: bool, cut) -> np.ndarray:
+    """The landscape with PAD cells on every side holding what lies beyond it: past an
+    uncut x/y side 0 (no contact); past a cut side, or the end of a non-periodic twist
+    axis, +inf (a wall); a periodic twist axis wraps around. A corner is a wall when
+    either of its sides is. Index clipping into the pad (:func:`lookup`) then gives the
+    energy anywhere, however far outside."""
+    energy = np.asarray(energy)
+    out = np.pad(energy, ((0, 0), (PAD, PAD), (PAD, PAD)))
+    (_, _), (y_lo, y_hi), (x_lo, x_hi) = cut
+    if y_lo:
+        out[:, :PAD, :] = np.inf
+    if y_hi:
+        out[:, -PAD:, :] = np.inf
+    if x_lo:
+        out[:, :, :PAD] = np.inf
+    if x_hi:
+        out[:, :, -PAD:] = np.inf
+    if wrap:
+        return np.pad(out, ((PAD, PAD), (0, 0), (0, 0)), mode="wrap")
+    return np.pad(out, ((PAD, PAD), (0, 0), (0, 0)), constant_values=np.inf)
+
+
+def make_field(energy, grid: PoseGrid, floor, best, pin: tuple[float, float, float] = (0.0, 0.0, 0.0),
+               align_tol: tuple[float, float] = (1.0, 1.0)) -> Field:
+    """A :class:`Field` from a (T, Ny, Nx) energy array (J) on ``grid``."""
+    enable_float64()
+    energy = np.asarray(energy)
+    dt = energy.dtype
+    return Field(
+        padded=jnp.asarray(pad_energy(energy, grid.wrap, grid.cut)),
+        floor=jnp.asarray(floor, dt),
+        best=jnp.asarray(best, dt),
+        scale=jnp.asarray(np.abs(energy).max() if energy.size else 0.0, dt),
+        pin=tuple(float(v) for v in pin),
+        align_tol=(float(align_tol[0]), float(align_tol[1])),
+    )
+
+
+def field_and_grid(ls: Landscape, rg_px: float | None = None, dtype=None, pin: tuple[float, float, float] = (0.0, 0.0, 0.0),
+                   align_tol: tuple[float, float] = (1.0, 1.0)) -> tuple[Field, PoseGrid]:
+    """The stepper view of a landscape: its arrays and its pose grid. ``rg_px``: the chip's
+    radius of gyration in px, when it differs from the grid's own; ``pin``: the pinning
+    work per grid step (J, twist/y/x) of contact-angle hysteresis."""
+    e = ls.energy if dtype is None else ls.energy.astype(dtype)
+    it, iy, ix = ls.minimum_index()  # the global minimum: ties decided by position (Landscape.minimum_index)
+    grid = ls.grid if rg_px is None else replace(ls.grid, rg_px=float(rg_px))
+    return make_field(e, grid, ls.noise_floor_J, [it, iy, ix], pin, align_tol), grid
+
+
+# ----------------------------------------------------------------- look-ups
+def lookup(field: Field, grid: Grid, it, iy, ix):
+    """Energy at integer grid indices (broadcasting). Beyond an uncut x/y side: 0 (no
+    contact); beyond a cut side or the end of a non-periodic twist axis: +inf (a wall
+    the steppers never cross; they stop at a cut side first). One gather from
+    :attr:`Field.padded`: indices past the pad are clipped into it, where the value is
+    the same."""
+    t, ny, nx = grid.shape
+    itw = jnp.mod(it, t) if grid.wrap else jnp.clip(it, -PAD, t - 1 + PAD)
+    return field.padded[itw + PAD, jnp.clip(iy, -PAD, ny - 1 + PAD) + PAD, jnp.clip(ix, -PAD, nx - 1 + PAD) + PAD]
+
+
+def _cube(field: Field, grid: Grid, b, side: int):
+    """Energies at ``b + (i, j, k)``, i, j, k in -1 .. side - 2, as a (side, side, side)
+    array equal to :func:`lookup`'s values.
+
+    One base index is clipped (far enough inside the pad that the whole cube stays in
+    it, whose values equal those farther out), then the cube is read as side**2 rows of
+    ``side`` cells of the flattened padded array: under vmap one gather of short slices,
+    measured 1.45x faster per greedy step than 27 single look-ups."""
+    t, ny, nx = grid.shape
+    sy, st = nx + 2 * PAD, (ny + 2 * PAD) * (nx + 2 * PAD)
+    itype = jnp.int32 if field.padded.size < 2**31 else jnp.int64
+    lo, hi = PAD - 1, PAD - (side - 2)  # the cube reaches 1 cell below b, side - 2 above
+
+    def clip(i, n):
+        return jnp.clip(i, -lo, n - 1 + hi).astype(itype) + PAD
+
+    itw = (jnp.mod(b[0], t).astype(itype) + PAD) if grid.wrap else clip(b[0], t)
+    base = itw * st + clip(b[1], ny) * sy + clip(b[2], nx)
+    span = range(-1, side - 1)
+    rows = jnp.asarray([dt * st + dy * sy - 1 for dt in span for dy in span], itype)
+    flat = field.padded.reshape(-1)
+    return jax.vmap(lambda r: jax.lax.dynamic_slice(flat, (base + r,), (side,)))(rows).reshape(side, side, side)
+
+
+def neighbourhood(field: Field, grid: Grid, idx):
+    """Energies at the 27 nodes ``idx + BLOCK_MOVES`` (the (3, 3, 3) block around idx,
+    ``(dt, dy, dx)`` lexicographic), exactly as :func:`lookup` gives them (:func:`_cube`)."""
+    return _cube(field, grid, idx, 3).reshape(27)
+
+
+def at_cut_edge(grid: Grid, q, margin: float = 0.0):
+    """True where fractional indices q lie within ``margin`` of a cut side of the grid."""
+    out = False
+    for k, n in enumerate(grid.shape):
+        lo, hi = grid.cut[k]
+        if lo:
+            out = out | (q[k] <= margin)
+        if hi:
+            out = out | (q[k] >= n - 1 - margin)
+    return jnp.asarray(out)
+
+
+def clamp_start(grid: Grid, q):
+    """A start past the end of a bounded (non-periodic) twist axis, e.g. a twist within
+    half a step of the range that greedy rounds outward, starts at that end: beyond it
+    lies a wall (+inf), which no energy output may show."""
+    if grid.wrap:
+        return q
+    return q.at[0].set(jnp.clip(q[0], 0, grid.shape[0] - 1))
+
+
+def _trilinear(f, corner_energy, dtype):
+    """Sum over the 8 cell corners of weight * ``corner_energy(corner)`` for fractions
+    f (..., 3); a corner of weight 0 adds 0 even at a wall (0 * inf)."""
+    total = jnp.zeros(f.shape[:-1], dtype)
+    for corner in itertools.product((0, 1), repeat=3):
+        w = jnp.ones(f.shape[:-1], dtype)
+        for k, c in enumerate(corner):
+            w = w * (f[..., k] if c else 1 - f[..., k])
+        total = total + jnp.where(w > 0, w * corner_energy(corner), 0.0)
+    return total
+
+
+def interpolate(field: Field, grid: Grid, q):
+    """Energy at fractional indices q = (it, iy, ix) by trilinear interpolation."""
+    q = jnp.asarray(q, field.dtype)
+    base = jnp.floor(q)
+    b = base.astype(jnp.int32)
+    return _trilinear(q - base, lambda c: lookup(field, grid, b[..., 0] + c[0], b[..., 1] + c[1], b[..., 2] + c[2]), field.dtype)
+
+
+def block(field: Field, grid: Grid, b):
+    """Energies at ``b + (i, j, k)``, i, j, k in -1..2: the (4, 4, 4) block that holds
+    every corner of the trilinear interpolations at q and q +- one step along any axis,
+    for b = floor(q) (:func:`_cube`)."""
+    return _cube(field, grid, b, 4)
+
+
+def gradient(field: Field, grid: Grid, q):
+    """dE/dq (J per index unit) by central differences of one grid step; differences
+    at or below the noise floor are 0, so plateaus are exactly flat. Next to a wall (the
+    end of a bounded twist axis, a cut side) the one-sided difference away from the wall
+    is used, so a chip at the end of its twist range still feels the torque back into
+    the range.
+
+    The seven trilinear interpolations (at q and q +- one step along each axis) read
+    one (4, 4, 4) :func:`block` and share q's position within its cell."""
+    dt = field.dtype
+    q = jnp.asarray(q, dt)
+    base = jnp.floor(q)
+    f = q - base
+    blk = block(field, grid, base.astype(jnp.int32))
+
+    def interp(o):  # :func:`interpolate` at q + o, from the block
+        return _trilinear(f, lambda c: blk[1 + o[0] + c[0], 1 + o[1] + c[1], 1 + o[2] + c[2]], dt)
+
+    e0 = interp((0, 0, 0))
+    out = []
+    for k in range(3):
+        step = [0, 0, 0]
+        step[k] = 1
+        ep = interp(tuple(step))
+        step[k] = -1
+        em = interp(tuple(step))
+        fp, fm = jnp.isfinite(ep), jnp.isfinite(em)
+        central = jnp.where(fp & fm, ep - em, 0.0) / 2
+        one_sided = jnp.where(fm, e0 - jnp.where(fm, em, 0.0), jnp.where(fp, jnp.where(fp, ep, 0.0) - e0, 0.0))
+        de = jnp.where(fp & fm, central, jnp.where(jnp.isfinite(e0), one_sided, 0.0))
+        # the floor applies to the energy difference actually taken (two steps or one)
+        span = jnp.where(fp & fm, 2.0, 1.0)
+        out.append(jnp.where(jnp.abs(de) * span <= field.floor, 0.0, de))
+    if grid.shape[0] == 1:
+        out[0] = jnp.zeros_like(out[0])
+    return jnp.stack(out)

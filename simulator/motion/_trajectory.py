@@ -1,0 +1,414 @@
+"""One trajectory from one start: the host side around the pure steppers.
+
+:func:`simulate` builds only the part of the landscape a run needs (see
+:class:`_Boxes`): the stepper runs on a box of translations and a band of twists,
+stops with status EDGE when it reaches a side, and resumes from where it stopped
+once the band (or box) has moved. Greedy and gradient stepping are memoryless, so the path
+equals a run on the full landscape (tested), at a fraction of the cost
+(``Trajectory.cost``).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import jax.numpy as jnp
+import numpy as np
+
+from patterns.errors import InputError
+from patterns.resources import require_fits
+from simulator.core import DEFAULT_MAX_STEPS, DEG_TOL, MAX_STEPS_LIMIT, METHODS, tiny
+from simulator.landscape import (
+    Landscape,
+    PoseGrid,
+    build_landscape,
+    consecutive_runs,
+    global_minimum,
+)
+from simulator.motion._field import field_and_grid
+from simulator.motion._steppers import DYNAMIC, RunState, flat_at, jitted
+from simulator.motion._stepping import (
+    CONVERGED,
+    EDGE,
+    MAX_STEPS,
+    OUTCOMES,
+    classify,
+    reference_gradient,
+)
+from simulator.physics import align_tolerance, pin_per_index
+from simulator.scene import Scene
+
+#: Largest |x|, |y| of a start in pixels (float32 holds every whole pixel up to 2**24, and
+#: int32 grid indices have room) and largest |twist| in degrees (as TwistGrid's range).
+MAX_START_PX, MAX_START_TWIST_DEG = 2**24, 3600.0
+#: Peak bytes per recorded step of one run (device buffers, their host copies and the
+#: Trajectory's float64 path and energies): stepping and dynamics.
+PATH_BYTES_PER_STEP = {"stepping": 96, "dynamics": 320}
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """A path with its energy curve and outcome.
+
+    path: (N, 3) poses (x_um, y_um, twist_deg), start first; twist unwrapped.
+    energy_J: (N,) energy per recorded pose. t_s: (N,) times for dynamics, else None.
+    steps: moves (stepping) or accepted solver steps (dynamics). time_s: final time
+    (dynamics) or None. cost: landscape twists computed vs the full axis, seconds.
+    """
+
+    method: str
+    outcome: str
+    path: np.ndarray
+    energy_J: np.ndarray
+    steps: int
+    time_s: float | None = None
+    t_s: np.ndarray | None = None
+    cost: dict = field(default_factory=dict)
+    #: The scene's global minimum (x_um, y_um, twist_deg) the outcome was measured against.
+    optimum: tuple[float, float, float] | None = None
+    #: With a finite meniscus, the final pose of a gradient or dynamic run refined below the
+    #: grid (the minimum of the interpolated landscape next to it, :mod:`simulator.landscape`).
+    refined: tuple[float, float, float] | None = None
+
+    @property
+    def start(self) -> tuple[float, float, float]:
+        return tuple(float(v) for v in self.path[0])
+
+    @property
+    def final(self) -> tuple[float, float, float]:
+        return tuple(float(v) for v in self.path[-1])
+
+    def to_json(self) -> dict:
+        def pose(p):
+            return {"x_um": float(p[0]), "y_um": float(p[1]), "twist_deg": float(p[2])}
+
+        path = []
+        for i, p in enumerate(self.path):
+            row = pose(p) | {"energy_J": float(self.energy_J[i])}
+            if self.t_s is not None:
+                row["t_s"] = float(self.t_s[i])
+            path.append(row)
+        return {
+            "method": self.method,
+            "outcome": self.outcome,
+            "start": pose(self.path[0]),
+            "final": pose(self.path[-1]),
+            "steps": int(self.steps),
+            "time_s": self.time_s,
+            "path": path,
+            "cost": self.cost,
+            "optimum": None if self.optimum is None else pose(self.optimum),
+            "final_refined": None if self.refined is None else pose(self.refined),
+        }
+
+
+def radius_of_gyration_px(scene: Scene) -> float:
+    """sqrt(polar moment / area) of the chip's wettable footprint about its centre (px)
+    (:attr:`Scene.chip_rg_px`, computed once per scene)."""
+    return scene.chip_rg_px
+
+
+def is_stiff(method: str, field, grid, params) -> bool:
+    """An inertial run is stiff when inertia relaxes (m / c) much faster than the chip
+    creeps one pixel under a typical force (overdamped, c s / F): then the IMEX solver
+    (:func:`simulator.motion.stiff_solver`) takes ~100 steps where an explicit one takes ~10^4."""
+    if method != "inertial":
+        return False
+    f_ref = float(reference_gradient(field, grid)) / (grid.um_per_px * 1e-6)  # N (J per px -> J per m)
+    tau_m = params.mass_kg / params.damping_N_s_m
+    tau_c = params.damping_N_s_m * grid.um_per_px * 1e-6 / max(f_ref, tiny())
+    return tau_m < 0.1 * tau_c
+
+
+def price_run(scene: Scene, method: str, max_steps: int) -> None:
+    """Refuse, before anything is compiled or allocated, a ``max_steps`` that overflows the
+    step counter or whose recorded path would not fit the scene's memory budget."""
+    if isinstance(max_steps, bool) or not isinstance(max_steps, int | np.integer) or max_steps < 1:
+        raise InputError(f"max steps must be a whole number >= 1, got {max_steps!r}")
+    if max_steps > MAX_STEPS_LIMIT:
+        raise InputError(f"max steps must be at most {MAX_STEPS_LIMIT:,} (the step counter is 32-bit), got {max_steps:,}")
+    per_step = PATH_BYTES_PER_STEP["dynamics" if method in ("overdamped", "inertial") else "stepping"]
+    require_fits(f"the path of up to {max_steps:,} steps", float(max_steps + 1) * per_step, "use a smaller --max-steps", scene.memory_budget_mb)
+
+
+def simulate(
+    scene: Scene,
+    start: tuple[float, float, float],
+    method: str = "greedy",
+    max_steps: int = DEFAULT_MAX_STEPS,
+    landscape: Landscape | None = None,
+    band_steps: int = 3,
+    band_px: int = 48,
+    dynamics=None,
+    backend: str = "auto",
+) -> Trajectory:
+    """Run one trajectory from ``start`` = (x_um, y_um, twist_deg).
+
+    Args:
+        scene: what to simulate.
+        start: the initial pose. Greedy snaps it to the nearest grid pose.
+        method: "greedy", "gradient", "overdamped" or "inertial".
+        max_steps: bound on moves (or solver steps for dynamics).
+        landscape: a precomputed landscape to run on (its global minimum decides
+            "aligned"). Default: greedy and gradient build only what the run needs
+            (:class:`_Boxes`: translations between the start and the centre plus
+            ``band_px`` px, twists within ``band_steps`` steps of the chip's, each plane
+            once); dynamics build the whole landscape (the chip may overshoot).
+        dynamics: :class:`simulator.motion.DynamicsParams` for the dynamic methods
+            (default: from the scene's chip, liquid and calibration).
+    """
+    if method not in METHODS:
+        raise InputError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+    price_run(scene, method, max_steps)
+    if len(start) != 3 or not all(math.isfinite(v) for v in start):
+        raise InputError(f"start pose must be three finite numbers (um, um, deg), got {start}")
+    reach_um = MAX_START_PX * scene.um_per_px
+    if max(abs(start[0]), abs(start[1])) > reach_um or abs(start[2]) > MAX_START_TWIST_DEG:
+        raise InputError(
+            f"start pose {tuple(start)} is out of range: |x| and |y| must be at most {reach_um:g} um "
+            f"({MAX_START_PX} px) and |twist| at most {MAX_START_TWIST_DEG:g} deg"
+        )
+    if landscape is None:
+        require_start_in_window(scene, start)
+    dynamic = method in ("overdamped", "inertial")
+    if dynamic and dynamics is None:
+        from simulator.motion._dynamics_params import DynamicsParams
+
+        dynamics = DynamicsParams.from_scene(scene)
+    rg = radius_of_gyration_px(scene)
+    t0 = time.perf_counter()
+    ta = scene.twist_axis
+    axis, wrap, step = ((ta.values(), ta.periodic, ta.grid_step_deg) if landscape is None
+                        else (landscape.twist_deg, landscape.wrap, landscape.twist_step_deg))
+    n = len(axis)
+    if not wrap and n > 1 and not (axis[0] - step / 2 <= start[2] <= axis[-1] + step / 2):
+        raise InputError(f"start twist {start[2]:g} deg is outside the twist range {axis[0]:g}..{axis[-1]:g} deg")
+    if n == 1 and abs(start[2] - axis[0]) > DEG_TOL:
+        raise InputError(
+            f"start twist {start[2]:g} deg: this scene has one twist ({axis[0]:g} deg, twist turned off), "
+            f"so the start twist must be {axis[0]:g} deg; give that, or turn twist on"
+        )
+    pose = np.asarray(start, float)
+    boxes = _BoxCost()
+    around = _box_landscapes(scene, band_steps, band_px, backend, boxes)
+    next(around)
+    pieces = []
+    while True:
+        if landscape is not None:
+            ls = landscape
+        elif dynamic:
+            ls = build_landscape(scene, backend=backend)
+            boxes.count(ls)
+        else:
+            ls = around.send(pose)
+            if ls is None:  # moving the box would not move the chip: stop here
+                break
+        pin = pin_per_index(scene, ls.um_per_px, ls.twist_step_deg)
+        field, grid = field_and_grid(ls, rg, pin=pin, align_tol=align_tolerance(ls, pin, floats=scene.wall_profile is not None))
+        run = jitted(method, is_stiff(method, field, grid, dynamics))
+        state = run(field, grid, dynamics, jnp.asarray(grid.to_index(pose)), max_steps)
+        pieces.append(_to_trajectory(method, state, grid))
+        if int(state.status) != EDGE or landscape is not None or dynamic:
+            break
+        if sum(p.steps for p in pieces) >= max_steps:
+            break
+        pose = np.asarray(pieces[-1].final)
+    traj = _join(method, pieces)
+    status = int(state.status)
+    if traj.steps >= max_steps and (status != CONVERGED or traj.steps > max_steps):
+        status = MAX_STEPS
+        traj = Trajectory(method, "", traj.path[: max_steps + 1], traj.energy_J[: max_steps + 1], max_steps, traj.time_s, None if traj.t_s is None else traj.t_s[: max_steps + 1])
+    # Outcome: flatness where the run ended; "aligned" against the scene's global minimum
+    # (simulator.landscape: the same pose every command uses, found without the full landscape).
+    q_end = grid.to_index(np.asarray(traj.final))
+    flat = bool(flat_at(field, grid, state.flat, q_end))
+    opt = global_minimum(scene, landscape=landscape if landscape is not None else (ls if dynamic else None),
+                         evaluated=boxes.built, backend=backend)
+    best = jnp.asarray(grid.to_index(np.asarray(opt.pose)), field.dtype)
+    timed_out = dynamic and traj.steps < max_steps  # the simulated time ran out, not the steps
+    out = classify(field._replace(best=best), grid, q_end, float(traj.energy_J[-1]), status, flat, timed_out)
+    full = full_landscape_poses(scene) if landscape is None else landscape.energy.size
+    cost = {
+        "poses_computed": int(boxes.poses),
+        "poses_full": int(full),
+        "fraction_of_full": boxes.poses / full,
+        "planes": boxes.planes,
+        "landscape_s": boxes.seconds,
+        "total_s": time.perf_counter() - t0,
+        "minimum_poses": int(opt.poses),
+        "minimum_s": opt.seconds,
+        "minimum_how": opt.how,
+    }
+    refined = None
+    outcome = OUTCOMES[int(out)]
+    if scene.meniscus_height_um is not None and not any(pin) and method != "greedy" and outcome in ("aligned", "local_minimum"):
+        from simulator.landscape import refine_minimum
+
+        r = refine_minimum(ls, *traj.final)
+        refined = (r["x_um"], r["y_um"], r["twist_deg"])
+    return Trajectory(method, outcome, traj.path, traj.energy_J, traj.steps, traj.time_s, traj.t_s, cost,
+                      optimum=opt.pose, refined=refined)
+
+
+@dataclass
+class _BoxCost:
+    """What the boxes of one run cost (poses, planes, seconds) and the landscapes built for
+    the current box (reused to find the global minimum)."""
+
+    poses: int = 0
+    planes: int = 0
+    seconds: float = 0.0
+    built: list = field(default_factory=list)
+
+    def count(self, ls: Landscape) -> None:
+        self.poses += ls.energy.size
+        self.planes += ls.energy.shape[0]
+        self.seconds += ls.stats["seconds"]
+
+
+def _fit_box(box, pose_px: np.ndarray, margin: int) -> tuple[tuple[int, int], int]:
+    """The square box (centre px, half-width px) holding the start, the aligned pose (0, 0),
+    the old box and a margin."""
+    pts = [(0, 0), tuple(pose_px)]
+    if box is not None:
+        (cx, cy), h = box
+        pts += [(cx - h, cy - h), (cx + h, cy + h)]
+    pts = np.array(pts, float)
+    lo, hi = pts.min(axis=0) - margin, pts.max(axis=0) + margin
+    center = np.round((lo + hi) / 2).astype(int)
+    return (int(center[0]), int(center[1])), int(np.ceil(((hi - lo) / 2).max()))
+
+
+def _outside(t: Landscape, pose_px: np.ndarray) -> bool:
+    """The pose lies on or next to a cut side of the box ``t``: the box must grow."""
+    s = t.um_per_px
+    x, y = pose_px * s
+    (xlo, xhi), (ylo, yhi) = t.cut[2], t.cut[1]
+    return bool(
+        (xlo and x <= t.x_um[0] + s) or (xhi and x >= t.x_um[-1] - s) or (ylo and y <= t.y_um[0] + s) or (yhi and y >= t.y_um[-1] - s)
+    )
+
+
+def require_start_in_window(scene: Scene, start) -> None:
+    """InputError for a start beyond the scene's translation window (``window_um``): the pose grid
+    ends there, so there is no landscape to step on (the run would grow its box forever)."""
+    w = scene.window_um
+    if w is not None and max(abs(start[0]), abs(start[1])) > w:
+        raise InputError(f"start pose ({start[0]:g}, {start[1]:g}) um lies outside the translation window of +-{w:g} um "
+                         f"(--window / window_um); widen the window to at least {max(abs(start[0]), abs(start[1])):g} um, or leave it out")
+
+
+def _extent(t: Landscape) -> tuple[float, float, float, float]:
+    """The translations (um) a box landscape spans: x first, x last, y first, y last."""
+    return (float(t.x_um[0]), float(t.x_um[-1]), float(t.y_um[0]), float(t.y_um[-1]))
+
+
+def _box_landscapes(scene: Scene, band_steps: int, band_px: int, backend: str, cost: _BoxCost):
+    """The part of the landscape one run needs, built as the chip goes: a generator that
+    is sent the chip's pose and yields the landscape around it (None: the same as last
+    time, so moving the box would not move the chip).
+
+    Translations: one square box holding the start, the aligned pose (0, 0) and a
+    margin of ``band_px``; grown (and rebuilt) only if the chip leaves it.
+    Twists: a band of +-``band_steps`` around the chip's twist, re-centred whenever
+    the chip reaches its end; every twist plane of the box is computed once (the plane
+    cache is this generator's own).
+    """
+    ta = scene.twist_axis
+    n, s = ta.count, scene.um_per_px
+    box, template, last = None, None, None
+    stuck = False  # the box grew and the landscape did not: the window (window_um) cuts it, growing again is futile
+    planes: dict[int, np.ndarray] = {}
+    pose = yield
+    while True:
+        pose_px = np.round(pose[:2] / s)
+        before = None
+        if box is None or (template is not None and not stuck and _outside(template, pose_px)):
+            before = None if template is None else _extent(template)
+            box = _fit_box(box, pose_px, band_px)
+            planes.clear()
+            cost.built.clear()
+        k = int(round((pose[2] - float(ta.values_at(0))) / ta.step_deg)) if n > 1 else 0
+        lo, hi = k - band_steps, k + band_steps
+        if n == 1 or (ta.periodic and hi - lo + 1 >= n):
+            lo, hi = 0, n - 1
+        elif not ta.periodic:
+            lo, hi = max(lo, 0), min(hi, n - 1)
+        if (lo, hi, box) == last:
+            pose = yield None
+            continue
+        last = (lo, hi, box)
+        want = list(range(lo, hi + 1))
+        (cx, cy), half = box
+        for run in consecutive_runs({j % n for j in want} - set(planes)):
+            ls = build_landscape(scene, twists=ta.values_at(np.asarray(run)), center_px=(cx, cy), half_px=half, backend=backend)
+            cost.count(ls)
+            cost.built.append(ls)
+            template = ls
+            planes.update({j: ls.energy[i] for i, j in enumerate(run)})
+        if before is not None and _extent(template) == before:
+            stuck = True
+        g = template.grid
+        grid = PoseGrid((len(want),) + g.shape[1:], g.um_per_px, ta, ta.periodic and len(want) == n,
+                        (ta.cut_of(lo, len(want)), g.cut[1], g.cut[2]), g.rg_px, g.x_first_px, g.y_first_px, lo)
+        pose = yield Landscape(
+            energy=np.stack([planes[j % n] for j in want]),
+            grid=grid,
+            delta_gamma=template.delta_gamma,
+            energy_scale_J=template.energy_scale_J,
+            stats=template.stats,
+        )
+
+
+def reference_landscape(scene: Scene, backend: str = "auto", reach_steps: int = 2, half_px: int = 16) -> Landscape:
+    """A small box around the aligned pose (0, 0, 0) that locates the global minimum.
+
+    Assumes the minimum lies within ``half_px`` px and ``reach_steps`` twist steps of
+    (0, 0, 0), as for a chip on its own pattern; pass a full landscape to
+    :func:`simulate` when it does not.
+    """
+    ta = scene.twist_axis
+    n = ta.count
+    if n > 1:
+        k0 = int(np.argmin(np.abs(ta.values())))
+        lo, hi = k0 - reach_steps, k0 + reach_steps
+        if not ta.periodic:
+            lo, hi = max(lo, 0), min(hi, n - 1)
+        twists = None if (ta.periodic and hi - lo + 1 >= n) else ta.values_at(np.arange(lo, hi + 1))
+    else:
+        twists = None
+    return build_landscape(scene, twists=twists, center_px=(0, 0), half_px=half_px, backend=backend)
+
+
+def full_landscape_poses(scene: Scene) -> int:
+    """Poses of the scene's full landscape (what a trajectory would cost without boxes)."""
+    from simulator.landscape import estimate_bytes
+
+    return estimate_bytes(scene) // np.dtype(scene.dtype).itemsize
+
+
+def _to_trajectory(method: str, state: RunState, grid) -> Trajectory:
+    n = int(state.step) + 1
+    idx = np.asarray(state.path)[:n]
+    energy = np.asarray(state.path_energy)[:n].astype(float)
+    dynamic = method in DYNAMIC
+    t_s = np.asarray(state.path_t)[:n].astype(float) if dynamic else None
+    time_s = float(state.time_s) if dynamic else None
+    return Trajectory(method, "", grid.to_pose(idx), energy, n - 1, time_s, t_s)
+
+
+def _join(method: str, pieces: list[Trajectory]) -> Trajectory:
+    path = np.concatenate([pieces[0].path] + [p.path[1:] for p in pieces[1:]])
+    energy = np.concatenate([pieces[0].energy_J] + [p.energy_J[1:] for p in pieces[1:]])
+    steps = sum(p.steps for p in pieces)
+    t_s = None
+    if pieces[0].t_s is not None:
+        offs, ts = 0.0, [pieces[0].t_s]
+        for prev, p in zip(pieces, pieces[1:], strict=False):
+            offs += prev.t_s[-1]
+            ts.append(p.t_s[1:] + offs)
+        t_s = np.concatenate(ts)
+    time_s = float(t_s[-1]) if t_s is not None else None
+    return Trajectory(method, "", path, energy, steps, time_s, t_s)

@@ -1,0 +1,43 @@
+"""Types of ``simulator.physics``'s names, loaded on first use (SPEC 1 lazy loading)."""
+
+from ._hysteresis import (
+    align_tolerance as align_tolerance,
+    contact_line_integrals_um as contact_line_integrals_um,
+    line_reach_um as line_reach_um,
+    parse_window as parse_window,
+    pin_per_index as pin_per_index,
+    pinning as pinning,
+    pinning_force_per_length as pinning_force_per_length,
+    sliding_pinning as sliding_pinning,
+    sliding_shares as sliding_shares,
+)
+from ._mechanics import (
+    DAMPING_CALIBRATION as DAMPING_CALIBRATION,
+    Chip as Chip,
+    Liquid as Liquid,
+    couette_damping as couette_damping,
+    couette_rotational_damping as couette_rotational_damping,
+    couette_torsional_damping as couette_torsional_damping,
+    meniscus_height_um as meniscus_height_um,
+    parallelepiped_force as parallelepiped_force,
+    parallelepiped_stiffness as parallelepiped_stiffness,
+)
+from ._meniscus import (
+    CHIP_BLUR_MIN_PX as CHIP_BLUR_MIN_PX,
+    WallProfile as WallProfile,
+    flat_wall_energy_J as flat_wall_energy_J,
+    flat_wall_stiffness_N_m as flat_wall_stiffness_N_m,
+    flat_wall_twist_stiffness_Nm as flat_wall_twist_stiffness_Nm,
+    kernel_image as kernel_image,
+    kernel_spectrum as kernel_spectrum,
+    margin_px as margin_px,
+    regime_warning as regime_warning,
+    require_height as require_height,
+    signed_distance_px as signed_distance_px,
+)
+from ._wetting import (
+    Materials as Materials,
+    contact_angle_deg as contact_angle_deg,
+    delta_gamma as delta_gamma,
+    gamma_wet as gamma_wet,
+)

@@ -1,0 +1,47 @@
+"""Types of ``simulator.scene``'s names, loaded on first use (SPEC 1 lazy loading)."""
+
+from ._accuracy import (
+    DEFAULT_PRESET as DEFAULT_PRESET,
+    KNOBS as KNOBS,
+    PRESETS as PRESETS,
+    Preset as Preset,
+    apply_preset as apply_preset,
+    feature_warning as feature_warning,
+    smallest_feature_um as smallest_feature_um,
+)
+from ._build import (
+    LAYOUT_KEYS as LAYOUT_KEYS,
+)
+from ._parts import (
+    Effects as Effects,
+    TwistGrid as TwistGrid,
+)
+from ._scene import (
+    DTYPES as DTYPES,
+    Scene as Scene,
+)
+from ._schema import (
+    SCHEMA as SCHEMA,
+    number as number,
+    read_scene_file as read_scene_file,
+    validate_scene as validate_scene,
+)
+from ._schema_kinds import (
+    ACCURACY_PRESETS as ACCURACY_PRESETS,
+    DXF_UNITS as DXF_UNITS,
+    MAX_ARRAY_ITEMS as MAX_ARRAY_ITEMS,
+    MAX_DEPTH as MAX_DEPTH,
+    MAX_SCENE_BYTES as MAX_SCENE_BYTES,
+    MONTECARLO_METHODS as MONTECARLO_METHODS,
+    Bool as Bool,
+    Bounds as Bounds,
+    FilePath as FilePath,
+    Number as Number,
+    Pose as Pose,
+    Size as Size,
+)
+from ._twist_axis import (
+    MAX_TWISTS as MAX_TWISTS,
+    TwistAxis as TwistAxis,
+    chip_symmetry as chip_symmetry,
+)

@@ -1,0 +1,309 @@
+"""What accuracy costs: presets of the accuracy knobs, and feature-size guidance.
+
+The landscape is a raster, so its accuracy is set by a few knobs: the pixel size
+(``um_per_px``), the twist step (``twist_step_deg``) and the float type (``dtype``).
+``benchmarks/accuracy.py`` measured each against exact polygon overlap
+(:mod:`simulator.testing`) on a 2-core AMD EPYC: energy error in % of the chip area
+(RMS / max over random poses), force error in % of the chip side x Delta_gamma
+(90th percentile), landscape time relative to "balanced":
+
+========  ==============================================  ===============  =========  ===========
+preset    knobs                                           energy RMS/max   force p90  cost
+========  ==============================================  ===============  =========  ===========
+fast      pixel = feature / 2 in [1, 4] um, 2 deg          0.08 / 0.4 %     8 %        0.03-0.17 x
+balanced  pixel = feature / 4 in [0.5, 1] um, 1 deg        0.015 / 0.1 %    3 %        1 x
+precise   pixel = feature / 8 in [0.25, 0.5] um, 0.5 deg   0.004 / 0.05 %   1 %        9-13 x
+========  ==============================================  ===============  =========  ===========
+
+("feature" is the pattern's smallest feature, :func:`smallest_feature_um`; the pixel size
+is rounded down to 1, 2, 2.5 or 5 x 10^k and kept in the range given. The bounds are
+the worst measured over the sweep's patterns and the whole pattern library, with a
+margin for pose sampling.) "balanced" is the default: 1 um/px, the scale of the source,
+for every library pattern except the finest jagged ones. Greedy final poses matched the
+exact greedy on the same grid in every measured case up to 4 um/px (at 8 um/px the final
+twist was off by 2 degrees on the 200 um patterns). float64 doubled the cost and
+changed no error (rasterization, not round-off, limits the accuracy), so every preset
+uses float32. For the 730 um four-pad, "balanced" costs about 2-3 s and 0.55 GB per
+landscape and "precise" about 30 s and 3.2 GB. For chips that large the twist step,
+not the pixel, limits the accuracy (a 1 degree step moves the chip's corners by 9 um):
+1 um/px with a 0.25 degree step measured 0.0007 % energy and 0.04 % force error at 5 x
+the cost, so set the twist step explicitly there.
+
+Presets never override a knob the user sets explicitly (:func:`apply_preset`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import shapely
+from shapely.geometry import Polygon
+from shapely.geometry.base import BaseGeometry
+
+from patterns.errors import InputError, positive
+from patterns.mask import Mask
+from simulator.core import REL_TOL
+
+__all__ = [
+    "DEFAULT_PRESET",
+    "KNOBS",
+    "PRESETS",
+    "Preset",
+    "apply_preset",
+    "feature_warning",
+    "smallest_feature_um",
+]
+
+
+# --------------------------------------------------------------------- feature size
+#: A vertex where the outline turns by more than this (degrees) is a corner.
+CORNER_DEG = 15.0
+#: The feature size is this quantile of the outline stretches (the shortest 10 % are
+#: slivers where teeth are clipped at a pattern corner, or the ends of a jagged edge);
+#: with 10 stretches or fewer it is the shortest.
+QUANTILE = 0.10
+
+
+def _geometry_of(pattern: Mask | BaseGeometry) -> tuple[BaseGeometry, float, float]:
+    """(geometry, simplification tolerance, corner merge distance), um, of a geometry or mask."""
+    if isinstance(pattern, BaseGeometry):
+        if pattern.is_empty:
+            raise InputError("pattern geometry is empty; nothing to measure")
+        return pattern, 0.05, 0.1
+    if not isinstance(pattern, Mask):
+        raise InputError(f"expected a shapely geometry or a patterns.mask.Mask, got {type(pattern).__name__}")
+    if pattern.geometry is not None:
+        return pattern.geometry, 0.05, 0.1
+    return _mask_outline(pattern), 0.5 * pattern.um_per_px, 1.5 * pattern.um_per_px
+
+
+def _mask_outline(mask: Mask) -> BaseGeometry:
+    """Polygons along the 0.5 level of the mask (marching squares on pixel centres), in um."""
+    from skimage import measure
+
+    mask.require_nonempty("pattern")
+    h, w = mask.shape
+    s = mask.um_per_px
+    data = np.pad(mask.data, 1)  # every contour closes
+    polys = []
+    for c in measure.find_contours(data, 0.5):
+        if len(c) < 4:
+            continue
+        x = (c[:, 1] - 1 + 0.5 - w / 2) * s
+        y = (h / 2 - (c[:, 0] - 1) - 0.5) * s
+        p = shapely.make_valid(Polygon(np.column_stack([x, y])))
+        if p.area > 0:
+            polys.append(p)
+    if not polys:
+        raise InputError("pattern: no outline at the 0.5 level; the mask has no pad a pixel wide")
+    geom = polys[0]
+    for p in polys[1:]:  # even-odd rule: nested outlines are holes, holes in holes are pads
+        geom = geom.symmetric_difference(p)
+    return geom
+
+
+def _stretches(ring_xy: np.ndarray, corner_deg: float, merge: float) -> np.ndarray:
+    """Outline lengths between consecutive corners of a closed ring (k + 1, 2).
+
+    Corners closer than ``merge`` along the outline count as one (a tip cut flat).
+    """
+    p = ring_xy[:-1]
+    seg = np.roll(p, -1, axis=0) - p  # segment i: vertex i -> i + 1
+    length = np.hypot(seg[:, 0], seg[:, 1])
+    keep = length > 0
+    p, seg, length = p[keep], seg[keep], length[keep]
+    prev = np.roll(seg, 1, axis=0)
+    turn = np.degrees(np.abs(np.arctan2(prev[:, 0] * seg[:, 1] - prev[:, 1] * seg[:, 0], (prev * seg).sum(axis=1))))
+    corners = np.flatnonzero(turn > corner_deg)
+    perimeter = length.sum()
+    if len(corners) < 2:
+        return np.array([perimeter / math.pi])  # no corners: a round shape, its diameter
+    cum = np.concatenate([[0.0], np.cumsum(length)])
+    at = cum[corners]  # outline position of each corner
+    gaps = np.diff(np.concatenate([at, [at[0] + perimeter]]))
+    long = gaps[gaps >= merge]
+    return long if long.size else np.array([perimeter / math.pi])
+
+
+def smallest_feature_um(pattern: Mask | BaseGeometry, corner_deg: float = CORNER_DEG) -> float:
+    """The smallest feature of a pattern (um): its narrowest gap, pad, defect or tooth.
+
+    What "feature" means here: the outline of every pad (and hole) is cut at its
+    *corners*, the vertices where it turns by more than ``corner_deg`` (15 degrees);
+    every straight or gently curved stretch between two corners is a feature of that
+    length (a pad's side, a defect's flank, one flank of a jagged tooth), and so is every
+    gap between two separate pads or between a hole and its pad's outline (their
+    distance). A shape without corners (a circle) counts with its diameter
+    (perimeter / pi). The result is the smallest of these, ignoring the shortest 2 % of
+    the stretches (slivers where teeth are clipped at a pattern corner).
+
+    Examples: a 200 um square gives 200; a 730/50 four-pad gives 50 (the gap);
+    defect type A (h 10, w 20 um) gives 14.1 (its flank); random jaggedness with sigma
+    2 um (pitch 8 um) gives about 4 (a tooth flank).
+
+    Args:
+        pattern: exact shapely geometry (um), or a :class:`~patterns.mask.Mask`; a mask
+            with ``geometry`` uses it, one without is outlined at its 0.5 level and
+            simplified by half a pixel (features below about a pixel cannot be seen).
+        corner_deg: turning angle above which an outline vertex is a corner.
+    """
+    geom, tol, merge = _geometry_of(pattern)
+    # Islands and holes smaller than merge^2 are noise (a mask's stray pixels).
+    parts = [g for g in shapely.get_parts(shapely.simplify(geom, tol, preserve_topology=True)) if g.area > merge**2]
+    if not parts:
+        raise InputError("pattern has no area to measure")
+    sizes, gaps = [], []
+    for part in parts:
+        holes = [h for h in part.interiors if Polygon(h).area > merge**2]
+        for ring in (part.exterior, *holes):
+            sizes.append(_stretches(shapely.get_coordinates(ring), corner_deg, merge))
+        gaps += [part.exterior.distance(h) for h in holes]
+    if len(parts) > 1:
+        tree = shapely.STRtree(parts)
+        _, dist = tree.query_nearest(parts, exclusive=True, return_distance=True)
+        gaps += dist.tolist()
+    s = np.sort(np.concatenate(sizes))
+    feature = float(s[int(math.floor(QUANTILE * (len(s) - 1)))])
+    return min([feature, *gaps])
+
+
+def feature_warning(pattern: Mask | BaseGeometry, um_per_px: float, min_px: float = 3.0) -> str | None:
+    """A one-line warning when the pattern's smallest feature spans fewer than ``min_px`` pixels.
+
+    Returns None when the scale resolves it. The warning names the feature size, its
+    width in pixels and the pixel size that would resolve it (feature / min_px, rounded
+    down to 1, 2, 2.5 or 5 x 10^k), as the CLI's ``--resolution`` flag.
+    """
+    s = positive("um_per_px", um_per_px, "um per px")
+    need = positive("min_px", min_px, "px")
+    f = smallest_feature_um(pattern)
+    if f >= need * s * (1 - REL_TOL):
+        return None
+    return (
+        f"the pattern's smallest feature is {f:.3g} um, only {f / s:.2g} px at {s:g} um/px; "
+        f"use --resolution {_nice_down(f / need)} (um/px) or finer to resolve it with {need:g} px"
+    )
+
+
+def _nice_down(v: float) -> str:
+    """The largest of 1, 2, 2.5, 5 x 10^k not above v, as text."""
+    k = math.floor(math.log10(v))
+    for m in (5, 2.5, 2, 1):
+        if m * 10**k <= v * (1 + REL_TOL):
+            return f"{m * 10**k:g}"
+    return f"{10**k:g}"
+
+
+# --------------------------------------------------------------------- presets
+#: The knobs a preset sets, as keys of the dicts :func:`apply_preset` takes and returns.
+KNOBS = ("um_per_px", "twist_step_deg", "dtype")
+DEFAULT_PRESET = "balanced"
+
+
+@dataclass(frozen=True)
+class Preset:
+    """Knob values of one accuracy preset, with what they were measured to give.
+
+    Pixel size: ``feature / px_per_feature`` (the pattern's smallest feature,
+    :func:`smallest_feature_um`, spans ``px_per_feature`` pixels), rounded down to
+    1, 2, 2.5 or 5 x 10^k and clamped to [``min_um_per_px``, ``max_um_per_px``];
+    ``max_um_per_px`` when the feature size is unknown.
+
+    Measured (benchmarks/accuracy.py, worst case over its patterns): ``energy_rms_pct`` /
+    ``energy_max_pct`` of the chip area (RMS / max), ``force_p90_pct`` of the chip side
+    (x Delta_gamma; 90th percentile), at random poses against exact polygon overlap; ``cost`` is the landscape
+    time relative to "balanced" (range over the patterns).
+    """
+
+    name: str
+    px_per_feature: float
+    max_um_per_px: float
+    min_um_per_px: float
+    twist_step_deg: float
+    dtype: str
+    energy_rms_pct: float
+    energy_max_pct: float
+    force_p90_pct: float
+    cost: tuple[float, float]
+    summary: str
+
+    def knobs(self, feature_um: float | None = None, native_um_per_px: float | None = None) -> dict[str, Any]:
+        """The knob values for a pattern with this smallest feature (um), if known."""
+        s = self.max_um_per_px
+        if feature_um is not None:
+            f = positive("feature_um", feature_um, "um")
+            s = min(s, max(self.min_um_per_px, float(_nice_down(f / self.px_per_feature))))
+        if native_um_per_px is not None:  # an image has no detail finer than its pixels
+            s = max(s, positive("native_um_per_px", native_um_per_px, "um per px"))
+        return {"um_per_px": s, "twist_step_deg": self.twist_step_deg, "dtype": self.dtype}
+
+    def _cost_text(self) -> str:
+        lo, hi = self.cost
+        return f"{lo:.2g}" if lo == hi else f"{lo:.2g}-{hi:.2g}"
+
+    def describe(self) -> str:
+        return (
+            f"{self.name}: {self.summary}; energy error <= {self.energy_rms_pct:.2g} % RMS ({self.energy_max_pct:.2g} % max) "
+            f"of the chip area, force error <= {self.force_p90_pct:.2g} % of the chip side (90th percentile); "
+            f"landscape cost {self._cost_text()} x balanced"
+        )
+
+
+PRESETS: dict[str, Preset] = {
+    "fast": Preset(
+        "fast", px_per_feature=2.0, max_um_per_px=4.0, min_um_per_px=1.0, twist_step_deg=2.0, dtype="float32",
+        energy_rms_pct=0.08, energy_max_pct=0.4, force_p90_pct=8.0, cost=(0.03, 0.17),
+        summary="pixel = smallest feature / 2 (1 to 4 um/px), 2 degree twist step, float32",
+    ),
+    "balanced": Preset(
+        "balanced", px_per_feature=4.0, max_um_per_px=1.0, min_um_per_px=0.5, twist_step_deg=1.0, dtype="float32",
+        energy_rms_pct=0.015, energy_max_pct=0.1, force_p90_pct=3.0, cost=(1.0, 1.0),
+        summary="pixel = smallest feature / 4 (0.5 to 1 um/px), 1 degree twist step, float32",
+    ),
+    "precise": Preset(
+        "precise", px_per_feature=8.0, max_um_per_px=0.5, min_um_per_px=0.25, twist_step_deg=0.5, dtype="float32",
+        energy_rms_pct=0.004, energy_max_pct=0.05, force_p90_pct=1.0, cost=(9.0, 13.0),
+        summary="pixel = smallest feature / 8 (0.25 to 0.5 um/px), 0.5 degree twist step, float32",
+    ),
+}
+
+
+def apply_preset(
+    name: str | None,
+    explicit: dict[str, Any] | None = None,
+    *,
+    feature_um: float | None = None,
+    native_um_per_px: float | None = None,
+) -> dict[str, Any]:
+    """Knob values from a preset, with every explicitly set knob kept as given.
+
+    Presets never override a knob the user sets explicitly: a key of ``explicit`` whose
+    value is not None wins over the preset.
+
+    Args:
+        name: "fast", "balanced" or "precise"; None means :data:`DEFAULT_PRESET`.
+        explicit: knob values the user set (keys from :data:`KNOBS`; None = not set).
+        feature_um: the pattern's smallest feature (:func:`smallest_feature_um`); the
+            preset's pixel size then scales with it. None: the preset's default pixel size.
+        native_um_per_px: pixel size of a pattern image without exact geometry; the
+            preset never asks for finer pixels (they would add cost, not detail).
+
+    Returns:
+        ``{"um_per_px": float, "twist_step_deg": float, "dtype": str}``.
+
+    Raises:
+        InputError: unknown preset name or knob.
+    """
+    name = DEFAULT_PRESET if name is None else name
+    if name not in PRESETS:
+        raise InputError(f"unknown accuracy preset {name!r}; choose one of {', '.join(PRESETS)}")
+    explicit = dict(explicit or {})
+    unknown = sorted(set(explicit) - set(KNOBS))
+    if unknown:
+        raise InputError(f"unknown accuracy knob(s) {', '.join(unknown)}; presets set {', '.join(KNOBS)}")
+    knobs = PRESETS[name].knobs(feature_um, native_um_per_px)
+    knobs.update({k: v for k, v in explicit.items() if v is not None})
+    return knobs

@@ -1,0 +1,37 @@
+"""Types of ``simulator.sweep``'s names, loaded on first use (SPEC 1 lazy loading)."""
+
+from ._axes import (
+    AXES as AXES,
+    HARD_MAX_POINTS as HARD_MAX_POINTS,
+    Axis as Axis,
+    AxisKind as AxisKind,
+    axis_kinds as axis_kinds,
+)
+from ._cluster import (
+    CONNECT_TIMEOUT_S as CONNECT_TIMEOUT_S,
+    WORKER_MEMORY_MB as WORKER_MEMORY_MB,
+    dask_client as dask_client,
+    release_semaphores as release_semaphores,
+    worker_cap as worker_cap,
+)
+from ._columns import (
+    STATUS_COLUMNS as STATUS_COLUMNS,
+    UNITS as UNITS,
+    flatten as flatten,
+)
+from ._point import (
+    assess_point as assess_point,
+    point_scene as point_scene,
+    run_point as run_point,
+)
+from ._run import (
+    sweep as sweep,
+)
+from ._spec import (
+    DEFAULT_MAX_POINTS as DEFAULT_MAX_POINTS,
+    SweepSpec as SweepSpec,
+    load_sweep as load_sweep,
+)
+from ._store import (
+    kept_points as kept_points,
+)

@@ -1,0 +1,134 @@
+"""One point of a design sweep: its scene, its assessment, and the run that never raises.
+
+Owns what a Dask task runs for one point: :func:`point_scene` (the point's scene, built
+as ``selfalign evaluate`` builds it: the axis values onto the base scene, a generated
+pattern rasterized, evaluate's default chip), :func:`assess_point` (the summary of
+:func:`simulator.batch.assess`, the yield drawn with the point's ``point_seed``) and
+:func:`run_point` (the point's failure as its one-line error row), with
+``_cap_threads``, which keeps a worker's JAX and FFTs on one core. The scene, the engine
+and JAX are imported only when a point runs.
+"""
+
+from __future__ import annotations
+
+import copy
+import os
+import sys
+import time
+from pathlib import Path
+
+from patterns.errors import InputError
+from simulator.core import THREADS_ENV
+from simulator.sweep._axes import AXES, _design_axes
+from simulator.sweep._spec import _design_seed
+
+__all__ = ["assess_point", "point_scene", "run_point"]
+
+#: XLA flag that keeps a worker's JAX on one thread (set before JAX is imported there).
+XLA_ONE_THREAD = "--xla_cpu_multi_thread_eigen=false"
+
+
+# ----------------------------------------------------------------------- one point
+def _cap_threads() -> None:
+    """In a Dask worker: JAX and the FFTs on one core (before JAX is imported there)."""
+    try:
+        from distributed import get_worker
+
+        get_worker()
+    except (ImportError, ValueError):
+        return  # not in a worker: this process's own settings stand
+    if "jax" not in sys.modules and XLA_ONE_THREAD not in os.environ.get("XLA_FLAGS", ""):
+        os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {XLA_ONE_THREAD}".strip()
+    # The correlator's FFTs and the batch threads: one per worker (simulator.core.threads).
+    os.environ[THREADS_ENV] = "1"
+
+
+def point_scene(task: dict):
+    """The scene of one point, built as ``selfalign evaluate`` builds it; also whether to coarsen automatically."""
+    from patterns.geometry import build, design_record
+    from patterns.raster import mask_from_geometry
+    from simulator.scene import Scene
+
+    doc = copy.deepcopy(task["scene"])
+    v = task["values"]
+    design = task["design"]
+    if "chip_size_um" in v:
+        for k in ("chip", "chip_layer"):
+            doc.pop(k, None)
+        doc["chip_size_um"] = v["chip_size_um"]
+    for key, table, name in (("volume_nl", "liquid", "volume_nl"), ("pad_angle_deg", "materials", "pad_angle_deg"),
+                             ("substrate_angle_deg", "materials", "substrate_angle_deg"),
+                             ("surface_tension_mN_m", "materials", "surface_tension_mN_m"), ("twist_step_deg", "twist", "step_deg")):
+        if key in v:
+            doc.setdefault(table, {})[name] = v[key]
+    if "resolution_um" in v:
+        doc["resolution_um"] = v["resolution_um"]
+    if "pattern" in v:
+        doc["pattern"] = str((Path(task["base"]) / v["pattern"]).resolve())
+    if design is not None:
+        params = dict(design["params"])
+        params.update({k: x for k, x in v.items() if k not in AXES})
+        if "seed" in {p for p in _design_axes(design["name"])}:
+            params["seed"] = _design_seed(design, task)
+        geometry = build(design["name"], **params)
+        record = design_record(design["name"], **params)
+        record.update(margin_um=design["margin_um"], area_um2=geometry.area)
+        um = doc.get("resolution_um") or doc.get("um_per_px") or 1.0
+        doc["pattern"] = mask_from_geometry(geometry, um, margin_um=design["margin_um"], params=record,
+                                            budget_mb=doc.get("memory_budget_mb"), what="the pattern raster")
+        if not any(k in doc for k in ("chip", "chip_size_um", "chip_layer")):
+            x0, y0, x1, y1 = geometry.bounds  # evaluate's default chip: the pattern's wettable bounding box
+            doc["chip_size_um"] = [x1 - x0, y1 - y0]
+    elif not any(k in doc for k in ("chip", "chip_size_um", "chip_layer")):
+        # evaluate's default chip: the pattern's wettable bounding box (the pattern read once with a stand-in chip)
+        from patterns.mask import footprint_um
+
+        probe = Scene.from_dict(doc | {"chip_size_um": [1.0, 1.0]}, base=Path(task["base"]))
+        doc["chip_size_um"] = list(footprint_um(probe.pattern))
+    auto = "resolution_um" not in doc
+    return Scene.from_dict(doc, base=Path(task["base"])), auto
+
+
+def assess_point(task: dict) -> dict:
+    """The summary of one point: :func:`simulator.batch.assess` on its scene, as ``evaluate`` runs it.
+
+    The yield's placement noise is drawn with the point's ``point_seed``; ``settings`` also
+    records ``source_um_per_px``, ``resolution_auto`` (as evaluate) and ``volume_nl``.
+    """
+    from simulator.batch import NOISE_FRACTION, NOISE_TWIST_DEG, assess, auto_resolution, chip_size
+    from simulator.core import require_finite
+
+    scene, auto = point_scene(task)
+    native = scene.um_per_px
+    if auto:
+        scene = auto_resolution(scene)
+    v = task["values"]
+    sigma = None
+    if "placement_sigma_um" in v or "placement_sigma_deg" in v:
+        w, h = chip_size(scene)
+        sx, sy = (v["placement_sigma_um"],) * 2 if "placement_sigma_um" in v else (NOISE_FRACTION * w, NOISE_FRACTION * h)
+        sigma = (sx, sy, v.get("placement_sigma_deg", NOISE_TWIST_DEG))
+    summary = assess(scene, quiet=True, method=v.get("method", "greedy"), seed=task["point_seed"], placement_sigma=sigma,
+                     yield_starts=task["yield_starts"], grid_cells=task["capture_grid"])
+    summary["settings"] |= {"source_um_per_px": native, "resolution_auto": bool(auto and scene.um_per_px != native),
+                            "volume_nl": scene.liquid.volume_nl}
+    if "layout" in scene.pattern.params:
+        summary["layout"] = scene.pattern.params["layout"]
+    return require_finite(summary, f"point {task['point']}")
+
+
+def _one_line(err: BaseException) -> str:
+    text = " ".join(str(err).split()) or "(no message)"
+    return (text if isinstance(err, InputError) else f"{type(err).__name__}: {text}")[:500]
+
+
+def run_point(task: dict) -> dict:
+    """Run one point; never raises for the point's own failure: ``status`` "ok" with the
+    ``summary``, or "error" with the one-line ``error``. What each Dask task runs."""
+    _cap_threads()
+    t0 = time.perf_counter()
+    try:
+        summary = assess_point(task)
+    except Exception as err:  # the point's failure is its row; the sweep goes on
+        return {"point": task["point"], "status": "error", "error": _one_line(err), "seconds": round(time.perf_counter() - t0, 3), "summary": None}
+    return {"point": task["point"], "status": "ok", "error": None, "seconds": round(time.perf_counter() - t0, 3), "summary": summary}
