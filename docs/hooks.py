@@ -10,12 +10,16 @@
   GitHub. The build copies each such file into the site under ``repo/`` and points the
   link there; a link to a file that does not exist is a warning, so ``mkdocs build
   --strict`` fails on it as on any broken link between pages.
-* Docstrings. The API reference renders the docstrings as Markdown; their Sphinx roles
-  (``:func:`name```, ``:class:`~pkg.Name```) are shown as the plain code they name.
+* The API reference. A package's face loads its names lazily from its ``__init__.pyi``
+  stub, so a page's ``::: simulator.PACKAGE`` (with no options of its own) gets the names
+  of that stub, its ``__all__``, as the members to show. The docstrings render as
+  Markdown; their Sphinx roles (``:func:`name```, ``:class:`~pkg.Name```) are shown as
+  the plain code they name.
 """
 
 from __future__ import annotations
 
+import ast
 import json
 import logging
 import posixpath
@@ -28,6 +32,7 @@ RESULTS = ROOT / "benchmarks" / "results"
 MARKER = re.compile(r"^<!-- table: ([\w-]+) -->$", re.M)
 LINK = re.compile(r"(\]\()([^)\s#]+)(#[^)\s]*)?(\))")
 REPO_PREFIX = "repo"
+API_BLOCK = re.compile(r"^::: (simulator(?:\.\w+)*)[ \t]*$(?!\n    )", re.M)
 ROLE = re.compile(r":(?:py:)?(?:func|mod|class|meth|data|attr|exc|obj):<code>(~?)([^<]*)</code>")
 
 log = logging.getLogger("mkdocs.hooks.selfalign")
@@ -233,7 +238,34 @@ def on_files(files, config):
     return files
 
 
+# ------------------------------------------------------------------------ API reference
+def face_names(package: str) -> list[str]:
+    """The public names of a package, as its ``__all__`` has them: those its ``__init__.pyi``
+    re-exports (``from ._x import name as name``), else a literal ``__all__`` in ``__init__.py``."""
+    folder = ROOT.joinpath(*package.split("."))
+    stub = folder / "__init__.pyi"
+    if stub.exists():
+        tree = ast.parse(stub.read_text(encoding="utf-8"))
+        return [a.asname or a.name for node in tree.body if isinstance(node, ast.ImportFrom)
+                for a in node.names if a.asname in (None, a.name)]
+    tree = ast.parse((folder / "__init__.py").read_text(encoding="utf-8"))
+    for node in tree.body:
+        if isinstance(node, ast.Assign) and any(getattr(t, "id", None) == "__all__" for t in node.targets):
+            return list(ast.literal_eval(node.value))
+    return []
+
+
+def _api_block(m: re.Match) -> str:
+    names = face_names(m.group(1))
+    if not names:
+        return m.group(0)
+    return f"::: {m.group(1)}\n    options:\n      members: [{', '.join(names)}]"
+
+
 def on_page_markdown(markdown, page, config, files):
+    if page.file.src_uri.startswith("api/"):
+        markdown = API_BLOCK.sub(_api_block, markdown)
+
     def table(m):
         try:
             return render(m.group(1))

@@ -23,7 +23,7 @@ PHYSICS = ROOT / "docs" / "physics.md"
 #: Where citations are looked for: the code first, then every other text the project keeps.
 CODE_DIRS = ("simulator", "patterns")
 TEXT_DIRS = ("tests", "benchmarks", "validation", "examples", "notebooks", "docs")
-SUFFIXES = {".py", ".md", ".toml", ".ipynb", ".txt"}
+SUFFIXES = {".py", ".pyi", ".md", ".toml", ".ipynb", ".txt"}
 
 
 # ----------------------------------------------------------------------- the physics page
@@ -264,3 +264,18 @@ def test_benchmark_tables_come_from_the_results_files():
     assert f"{hooks._acc(base['energy_rms_pct'])} / {hooks._acc(base['force_p90_pct'])} / {hooks._acc(base['landscape_s'])}" \
         in hooks.render("accuracy")
     assert "| knob | value | energy RMS %" in hooks.render("accuracy-details")
+
+
+def test_every_package_has_its_api_page():
+    """One API page per package face, in the site's navigation, showing the face's ``__all__``."""
+    import importlib
+
+    hooks = _hooks()
+    nav = (ROOT / "mkdocs.yml").read_text(encoding="utf-8")
+    packages = sorted(p.name for p in (ROOT / "simulator").iterdir() if (p / "__init__.pyi").exists())
+    assert {"core", "scene", "physics", "liquid", "landscape", "motion", "batch", "sweep", "render", "testing"} <= set(packages)
+    for name in packages:
+        page = ROOT / "docs" / "api" / f"{name}.md"
+        assert f"::: simulator.{name}\n" in page.read_text(encoding="utf-8"), page
+        assert f"api/{name}.md" in nav, name
+        assert sorted(hooks.face_names(f"simulator.{name}")) == sorted(importlib.import_module(f"simulator.{name}").__all__)
