@@ -279,11 +279,13 @@ def test_scene_file_means_what_the_flags_mean(tmp_path):
 def test_boxes_of_a_run_share_the_chips_footprint(monkeypatch):
     """A trajectory builds a landscape per box: the free-contact-line footprint (a distance
     transform of the whole chip) is made once, and a box gets the same energies from it."""
-    import simulator.physics._meniscus as meniscus_module
+    import simulator.landscape._rotation as rotation_module
+    import simulator.physics as physics
 
+    monkeypatch.setattr(rotation_module, "_SMOOTH", {})  # an earlier test may have left this chip's footprint
     calls = []
-    sdf = meniscus_module.signed_distance_px
-    monkeypatch.setattr(meniscus_module, "signed_distance_px", lambda img: (calls.append(img.shape), sdf(img))[1])
+    sdf = physics.signed_distance_px
+    monkeypatch.setattr(physics, "signed_distance_px", lambda img: (calls.append(img.shape), sdf(img))[1])
     sc = _scene(box(-50, -50, 50, 50), chip_size=100.0, h=8.0, pinned=False, twist=(1.0, -2, 2), window=20)
     full = build_landscape(sc)
     boxed = build_landscape(sc, center_px=(4, -3), half_px=6)
