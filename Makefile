@@ -3,7 +3,7 @@ PY ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: demo test lint library bench validate validate-pinned validate-defects validate-fourpad clean
+.PHONY: demo test docs lint library bench validate validate-pinned validate-defects validate-fourpad clean
 
 $(BIN)/selfalign: pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -14,9 +14,18 @@ $(BIN)/selfalign: pyproject.toml
 demo: $(BIN)/selfalign
 	$(BIN)/selfalign demo --out out --force
 
+# The manual as a site (mkdocs-material, API reference by mkdocstrings): `make docs` writes
+# site/; `make test` builds it too, in strict mode, so a broken link or a citation the pages
+# cannot resolve fails the tests (no --quiet: it would hide the warnings strict mode counts).
+MKDOCS = NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict
+
 test: $(BIN)/selfalign
 	$(BIN)/python -m pytest -q tests
 	$(BIN)/python -m pytest -q --nbmake notebooks
+	d="$$(mktemp -d)" && $(MKDOCS) --site-dir "$$d" && rm -rf "$$d"
+
+docs: $(BIN)/selfalign
+	$(MKDOCS) --site-dir site
 
 # The lint tools (the `dev` extra: pyright, the SciPy stubs, pre-commit) on top of the test environment.
 $(BIN)/pyright: $(BIN)/selfalign
@@ -32,7 +41,7 @@ library: $(BIN)/selfalign
 	$(BIN)/python -m patterns.library
 
 bench: $(BIN)/selfalign
-	$(BIN)/python benchmarks/landscape.py
+	$(BIN)/python benchmarks/landscape.py --json benchmarks/results/landscape.json
 
 # Surface Evolver reference numbers (validation/README.md; hours on one core: pinned single pad
 # ~20 min, pinned defects ~20 min, four-pad paths with free contact lines ~2 h).
@@ -53,4 +62,4 @@ validate-fourpad: $(BIN)/selfalign
 	$(BIN)/python validation/evolver_fourpad.py --out validation/evolver_fourpad.csv
 
 clean:
-	rm -rf $(VENV) out .pytest_cache
+	rm -rf $(VENV) out site .pytest_cache

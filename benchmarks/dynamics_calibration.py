@@ -6,7 +6,7 @@ contact lines), 2 um/px, 1 deg twist steps, the default damping calibration
 ``docs/images/dynamics_fourpad_730_100.png``: x, y and twist against time for the
 500 um x-bias of the video (it stops on the meniscus's flat part) and for the starts
 that reach alignment, with the video's frame times (135, 290 and about 326 ms), and
-prints the table of the README's dynamics section.
+prints the table of the dynamics section of docs/guide/trajectories.md.
 
 Usage: ``python benchmarks/dynamics_calibration.py [--out docs/images] [--no-inertial]``
 """

@@ -1,4 +1,4 @@
-"""Figures and tables of the finite meniscus for the README (a few minutes on 2 cores).
+"""Figures and tables of the finite meniscus for docs/guide/meniscus.md (a few minutes on 2 cores).
 
 * the 730/50 um four-pad x-curve at 20 nl (h = 37.5 um) against the overlap model:
   ``docs/images/meniscus_fourpad_x.png``;

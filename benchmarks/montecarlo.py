@@ -22,10 +22,10 @@ The job: run N starts to their end on one precomputed landscape and classify the
 Usage::
 
     python benchmarks/montecarlo.py [--n 1000 10000 100000] [--methods greedy gradient]
-        [--chunk 2048] [--loop-starts 300] [--readme README.md] [--no-readme]
+        [--chunk 2048] [--loop-starts 300] [--page docs/benchmarks.md] [--no-page]
 
 The markdown table is printed and written between the markers
-``<!-- bench:montecarlo -->`` and ``<!-- /bench:montecarlo -->`` of the README.
+``<!-- bench:montecarlo -->`` and ``<!-- /bench:montecarlo -->`` of the benchmarks page.
 """
 
 from __future__ import annotations
@@ -96,8 +96,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--chunk", type=int, default=DEFAULT_CHUNK)
     ap.add_argument("--loop-starts", type=int, default=300, help="starts the Python loop is timed on")
     ap.add_argument("--repeats", type=int, default=3, help="timings per figure; the best is reported")
-    ap.add_argument("--readme", type=Path, default=ROOT / "README.md")
-    ap.add_argument("--no-readme", action="store_true")
+    ap.add_argument("--page", "--readme", dest="readme", type=Path, default=ROOT / "docs" / "benchmarks.md")
+    ap.add_argument("--no-page", "--no-readme", dest="no_readme", action="store_true")
     args = ap.parse_args(argv)
 
     load = os.getloadavg()[0]

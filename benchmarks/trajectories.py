@@ -1,4 +1,4 @@
-"""Trajectory figures and costs for the README (not a test).
+"""Trajectory figures and costs for docs/guide/trajectories.md (not a test).
 
 1. ``docs/methods.png``: one trajectory of each method (greedy, gradient, overdamped,
    inertial) on the 730/50 um four-pad, chip path over the pattern and energy curve.

@@ -1,4 +1,4 @@
-"""The yield table of the README: yield against the nominal placement bias, one column per model.
+"""The yield table of docs/guide/montecarlo.md: yield against the nominal placement bias, one column per model.
 
 The 730/50 and 730/100 um four-pads under a 730 um chip, 20 nl of water (h = 37.5 um),
 4 um/px and 2 degree twist steps; at each nominal bias, ``--starts`` placements with

@@ -1,4 +1,4 @@
-"""Imperfect squares: one triangular defect (docs/physics.md §10) and jagged edges (10.2-10.3).
+"""Imperfect squares: one triangular defect (docs/physics.md §10) and jagged edges (§10.2, §10.3).
 
 Jagged designs (docs/physics.md §10-10.3) are built edge by edge. Each edge has a *profile*
 ``d(t)``: the outward offset of the edge line at position ``t`` along the edge, for

@@ -164,10 +164,10 @@ DESIGNS: dict[str, Design] = {d.name: d for d in (
     Design("circle", circle, "Circular pad (equal-area regular 1024-gon, radius error < 3.2e-6 r).", (
         Param("diameter", "length", "circle diameter", unit="um"),
         Param("segments", "int", "polygon vertices, a multiple of 4", 1024))),
-    Design("four-pad", four_pad, "2x2 square pads split by a cross-shaped gap (PHYSICS 6.1).", (
+    Design("four-pad", four_pad, "2x2 square pads split by a cross-shaped gap (docs/physics.md §6.1).", (
         _size_param(help="outer side, gaps included"),
         Param("gap", "length", "width of the hydrophobic cross; pad side = (size - gap)/2", unit="um"))),
-    Design("defect", defect, "Square with one triangular defect on an edge (PHYSICS 10.1).", (
+    Design("defect", defect, "Square with one triangular defect on an edge (docs/physics.md §10.1).", (
         _size_param(200.0),
         Param("kind", "choice", "add the triangle (outward) or cut it out (inward)", choices=("inward", "outward")),
         Param("position", "choice", "base centred on the edge, or flush with its counter-clockwise end",
@@ -175,7 +175,7 @@ DESIGNS: dict[str, Design] = {d.name: d for d in (
         Param("edge", "choice", "edge carrying the defect", "right", choices=EDGES),
         Param("height", "length", "triangle height, perpendicular to the edge", unit="um"),
         Param("width", "length", "triangle base along the edge", unit="um"))),
-    Design("constant-jagged", constant_jagged, "Square with regular zigzag edges (PHYSICS 10.2).", (
+    Design("constant-jagged", constant_jagged, "Square with regular zigzag edges (docs/physics.md §10.2).", (
         _size_param(200.0),
         Param("amplitude", "length", "tooth height, peak to valley", unit="um"),
         Param("pitch", "length", "tooth base along the edge (default 2 x amplitude: 45-degree flanks)",
@@ -184,7 +184,7 @@ DESIGNS: dict[str, Design] = {d.name: d for d in (
               "centred", choices=("centred", "outward", "inward")),
         Param("phase", "choice", "edge midpoint at a zero crossing (4-fold symmetric, exact area) "
               "or at a tooth tip (also mirror symmetric)", "zero", choices=("zero", "peak")))),
-    Design("random-jagged", random_jagged, "Square with random-height teeth on every edge (PHYSICS 10.3).", (
+    Design("random-jagged", random_jagged, "Square with random-height teeth on every edge (docs/physics.md §10.3).", (
         _size_param(200.0),
         Param("sigma", "length", "standard deviation of the peak heights", unit="um"),
         Param("pitch", "length", "peak spacing (default 4 x sigma)", lambda v: 4 * v["sigma"], "um"),

@@ -6,7 +6,7 @@ writes ``patterns/library/*.png`` (16-bit grey, pHYs scale, parameters in a text
 ``index.json``, ``index.md`` and the contact sheet ``overview.png``. Find a file with
 :func:`library_path`, e.g. ``read_mask(library_path("four_pad_730_50"))``.
 
-Contents (docs/physics.md §6 and 10): four-pad 730/50, 730/100, 710/50, 710/100 um; a 200 um
+Contents (docs/physics.md §6 and §10): four-pad 730/50, 730/100, 710/50, 710/100 um; a 200 um
 square; defect types A, B, C (right edge) inward and outward; constant jaggedness with
 amplitudes 1.7, 3.2, 5 and 15 um (centred teeth, pitch = 2 x amplitude, phase 'zero');
 random jaggedness with sigma 2, 4 and 8 um (pitch = 4 x sigma, seed 1 for each).

@@ -11,7 +11,7 @@ Two kinds of checks:
   part's transitions (10 %), and with free contact lines the flat part that Surface
   Evolver's inward path finds (its onset within 10 um) and the float near alignment. Where
   it does not agree (the inner end of the 730/50 flat part, the outward branch's
-  hysteresis, the defects' inward/outward asymmetry), the README says so with the numbers.
+  hysteresis, the defects' inward/outward asymmetry), docs/guide/meniscus.md says so with the numbers.
 """
 
 from __future__ import annotations

@@ -105,7 +105,7 @@ def test_c13_parallelepiped_force_through_the_cli(run_cli):
     assert tiny / (1e-6 * h * 1e-6) == pytest.approx(-r["stiffness_N_per_m"], rel=1e-9)  # slope -2 gamma L / h
 
 
-# ------------------------------------------------------------------ PHYSICS 9.4 branches
+# ------------------------------------------------------------------ docs/physics.md §9 branches
 OVER = ["liquid", "overflow", "--meniscus-height", "12.5"]
 
 

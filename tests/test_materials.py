@@ -160,7 +160,7 @@ def test_overflow_conditions():
     dewets = overflow_conditions(90, 60, theta_chip_deg=40, bias_um=30, h_um=12.5)
     assert dewets.holding == (2,)
     flush = overflow_conditions(60, 60, theta_chip_deg=0, bias_um=1e6, h_um=12.5)
-    # Condition 3 applies only when the edge is steeper than the pad's advancing angle (PHYSICS 9.4).
+    # Condition 3 applies only when the edge is steeper than the pad's advancing angle (docs/physics.md §9, condition 3).
     assert flush.holding == (1,) and flush.overflow_bias_um == math.inf
     sloped = overflow_conditions(50, 60, theta_chip_deg=0, bias_um=1e6, h_um=12.5)
     assert sloped.holding == (1, 2)

@@ -175,7 +175,7 @@ def test_defect_moves_the_minimum_towards_the_flatter_side():
     assert r["x_um"] < -0.3
     assert r["x_um"] == pytest.approx(expected, rel=0.5)
     assert abs(r["y_um"]) < 0.05 and abs(r["twist_deg"]) < 0.05
-    # The overlap model cannot see it (PHYSICS check C11): its minimum stays at 0.
+    # The overlap model cannot see it (docs/physics.md C11): its minimum stays at 0.
     off = build_landscape(_scene(pad, chip_size=L, twist=(1.0, -2, 2), window=20, meniscus=False))
     assert off.global_minimum()[:3] == (0.0, 0.0, 0.0)
 
@@ -274,3 +274,26 @@ def test_scene_file_means_what_the_flags_mean(tmp_path):
         assert s.meniscus_height_um == 12.5 and s.liquid.pinned and s.effects.meniscus and s.effects.hysteresis
         assert (s.materials.pad_receding_deg, s.materials.pad_advancing_deg) == (31.0, 50.0)
     assert a.um_per_px == b.um_per_px and np.array_equal(a.pattern.data, b.pattern.data)
+
+
+def test_boxes_of_a_run_share_the_chips_footprint(monkeypatch):
+    """A trajectory builds a landscape per box: the free-contact-line footprint (a distance
+    transform of the whole chip) is made once, and a box gets the same energies from it."""
+    import simulator.landscape._rotation as rotation_module
+    import simulator.physics as physics
+
+    monkeypatch.setattr(rotation_module, "_SMOOTH", {})  # an earlier test may have left this chip's footprint
+    calls = []
+    sdf = physics.signed_distance_px
+    monkeypatch.setattr(physics, "signed_distance_px", lambda img: (calls.append(img.shape), sdf(img))[1])
+    sc = _scene(box(-50, -50, 50, 50), chip_size=100.0, h=8.0, pinned=False, twist=(1.0, -2, 2), window=20)
+    full = build_landscape(sc)
+    boxed = build_landscape(sc, center_px=(4, -3), half_px=6)
+    assert len(calls) == 1
+    x0 = int(np.searchsorted(full.x_um, boxed.x_um[0]))
+    y0 = int(np.searchsorted(full.y_um, boxed.y_um[0]))
+    t, ny, nx = boxed.energy.shape
+    np.testing.assert_allclose(boxed.energy, full.energy[:, y0 : y0 + ny, x0 : x0 + nx], rtol=0, atol=1e-12 * np.abs(full.energy).max())
+    # Another chip (even of the same shape) makes its own.
+    build_landscape(_scene(box(-50, -50, 50, 50), chip_size=100.0, h=8.0, pinned=False, twist=(1.0, -2, 2), window=20))
+    assert len(calls) == 2

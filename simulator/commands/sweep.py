@@ -29,7 +29,7 @@ def register(sub: argparse._SubParsersAction) -> None:
             "sweep into the same --out skips the points done. A point that fails records its error and the sweep goes on."
         ),
     )
-    p.add_argument("sweep_file", metavar="SWEEP.toml", help="the sweep file (see the README, 'Design sweeps')")
+    p.add_argument("sweep_file", metavar="SWEEP.toml", help="the sweep file (see docs/guide/sweeps.md)")
     p.add_argument("--out", required=True, metavar="DIR", help="results directory: new, empty, or holding this same sweep (resumed)")
     p.add_argument("--workers", type=int, metavar="N", help="local Dask worker processes (default: one per core, at most one per point); "
                    "0 runs the points in this process without Dask")

@@ -38,10 +38,10 @@ MAX_STEPS_LIMIT = 2**31 - 2
 BATCH_METHODS = METHODS
 #: The time-resolved methods (they need :class:`simulator.motion.DynamicsParams`).
 DYNAMIC_METHODS = ("overdamped", "inertial")
-#: Starts per compiled batch of the steppers (measured best on a 2-core CPU, see README "Monte Carlo").
+#: Starts per compiled batch of the steppers (measured best on a 2-core CPU, see docs/benchmarks.md).
 DEFAULT_CHUNK = 2048
 #: Starts per compiled batch of the dynamics (a vmapped solver runs until its slowest
-#: lane stops, and the bar advances per chunk; see README "Monte Carlo").
+#: lane stops, and the bar advances per chunk; see docs/guide/montecarlo.md).
 DEFAULT_DYNAMICS_CHUNK = 64
 #: Largest chunk of starts compiled together.
 MAX_CHUNK = 2**20

@@ -3,7 +3,7 @@ stacks of chips, windowed to the translations asked for; symmetries between chip
 save transforms (:func:`chip_relations`, :func:`correlate_stack`).
 
 The transform runs in SciPy's pocketfft on a CPU (measured faster than XLA's FFT on
-a 2-core machine, see README) and in JAX when JAX sees a GPU; ``backend=`` overrides.
+a 2-core machine, see docs/benchmarks.md) and in JAX when JAX sees a GPU; ``backend=`` overrides.
 Forward chip transforms skip the rows that are zero, and only the translation window
 asked for is transformed back along x.
 """
@@ -143,7 +143,7 @@ class Correlator:
         mirror_out: if given, (B, 2 ry + 1, 2 rx + 1) that receives the same for each
         chip's mirror image ``chips[:, ::-1]`` (its raster upside down), whose spectrum
         is the chip's with the row frequencies negated and a phase ramp: one forward
-        transform serves both (docs/physics.md: a mirror-symmetric chip at -alpha is the
+        transform serves both (docs/benchmarks.md, landscape: a mirror-symmetric chip at -alpha is the
         mirror image of itself at +alpha).
         work: the :meth:`workspace` to compute in (default: one made for this call).
         """

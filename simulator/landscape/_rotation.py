@@ -4,6 +4,7 @@ resampled (bilinear), on one canvas with the pattern's pixel parity; mirror twin
 from __future__ import annotations
 
 import math
+import weakref
 
 import numpy as np
 from shapely import affinity
@@ -16,6 +17,11 @@ from simulator.core import ceil_whole
 #: energy against twist) at 9 taps a pixel, against 16 for cubic (measured 1.7x faster;
 #: the same Surface Evolver ratios to 0.001).
 SPLINE_ORDER = 2
+
+#: The last smooth chip made (:meth:`ChipRotator._smooth_chip`): its key, a weak reference to
+#: the chip it was made from (a chip freed and another made at its address is not it), and
+#: the arrays. One entry: a run works on one chip.
+_SMOOTH: dict = {}
 
 
 def _chip_reach_px(chip: Mask, twist: bool) -> tuple[float, float]:
@@ -84,8 +90,26 @@ class ChipRotator:
         rad = max(_chip_reach_px(chip, True))
         turn = 2 * ceil_whole(rad) + 2
         self._turn_shape = (max(turn + parity[0], self.shape[0]), max(turn + parity[1], self.shape[1]))
-        self._blurred = self._blur() if self.blur_px > 0 or profile is not None else None
-        self._coeffs = None  # its cubic-spline coefficients, made at the first rotation
+        self._blurred = self._coeffs = None  # the smooth chip and its spline coefficients
+        if self.blur_px > 0 or profile is not None:
+            self._smooth_chip()
+
+    def _smooth_chip(self) -> None:
+        """The blurred chip (or the footprint of its free contact lines) and its spline
+        coefficients: made once per chip and canvas, and kept for the next ChipRotator of the
+        same chip (a trajectory builds one per box; the distance transform and the spline
+        prefilter of a 4000 px chip take tens of seconds each)."""
+        key = (id(self.chip), self.blur_px, self.margin_px, self.profile, self.shape[0] % 2, self.shape[1] % 2)
+        cached = _SMOOTH.get("entry")
+        if cached is not None and cached[0] == key and cached[1]() is self.chip:
+            self._blurred, self._half, self._sdf, self._coeffs = cached[2]
+            return
+        self._sdf = None
+        self._blurred = self._blur()
+        from scipy import ndimage
+
+        self._coeffs = ndimage.spline_filter(self._blurred, order=SPLINE_ORDER, mode="constant")
+        _SMOOTH["entry"] = (key, weakref.ref(self.chip), (self._blurred, self._half, self._sdf, self._coeffs))
 
     def _blur(self) -> np.ndarray:
         """The unrotated chip blurred by K_h, or its free-contact-line footprint (a
@@ -160,11 +184,10 @@ class ChipRotator:
         as steps in the energy at small twists)."""
         from scipy import ndimage
 
-        assert self._blurred is not None  # only a blurred chip is rotated by splines
+        assert self._blurred is not None and self._coeffs is not None  # a smooth chip (_smooth_chip)
         ho, wo = self.shape
         h, w = self._blurred.shape
-        if self._coeffs is None:
-            self._coeffs = ndimage.spline_filter(self._blurred, order=SPLINE_ORDER, mode="constant")
+        if getattr(self, "_xy", None) is None:
             v, u = np.mgrid[0:ho, 0:wo].astype(float)
             self._xy = (u - (wo / 2 - 0.5), -(v - (ho / 2 - 0.5)))  # physical, y up, about the centre
         a = math.radians(twist_deg)
@@ -182,6 +205,7 @@ class ChipRotator:
             # The wall profile is 1 deep inside the chip and 0 beyond the pad reach: splines
             # only in the band between (with 3 px for the splines' support and the nearest-pixel
             # lookup), exactly 1 and 0 elsewhere; the band is a few per cent of the canvas.
+            assert self._sdf is not None  # made with the footprint (_blur)
             s = self._sdf[np.clip(np.rint(rows), 0, h - 1).astype(np.intp), np.clip(np.rint(cols), 0, w - 1).astype(np.intp)]
             prof = self.profile
             lo, hi = min(prof.substrate_reach_px, 0.0) - 3.0, prof.pad_reach_px + 3.0
@@ -201,7 +225,7 @@ class ChipRotator:
         map of the coarse samples, so the result stays smooth in the twist."""
         from scipy import ndimage
 
-        assert self._blurred is not None and self._coeffs is not None  # set up by _spline_rotate
+        assert self._blurred is not None and self._coeffs is not None  # made by _smooth_chip
         ho, wo = self.shape
         h, w = self._blurred.shape
         # The coarse grid covers the smooth image at every twist (the radius of its cut box)

@@ -93,7 +93,7 @@ def height_report(volume_nl: float, area_um2: float, sides_um: tuple[float, floa
     return out
 
 
-# --------------------------------------------------------------------- overflow (PHYSICS 9)
+# --------------------------------------------------------------------- overflow (docs/physics.md §9)
 def _edge_angle(name: str, value: float) -> float:
     """A solid wedge angle in (0, 180] degrees (90 = vertical wall, 180 = no edge), else InputError.
 
@@ -286,7 +286,7 @@ class Topography:
             contact_angle_deg("chip_angle_deg (--chip-angle)", self.chip_angle_deg)
 
 
-# --------------------------------------------------------------------- critical volume (PHYSICS 8.3)
+# --------------------------------------------------------------------- critical volume (docs/physics.md §8)
 def critical_volume_nl(v_nd: float, area_um2: float) -> float:
     """Critical droplet volume ``V_crit = (V_ND A)^(3/2)`` of a segmented pattern, nl.
 

@@ -1,4 +1,4 @@
-"""The critical droplet volume of a four-pad pattern, computed (docs/physics.md §8; docs/physics.md §8).
+"""The critical droplet volume of a four-pad pattern, computed (docs/physics.md §8).
 
 Too little liquid on a segmented pattern splits onto single pads or leaves a pad dry.
 The *critical volume* is the smallest droplet for which one drop wetting all four pads

@@ -92,7 +92,7 @@ class DynamicsParams:
         t_max_s: float = 1.0,
         polar_moment_um4: float | None = None,
     ) -> DynamicsParams:
-        """Couette damping of the liquid film under a rigid chip (docs/physics.md §4, 7.1).
+        """Couette damping of the liquid film under a rigid chip (docs/physics.md §4, §7).
 
         ``h = V / A`` (flat slab), ``c = calibration * mu A / h`` and
         ``c_t = calibration * mu J / h``; mass and inertia of the chip's cuboid body (the

@@ -11,7 +11,7 @@ Index units: ``ix``, ``iy`` are pixels from the window's first column/row;
 is *unwrapped* (it may leave [0, T) and is wrapped only for look-ups), so a
 trajectory reports the twist it actually turned through (e.g. -90 degrees).
 
-Ties (docs/physics.md §5, DESIGN.md): energy differences at or below the landscape's
+Ties (docs/physics.md §5.2): energy differences at or below the landscape's
 noise floor are equal. Greedy keeps the current pose when it ties for the best;
 otherwise it takes the smallest move ``|dt| + |dy| + |dx|``, then the first in
 lexicographic order of ``(dt, dy, dx)`` from -1 to +1 (:data:`GREEDY_MOVES`). A move

@@ -51,7 +51,7 @@ Where the edges end (the chip's corners), the blur also acts along the edge: the
 effective edge is shorter by about ``h``, so the stiffness of a square is
 ``(2 gamma L / h)(1 - 2 h / (pi L))`` and its saturated force ``2 gamma (L - h)``
 (measured and tested: a deficit of order ``h / L``). A real meniscus rounds its
-corners too; Surface Evolver is the referee (``validation/``, README).
+corners too; Surface Evolver is the referee (``validation/``, docs/guide/meniscus.md).
 
 Assumptions and regime: the liquid wets the chip and the pattern where the overlap
 model says; gravity is neglected (``h`` well below the capillary length, 2.7 mm for

@@ -219,7 +219,7 @@ def greedy(
     tie_um2: float | None = None,
     evaluator: ExactOverlap | None = None,
 ) -> ReferenceRun:
-    """Greedy ascent on the exact overlap (docs/physics.md §5.2) with the tie rule of 5.3.
+    """Greedy ascent on the exact overlap (docs/physics.md §5.2) with its tie rule.
 
     Args:
         start: (x_um, y_um, twist_deg), snapped to the nearest grid pose (``np.round``,
