@@ -28,14 +28,13 @@ from simulator.landscape._correlator import (
 )
 from simulator.landscape._posegrid import (
     PoseGrid,
-    TwistAxis,
     _axis_box,
     _twist_cut,
     evenly_spaced_axis,
 )
 from simulator.landscape._rotation import ChipRotator, _chip_reach_px, mirror_twins
 from simulator.physics import CHIP_BLUR_MIN_PX
-from simulator.scene import Scene
+from simulator.scene import Scene, TwistAxis
 
 if TYPE_CHECKING:
     from simulator.landscape._landscape import Landscape

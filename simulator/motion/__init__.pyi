@@ -42,6 +42,8 @@ from ._stepping import (
     STAY as STAY,
     TIE_RANK as TIE_RANK,
     classify as classify,
+    gradient_descent as gradient_descent,
+    greedy as greedy,
     on_plateau as on_plateau,
     reference_gradient as reference_gradient,
 )
