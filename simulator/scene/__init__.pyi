@@ -19,6 +19,7 @@ from ._parts import (
 from ._scene import (
     DTYPES as DTYPES,
     Scene as Scene,
+    chip_radius_of_gyration_px as chip_radius_of_gyration_px,
 )
 from ._schema import (
     SCHEMA as SCHEMA,
