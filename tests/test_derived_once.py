@@ -1,7 +1,7 @@
 """Each derived quantity has one home and is carried from there: the liquid's height and the
 chip's radius of gyration in the Scene (one formula each, computed once per scene, used by
-the energy and the dynamics alike), and the twist step of a pose grid (one rule, on its twist
-axis)."""
+the energy and the dynamics alike), the twist step of a pose grid (one rule, on its twist
+axis), and the size of a landscape at another pixel size (computed, not found by resampling)."""
 
 from __future__ import annotations
 
@@ -9,12 +9,14 @@ import math
 
 import pytest
 
-from patterns.geometry import square
+from patterns.geometry import four_pad, square
+from patterns.io import read_mask
 from patterns.library import library_path
 from patterns.raster import mask_from_geometry
+from simulator.batch import auto_resolution
 from simulator.cli import build_parser
 from simulator.commands._common import scene_from_args
-from simulator.landscape import PoseGrid, build_landscape, plan
+from simulator.landscape import PoseGrid, build_landscape, estimate_bytes, plan
 from simulator.motion import DynamicsParams, field_and_grid
 from simulator.physics import Liquid, couette_damping, couette_torsional_damping, meniscus_height_um
 from simulator.scene import Effects, Scene, TwistAxis, TwistGrid, chip_radius_of_gyration_px
@@ -113,5 +115,51 @@ def test_one_rule_for_the_twist_step_of_a_pose_grid():
     assert one.twist_step_deg == axis.step_deg_for(1) == 1.0
     untwisted = small_scene().twist_axis
     assert untwisted.count == 1 and untwisted.grid_step_deg == 1.0 == build_landscape(small_scene()).twist_step_deg
+
+
+# ---------------------------------------------------------------- the pixel size
+def _old_auto_resolution(scene: Scene, budget_mb: float) -> Scene:
+    """The search auto_resolution made before: resample at each multiple, measure, stop when it fits."""
+    for k in range(1, 17):
+        s = scene if k == 1 else scene.at_resolution(scene.um_per_px * k)
+        if estimate_bytes(s) / 2**20 <= budget_mb:
+            return s
+    return s
+
+
+def _scenes() -> dict[str, Scene]:
+    fp = mask_from_geometry(four_pad(400, 40), 2.0, margin_um=10)
+    png = read_mask(library_path("square_200"), default_um_per_px=1.0)
+    return {
+        "four-pad geometry": Scene(pattern=fp, chip=mask_from_geometry(square(400), 2.0), twist=TwistGrid(3.0)),
+        "meniscus, window": Scene(pattern=fp, chip=mask_from_geometry(square(400), 2.0), effects=Effects(twist=False, meniscus=True),
+                                  liquid=Liquid(volume_nl=2.0), window_um=150.0),
+        "PNG pattern and chip": Scene.from_inputs(png, chip=png, twist=TwistGrid(5.0)),
+    }
+
+
+@pytest.mark.parametrize("name", list(_scenes()))
+def test_the_size_of_a_landscape_at_another_pixel_size_is_computed(name):
+    scene = _scenes()[name]
+    for k in range(1, 17):
+        s = scene.um_per_px * k
+        assert estimate_bytes(scene, um_per_px=s) == estimate_bytes(scene.at_resolution(s)), (name, k)
+
+
+@pytest.mark.parametrize("name", list(_scenes()))
+def test_auto_resolution_chooses_what_the_resampling_search_chose(name, monkeypatch):
+    import simulator.scene._scene as scene_module
+
+    scene = _scenes()[name]
+    sizes = [estimate_bytes(scene, um_per_px=scene.um_per_px * k) / 2**20 for k in (1, 2, 3, 5, 16)]
+    resampled = []
+    real = scene_module.resample_to_scale
+    monkeypatch.setattr(scene_module, "resample_to_scale", lambda m, s, b=None: resampled.append(s) or real(m, s, b))
+    for budget in sorted({*sizes, *(0.999 * v for v in sizes), 1e-9}):
+        old = _old_auto_resolution(scene, budget).um_per_px
+        resampled.clear()
+        new = auto_resolution(scene, budget)
+        assert new.um_per_px == old, (name, budget)
+        assert len(resampled) == (0 if new is scene else 2)  # pattern and chip, once, at the size chosen
 
 

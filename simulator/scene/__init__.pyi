@@ -11,6 +11,7 @@ from ._accuracy import (
 )
 from ._build import (
     LAYOUT_KEYS as LAYOUT_KEYS,
+    resampled_extent as resampled_extent,
 )
 from ._parts import (
     Effects as Effects,

@@ -197,17 +197,24 @@ class Scene(SceneBuilders):
     @property
     def meniscus_height_px(self) -> float:
         """The meniscus height in pixels (0 without the meniscus)."""
+        return self.meniscus_height_px_at(self.um_per_px)
+
+    def meniscus_height_px_at(self, um_per_px: float) -> float:
+        """The meniscus height in pixels of ``um_per_px`` (0 without the meniscus)."""
         h = self.meniscus_height_um
-        return 0.0 if h is None else h / self.um_per_px
+        return 0.0 if h is None else h / um_per_px
 
     @functools.cached_property
     def wall_profile(self):
         """The free-contact-line footprint (:class:`simulator.physics.WallProfile`) when the
         scene's meniscus has free lines and a height of a pixel or more, else None (no
         meniscus, pinned lines, or a height below a pixel: the ``K_h`` blur)."""
+        return self._wall_profile_at(self.um_per_px)
+
+    def _wall_profile_at(self, um_per_px: float):
         from simulator.physics import CHIP_BLUR_MIN_PX, WallProfile
 
-        h_px = self.meniscus_height_px
+        h_px = self.meniscus_height_px_at(um_per_px)
         if self.liquid.pinned or h_px < CHIP_BLUR_MIN_PX:
             return None
         m = self.materials
@@ -216,10 +223,14 @@ class Scene(SceneBuilders):
     @property
     def meniscus_margin_px(self) -> int:
         """Pixels beyond the chip that the meniscus's footprint reaches (0 without it)."""
+        return self.meniscus_margin_px_at(self.um_per_px)
+
+    def meniscus_margin_px_at(self, um_per_px: float) -> int:
+        """:attr:`meniscus_margin_px` for pixels of ``um_per_px`` (the scene's height, not resampled)."""
         from simulator.physics import margin_px
 
-        prof = self.wall_profile
-        return prof.margin_px if prof is not None else margin_px(self.meniscus_height_px)
+        prof = self.wall_profile if um_per_px == self.um_per_px else self._wall_profile_at(um_per_px)
+        return prof.margin_px if prof is not None else margin_px(self.meniscus_height_px_at(um_per_px))
 
     @property
     def um_per_px(self) -> float:
