@@ -1,11 +1,13 @@
 """Each derived quantity has one home and is carried from there: the liquid's height and the
 chip's radius of gyration in the Scene (one formula each, computed once per scene, used by
 the energy and the dynamics alike), the twist step of a pose grid (one rule, on its twist
-axis), and the size of a landscape at another pixel size (computed, not found by resampling)."""
+axis), the size of a landscape at another pixel size (computed, not found by resampling),
+and the scene file (read once per command)."""
 
 from __future__ import annotations
 
 import math
+import tomllib
 
 import pytest
 
@@ -14,7 +16,7 @@ from patterns.io import read_mask
 from patterns.library import library_path
 from patterns.raster import mask_from_geometry
 from simulator.batch import auto_resolution
-from simulator.cli import build_parser
+from simulator.cli import build_parser, main
 from simulator.commands._common import scene_from_args
 from simulator.landscape import PoseGrid, build_landscape, estimate_bytes, plan
 from simulator.motion import DynamicsParams, field_and_grid
@@ -163,3 +165,38 @@ def test_auto_resolution_chooses_what_the_resampling_search_chose(name, monkeypa
         assert len(resampled) == (0 if new is scene else 2)  # pattern and chip, once, at the size chosen
 
 
+# ---------------------------------------------------------------- the scene file
+@pytest.fixture
+def count_toml_reads(monkeypatch):
+    calls = []
+    loads = tomllib.loads
+    monkeypatch.setattr(tomllib, "loads", lambda text, **kw: calls.append(1) or loads(text, **kw))
+    return calls
+
+
+def _scene_file(tmp_path, table: str) -> str:
+    p = tmp_path / "scene.toml"
+    p.write_text(f'pattern = "{library_path("square_200")}"\nchip_size_um = [200, 200]\nresolution_um = 4\n'
+                 f"[effects]\ntwist = false\n[liquid]\nvolume_nl = 0.5\n{table}")
+    return str(p)
+
+
+def test_simulate_reads_its_scene_file_once(tmp_path, count_toml_reads, capsys):
+    scene = _scene_file(tmp_path, "[simulate]\nstart = [12, 0, 0]\n")
+    assert main(["simulate", scene, "--quiet", "--json", str(tmp_path / "t.json")]) == 0
+    assert "aligned" in capsys.readouterr().out
+    assert len(count_toml_reads) == 1
+
+
+def test_montecarlo_reads_its_scene_file_once(tmp_path, count_toml_reads, capsys):
+    scene = _scene_file(tmp_path, '[montecarlo]\ngrid = "-12:12:12,-12:12:12"\n')
+    assert main(["montecarlo", scene, "--quiet", "--json", str(tmp_path / "m.json")]) == 0
+    capsys.readouterr()
+    assert len(count_toml_reads) == 1
+
+
+def test_energy_reads_its_scene_file_once(tmp_path, count_toml_reads, capsys):
+    scene = _scene_file(tmp_path, "")
+    assert main(["energy", scene, "--at", "10,0,0", "--json", str(tmp_path / "e.json")]) == 0
+    capsys.readouterr()
+    assert len(count_toml_reads) == 1
