@@ -66,13 +66,21 @@ YIELD_STARTS = 2000
 GRID_CELLS = 25
 
 
+#: The coarsest whole multiple of its pixel size :func:`auto_resolution` takes a scene to.
+AUTO_MAX_FACTOR = 16
+
+
 def auto_resolution(scene: Scene, budget_mb: float = AUTO_LANDSCAPE_MB) -> Scene:
-    """The scene at the finest whole multiple of its pixel size whose landscape fits ``budget_mb``."""
-    for k in range(1, 17):
-        s = scene if k == 1 else scene.at_resolution(scene.um_per_px * k)
-        if estimate_bytes(s) / 2**20 <= budget_mb:
-            return s
-    return s
+    """The scene at the finest whole multiple of its pixel size whose landscape fits
+    ``budget_mb`` (at most :data:`AUTO_MAX_FACTOR` times it, that one when none fits).
+
+    The landscape's size at each multiple is computed from the scene as it is
+    (:func:`simulator.landscape.estimate_bytes` with ``um_per_px``); the scene is resampled
+    once, to the pixel size chosen.
+    """
+    s = scene.um_per_px
+    k = next((k for k in range(1, AUTO_MAX_FACTOR + 1) if estimate_bytes(scene, um_per_px=s * k) / 2**20 <= budget_mb), AUTO_MAX_FACTOR)
+    return scene if k == 1 else scene.at_resolution(s * k)
 
 
 def chip_size(scene: Scene) -> tuple[float, float]:

@@ -97,7 +97,6 @@ from simulator.motion import (
     field_and_grid,
     finish,
     is_stiff,
-    radius_of_gyration_px,
     stepper,
 )
 from simulator.physics import align_tolerance, pin_per_index
@@ -263,7 +262,7 @@ def run_batch(
     t_land = time.perf_counter() - t0
     _check_starts_fit(ls, poses)
     pin = pin_per_index(scene, ls.um_per_px, ls.twist_step_deg)
-    fld, grid = field_and_grid(ls, radius_of_gyration_px(scene), pin=pin, align_tol=align_tolerance(ls, pin, floats=scene.wall_profile is not None))
+    fld, grid = field_and_grid(ls, pin=pin, align_tol=align_tolerance(ls, pin, floats=scene.wall_profile is not None))
     stiff = bool(is_stiff(method, fld, grid, dynamics)) if dynamic else False  # the solver simulate() would choose
     q0 = grid.to_index(poses)
     q0 = np.round(q0).astype(np.int32) if method == "greedy" else q0  # as simulate()

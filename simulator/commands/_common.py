@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import copy
 import json
 import math
 import os
@@ -137,18 +138,24 @@ def parse_pose(text: str, flag: str) -> tuple[float, float, float]:
     return vals[0], vals[1], vals[2]
 
 
-def scene_from_args(args: argparse.Namespace, note_frame: bool = True) -> Scene:
+def scene_document(args: argparse.Namespace) -> dict[str, Any]:
+    """The scene file's document (``args.scene``, read and validated by :func:`read_toml`),
+    or {} without one. A command reads it once and passes it on (``doc=``) to
+    :func:`scene_from_args`, :func:`liquid_checks` and :func:`check_outputs`."""
+    return read_toml(args.scene) if args.scene else {}
+
+
+def scene_from_args(args: argparse.Namespace, note_frame: bool = True, doc: dict[str, Any] | None = None) -> Scene:
     """Build the scene from an optional TOML file and the flags (flags win).
 
     Flags are merged into the TOML document under the TOML keys (see
     :mod:`simulator.scene`), so a file and the command line mean the same thing.
+    ``doc``: the scene file's document when the command has read it
+    (:func:`scene_document`; it is not changed), else it is read here.
     For a layout pattern, ``note_frame`` prints on stderr where the poses' origin is.
     """
-    doc: dict[str, Any] = {}
-    base = Path(".")
-    if args.scene:
-        doc = read_toml(args.scene)
-        base = Path(args.scene).parent
+    doc = copy.deepcopy(scene_document(args) if doc is None else doc)
+    base = Path(args.scene).parent if args.scene else Path(".")
     if args.pattern:
         doc["pattern"] = str(Path(args.pattern).resolve())
     chips = {"chip": str(Path(args.chip).resolve()) if args.chip else None,
@@ -225,16 +232,17 @@ def scene_from_args(args: argparse.Namespace, note_frame: bool = True) -> Scene:
 
 
 def liquid_checks(args: argparse.Namespace, scene: Scene, method: str, biases_um: Any = None,
-                  placed: str = "the start") -> list[str]:
+                  placed: str = "the start", doc: dict[str, Any] | None = None) -> list[str]:
     """The droplet checks of :mod:`simulator.liquid` for a volume the user gave (``--volume``
     or ``[liquid] volume_nl``; :func:`scene_from_args` has refused a film thicker than the
     chip): a note when ``method`` does not use the volume, and the warnings of
     :func:`simulator.liquid.scene_warnings` (``biases_um``: per start, the larger of |x|, |y|),
-    each printed as one line on stderr and returned for the JSON (``liquid_warnings``)."""
+    each printed as one line on stderr and returned for the JSON (``liquid_warnings``).
+    ``doc``: the scene file's document (:func:`scene_document`; default: read here)."""
     from simulator.liquid import scene_warnings, volume_note
 
     given = getattr(args, "volume", None) is not None or (
-        bool(args.scene) and "volume_nl" in (read_toml(args.scene).get("liquid") or {}))
+        bool(args.scene) and "volume_nl" in ((scene_document(args) if doc is None else doc).get("liquid") or {}))
     if not given:
         warns = []
         if scene.topography is not None:
@@ -257,30 +265,33 @@ def read_toml(path: str | os.PathLike) -> dict[str, Any]:
     return read_scene_file(path)
 
 
-def input_paths(args: argparse.Namespace) -> list[Path]:
-    """The files this run reads (pattern, chip, scene and the scene's own pattern/chip)."""
+def input_paths(args: argparse.Namespace, doc: dict[str, Any] | None = None) -> list[Path]:
+    """The files this run reads (pattern, chip, scene and the scene's own pattern/chip).
+    ``doc``: the scene file's document (:func:`scene_document`; default: read here)."""
     paths = [getattr(args, k, None) for k in ("scene", "pattern", "chip", "image")]
     scene = getattr(args, "scene", None)
     if scene:
-        try:
-            doc = read_toml(scene)
-        except InputError:
-            doc = {}
+        if doc is None:
+            try:
+                doc = read_toml(scene)
+            except InputError:
+                doc = {}
         for key in ("pattern", "chip"):
             if isinstance(doc.get(key), str):
                 paths.append(str(Path(scene).parent / doc[key]))
     return [Path(p) for p in paths if isinstance(p, str) and p]
 
 
-def check_outputs(args: argparse.Namespace, flags: tuple[str, ...]) -> None:
+def check_outputs(args: argparse.Namespace, flags: tuple[str, ...], doc: dict[str, Any] | None = None) -> None:
     """Fail before any work when an output file cannot or must not be written.
 
     ``flags`` are attribute names (``json`` for ``--json``). An output may not be an
     input, a link, a device or a directory, and two outputs may not name one file.
+    ``doc``: the scene file's document (:func:`scene_document`; default: read here).
     """
     from patterns.outputs import check_distinct, check_output_file
 
-    inputs = input_paths(args)
+    inputs = input_paths(args, doc)
     named = {f"--{f.replace('_', '-')}": getattr(args, f, None) for f in flags}
     for flag, path in named.items():
         if path:

@@ -11,6 +11,7 @@ from simulator.commands._common import (
     add_scene_args,
     check_outputs,
     parse_pose,
+    scene_document,
     scene_from_args,
     write_json,
 )
@@ -46,8 +47,9 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("give at least one pose with --at X,Y,TWIST (um, um, degrees), or a --curve")
     if args.curve and (args.start is None or args.stop is None):
         raise InputError("--curve needs --from A --to B (um for x/y, degrees for twist)")
-    check_outputs(args, ("json", "csv"))
-    scene = scene_from_args(args)
+    doc = scene_document(args)  # the scene file, read and validated once for the whole command
+    check_outputs(args, ("json", "csv"), doc)
+    scene = scene_from_args(args, doc=doc)
     twists = [p[2] for p in poses]
     if args.curve == "twist":
         twists += [args.start, args.stop]

@@ -7,7 +7,13 @@ from pathlib import Path
 
 from patterns.errors import InputError
 from patterns.outputs import check_output_dir
-from simulator.commands._common import add_scene_args, input_paths, liquid_checks, scene_from_args
+from simulator.commands._common import (
+    add_scene_args,
+    input_paths,
+    liquid_checks,
+    scene_document,
+    scene_from_args,
+)
 from simulator.core import AUTO_LANDSCAPE_MB, BATCH_METHODS, DYNAMIC_METHODS
 
 
@@ -47,12 +53,13 @@ def run(args: argparse.Namespace) -> int:
         args.pattern = args.image
     if not (args.pattern or args.scene):
         raise InputError("give the pattern PNG or layout: selfalign evaluate PATTERN.png --out DIR")
-    inputs = input_paths(args)
+    doc = scene_document(args)  # the scene file, read and validated once for the whole command
+    inputs = input_paths(args, doc)
     check_output_dir(args.out, "--out", args.force, inputs)  # before any work
     if not (args.chip or args.chip_size or args.chip_layer or args.scene):
         args.chip_size = _bbox_chip(args)
-    scene = scene_from_args(args, note_frame=False)
-    liquid_warnings = liquid_checks(args, scene, args.method, _noise_biases(scene), "the placement-noise starts")
+    scene = scene_from_args(args, note_frame=False, doc=doc)
+    liquid_warnings = liquid_checks(args, scene, args.method, _noise_biases(scene), "the placement-noise starts", doc=doc)
     layout = scene.pattern.params.get("layout")
     if layout:
         from patterns.layout import frame_note

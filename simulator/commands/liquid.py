@@ -188,7 +188,6 @@ def run_height(args: argparse.Namespace) -> int:
 # ----------------------------------------------------------------------- overflow
 def run_overflow(args: argparse.Namespace) -> int:
     from simulator.liquid import overflow_report
-    from simulator.physics import meniscus_height_um
 
     _liquid(args)
     chip = _chip_angle(args.chip_angle)
@@ -199,11 +198,11 @@ def run_overflow(args: argparse.Namespace) -> int:
     else:
         if args.volume is None or args.chip_size is None:
             raise InputError("give the liquid height: --meniscus-height UM, or --volume NL with --chip-size W[xH]")
+        from simulator.liquid import require_film
+
         w, ht = _chip_size(args.chip_size)
-        h = meniscus_height_um(_finite("--volume", args.volume), w * ht)
-        if h > min(w, ht):
-            raise InputError(f"--volume {args.volume:g} nl under a {w:g} x {ht:g} um chip is a film {h:.4g} um thick, more than the chip's "
-                             f"smallest side: not a film (1 nl = 1e6 um^3); use at most {0.1 * min(w, ht) * w * ht / 1e6:.3g} nl for a thin film")
+        # As `liquid height`, simulate and evaluate: h = V / A, a film thicker than the chip refused.
+        h = require_film(_finite("--volume", args.volume), w, ht)
     r = overflow_report(args.pad_advancing, chip, args.edge_angle, h, _finite("--bias", args.bias, positive=False))
     xo = r["overflow_bias_um"]
     lines = [f"meniscus height {h:.4g} um; overflow angle (180 - edge) + pad advancing = {r['overflow_angle_deg']:g} deg; "

@@ -18,7 +18,7 @@ from simulator.commands._common import (
     check_outputs,
     liquid_checks,
     parse_pose,
-    read_toml,
+    scene_document,
     scene_from_args,
 )
 from simulator.core import (
@@ -133,9 +133,10 @@ def parse_spread(text: str) -> tuple[float, float, float]:
     return sx, sy, st
 
 
-def _options(args: argparse.Namespace) -> dict:
-    """Flags over the TOML scene's [montecarlo] table."""
-    table = read_toml(args.scene).get("montecarlo", {}) if args.scene else {}
+def _options(args: argparse.Namespace, doc: dict | None = None) -> dict:
+    """Flags over the TOML scene's [montecarlo] table (``doc``: the scene file's document,
+    :func:`scene_document`; default: read here)."""
+    table = (scene_document(args) if doc is None else doc).get("montecarlo", {})
     if not isinstance(table, dict):
         raise InputError("[montecarlo] in the scene file must be a table")
     allowed = {"grid", "random", "spread", "around", "distribution", "seed", "method", "max_steps", "chunk"}
@@ -221,9 +222,9 @@ def _axis_doc(values: tuple[float, ...]) -> dict:
     return {"from": values[0], "to": values[-1], "step": step, "count": len(values)}
 
 
-def _check_outputs(args: argparse.Namespace, is_grid: bool, method: str) -> None:
+def _check_outputs(args: argparse.Namespace, is_grid: bool, method: str, doc: dict | None = None) -> None:
     """Fail before any work when an output cannot or must not be written."""
-    check_outputs(args, ("json", "csv", "map", "time_plot"))
+    check_outputs(args, ("json", "csv", "map", "time_plot"), doc)
     if args.map:
         if not is_grid:
             raise InputError("--map needs --grid starts (a capture map is drawn over the start grid)")
@@ -249,14 +250,15 @@ def run(args: argparse.Namespace) -> int:
     from simulator.core import threads
     from simulator.motion import OUTCOMES
 
-    opt = _options(args)
+    scene_doc = scene_document(args)  # the scene file, read and validated once for the whole command
+    opt = _options(args, scene_doc)
     starts, desc, seed = _starts(opt)
     grid = starts if isinstance(starts, StartGrid) else None
-    _check_outputs(args, grid is not None, opt["method"])
-    scene = scene_from_args(args)
+    _check_outputs(args, grid is not None, opt["method"], scene_doc)
+    scene = scene_from_args(args, doc=scene_doc)
     from simulator.liquid import placement_biases
 
-    liquid_warnings = liquid_checks(args, scene, opt["method"], lambda: placement_biases(starts), "the starts")
+    liquid_warnings = liquid_checks(args, scene, opt["method"], lambda: placement_biases(starts), "the starts", doc=scene_doc)
     from simulator.core import compiling
     from simulator.landscape import require_landscape_fits
 
@@ -277,7 +279,7 @@ def run(args: argparse.Namespace) -> int:
         "starts": desc,
         "max_steps": opt["max_steps"],
         "scene": {
-            "pattern": str(args.pattern or read_toml(args.scene).get("pattern")),
+            "pattern": str(args.pattern or scene_doc.get("pattern")),
             "um_per_px": scene.um_per_px,
             "chip_area_um2": scene.chip.area_um2,
             "twist_step_deg": scene.twist.step_deg if scene.effects.twist else None,

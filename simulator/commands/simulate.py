@@ -12,6 +12,7 @@ from simulator.commands._common import (
     check_outputs,
     liquid_checks,
     parse_pose,
+    scene_document,
     scene_from_args,
     write_json,
 )
@@ -50,12 +51,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from simulator.commands._common import read_toml
-
     # JAX: imported when a run needs it (selfalign --help starts without it).
     from simulator.motion import price_run, require_start_in_window, simulate
 
-    doc = read_toml(args.scene) if args.scene else {}
+    doc = scene_document(args)  # the scene file, read and validated once for the whole command
     sim = doc.get("simulate", {})
     start_text = args.start or (",".join(str(v) for v in sim["start"]) if "start" in sim else None)
     if start_text is None:
@@ -63,11 +62,11 @@ def run(args: argparse.Namespace) -> int:
     start = parse_pose(start_text, "--start")
     method = args.method or sim.get("method", "greedy")
     max_steps = args.max_steps if args.max_steps is not None else sim.get("max_steps", DEFAULT_MAX_STEPS)
-    _check_outputs(args)
-    scene = scene_from_args(args)
+    _check_outputs(args, doc)
+    scene = scene_from_args(args, doc=doc)
     from simulator.liquid import placement_biases
 
-    liquid_warnings = liquid_checks(args, scene, method, placement_biases(start), "the start")
+    liquid_warnings = liquid_checks(args, scene, method, placement_biases(start), "the start", doc=doc)
     price_run(scene, method, max_steps)
     require_start_in_window(scene, start)
     if method in ("overdamped", "inertial"):
@@ -140,9 +139,9 @@ def chip_symmetry_words(scene, period: float) -> str:
     return f"a chip with {period:g}-degree symmetry"
 
 
-def _check_outputs(args: argparse.Namespace) -> None:
+def _check_outputs(args: argparse.Namespace, doc: dict | None = None) -> None:
     """Fail before any work when an output cannot or must not be written."""
-    check_outputs(args, ("json", "csv", "plot", "gif"))
+    check_outputs(args, ("json", "csv", "plot", "gif"), doc)
     if args.gif and not args.gif.lower().endswith(".gif"):
         raise InputError(f"--gif {args.gif}: the animation must end in .gif")
     if args.plot and not args.plot.lower().endswith((".png", ".svg", ".pdf")):

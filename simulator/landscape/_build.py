@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -34,7 +34,7 @@ from simulator.landscape._posegrid import (
 )
 from simulator.landscape._rotation import ChipRotator, _chip_reach_px, mirror_twins
 from simulator.physics import CHIP_BLUR_MIN_PX
-from simulator.scene import Scene, TwistAxis
+from simulator.scene import Scene, TwistAxis, resampled_extent
 
 if TYPE_CHECKING:
     from simulator.landscape._landscape import Landscape
@@ -77,9 +77,20 @@ def _check_energy_range(scene: Scene) -> None:
         )
 
 
-def estimate_bytes(scene: Scene, twists: np.ndarray | None = None) -> int:
-    """Bytes the landscape array of ``scene`` would take (before building it; nothing is rotated)."""
-    return _box(scene, twists)["landscape_bytes"]
+def estimate_bytes(scene: Scene, twists: np.ndarray | None = None, um_per_px: float | None = None) -> int:
+    """Bytes the landscape array of ``scene`` would take (before building it; nothing is rotated).
+
+    ``um_per_px``: the landscape of ``scene.at_resolution(um_per_px)``, computed from the
+    scene's rasters without resampling them (:func:`simulator.scene.resampled_extent`: the
+    reach of pattern and chip at that pixel size; the scene's twist axis and meniscus height).
+    """
+    if um_per_px is None or math.isclose(um_per_px, scene.um_per_px, rel_tol=1e-9):
+        return _box(scene, twists)["landscape_bytes"]
+    n_twists = _twist_run(scene, twists)[2]
+    e = _extent(scene, um_per_px)
+    _, rx, _, _ = _axis_box(e["full"][0], e["limit"], 0, None)
+    _, ry, _, _ = _axis_box(e["full"][1], e["limit"], 0, None)
+    return int(n_twists * (2 * ry + 1) * (2 * rx + 1) * np.dtype(scene.dtype).itemsize)
 
 
 def _refuse_over_budget(scene: Scene, need: float, n_twists: int, ny: int, nx: int) -> None:
@@ -109,41 +120,49 @@ def _twist_run(scene: Scene, twists) -> tuple[TwistAxis, int, int, tuple[bool, b
 
 
 def _box(scene: Scene, twists, center_px: tuple[int, int] = (0, 0), half_px: int | None = None) -> dict:
-    """Twists and translation box of a build, and its landscape bytes: sizes only, no rotation."""
+    """Twists and translation box of a build, and its landscape bytes: sizes only, no rotation
+    (the pose grid is made by :func:`plan`, complete, once the budget is checked)."""
     axis, t_first, n_twists, t_cut = _twist_run(scene, twists)
-    pat = scene.pattern.data
-    r0, r1, c0, c1 = nonzero_box(pat > 0)
-    h, w = pat.shape
+    e = _extent(scene)
+    limit = e["limit"]
+    cx, rx, x_lo, x_hi = _axis_box(e["full"][0], limit, int(center_px[0]), half_px)
+    cy, ry, y_lo, y_hi = _axis_box(e["full"][1], limit, int(center_px[1]), half_px)
+    shape = (n_twists, 2 * ry + 1, 2 * rx + 1)
+    return {"axis": axis, "t_first": t_first, "shape": shape, "cut": (t_cut, (y_lo, y_hi), (x_lo, x_hi)),
+            "first_px": (cx - rx, cy - ry), "origin": e["origin"], "crop": e["crop"],
+            "landscape_bytes": int(math.prod(shape) * np.dtype(scene.dtype).itemsize), "margin": e["margin"]}
+
+
+def _extent(scene: Scene, um_per_px: float | None = None) -> dict:
+    """The translation reach of a scene's pose grid, in px: ``full`` (x, y), the half-widths
+    at which the chip no longer touches the pattern (its meniscus footprint included), and
+    ``limit``, the scene's window; with the pattern's crop, origin and the meniscus margin.
+
+    ``um_per_px``: at that pixel size, as :meth:`Scene.at_resolution` would resample the
+    scene, computed from the extents of the resampled rasters
+    (:func:`simulator.scene.resampled_extent`) without making them (default: the scene's own).
+    """
+    native = um_per_px is None
+    s = scene.um_per_px if native else um_per_px
+    pat = scene.pattern
+    (h, w), (r0, r1, c0, c1) = (pat.shape, nonzero_box(pat.data > 0)) if native else resampled_extent(pat, s)
     # Cropped pattern, y-up; origin (physical 0, 0) in pixel-corner coordinates.
     origin = (w / 2 - c0, r1 - h / 2)
     reach = (max(w / 2 - c0, c1 - w / 2), max(h / 2 - r0, r1 - h / 2))
-    chip_rx, chip_ry = _chip_reach_px(scene.chip, scene.effects.twist)
+    chip_rx, chip_ry = _chip_reach_px(scene.chip, scene.effects.twist, None if native else s)
     # A finite meniscus widens the liquid footprint: poses that far beyond contact still feel it.
-    margin = scene.meniscus_margin_px
+    margin = scene.meniscus_margin_px_at(s)
     chip_rx, chip_ry = chip_rx + margin, chip_ry + margin
-    limit = None if scene.window_um is None else math.ceil(scene.window_um / scene.um_per_px - 1e-9)
-    cx, rx, x_lo, x_hi = _axis_box(math.ceil(reach[0] + chip_rx - 1e-9), limit, int(center_px[0]), half_px)
-    cy, ry, y_lo, y_hi = _axis_box(math.ceil(reach[1] + chip_ry - 1e-9), limit, int(center_px[1]), half_px)
-    nbytes = n_twists * (2 * ry + 1) * (2 * rx + 1) * np.dtype(scene.dtype).itemsize
-    grid = PoseGrid(
-        shape=(n_twists, 2 * ry + 1, 2 * rx + 1),
-        um_per_px=scene.um_per_px,
-        twist=axis,
-        wrap=axis.periodic and n_twists == axis.count,
-        cut=(t_cut, (y_lo, y_hi), (x_lo, x_hi)),
-        rg_px=0.0,  # set by build_landscape once the budget is checked (it costs a pass over the chip)
-        x_first_px=cx - rx,
-        y_first_px=cy - ry,
-        t_first=t_first,
-    )
-    return {"grid": grid, "origin": origin, "crop": (r0, r1, c0, c1), "landscape_bytes": int(nbytes), "margin": margin}
+    limit = None if scene.window_um is None else math.ceil(scene.window_um / s - 1e-9)
+    full = (math.ceil(reach[0] + chip_rx - 1e-9), math.ceil(reach[1] + chip_ry - 1e-9))
+    return {"full": full, "limit": limit, "origin": origin, "crop": (r0, r1, c0, c1), "margin": margin}
 
 
 def require_landscape_fits(scene: Scene, twists: np.ndarray | None = None) -> None:
     """Refuse (InputError) a landscape over the memory budget or with too many twists, cheaply
     (no rotation, no allocation): for commands to call before announcing a long run."""
     b = _box(scene, twists)
-    t, ny, nx = b["grid"].shape
+    t, ny, nx = b["shape"]
     _refuse_over_budget(scene, b["landscape_bytes"], t, ny, nx)
 
 
@@ -181,12 +200,17 @@ def plan(scene: Scene, twists: np.ndarray | None = None, center_px: tuple[int, i
     never allocates the landscape, e.g. :mod:`simulator.landscape`'s bound).
     """
     b = _box(scene, twists, center_px, half_px)
-    grid, origin, (r0, r1, c0, c1) = b["grid"], b["origin"], b["crop"]
-    n_twists, ny, nx = grid.shape
-    rx, ry = nx // 2, ny // 2
-    cx, cy = grid.x_first_px + rx, grid.y_first_px + ry
+    origin, (r0, r1, c0, c1) = b["origin"], b["crop"]
+    n_twists, ny, nx = b["shape"]
     if check_budget:
         _refuse_over_budget(scene, b["landscape_bytes"], n_twists, ny, nx)
+    axis, (x_first, y_first) = b["axis"], b["first_px"]
+    # The pose grid, complete: the chip's radius of gyration is the scene's (derived once per
+    # scene, after the budget check: it costs a pass over the chip).
+    grid = PoseGrid(shape=b["shape"], um_per_px=scene.um_per_px, twist=axis, wrap=axis.periodic and n_twists == axis.count,
+                    cut=b["cut"], rg_px=scene.chip_rg_px, x_first_px=x_first, y_first_px=y_first, t_first=b["t_first"])
+    rx, ry = nx // 2, ny // 2
+    cx, cy = grid.x_first_px + rx, grid.y_first_px + ry
     pat = scene.pattern.data
     parity = (int((2 * origin[1]) % 2), int((2 * origin[0]) % 2))
     # The meniscus blur: on the chip (rotated smoothly) from one pixel up; below a pixel on
@@ -283,7 +307,7 @@ def build_landscape(
 
     return Landscape(
         energy=energy,
-        grid=replace(p.grid, rg_px=scene.chip_rg_px),
+        grid=p.grid,
         delta_gamma=scene.delta_gamma_N_m,
         energy_scale_J=energy_scale_J(scene),
         meniscus_height_um=scene.meniscus_height_um,

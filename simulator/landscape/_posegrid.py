@@ -130,8 +130,9 @@ class PoseGrid:
     # -- steps and origin
     @property
     def twist_step_deg(self) -> float:
-        """Twist step (degrees); 1.0 for a grid of one twist (no twist direction)."""
-        return float(self.twist.step_deg) if self.shape[0] > 1 else 1.0
+        """Twist step (degrees); 1.0 for a grid of one twist (no twist direction):
+        :meth:`TwistAxis.step_deg_for`, the rule of its axis."""
+        return self.twist.step_deg_for(self.shape[0])
 
     @property
     def period_deg(self) -> float:

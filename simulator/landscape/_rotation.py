@@ -12,6 +12,7 @@ from shapely import affinity
 from patterns.mask import Mask, nonzero_box
 from patterns.raster import rasterize
 from simulator.core import ceil_whole
+from simulator.scene import resampled_extent
 
 #: Spline order of the blurred chip's rotation: quadratic B-splines are C1 (no kinks in the
 #: energy against twist) at 9 taps a pixel, against 16 for cubic (measured 1.7x faster;
@@ -24,10 +25,13 @@ SPLINE_ORDER = 2
 _SMOOTH: dict = {}
 
 
-def _chip_reach_px(chip: Mask, twist: bool) -> tuple[float, float]:
-    """Half-extent (x, y) in px of the chip's wettable area about its centre, over all twists."""
-    h, w = chip.shape
-    r0, r1, c0, c1 = nonzero_box(chip.data > 0)
+def _chip_reach_px(chip: Mask, twist: bool, um_per_px: float | None = None) -> tuple[float, float]:
+    """Half-extent (x, y) in px of the chip's wettable area about its centre, over all twists
+    (``um_per_px``: of the chip resampled to that pixel size, :func:`simulator.scene.resampled_extent`)."""
+    if um_per_px is None:
+        (h, w), (r0, r1, c0, c1) = chip.shape, nonzero_box(chip.data > 0)
+    else:
+        (h, w), (r0, r1, c0, c1) = resampled_extent(chip, um_per_px)
     xs = np.array([c0, c1]) - w / 2
     ys = np.array([r0, r1]) - h / 2
     if not twist:
@@ -35,7 +39,7 @@ def _chip_reach_px(chip: Mask, twist: bool) -> tuple[float, float]:
     if chip.geometry is not None:
         from shapely.geometry import Point
 
-        rad = chip.geometry.hausdorff_distance(Point(0, 0)) / chip.um_per_px
+        rad = chip.geometry.hausdorff_distance(Point(0, 0)) / (chip.um_per_px if um_per_px is None else um_per_px)
     else:
         rad = math.hypot(np.abs(xs).max(), np.abs(ys).max())
     return rad, rad

@@ -54,8 +54,12 @@ def capillary_length_um(surface_tension_N_m: float = WATER_SURFACE_TENSION_N_M,
 # --------------------------------------------------------------------- meniscus height
 def height_report(volume_nl: float, area_um2: float, sides_um: tuple[float, float] | None = None,
                   surface_tension_N_m: float = WATER_SURFACE_TENSION_N_M,
-                  density_kg_m3: float = WATER_DENSITY_KG_M3, bias_um: float | None = None) -> dict:
+                  density_kg_m3: float = WATER_DENSITY_KG_M3, bias_um: float | None = None,
+                  height_um: float | None = None) -> dict:
     """The flat-film meniscus height and whether the thin-film picture holds (units in the keys).
+
+    ``height_um``: the height when it is known already (a scene's,
+    :attr:`simulator.scene.Scene.liquid_height_um`); default ``V / A``.
 
     ``sides_um`` (the chip's width and height) adds the comparison with the smallest side
     and the parallelepiped meniscus of docs/physics.md §3.3 for a shift along x (edge length
@@ -64,7 +68,7 @@ def height_report(volume_nl: float, area_um2: float, sides_um: tuple[float, floa
     """
     from simulator.physics import parallelepiped_force, parallelepiped_stiffness
 
-    h = meniscus_height_um(volume_nl, area_um2)
+    h = meniscus_height_um(volume_nl, area_um2) if height_um is None else float(height_um)
     lc = capillary_length_um(surface_tension_N_m, density_kg_m3)
     out: dict = {"volume_nl": float(volume_nl), "area_um2": float(area_um2), "meniscus_height_um": h,
                  "capillary_length_um": lc, "h_over_capillary_length": h / lc}

@@ -96,8 +96,10 @@ def require_film(volume_nl: float, w_um: float, h_um: float, area_um2: float | N
 
 def volume_note(scene, method: str) -> str | None:
     """A note when ``method`` does not use the droplet volume (None when it does)."""
-    sets_height = getattr(scene.effects, "meniscus", False) and getattr(scene.liquid, "height_um", None) is None
-    if method in ("overdamped", "inertial") or sets_height:
+    if getattr(scene.liquid, "height_um", None) is not None:  # the height is given: the volume sets nothing
+        return (f"--volume {scene.liquid.volume_nl:g} nl is not used by the {method} method: --meniscus-height gives the "
+                "liquid's height (the meniscus's and the dynamics' damping's); it is used here only for the liquid checks")
+    if method in ("overdamped", "inertial") or getattr(scene.effects, "meniscus", False):
         return None
     return (f"--volume {scene.liquid.volume_nl:g} nl is not used by the {method} method (only overdamped and inertial "
             "use it, and --meniscus for the height); it is used here only for the liquid checks")
@@ -145,7 +147,9 @@ def scene_warnings(scene, biases_um=None, placed: str = "the start") -> list[str
         out.append(f"the pattern has {n} separate pads: one drop must touch them all; the critical volume is computed "
                    "for 2 x 2 four-pad patterns only, so check this one another way")
     w, ht = _footprint_um(scene.chip)
-    rep = height_report(v, scene.chip.area_um2, (w, ht), m.surface_tension_N_m, scene.liquid.density_kg_m3)
+    # The scene's one height (the meniscus's and the damping's): V / A, or --meniscus-height when given.
+    rep = height_report(v, scene.chip.area_um2, (w, ht), m.surface_tension_N_m, scene.liquid.density_kg_m3,
+                        height_um=scene.liquid_height_um)
     h = rep["meniscus_height_um"]
     if not rep["thin_film_holds"] and not getattr(scene.effects, "meniscus", False):
         out.append("thick film: " + "; ".join(rep["thin_film_notes"]) + " (--meniscus models the finite height)")

@@ -2,7 +2,8 @@
 tolerances from the scene's chip and liquid, in SI units.
 
 The model (docs/physics.md §4): the chip slides on a film of height ``h = V / A`` (droplet
-volume over the chip's wetted footprint) held on its edges.
+volume over the chip's wetted footprint; the meniscus height when one is given, the same
+height the finite meniscus's energy uses) held on its edges.
 
 * mass ``m`` and moment ``I`` of the chip's body (footprint extruded to its thickness and
   density). The liquid the Couette profile carries along, ``rho_l A h / 3`` and
@@ -94,7 +95,7 @@ class DynamicsParams:
     ) -> DynamicsParams:
         """Couette damping of the liquid film under a rigid chip (docs/physics.md §4, §7).
 
-        ``h = V / A`` (flat slab), ``c = calibration * mu A / h`` and
+        ``h = V / A`` (flat slab; the liquid's ``height_um`` when given), ``c = calibration * mu A / h`` and
         ``c_t = calibration * mu J / h``; mass and inertia of the chip's cuboid body (the
         liquid's added mass is left out: module docstring).
 
@@ -120,7 +121,7 @@ class DynamicsParams:
             else positive("polar moment", polar_moment_um4, "um^4")
         )
         return cls._film(
-            chip.mass_kg, chip.moment_of_inertia_kg_m2, area, j, liquid, calibration, t_max_s
+            chip.mass_kg, chip.moment_of_inertia_kg_m2, area, j, liquid.meniscus_height_um(area), liquid, calibration, t_max_s
         )
 
     @classmethod
@@ -129,35 +130,38 @@ class DynamicsParams:
 
         The chip body is its wettable footprint (the mask, any shape, area coverage per
         pixel) extruded to ``scene.chip_thickness_um`` at ``scene.chip_density_kg_m3``;
-        the liquid film covers the same footprint. Area and polar moment come from the
-        mask about its centre (each pixel with its own ``px^2/6`` term, so full pixels
-        are exact): a 200 um square gives the cuboid values of :meth:`from_physics`.
+        the liquid film covers the same footprint. Every length comes from the scene, derived
+        once there: the area ``A`` of the chip's mask, its polar moment ``J = A rg^2`` with
+        the radius of gyration of the pose grid (:attr:`~simulator.scene.Scene.chip_rg_px`)
+        and the film height ``h`` of the meniscus
+        (:attr:`~simulator.scene.Scene.liquid_height_um`: ``--meniscus-height`` when given,
+        else ``V / A``).
         """
-        chip = scene.chip
-        s = float(chip.um_per_px)
-        d = np.asarray(chip.data, dtype=float)
-        h, w = d.shape
-        y, x = np.mgrid[0:h, 0:w]
-        r2 = ((x + 0.5 - w / 2) ** 2 + (y + 0.5 - h / 2) ** 2 + 1.0 / 6.0) * s * s  # um^2
-        area = positive("chip footprint area", d.sum() * s * s, "um^2")
-        j = float((d * r2).sum() * s * s)  # um^4
+        s = float(scene.um_per_px)
+        area = positive("chip footprint area", scene.chip.area_um2, "um^2")
+        j = area * (scene.chip_rg_px * s) ** 2  # um^4
         rho_t = scene.chip_density_kg_m3 * scene.chip_thickness_um * UM  # kg/m^2
         return cls._film(
             rho_t * area * UM2,
             rho_t * j * UM2 * UM2,
             area,
             j,
+            scene.liquid_height_um,
             scene.liquid,
             scene.damping_calibration,
             t_max_s,
         )
 
     @classmethod
-    def _film(cls, mass, inertia, area, j, liquid, calibration, t_max_s) -> DynamicsParams:
+    def _film(cls, mass, inertia, area, j, h, liquid, calibration, t_max_s) -> DynamicsParams:
         cal = positive("damping calibration", calibration)
-        h = liquid.meniscus_height_um(area)
         mu = liquid.viscosity_Pa_s
         if not h >= MIN_FILM_UM:
+            if liquid.height_um is not None:
+                raise InputError(
+                    f"meniscus height {h:.3g} um (--meniscus-height) is thinner than {MIN_FILM_UM * 1e3:g} nm, where the damping "
+                    f"overflows the solver (and no real film is that thin); give at least {MIN_FILM_UM:g} um"
+                )
             raise InputError(
                 f"droplet volume {liquid.volume_nl:g} nl spreads to a film {h:.3g} um thick under the chip "
                 f"({area:,.0f} um^2), thinner than {MIN_FILM_UM * 1e3:g} nm, where the damping overflows the solver (and no real film is that thin); "

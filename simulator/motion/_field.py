@@ -116,9 +116,10 @@ def make_field(energy, grid: PoseGrid, floor, best, pin: tuple[float, float, flo
 
 def field_and_grid(ls: Landscape, rg_px: float | None = None, dtype=None, pin: tuple[float, float, float] = (0.0, 0.0, 0.0),
                    align_tol: tuple[float, float] = (1.0, 1.0)) -> tuple[Field, PoseGrid]:
-    """The stepper view of a landscape: its arrays and its pose grid. ``rg_px``: the chip's
-    radius of gyration in px, when it differs from the grid's own; ``pin``: the pinning
-    work per grid step (J, twist/y/x) of contact-angle hysteresis."""
+    """The stepper view of a landscape: its arrays and its pose grid. ``rg_px``: a radius of
+    gyration in px other than the grid's own (a landscape's grid carries its scene's,
+    :attr:`simulator.scene.Scene.chip_rg_px`); ``pin``: the pinning work per grid step (J,
+    twist/y/x) of contact-angle hysteresis."""
     e = ls.energy if dtype is None else ls.energy.astype(dtype)
     it, iy, ix = ls.minimum_index()  # the global minimum: ties decided by position (Landscape.minimum_index)
     grid = ls.grid if rg_px is None else replace(ls.grid, rg_px=float(rg_px))

@@ -107,8 +107,8 @@ class Trajectory:
 
 
 def radius_of_gyration_px(scene: Scene) -> float:
-    """sqrt(polar moment / area) of the chip's wettable footprint about its centre (px)
-    (:attr:`Scene.chip_rg_px`, computed once per scene)."""
+    """The chip's radius of gyration (px): :attr:`Scene.chip_rg_px`, derived once per scene
+    (the pose grids of its landscapes carry it, and the dynamics' polar moment is built on it)."""
     return scene.chip_rg_px
 
 
@@ -179,7 +179,6 @@ def simulate(
         from simulator.motion._dynamics_params import DynamicsParams
 
         dynamics = DynamicsParams.from_scene(scene)
-    rg = radius_of_gyration_px(scene)
     t0 = time.perf_counter()
     ta = scene.twist_axis
     axis, wrap, step = ((ta.values(), ta.periodic, ta.grid_step_deg) if landscape is None
@@ -208,7 +207,7 @@ def simulate(
             if ls is None:  # moving the box would not move the chip: stop here
                 break
         pin = pin_per_index(scene, ls.um_per_px, ls.twist_step_deg)
-        field, grid = field_and_grid(ls, rg, pin=pin, align_tol=align_tolerance(ls, pin, floats=scene.wall_profile is not None))
+        field, grid = field_and_grid(ls, pin=pin, align_tol=align_tolerance(ls, pin, floats=scene.wall_profile is not None))
         run = jitted(method, is_stiff(method, field, grid, dynamics))
         state = run(field, grid, dynamics, jnp.asarray(grid.to_index(pose)), max_steps)
         pieces.append(_to_trajectory(method, state, grid))

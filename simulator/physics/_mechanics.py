@@ -118,8 +118,8 @@ class Liquid:
         volume_nl: droplet volume, nl. The default 20 nl is the source's four-pad
             volume (730 um pattern); the defect/jaggedness tests on 200 um used 0.5 nl.
         height_um: the liquid's height under the chip (um) for the finite meniscus
-            (:mod:`simulator.physics`; TOML ``meniscus_height_um``); None = ``volume_nl``
-            over the chip's area.
+            (:mod:`simulator.physics`; TOML ``meniscus_height_um``) and the film of the
+            dynamics' damping alike; None = ``volume_nl`` over the chip's area.
         pinned: contact lines held at the pad edges (liquid confined by a superhydrophobic
             substrate): only liquid-air area changes, ``Delta_gamma = -2 gamma_LA``.
     """
@@ -153,7 +153,12 @@ class Liquid:
         set_(self, "volume_nl", positive("droplet volume", self.volume_nl, "nl"))
 
     def meniscus_height_um(self, area_um2: float) -> float:
-        """``h = V / A`` in um for this droplet spread over ``area_um2``."""
+        """The liquid's height (um) under a chip of wetted area ``area_um2``: ``height_um``
+        when given, else ``h = V / A`` (:func:`meniscus_height_um`). The rule for every
+        model that needs the height (a scene derives it once:
+        :attr:`simulator.scene.Scene.liquid_height_um`)."""
+        if self.height_um is not None:
+            return self.height_um
         return meniscus_height_um(self.volume_nl, area_um2)
 
 

@@ -11,6 +11,7 @@ from ._accuracy import (
 )
 from ._build import (
     LAYOUT_KEYS as LAYOUT_KEYS,
+    resampled_extent as resampled_extent,
 )
 from ._parts import (
     Effects as Effects,
@@ -19,6 +20,7 @@ from ._parts import (
 from ._scene import (
     DTYPES as DTYPES,
     Scene as Scene,
+    chip_radius_of_gyration_px as chip_radius_of_gyration_px,
 )
 from ._schema import (
     SCHEMA as SCHEMA,

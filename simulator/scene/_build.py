@@ -209,6 +209,54 @@ class SceneBuilders:
         )
 
 
+def _padded_size(n: int, f: float, mask: Mask, um_per_px: float) -> int:
+    """The size (px) a raster axis of ``n`` px is padded to, symmetrically, so that it maps to
+    whole pixels at ``f`` new pixels per old pixel (:func:`resample_to_scale`)."""
+    m = next((m for m in range(n, n + 2001, 2) if abs(m * f - round(m * f)) < 1e-6 and round(m * f) >= 1), None)
+    if m is None:
+        raise InputError(
+            f"cannot resample a {mask.um_per_px:g} um/px image to {um_per_px:g} um/px without moving its centre; "
+            "choose a resolution that is a simple multiple or fraction of the image's"
+        )
+    return m
+
+
+def resampled_extent(mask: Mask, um_per_px: float) -> tuple[tuple[int, int], tuple[int, int, int, int]]:
+    """(shape, nonzero box) of :func:`resample_to_scale` ``(mask, um_per_px)``, computed
+    without making the raster: the box (row0, row1, col0, col1, end-exclusive) as
+    :func:`patterns.mask.nonzero_box` would give it.
+
+    Exact geometry: the canvas of :func:`patterns.raster.canvas_shape` and the pixels the
+    geometry's bounds reach into (every pixel a polygon reaches into it covers with a positive
+    area). A raster coarsened by a whole factor ``k``: the padded raster's blocks of k x k
+    pixels, a block non-zero where one of its pixels is (area averaging). Any other
+    resampling of a raster is made (and measured).
+    """
+    from patterns.mask import nonzero_box
+    from patterns.raster import canvas_shape
+
+    s = positive("resolution", um_per_px, "um per px")
+    if math.isclose(mask.um_per_px, s, rel_tol=1e-9):
+        return mask.shape, nonzero_box(mask.data > 0)
+    if mask.geometry is not None:
+        h, w = canvas_shape(mask.geometry, s)
+        xmin, ymin, xmax, ymax = mask.geometry.bounds
+        a = 1 / s  # the pixel frame of patterns.raster.to_pixel_frame: column = x / s + w / 2, row = h / 2 - y / s
+        c0, c1 = math.floor(a * xmin + w / 2), math.ceil(a * xmax + w / 2)
+        r0, r1 = math.floor(-a * ymax + h / 2), math.ceil(-a * ymin + h / 2)
+        return (h, w), (max(r0, 0), min(r1, h), max(c0, 0), min(c1, w))
+    k = s / mask.um_per_px
+    if abs(k - round(k)) < 1e-9 and round(k) >= 1:
+        k = round(k)
+        (h, w), f = mask.shape, 1.0 / k
+        ph, pw = _padded_size(h, f, mask, s), _padded_size(w, f, mask, s)
+        r0, r1, c0, c1 = nonzero_box(mask.data > 0)
+        oy, ox = (ph - h) // 2, (pw - w) // 2
+        return (ph // k, pw // k), ((r0 + oy) // k, -(-(r1 + oy) // k), (c0 + ox) // k, -(-(c1 + ox) // k))
+    out = resample_to_scale(mask, s)
+    return out.shape, nonzero_box(out.data > 0)
+
+
 def resample_to_scale(mask: Mask, um_per_px: float, budget_mb: float | None = None) -> Mask:
     """``mask`` at another pixel size, its centre kept at the image centre.
 
@@ -226,16 +274,7 @@ def resample_to_scale(mask: Mask, um_per_px: float, budget_mb: float | None = No
 
     f = mask.um_per_px / um_per_px  # new pixels per old pixel
     price_raster(tuple(n * f for n in mask.shape), um_per_px, f"the image resampled to {um_per_px:g} um/px", budget_mb)
-    sizes = []
-    for n in mask.shape:
-        m = next((m for m in range(n, n + 2001, 2) if abs(m * f - round(m * f)) < 1e-6 and round(m * f) >= 1), None)
-        if m is None:
-            raise InputError(
-                f"cannot resample a {mask.um_per_px:g} um/px image to {um_per_px:g} um/px without moving its centre; "
-                "choose a resolution that is a simple multiple or fraction of the image's"
-            )
-        sizes.append(m)
-    (h, w), (ph, pw) = mask.shape, sizes
+    (h, w), (ph, pw) = mask.shape, [_padded_size(n, f, mask, um_per_px) for n in mask.shape]
     data = np.pad(mask.data, (((ph - h) // 2,) * 2, ((pw - w) // 2,) * 2))
     out = cv2.resize(data, (round(pw * f), round(ph * f)), interpolation=cv2.INTER_AREA if f < 1 else cv2.INTER_NEAREST)
     return Mask(np.clip(out, 0, 1), um_per_px, None, mask.params)

@@ -79,6 +79,19 @@ def default_memory_budget_mb() -> float:
     return default_budget_mb()
 
 
+def chip_radius_of_gyration_px(chip: Mask) -> float:
+    """sqrt(polar moment / area) (px) of a chip's wettable footprint about its centre: the
+    one formula of the radius of gyration (:attr:`Scene.chip_rg_px` caches it per scene).
+    Each pixel counts its coverage at its centre (no ``1/6 px^2`` self-term: a full
+    ``n x n`` px square gives ``sqrt((n^2 - 1) / 6)`` px, the exact ``n / sqrt(6)`` less a
+    relative ``1 / (12 rg^2)``)."""
+    d = chip.data
+    h, w = d.shape
+    y, x = np.ogrid[0:h, 0:w]  # open grids: one chip-sized array of r^2, not three
+    r2 = (x + 0.5 - w / 2) ** 2 + (y + 0.5 - h / 2) ** 2
+    return float(math.sqrt((d * r2).sum() / d.sum()))
+
+
 @dataclass(frozen=True, eq=False)
 class Scene(SceneBuilders):
     """One validated description of what to simulate.
@@ -158,35 +171,50 @@ class Scene(SceneBuilders):
 
         return float(min(footprint_um(self.chip)))
 
-    @property
+    @functools.cached_property
+    def liquid_height_um(self) -> float:
+        """The liquid's height under the chip (um), derived once per scene: the given
+        meniscus height (``liquid.height_um``, ``--meniscus-height``), else the droplet volume
+        over the chip's wetted area (:meth:`simulator.physics.Liquid.meniscus_height_um`).
+        The one height of the scene: the finite meniscus's energy
+        (:attr:`meniscus_height_um`) and the dynamics' Couette damping
+        (:meth:`simulator.motion.DynamicsParams.from_scene`) both take it."""
+        if self.liquid.height_um is None:
+            require(self.chip.area_um2 > 0, "the meniscus height needs a chip with a wetted area to divide the volume by; give --meniscus-height")
+        return self.liquid.meniscus_height_um(self.chip.area_um2)
+
+    @functools.cached_property
     def meniscus_height_um(self) -> float | None:
-        """The meniscus height (um) when the scene calls for the meniscus, else None: the
-        liquid's ``meniscus_height_um``, or its volume over the chip's wetted area."""
+        """The meniscus height (um) when the scene calls for the meniscus, else None:
+        :attr:`liquid_height_um`, checked (positive, finite, not above the chip's smallest side)."""
         if not self.effects.meniscus:
             return None
         from simulator.physics import require_height
 
-        h, flag = self.liquid.height_um, "--meniscus-height"
-        if h is None:
-            area = self.chip.area_um2
-            require(area > 0, "the meniscus height needs a chip with a wetted area to divide the volume by; give --meniscus-height")
-            h, flag = self.liquid.meniscus_height_um(area), "--volume"
-        return require_height(h, self.chip_min_side_um, flag)
+        flag = "--volume" if self.liquid.height_um is None else "--meniscus-height"
+        return require_height(self.liquid_height_um, self.chip_min_side_um, flag)
 
     @property
     def meniscus_height_px(self) -> float:
         """The meniscus height in pixels (0 without the meniscus)."""
-        h = self.meniscus_height_um
-        return 0.0 if h is None else h / self.um_per_px
+        return self.meniscus_height_px_at(self.um_per_px)
 
-    @property
+    def meniscus_height_px_at(self, um_per_px: float) -> float:
+        """The meniscus height in pixels of ``um_per_px`` (0 without the meniscus)."""
+        h = self.meniscus_height_um
+        return 0.0 if h is None else h / um_per_px
+
+    @functools.cached_property
     def wall_profile(self):
         """The free-contact-line footprint (:class:`simulator.physics.WallProfile`) when the
         scene's meniscus has free lines and a height of a pixel or more, else None (no
         meniscus, pinned lines, or a height below a pixel: the ``K_h`` blur)."""
+        return self._wall_profile_at(self.um_per_px)
+
+    def _wall_profile_at(self, um_per_px: float):
         from simulator.physics import CHIP_BLUR_MIN_PX, WallProfile
 
-        h_px = self.meniscus_height_px
+        h_px = self.meniscus_height_px_at(um_per_px)
         if self.liquid.pinned or h_px < CHIP_BLUR_MIN_PX:
             return None
         m = self.materials
@@ -195,10 +223,14 @@ class Scene(SceneBuilders):
     @property
     def meniscus_margin_px(self) -> int:
         """Pixels beyond the chip that the meniscus's footprint reaches (0 without it)."""
+        return self.meniscus_margin_px_at(self.um_per_px)
+
+    def meniscus_margin_px_at(self, um_per_px: float) -> int:
+        """:attr:`meniscus_margin_px` for pixels of ``um_per_px`` (the scene's height, not resampled)."""
         from simulator.physics import margin_px
 
-        prof = self.wall_profile
-        return prof.margin_px if prof is not None else margin_px(self.meniscus_height_px)
+        prof = self.wall_profile if um_per_px == self.um_per_px else self._wall_profile_at(um_per_px)
+        return prof.margin_px if prof is not None else margin_px(self.meniscus_height_px_at(um_per_px))
 
     @property
     def um_per_px(self) -> float:
@@ -212,13 +244,12 @@ class Scene(SceneBuilders):
 
     @functools.cached_property
     def chip_rg_px(self) -> float:
-        """The chip's radius of gyration (px): sqrt(polar moment / area) of its wettable
-        footprint about its centre, the length one radian of twist moves its edge."""
-        d = self.chip.data
-        h, w = d.shape
-        y, x = np.mgrid[0:h, 0:w]
-        r2 = (x + 0.5 - w / 2) ** 2 + (y + 0.5 - h / 2) ** 2
-        return float(math.sqrt((d * r2).sum() / d.sum()))
+        """The chip's radius of gyration (px), derived once per scene: sqrt(polar moment /
+        area) of its wettable footprint about its centre, each pixel's coverage at its centre
+        (:func:`chip_radius_of_gyration_px`). The length one radian of twist moves the chip's
+        edge: the pose grid's twist metric (the steppers) and, as ``A rg^2``, the polar moment
+        of the dynamics' inertia and rotational damping."""
+        return chip_radius_of_gyration_px(self.chip)
 
     def replace(self, **changes: Any) -> Scene:
         """A copy with some fields changed (validated again)."""

@@ -82,11 +82,16 @@ class TwistAxis:
     period_deg: float
     mirror: bool
 
+    def step_deg_for(self, count: int) -> float:
+        """The twist step (degrees) of a pose grid of ``count`` twists of this axis: the
+        axis's step, or 1.0 for a grid of one twist (no twist direction). The one rule:
+        :attr:`grid_step_deg` and :attr:`simulator.landscape.PoseGrid.twist_step_deg` ask it."""
+        return float(self.step_deg) if count > 1 else 1.0
+
     @property
     def grid_step_deg(self) -> float:
-        """The twist step (degrees) a pose grid on the whole axis uses: 1.0 for an axis of one
-        twist (no twist direction), as :attr:`PoseGrid.twist_step_deg`."""
-        return float(self.step_deg) if self.count > 1 else 1.0
+        """The twist step (degrees) a pose grid on the whole axis uses (:meth:`step_deg_for`)."""
+        return self.step_deg_for(self.count)
 
     def values(self) -> np.ndarray:
         """The twists in degrees, ascending (one twist 0.0 when twist is off)."""

@@ -1,0 +1,202 @@
+"""Each derived quantity has one home and is carried from there: the liquid's height and the
+chip's radius of gyration in the Scene (one formula each, computed once per scene, used by
+the energy and the dynamics alike), the twist step of a pose grid (one rule, on its twist
+axis), the size of a landscape at another pixel size (computed, not found by resampling),
+and the scene file (read once per command)."""
+
+from __future__ import annotations
+
+import math
+import tomllib
+
+import pytest
+
+from patterns.geometry import four_pad, square
+from patterns.io import read_mask
+from patterns.library import library_path
+from patterns.raster import mask_from_geometry
+from simulator.batch import auto_resolution
+from simulator.cli import build_parser, main
+from simulator.commands._common import scene_from_args
+from simulator.landscape import PoseGrid, build_landscape, estimate_bytes, plan
+from simulator.motion import DynamicsParams, field_and_grid
+from simulator.physics import Liquid, couette_damping, couette_torsional_damping, meniscus_height_um
+from simulator.scene import Effects, Scene, TwistAxis, TwistGrid, chip_radius_of_gyration_px
+from simulator.testing import radius_of_gyration_um
+
+
+def small_scene(**kw) -> Scene:
+    """A 200 um square on its own pad at 4 um/px, untwisted: cheap to build."""
+    kw.setdefault("effects", Effects(twist=False))
+    return Scene(pattern=mask_from_geometry(square(200), 4.0, margin_um=20), chip=mask_from_geometry(square(200), 4.0), **kw)
+
+
+def cli_scene(*flags: str) -> Scene:
+    argv = ["simulate", "--pattern", str(library_path("square_200")), "--chip-size", "200", "--resolution", "4", "--no-twist", *flags]
+    return scene_from_args(build_parser().parse_args(argv))
+
+
+# ---------------------------------------------------------------- the liquid's height
+def test_an_explicit_meniscus_height_is_the_height_of_the_energy_and_of_the_damping():
+    # --meniscus-height 8 with --volume 0.5 (V / A = 12.5 um under the 200 um chip): the
+    # meniscus's energy and the dynamics' Couette damping both take the 8 um.
+    scene = cli_scene("--meniscus-height", "8", "--volume", "0.5")
+    p = DynamicsParams.from_scene(scene)
+    area, mu, cal = scene.chip.area_um2, scene.liquid.viscosity_Pa_s, scene.damping_calibration
+    assert scene.meniscus_height_um == scene.liquid_height_um == 8.0
+    assert build_landscape(scene).meniscus_height_um == 8.0
+    assert p.damping_N_s_m == pytest.approx(cal * couette_damping(mu, area, 8.0), rel=1e-12)
+    assert p.damping_N_s_m != pytest.approx(cal * couette_damping(mu, area, meniscus_height_um(0.5, area)), rel=1e-3)
+    j = area * (scene.chip_rg_px * scene.um_per_px) ** 2
+    assert p.rot_damping_N_m_s == pytest.approx(cal * couette_torsional_damping(mu, j, 8.0), rel=1e-12)
+
+
+def test_without_a_given_height_energy_and_damping_take_the_volume_over_the_area():
+    scene = cli_scene("--meniscus", "--volume", "0.5")
+    h = meniscus_height_um(0.5, scene.chip.area_um2)
+    assert scene.meniscus_height_um == scene.liquid_height_um == h == pytest.approx(12.5)
+    p = DynamicsParams.from_scene(scene)
+    assert p.damping_N_s_m == pytest.approx(scene.damping_calibration * couette_damping(scene.liquid.viscosity_Pa_s, scene.chip.area_um2, h), rel=1e-12)
+    # The overlap model (no meniscus) has no meniscus height; the film under the chip is the same.
+    flat = cli_scene("--volume", "0.5")
+    assert flat.meniscus_height_um is None and flat.liquid_height_um == h
+    assert DynamicsParams.from_scene(flat).damping_N_s_m == p.damping_N_s_m
+
+
+def test_the_height_is_derived_once_per_scene(monkeypatch):
+    calls = []
+    rule = Liquid.meniscus_height_um
+    monkeypatch.setattr(Liquid, "meniscus_height_um", lambda self, area: calls.append(area) or rule(self, area))
+    scene = small_scene(effects=Effects(twist=False, meniscus=True), liquid=Liquid(volume_nl=0.5))
+    for _ in range(3):
+        assert scene.meniscus_height_um == scene.liquid_height_um
+    _ = scene.meniscus_height_px, scene.wall_profile, scene.meniscus_margin_px
+    ls = build_landscape(scene)
+    DynamicsParams.from_scene(scene)
+    assert ls.meniscus_height_um is scene.meniscus_height_um
+    assert len(calls) == 1
+
+
+# ---------------------------------------------------------------- the radius of gyration
+def test_one_radius_of_gyration_for_the_pose_grid_the_steppers_and_the_dynamics():
+    scene = small_scene(effects=Effects(), twist=TwistGrid(5.0))
+    rg = chip_radius_of_gyration_px(scene.chip)
+    assert scene.chip_rg_px == rg
+    # The plan makes the pose grid complete: the landscape and the steppers carry it unchanged.
+    assert plan(scene).grid.rg_px == rg
+    ls = build_landscape(scene)
+    assert ls.grid.rg_px == rg
+    assert field_and_grid(ls)[1].rg_px == rg
+    # The dynamics' polar moment is A rg^2, in the inertia and the rotational damping.
+    p = DynamicsParams.from_scene(scene)
+    area, s = scene.chip.area_um2, scene.um_per_px
+    j = area * (rg * s) ** 2
+    rho_t = scene.chip_density_kg_m3 * scene.chip_thickness_um * 1e-6
+    assert p.inertia_kg_m2 == pytest.approx(rho_t * j * 1e-24, rel=1e-12)
+    assert p.mass_kg == pytest.approx(rho_t * area * 1e-12, rel=1e-12)
+    h = scene.liquid_height_um
+    assert p.rot_damping_N_m_s == pytest.approx(scene.damping_calibration * couette_torsional_damping(scene.liquid.viscosity_Pa_s, j, h), rel=1e-12)
+
+
+def test_the_raster_radius_of_gyration_is_the_exact_one_less_the_pixels_own_moment():
+    # A 200 um square of 50 x 50 full pixels: pixel centres give (n^2 - 1) / 6 px^2, the exact
+    # value n^2 / 6 (simulator.testing's, from the polygon) less 1/6 px^2 (each pixel's own moment).
+    scene = small_scene()
+    exact_px = radius_of_gyration_um(square(200)) / scene.um_per_px
+    assert scene.chip_rg_px**2 + 1 / 6 == pytest.approx(exact_px**2, rel=1e-12)
+    assert exact_px == pytest.approx(50 / math.sqrt(6), rel=1e-12)
+
+
+# ---------------------------------------------------------------- the twist step
+def test_one_rule_for_the_twist_step_of_a_pose_grid():
+    axis = TwistAxis(None, 2.0, -22, 45, True, 90.0, True)
+    assert axis.grid_step_deg == axis.step_deg_for(45) == 2.0
+    whole = PoseGrid((45, 3, 3), 1.0, axis, wrap=True)
+    one = PoseGrid((1, 3, 3), 1.0, axis, t_first=4)
+    assert whole.twist_step_deg == axis.grid_step_deg == 2.0
+    assert one.twist_step_deg == axis.step_deg_for(1) == 1.0
+    untwisted = small_scene().twist_axis
+    assert untwisted.count == 1 and untwisted.grid_step_deg == 1.0 == build_landscape(small_scene()).twist_step_deg
+
+
+# ---------------------------------------------------------------- the pixel size
+def _old_auto_resolution(scene: Scene, budget_mb: float) -> Scene:
+    """The search auto_resolution made before: resample at each multiple, measure, stop when it fits."""
+    for k in range(1, 17):
+        s = scene if k == 1 else scene.at_resolution(scene.um_per_px * k)
+        if estimate_bytes(s) / 2**20 <= budget_mb:
+            return s
+    return s
+
+
+def _scenes() -> dict[str, Scene]:
+    fp = mask_from_geometry(four_pad(400, 40), 2.0, margin_um=10)
+    png = read_mask(library_path("square_200"), default_um_per_px=1.0)
+    return {
+        "four-pad geometry": Scene(pattern=fp, chip=mask_from_geometry(square(400), 2.0), twist=TwistGrid(3.0)),
+        "meniscus, window": Scene(pattern=fp, chip=mask_from_geometry(square(400), 2.0), effects=Effects(twist=False, meniscus=True),
+                                  liquid=Liquid(volume_nl=2.0), window_um=150.0),
+        "PNG pattern and chip": Scene.from_inputs(png, chip=png, twist=TwistGrid(5.0)),
+    }
+
+
+@pytest.mark.parametrize("name", list(_scenes()))
+def test_the_size_of_a_landscape_at_another_pixel_size_is_computed(name):
+    scene = _scenes()[name]
+    for k in range(1, 17):
+        s = scene.um_per_px * k
+        assert estimate_bytes(scene, um_per_px=s) == estimate_bytes(scene.at_resolution(s)), (name, k)
+
+
+@pytest.mark.parametrize("name", list(_scenes()))
+def test_auto_resolution_chooses_what_the_resampling_search_chose(name, monkeypatch):
+    import simulator.scene._scene as scene_module
+
+    scene = _scenes()[name]
+    sizes = [estimate_bytes(scene, um_per_px=scene.um_per_px * k) / 2**20 for k in (1, 2, 3, 5, 16)]
+    resampled = []
+    real = scene_module.resample_to_scale
+    monkeypatch.setattr(scene_module, "resample_to_scale", lambda m, s, b=None: resampled.append(s) or real(m, s, b))
+    for budget in sorted({*sizes, *(0.999 * v for v in sizes), 1e-9}):
+        old = _old_auto_resolution(scene, budget).um_per_px
+        resampled.clear()
+        new = auto_resolution(scene, budget)
+        assert new.um_per_px == old, (name, budget)
+        assert len(resampled) == (0 if new is scene else 2)  # pattern and chip, once, at the size chosen
+
+
+# ---------------------------------------------------------------- the scene file
+@pytest.fixture
+def count_toml_reads(monkeypatch):
+    calls = []
+    loads = tomllib.loads
+    monkeypatch.setattr(tomllib, "loads", lambda text, **kw: calls.append(1) or loads(text, **kw))
+    return calls
+
+
+def _scene_file(tmp_path, table: str) -> str:
+    p = tmp_path / "scene.toml"
+    p.write_text(f'pattern = "{library_path("square_200")}"\nchip_size_um = [200, 200]\nresolution_um = 4\n'
+                 f"[effects]\ntwist = false\n[liquid]\nvolume_nl = 0.5\n{table}")
+    return str(p)
+
+
+def test_simulate_reads_its_scene_file_once(tmp_path, count_toml_reads, capsys):
+    scene = _scene_file(tmp_path, "[simulate]\nstart = [12, 0, 0]\n")
+    assert main(["simulate", scene, "--quiet", "--json", str(tmp_path / "t.json")]) == 0
+    assert "aligned" in capsys.readouterr().out
+    assert len(count_toml_reads) == 1
+
+
+def test_montecarlo_reads_its_scene_file_once(tmp_path, count_toml_reads, capsys):
+    scene = _scene_file(tmp_path, '[montecarlo]\ngrid = "-12:12:12,-12:12:12"\n')
+    assert main(["montecarlo", scene, "--quiet", "--json", str(tmp_path / "m.json")]) == 0
+    capsys.readouterr()
+    assert len(count_toml_reads) == 1
+
+
+def test_energy_reads_its_scene_file_once(tmp_path, count_toml_reads, capsys):
+    scene = _scene_file(tmp_path, "")
+    assert main(["energy", scene, "--at", "10,0,0", "--json", str(tmp_path / "e.json")]) == 0
+    capsys.readouterr()
+    assert len(count_toml_reads) == 1
