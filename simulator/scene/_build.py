@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 import os
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any, Self
 
 import numpy as np
 from shapely.geometry import box
@@ -28,9 +28,6 @@ from patterns.resources import check_budget_mb, price_raster
 from simulator.liquid import Topography, check_surface_tension_mN_m
 from simulator.physics import Liquid, Materials
 from simulator.scene._parts import Effects, TwistGrid
-
-if TYPE_CHECKING:
-    from simulator.scene._scene import Scene
 
 #: Scene keys that choose what to read from a layout pattern (:class:`patterns.layout.LayoutSelection`).
 LAYOUT_KEYS = ("layer", "cell", "chip_layer", "dxf_units", "max_polygons")
@@ -59,7 +56,7 @@ class SceneBuilders:
         invert: bool = False,
         invert_chip: bool = False,
         **kwargs: Any,
-    ) -> Scene:
+    ) -> Self:
         """Scene from a pattern (Mask, PNG or layout path) and a chip (Mask, PNG/layout path, size or layout layer).
 
         ``um_per_px`` states the scale of PNGs that store none (their pHYs chunk wins);
@@ -131,7 +128,7 @@ class SceneBuilders:
         return cls(pattern=pattern, chip=chip, **kwargs)
 
     @classmethod
-    def from_toml(cls, path: str | os.PathLike, **overrides: Any) -> Scene:
+    def from_toml(cls, path: str | os.PathLike, **overrides: Any) -> Self:
         """Scene from a TOML file (keys in the :mod:`simulator.scene` docstring); paths are relative to it.
 
         The file means what it means on the command line: its ``accuracy`` preset (default
@@ -142,7 +139,7 @@ class SceneBuilders:
         return cls.from_dict(read_scene_file(path), base=Path(path).parent, **overrides)
 
     @classmethod
-    def from_dict(cls, doc: dict, base: Path = Path("."), **overrides: Any) -> Scene:
+    def from_dict(cls, doc: dict, base: Path = Path("."), **overrides: Any) -> Self:
         known = {
             "pattern", "chip", "chip_size_um", "um_per_px", "resolution_um", "dtype", "window_um", "memory_budget_mb", "materials", "twist",
             "effects", "liquid", "chip_thickness_um", "chip_density_kg_m3", "damping_calibration", "max_image_mpx",
@@ -159,7 +156,7 @@ class SceneBuilders:
         return scene.with_preset(doc.get("accuracy"), explicit)
 
     @classmethod
-    def _from_dict(cls, doc: dict, base: Path, overrides: dict) -> Scene:
+    def _from_dict(cls, doc: dict, base: Path, overrides: dict) -> Self:
         def resolve(p: Any) -> Any:
             return p if isinstance(p, Mask) else base / p
 

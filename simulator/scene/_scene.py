@@ -240,7 +240,7 @@ class Scene(SceneBuilders):
     def twist_axis(self):
         """The twist axis of the pose grid (:class:`simulator.landscape.TwistAxis`): the
         chip's symmetry is computed once per scene, however often the axis is asked for."""
-        return TwistAxis.from_scene(self)
+        return TwistAxis.from_scene(self.chip, self.effects, self.twist)
 
     @functools.cached_property
     def chip_rg_px(self) -> float:

@@ -10,7 +10,6 @@ landscape's :class:`~simulator.landscape.PoseGrid` takes its part of it.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 from shapely import affinity
@@ -19,9 +18,7 @@ from patterns.errors import InputError
 from patterns.mask import Mask
 from patterns.resources import fmt_bytes
 from simulator.core import AREA_REL_TOL, DEG_TOL, floor_whole, is_whole, tiny
-
-if TYPE_CHECKING:
-    from simulator.scene._scene import Scene
+from simulator.scene._parts import Effects, TwistGrid
 
 
 def chip_symmetry(chip: Mask) -> tuple[float, bool]:
@@ -52,9 +49,8 @@ def chip_symmetry(chip: Mask) -> tuple[float, bool]:
 MAX_TWISTS = 2**20
 
 
-def _require_twist_count(scene: Scene, span_deg: float) -> None:
+def _require_twist_count(tg: TwistGrid, span_deg: float) -> None:
     """Refuse a twist axis of more than MAX_TWISTS twists before any array is made."""
-    tg = scene.twist
     n = span_deg / tg.step_deg
     if not n <= MAX_TWISTS:
         raise InputError(
@@ -130,13 +126,13 @@ class TwistAxis:
         return k0 if np.all(np.abs(self.values_at(k0 + np.arange(tw.size)) - tw) <= tol) else None
 
     @classmethod
-    def from_scene(cls, scene: Scene) -> TwistAxis:
-        """The axis of ``scene`` (its chip's symmetry is computed here, once per scene)."""
-        period, mirror = chip_symmetry(scene.chip)
-        if not scene.effects.twist:
+    def from_scene(cls, chip: Mask, effects: Effects, tg: TwistGrid) -> TwistAxis:
+        """The axis of a scene with this chip, effects and twist grid (the chip's symmetry is
+        computed here, once per scene: :attr:`simulator.scene.Scene.twist_axis`)."""
+        period, mirror = chip_symmetry(chip)
+        if not effects.twist:
             return cls(None, 1.0, 0, 1, False, period, mirror)
-        tg = scene.twist
-        _require_twist_count(scene, period if tg.min_deg is None else tg.max_deg - tg.min_deg)
+        _require_twist_count(tg, period if tg.min_deg is None else tg.max_deg - tg.min_deg)
         step = tg.step_deg
         n_period = period / step
         divides = is_whole(n_period)
