@@ -100,6 +100,9 @@ CASES = {
     "simulate greedy with the meniscus: the first box and its footprint": (
         ["simulate", "--start=300,-200,10", "--meniscus-height", "31", "--memory-budget", "330"],
         ["the landscape needs about", "meniscus footprint", "memory budget is 330 MB", "--memory-budget"]),
+    "simulate greedy, meniscus below a pixel: the proof's whole landscape, a twist at a time": (
+        ["simulate", "--start=300,-200,10", "--meniscus-height", "0.5", "--memory-budget", "150"],
+        ["the landscape needs about", "(1 twist x ", "memory budget is 150 MB", "--memory-budget"]),
     "simulate overdamped: the whole landscape": (
         ["simulate", "--start=300,-200,10", "--method", "overdamped", "--memory-budget", "1000"],
         ["the landscape needs about", "memory budget is 1,000 MB", "--memory-budget"]),

@@ -99,7 +99,7 @@ def _refuse_over_budget(scene: Scene, need: float, n_twists: int, ny: int, nx: i
     the estimate holds beyond the energy array (the transforms' work space, the footprint)."""
     if need > scene.memory_budget_mb * 2**20:
         raise InputError(
-            f"the landscape needs about {need / 2**20:,.0f} MB ({n_twists} twists x "
+            f"the landscape needs about {need / 2**20:,.0f} MB ({n_twists} twist{'s' if n_twists != 1 else ''} x "
             f"{ny} x {nx} poses, {scene.dtype}{what}) but the memory budget is "
             f"{scene.memory_budget_mb:,.0f} MB; use a coarser scale (--um-per-px), a larger twist step "
             "or narrower twist range, a smaller translation window (window_um), or raise memory_budget_mb (--memory-budget)"

@@ -110,6 +110,26 @@ def global_minimum(scene: Scene, landscape: Landscape | None = None, evaluated: 
     return GlobalMinimum(x, y, t, e, how=how, poses=search.poses, seconds=time.perf_counter() - t0)
 
 
+def require_minimum_fits(scene: Scene) -> None:
+    """Refuse (InputError), before a run that will need it, a global minimum that
+    :func:`global_minimum` could not find within the memory budget: the bound's chip canvas
+    and, with a meniscus, the chip's footprint; for a scene the bound does not cover (a
+    repulsive pad, a meniscus below a pixel) one twist of the whole landscape, which the
+    search then builds twist by twist. Sizes only: nothing rotated or transformed."""
+    from simulator.landscape._build import _layout, require_landscape_fits
+
+    if _full_search(scene):
+        require_landscape_fits(scene, twists=scene.twist_axis.values()[:1])
+        return
+    lay = _layout(scene, None, (0, 0), None, check_budget=False)  # the footprint priced here
+    _Bounds.require_fits(scene, lay["canvas"], bool(lay["chip_blur"]))
+
+
+def _full_search(scene: Scene) -> bool:
+    """Whether the search builds the whole landscape (no bound covers the scene)."""
+    return _delta_gamma(scene) >= 0 or (getattr(scene.effects, "meniscus", False) and not _Bounds.covers_meniscus(scene))
+
+
 # ----------------------------------------------------------------------------- search
 class _Piece:
     """A built box, reduced to its extent and its tie candidates (energies within the
@@ -195,7 +215,7 @@ class _Search:
     # -- the search
     def run(self) -> str:
         scene = self.scene
-        if _delta_gamma(scene) >= 0 or (getattr(scene.effects, "meniscus", False) and not _Bounds.covers_meniscus(scene)):
+        if _full_search(scene):
             return self._full()
         n = len(self.axis)
         k0 = int(np.argmin(np.abs(self.axis)))

@@ -45,7 +45,6 @@ class _Bounds:
     """
 
     def __init__(self, scene: Scene):
-        from patterns.resources import require_fits
         from simulator.landscape._build import plan
 
         p = plan(scene, check_budget=False)  # prices the footprint before it is made
@@ -58,9 +57,7 @@ class _Bounds:
         hc, wc = self.rot.shape
         self._fine_bytes = hc * wc * 8
         budget = scene.memory_budget_mb * 2**20
-        require_fits(f"the global minimum's bound ({hc:,} x {wc:,} px chip canvas at {scene.um_per_px:g} um/px)",
-                     self._fine_bytes * 3 + (hc * wc * SMOOTH_ROTATE_BYTES_PER_PX if self.footprint else 0),
-                     "use a coarser scale (--resolution)", scene.memory_budget_mb)
+        self.require_fits(scene, (hc, wc), self.footprint)
         self._fine_keep = max(1, int(budget / 4 // self._fine_bytes))
         self._mass: dict[int, float] = {}
         w = p.window
@@ -71,6 +68,18 @@ class _Bounds:
         self._pat_blocks: dict[int, np.ndarray] = {}
         self._fine: dict[int, np.ndarray] = {}
         self._spectra: dict = {}
+
+    @staticmethod
+    def require_fits(scene: Scene, canvas: tuple[int, int], footprint: bool) -> None:
+        """InputError unless the bound's least memory fits the budget: the chip at one twist
+        on its ``canvas`` (with a ``footprint``, its rotation's work space), its block maxima
+        and the pooling's copy."""
+        from patterns.resources import require_fits
+
+        hc, wc = canvas
+        require_fits(f"the global minimum's bound ({hc:,} x {wc:,} px chip canvas at {scene.um_per_px:g} um/px)",
+                     hc * wc * 8 * 3 + (hc * wc * SMOOTH_ROTATE_BYTES_PER_PX if footprint else 0),
+                     "use a coarser scale (--resolution)", scene.memory_budget_mb)
 
     @staticmethod
     def covers_meniscus(scene: Scene) -> bool:

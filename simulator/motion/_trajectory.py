@@ -381,9 +381,10 @@ def require_run_fits(scene: Scene, start, method: str, band_steps: int = BAND_ST
     """Refuse (InputError), before anything is compiled, rotated or transformed, a run whose
     first landscape does not fit the memory budget: the first box and band of twists of a
     greedy or gradient run (:func:`simulate`), the whole landscape of the dynamics, each with
-    the chip's meniscus footprint. Boxes built later are priced as they come (in chunks of
+    the chip's meniscus footprint, and what the global minimum's proof after a greedy or
+    gradient run needs at least. Boxes built later are priced as they come (in chunks of
     twists that fit)."""
-    from simulator.landscape import require_landscape_fits
+    from simulator.landscape import require_landscape_fits, require_minimum_fits
 
     if method in DYNAMIC:
         require_landscape_fits(scene)
@@ -392,10 +393,10 @@ def require_run_fits(scene: Scene, start, method: str, band_steps: int = BAND_ST
     (cx, cy), half = _fit_box(None, np.round(np.asarray(start[:2], float) / scene.um_per_px), band_px)
     lo, hi = _twist_band(ta, float(start[2]), band_steps)
     runs = consecutive_runs({j % ta.count for j in range(lo, hi + 1)})
-    if not runs:  # a start twist beyond the axis: refused by simulate with its own message
-        return
-    longest = max(runs, key=len)
-    require_landscape_fits(scene, twists=ta.values_at(np.asarray(longest)), center_px=(cx, cy), half_px=half)
+    if runs:  # else a start twist beyond the axis: refused by simulate with its own message
+        longest = max(runs, key=len)
+        require_landscape_fits(scene, twists=ta.values_at(np.asarray(longest)), center_px=(cx, cy), half_px=half)
+    require_minimum_fits(scene)
 
 
 def reference_landscape(scene: Scene, backend: str = "auto", reach_steps: int = 2, half_px: int = 16) -> Landscape:
