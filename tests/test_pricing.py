@@ -33,9 +33,9 @@ LIB = Path(__file__).resolve().parents[1] / "patterns" / "library"
 REFUSED_RSS_MB = 500
 
 #: Runs ``selfalign ARGS`` with the expensive steps replaced by a RuntimeError, then prints
-#: the process's peak RSS (MB) on stdout.
+#: the process's peak RSS (MB, VmHWM) on stdout.
 GUARDED = textwrap.dedent("""
-    import resource, sys
+    import sys
 
     def forbid(owner, name):
         def stop(*args, **kwargs):
@@ -56,7 +56,9 @@ GUARDED = textwrap.dedent("""
     forbid(_montecarlo, "_run_chunk")
     from simulator.cli import main
     code = main(sys.argv[1:])
-    print(f"peak_rss_mb={resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f}")
+    # VmHWM: this process's own peak (ru_maxrss can carry the forking parent's over exec)
+    hwm = [int(line.split()[1]) for line in open("/proc/self/status") if line.startswith("VmHWM:")][0]
+    print(f"peak_rss_mb={hwm / 1024:.0f}")
     sys.exit(code)
 """)
 
