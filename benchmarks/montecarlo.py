@@ -57,8 +57,8 @@ ROOT = Path(__file__).resolve().parents[1]
 MARK_OPEN, MARK_CLOSE = "<!-- bench:montecarlo -->", "<!-- /bench:montecarlo -->"
 
 
-def make_scene() -> Scene:
-    s = 2.0
+def make_scene(s: float = 2.0) -> Scene:
+    """The benchmark's scene at ``s`` um/px (2 by default; coarser for a quick run)."""
     return Scene(
         pattern=mask_from_geometry(four_pad(730, 50), s, margin_um=10),
         chip=mask_from_geometry(square(730), s),

@@ -131,7 +131,10 @@ def main(argv: list[str] | None = None) -> int:
             parser = build_parser()
             args = parser.parse_args(argv)
             name = args.command
-            code = int(args.func(args) or 0)
+            from simulator.core import quiet_waits
+
+            with quiet_waits(bool(getattr(args, "quiet", False))):  # --quiet also silences the engine's waiting lines
+                code = int(args.func(args) or 0)
             sys.stdout.flush()
             return code
         except InputError as err:

@@ -49,7 +49,7 @@ from simulator.core import (
     METHODS,
     require_finite,
 )
-from simulator.landscape import build_landscape, estimate_bytes
+from simulator.landscape import build_landscape, estimate_bytes, require_landscape_fits
 from simulator.physics import regime_warning
 from simulator.render import (
     plot_capture_map,
@@ -131,6 +131,7 @@ def evaluate(scene: Scene, out_dir: str | os.PathLike, quiet: bool = False, sour
     native = scene.um_per_px
     if auto:
         scene = auto_resolution(scene)
+    require_landscape_fits(scene)  # the landscape and the chip's footprint priced before any work
     with output_directory(out_dir, "--out", force, inputs, command="evaluate") as tmp:
         summary = assess(scene, quiet=quiet, pictures=tmp, method=method)
         summary["settings"] |= {"source_um_per_px": native, "resolution_auto": bool(auto and scene.um_per_px != native)}

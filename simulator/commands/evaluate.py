@@ -66,9 +66,11 @@ def run(args: argparse.Namespace) -> int:
 
         print(frame_note(layout))
     from simulator.core import compiling
-    from simulator.landscape import twist_axis
+    from simulator.landscape import require_landscape_fits, twist_axis
 
     twist_axis(scene)  # a twist step that gives too many twists fails before the announcement
+    if args.resolution is not None:  # the pixel size stays: the landscape and footprint priced now (else after coarsening)
+        require_landscape_fits(scene)
     if args.method in DYNAMIC_METHODS:
         from simulator.motion import DynamicsParams
 

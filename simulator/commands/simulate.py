@@ -52,7 +52,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     # JAX: imported when a run needs it (selfalign --help starts without it).
-    from simulator.motion import price_run, require_start_in_window, simulate
+    from simulator.motion import price_run, require_run_fits, require_start_in_window, simulate
 
     doc = scene_document(args)  # the scene file, read and validated once for the whole command
     sim = doc.get("simulate", {})
@@ -73,6 +73,7 @@ def run(args: argparse.Namespace) -> int:
         from simulator.motion import DynamicsParams
 
         DynamicsParams.from_scene(scene)  # a liquid the model cannot take fails before compiling
+    require_run_fits(scene, start, method)  # the first landscape (and footprint) priced before any work
     compiling(method, args.quiet)
     traj = simulate(scene, start, method=method, max_steps=max_steps)
     print(end_line(scene, traj))

@@ -6,10 +6,61 @@ a progress bar) goes to stderr, so ``selfalign ... > result.txt`` stays clean.
 
 from __future__ import annotations
 
+import contextlib
+import math
+import os
 import sys
 
 #: Messages already shown in this process (see :func:`announce_once`).
 _shown: set[str] = set()
+
+#: Estimated seconds of work from which a step deep in the engine says what it waits for
+#: (:func:`wait_line`, :func:`shows_wait`): the meniscus footprint, the global minimum's
+#: proof, the boxes of a long run.
+WAIT_S = 3.0
+#: Environment variable that sets :data:`WAIT_S` (seconds; 0 shows every such line).
+WAIT_ENV = "SELFALIGN_WAIT_S"
+#: Whether waiting lines are silenced (``--quiet``; :func:`quiet_waits`).
+_quiet_waits = [False]
+
+
+@contextlib.contextmanager
+def quiet_waits(quiet: bool = True):
+    """Within the block, :func:`wait_line` and :func:`shows_wait` stay silent when ``quiet``
+    (a command's ``--quiet``: the engine below it has no flag of its own)."""
+    before = _quiet_waits[0]
+    _quiet_waits[0] = bool(quiet) or before
+    try:
+        yield
+    finally:
+        _quiet_waits[0] = before
+
+
+def wait_threshold_s() -> float:
+    """Seconds from which a wait is shown: ``SELFALIGN_WAIT_S``, else :data:`WAIT_S`."""
+    text = os.environ.get(WAIT_ENV)
+    if text:
+        try:
+            v = float(text)
+        except ValueError:
+            v = math.nan
+        if math.isfinite(v) and v >= 0:
+            return v
+    return WAIT_S
+
+
+def shows_wait(seconds: float) -> bool:
+    """Whether a step estimated to take ``seconds`` shows a waiting line or a progress bar."""
+    return not _quiet_waits[0] and seconds >= wait_threshold_s()
+
+
+def wait_line(message: str, seconds: float) -> bool:
+    """Say on stderr what a step estimated to take ``seconds`` is doing (``message...``), when
+    it is long enough (:func:`shows_wait`); returns whether it was shown."""
+    show = shows_wait(seconds)
+    if show:
+        announce(f"{message}...")
+    return show
 
 
 def announce(message: str, quiet: bool = False) -> None:

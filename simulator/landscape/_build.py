@@ -16,7 +16,8 @@ import numpy as np
 
 from patterns.errors import InputError
 from patterns.mask import nonzero_box
-from simulator.core import UM2, progress_bar
+from patterns.resources import RASTER_BYTES_PER_PX
+from simulator.core import UM2, progress_bar, wait_line
 from simulator.landscape._correlator import (
     NOISE_FACTOR,
     SAME_CHIP_TOL,
@@ -32,13 +33,24 @@ from simulator.landscape._posegrid import (
     _twist_cut,
     evenly_spaced_axis,
 )
-from simulator.landscape._rotation import ChipRotator, _chip_reach_px, mirror_twins
+from simulator.landscape._rotation import (
+    SMOOTH_ROTATE_BYTES_PER_PX,
+    ChipRotator,
+    _chip_reach_px,
+    canvas_shape,
+    mirror_twins,
+    smooth_bytes,
+    smooth_canvas,
+)
 from simulator.physics import CHIP_BLUR_MIN_PX
 from simulator.scene import Scene, TwistAxis, resampled_extent
 
 if TYPE_CHECKING:
     from simulator.landscape._landscape import Landscape
 
+#: Transform pixels per second and twist of a build (2 cores: 3 to 6e6 measured, SciPy): for
+#: the waiting line of a long build (:func:`simulator.core.wait_line`), not for any result.
+FFT_PX_PER_S = 5e6
 
 
 def energy_scale_J(scene: Scene) -> float:
@@ -93,14 +105,30 @@ def estimate_bytes(scene: Scene, twists: np.ndarray | None = None, um_per_px: fl
     return int(n_twists * (2 * ry + 1) * (2 * rx + 1) * np.dtype(scene.dtype).itemsize)
 
 
-def _refuse_over_budget(scene: Scene, need: float, n_twists: int, ny: int, nx: int) -> None:
-    """InputError unless ``need`` bytes fit ``scene.memory_budget_mb``."""
+def _refuse_over_budget(scene: Scene, need: float, n_twists: int, ny: int, nx: int, what: str = "") -> None:
+    """InputError unless ``need`` bytes fit ``scene.memory_budget_mb``; ``what`` says what
+    the estimate holds beyond the energy array (the transforms' work space, the footprint)."""
     if need > scene.memory_budget_mb * 2**20:
         raise InputError(
-            f"the landscape needs about {need / 2**20:,.0f} MB ({n_twists} twists x "
-            f"{ny} x {nx} poses, {scene.dtype}) but the memory budget is "
+            f"the landscape needs about {need / 2**20:,.0f} MB ({n_twists} twist{'s' if n_twists != 1 else ''} x "
+            f"{ny} x {nx} poses, {scene.dtype}{what}) but the memory budget is "
             f"{scene.memory_budget_mb:,.0f} MB; use a coarser scale (--um-per-px), a larger twist step "
-            "or narrower twist range, a smaller translation window (window_um), or raise memory_budget_mb"
+            "or narrower twist range, a smaller translation window (window_um), or raise memory_budget_mb (--memory-budget)"
+        )
+
+
+def _refuse_footprint(scene: Scene, need: float, canvas: tuple[int, int]) -> None:
+    """InputError unless the meniscus footprint of the chip (``need`` bytes while it is
+    made on its ``canvas``) fits the memory budget: before the chip is rasterized for it."""
+    if need > scene.memory_budget_mb * 2**20:
+        h, w = canvas
+        cw, ch = (v * scene.chip.um_per_px for v in scene.chip.shape[::-1])
+        how = "the distance transform" if scene.wall_profile is not None else "the K_h blur"
+        raise InputError(
+            f"the meniscus footprint of the {cw:,.4g} x {ch:,.4g} um chip ({how} of {w:,} x {h:,} px at "
+            f"{scene.um_per_px:g} um/px, meniscus {scene.meniscus_height_um:.3g} um) needs about {need / 2**20:,.0f} MB "
+            f"but the memory budget is {scene.memory_budget_mb:,.0f} MB; use a coarser scale (--resolution), a lower "
+            "meniscus (--volume or --meniscus-height), or raise --memory-budget"
         )
 
 
@@ -158,12 +186,16 @@ def _extent(scene: Scene, um_per_px: float | None = None) -> dict:
     return {"full": full, "limit": limit, "origin": origin, "crop": (r0, r1, c0, c1), "margin": margin}
 
 
-def require_landscape_fits(scene: Scene, twists: np.ndarray | None = None) -> None:
+def require_landscape_fits(scene: Scene, twists: np.ndarray | None = None, center_px: tuple[int, int] = (0, 0),
+                           half_px: int | None = None) -> None:
     """Refuse (InputError) a landscape over the memory budget or with too many twists, cheaply
-    (no rotation, no allocation): for commands to call before announcing a long run."""
-    b = _box(scene, twists)
-    t, ny, nx = b["shape"]
-    _refuse_over_budget(scene, b["landscape_bytes"], t, ny, nx)
+    (no rotation, no allocation): for commands to call before announcing a long run.
+
+    Prices what :func:`build_landscape` of the same arguments would hold at its peak, in
+    its smallest chunk of twists: the energy array, the transforms' work space, and with a
+    meniscus the chip's footprint (made once per chip) and its rotations.
+    """
+    _layout(scene, twists, center_px, half_px, check_budget=True)
 
 
 @dataclass(frozen=True, eq=False)
@@ -195,14 +227,38 @@ def plan(scene: Scene, twists: np.ndarray | None = None, center_px: tuple[int, i
          check_budget: bool = True) -> Plan:
     """Everything the build will do, computed without allocating the landscape.
 
-    Refuses (InputError) a landscape over the scene's memory budget before any chip
-    rotation is computed (``check_budget=False``: the layout only, for a caller that
-    never allocates the landscape, e.g. :mod:`simulator.landscape`'s bound).
+    Refuses (InputError) a build over the scene's memory budget before any chip rotation
+    is computed: the landscape with its smallest chunk of twists (the energy array, the
+    transforms' work space, the chip's rasters) and, with a meniscus, the chip's footprint
+    (a distance transform or a blur of the whole chip, made once per chip). With
+    ``check_budget=False`` (the layout only, for a caller that never allocates the
+    landscape, e.g. :mod:`simulator.landscape`'s bound) the footprint alone is priced.
     """
+    return _plan_of(scene, _layout(scene, twists, center_px, half_px, check_budget))
+
+
+def _plan_of(scene: Scene, lay: dict) -> Plan:
+    """The plan of a priced layout (:func:`_layout`): the chip's rotator made (with a
+    meniscus, its footprint: the expensive part, after the pricing)."""
+    grid, win, pat_up = lay["grid"], lay["window"], lay["pattern_up"]
+    rot = ChipRotator(scene.chip, grid.twist_deg(), lay["parity"], blur_px=lay["chip_blur"], margin_px=lay["rot_margin"],
+                      profile=scene.wall_profile)
+    assert rot.shape == lay["canvas"], "the rotator's canvas is the one priced"
+    m = lay["pad"]
+    if m:  # room for the blurred footprint, so that the meniscus blur does not wrap around
+        pat_up = np.pad(pat_up, m)
+        win = Window(rx=win.rx, ry=win.ry, dx=win.dx + m, dy=win.dy + m)
+    h_px = scene.meniscus_height_px
+    return Plan(grid, pat_up, rot, win, int(lay["landscape_bytes"]), h_px if not lay["chip_blur"] else 0.0, bool(lay["chip_blur"]))
+
+
+def _layout(scene: Scene, twists, center_px: tuple[int, int], half_px: int | None, check_budget: bool) -> dict:
+    """The plan's sizes (grid, window, cropped pattern, the rotator's canvas), priced against
+    the budget (see :func:`plan`): nothing rotated, rasterized or transformed."""
     b = _box(scene, twists, center_px, half_px)
     origin, (r0, r1, c0, c1) = b["origin"], b["crop"]
     n_twists, ny, nx = b["shape"]
-    if check_budget:
+    if check_budget:  # the energy array alone, before anything else is sized
         _refuse_over_budget(scene, b["landscape_bytes"], n_twists, ny, nx)
     axis, (x_first, y_first) = b["axis"], b["first_px"]
     # The pose grid, complete: the chip's radius of gyration is the scene's (derived once per
@@ -217,9 +273,8 @@ def plan(scene: Scene, twists: np.ndarray | None = None, center_px: tuple[int, i
     # the pattern, whose exact rasters then return the overlap model to round-off as h -> 0.
     h_px = scene.meniscus_height_px
     chip_blur = h_px if h_px >= CHIP_BLUR_MIN_PX else 0.0
-    rot = ChipRotator(scene.chip, grid.twist_deg(), parity, blur_px=chip_blur, margin_px=b["margin"] if chip_blur else 0,
-                      profile=scene.wall_profile)
-    hc, wc = rot.shape
+    rot_margin = b["margin"] if chip_blur else 0
+    hc, wc = canvas_shape(scene.chip, grid.twist_deg(), parity, rot_margin)
     dx, dy = origin[0] - wc / 2 + cx, origin[1] - hc / 2 + cy
     assert dx == int(dx) and dy == int(dy), "pixel grids of chip and pattern must coincide"
     win = Window(rx=rx, ry=ry, dx=int(dx), dy=int(dy))
@@ -232,10 +287,42 @@ def plan(scene: Scene, twists: np.ndarray | None = None, center_px: tuple[int, i
     pat_up = pat_up[ya:yb, xa:xb]
     win = Window(rx=win.rx, ry=win.ry, dx=win.dx - xa, dy=win.dy - ya)
     m = b["margin"] if 0 < h_px < CHIP_BLUR_MIN_PX else 0
-    if m:  # room for the blurred footprint, so that the meniscus blur does not wrap around
-        pat_up = np.pad(pat_up, m)
-        win = Window(rx=win.rx, ry=win.ry, dx=win.dx + m, dy=win.dy + m)
-    return Plan(grid, pat_up, rot, win, int(b["landscape_bytes"]), h_px if not chip_blur else 0.0, bool(chip_blur))
+    out = {"grid": grid, "window": win, "pattern_up": pat_up, "parity": parity, "chip_blur": chip_blur, "rot_margin": rot_margin,
+           "canvas": (hc, wc), "pad": m, "landscape_bytes": b["landscape_bytes"]}
+    # The footprint (made once per chip, kept) and the rotations onto the canvas.
+    make, kept = smooth_bytes(scene.chip, chip_blur, rot_margin, scene.wall_profile, parity)
+    rotating = hc * wc * (SMOOTH_ROTATE_BYTES_PER_PX if kept else RASTER_BYTES_PER_PX)
+    out["rotator_bytes"] = kept + rotating
+    if make:
+        _refuse_footprint(scene, make, smooth_canvas(scene.chip, rot_margin, parity))
+    if check_budget:
+        need = _build_bytes(scene, out, 1)
+        if need > scene.memory_budget_mb * 2**20:
+            _refuse_over_budget(scene, need, n_twists, ny, nx, ", with the transforms' work space"
+                                + (" and the chip's meniscus footprint" if kept else ""))
+    return out
+
+
+def _fft_of(lay: dict) -> tuple[int, int]:
+    """(ny, nx) of the correlation's transforms for the layout ``lay`` (:func:`_layout`)."""
+    win, m = lay["window"], lay["pad"]
+    win = Window(rx=win.rx, ry=win.ry, dx=win.dx + m, dy=win.dy + m)  # as the plan pads the pattern
+    return fft_shape(tuple(v + 2 * m for v in lay["pattern_up"].shape), lay["canvas"], win)
+
+
+def _build_bytes(scene: Scene, lay: dict, chunk: int) -> int:
+    """Peak bytes of a build of the layout ``lay`` (:func:`_layout`) in chunks of ``chunk``
+    twists: the energy array, the correlation's work space, the chunk's chip rasters (each
+    made, then stacked) and the footprint with its rotations."""
+    win = lay["window"]
+    n_twists = lay["grid"].shape[0]
+    fft = _fft_of(lay)
+    twists_deg = lay["grid"].twist_deg()
+    per_chunk = chunk * (2 if mirror_twins(scene.twist_axis.mirror, twists_deg) else 1)
+    hc, wc = lay["canvas"]
+    rasters = 2 * chunk * hc * wc * 8
+    return int(lay["landscape_bytes"] + work_bytes(fft, 2 * win.ry + 1, scene.dtype, per_chunk, -(-n_twists // chunk))
+               + rasters + lay["rotator_bytes"])
 
 
 def build_landscape(
@@ -246,6 +333,7 @@ def build_landscape(
     backend: str = "auto",
     chunk: int = 8,
     progress: bool = False,
+    label: str = "landscape",
 ) -> Landscape:
     """Compute E[twist, y, x] (J) for the scene, or for a subset of its twists.
 
@@ -259,23 +347,30 @@ def build_landscape(
         backend: "auto" (SciPy on CPU, JAX on GPU), "scipy" or "jax".
         chunk: twists transformed together (memory per chunk is reported in stats).
         progress: show a progress bar over twist chunks.
+        label: what the waiting line calls this build when no progress bar is shown and it
+            takes long enough (:func:`simulator.core.wait_line`), e.g. "landscape box 3".
 
     Raises:
         InputError: the landscape would exceed ``scene.memory_budget_mb``.
     """
     t_start = time.perf_counter()
-    p = plan(scene, twists, center_px, half_px)
-    win, rot = p.window, p.rotator
     _check_energy_range(scene)
-    # Sizes first, allocation after: an over-budget request fails before any transform.
+    # Sizes first, allocation after: an over-budget request fails before any rotation or
+    # transform, and the chunk of twists shrinks until the build fits the budget.
+    lay = _layout(scene, twists, center_px, half_px, check_budget=True)
+    chunk = max(1, min(chunk, lay["grid"].shape[0]))
+    while chunk > 1 and _build_bytes(scene, lay, chunk) > scene.memory_budget_mb * 2**20:
+        chunk = max(1, chunk // 2)
+    if not progress:
+        n, ny, nx = lay["grid"].shape
+        fy, fx = _fft_of(lay)
+        wait_line(f"{label}: {n} twist{'s' if n != 1 else ''} x {ny:,} x {nx:,} poses (transforms of {fy:,} x {fx:,} px)",
+                  n * fy * fx / FFT_PX_PER_S)
+    p = _plan_of(scene, lay)
+    win, rot = p.window, p.rotator
     twists_deg = p.twists
-    chunk = max(1, min(chunk, len(twists_deg)))
-    fft = fft_shape(p.pattern_up.shape, rot.shape, win)
     # A chunk of mirror twins works on twice the twists (the twins' spectra and windows).
     twins = mirror_twins(scene.twist_axis.mirror, twists_deg)
-    per_chunk = chunk * (2 if twins else 1)
-    need = p.landscape_bytes + work_bytes(fft, 2 * win.ry + 1, scene.dtype, per_chunk, -(-len(twists_deg) // chunk))
-    _refuse_over_budget(scene, need, len(twists_deg), 2 * win.ry + 1, 2 * win.rx + 1)
     cor = Correlator(p.pattern_up, rot.shape, win, scene.dtype, backend, meniscus_px=p.meniscus_px)
     scale = scene.delta_gamma_N_m * scene.um_per_px**2 * UM2
     energy = np.empty((len(twists_deg), 2 * win.ry + 1, 2 * win.rx + 1), dtype=scene.dtype)

@@ -10,6 +10,7 @@ asked for is transformed back along x.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -205,14 +206,24 @@ class Correlator:
         kern = jnp.asarray(self.kernel)
         nx, ny = self.nx, self.ny
         nr, nc = self.out_shape
+        run = _jax_correlation()
+        return lambda chips: run(kern, chips, nx=nx, ny=ny, nr=nr, nc=nc)
 
-        @jax.jit
-        def run(chips):
-            spec = jnp.fft.fft(jnp.fft.rfft(chips[:, ::-1, ::-1], n=nx, axis=2), n=ny, axis=1)
-            a = jnp.fft.ifft(kern * spec, axis=1)[:, :nr]
-            return jnp.fft.irfft(a, n=nx, axis=2)[:, :, :nc]
 
-        return run
+@functools.cache
+def _jax_correlation():
+    """The JAX backend's correlation, compiled once per shape (the pattern's spectrum is an
+    argument, not a constant: a new Correlator of the same sizes compiles nothing)."""
+    import jax
+    import jax.numpy as jnp
+
+    @functools.partial(jax.jit, static_argnames=("nx", "ny", "nr", "nc"))
+    def run(kern, chips, nx: int, ny: int, nr: int, nc: int):
+        spec = jnp.fft.fft(jnp.fft.rfft(chips[:, ::-1, ::-1], n=nx, axis=2), n=ny, axis=1)
+        a = jnp.fft.ifft(kern * spec, axis=1)[:, :nr]
+        return jnp.fft.irfft(a, n=nx, axis=2)[:, :, :nc]
+
+    return run
 
 
 #: Rasters equal to within this (per pixel) count as the same chip: rasters of a

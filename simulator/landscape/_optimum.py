@@ -110,6 +110,26 @@ def global_minimum(scene: Scene, landscape: Landscape | None = None, evaluated: 
     return GlobalMinimum(x, y, t, e, how=how, poses=search.poses, seconds=time.perf_counter() - t0)
 
 
+def require_minimum_fits(scene: Scene) -> None:
+    """Refuse (InputError), before a run that will need it, a global minimum that
+    :func:`global_minimum` could not find within the memory budget: the bound's chip canvas
+    and, with a meniscus, the chip's footprint; for a scene the bound does not cover (a
+    repulsive pad, a meniscus below a pixel) one twist of the whole landscape, which the
+    search then builds twist by twist. Sizes only: nothing rotated or transformed."""
+    from simulator.landscape._build import _layout, require_landscape_fits
+
+    if _full_search(scene):
+        require_landscape_fits(scene, twists=scene.twist_axis.values()[:1])
+        return
+    lay = _layout(scene, None, (0, 0), None, check_budget=False)  # the footprint priced here
+    _Bounds.require_fits(scene, lay["canvas"], bool(lay["chip_blur"]))
+
+
+def _full_search(scene: Scene) -> bool:
+    """Whether the search builds the whole landscape (no bound covers the scene)."""
+    return _delta_gamma(scene) >= 0 or (getattr(scene.effects, "meniscus", False) and not _Bounds.covers_meniscus(scene))
+
+
 # ----------------------------------------------------------------------------- search
 class _Piece:
     """A built box, reduced to its extent and its tie candidates (energies within the
@@ -140,6 +160,7 @@ class _Search:
         self.floor = float(NOISE_FACTOR * eps * max(energy_scale_J(scene), np.finfo(float).tiny))
         self.pieces: list[_Piece] = []
         self.poses = 0
+        self.how = "nominal"  # the step of the proof, for the waiting lines
 
     # -- pieces
     def add(self, ls: Landscape, counted: bool = True) -> None:
@@ -161,7 +182,8 @@ class _Search:
         for run in consecutive_runs(twist_idx):  # each landscape holds one run of the twist axis
             for i in range(0, len(run), chunk):
                 tw = self.axis[run[i : i + chunk]]
-                self.add(build_landscape(self.scene, twists=tw, center_px=center_px, half_px=half_px, backend=self.backend))
+                self.add(build_landscape(self.scene, twists=tw, center_px=center_px, half_px=half_px, backend=self.backend,
+                                         label=f"global minimum: {self.how} box"))
 
     def low(self) -> float:
         return min(p.low for p in self.pieces)
@@ -193,7 +215,7 @@ class _Search:
     # -- the search
     def run(self) -> str:
         scene = self.scene
-        if _delta_gamma(scene) >= 0 or (getattr(scene.effects, "meniscus", False) and not _Bounds.covers_meniscus(scene)):
+        if _full_search(scene):
             return self._full()
         n = len(self.axis)
         k0 = int(np.argmin(np.abs(self.axis)))
@@ -213,12 +235,20 @@ class _Search:
         return self._cells(bounds)
 
     def _cells(self, b: _Bounds) -> str:
+        from simulator.core import progress_bar, shows_wait
+
         n = len(self.axis)
         k = max(2, math.ceil(max(b.ny, b.nx) / CELLS_PER_AXIS))
         regions = {j: None for j in range(n)}  # twist index -> translations (x0, x1, y0, y1) px left (None: all)
         first = True
+        self.how = "cell-bound"
         while regions:
-            cand = {j: b.cells(j, k, reg) for j, reg in regions.items()}
+            with progress_bar(shows_wait(len(regions) * b.seconds_per_twist(k)), len(regions),
+                              f"global minimum: bound over {k} x {k} px cells", "twist") as bar:
+                cand = {}
+                for j, reg in regions.items():
+                    cand[j] = b.cells(j, k, reg)
+                    bar.update(1)
             # keep the cells that could hold a lower pose or a tie, and are not computed yet
             left = self._prune(cand, k, b)
             if not left:
@@ -278,6 +308,7 @@ class _Search:
             self.build(twists, ((x0 + x1) // 2, (y0 + y1) // 2), int(math.ceil(max(x1 - x0, y1 - y0) / 2)) + 1)
 
     def _full(self) -> str:
+        self.how = "full-landscape"
         self.build(range(len(self.axis)), (0, 0), None)
         return "full landscape"
 

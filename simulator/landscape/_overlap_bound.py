@@ -14,7 +14,12 @@ from __future__ import annotations
 import numpy as np
 
 from simulator.core import UM2
+from simulator.landscape._rotation import SMOOTH_ROTATE_BYTES_PER_PX
 from simulator.scene import Scene
+
+#: Canvas pixels per second of a footprint's rotation by splines (2 cores: 1.6e7 measured),
+#: for the waiting lines only.
+ROTATE_PX_PER_S = 1.5e7
 
 
 # ----------------------------------------------------------------------------- the bound
@@ -42,11 +47,19 @@ class _Bounds:
     def __init__(self, scene: Scene):
         from simulator.landscape._build import plan
 
-        p = plan(scene, check_budget=False)
+        p = plan(scene, check_budget=False)  # prices the footprint before it is made
         self.scene = scene
         self.pat = np.asarray(p.pattern_up, float)
         self.rot = p.rotator
         self.twists = p.twists
+        # The chip at one twist on the whole canvas, its rotation's work space and its block
+        # maxima; rotations are kept while they fit a quarter of the budget (_fine).
+        hc, wc = self.rot.shape
+        self._fine_bytes = hc * wc * 8
+        budget = scene.memory_budget_mb * 2**20
+        self.require_fits(scene, (hc, wc), self.footprint)
+        self._fine_keep = max(1, int(budget / 4 // self._fine_bytes))
+        self._mass: dict[int, float] = {}
         w = p.window
         self.rx, self.ry, self.dx, self.dy = w.rx, w.ry, w.dx, w.dy
         self.ny, self.nx = 2 * w.ry + 1, 2 * w.rx + 1
@@ -55,6 +68,18 @@ class _Bounds:
         self._pat_blocks: dict[int, np.ndarray] = {}
         self._fine: dict[int, np.ndarray] = {}
         self._spectra: dict = {}
+
+    @staticmethod
+    def require_fits(scene: Scene, canvas: tuple[int, int], footprint: bool) -> None:
+        """InputError unless the bound's least memory fits the budget: the chip at one twist
+        on its ``canvas`` (with a ``footprint``, its rotation's work space), its block maxima
+        and the pooling's copy."""
+        from patterns.resources import require_fits
+
+        hc, wc = canvas
+        require_fits(f"the global minimum's bound ({hc:,} x {wc:,} px chip canvas at {scene.um_per_px:g} um/px)",
+                     hc * wc * 8 * 3 + (hc * wc * SMOOTH_ROTATE_BYTES_PER_PX if footprint else 0),
+                     "use a coarser scale (--resolution)", scene.memory_budget_mb)
 
     @staticmethod
     def covers_meniscus(scene: Scene) -> bool:
@@ -74,11 +99,32 @@ class _Bounds:
         """The largest overlap any pose can have, min(|P|, |C|) in px^2 (with a margin); with
         a meniscus |C| is the footprint's mass (the chip's area and the liquid beyond it)."""
         c = self.scene.chip
+        pat = float(self.pat.sum())
         if c.geometry is not None and not self.footprint:
             chip = max(float(c.data.sum()), c.geometry.area / self.s**2)
         else:
-            chip = max(float(self.fine(j).sum()) for j in range(len(self.twists)))
-        return min(float(self.pat.sum()), chip) * (1 + 1e-9)
+            # min(|P|, max over twists of the footprint's mass): |P| as soon as one twist's
+            # mass reaches it (the twist nearest 0 first), without rotating the chip to the others.
+            chip = 0.0
+            for j in np.argsort(np.abs(self.twists), kind="stable"):
+                chip = max(chip, self.mass(int(j)))
+                if chip >= pat:
+                    break
+        return min(pat, chip) * (1 + 1e-9)
+
+    def seconds_per_twist(self, k: int) -> float:
+        """A rough time of :meth:`cells` at one twist with k x k px cells (for the waiting
+        lines): the chip rotated onto its canvas (a footprint by splines; exact geometry
+        rasterized at the block size), and a correlation k^2 times smaller than the landscape's."""
+        hc, wc = self.rot.shape
+        rotate = hc * wc / (ROTATE_PX_PER_S if self.footprint else ROTATE_PX_PER_S * k * k)
+        return rotate + (self.ny + hc) * (self.nx + wc) / (k * k) / 5e6
+
+    def mass(self, j: int) -> float:
+        """The footprint's (or the chip raster's) sum at twist j, px^2."""
+        if j not in self._mass:
+            self._mass[j] = float(self.fine(j).sum())
+        return self._mass[j]
 
     def perimeter_px(self) -> float:
         """The chip outline's length in px (exact geometry), or its raster's total variation."""
@@ -89,9 +135,16 @@ class _Bounds:
         return float(np.abs(np.diff(d, axis=0)).sum() + np.abs(np.diff(d, axis=1)).sum())
 
     def fine(self, j: int) -> np.ndarray:
-        if j not in self._fine:
-            self._fine[j] = self.rot(float(self.twists[j]))
-        return self._fine[j]
+        """The chip (or its footprint) at twist j on the canvas; the latest rotations are kept
+        while they fit a quarter of the memory budget (a 4000 px chip's canvas is 270 MB)."""
+        if j in self._fine:
+            self._fine[j] = self._fine.pop(j)  # most recently used last
+            return self._fine[j]
+        img = self.rot(float(self.twists[j]))
+        while len(self._fine) >= self._fine_keep:
+            self._fine.pop(next(iter(self._fine)))
+        self._fine[j] = img
+        return img
 
     def pattern_blocks(self, k: int) -> np.ndarray:
         if k not in self._pat_blocks:

@@ -19,6 +19,21 @@ from simulator.scene import resampled_extent
 #: the same Surface Evolver ratios to 0.001).
 SPLINE_ORDER = 2
 
+#: Peak bytes per pixel of the smooth chip's own canvas (:func:`smooth_canvas`) while it is
+#: made, with a margin over what tracemalloc measured: the free-contact-line footprint (the
+#: chip rasterized, two distance transforms and the wall profile over them, 50 B/px) and the
+#: ``K_h`` blur (its FFT canvas is twice as wide and high, 108 B/px).
+SMOOTH_BYTES_PER_PX = {"profile": 64, "blur": 128}
+#: Bytes per pixel of the smooth chip kept once made (the footprint, its signed distances and
+#: its spline coefficients; the blurred chip and its coefficients).
+SMOOTH_KEPT_BYTES_PER_PX = {"profile": 24, "blur": 16}
+#: Peak bytes per pixel of the rotator's canvas while the smooth chip is rotated onto it
+#: (coordinates, masks, spline taps: 79 B/px measured) and kept between rotations (32 B/px).
+SMOOTH_ROTATE_BYTES_PER_PX = 112
+#: Pixels per second of the smooth chip's canvas made (2 cores: about 3e6 measured); for the
+#: waiting line (:func:`simulator.core.wait_line`).
+SMOOTH_PX_PER_S = 2.5e6
+
 #: The last smooth chip made (:meth:`ChipRotator._smooth_chip`): its key, a weak reference to
 #: the chip it was made from (a chip freed and another made at its address is not it), and
 #: the arrays. One entry: a run works on one chip.
@@ -60,6 +75,41 @@ def _rotated_extent_px(chip: Mask, twists: np.ndarray) -> tuple[float, float]:
     return float(np.abs(xr).max()), float(np.abs(yr).max())
 
 
+def canvas_shape(chip: Mask, twists: np.ndarray, parity: tuple[int, int], margin_px: int = 0) -> tuple[int, int]:
+    """(H, W) of the rotator's canvas: just large enough for the chip (grown by ``margin_px``)
+    at the given twists, with W % 2 and H % 2 the pattern's parity (a size, nothing rasterized)."""
+    rx, ry = _rotated_extent_px(chip, twists)
+    rx, ry = rx + margin_px, ry + margin_px
+    return tuple(2 * ceil_whole(r) + 2 + p for r, p in ((ry, parity[0]), (rx, parity[1])))
+
+
+def smooth_canvas(chip: Mask, margin_px: int, parity: tuple[int, int]) -> tuple[int, int]:
+    """(H, W) of the smooth chip's own canvas (:meth:`ChipRotator._blur`): the chip and its
+    margin at every twist, whatever the rotator's canvas (one for every build of a scene)."""
+    rad = max(_chip_reach_px(chip, True)) + margin_px
+    side = int(2 * math.ceil(rad * math.sqrt(2)) + 4)
+    return side + parity[0] % 2, side + parity[1] % 2
+
+
+def smooth_cached(chip: Mask, blur_px: float, margin_px: int, profile, parity: tuple[int, int]) -> bool:
+    """Whether the smooth chip of these settings is made already (:data:`_SMOOTH`)."""
+    key = (id(chip), float(blur_px), int(margin_px), profile, parity[0] % 2, parity[1] % 2)
+    cached = _SMOOTH.get("entry")
+    return cached is not None and cached[0] == key and cached[1]() is chip
+
+
+def smooth_bytes(chip: Mask, blur_px: float, margin_px: int, profile, parity: tuple[int, int]) -> tuple[int, int]:
+    """(peak bytes while the smooth chip is made, 0 when it is made already; bytes kept)
+    of a rotator with a meniscus footprint (both 0 without one): sizes only."""
+    if not (blur_px > 0 or profile is not None):
+        return 0, 0
+    ho, wo = smooth_canvas(chip, margin_px, parity)
+    kind = "blur" if profile is None else "profile"
+    kept = ho * wo * SMOOTH_KEPT_BYTES_PER_PX[kind]
+    make = 0 if smooth_cached(chip, blur_px, margin_px, profile, parity) else ho * wo * SMOOTH_BYTES_PER_PX[kind]
+    return int(make), int(kept)
+
+
 class ChipRotator:
     """Rotated chip rasters on one fixed canvas, y-up, with the pattern's pixel parity.
 
@@ -82,11 +132,9 @@ class ChipRotator:
         # edge takes and releases the contact line coarse splines would round off.
         self.sample_px = coarse_step(self.blur_px) if profile is None else 1
         self.margin_px = int(margin_px)
-        rx, ry = _rotated_extent_px(chip, twists)
-        rx, ry = rx + margin_px, ry + margin_px
         # Canvas (H, W) with W % 2 == parity so chip and pattern pixel grids coincide;
         # just large enough for the twists asked for (a band of twists needs less).
-        self.shape = (2 * ceil_whole(ry) + 2 + parity[0], 2 * ceil_whole(rx) + 2 + parity[1])
+        self.shape = canvas_shape(chip, twists, parity, margin_px)
         # A chip image is resampled on the canvas of a full turn and cut to this one: OpenCV's
         # fixed-point bilinear weights (1/32 px) depend on where a pixel lies on the canvas, so
         # a band of twists (a smaller canvas) would otherwise get other rasters than the
@@ -109,6 +157,13 @@ class ChipRotator:
             self._blurred, self._half, self._sdf, self._coeffs = cached[2]
             return
         self._sdf = None
+        from simulator.core import wait_line
+
+        ho, wo = smooth_canvas(self.chip, self.margin_px, self.shape)
+        w_um, h_um = (v * self.chip.um_per_px for v in self.chip.shape[::-1])
+        how = "distance transform" if self.profile is not None else "K_h blur"
+        wait_line(f"meniscus footprint of the {w_um:,.4g} x {h_um:,.4g} um chip ({how} of {wo:,} x {ho:,} px)",
+                  ho * wo / SMOOTH_PX_PER_S)
         self._blurred = self._blur()
         from scipy import ndimage
 
@@ -126,9 +181,7 @@ class ChipRotator:
         # One canvas for every build of the scene (a band of twists, a box, the whole axis):
         # the K_h kernel's tail is long, and what of it wraps around a smaller FFT canvas
         # would make boxes differ from the landscape (by 3e-5 of the energy, measured).
-        rad = max(_chip_reach_px(c, True)) + self.margin_px
-        side = int(2 * math.ceil(rad * math.sqrt(2)) + 4)
-        ho, wo = side + (self.shape[0] % 2), side + (self.shape[1] % 2)
+        ho, wo = smooth_canvas(c, self.margin_px, self.shape)
         if c.geometry is not None:
             img = rasterize(c.geometry, c.um_per_px, shape=(ho, wo))
         else:

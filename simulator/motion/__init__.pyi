@@ -53,6 +53,7 @@ from ._trajectory import (
     is_stiff as is_stiff,
     price_run as price_run,
     radius_of_gyration_px as radius_of_gyration_px,
+    require_run_fits as require_run_fits,
     require_start_in_window as require_start_in_window,
     simulate as simulate,
 )

@@ -46,6 +46,9 @@ MAX_START_PX, MAX_START_TWIST_DEG = 2**24, 3600.0
 #: Peak bytes per recorded step of one run (device buffers, their host copies and the
 #: Trajectory's float64 path and energies): stepping and dynamics.
 PATH_BYTES_PER_STEP = {"stepping": 96, "dynamics": 320}
+#: The boxes of a greedy or gradient run (:func:`simulate`): twists within this many steps
+#: of the chip's, translations this many px beyond the start and the aligned pose.
+BAND_STEPS, BAND_PX = 3, 48
 
 
 @dataclass(frozen=True)
@@ -141,8 +144,8 @@ def simulate(
     method: str = "greedy",
     max_steps: int = DEFAULT_MAX_STEPS,
     landscape: Landscape | None = None,
-    band_steps: int = 3,
-    band_px: int = 48,
+    band_steps: int = BAND_STEPS,
+    band_px: int = BAND_PX,
     dynamics=None,
     backend: str = "auto",
 ) -> Trajectory:
@@ -174,6 +177,7 @@ def simulate(
         )
     if landscape is None:
         require_start_in_window(scene, start)
+        require_run_fits(scene, start, method, band_steps, band_px)
     dynamic = method in ("overdamped", "inertial")
     if dynamic and dynamics is None:
         from simulator.motion._dynamics_params import DynamicsParams
@@ -322,6 +326,7 @@ def _box_landscapes(scene: Scene, band_steps: int, band_px: int, backend: str, c
     box, template, last = None, None, None
     stuck = False  # the box grew and the landscape did not: the window (window_um) cuts it, growing again is futile
     planes: dict[int, np.ndarray] = {}
+    builds = 0  # landscapes built, for the waiting lines
     pose = yield
     while True:
         pose_px = np.round(pose[:2] / s)
@@ -331,12 +336,7 @@ def _box_landscapes(scene: Scene, band_steps: int, band_px: int, backend: str, c
             box = _fit_box(box, pose_px, band_px)
             planes.clear()
             cost.built.clear()
-        k = int(round((pose[2] - float(ta.values_at(0))) / ta.step_deg)) if n > 1 else 0
-        lo, hi = k - band_steps, k + band_steps
-        if n == 1 or (ta.periodic and hi - lo + 1 >= n):
-            lo, hi = 0, n - 1
-        elif not ta.periodic:
-            lo, hi = max(lo, 0), min(hi, n - 1)
+        lo, hi = _twist_band(ta, pose[2], band_steps)
         if (lo, hi, box) == last:
             pose = yield None
             continue
@@ -344,7 +344,9 @@ def _box_landscapes(scene: Scene, band_steps: int, band_px: int, backend: str, c
         want = list(range(lo, hi + 1))
         (cx, cy), half = box
         for run in consecutive_runs({j % n for j in want} - set(planes)):
-            ls = build_landscape(scene, twists=ta.values_at(np.asarray(run)), center_px=(cx, cy), half_px=half, backend=backend)
+            ls = build_landscape(scene, twists=ta.values_at(np.asarray(run)), center_px=(cx, cy), half_px=half, backend=backend,
+                                 label=f"landscape box {builds + 1}")
+            builds += 1
             cost.count(ls)
             cost.built.append(ls)
             template = ls
@@ -362,6 +364,41 @@ def _box_landscapes(scene: Scene, band_steps: int, band_px: int, backend: str, c
             energy_scale_J=template.energy_scale_J,
             stats=template.stats,
         )
+
+
+def _twist_band(ta, twist_deg: float, band_steps: int) -> tuple[int, int]:
+    """(first, last) axis index of the band of +-``band_steps`` twists around ``twist_deg`` (may
+    run past the ends of a periodic axis; the whole axis when the band covers it)."""
+    n = ta.count
+    k = int(round((twist_deg - float(ta.values_at(0))) / ta.step_deg)) if n > 1 else 0
+    lo, hi = k - band_steps, k + band_steps
+    if n == 1 or (ta.periodic and hi - lo + 1 >= n):
+        lo, hi = 0, n - 1
+    elif not ta.periodic:
+        lo, hi = max(lo, 0), min(hi, n - 1)
+    return lo, hi
+
+
+def require_run_fits(scene: Scene, start, method: str, band_steps: int = BAND_STEPS, band_px: int = BAND_PX) -> None:
+    """Refuse (InputError), before anything is compiled, rotated or transformed, a run whose
+    first landscape does not fit the memory budget: the first box and band of twists of a
+    greedy or gradient run (:func:`simulate`), the whole landscape of the dynamics, each with
+    the chip's meniscus footprint, and what the global minimum's proof after a greedy or
+    gradient run needs at least. Boxes built later are priced as they come (in chunks of
+    twists that fit)."""
+    from simulator.landscape import require_landscape_fits, require_minimum_fits
+
+    if method in DYNAMIC:
+        require_landscape_fits(scene)
+        return
+    ta = scene.twist_axis
+    (cx, cy), half = _fit_box(None, np.round(np.asarray(start[:2], float) / scene.um_per_px), band_px)
+    lo, hi = _twist_band(ta, float(start[2]), band_steps)
+    runs = consecutive_runs({j % ta.count for j in range(lo, hi + 1)})
+    if runs:  # else a start twist beyond the axis: refused by simulate with its own message
+        longest = max(runs, key=len)
+        require_landscape_fits(scene, twists=ta.values_at(np.asarray(longest)), center_px=(cx, cy), half_px=half)
+    require_minimum_fits(scene)
 
 
 def reference_landscape(scene: Scene, backend: str = "auto", reach_steps: int = 2, half_px: int = 16) -> Landscape:

@@ -126,9 +126,12 @@ def run_point(task: dict) -> dict:
     """Run one point; never raises for the point's own failure: ``status`` "ok" with the
     ``summary``, or "error" with the one-line ``error``. What each Dask task runs."""
     _cap_threads()
+    from simulator.core import quiet_waits
+
     t0 = time.perf_counter()
     try:
-        summary = assess_point(task)
+        with quiet_waits():  # the sweep's own bar says how the points go
+            summary = assess_point(task)
     except Exception as err:  # the point's failure is its row; the sweep goes on
         return {"point": task["point"], "status": "error", "error": _one_line(err), "seconds": round(time.perf_counter() - t0, 3), "summary": None}
     return {"point": task["point"], "status": "ok", "error": None, "seconds": round(time.perf_counter() - t0, 3), "summary": summary}
