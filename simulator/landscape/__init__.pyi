@@ -23,6 +23,10 @@ from ._optimum import (
     GlobalMinimum as GlobalMinimum,
     global_minimum as global_minimum,
 )
+from ._pathcost import (
+    PathEnergy as PathEnergy,
+    path_engine_supported as path_engine_supported,
+)
 from ._posegrid import (
     PoseGrid as PoseGrid,
     axis_step as axis_step,

@@ -1,0 +1,269 @@
+"""Energies pose by pose, at the cost of the chip's outline: the path-cost engine.
+
+``E(x, y, a) = scale * sum_{k,l} chip_a[k, l] * w[k + y + oy, l + x + ox]`` (the FFT
+engine's correlation, :class:`simulator.landscape.Correlator`). A chip raster is 1 inside
+and 0 outside, fractional only along its outline, so its row differences
+``D[k, l] = chip[k, l] - chip[k, l - 1]`` (a zero column before and after each row) are
+non-zero only along the outline. With the pattern's row prefix sums
+``P[r, j] = sum_{i < j} w[r, i]`` (made once), summation by parts gives
+
+    E = -scale * sum_{k,l} D[k, l] * P[k + y + oy, l + x + ox]
+
+exactly (each chip row sums its D to 0, so any constant per pattern row cancels: beyond
+the pattern's left end P is 0, beyond its right end the row total, and rows off the
+pattern are 0). One pose costs one gather per non-zero of D, about four per outline pixel,
+whatever the chip's area. The same holds for a meniscus footprint that is exactly 1 deep
+inside and 0 beyond a band (the free contact lines' wall profile, clipped): D is then
+non-zero over the band only. The K_h-blurred chip (pinned lines) is smooth everywhere
+and a meniscus below one pixel blurs the pattern: those stay with the FFT engine
+(:func:`path_engine_supported`).
+
+:class:`PathEnergy` computes poses on demand and keeps every pose it computed, so a run
+that comes back to a pose (boxes that overlap) pays for it once; :meth:`PathEnergy.box`
+returns a :class:`~simulator.landscape.Landscape` on the same grid as
+:func:`~simulator.landscape.build_landscape` gives for the same twists, centre and
+half-width, so the steppers run on it unchanged. The energies equal the FFT engine's to
+its round-off (well below the noise floor): the FFT rounds in the scene's dtype, this
+engine sums in float64 and rounds once.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+
+import numpy as np
+from shapely import affinity
+
+from patterns.raster import coverage_steps
+from simulator.core import UM2
+from simulator.landscape._build import _box, _check_energy_range, energy_scale_J
+from simulator.landscape._posegrid import PoseGrid
+from simulator.landscape._rotation import ChipRotator
+from simulator.physics import CHIP_BLUR_MIN_PX
+from simulator.scene import Scene
+
+
+def path_engine_supported(scene: Scene) -> tuple[bool, str]:
+    """(True, "") when :class:`PathEnergy` computes this scene's energies, else (False, why).
+
+    Supported: chips whose raster (or meniscus footprint) is exactly 1 inside and 0 outside
+    away from its outline: exact geometry, chip PNGs, the free contact lines' footprint.
+    Not: the K_h-blurred chip (smooth everywhere, so not sparse) and a meniscus below one
+    pixel (its blur is on the pattern's side)."""
+    h_px = scene.meniscus_height_px
+    if h_px > 0 and scene.wall_profile is None:
+        if h_px >= CHIP_BLUR_MIN_PX:
+            return False, "the K_h-blurred chip is smooth everywhere (not sparse)"
+        return False, "a meniscus below one pixel blurs the pattern"
+    if h_px > 0 and h_px < CHIP_BLUR_MIN_PX:
+        return False, "a meniscus below one pixel blurs the pattern"
+    return True, ""
+
+
+class _Outline:
+    """The non-zeros of one twist's row differences: flat offsets into the padded prefix
+    sums (before the pose's shift), rows and columns (pattern coordinates at pose 0), values."""
+
+    __slots__ = ("rows", "cols", "vals", "nnz")
+
+    def __init__(self, rows: np.ndarray, cols: np.ndarray, vals: np.ndarray):
+        self.rows, self.cols, self.vals = rows, cols, vals
+        self.nnz = len(vals)
+
+
+class PathEnergy:
+    """A scene's energies at any grid pose, computed on demand at the cost of the chip's
+    outline (module docstring), and kept.
+
+    Poses are integer px from the pattern centre (x, y) and twist-axis indices ``k``
+    (0 .. count - 1; wrapped on a periodic axis by the caller)."""
+
+    def __init__(self, scene: Scene):
+        ok, why = path_engine_supported(scene)
+        if not ok:
+            raise ValueError(f"the path-cost engine does not cover this scene: {why}")
+        _check_energy_range(scene)
+        self.scene = scene
+        self.axis = scene.twist_axis
+        b = _box(scene, None)
+        self.grid: PoseGrid = b["grid"]
+        self.origin = b["origin"]
+        r0, r1, c0, c1 = b["crop"]
+        self.margin = b["margin"]
+        pat = np.asarray(scene.pattern.data[r0:r1, c0:c1][::-1], np.float64)
+        hp, wp = pat.shape
+        # Prefix sums along rows, one column more (the row total), one zero row more (rows off the pattern).
+        self.P = np.zeros((hp + 1, wp + 1), np.float64)
+        np.cumsum(pat, axis=1, out=self.P[:hp, 1:])
+        self.hp, self.wp = hp, wp
+        self.parity = (int((2 * self.origin[1]) % 2), int((2 * self.origin[0]) % 2))
+        self.scale = scene.delta_gamma_N_m * scene.um_per_px**2 * UM2
+        self.dtype = np.dtype(scene.dtype)
+        h_px = scene.meniscus_height_px
+        self.chip_blur = h_px if h_px >= CHIP_BLUR_MIN_PX else 0.0
+        self._outlines: dict[int, _Outline] = {}
+        self._cache: dict[int, dict[tuple[int, int], float]] = {}
+        self.poses = 0  # poses computed
+        self.rotations = 0
+        self.seconds = 0.0
+        self.nnz_max = 0
+
+    # -- the chip's outline at one twist
+    def outline(self, k: int) -> _Outline:
+        o = self._outlines.get(k)
+        if o is not None:
+            return o
+        tw = float(self.axis.values_at(np.asarray([k]))[0])
+        rot = ChipRotator(self.scene.chip, np.asarray([tw]), self.parity, blur_px=self.chip_blur,
+                          margin_px=self.margin if self.chip_blur else 0, profile=self.scene.wall_profile)
+        self.rotations += 1
+        hc, wc = rot.shape
+        oy, ox = self.origin[1] - hc / 2, self.origin[0] - wc / 2
+        assert oy == int(oy) and ox == int(ox), "pixel grids of chip and pattern must coincide"
+        chip = self.scene.chip
+        if chip.geometry is not None and not self.chip_blur and self.scene.wall_profile is None:
+            # Exact geometry: the raster's steps straight from the outline's pieces (the
+            # rotator's raster, y down; never the whole canvas).
+            g = chip.geometry if tw == 0 else affinity.rotate(chip.geometry, tw, origin=(0, 0))
+            r, c, v = coverage_steps(g, chip.um_per_px, rot.shape, self.dtype)
+            rows, cols, vals = [hc - 1 - r], [c], [v]
+        else:
+            # The FFT engine correlates the raster in the scene's dtype.
+            img = np.asarray(rot(tw), self.dtype)
+            rows, cols, vals = [], [], []
+            for a in range(0, hc, 256):  # row blocks: the difference never holds the whole raster twice
+                blk = np.asarray(img[a : a + 256], np.float64)
+                d = np.diff(blk, axis=1, prepend=0.0, append=0.0)
+                r, c = np.nonzero(d)
+                rows.append(r + a)
+                cols.append(c)
+                vals.append(d[r, c])
+            del img
+        o = _Outline(np.concatenate(rows).astype(np.int64) + int(oy), np.concatenate(cols).astype(np.int64) + int(ox),
+                     np.concatenate(vals))
+        self._outlines[k] = o
+        self.nnz_max = max(self.nnz_max, o.nnz)
+        return o
+
+    def drop_outlines(self, keep: set[int]) -> None:
+        """Forget the outlines of twists not in ``keep`` (memory: a run keeps its band's)."""
+        for k in list(self._outlines):
+            if k not in keep:
+                del self._outlines[k]
+
+    # -- energies
+    def _row(self, o: _Outline, y: int, xs: np.ndarray) -> np.ndarray:
+        """Correlation (unscaled, float64) at twist outline ``o``, row y, the consecutive
+        columns ``xs``: for each step of the outline, ``len(xs)`` consecutive prefix sums of
+        one pattern row (a contiguous read); steps whose columns lie all beyond the
+        pattern's right end read the row total, all before its left end nothing."""
+        n = len(xs)
+        if n == 0:
+            return np.zeros(0)
+        x0 = int(xs[0])
+        r = o.rows + y
+        r = np.where((r >= 0) & (r < self.hp), r, self.hp)
+        lo = o.cols + x0
+        hi = lo + (n - 1)
+        wp = self.wp
+        flat = self.P.reshape(-1)
+        inside = (lo >= 0) & (hi <= wp)
+        out = np.zeros(n)
+        base = r * (wp + 1)
+        if inside.any():
+            win = np.lib.stride_tricks.sliding_window_view(flat, n)
+            out -= o.vals[inside] @ win[(base + lo)[inside]]
+        right = ~inside & (lo >= wp)
+        if right.any():
+            out -= float(o.vals[right] @ flat[base[right] + wp])
+        mixed = ~inside & ~right & (hi > 0)
+        if mixed.any():
+            c = np.clip(lo[mixed][:, None] + np.arange(n)[None, :], 0, wp)
+            out -= o.vals[mixed] @ flat[base[mixed][:, None] + c]
+        return out
+
+    def energies(self, k: int, ys: np.ndarray, xs: np.ndarray) -> np.ndarray:
+        """Energies (J, the scene's dtype) at twist index k and integer poses (ys[i], xs[i]) px."""
+        ys, xs = np.asarray(ys, np.int64).ravel(), np.asarray(xs, np.int64).ravel()
+        cache = self._cache.setdefault(k, {})
+        out = np.empty(len(ys), self.dtype)
+        missing: dict[int, list[int]] = {}
+        for i, (y, x) in enumerate(zip(ys.tolist(), xs.tolist(), strict=True)):
+            v = cache.get((y, x))
+            if v is None:
+                missing.setdefault(y, []).append(i)
+            else:
+                out[i] = v
+        if missing:
+            t0 = time.perf_counter()
+            o = self.outline(k)
+            for y, idx in missing.items():
+                want = xs[idx]
+                lo, hi = int(want.min()), int(want.max())
+                row = np.arange(lo, hi + 1)
+                todo = row[np.array([(y, int(x)) not in cache for x in row])]
+                # _row reads consecutive columns: one call per run of columns not computed yet
+                cuts = np.flatnonzero(np.diff(todo) != 1) + 1
+                for part in np.split(todo, cuts):
+                    if len(part) == 0:
+                        continue
+                    e = np.multiply(self._row(o, y, part), self.scale).astype(self.dtype)
+                    self.poses += len(part)
+                    for x, v in zip(part.tolist(), e.tolist(), strict=True):
+                        cache[(y, x)] = v
+                out[idx] = [cache[(y, int(x))] for x in want]
+            self.seconds += time.perf_counter() - t0
+        return out
+
+    def box(self, twist_idx, center_px: tuple[int, int], half_px: int):
+        """The landscape at the consecutive axis twists ``twist_idx`` (a periodic axis may
+        run past its end: wrapped) and the translations within ``half_px`` of
+        ``center_px``: the grid :func:`~simulator.landscape.build_landscape` gives, the
+        energies computed here."""
+        from simulator.landscape._landscape import Landscape
+
+        t0 = time.perf_counter()
+        twist_idx = [int(j) for j in twist_idx]
+        n = self.axis.count
+        twists = self.axis.values_at(np.asarray([j % n for j in twist_idx]))
+        b = _box(self.scene, twists, center_px, half_px)
+        g = b["grid"]
+        _, ny, nx = g.shape
+        yy, xx = np.meshgrid(np.arange(ny) + g.y_first_px, np.arange(nx) + g.x_first_px, indexing="ij")
+        energy = np.empty(g.shape, self.dtype)
+        poses0, s0 = self.poses, self.seconds
+        for i, j in enumerate(twist_idx):
+            energy[i] = self.energies(j % n, yy, xx).reshape(ny, nx)
+        return Landscape(
+            energy=energy,
+            grid=replace(g, rg_px=self.scene.chip_rg_px),
+            delta_gamma=self.scene.delta_gamma_N_m,
+            energy_scale_J=energy_scale_J(self.scene),
+            meniscus_height_um=self.scene.meniscus_height_um,
+            stats={
+                "rotations": 0,
+                "mirrored_twists": 0,
+                "copied_twists": 0,
+                "seconds": time.perf_counter() - t0,
+                "bytes": energy.nbytes,
+                "backend": "path",
+                "poses_computed": self.poses - poses0,
+                "compute_s": self.seconds - s0,
+            },
+        )
+
+    def nominal_boxes(self) -> list:
+        """The nominal box of :func:`~simulator.landscape.global_minimum` (+-16 px, the
+        twist steps around 0), pose by pose: landscapes of consecutive twists, for its
+        ``evaluated``."""
+        from simulator.landscape._landscape import NOMINAL_BALL_PX, NOMINAL_PX_PER_STEP
+        from simulator.landscape._posegrid import consecutive_runs
+
+        ax = self.axis
+        n = ax.count
+        k0 = int(np.argmin(np.abs(ax.values())))
+        band = NOMINAL_BALL_PX // NOMINAL_PX_PER_STEP
+        near = range(k0 - band, k0 + band + 1) if n > 1 else [0]
+        idx = {j % n for j in near} if ax.periodic else {j for j in near if 0 <= j < n}
+        return [self.box(run, (0, 0), NOMINAL_BALL_PX) for run in consecutive_runs(idx)]
