@@ -108,9 +108,9 @@ def _twist_run(scene: Scene, twists) -> tuple[TwistAxis, int, int, tuple[bool, b
     return evenly_spaced_axis(tw, axis), 0, len(tw), _twist_cut(axis.values(), axis.periodic, tw)
 
 
-def _box(scene: Scene, twists, center_px: tuple[int, int] = (0, 0), half_px: int | None = None) -> dict:
-    """Twists and translation box of a build, and its landscape bytes: sizes only, no rotation."""
-    axis, t_first, n_twists, t_cut = _twist_run(scene, twists)
+def _scene_extent(scene: Scene) -> dict:
+    """What every box of a scene shares (one pass over the pattern and the chip): the
+    pattern's crop and origin, the reach of pattern and chip, the meniscus margin, the window."""
     pat = scene.pattern.data
     r0, r1, c0, c1 = nonzero_box(pat > 0)
     h, w = pat.shape
@@ -120,8 +120,17 @@ def _box(scene: Scene, twists, center_px: tuple[int, int] = (0, 0), half_px: int
     chip_rx, chip_ry = _chip_reach_px(scene.chip, scene.effects.twist)
     # A finite meniscus widens the liquid footprint: poses that far beyond contact still feel it.
     margin = scene.meniscus_margin_px
-    chip_rx, chip_ry = chip_rx + margin, chip_ry + margin
     limit = None if scene.window_um is None else math.ceil(scene.window_um / scene.um_per_px - 1e-9)
+    return {"crop": (r0, r1, c0, c1), "origin": origin, "reach": reach, "chip_reach": (chip_rx + margin, chip_ry + margin),
+            "margin": margin, "limit": limit}
+
+
+def _box(scene: Scene, twists, center_px: tuple[int, int] = (0, 0), half_px: int | None = None, extent: dict | None = None) -> dict:
+    """Twists and translation box of a build, and its landscape bytes: sizes only, no rotation
+    (``extent``: the scene's :func:`_scene_extent`, when a caller keeps it)."""
+    axis, t_first, n_twists, t_cut = _twist_run(scene, twists)
+    ext = _scene_extent(scene) if extent is None else extent
+    origin, reach, (chip_rx, chip_ry), margin, limit = ext["origin"], ext["reach"], ext["chip_reach"], ext["margin"], ext["limit"]
     cx, rx, x_lo, x_hi = _axis_box(math.ceil(reach[0] + chip_rx - 1e-9), limit, int(center_px[0]), half_px)
     cy, ry, y_lo, y_hi = _axis_box(math.ceil(reach[1] + chip_ry - 1e-9), limit, int(center_px[1]), half_px)
     nbytes = n_twists * (2 * ry + 1) * (2 * rx + 1) * np.dtype(scene.dtype).itemsize
@@ -136,7 +145,7 @@ def _box(scene: Scene, twists, center_px: tuple[int, int] = (0, 0), half_px: int
         y_first_px=cy - ry,
         t_first=t_first,
     )
-    return {"grid": grid, "origin": origin, "crop": (r0, r1, c0, c1), "landscape_bytes": int(nbytes), "margin": margin}
+    return {"grid": grid, "origin": origin, "crop": ext["crop"], "landscape_bytes": int(nbytes), "margin": margin}
 
 
 def require_landscape_fits(scene: Scene, twists: np.ndarray | None = None) -> None:

@@ -37,7 +37,7 @@ from shapely import affinity
 
 from patterns.raster import coverage_steps
 from simulator.core import UM2
-from simulator.landscape._build import _box, _check_energy_range, energy_scale_J
+from simulator.landscape._build import _box, _check_energy_range, _scene_extent, energy_scale_J
 from simulator.landscape._posegrid import PoseGrid
 from simulator.landscape._rotation import ChipRotator
 from simulator.physics import CHIP_BLUR_MIN_PX
@@ -86,7 +86,8 @@ class PathEnergy:
         _check_energy_range(scene)
         self.scene = scene
         self.axis = scene.twist_axis
-        b = _box(scene, None)
+        self._extent = _scene_extent(scene)  # one pass over pattern and chip, shared by every box
+        b = _box(scene, None, extent=self._extent)
         self.grid: PoseGrid = b["grid"]
         self.origin = b["origin"]
         r0, r1, c0, c1 = b["crop"]
@@ -103,7 +104,9 @@ class PathEnergy:
         h_px = scene.meniscus_height_px
         self.chip_blur = h_px if h_px >= CHIP_BLUR_MIN_PX else 0.0
         self._outlines: dict[int, _Outline] = {}
-        self._cache: dict[int, dict[tuple[int, int], float]] = {}
+        self._cache: dict[int, dict[int, list]] = {}  # twist index -> row y -> [first column, energies]
+        self.energy_scale = energy_scale_J(scene)
+        self.rg_px = scene.chip_rg_px
         self.poses = 0  # poses computed
         self.rotations = 0
         self.seconds = 0.0
@@ -153,68 +156,91 @@ class PathEnergy:
                 del self._outlines[k]
 
     # -- energies
-    def _row(self, o: _Outline, y: int, xs: np.ndarray) -> np.ndarray:
-        """Correlation (unscaled, float64) at twist outline ``o``, row y, the consecutive
-        columns ``xs``: for each step of the outline, ``len(xs)`` consecutive prefix sums of
-        one pattern row (a contiguous read); steps whose columns lie all beyond the
-        pattern's right end read the row total, all before its left end nothing."""
-        n = len(xs)
-        if n == 0:
-            return np.zeros(0)
-        x0 = int(xs[0])
-        r = o.rows + y
-        r = np.where((r >= 0) & (r < self.hp), r, self.hp)
+    def _rows(self, o: _Outline, ys: np.ndarray, x0: int, n: int) -> np.ndarray:
+        """Correlation (unscaled, float64), shape (len(ys), n), at twist outline ``o``, the
+        rows ``ys`` and the consecutive columns ``x0 .. x0 + n - 1``: for each step of the
+        outline and each row, ``n`` consecutive prefix sums of one pattern row (a contiguous
+        read; the cost is one memory access per step and row, almost whatever ``n``). Steps
+        whose columns lie all beyond the pattern's right end read the row total, all before
+        its left end nothing. No BLAS (a threaded BLAS call on a busy machine costs
+        milliseconds for a few thousand products): einsum sums in float64."""
+        out = np.zeros((len(ys), n))
+        if len(ys) == 0 or n == 0:
+            return out
+        wp, hp = self.wp, self.hp
+        flat = self.P.reshape(-1)
         lo = o.cols + x0
         hi = lo + (n - 1)
-        wp = self.wp
-        flat = self.P.reshape(-1)
         inside = (lo >= 0) & (hi <= wp)
-        out = np.zeros(n)
-        base = r * (wp + 1)
-        if inside.any():
-            win = np.lib.stride_tricks.sliding_window_view(flat, n)
-            out -= o.vals[inside] @ win[(base + lo)[inside]]
         right = ~inside & (lo >= wp)
-        if right.any():
-            out -= float(o.vals[right] @ flat[base[right] + wp])
         mixed = ~inside & ~right & (hi > 0)
-        if mixed.any():
-            c = np.clip(lo[mixed][:, None] + np.arange(n)[None, :], 0, wp)
-            out -= o.vals[mixed] @ flat[base[mixed][:, None] + c]
+        # rows per chunk: the gathered block (rows x steps x n) stays near 4 M values
+        per = max(1, int(4_000_000 // max(1, o.nnz * n)))
+        for i in range(0, len(ys), per):
+            yc = ys[i : i + per]
+            r = o.rows[None, :] + yc[:, None]
+            r = np.where((r >= 0) & (r < hp), r, hp)  # rows off the pattern: the zero row
+            base = r * (wp + 1)
+            blk = out[i : i + per]
+            if inside.any():
+                win = np.lib.stride_tricks.sliding_window_view(flat, n)
+                blk -= np.einsum("ysn,s->yn", win[base[:, inside] + lo[inside]], o.vals[inside])
+            if right.any():
+                blk -= np.einsum("ys,s->y", flat[base[:, right] + wp], o.vals[right])[:, None]
+            if mixed.any():
+                c = np.clip(lo[mixed][:, None] + np.arange(n)[None, :], 0, wp)
+                blk -= np.einsum("ysn,s->yn", flat[base[:, mixed][:, :, None] + c[None]], o.vals[mixed])
+        return out
+
+    def plane(self, k: int, y0: int, ny: int, x0: int, nx: int) -> np.ndarray:
+        """Energies (J, the scene's dtype), shape (ny, nx), at twist index k, rows
+        ``y0 .. y0 + ny - 1`` and columns ``x0 .. x0 + nx - 1`` px. Each row keeps one run of
+        columns computed (extended at its ends as boxes move: a pose is computed once);
+        rows that need the same columns are computed together."""
+        rows = self._cache.setdefault(k, {})
+        x1 = x0 + nx - 1
+        todo: dict[tuple[int, int], list[int]] = {}  # (first column, count) -> rows
+        for y in range(y0, y0 + ny):
+            have = rows.get(y)
+            if have is None:
+                todo.setdefault((x0, nx), []).append(y)
+                continue
+            a, e = have
+            b = a + len(e) - 1
+            if x0 < a:
+                todo.setdefault((x0, a - x0), []).append(y)
+            if x1 > b:
+                todo.setdefault((b + 1, x1 - b), []).append(y)
+        if todo:
+            t0 = time.perf_counter()
+            o = self.outline(k)
+            for (xa, n), ys in todo.items():
+                e = np.multiply(self._rows(o, np.asarray(ys, np.int64), xa, n), self.scale).astype(self.dtype)
+                self.poses += e.size
+                for y, v in zip(ys, e, strict=True):
+                    have = rows.get(y)
+                    if have is None:
+                        rows[y] = [xa, v]
+                    elif xa < have[0]:
+                        rows[y] = [xa, np.concatenate([v, have[1]])]
+                    else:
+                        have[1] = np.concatenate([have[1], v])
+            self.seconds += time.perf_counter() - t0
+        out = np.empty((ny, nx), self.dtype)
+        for i, y in enumerate(range(y0, y0 + ny)):
+            a, e = rows[y]
+            out[i] = e[x0 - a : x0 - a + nx]
         return out
 
     def energies(self, k: int, ys: np.ndarray, xs: np.ndarray) -> np.ndarray:
-        """Energies (J, the scene's dtype) at twist index k and integer poses (ys[i], xs[i]) px."""
+        """Energies (J, the scene's dtype) at twist index k and integer poses (ys[i], xs[i]) px
+        (the rectangle that holds them is computed)."""
         ys, xs = np.asarray(ys, np.int64).ravel(), np.asarray(xs, np.int64).ravel()
-        cache = self._cache.setdefault(k, {})
-        out = np.empty(len(ys), self.dtype)
-        missing: dict[int, list[int]] = {}
-        for i, (y, x) in enumerate(zip(ys.tolist(), xs.tolist(), strict=True)):
-            v = cache.get((y, x))
-            if v is None:
-                missing.setdefault(y, []).append(i)
-            else:
-                out[i] = v
-        if missing:
-            t0 = time.perf_counter()
-            o = self.outline(k)
-            for y, idx in missing.items():
-                want = xs[idx]
-                lo, hi = int(want.min()), int(want.max())
-                row = np.arange(lo, hi + 1)
-                todo = row[np.array([(y, int(x)) not in cache for x in row])]
-                # _row reads consecutive columns: one call per run of columns not computed yet
-                cuts = np.flatnonzero(np.diff(todo) != 1) + 1
-                for part in np.split(todo, cuts):
-                    if len(part) == 0:
-                        continue
-                    e = np.multiply(self._row(o, y, part), self.scale).astype(self.dtype)
-                    self.poses += len(part)
-                    for x, v in zip(part.tolist(), e.tolist(), strict=True):
-                        cache[(y, x)] = v
-                out[idx] = [cache[(y, int(x))] for x in want]
-            self.seconds += time.perf_counter() - t0
-        return out
+        if len(ys) == 0:
+            return np.empty(0, self.dtype)
+        y0, x0 = int(ys.min()), int(xs.min())
+        pl = self.plane(k, y0, int(ys.max()) - y0 + 1, x0, int(xs.max()) - x0 + 1)
+        return pl[ys - y0, xs - x0]
 
     def box(self, twist_idx, center_px: tuple[int, int], half_px: int):
         """The landscape at the consecutive axis twists ``twist_idx`` (a periodic axis may
@@ -227,19 +253,18 @@ class PathEnergy:
         twist_idx = [int(j) for j in twist_idx]
         n = self.axis.count
         twists = self.axis.values_at(np.asarray([j % n for j in twist_idx]))
-        b = _box(self.scene, twists, center_px, half_px)
+        b = _box(self.scene, twists, center_px, half_px, extent=self._extent)
         g = b["grid"]
         _, ny, nx = g.shape
-        yy, xx = np.meshgrid(np.arange(ny) + g.y_first_px, np.arange(nx) + g.x_first_px, indexing="ij")
         energy = np.empty(g.shape, self.dtype)
         poses0, s0 = self.poses, self.seconds
         for i, j in enumerate(twist_idx):
-            energy[i] = self.energies(j % n, yy, xx).reshape(ny, nx)
+            energy[i] = self.plane(j % n, g.y_first_px, ny, g.x_first_px, nx)
         return Landscape(
             energy=energy,
-            grid=replace(g, rg_px=self.scene.chip_rg_px),
+            grid=replace(g, rg_px=self.rg_px),
             delta_gamma=self.scene.delta_gamma_N_m,
-            energy_scale_J=energy_scale_J(self.scene),
+            energy_scale_J=self.energy_scale,
             meniscus_height_um=self.scene.meniscus_height_um,
             stats={
                 "rotations": 0,
