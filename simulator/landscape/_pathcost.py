@@ -61,9 +61,14 @@ def path_engine_supported(scene: Scene) -> tuple[bool, str]:
     return True, ""
 
 
+#: Columns a row computes beyond the box on each side when it starts (twice that when it
+#: is extended), and the gap beyond which a row's computed run is dropped and started anew.
+ROW_AHEAD, ROW_GAP = 8, 64
+
+
 class _Outline:
-    """The non-zeros of one twist's row differences: flat offsets into the padded prefix
-    sums (before the pose's shift), rows and columns (pattern coordinates at pose 0), values."""
+    """The non-zeros of one twist's row differences, sorted by row: rows and columns
+    (pattern coordinates at pose 0) and values."""
 
     __slots__ = ("rows", "cols", "vals", "nnz")
 
@@ -97,6 +102,7 @@ class PathEnergy:
         # Prefix sums along rows, one column more (the row total), one zero row more (rows off the pattern).
         self.P = np.zeros((hp + 1, wp + 1), np.float64)
         np.cumsum(pat, axis=1, out=self.P[:hp, 1:])
+        self.T = self.P[:, wp].copy()  # row totals (what a step beyond the right end reads), contiguous
         self.hp, self.wp = hp, wp
         self.parity = (int((2 * self.origin[1]) % 2), int((2 * self.origin[0]) % 2))
         self.scale = scene.delta_gamma_N_m * scene.um_per_px**2 * UM2
@@ -143,8 +149,9 @@ class PathEnergy:
                 cols.append(c)
                 vals.append(d[r, c])
             del img
-        o = _Outline(np.concatenate(rows).astype(np.int64) + int(oy), np.concatenate(cols).astype(np.int64) + int(ox),
-                     np.concatenate(vals))
+        r, c, v = (np.concatenate(a) for a in (rows, cols, vals))
+        order = np.argsort(r, kind="stable")  # by row (_rows slices the rows on the pattern)
+        o = _Outline(r[order].astype(np.int64) + int(oy), c[order].astype(np.int64) + int(ox), v[order])
         self._outlines[k] = o
         self.nnz_max = max(self.nnz_max, o.nnz)
         return o
@@ -174,43 +181,62 @@ class PathEnergy:
         inside = (lo >= 0) & (hi <= wp)
         right = ~inside & (lo >= wp)
         mixed = ~inside & ~right & (hi > 0)
-        # rows per chunk: the gathered block (rows x steps x n) stays near 4 M values
-        per = max(1, int(4_000_000 // max(1, o.nnz * n)))
-        for i in range(0, len(ys), per):
-            yc = ys[i : i + per]
-            r = o.rows[None, :] + yc[:, None]
-            r = np.where((r >= 0) & (r < hp), r, hp)  # rows off the pattern: the zero row
-            base = r * (wp + 1)
-            blk = out[i : i + per]
-            if inside.any():
-                win = np.lib.stride_tricks.sliding_window_view(flat, n)
-                blk -= np.einsum("ysn,s->yn", win[base[:, inside] + lo[inside]], o.vals[inside])
-            if right.any():
-                blk -= np.einsum("ys,s->y", flat[base[:, right] + wp], o.vals[right])[:, None]
-            if mixed.any():
-                c = np.clip(lo[mixed][:, None] + np.arange(n)[None, :], 0, wp)
-                blk -= np.einsum("ysn,s->yn", flat[base[:, mixed][:, :, None] + c[None]], o.vals[mixed])
+        # Steps are sorted by row: the steps on the pattern's rows at row shift y are one slice.
+        parts = []
+        for m in (inside, right, mixed):
+            i = np.flatnonzero(m)
+            parts.append((o.rows[i], o.cols[i] + x0, o.vals[i]) if len(i) else None)
+        win = np.lib.stride_tricks.sliding_window_view(flat, n)
+        cn = np.arange(n)
+        for j, y in enumerate(ys.tolist()):
+            acc = 0.0
+            for kind, part in enumerate(parts):
+                if part is None:
+                    continue
+                r, c, v = part
+                a, b = np.searchsorted(r, (-y, hp - y))
+                if a == b:
+                    continue
+                rr = (r[a:b] + y) * (wp + 1)
+                if kind == 0:
+                    acc = acc + np.einsum("sn,s->n", win[rr + c[a:b]], v[a:b])
+                elif kind == 1:  # beyond the right end: the row total
+                    acc = acc + np.einsum("s,s->", self.T[r[a:b] + y], v[a:b])
+                else:
+                    cc = np.clip(c[a:b, None] + cn, 0, wp)
+                    acc = acc + np.einsum("sn,s->n", flat[rr[:, None] + cc], v[a:b])
+            out[j] -= acc
         return out
 
     def plane(self, k: int, y0: int, ny: int, x0: int, nx: int) -> np.ndarray:
         """Energies (J, the scene's dtype), shape (ny, nx), at twist index k, rows
         ``y0 .. y0 + ny - 1`` and columns ``x0 .. x0 + nx - 1`` px. Each row keeps one run of
-        columns computed (extended at its ends as boxes move: a pose is computed once);
+        columns computed (extended at its ends as boxes move: a pose is computed once), and
+        computes :data:`ROW_AHEAD` columns more on each side of a new row and twice that
+        beyond an end it extends (a row's cost is one memory access per outline step,
+        almost whatever its length, so a few columns more cost less than one more call);
         rows that need the same columns are computed together."""
         rows = self._cache.setdefault(k, {})
         x1 = x0 + nx - 1
+        ahead = ROW_AHEAD
         todo: dict[tuple[int, int], list[int]] = {}  # (first column, count) -> rows
         for y in range(y0, y0 + ny):
             have = rows.get(y)
+            if have is not None:
+                a, e = have
+                b = a + len(e) - 1
+                if x0 > b + ROW_GAP or x1 < a - ROW_GAP:  # far from the run kept: start the row afresh
+                    del rows[y]
+                    have = None
             if have is None:
-                todo.setdefault((x0, nx), []).append(y)
+                todo.setdefault((x0 - ahead, nx + 2 * ahead), []).append(y)
                 continue
-            a, e = have
-            b = a + len(e) - 1
             if x0 < a:
-                todo.setdefault((x0, a - x0), []).append(y)
+                lo = min(x0, a - 2 * ahead)
+                todo.setdefault((lo, a - lo), []).append(y)
             if x1 > b:
-                todo.setdefault((b + 1, x1 - b), []).append(y)
+                hi = max(x1, b + 2 * ahead)
+                todo.setdefault((b + 1, hi - b), []).append(y)
         if todo:
             t0 = time.perf_counter()
             o = self.outline(k)
