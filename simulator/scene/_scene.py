@@ -216,9 +216,12 @@ class Scene(SceneBuilders):
         footprint about its centre, the length one radian of twist moves its edge."""
         d = self.chip.data
         h, w = d.shape
-        y, x = np.mgrid[0:h, 0:w]
-        r2 = (x + 0.5 - w / 2) ** 2 + (y + 0.5 - h / 2) ** 2
-        return float(math.sqrt((d * r2).sum() / d.sum()))
+        # r^2 = x^2 + y^2 separates: the column and row sums of the footprint carry the
+        # moment (no full-size coordinate arrays: a 4000 px chip's took a second and 0.5 GB).
+        cols, rows = d.sum(axis=0, dtype=np.float64), d.sum(axis=1, dtype=np.float64)
+        x2 = (np.arange(w) + 0.5 - w / 2) ** 2
+        y2 = (np.arange(h) + 0.5 - h / 2) ** 2
+        return float(math.sqrt((cols @ x2 + rows @ y2) / rows.sum()))
 
     def replace(self, **changes: Any) -> Scene:
         """A copy with some fields changed (validated again)."""
