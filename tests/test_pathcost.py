@@ -13,7 +13,7 @@ from patterns.geometry import four_pad, square
 from patterns.mask import Mask
 from patterns.raster import coverage_steps, mask_from_geometry, rasterize
 from simulator.landscape import PathEnergy, build_landscape, path_engine_supported
-from simulator.motion import simulate
+from simulator.motion import choose_engine, simulate
 from simulator.physics import Liquid
 from simulator.scene import Effects, Scene, TwistGrid
 
@@ -115,6 +115,15 @@ def test_the_pinned_meniscus_stays_with_the_fft_engine():
     assert not ok and "K_h" in why
     t = simulate(s, (20, 0, 0))
     assert t.cost["engine"] == "fft"
+
+
+@pytest.mark.parametrize("L, method, want", [(730, "greedy", "fft"), (999, "greedy", "fft"), (1000, "greedy", "path"),
+                                             (1000, "gradient", "fft"), (1999, "gradient", "fft"), (2000, "gradient", "path")])
+def test_auto_keeps_small_chips_on_the_fft_engine(L, method, want):
+    s = Scene(pattern=mask_from_geometry(square(L), 1.0), chip=mask_from_geometry(square(L), 1.0))
+    assert choose_engine(s, (30, -20, 1), method, "auto", 3, 48) == want
+    assert choose_engine(s, (30, -20, 1), method, "fft", 3, 48) == "fft"
+    assert choose_engine(s, (30, -20, 1), method, "path", 3, 48) == "path"
 
 
 def test_auto_takes_the_path_engine_for_a_large_chip_and_a_short_path():

@@ -10,8 +10,6 @@ path on the whole landscape). Poses that boxes share are computed once.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from simulator.landscape import (
@@ -28,42 +26,28 @@ ENGINES = ("auto", "fft", "path")
 #: stops at a box's side, gradient 2 grid steps before it (its differences and interpolation
 #: reach that far), so gradient needs wider boxes to move at all.
 FOLLOW_BOX = {"greedy": (4, 1), "gradient": (6, 3)}
-#: Measured costs per unit (2-core CPU): one FFT-correlated pose of a canvas, and one
-#: gathered outline step of the path engine. "auto" takes the path engine when it is
-#: cheaper by this factor.
-FFT_UNIT, PATH_UNIT, AUTO_MARGIN = 25.0, 3.0, 4.0
+#: "auto" takes the path engine for chips of at least this many pixels (wettable bounding
+#: box, width x height), per method. Measured on a 2-core CPU, four-pad under its own
+#: square chip at 1 um/px from (0.3 L, -0.2 L, 10 deg), best of two, both engines warm:
+#: greedy 400 px 1.0 s (path) vs 1.2 s (FFT), 730 px 1.5 vs 6.7 s, 1000 px 2.0 vs 16.6 s;
+#: gradient 400 px 2.2 vs 1.0 s, 730 px 1.9 vs 1.5 s, 1000 px 3.4 vs 3.2 s, 2000 px 11.3 vs
+#: 17.0 s. The thresholds sit above those crossovers with a margin (the engines' costs
+#: also depend on the path and the pattern), so smaller chips keep the FFT engine.
+AUTO_MIN_CHIP_PX = {"greedy": 1000 * 1000, "gradient": 2000 * 2000}
 
 
-def _chip_reach_px(scene: Scene) -> float:
-    h, w = scene.chip.shape
-    return 0.5 * math.hypot(h, w) + scene.meniscus_margin_px
+def _chip_px(scene: Scene) -> int:
+    """Pixels of the chip's wettable bounding box (width x height)."""
+    from patterns.mask import footprint_um
 
-
-def estimate(scene: Scene, start, method: str, band_steps: int, band_px: int) -> dict:
-    """Rough work (arbitrary units) of one run with each engine, before anything is built:
-    the FFT boxes (planes x canvas) and the path engine (poses along the path x outline steps)."""
-    s = scene.um_per_px
-    sx, sy = abs(start[0]) / s, abs(start[1]) / s
-    ta = scene.twist_axis
-    k_travel = 0.0
-    if ta.count > 1:
-        k_travel = abs(start[2]) / ta.step_deg
-        if ta.periodic:
-            k_travel = min(k_travel, ta.count / 2)
-    rc = _chip_reach_px(scene)
-    half = math.ceil((max(sx, sy) + 2 * band_px) / 2)
-    planes = min(2 * band_steps + 1 + k_travel, ta.count)
-    fft = planes * (2 * half + 2 * rc) ** 2 * FFT_UNIT
-    h, t = FOLLOW_BOX.get(method, FOLLOW_BOX["gradient"])
-    steps = max(sx, sy) + k_travel + 2 * h
-    nnz = 14.0 * rc
-    path = steps * 2 * (2 * h + 1) * min(2 * t + 1, ta.count) * nnz * PATH_UNIT
-    return {"fft": fft, "path": path}
+    w, h = footprint_um(scene.chip)
+    return int(round(w / scene.um_per_px) * round(h / scene.um_per_px))
 
 
 def choose_engine(scene: Scene, start, method: str, engine: str, band_steps: int, band_px: int) -> str:
-    """"fft" or "path" for a greedy or gradient run without a landscape (``engine``: as asked,
-    "auto": the path engine where it covers the scene and is cheaper by :data:`AUTO_MARGIN`)."""
+    """"fft" or "path" for a greedy or gradient run without a landscape (``engine``: as asked;
+    "auto": the path engine where it covers the scene, the run's outcome is classified the
+    same, and the chip is large enough for it to be the faster, :data:`AUTO_MIN_CHIP_PX`)."""
     if engine not in ENGINES:
         raise ValueError(f"engine must be one of {', '.join(ENGINES)}, got {engine!r}")
     ok, why = path_engine_supported(scene)
@@ -77,10 +61,9 @@ def choose_engine(scene: Scene, start, method: str, engine: str, band_steps: int
         raise InputError(f"the path-cost engine does not cover this scene: {why}")
     if engine != "auto":
         return engine
-    if not ok:
+    if not ok or method not in AUTO_MIN_CHIP_PX:
         return "fft"
-    e = estimate(scene, start, method, band_steps, band_px)
-    return "path" if e["fft"] > AUTO_MARGIN * e["path"] else "fft"
+    return "path" if _chip_px(scene) >= AUTO_MIN_CHIP_PX[method] else "fft"
 
 
 def path_boxes(scene: Scene, method: str, cost):

@@ -162,7 +162,8 @@ def simulate(
         engine: how greedy and gradient compute the boxes they need without ``landscape``:
             "fft" (boxes holding the start and the centre, by FFT correlation), "path"
             (small boxes that follow the chip, pose by pose at the cost of the chip's
-            outline, :class:`simulator.landscape.PathEnergy`) or "auto" (the cheaper,
+            outline, :class:`simulator.landscape.PathEnergy`) or "auto" (the path engine for
+            chips large enough for it to be the faster, else the FFT engine,
             :func:`simulator.motion.choose_engine`). ``cost["engine"]`` says which ran.
     """
     if method not in METHODS:
