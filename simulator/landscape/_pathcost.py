@@ -170,7 +170,11 @@ class PathEnergy:
         read; the cost is one memory access per step and row, almost whatever ``n``). Steps
         whose columns lie all beyond the pattern's right end read the row total, all before
         its left end nothing. No BLAS (a threaded BLAS call on a busy machine costs
-        milliseconds for a few thousand products): einsum sums in float64."""
+        milliseconds for a few thousand products): einsum sums in float64. Long runs of
+        columns are cut so that one gather (steps x columns) stays near 2 M values."""
+        cols = max(16, 2_000_000 // max(o.nnz, 1))
+        if n > cols:
+            return np.concatenate([self._rows(o, ys, x0 + i, min(cols, n - i)) for i in range(0, n, cols)], axis=1)
         out = np.zeros((len(ys), n))
         if len(ys) == 0 or n == 0:
             return out
