@@ -18,8 +18,9 @@ non-zero over the band only. The K_h-blurred chip (pinned lines) is smooth every
 and a meniscus below one pixel blurs the pattern: those stay with the FFT engine
 (:func:`path_engine_supported`).
 
-:class:`PathEnergy` computes poses on demand and keeps every pose it computed, so a run
-that comes back to a pose (boxes that overlap) pays for it once; :meth:`PathEnergy.box`
+:class:`PathEnergy` computes poses on demand, row by row (one read per outline step and
+row, whatever the row's length), and keeps one run of computed columns per row and twist,
+so boxes that overlap pay for their shared poses once; :meth:`PathEnergy.box`
 returns a :class:`~simulator.landscape.Landscape` on the same grid as
 :func:`~simulator.landscape.build_landscape` gives for the same twists, centre and
 half-width, so the steppers run on it unchanged. The energies equal the FFT engine's to
