@@ -5,13 +5,22 @@
 2. The cost of one greedy run that builds only what it needs, against the full
    landscape (GitHub issue 4 item 6): 730 um four-pad, 1 um/px, start (300, 200, 10 deg).
 
-Usage: ``python benchmarks/trajectories.py [--out docs]``
+3. A single run on a large image, both engines (GitHub issue 28): the 4000 um four-pad
+   (gap 200 um) at 1 um/px under a 4000 um chip from (1200, -800, 10 deg), greedy and
+   gradient, each in a fresh process (its own peak RSS): the FFT boxes against the
+   path-cost engine (small boxes that follow the chip, pose by pose).
+
+Usage: ``python benchmarks/trajectories.py [--out docs] [--only-4k] [--engines fft,path]``
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+import os
+import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -85,15 +94,65 @@ def cost_table() -> list[str]:
     ]
 
 
+LARGE_RUN = r"""
+import json, sys, time
+from patterns.geometry import four_pad, square
+from patterns.raster import mask_from_geometry
+from simulator.motion import simulate
+from simulator.scene import Scene
+method, engine = sys.argv[1], sys.argv[2]
+scene = Scene(pattern=mask_from_geometry(four_pad(4000, 200), 1.0), chip=mask_from_geometry(square(4000), 1.0))
+t0 = time.perf_counter()
+t = simulate(scene, (1200.0, -800.0, 10.0), method=method, engine=engine)
+wall = time.perf_counter() - t0
+peak = [int(line.split()[1]) for line in open("/proc/self/status") if line.startswith("VmHWM:")][0] / 1024
+print(json.dumps({"wall_s": wall, "peak_mb": peak, "outcome": t.outcome, "steps": t.steps, "final": t.final,
+                  "poses": t.cost["poses_computed"], "engine": t.cost["engine"], "path": t.path.tolist()}))
+"""
+
+
+def large_run(engines=("fft", "path"), methods=("greedy", "gradient")) -> list[str]:
+    lines = ["| method | engine | outcome | steps | final (um, um, deg) | poses computed | wall (s) | peak RSS (MB) |",
+             "|---|---|---|---:|---|---:|---:|---:|"]
+    runs = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        script = Path(tmp) / "run.py"
+        script.write_text(LARGE_RUN)
+        for method in methods:
+            for engine in engines:
+                out = subprocess.run([sys.executable, str(script), method, engine], capture_output=True, text=True,
+                                     env=os.environ | {"PYTHONPATH": str(ROOT)})
+                if out.returncode:
+                    lines.append(f"| {method} | {engine} | failed: {out.stderr.strip().splitlines()[-1]} |")
+                    continue
+                r = json.loads(out.stdout.strip().splitlines()[-1])
+                runs[method, engine] = r
+                f = ", ".join(f"{v:.3g}" for v in r["final"])
+                lines.append(f"| {method} | {engine} | {r['outcome']} | {r['steps']} | ({f}) | {r['poses']:,} | {r['wall_s']:.1f} | {r['peak_mb']:,.0f} |")
+            if (method, "fft") in runs and (method, "path") in runs:
+                a, b = np.asarray(runs[method, "fft"]["path"]), np.asarray(runs[method, "path"]["path"])
+                same = a.shape == b.shape and np.array_equal(a, b)
+                gap = np.abs(a[-1] - b[-1]).max()
+                lines.append(f"| {method} | | same path: {same}; final poses {gap:.2g} apart | | | | | |")
+    return lines
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, default=ROOT / "docs")
+    ap.add_argument("--only-4k", action="store_true", help="only the large single runs (item 3)")
+    ap.add_argument("--engines", default="fft,path", help="engines of item 3, comma-separated")
     args = ap.parse_args(argv)
+    if args.only_4k:
+        print("\n".join(large_run(tuple(args.engines.split(",")))))
+        return 0
     args.out.mkdir(parents=True, exist_ok=True)
     print("| method | outcome | final (um, um, deg) | steps | wall s |\n|---|---|---|---|---:|")
     print("\n".join(methods_figure(args.out)))
     print()
     print("\n".join(cost_table()))
+    print()
+    print("\n".join(large_run(tuple(args.engines.split(",")))))
     return 0
 
 

@@ -84,6 +84,19 @@ def _coverage(geom_px: BaseGeometry, shape: tuple[int, int]) -> np.ndarray:
     row turns these increments into coverage. Exact for any polygon with holes.
     """
     h, w = shape
+    r, c, here, dy = _pieces(geom_px, shape)
+    acc = np.zeros((h, w + 1))
+    np.add.at(acc, (r, c), here)
+    np.add.at(acc, (r, c + 1), dy - here)
+    cov = np.cumsum(acc[:, :w], axis=1)
+    # Orientation in the y-down pixel frame decides the overall sign.
+    return np.clip(np.abs(cov) if cov.sum() < 0 else cov, 0.0, 1.0)
+
+
+def _pieces(geom_px: BaseGeometry, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The pieces of :func:`_coverage`: row, column, what the piece adds to its pixel, and
+    its vertical extent (what it adds to every pixel further right)."""
+    h, w = shape
     e = _directed_edges(geom_px)
     e = e[e[:, 1] != e[:, 3]]  # horizontal edges enclose no area in a row
     x0, y0, x1, y1 = e.T
@@ -109,12 +122,50 @@ def _coverage(geom_px: BaseGeometry, shape: tuple[int, int]) -> np.ndarray:
     left = c < 0  # pieces left of the canvas cover their whole row
     here = np.where(left, dy, dy * (c + 1 - xm))
     c = np.maximum(c, 0)
-    acc = np.zeros((h, w + 1))
-    np.add.at(acc, (r, c), here)
-    np.add.at(acc, (r, c + 1), dy - here)
-    cov = np.cumsum(acc[:, :w], axis=1)
-    # Orientation in the y-down pixel frame decides the overall sign.
-    return np.clip(np.abs(cov) if cov.sum() < 0 else cov, 0.0, 1.0)
+    return r, c, here, dy
+
+
+def coverage_steps(geometry: BaseGeometry, um_per_px: float, shape: tuple[int, int], dtype=np.float64) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The row differences of :func:`rasterize`'s raster (cast to ``dtype``), sparse, at the
+    cost of the outline: ``(rows, cols, steps)`` with ``raster[r, c] - raster[r, c - 1]``
+    (0 before column 0 and after the last, column ``W``), rows y-down. The raster's values
+    between the steps are the running sums of the same pieces (equal to :func:`rasterize`'s
+    to round-off); the whole canvas is never allocated."""
+    h, w = int(shape[0]), int(shape[1])
+    if geometry.is_empty:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0)
+    r, c, here, dy = _pieces(to_pixel_frame(geometry, positive("um_per_px", um_per_px, "um per px"), (h, w)), (h, w))
+    rows = np.concatenate([r, r])
+    cols = np.concatenate([c, c + 1])
+    inc = np.concatenate([here, dy - here])
+    keep = cols < w
+    rows, cols, inc = rows[keep], cols[keep], inc[keep]
+    key = rows * (w + 1) + cols
+    order = np.argsort(key, kind="stable")
+    key, inc = key[order], inc[order]
+    first = np.r_[True, key[1:] != key[:-1]]
+    inc = np.add.reduceat(inc, np.flatnonzero(first)) if len(inc) else inc
+    key = key[first]
+    rows, cols = key // (w + 1), key % (w + 1)
+    # Running sums within each row: the raster's value from each step to the next.
+    start = np.r_[True, rows[1:] != rows[:-1]]
+    total = np.cumsum(inc)
+    seg = np.flatnonzero(start)
+    first_of = np.repeat(seg, np.diff(np.r_[seg, len(inc)]))
+    val = total - total[first_of] + inc[first_of]
+    # Orientation: the sign of the raster's sum (each value holds up to the next step).
+    nxt = np.r_[cols[1:], w]
+    nxt = np.where(np.r_[~start[1:], False], nxt, w)
+    if float(np.sum(val * (nxt - cols))) < 0:
+        val = np.abs(val)
+    val = np.clip(val, 0.0, 1.0).astype(dtype).astype(np.float64)
+    prev = np.where(start, 0.0, np.r_[0.0, val[:-1]])
+    last = np.r_[start[1:], True]
+    rows = np.concatenate([rows, rows[last]])
+    cols = np.concatenate([cols, np.full(int(last.sum()), w)])
+    steps = np.concatenate([val - prev, -val[last]])
+    nz = steps != 0
+    return rows[nz], cols[nz], steps[nz]
 
 
 def rasterize(

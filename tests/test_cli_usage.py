@@ -365,6 +365,23 @@ def test_simulate_csv_is_the_path_with_units(tmp_path, run_cli):
         assert float(r["energy_J"]) == pytest.approx(p["energy_J"], rel=1e-9)
 
 
+def test_simulate_engine_flag_picks_the_engine_and_keeps_the_path(tmp_path, run_cli):
+    paths = {}
+    for engine in ("fft", "path", "auto"):
+        j = tmp_path / f"{engine}.json"
+        rc, out, err = run_cli(["simulate", "--pattern", SQUARE, "--chip-size", "200", "--resolution", "4", "--twist-step", "5",
+                            "--start", "-40,24,5", "--engine", engine, "--json", j, "--quiet"])
+        assert rc == 0, err
+        doc = json.loads(j.read_text())
+        assert doc["cost"]["engine"] == ("fft" if engine == "auto" else engine)  # auto: a small chip stays on FFT
+        assert ("(path engine)" in out) == (engine == "path")
+        paths[engine] = [(p["x_um"], p["y_um"], p["twist_deg"]) for p in doc["path"]]  # energies: each engine's round-off
+    assert paths["fft"] == paths["path"] == paths["auto"]
+    rc, _, err = run_cli(["simulate", "--pattern", SQUARE, "--chip-size", "200", "--resolution", "4", "--start", "-40,24,0",
+                      "--method", "overdamped", "--engine", "path"])
+    assert rc != 0 and "--engine path" in err
+
+
 def test_energy_csv_holds_poses_and_curve_with_units(tmp_path, run_cli):
     j, c = tmp_path / "e.json", tmp_path / "e.csv"
     rc, _, err = run_cli(["energy", "--pattern", SQUARE, "--chip-size", "200", "--resolution", "4", "--at", "-40,24,0", "--at", "0,0,0",

@@ -35,6 +35,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--start", metavar="X,Y,TWIST", help="initial pose in um, um, degrees")
     p.add_argument("--method", choices=METHODS, default=None, help="stepper (default greedy)")
     p.add_argument("--max-steps", type=int, default=None, help=f"bound on moves or solver steps (default {DEFAULT_MAX_STEPS})")
+    p.add_argument("--engine", choices=("auto", "fft", "path"), default="auto",
+                   help="how greedy and gradient compute the energies they step on: fft (boxes of the landscape "
+                   "holding the start and the centre, by FFT correlation), path (small boxes that follow the chip, "
+                   "pose by pose at the cost of the chip's outline: seconds instead of minutes for chips of "
+                   "thousands of px; exact geometry or chip images, no K_h meniscus, no free contact lines) or "
+                   "auto (path for chips of at least 1000 x 1000 px greedy, 2000 x 2000 px gradient; default). "
+                   "The JSON's cost.engine says which ran")
     d = p.add_argument_group("liquid and chip body (dynamic methods)")
     d.add_argument("--viscosity", type=float, help="liquid viscosity in mPa s (default 1.0, water)")
     d.add_argument("--chip-thickness", type=float, help="chip thickness in um (default 50)")
@@ -75,14 +82,17 @@ def run(args: argparse.Namespace) -> int:
         DynamicsParams.from_scene(scene)  # a liquid the model cannot take fails before compiling
     require_run_fits(scene, start, method)  # the first landscape (and footprint) priced before any work
     compiling(method, args.quiet)
-    traj = simulate(scene, start, method=method, max_steps=max_steps)
+    if args.engine == "path" and method in ("overdamped", "inertial"):
+        raise InputError(f"--engine path runs greedy and gradient; {method} builds the whole landscape (leave --engine out)")
+    traj = simulate(scene, start, method=method, max_steps=max_steps, engine=args.engine)
     print(end_line(scene, traj))
     if traj.refined is not None:
         r = [round(v, 1) + 0.0 for v in traj.refined]
         print(f"refined below the grid (meniscus {scene.meniscus_height_um:.3g} um): ({r[0]:.1f} um, {r[1]:.1f} um, {r[2]:.1f} deg)")
     c = traj.cost
     if c.get("poses_computed"):
-        print(f"landscape computed: {c['poses_computed']:,} of {c['poses_full']:,} poses ({100 * c['fraction_of_full']:.3g} %), {c['landscape_s']:.2f} s")
+        print(f"landscape computed: {c['poses_computed']:,} of {c['poses_full']:,} poses ({100 * c['fraction_of_full']:.3g} %), {c['landscape_s']:.2f} s"
+              + (" (path engine)" if c.get("engine") == "path" else ""))
     if args.json:
         write_json(args.json, traj.to_json() | {"liquid_warnings": liquid_warnings, "meniscus_height_um": scene.meniscus_height_um})
         print(f"wrote {args.json}")

@@ -24,6 +24,10 @@ from ._optimum import (
     global_minimum as global_minimum,
     require_minimum_fits as require_minimum_fits,
 )
+from ._pathcost import (
+    PathEnergy as PathEnergy,
+    path_engine_supported as path_engine_supported,
+)
 from ._posegrid import (
     PoseGrid as PoseGrid,
     axis_step as axis_step,

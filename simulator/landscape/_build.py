@@ -147,11 +147,12 @@ def _twist_run(scene: Scene, twists) -> tuple[TwistAxis, int, int, tuple[bool, b
     return evenly_spaced_axis(tw, axis), 0, len(tw), _twist_cut(axis.values(), axis.periodic, tw)
 
 
-def _box(scene: Scene, twists, center_px: tuple[int, int] = (0, 0), half_px: int | None = None) -> dict:
+def _box(scene: Scene, twists, center_px: tuple[int, int] = (0, 0), half_px: int | None = None, extent: dict | None = None) -> dict:
     """Twists and translation box of a build, and its landscape bytes: sizes only, no rotation
-    (the pose grid is made by :func:`plan`, complete, once the budget is checked)."""
+    (the pose grid is made by :func:`_grid_of`, complete, once the budget is checked;
+    ``extent``: the scene's :func:`_extent`, when a caller keeps it for many boxes)."""
     axis, t_first, n_twists, t_cut = _twist_run(scene, twists)
-    e = _extent(scene)
+    e = _extent(scene) if extent is None else extent
     limit = e["limit"]
     cx, rx, x_lo, x_hi = _axis_box(e["full"][0], limit, int(center_px[0]), half_px)
     cy, ry, y_lo, y_hi = _axis_box(e["full"][1], limit, int(center_px[1]), half_px)
@@ -159,6 +160,14 @@ def _box(scene: Scene, twists, center_px: tuple[int, int] = (0, 0), half_px: int
     return {"axis": axis, "t_first": t_first, "shape": shape, "cut": (t_cut, (y_lo, y_hi), (x_lo, x_hi)),
             "first_px": (cx - rx, cy - ry), "origin": e["origin"], "crop": e["crop"],
             "landscape_bytes": int(math.prod(shape) * np.dtype(scene.dtype).itemsize), "margin": e["margin"]}
+
+
+def _grid_of(scene: Scene, b: dict) -> PoseGrid:
+    """The pose grid of a box (:func:`_box`), complete: its twist run, translations, cut sides
+    and the chip's radius of gyration (the scene's, derived once per scene)."""
+    axis, (x_first, y_first), n_twists = b["axis"], b["first_px"], b["shape"][0]
+    return PoseGrid(shape=b["shape"], um_per_px=scene.um_per_px, twist=axis, wrap=axis.periodic and n_twists == axis.count,
+                    cut=b["cut"], rg_px=scene.chip_rg_px, x_first_px=x_first, y_first_px=y_first, t_first=b["t_first"])
 
 
 def _extent(scene: Scene, um_per_px: float | None = None) -> dict:
@@ -260,11 +269,8 @@ def _layout(scene: Scene, twists, center_px: tuple[int, int], half_px: int | Non
     n_twists, ny, nx = b["shape"]
     if check_budget:  # the energy array alone, before anything else is sized
         _refuse_over_budget(scene, b["landscape_bytes"], n_twists, ny, nx)
-    axis, (x_first, y_first) = b["axis"], b["first_px"]
-    # The pose grid, complete: the chip's radius of gyration is the scene's (derived once per
-    # scene, after the budget check: it costs a pass over the chip).
-    grid = PoseGrid(shape=b["shape"], um_per_px=scene.um_per_px, twist=axis, wrap=axis.periodic and n_twists == axis.count,
-                    cut=b["cut"], rg_px=scene.chip_rg_px, x_first_px=x_first, y_first_px=y_first, t_first=b["t_first"])
+    # The pose grid, complete, after the budget check.
+    grid = _grid_of(scene, b)
     rx, ry = nx // 2, ny // 2
     cx, cy = grid.x_first_px + rx, grid.y_first_px + ry
     pat = scene.pattern.data

@@ -3,6 +3,7 @@ resampled (bilinear), on one canvas with the pattern's pixel parity; mirror twin
 
 from __future__ import annotations
 
+import functools
 import math
 import weakref
 
@@ -62,11 +63,11 @@ def _chip_reach_px(chip: Mask, twist: bool, um_per_px: float | None = None) -> t
 
 def _rotated_extent_px(chip: Mask, twists: np.ndarray) -> tuple[float, float]:
     """Half-extent (x, y) in px of the chip's wettable area over the given twists."""
-    h, w = chip.shape
-    r0, r1, c0, c1 = nonzero_box(chip.data > 0)
-    if chip.geometry is not None:
+    if chip.geometry is not None:  # exact: no pass over the raster
         bounds = np.array([affinity.rotate(chip.geometry, float(t), origin=(0, 0)).bounds for t in twists]) / chip.um_per_px
         return float(np.abs(bounds[:, [0, 2]]).max()), float(np.abs(bounds[:, [1, 3]]).max())
+    h, w = chip.shape
+    r0, r1, c0, c1 = nonzero_box(chip.data > 0)
     xs = np.array([c0, c1, c1, c0]) - w / 2
     ys = h / 2 - np.array([r0, r0, r1, r1])
     a = np.radians(np.asarray(twists, float))[:, None]
@@ -139,12 +140,16 @@ class ChipRotator:
         # fixed-point bilinear weights (1/32 px) depend on where a pixel lies on the canvas, so
         # a band of twists (a smaller canvas) would otherwise get other rasters than the
         # whole axis, and a box of the landscape other energies than the full one.
-        rad = max(_chip_reach_px(chip, True))
-        turn = 2 * ceil_whole(rad) + 2
-        self._turn_shape = (max(turn + parity[0], self.shape[0]), max(turn + parity[1], self.shape[1]))
+        self._parity = parity
         self._blurred = self._coeffs = None  # the smooth chip and its spline coefficients
         if self.blur_px > 0 or profile is not None:
             self._smooth_chip()
+
+    @functools.cached_property
+    def _turn_shape(self) -> tuple[int, int]:
+        """The canvas of a full turn (a chip image is resampled on it: see __init__)."""
+        rad = max(_chip_reach_px(self.chip, True))
+        return tuple(max(2 * ceil_whole(rad) + 2 + p, n) for p, n in zip(self._parity, self.shape, strict=True))
 
     def _smooth_chip(self) -> None:
         """The blurred chip (or the footprint of its free contact lines) and its spline

@@ -23,6 +23,10 @@ from ._field import (
     make_field as make_field,
     neighbourhood as neighbourhood,
 )
+from ._pathrun import (
+    ENGINES as ENGINES,
+    choose_engine as choose_engine,
+)
 from ._potential import (
     potential as potential,
     potential_and_gradient as potential_and_gradient,

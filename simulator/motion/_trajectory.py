@@ -148,6 +148,7 @@ def simulate(
     band_px: int = BAND_PX,
     dynamics=None,
     backend: str = "auto",
+    engine: str = "auto",
 ) -> Trajectory:
     """Run one trajectory from ``start`` = (x_um, y_um, twist_deg).
 
@@ -163,6 +164,12 @@ def simulate(
             once); dynamics build the whole landscape (the chip may overshoot).
         dynamics: :class:`simulator.motion.DynamicsParams` for the dynamic methods
             (default: from the scene's chip, liquid and calibration).
+        engine: how greedy and gradient compute the boxes they need without ``landscape``:
+            "fft" (boxes holding the start and the centre, by FFT correlation), "path"
+            (small boxes that follow the chip, pose by pose at the cost of the chip's
+            outline, :class:`simulator.landscape.PathEnergy`) or "auto" (the path engine for
+            chips large enough for it to be the faster, else the FFT engine,
+            :func:`simulator.motion.choose_engine`). ``cost["engine"]`` says which ran.
     """
     if method not in METHODS:
         raise InputError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
@@ -197,7 +204,17 @@ def simulate(
         )
     pose = np.asarray(start, float)
     boxes = _BoxCost()
-    around = _box_landscapes(scene, band_steps, band_px, backend, boxes)
+    path_engine = None
+    if landscape is None and not dynamic:
+        from simulator.motion._pathrun import choose_engine, path_boxes
+
+        engine = choose_engine(scene, start, method, engine, band_steps, band_px)
+        if engine == "path":
+            around, path_engine = path_boxes(scene, method, boxes)
+    else:
+        engine = "landscape" if landscape is not None else "fft"
+    if path_engine is None:
+        around = _box_landscapes(scene, band_steps, band_px, backend, boxes)
     next(around)
     pieces = []
     while True:
@@ -229,13 +246,20 @@ def simulate(
     # (simulator.landscape: the same pose every command uses, found without the full landscape).
     q_end = grid.to_index(np.asarray(traj.final))
     flat = bool(flat_at(field, grid, state.flat, q_end))
+    if path_engine is not None:
+        from simulator.motion._pathrun import nominal_box
+
+        boxes.built[:] = nominal_box(scene, path_engine)  # the global minimum's first look, pose by pose
     opt = global_minimum(scene, landscape=landscape if landscape is not None else (ls if dynamic else None),
                          evaluated=boxes.built, backend=backend)
+    if path_engine is not None:
+        boxes.poses, boxes.planes, boxes.seconds = path_engine.poses, path_engine.rotations, path_engine.seconds
     best = jnp.asarray(grid.to_index(np.asarray(opt.pose)), field.dtype)
     timed_out = dynamic and traj.steps < max_steps  # the simulated time ran out, not the steps
     out = classify(field._replace(best=best), grid, q_end, float(traj.energy_J[-1]), status, flat, timed_out)
     full = full_landscape_poses(scene) if landscape is None else landscape.energy.size
     cost = {
+        "engine": engine,
         "poses_computed": int(boxes.poses),
         "poses_full": int(full),
         "fraction_of_full": boxes.poses / full,

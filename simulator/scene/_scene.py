@@ -87,9 +87,12 @@ def chip_radius_of_gyration_px(chip: Mask) -> float:
     relative ``1 / (12 rg^2)``)."""
     d = chip.data
     h, w = d.shape
-    y, x = np.ogrid[0:h, 0:w]  # open grids: one chip-sized array of r^2, not three
-    r2 = (x + 0.5 - w / 2) ** 2 + (y + 0.5 - h / 2) ** 2
-    return float(math.sqrt((d * r2).sum() / d.sum()))
+    # r^2 = x^2 + y^2 separates: the column and row sums of the footprint carry the moment
+    # (no chip-sized array of r^2: a 4000 px chip's took a second and 0.5 GB).
+    cols, rows = d.sum(axis=0, dtype=np.float64), d.sum(axis=1, dtype=np.float64)
+    x2 = (np.arange(w) + 0.5 - w / 2) ** 2
+    y2 = (np.arange(h) + 0.5 - h / 2) ** 2
+    return float(math.sqrt((cols @ x2 + rows @ y2) / rows.sum()))
 
 
 @dataclass(frozen=True, eq=False)

@@ -1,0 +1,111 @@
+"""A greedy or gradient run at the cost of its path: small boxes of the landscape that
+follow the chip, computed pose by pose (:class:`simulator.landscape.PathEnergy`), and the
+choice between that and the FFT boxes (:func:`choose_engine`).
+
+The steppers are today's, unchanged: each box is a landscape on the grid the FFT engine
+would give, cut on its sides; the run stops at a cut side (status EDGE) and resumes in
+the next box, centred on the chip (greedy and gradient are memoryless, so the path is the
+path on the whole landscape). Poses that boxes share are computed once.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from simulator.landscape import (
+    Landscape,
+    PathEnergy,
+    PoseGrid,
+    consecutive_runs,
+    path_engine_supported,
+)
+from simulator.scene import Scene
+
+ENGINES = ("auto", "fft", "path")
+#: Half-width (px) and twist half-band (steps) of the boxes that follow the chip. Greedy
+#: stops at a box's side, gradient 2 grid steps before it (its differences and interpolation
+#: reach that far), so gradient needs wider boxes to move at all.
+FOLLOW_BOX = {"greedy": (4, 1), "gradient": (6, 3)}
+#: "auto" takes the path engine for chips of at least this many pixels (wettable bounding
+#: box, width x height), per method. Measured on a 2-core CPU, four-pad under its own
+#: square chip at 1 um/px from (0.3 L, -0.2 L, 10 deg), best of two, both engines warm:
+#: greedy 400 px 1.0 s (path) vs 1.2 s (FFT), 730 px 1.5 vs 6.7 s, 1000 px 2.0 vs 16.6 s;
+#: gradient 400 px 2.2 vs 1.0 s, 730 px 1.9 vs 1.5 s, 1000 px 3.4 vs 3.2 s, 2000 px 11.3 vs
+#: 17.0 s. The thresholds sit above those crossovers with a margin (the engines' costs
+#: also depend on the path and the pattern), so smaller chips keep the FFT engine.
+AUTO_MIN_CHIP_PX = {"greedy": 1000 * 1000, "gradient": 2000 * 2000}
+
+
+def _chip_px(scene: Scene) -> int:
+    """Pixels of the chip's wettable bounding box (width x height)."""
+    from patterns.mask import footprint_um
+
+    w, h = footprint_um(scene.chip)
+    return int(round(w / scene.um_per_px) * round(h / scene.um_per_px))
+
+
+def choose_engine(scene: Scene, start, method: str, engine: str, band_steps: int, band_px: int) -> str:
+    """"fft" or "path" for a greedy or gradient run without a landscape (``engine``: as asked;
+    "auto": the path engine where it covers the scene, the run's outcome is classified the
+    same, and the chip is large enough for it to be the faster, :data:`AUTO_MIN_CHIP_PX`)."""
+    if engine not in ENGINES:
+        raise ValueError(f"engine must be one of {', '.join(ENGINES)}, got {engine!r}")
+    ok, why = path_engine_supported(scene)
+    if ok and scene.wall_profile is not None:
+        # The energies agree (tested), but the outcome of a run that ends on the floor the
+        # free lines float the chip on is classified on its last box, whose width decides it.
+        ok, why = False, "a run on the free contact lines' floor is not classified the same yet"
+    if engine == "path" and not ok:
+        from patterns.errors import InputError
+
+        raise InputError(f"the path-cost engine does not cover this scene: {why}")
+    if engine != "auto":
+        return engine
+    if not ok or method not in AUTO_MIN_CHIP_PX:
+        return "fft"
+    return "path" if _chip_px(scene) >= AUTO_MIN_CHIP_PX[method] else "fft"
+
+
+def path_boxes(scene: Scene, method: str, cost):
+    """(generator, engine): the generator is sent the chip's pose and yields the box around
+    it (None when the box would be the last one again: the chip cannot move on), as
+    :func:`simulator.motion._trajectory._box_landscapes` does."""
+    pe = PathEnergy(scene)
+    half, band = FOLLOW_BOX.get(method, FOLLOW_BOX["gradient"])
+
+    def gen():
+        ta = scene.twist_axis
+        n, s = ta.count, scene.um_per_px
+        last = None
+        pose = yield
+        while True:
+            cx, cy = (int(v) for v in np.round(pose[:2] / s))
+            k = int(round((pose[2] - float(ta.values_at(0))) / ta.step_deg)) if n > 1 else 0
+            lo, hi = k - band, k + band
+            if n == 1 or (ta.periodic and hi - lo + 1 >= n):
+                lo, hi = 0, n - 1
+            elif not ta.periodic:
+                lo, hi = max(lo, 0), min(hi, n - 1)
+            if (lo, hi, cx, cy) == last:
+                pose = yield None
+                continue
+            last = (lo, hi, cx, cy)
+            want = list(range(lo, hi + 1))
+            planes: dict[int, np.ndarray] = {}
+            template = None
+            for run in consecutive_runs({j % n for j in want}):
+                ls = pe.box(run, (cx, cy), half)
+                template = ls
+                planes.update({j: ls.energy[i] for i, j in enumerate(run)})
+            g = template.grid
+            grid = PoseGrid((len(want),) + g.shape[1:], g.um_per_px, ta, ta.periodic and len(want) == n,
+                            (ta.cut_of(lo, len(want)), g.cut[1], g.cut[2]), g.rg_px, g.x_first_px, g.y_first_px, lo)
+            pose = yield Landscape(energy=np.stack([planes[j % n] for j in want]), grid=grid, delta_gamma=template.delta_gamma,
+                                   energy_scale_J=template.energy_scale_J, stats=template.stats)
+
+    return gen(), pe
+
+
+def nominal_box(scene: Scene, pe: PathEnergy) -> list[Landscape]:
+    """The boxes :func:`simulator.landscape.global_minimum` looks in first, pose by pose."""
+    return pe.nominal_boxes()
