@@ -28,7 +28,11 @@ def mark() -> dict:
         reset = True
     except OSError:
         reset = False
-    return {"reset": reset, "rss_kb": _status_kb("VmRSS") or 0, "maxrss_kb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss}
+    return {
+        "reset": reset,
+        "rss_kb": _status_kb("VmRSS") or 0,
+        "maxrss_kb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss,
+    }
 
 
 def peak_mb(before: dict) -> float:
@@ -37,4 +41,6 @@ def peak_mb(before: dict) -> float:
         hwm = _status_kb("VmHWM")
         if hwm is not None:
             return max(0.0, (hwm - before["rss_kb"]) / 1024)
-    return max(0.0, (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before["maxrss_kb"]) / 1024)
+    return max(
+        0.0, (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before["maxrss_kb"]) / 1024
+    )

@@ -98,7 +98,10 @@ CASES = {
     },
     "defect_B": {
         "title": "defect type B outward (200 um square), 200 um chip",
-        "design": ("defect", {"size": 200, "kind": "outward", "position": "corner", "height": 30, "width": 60}),
+        "design": (
+            "defect",
+            {"size": 200, "kind": "outward", "position": "corner", "height": 30, "width": 60},
+        ),
         "chip_um": 200.0,
         "reach_um": 150.0,
         "twist_spread_deg": 10.0,
@@ -132,7 +135,14 @@ SWEEP = {
     "rotation": ["resample"],
     "method": ["gradient"],
 }
-QUICK_SWEEP = {"um_per_px": [2.0, 4.0], "twist_step_deg": [2.0], "dtype": ["float64"], "raster": ["nearest"], "rotation": ["resample"], "method": ["gradient"]}
+QUICK_SWEEP = {
+    "um_per_px": [2.0, 4.0],
+    "twist_step_deg": [2.0],
+    "dtype": ["float64"],
+    "raster": ["nearest"],
+    "rotation": ["resample"],
+    "method": ["gradient"],
+}
 FULL = {"poses": 200, "starts": 12, "mc": 10_000}
 QUICK = {"poses": 50, "starts": 3, "mc": 2_000}
 SEED = 2024
@@ -141,12 +151,6 @@ WINDOW_EXTRA_UM = 50.0
 
 
 # ------------------------------------------------------------------ memory
-
-
-
-
-
-
 
 
 # ------------------------------------------------------------------ inputs
@@ -180,7 +184,14 @@ def _scene(case: str, k: Knobs):
     if k.rotation == "resample":
         chip = Mask(chip.data, s)
     window = CASES[case]["reach_um"] + WINDOW_EXTRA_UM
-    return Scene(pattern=pattern, chip=chip, twist=TwistGrid(k.twist_step_deg), window_um=window, dtype=k.dtype, memory_budget_mb=16384)
+    return Scene(
+        pattern=pattern,
+        chip=chip,
+        twist=TwistGrid(k.twist_step_deg),
+        window_um=window,
+        dtype=k.dtype,
+        memory_budget_mb=16384,
+    )
 
 
 # ------------------------------------------------------------------ child: the raster side
@@ -225,7 +236,14 @@ def measure_point(case: str, knobs: dict, settings: dict) -> dict:
     e = ls.energy_at(poses[:, 0], poses[:, 1], poses[:, 2])
     gx, gy, gt = ls.gradient_at(poses[:, 0], poses[:, 1], poses[:, 2])
     area = np.asarray(e, float) / (dg * UM2_TO_M2)
-    grad = np.stack([np.asarray(gx) / (dg * UM2_TO_M2 / 1e-6), np.asarray(gy) / (dg * UM2_TO_M2 / 1e-6), np.asarray(gt) / (dg * UM2_TO_M2)], axis=1)
+    grad = np.stack(
+        [
+            np.asarray(gx) / (dg * UM2_TO_M2 / 1e-6),
+            np.asarray(gy) / (dg * UM2_TO_M2 / 1e-6),
+            np.asarray(gt) / (dg * UM2_TO_M2),
+        ],
+        axis=1,
+    )
 
     c = CASES[case]
     spread = (c["reach_um"], c["reach_um"], c["twist_spread_deg"])
@@ -243,14 +261,22 @@ def measure_point(case: str, knobs: dict, settings: dict) -> dict:
 
     mc_starts = random_starts(settings["mc"], spread, SEED + 2, distribution="uniform")
     t0 = time.perf_counter()
-    run_batch(scene, mc_starts[: min(DEFAULT_CHUNK, len(mc_starts))], k.method, landscape=ls, progress=False)
+    run_batch(
+        scene,
+        mc_starts[: min(DEFAULT_CHUNK, len(mc_starts))],
+        k.method,
+        landscape=ls,
+        progress=False,
+    )
     warm_s = time.perf_counter() - t0
     before = mark()
     t0 = time.perf_counter()
     mc = run_batch(scene, mc_starts, k.method, landscape=ls, progress=False)
     mc_s = time.perf_counter() - t0
     mc_mb = peak_mb(before)
-    mc_s = _best_of(lambda: run_batch(scene, mc_starts, k.method, landscape=ls, progress=False), mc_s)
+    mc_s = _best_of(
+        lambda: run_batch(scene, mc_starts, k.method, landscape=ls, progress=False), mc_s
+    )
     return {
         "overlap_um2": area.tolist(),
         "grad": grad.tolist(),
@@ -287,14 +313,18 @@ def _reference_field(case: str, n: int) -> tuple[np.ndarray, np.ndarray]:
     return overlap_um2(pattern, chip, poses), gradient_um2(pattern, chip, poses)
 
 
-def _reference_final(case: str, k: Knobs, start: tuple, rg_um: float, a_max: float) -> tuple[float, float, float]:
+def _reference_final(
+    case: str, k: Knobs, start: tuple, rg_um: float, a_max: float
+) -> tuple[float, float, float]:
     from simulator.testing import gradient_descent, greedy
 
     pattern, chip = _geometry(case)
     if k.method == "greedy":
         ev = _evaluator(case, k.um_per_px, k.twist_step_deg)
         return greedy(pattern, chip, start, k.um_per_px, k.twist_step_deg, evaluator=ev).final
-    run = gradient_descent(pattern, chip, start, k.um_per_px, k.twist_step_deg, rg_um=rg_um, force_scale_um2=a_max)
+    run = gradient_descent(
+        pattern, chip, start, k.um_per_px, k.twist_step_deg, rg_um=rg_um, force_scale_um2=a_max
+    )
     return run.final
 
 
@@ -325,7 +355,12 @@ def errors(case: str, k: Knobs, raw: dict, n_poses: int) -> dict:
     dg = np.asarray(raw["grad"]) - g_ref
     dforce = np.hypot(dg[:, 0], dg[:, 1])
     finals = np.asarray(raw["final"])
-    refs = np.array([_reference_final(case, k, tuple(s), raw["rg_px"] * k.um_per_px, raw["a_max_um2"]) for s in raw["starts"]])
+    refs = np.array(
+        [
+            _reference_final(case, k, tuple(s), raw["rg_px"] * k.um_per_px, raw["a_max_um2"])
+            for s in raw["starts"]
+        ]
+    )
     d_um = np.hypot(finals[:, 0] - refs[:, 0], finals[:, 1] - refs[:, 1])
     d_tw = np.abs((finals[:, 2] - refs[:, 2] + 45.0) % 90.0 - 45.0)
     return {
@@ -382,12 +417,17 @@ def preset_library_check(n_poses: int, presets: list[str] | None = None) -> list
             da = ls.energy_at(*poses.T) / unit - a_ref
             gx, gy, _ = ls.gradient_at(*poses.T)
             df = np.hypot(gx / (unit / 1e-6) - g_ref[:, 0], gy / (unit / 1e-6) - g_ref[:, 1])
-            rows.append({
-                "pattern": stem, "preset": name, "feature_um": feature, "knobs": k,
-                "energy_rms_pct": 100 * _rms(da) / chip.area,
-                "energy_max_pct": 100 * float(np.abs(da).max()) / chip.area,
-                "force_p90_pct": 100 * float(np.percentile(df, 90)) / params["size"],
-            })
+            rows.append(
+                {
+                    "pattern": stem,
+                    "preset": name,
+                    "feature_um": feature,
+                    "knobs": k,
+                    "energy_rms_pct": 100 * _rms(da) / chip.area,
+                    "energy_max_pct": 100 * float(np.abs(da).max()) / chip.area,
+                    "force_p90_pct": 100 * float(np.percentile(df, 90)) / params["size"],
+                }
+            )
     return rows
 
 
@@ -403,7 +443,9 @@ def _points(case: str, sweep: dict, presets: bool) -> list[tuple[str, object, Kn
 
         feature = smallest_feature_um(_geometry(case)[0])
         for name in PRESETS:
-            pts.append(("preset", name, replace(BASELINE, **apply_preset(name, {}, feature_um=feature))))
+            pts.append(
+                ("preset", name, replace(BASELINE, **apply_preset(name, {}, feature_um=feature)))
+            )
     return pts
 
 
@@ -416,7 +458,9 @@ def machine() -> dict:
     cpu = platform.processor()
     try:
         with open("/proc/cpuinfo") as fh:
-            cpu = next((ln.split(":", 1)[1].strip() for ln in fh if ln.startswith("model name")), cpu)
+            cpu = next(
+                (ln.split(":", 1)[1].strip() for ln in fh if ln.startswith("model name")), cpu
+            )
     except OSError:
         pass
     try:
@@ -457,20 +501,31 @@ def run(quick: bool, out: Path, cases: list[str], presets: bool = True) -> dict:
             row |= {key: raw[key] for key in raw if key not in ("overlap_um2", "grad", "starts")}
             row["point_s"] = time.perf_counter() - t0
             rows.append(row)
-            print(f"{case:10s} {knob:15s} {value!s:9s} E {row['energy_rms_pct']:.4f}% F {row['force_p90_pct']:.3f}% "
-                  f"pose {row['pose_max_um']:.2f} um  landscape {row['landscape_s']:.2f} s {row['landscape_mb']:.0f} MB  "
-                  f"MC {row['mc_s']:.2f} s  ({row['point_s']:.0f} s)", flush=True)
+            print(
+                f"{case:10s} {knob:15s} {value!s:9s} E {row['energy_rms_pct']:.4f}% F {row['force_p90_pct']:.3f}% "
+                f"pose {row['pose_max_um']:.2f} um  landscape {row['landscape_s']:.2f} s {row['landscape_mb']:.0f} MB  "
+                f"MC {row['mc_s']:.2f} s  ({row['point_s']:.0f} s)",
+                flush=True,
+            )
     for r in rows:  # relative cost: landscape time over the case's baseline
         base = next(b for b in rows if b["case"] == r["case"] and b["knob"] == "baseline")
         r["relative_landscape_cost"] = r["landscape_s"] / base["landscape_s"]
-        r["relative_mc_cost"] = (r["landscape_s"] + r["mc_s"]) / (base["landscape_s"] + base["mc_s"])
+        r["relative_mc_cost"] = (r["landscape_s"] + r["mc_s"]) / (
+            base["landscape_s"] + base["mc_s"]
+        )
         r["feature_um"] = _feature(r["case"])
     t0 = time.perf_counter()
     library = preset_library_check(settings["poses"] // 2) if presets else []
     print(f"presets on the pattern library: {time.perf_counter() - t0:.0f} s", flush=True)
     result = {
         "machine": machine(),
-        "settings": settings | {"seed": SEED, "quick": quick, "window_extra_um": WINDOW_EXTRA_UM, "margin_um": MARGIN_UM},
+        "settings": settings
+        | {
+            "seed": SEED,
+            "quick": quick,
+            "window_extra_um": WINDOW_EXTRA_UM,
+            "margin_um": MARGIN_UM,
+        },
         "cases": {c: CASES[c] for c in cases},
         "baseline": asdict(BASELINE),
         "rows": rows,
@@ -490,7 +545,7 @@ def run(quick: bool, out: Path, cases: list[str], presets: bool = True) -> dict:
 def _fmt(v: float, digits: int = 2) -> str:
     if v == 0:
         return "0"
-    return f"{v:.{digits}g}" if abs(v) < 10 ** digits else f"{v:.0f}"
+    return f"{v:.{digits}g}" if abs(v) < 10**digits else f"{v:.0f}"
 
 
 def markdown(result: dict) -> str:
@@ -539,13 +594,22 @@ def markdown(result: dict) -> str:
             "",
         ]
         names = list(dict.fromkeys(r["preset"] for r in result["preset_library"]))
-        lines += ["| pattern | feature um | " + " | ".join(f"{n}: um/px, energy RMS / max %, force p90 %" for n in names) + " |",
-                  "|" + "---|" * (2 + len(names))]
+        lines += [
+            "| pattern | feature um | "
+            + " | ".join(f"{n}: um/px, energy RMS / max %, force p90 %" for n in names)
+            + " |",
+            "|" + "---|" * (2 + len(names)),
+        ]
         for stem in dict.fromkeys(r["pattern"] for r in result["preset_library"]):
             rs = {r["preset"]: r for r in result["preset_library"] if r["pattern"] == stem}
-            cells = [f"{rs[n]['knobs']['um_per_px']:g}, {_fmt(rs[n]['energy_rms_pct'])} / {_fmt(rs[n]['energy_max_pct'])}, "
-                     f"{_fmt(rs[n]['force_p90_pct'])}" for n in names]
-            lines.append(f"| {stem} | {_fmt(rs[names[0]]['feature_um'], 3)} | " + " | ".join(cells) + " |")
+            cells = [
+                f"{rs[n]['knobs']['um_per_px']:g}, {_fmt(rs[n]['energy_rms_pct'])} / {_fmt(rs[n]['energy_max_pct'])}, "
+                f"{_fmt(rs[n]['force_p90_pct'])}"
+                for n in names
+            ]
+            lines.append(
+                f"| {stem} | {_fmt(rs[names[0]]['feature_um'], 3)} | " + " | ".join(cells) + " |"
+            )
         lines.append("")
     if st["mc"] != 10_000:
         lines.append(f"10^4 MC times are scaled from {st['mc']:,} starts.")
@@ -571,9 +635,24 @@ def plot(result: dict, path: Path) -> None:
 
     cases = list(result["cases"])
     panels = [
-        ("energy_rms_pct", "landscape_s", "energy error, RMS (% of chip area)", "landscape time (s)"),
-        ("force_p90_pct", "landscape_s", "force error, 90th percentile (% of chip side)", "landscape time (s)"),
-        ("pose_max_um", "mc_total_s", "final-pose error, max (um)", "landscape + 10^4 MC starts (s)"),
+        (
+            "energy_rms_pct",
+            "landscape_s",
+            "energy error, RMS (% of chip area)",
+            "landscape time (s)",
+        ),
+        (
+            "force_p90_pct",
+            "landscape_s",
+            "force error, 90th percentile (% of chip side)",
+            "landscape time (s)",
+        ),
+        (
+            "pose_max_um",
+            "mc_total_s",
+            "final-pose error, max (um)",
+            "landscape + 10^4 MC starts (s)",
+        ),
     ]
     fig, axes = plt.subplots(len(cases), 3, figsize=(16, 5 * len(cases)), squeeze=False)
     colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
@@ -593,12 +672,23 @@ def plot(result: dict, path: Path) -> None:
                 if not pts:
                     continue
                 label, fmt = KNOB_LABELS[knob]
-                pts = sorted(pts + [base], key=lambda r: r["knobs"][knob]) if knob in ("um_per_px", "twist_step_deg") else [base, *pts]
+                pts = (
+                    sorted(pts + [base], key=lambda r: r["knobs"][knob])
+                    if knob in ("um_per_px", "twist_step_deg")
+                    else [base, *pts]
+                )
                 xs, ys = zip(*(xy(r) for r in pts), strict=True)
                 ax.plot(xs, ys, "o-", color=colors[c % len(colors)], label=label, alpha=0.85)
                 for r, x, y in zip(pts, xs, ys, strict=True):
                     if r["knob"] != "baseline":
-                        ax.annotate(fmt.format(r["knobs"][knob]), (x, y), textcoords="offset points", xytext=(4, 3), fontsize=7, color=colors[c % len(colors)])
+                        ax.annotate(
+                            fmt.format(r["knobs"][knob]),
+                            (x, y),
+                            textcoords="offset points",
+                            xytext=(4, 3),
+                            fontsize=7,
+                            color=colors[c % len(colors)],
+                        )
             bx, by = xy(base)
             ax.plot([bx], [by], "k*", ms=12, label="baseline", zorder=5)
             presets = [r for r in rows if r["knob"] == "preset"]
@@ -606,7 +696,14 @@ def plot(result: dict, path: Path) -> None:
                 xs, ys = zip(*(xy(r) for r in presets), strict=True)
                 ax.plot(xs, ys, "ks--", mfc="none", ms=9, lw=0.8, label="presets", zorder=4)
                 for r, x, y in zip(presets, xs, ys, strict=True):
-                    ax.annotate(r["value"], (x, y), textcoords="offset points", xytext=(-8, -12), fontsize=8, weight="bold")
+                    ax.annotate(
+                        r["value"],
+                        (x, y),
+                        textcoords="offset points",
+                        xytext=(-8, -12),
+                        fontsize=8,
+                        weight="bold",
+                    )
             ax.set_xscale("log")
             ax.set_yscale("log")
             ax.set_xlabel(xlabel)
@@ -617,8 +714,11 @@ def plot(result: dict, path: Path) -> None:
                 ax.axhline(FLOOR[ykey], color="grey", lw=0.8, ls=":")
             if i == 0 and j == 0:
                 ax.legend(fontsize=8)
-    fig.suptitle("What accuracy costs: error against exact polygon overlap vs time, one knob at a time around the baseline "
-                 f"(zero errors on the dotted floor; twist errors in accuracy.md); {result['machine']['cpu']}, {result['machine']['cores']} cores", fontsize=10)
+    fig.suptitle(
+        "What accuracy costs: error against exact polygon overlap vs time, one knob at a time around the baseline "
+        f"(zero errors on the dotted floor; twist errors in accuracy.md); {result['machine']['cpu']}, {result['machine']['cores']} cores",
+        fontsize=10,
+    )
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -626,13 +726,28 @@ def plot(result: dict, path: Path) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--quick", action="store_true", help="reduced sweep: fewer points, poses, starts and MC starts (about 3 minutes)")
-    ap.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results", help="output folder (default benchmarks/results/)")
-    ap.add_argument("--cases", nargs="+", choices=list(CASES), default=list(CASES), help="which patterns")
-    ap.add_argument("--no-presets", action="store_true", help="skip measuring the presets of simulator.scene")
+    ap.add_argument(
+        "--quick",
+        action="store_true",
+        help="reduced sweep: fewer points, poses, starts and MC starts (about 3 minutes)",
+    )
+    ap.add_argument(
+        "--out",
+        type=Path,
+        default=ROOT / "benchmarks" / "results",
+        help="output folder (default benchmarks/results/)",
+    )
+    ap.add_argument(
+        "--cases", nargs="+", choices=list(CASES), default=list(CASES), help="which patterns"
+    )
+    ap.add_argument(
+        "--no-presets", action="store_true", help="skip measuring the presets of simulator.scene"
+    )
     args = ap.parse_args(argv)
     result = run(args.quick, args.out, args.cases, not args.no_presets)
-    print(f"sweep took {result['sweep_seconds']:.0f} s; wrote {args.out}/accuracy.json, accuracy.md, accuracy_pareto.png")
+    print(
+        f"sweep took {result['sweep_seconds']:.0f} s; wrote {args.out}/accuracy.json, accuracy.md, accuracy_pareto.png"
+    )
     return 0
 
 

@@ -33,7 +33,14 @@ from simulator.scene import (
 )
 
 FRAMES_MS = (135.0, 290.0, 326.0)  # the source's video frames; aligned at about 326 ms
-STARTS = [(500.0, 0.0, 0.0), (500.0, 0.0, 2.0), (500.0, 5.0, 0.0), (380.0, 0.0, 0.0), (380.0, 0.0, 1.0), (380.0, 5.0, 0.0)]
+STARTS = [
+    (500.0, 0.0, 0.0),
+    (500.0, 0.0, 2.0),
+    (500.0, 5.0, 0.0),
+    (380.0, 0.0, 0.0),
+    (380.0, 0.0, 1.0),
+    (380.0, 5.0, 0.0),
+]
 
 
 def align_time_s(traj, floor) -> float:
@@ -43,7 +50,9 @@ def align_time_s(traj, floor) -> float:
     if not (out <= 0).any():
         return float("inf")
     k = int(np.argmax(out <= 0))
-    return 0.0 if k == 0 else float(t[k - 1] + (t[k] - t[k - 1]) * out[k - 1] / (out[k - 1] - out[k]))
+    return (
+        0.0 if k == 0 else float(t[k - 1] + (t[k] - t[k - 1]) * out[k - 1] / (out[k - 1] - out[k]))
+    )
 
 
 def main() -> None:
@@ -51,14 +60,23 @@ def main() -> None:
     ap.add_argument("--out", default=str(ROOT / "docs" / "images"))
     ap.add_argument("--no-inertial", action="store_true", help="overdamped runs only (faster)")
     args = ap.parse_args()
-    scene = Scene.from_inputs(library_path("four_pad_730_100"), chip_size_um=730, resolution_um=2.0,
-                              effects=Effects(meniscus=True), liquid=Liquid(volume_nl=20.0))
+    scene = Scene.from_inputs(
+        library_path("four_pad_730_100"),
+        chip_size_um=730,
+        resolution_um=2.0,
+        effects=Effects(meniscus=True),
+        liquid=Liquid(volume_nl=20.0),
+    )
     ls = build_landscape(scene)
     floor = ls.floor_range()
-    print(f"damping calibration {scene.damping_calibration:g}; the chip floats within +-{floor['x_um'][1]:g} um")
+    print(
+        f"damping calibration {scene.damping_calibration:g}; the chip floats within +-{floor['x_um'][1]:g} um"
+    )
     methods = ("overdamped",) if args.no_inertial else ("overdamped", "inertial")
     runs = {}
-    print("| start (um, um, deg) | model | outcome | final (um, um, deg) | on the floor after (ms) | largest twist (deg, at ms, at x um) |")
+    print(
+        "| start (um, um, deg) | model | outcome | final (um, um, deg) | on the floor after (ms) | largest twist (deg, at ms, at x um) |"
+    )
     print("|---|---|---|---|---:|---|")
     for start in STARTS:
         for method in methods:
@@ -68,8 +86,11 @@ def main() -> None:
             k = int(np.argmax(np.abs(t.path[:, 2])))
             f = ", ".join(f"{v:.1f}" for v in t.final)
             ta_txt = "never" if not np.isfinite(ta) else f"{ta * 1e3:.0f}"
-            print(f"| ({start[0]:g}, {start[1]:g}, {start[2]:g}) | {method} | {t.outcome} | ({f}) | {ta_txt} | "
-                  f"{t.path[k, 2]:.2f} at {t.t_s[k] * 1e3:.0f} ms, x {t.path[k, 0]:.0f} |", flush=True)
+            print(
+                f"| ({start[0]:g}, {start[1]:g}, {start[2]:g}) | {method} | {t.outcome} | ({f}) | {ta_txt} | "
+                f"{t.path[k, 2]:.2f} at {t.t_s[k] * 1e3:.0f} ms, x {t.path[k, 0]:.0f} |",
+                flush=True,
+            )
 
     plt = pyplot()
     fig, axes = plt.subplots(3, 1, figsize=(9, 9), sharex=True)
@@ -89,15 +110,20 @@ def main() -> None:
             ax.axvline(f, color="C1", lw=1)
         ax.axvspan(200, 400, color="C2", alpha=0.06)
         ax.grid(alpha=0.3)
-    axes[0].axhspan(-floor["x_um"][1], floor["x_um"][1], color="C2", alpha=0.2, label="floating floor (aligned)")
+    axes[0].axhspan(
+        -floor["x_um"][1], floor["x_um"][1], color="C2", alpha=0.2, label="floating floor (aligned)"
+    )
     axes[0].set_ylabel("x (um)")
     axes[1].set_ylabel("y (um)")
     axes[2].set_ylabel("twist (deg)")
     axes[2].set_xlabel("time (ms); orange lines: the video's frames at 135, 290, 326 ms")
     axes[0].legend(fontsize=7, ncol=2, loc="upper right")
     axes[0].set_xlim(0, 800)
-    fig.suptitle(f"730 um chip, 730/100 um four-pad, 20 nl, meniscus, overdamped (dotted: inertial x), "
-                 f"damping x{scene.damping_calibration:g}", fontsize=10)
+    fig.suptitle(
+        f"730 um chip, 730/100 um four-pad, 20 nl, meniscus, overdamped (dotted: inertial x), "
+        f"damping x{scene.damping_calibration:g}",
+        fontsize=10,
+    )
     fig.tight_layout()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -65,8 +65,20 @@ AGREE = 1e-6
 #: Sizes: the check scene's pixel size (um), the cubes (N px, twists), Monte Carlo starts
 #: and their chunk.
 SIZES = {
-    "gpu": {"um_per_px": 2.0, "cube": (512, 181), "large": (4096, 46), "starts": 1_000_000, "chunk": 65536},
-    "smoke": {"um_per_px": 10.0, "cube": (64, 19), "large": (128, 10), "starts": 2000, "chunk": 512},
+    "gpu": {
+        "um_per_px": 2.0,
+        "cube": (512, 181),
+        "large": (4096, 46),
+        "starts": 1_000_000,
+        "chunk": 65536,
+    },
+    "smoke": {
+        "um_per_px": 10.0,
+        "cube": (64, 19),
+        "large": (128, 10),
+        "starts": 2000,
+        "chunk": 512,
+    },
 }
 
 COLUMNS = ("step", "backend", "work", "seconds", "poses/s", "check")
@@ -96,16 +108,31 @@ def check_rows(um_per_px: float, repeats: int) -> tuple[list[dict], float, objec
         s, ls = best_of(lambda b=backend: build_landscape(scene, backend=b), repeats)
         built[backend] = ls
         t, ny, nx = ls.energy.shape
-        rows.append({"step": "landscape (check)", "backend": backend, "work": f"{t} twists x {ny} x {nx} poses",
-                     "seconds": s, "poses_per_s": ls.energy.size / s})
-    whole_chip = abs(scene.delta_gamma_N_m) * scene.chip.area_um2 * UM2  # J of a whole chip's overlap
-    diff = np.abs(built["jax"].energy.astype(np.float64) - built["scipy"].energy.astype(np.float64)).max()
+        rows.append(
+            {
+                "step": "landscape (check)",
+                "backend": backend,
+                "work": f"{t} twists x {ny} x {nx} poses",
+                "seconds": s,
+                "poses_per_s": ls.energy.size / s,
+            }
+        )
+    whole_chip = (
+        abs(scene.delta_gamma_N_m) * scene.chip.area_um2 * UM2
+    )  # J of a whole chip's overlap
+    diff = np.abs(
+        built["jax"].energy.astype(np.float64) - built["scipy"].energy.astype(np.float64)
+    ).max()
     err = float(diff / whole_chip)
-    rows[-1]["check"] = f"JAX - SciPy: {err:.2e} of the chip area at most ({'ok' if err <= AGREE else 'FAILED'}, limit {AGREE:g})"
+    rows[-1]["check"] = (
+        f"JAX - SciPy: {err:.2e} of the chip area at most ({'ok' if err <= AGREE else 'FAILED'}, limit {AGREE:g})"
+    )
     return rows, err, (scene, built["jax"])
 
 
-def cube_row(n: int, twists: int, backend: str, chips_kind: str, repeats: int, err_twists: int = 3) -> dict:
+def cube_row(
+    n: int, twists: int, backend: str, chips_kind: str, repeats: int, err_twists: int = 3
+) -> dict:
     """The full linear correlation of the landscape benchmark's N px pattern with ``twists`` chips."""
     from landscape import make_chips, make_pattern, scipy_rfft2_f64, selfalign_method
 
@@ -118,8 +145,14 @@ def cube_row(n: int, twists: int, backend: str, chips_kind: str, repeats: int, e
     err = float(np.abs(out[idx].astype(np.float64) - ref).max() / chips[0].sum(dtype=np.float64))
     t, h, w = out.shape
     step = 180.0 / (twists - 1) if twists > 1 else 0.0
-    return {"step": f"cube {n} px", "backend": backend, "work": f"{t} twists ({step:g} deg) x {h} x {w} poses", "seconds": s,
-            "poses_per_s": out.size / s, "check": f"max error {err:.1e} of the chip area ({len(idx)} twists vs float64)"}
+    return {
+        "step": f"cube {n} px",
+        "backend": backend,
+        "work": f"{t} twists ({step:g} deg) x {h} x {w} poses",
+        "seconds": s,
+        "poses_per_s": out.size / s,
+        "check": f"max error {err:.1e} of the chip area ({len(idx)} twists vs float64)",
+    }
 
 
 def montecarlo_row(scene, ls, n: int, chunk: int, repeats: int) -> dict:
@@ -128,36 +161,73 @@ def montecarlo_row(scene, ls, n: int, chunk: int, repeats: int) -> dict:
 
     starts = random_starts(n, (400, 400, 30), seed=0, distribution="uniform")
     chunk = min(chunk, n)
-    run_batch(scene, starts[:chunk], "greedy", landscape=ls, chunk=chunk, progress=False)  # compiles
-    s, r = best_of(lambda: run_batch(scene, starts, "greedy", landscape=ls, chunk=chunk, progress=False), max(0, repeats - 1))
+    run_batch(
+        scene, starts[:chunk], "greedy", landscape=ls, chunk=chunk, progress=False
+    )  # compiles
+    s, r = best_of(
+        lambda: run_batch(scene, starts, "greedy", landscape=ls, chunk=chunk, progress=False),
+        max(0, repeats - 1),
+    )
     run_s = r.stats["run_s"]
-    return {"step": "Monte Carlo greedy", "backend": "jax", "work": f"{n:,} starts, {int(r.steps.sum()):,} steps (chunk {chunk:,})",
-            "seconds": run_s, "poses_per_s": float(r.steps.sum()) / run_s,
-            "check": f"{n / run_s:,.0f} starts/s, yield {float(np.mean(r.outcome == 0)):.3f}"}
+    return {
+        "step": "Monte Carlo greedy",
+        "backend": "jax",
+        "work": f"{n:,} starts, {int(r.steps.sum()):,} steps (chunk {chunk:,})",
+        "seconds": run_s,
+        "poses_per_s": float(r.steps.sum()) / run_s,
+        "check": f"{n / run_s:,.0f} starts/s, yield {float(np.mean(r.outcome == 0)):.3f}",
+    }
 
 
 def table(rows: list[dict]) -> str:
     lines = ["| " + " | ".join(COLUMNS) + " |", "|---|---|---|---:|---:|---|"]
     for r in rows:
-        lines.append(f"| {r['step']} | {r['backend']} | {r['work']} | {r['seconds']:.3g} | {r['poses_per_s']:,.0f} | {r.get('check', '')} |")
+        lines.append(
+            f"| {r['step']} | {r['backend']} | {r['work']} | {r['seconds']:.3g} | {r['poses_per_s']:,.0f} | {r.get('check', '')} |"
+        )
     return "\n".join(lines)
 
 
 def machine() -> dict:
     import jax
 
-    return {"python": platform.python_version(), "jax": jax.__version__, "jax_backend": jax.default_backend(),
-            "devices": [str(d) for d in jax.devices()], "cpus": os.cpu_count()}
+    return {
+        "python": platform.python_version(),
+        "jax": jax.__version__,
+        "jax_backend": jax.default_backend(),
+        "devices": [str(d) for d in jax.devices()],
+        "cpus": os.cpu_count(),
+    }
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--cpu-smoke", action="store_true", help="the same steps on small sizes, on the CPU (a few seconds)")
-    ap.add_argument("--chips", choices=("opencv", "exact"), default="opencv",
-                    help="chip rasters: warpAffine, no two alike (default), or exact, whose symmetries skip transforms")
-    ap.add_argument("--repeats", type=int, default=2, help="timed calls per step after a compiling one; the best is reported")
-    ap.add_argument("--chunk", type=int, default=None, help="Monte Carlo starts per compiled batch (default 65536; smoke 512)")
-    ap.add_argument("--json", type=Path, default=None, metavar="OUT", help="also write the rows as JSON")
+    ap.add_argument(
+        "--cpu-smoke",
+        action="store_true",
+        help="the same steps on small sizes, on the CPU (a few seconds)",
+    )
+    ap.add_argument(
+        "--chips",
+        choices=("opencv", "exact"),
+        default="opencv",
+        help="chip rasters: warpAffine, no two alike (default), or exact, whose symmetries skip transforms",
+    )
+    ap.add_argument(
+        "--repeats",
+        type=int,
+        default=2,
+        help="timed calls per step after a compiling one; the best is reported",
+    )
+    ap.add_argument(
+        "--chunk",
+        type=int,
+        default=None,
+        help="Monte Carlo starts per compiled batch (default 65536; smoke 512)",
+    )
+    ap.add_argument(
+        "--json", type=Path, default=None, metavar="OUT", help="also write the rows as JSON"
+    )
     args = ap.parse_args(argv)
     if args.repeats < 1:
         ap.error("--repeats must be >= 1")
@@ -169,8 +239,11 @@ def main(argv: list[str] | None = None) -> int:
 
     info = machine()
     if not args.cpu_smoke and jax.default_backend() != "gpu":
-        print(f"no GPU visible to JAX (jax {jax.__version__}, backend {jax.default_backend()}): install the CUDA build "
-              "with pip install -e '.[gpu]', or run --cpu-smoke", file=sys.stderr)
+        print(
+            f"no GPU visible to JAX (jax {jax.__version__}, backend {jax.default_backend()}): install the CUDA build "
+            "with pip install -e '.[gpu]', or run --cpu-smoke",
+            file=sys.stderr,
+        )
         return 2
     size = SIZES["smoke" if args.cpu_smoke else "gpu"]
     chunk = args.chunk or size["chunk"]
@@ -193,15 +266,30 @@ def main(argv: list[str] | None = None) -> int:
     total = time.perf_counter() - t_all
 
     devices = ", ".join(info["devices"])
-    print(f"GPU benchmark{' (CPU smoke run)' if args.cpu_smoke else ''}: jax {info['jax']} on {info['jax_backend']} ({devices}), "
-          f"{info['cpus']} CPUs, {args.chips} chip rasters, best of {args.repeats}\n")
+    print(
+        f"GPU benchmark{' (CPU smoke run)' if args.cpu_smoke else ''}: jax {info['jax']} on {info['jax_backend']} ({devices}), "
+        f"{info['cpus']} CPUs, {args.chips} chip rasters, best of {args.repeats}\n"
+    )
     print(table(rows))
     ok = err <= AGREE
-    print(f"\nJAX against SciPy: {'agree' if ok else 'DISAGREE'} to {err:.2e} of the chip area (limit {AGREE:g}); "
-          f"total {total:.0f} s{'' if args.cpu_smoke else ' (target < 300 s)'}")
+    print(
+        f"\nJAX against SciPy: {'agree' if ok else 'DISAGREE'} to {err:.2e} of the chip area (limit {AGREE:g}); "
+        f"total {total:.0f} s{'' if args.cpu_smoke else ' (target < 300 s)'}"
+    )
     if args.json:
-        args.json.write_text(json.dumps({"machine": info, "args": {k: str(v) for k, v in vars(args).items()}, "rows": rows,
-                                         "agree": err, "total_s": total}, indent=2) + "\n")
+        args.json.write_text(
+            json.dumps(
+                {
+                    "machine": info,
+                    "args": {k: str(v) for k, v in vars(args).items()},
+                    "rows": rows,
+                    "agree": err,
+                    "total_s": total,
+                },
+                indent=2,
+            )
+            + "\n"
+        )
         print(f"wrote {args.json}")
     return 0 if ok else 1
 

@@ -137,7 +137,12 @@ def make_chips(n: int, twists_deg: np.ndarray, kind: str = "exact") -> np.ndarra
 
         h = chip_side(n) / 2
         sq = box(-h, -h, h, h)
-        return np.stack([rasterize(affinity.rotate(sq, float(a), origin=(0, 0)), 1.0, shape=(n, n)) for a in twists_deg]).astype(np.float32)
+        return np.stack(
+            [
+                rasterize(affinity.rotate(sq, float(a), origin=(0, 0)), 1.0, shape=(n, n))
+                for a in twists_deg
+            ]
+        ).astype(np.float32)
     import cv2
 
     s = chip_side(n)
@@ -296,14 +301,6 @@ METHODS = {
 # ------------------------------------------------------------------ measurement
 
 
-
-
-
-
-
-
-
-
 def _error_twists(t: int, k: int) -> np.ndarray:
     return np.unique(np.linspace(0, t - 1, min(k, t)).round().astype(int))
 
@@ -388,7 +385,16 @@ def run_one(name: str, n: int, twists: np.ndarray, args: argparse.Namespace) -> 
     ctx = mp.get_context("spawn")
     with cf.ProcessPoolExecutor(max_workers=1, mp_context=ctx) as pool:
         fut = pool.submit(
-            _child, name, n, list(map(float, twists)), args.error_twists, args.samples, args.seed, args.chips, args.pattern, args.repeats
+            _child,
+            name,
+            n,
+            list(map(float, twists)),
+            args.error_twists,
+            args.samples,
+            args.seed,
+            args.chips,
+            args.pattern,
+            args.repeats,
         )
         try:
             return fut.result()
@@ -442,7 +448,11 @@ def speedups(rows: list[dict]) -> list[str]:
     """Per size: selfalign against the fastest peer measured (time and error)."""
     out = []
     for n in sorted({r["N"] for r in rows}):
-        done = {r["method"]: r for r in rows if r["N"] == n and "skipped" not in r and not r.get("extrapolated")}
+        done = {
+            r["method"]: r
+            for r in rows
+            if r["N"] == n and "skipped" not in r and not r.get("extrapolated")
+        }
         peers = [done[m] for m in PEERS if m in done]
         if "selfalign" not in done or not peers:
             continue
@@ -511,7 +521,12 @@ def main(argv: list[str] | None = None) -> int:
         default="four-pad",
         help="four-pad (default, mirror-symmetric) or four-pad-notch (a corner notch breaks the symmetry)",
     )
-    ap.add_argument("--repeats", type=int, default=3, help="timed calls per method after a warm-up; the best is reported")
+    ap.add_argument(
+        "--repeats",
+        type=int,
+        default=3,
+        help="timed calls per method after a warm-up; the best is reported",
+    )
     ap.add_argument(
         "--json", type=Path, default=None, metavar="OUT", help="also write the rows as JSON"
     )
@@ -581,7 +596,9 @@ def meniscus_row(repeats: int = 3) -> str:
     from simulator.landscape import build_landscape
     from simulator.scene import Scene
 
-    base = Scene.from_inputs(ROOT / "patterns/library/four_pad_730_50.png", chip_size_um=730, resolution_um=2.0)
+    base = Scene.from_inputs(
+        ROOT / "patterns/library/four_pad_730_50.png", chip_size_um=730, resolution_um=2.0
+    )
     men = base.replace(effects=replace(base.effects, meniscus=True))
     build_landscape(base), build_landscape(men)  # warm-up
     t = {"overlap": [], "meniscus": []}
@@ -591,8 +608,10 @@ def meniscus_row(repeats: int = 3) -> str:
             build_landscape(sc)
             t[name].append(time.perf_counter() - t0)
     a, b = min(t["overlap"]), min(t["meniscus"])
-    return (f"meniscus row: four_pad_730_50 at 2 um/px, {base.twist_axis.count} twists, h = {men.meniscus_height_um:.1f} um: "
-            f"overlap {a:.2f} s, meniscus {b:.2f} s, ratio {b / a:.2f} (best of {max(1, repeats)}, interleaved)")
+    return (
+        f"meniscus row: four_pad_730_50 at 2 um/px, {base.twist_axis.count} twists, h = {men.meniscus_height_um:.1f} um: "
+        f"overlap {a:.2f} s, meniscus {b:.2f} s, ratio {b / a:.2f} (best of {max(1, repeats)}, interleaved)"
+    )
 
 
 if __name__ == "__main__":

@@ -44,18 +44,36 @@ from simulator.render import (
 from simulator.scene import Effects, Scene, TwistGrid  # noqa: E402
 
 LIB = ROOT / "patterns" / "library"
-DEFECTS = ["square_200", "defect_A_inward", "defect_A_outward", "defect_B_inward", "defect_B_outward", "defect_C_inward",
-           "defect_C_outward", "constant_jagged_a5", "random_jagged_s2", "random_jagged_s4", "random_jagged_s8"]
+DEFECTS = [
+    "square_200",
+    "defect_A_inward",
+    "defect_A_outward",
+    "defect_B_inward",
+    "defect_B_outward",
+    "defect_C_inward",
+    "defect_C_outward",
+    "constant_jagged_a5",
+    "random_jagged_s2",
+    "random_jagged_s4",
+    "random_jagged_s8",
+]
 
 
 def figure(out: Path) -> None:
-    base = Scene.from_inputs(LIB / "four_pad_730_50.png", chip_size_um=730, resolution_um=2.0, effects=Effects(twist=False),
-                             liquid=Liquid(volume_nl=20.0))
+    base = Scene.from_inputs(
+        LIB / "four_pad_730_50.png",
+        chip_size_um=730,
+        resolution_um=2.0,
+        effects=Effects(twist=False),
+        liquid=Liquid(volume_nl=20.0),
+    )
     men = base.replace(effects=replace(base.effects, meniscus=True))
     a, b = build_landscape(base), build_landscape(men)
     plot_forces(b, out, through=(0.0, 0.0, 0.0), compare=a)
     k = stiffness(b, 0.0, 0.0, 0.0)
-    print(f"four_pad_730_50, 730 um chip, 20 nl: h = {men.meniscus_height_um:.2f} um, stiffness x {k['x_N_per_m']:.3g} N/m; wrote {out}")
+    print(
+        f"four_pad_730_50, 730 um chip, 20 nl: h = {men.meniscus_height_um:.2f} um, stiffness x {k['x_N_per_m']:.3g} N/m; wrote {out}"
+    )
 
 
 def evolver_paths(level: str = "2") -> dict[int, list[dict]]:
@@ -65,7 +83,11 @@ def evolver_paths(level: str = "2") -> dict[int, list[dict]]:
     rows: dict[int, list[dict]] = {}
     with open(ROOT / "validation" / "evolver_fourpad_levels.csv", newline="") as f:
         for r in csv.DictReader(f):
-            if r["path"] in ("x_730_50", "x_730_100") and r["level"] == level and float(r["y_um"]) == 0.0:
+            if (
+                r["path"] in ("x_730_50", "x_730_100")
+                and r["level"] == level
+                and float(r["y_um"]) == 0.0
+            ):
                 rows.setdefault(int(float(r["g_um"])), []).append(r)
     return rows
 
@@ -90,12 +112,21 @@ def evolver_figure(out: Path) -> None:
     plt = pyplot()
     paths, finer, inward = evolver_paths("2"), evolver_paths("3"), evolver_inward("1")
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.6), layout="constrained", sharey=True)
-    print("| gap (um) | x (um) | Surface Evolver inward, level 1 (uN) | Surface Evolver outward, level 2 (uN) | meniscus model (uN) "
-          "| overlap model (uN) |")
+    print(
+        "| gap (um) | x (um) | Surface Evolver inward, level 1 (uN) | Surface Evolver outward, level 2 (uN) | meniscus model (uN) "
+        "| overlap model (uN) |"
+    )
     print("|---:|---:|---:|---:|---:|---:|")
     for ax, gap in zip(axes, (50, 100), strict=True):
-        base = Scene.from_inputs(LIB / f"four_pad_730_{gap}.png", chip_size_um=730, resolution_um=2.0, effects=Effects(twist=False),
-                                 liquid=Liquid(volume_nl=20.0), window_um=520, dtype="float64")
+        base = Scene.from_inputs(
+            LIB / f"four_pad_730_{gap}.png",
+            chip_size_um=730,
+            resolution_um=2.0,
+            effects=Effects(twist=False),
+            liquid=Liquid(volume_nl=20.0),
+            window_um=520,
+            dtype="float64",
+        )
         men = base.replace(effects=replace(base.effects, meniscus=True))
         over, mls = build_landscape(base), build_landscape(men)
         xs = np.arange(0.0, 510.0, 2.0)
@@ -105,23 +136,59 @@ def evolver_figure(out: Path) -> None:
         sx = np.array([float(r["x_um"]) for r in se])
         sf = np.array([float(r["force_x_N"]) for r in se]) * 1e6
         ax.plot(xs, -f_over, "--", color="0.45", label="overlap model")
-        ax.plot(xs, -f_men, color=PATH_COLOUR, label=f"meniscus model (h = {men.meniscus_height_um:.1f} um)")
-        ax.plot(sx, -sf, "o", ms=4, color=CHIP_COLOUR, label="Surface Evolver, outward from alignment (level 2)")
+        ax.plot(
+            xs,
+            -f_men,
+            color=PATH_COLOUR,
+            label=f"meniscus model (h = {men.meniscus_height_um:.1f} um)",
+        )
+        ax.plot(
+            sx,
+            -sf,
+            "o",
+            ms=4,
+            color=CHIP_COLOUR,
+            label="Surface Evolver, outward from alignment (level 2)",
+        )
         f3 = sorted(finer.get(gap, []), key=lambda r: float(r["x_um"]))
-        ax.plot([float(r["x_um"]) for r in f3], [-float(r["force_x_fd_N"]) * 1e6 for r in f3], "o", ms=7, mfc="none",
-                color=CHIP_COLOUR, label="Surface Evolver, outward (level 3)")
-        inw = {float(r["x_um"]): -float(r["force_x_N"]) * 1e6 for r in inward.get(gap, []) if float(r["x_um"]) > 1}
-        ax.plot(list(inw), list(inw.values()), "^", ms=5, color="black", label="Surface Evolver, inward from x = 500 um (level 1; x = 0 not relaxed, left out)")
+        ax.plot(
+            [float(r["x_um"]) for r in f3],
+            [-float(r["force_x_fd_N"]) * 1e6 for r in f3],
+            "o",
+            ms=7,
+            mfc="none",
+            color=CHIP_COLOUR,
+            label="Surface Evolver, outward (level 3)",
+        )
+        inw = {
+            float(r["x_um"]): -float(r["force_x_N"]) * 1e6
+            for r in inward.get(gap, [])
+            if float(r["x_um"]) > 1
+        }
+        ax.plot(
+            list(inw),
+            list(inw.values()),
+            "^",
+            ms=5,
+            color="black",
+            label="Surface Evolver, inward from x = 500 um (level 1; x = 0 not relaxed, left out)",
+        )
         p = (730 - gap) / 2
-        ax.axvspan(p, p + gap, color=PLATEAU_COLOUR, alpha=0.25, lw=0, label="overlap model's flat part")
-        ax.set_title(f"four-pad 730/{gap} um, 730 um chip, 20 nl, pads 30 deg, substrate 60 deg", fontsize=9)
+        ax.axvspan(
+            p, p + gap, color=PLATEAU_COLOUR, alpha=0.25, lw=0, label="overlap model's flat part"
+        )
+        ax.set_title(
+            f"four-pad 730/{gap} um, 730 um chip, 20 nl, pads 30 deg, substrate 60 deg", fontsize=9
+        )
         ax.set_xlabel("x (um)")
         ax.grid(alpha=0.3)
         out_f = {float(r["x_um"]): -float(r["force_x_N"]) * 1e6 for r in se}
         for x in sorted(set(out_f) | set(inw)):
             i, o = (f"{d[x]:.2f}" if x in d else "" for d in (inw, out_f))
-            print(f"| {gap} | {x:g} | {i} | {o} | {-float(mls.force_at(x, 0.0, 0.0)[0]) * 1e6:.2f} | "
-                  f"{-float(over.force_at(x, 0.0, 0.0)[0]) * 1e6:.2f} |")
+            print(
+                f"| {gap} | {x:g} | {i} | {o} | {-float(mls.force_at(x, 0.0, 0.0)[0]) * 1e6:.2f} | "
+                f"{-float(over.force_at(x, 0.0, 0.0)[0]) * 1e6:.2f} |"
+            )
     axes[0].set_ylabel("restoring force -F_x (uN)")
     fig.legend(*axes[0].get_legend_handles_labels(), loc="outside lower center", ncol=3, fontsize=8)
     save_figure(fig, out)
@@ -136,32 +203,50 @@ def evolver_defects(volume_nl: float = 0.9) -> dict[str, tuple[float, float, flo
     with open(ROOT / "validation" / "evolver_defects.csv", newline="") as f:
         for r in csv.DictReader(f):
             if float(r["volume_nl"]) == volume_nl:
-                name = "square_200" if r["defect"] == "none" else f"defect_{r['defect']}_{r['kind']}"
+                name = (
+                    "square_200" if r["defect"] == "none" else f"defect_{r['defect']}_{r['kind']}"
+                )
                 out[name] = (float(r["x_um"]), float(r["y_um"]), float(r["twist_deg"]))
     return out
 
 
 def table() -> None:
     se = evolver_defects(0.9)
-    print("| pattern | global minimum x (um) | y (um) | twist (deg) | Surface Evolver x, y (um), twist (deg) | stiffness x (N/m) | y (N/m) | twist (N m/rad) |")
+    print(
+        "| pattern | global minimum x (um) | y (um) | twist (deg) | Surface Evolver x, y (um), twist (deg) | stiffness x (N/m) | y (N/m) | twist (N m/rad) |"
+    )
     print("|---|---:|---:|---:|---:|---:|---:|---:|")
     for name in DEFECTS:
         t0 = time.perf_counter()
-        sc = Scene.from_inputs(LIB / f"{name}.png", chip_size_um=200, effects=Effects(meniscus=True),
-                               liquid=Liquid(volume_nl=0.9, pinned=True), twist=TwistGrid(0.25, -3, 3), window_um=30, dtype="float64")
+        sc = Scene.from_inputs(
+            LIB / f"{name}.png",
+            chip_size_um=200,
+            effects=Effects(meniscus=True),
+            liquid=Liquid(volume_nl=0.9, pinned=True),
+            twist=TwistGrid(0.25, -3, 3),
+            window_um=30,
+            dtype="float64",
+        )
         ls = build_landscape(sc)
         r = refine_minimum(ls, *ls.global_minimum()[:3])
         k = stiffness(ls, r["x_um"], r["y_um"], r["twist_deg"])
         ref = ", ".join(f"{v:+.2f}" for v in se[name]) if name in se else "—"
-        print(f"| {name} | {r['x_um']:+.2f} | {r['y_um']:+.2f} | {r['twist_deg']:+.2f} | {ref} | {k['x_N_per_m']:.3g} | {k['y_N_per_m']:.3g} | "
-              f"{k['twist_Nm_per_rad']:.3g} |", flush=True)
+        print(
+            f"| {name} | {r['x_um']:+.2f} | {r['y_um']:+.2f} | {r['twist_deg']:+.2f} | {ref} | {k['x_N_per_m']:.3g} | {k['y_N_per_m']:.3g} | "
+            f"{k['twist_Nm_per_rad']:.3g} |",
+            flush=True,
+        )
         print(f"  ({time.perf_counter() - t0:.1f} s)", file=sys.stderr)
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--skip-figure", action="store_true")
-    ap.add_argument("--evolver-only", action="store_true", help="only the four-pad figure and table against Surface Evolver")
+    ap.add_argument(
+        "--evolver-only",
+        action="store_true",
+        help="only the four-pad figure and table against Surface Evolver",
+    )
     args = ap.parse_args(argv)
     evolver_figure(ROOT / "docs" / "images" / "meniscus_fourpad_evolver.png")
     if args.evolver_only:

@@ -75,14 +75,18 @@ def _single(field, start, grid, method, max_steps):
 def time_loop(fld, grid, q0: np.ndarray, method: str, n: int, repeats: int) -> tuple[float, int]:
     """Best-of-``repeats`` seconds and total steps for a Python loop over the first n starts."""
     conv = (lambda v: jnp.asarray(v, jnp.int32)) if method == "greedy" else jnp.asarray
-    out = _single(fld, conv(q0[0]), grid=grid, method=method, max_steps=DEFAULT_MAX_STEPS)  # compile
+    out = _single(
+        fld, conv(q0[0]), grid=grid, method=method, max_steps=DEFAULT_MAX_STEPS
+    )  # compile
     jax.block_until_ready(out)
     best = math.inf
     for _ in range(repeats):
         steps = 0
         t = time.perf_counter()
         for i in range(n):
-            q, st, status, o, e = _single(fld, conv(q0[i]), grid=grid, method=method, max_steps=DEFAULT_MAX_STEPS)
+            q, st, status, o, e = _single(
+                fld, conv(q0[i]), grid=grid, method=method, max_steps=DEFAULT_MAX_STEPS
+            )
             steps += int(st)  # pulls the result to the host, as a user's loop would
             int(o)
         best = min(best, time.perf_counter() - t)
@@ -91,12 +95,20 @@ def time_loop(fld, grid, q0: np.ndarray, method: str, n: int, repeats: int) -> t
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--n", type=int, nargs="+", default=[1000, 10000, 100000], help="numbers of starts")
+    ap.add_argument(
+        "--n", type=int, nargs="+", default=[1000, 10000, 100000], help="numbers of starts"
+    )
     ap.add_argument("--methods", nargs="+", default=["greedy", "gradient"], choices=METHODS)
     ap.add_argument("--chunk", type=int, default=DEFAULT_CHUNK)
-    ap.add_argument("--loop-starts", type=int, default=300, help="starts the Python loop is timed on")
-    ap.add_argument("--repeats", type=int, default=3, help="timings per figure; the best is reported")
-    ap.add_argument("--page", "--readme", dest="readme", type=Path, default=ROOT / "docs" / "benchmarks.md")
+    ap.add_argument(
+        "--loop-starts", type=int, default=300, help="starts the Python loop is timed on"
+    )
+    ap.add_argument(
+        "--repeats", type=int, default=3, help="timings per figure; the best is reported"
+    )
+    ap.add_argument(
+        "--page", "--readme", dest="readme", type=Path, default=ROOT / "docs" / "benchmarks.md"
+    )
     ap.add_argument("--no-page", "--no-readme", dest="no_readme", action="store_true")
     args = ap.parse_args(argv)
 
@@ -118,11 +130,16 @@ def main(argv: list[str] | None = None) -> int:
             t = time.perf_counter()
             run_batch(scene, starts[:n], method, landscape=ls, chunk=args.chunk, progress=False)
             warm = time.perf_counter() - t
-            runs = [run_batch(scene, starts[:n], method, landscape=ls, chunk=args.chunk, progress=False) for _ in range(args.repeats)]
+            runs = [
+                run_batch(scene, starts[:n], method, landscape=ls, chunk=args.chunk, progress=False)
+                for _ in range(args.repeats)
+            ]
             r = min(runs, key=lambda b: b.stats["run_s"])
             s = r.stats["run_s"]
             if first:
-                notes.append(f"{method}: first call (compile + run) of {n:,} starts {warm:.2f} s, second {s:.2f} s")
+                notes.append(
+                    f"{method}: first call (compile + run) of {n:,} starts {warm:.2f} s, second {s:.2f} s"
+                )
                 first = False
             loop_n = n / loop_rate
             rows.append(
@@ -174,7 +191,11 @@ def write_readme(path: Path, text: str) -> None:
     block = f"{MARK_OPEN}\n{text}\n{MARK_CLOSE}"
     old = path.read_text() if path.exists() else ""
     pat = re.compile(re.escape(MARK_OPEN) + r".*?" + re.escape(MARK_CLOSE), re.S)
-    new = pat.sub(lambda _: block, old) if pat.search(old) else old.rstrip("\n") + ("\n\n" if old else "") + block + "\n"
+    new = (
+        pat.sub(lambda _: block, old)
+        if pat.search(old)
+        else old.rstrip("\n") + ("\n\n" if old else "") + block + "\n"
+    )
     path.write_text(new)
 
 

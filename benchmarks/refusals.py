@@ -34,11 +34,19 @@ from patterns.mask import Mask  # noqa: E402
 from patterns.raster import mask_from_geometry  # noqa: E402
 from simulator import Scene, build_landscape, simulate  # noqa: E402
 
-TARGETS_S = {"refuse over-budget landscape": 0.5, "4096 px greedy trajectory": 60.0, "refuse hostile scene files": 1.0}
+TARGETS_S = {
+    "refuse over-budget landscape": 0.5,
+    "4096 px greedy trajectory": 60.0,
+    "refuse hostile scene files": 1.0,
+}
 
 
 def refuse_seconds() -> float:
-    s = Scene(pattern=Mask(np.ones((4096, 4096)), 1.0), chip=mask_from_geometry(square(4000), 1.0), memory_budget_mb=64)
+    s = Scene(
+        pattern=Mask(np.ones((4096, 4096)), 1.0),
+        chip=mask_from_geometry(square(4000), 1.0),
+        memory_budget_mb=64,
+    )
     best = float("inf")
     for _ in range(3):
         t0 = time.perf_counter()
@@ -51,7 +59,10 @@ def refuse_seconds() -> float:
 
 def trajectory_seconds() -> float:
     t0 = time.perf_counter()
-    s = Scene(pattern=mask_from_geometry(four_pad(4096, 96), 1.0), chip=mask_from_geometry(square(4000), 1.0))
+    s = Scene(
+        pattern=mask_from_geometry(four_pad(4096, 96), 1.0),
+        chip=mask_from_geometry(square(4000), 1.0),
+    )
     simulate(s, (90, -70, 1), method="greedy", max_steps=100)
     return time.perf_counter() - t0
 
@@ -63,8 +74,11 @@ def hostile_files_seconds() -> float:
     from patterns.metadata import parse_png_params
     from simulator.scene import read_scene_file
 
-    texts = {"deep.toml": "x = " + "[" * 5000 + "]" * 5000 + "\n", "dotted.toml": "x" + ".a" * 200_000 + " = 1\n",
-             "big.toml": "x = [" + "0," * 25_000_000 + "]\n"}
+    texts = {
+        "deep.toml": "x = " + "[" * 5000 + "]" * 5000 + "\n",
+        "dotted.toml": "x" + ".a" * 200_000 + " = 1\n",
+        "big.toml": "x = [" + "0," * 25_000_000 + "]\n",
+    }
     worst = 0.0
     with tempfile.TemporaryDirectory() as d:
         calls = []
@@ -85,13 +99,18 @@ def hostile_files_seconds() -> float:
 
 
 def main() -> int:
-    results = {"refuse over-budget landscape": refuse_seconds(), "4096 px greedy trajectory": trajectory_seconds(),
-               "refuse hostile scene files": hostile_files_seconds()}
+    results = {
+        "refuse over-budget landscape": refuse_seconds(),
+        "4096 px greedy trajectory": trajectory_seconds(),
+        "refuse hostile scene files": hostile_files_seconds(),
+    }
     ok = True
     for name, seconds in results.items():
         target = TARGETS_S[name]
         ok &= seconds < target
-        print(f"{name}: {seconds:.3f} s (target < {target:g} s) {'ok' if seconds < target else 'MISSED'}")
+        print(
+            f"{name}: {seconds:.3f} s (target < {target:g} s) {'ok' if seconds < target else 'MISSED'}"
+        )
     return 0 if ok else 1
 
 

@@ -47,8 +47,12 @@ def spec(n: int) -> dict:
     return {
         "scene": {"chip_size_um": 730, "resolution_um": 5, "twist": {"step_deg": 3}},
         "design": {"name": "four-pad", "size": 730, "gap": 50},
-        "axes": {"gap": {"from": 20, "to": 250, "num": n}, "volume_nl": {"from": 5, "to": 40, "num": n},
-                 "placement_sigma_um": 150, "placement_sigma_deg": 2},
+        "axes": {
+            "gap": {"from": 20, "to": 250, "num": n},
+            "volume_nl": {"from": 5, "to": 40, "num": n},
+            "placement_sigma_um": 150,
+            "placement_sigma_deg": 2,
+        },
         "sweep": {"seed": 1},
     }
 
@@ -65,18 +69,34 @@ def loop(n: int) -> dict:
         assess_point(plan.task(p))
         per.append(time.perf_counter() - t)
     s = time.perf_counter() - t0
-    return {"seconds": s, "points_per_s": len(per) / s, "first_point_s": per[0], "median_point_s": float(np.median(per[1:]))}
+    return {
+        "seconds": s,
+        "points_per_s": len(per) / s,
+        "first_point_s": per[0],
+        "median_point_s": float(np.median(per[1:])),
+    }
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--points-per-axis", type=int, default=8)
-    parser.add_argument("--repeat", type=int, default=2, help="runs of every phase, alternating; the best of them is reported")
-    parser.add_argument("--loop-one-core", action="store_true", help=argparse.SUPPRESS)  # the child run of item 1b
+    parser.add_argument(
+        "--repeat",
+        type=int,
+        default=2,
+        help="runs of every phase, alternating; the best of them is reported",
+    )
+    parser.add_argument(
+        "--loop-one-core", action="store_true", help=argparse.SUPPRESS
+    )  # the child run of item 1b
     args = parser.parse_args()
     n_axis = args.points_per_axis
-    if args.loop_one_core:  # as a worker is: XLA on one thread, the FFTs and batches sized for one core
-        os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} --xla_cpu_multi_thread_eigen=false".strip()
+    if (
+        args.loop_one_core
+    ):  # as a worker is: XLA on one thread, the FFTs and batches sized for one core
+        os.environ["XLA_FLAGS"] = (
+            f"{os.environ.get('XLA_FLAGS', '')} --xla_cpu_multi_thread_eigen=false".strip()
+        )
         os.environ["SELFALIGN_THREADS"] = "1"
         print(json.dumps(loop(n_axis)))
         return 0
@@ -84,25 +104,63 @@ def main() -> int:
 
     sp = spec(n_axis)
     n = n_axis**2
-    out: dict = {"points": n, "cpus": os.cpu_count(), "repeats": args.repeat, "load_before": os.getloadavg()}
-    runs: dict[str, list[dict]] = {"loop": [], "loop_one_core": [], "two_loops_one_core": [], "workers_1": [], "workers_2": []}
-    for rep in range(args.repeat):  # the phases alternate, so that a burst of load elsewhere hits all of them alike
+    out: dict = {
+        "points": n,
+        "cpus": os.cpu_count(),
+        "repeats": args.repeat,
+        "load_before": os.getloadavg(),
+    }
+    runs: dict[str, list[dict]] = {
+        "loop": [],
+        "loop_one_core": [],
+        "two_loops_one_core": [],
+        "workers_1": [],
+        "workers_2": [],
+    }
+    for rep in range(
+        args.repeat
+    ):  # the phases alternate, so that a burst of load elsewhere hits all of them alike
         # 1. plain loops: every core for one point (this process; cold only the first time), and one core (a fresh child, as a worker)
         runs["loop"].append(loop(n_axis) | {"load": os.getloadavg()[0]})
         cmd = [sys.executable, __file__, "--loop-one-core", "--points-per-axis", str(n_axis)]
-        child = subprocess.run(cmd, capture_output=True, text=True, check=True, env=os.environ | {"OMP_NUM_THREADS": "1"})
-        runs["loop_one_core"].append(json.loads(child.stdout.strip().splitlines()[-1]) | {"load": os.getloadavg()[0]})
+        child = subprocess.run(
+            cmd,
+            capture_output=True,
+            text=True,
+            check=True,
+            env=os.environ | {"OMP_NUM_THREADS": "1"},
+        )
+        runs["loop_one_core"].append(
+            json.loads(child.stdout.strip().splitlines()[-1]) | {"load": os.getloadavg()[0]}
+        )
         # 1c. two such children at once, without Dask: what two cores of this machine give right now
-        pair = [subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True, env=os.environ | {"OMP_NUM_THREADS": "1"}) for _ in range(2)]
+        pair = [
+            subprocess.Popen(
+                cmd, stdout=subprocess.PIPE, text=True, env=os.environ | {"OMP_NUM_THREADS": "1"}
+            )
+            for _ in range(2)
+        ]
         both = [json.loads(p.communicate()[0].strip().splitlines()[-1]) for p in pair]
-        runs["two_loops_one_core"].append({"seconds": max(b["seconds"] for b in both), "points_per_s": sum(b["points_per_s"] for b in both),
-                                           "median_point_s": float(np.mean([b["median_point_s"] for b in both])), "load": os.getloadavg()[0]})
-        for k, what in (("loop", "plain loop, all cores"), ("loop_one_core", "plain loop, one core"),
-                        ("two_loops_one_core", "two one-core loops at once (no Dask), together")):
+        runs["two_loops_one_core"].append(
+            {
+                "seconds": max(b["seconds"] for b in both),
+                "points_per_s": sum(b["points_per_s"] for b in both),
+                "median_point_s": float(np.mean([b["median_point_s"] for b in both])),
+                "load": os.getloadavg()[0],
+            }
+        )
+        for k, what in (
+            ("loop", "plain loop, all cores"),
+            ("loop_one_core", "plain loop, one core"),
+            ("two_loops_one_core", "two one-core loops at once (no Dask), together"),
+        ):
             r = runs[k][-1]
             first = f"first {r['first_point_s']:.1f} s, then " if "first_point_s" in r else ""
-            print(f"[{rep + 1}] {what}: {'2 x ' if k.startswith('two') else ''}{n} points in {r['seconds']:.1f} s = {r['points_per_s']:.2f} points/s "
-                  f"({first}median {r['median_point_s']:.2f} s; load {r['load']:.1f})", flush=True)
+            print(
+                f"[{rep + 1}] {what}: {'2 x ' if k.startswith('two') else ''}{n} points in {r['seconds']:.1f} s = {r['points_per_s']:.2f} points/s "
+                f"({first}median {r['median_point_s']:.2f} s; load {r['load']:.1f})",
+                flush=True,
+            )
         # 2, 3. Dask, each on a fresh LocalCluster (cold workers)
         for workers in (1, 2):
             with tempfile.TemporaryDirectory() as d:
@@ -112,29 +170,45 @@ def main() -> int:
             st = table.attrs["sweep"]
             assert st["run_now"] == n and st["failed"] == 0, st
             busy = float(table["seconds"].sum())  # inside the assessments, compilation included
-            r = {"cluster_s": st["cluster_s"], "seconds": st["run_s"], "wall_s": wall, "points_per_s": n / st["run_s"],
-                 "median_point_s": float(table["seconds"].iloc[workers:].median()), "load": os.getloadavg()[0],
-                 "outside_per_point_s": (workers * st["run_s"] - busy) / n}
+            r = {
+                "cluster_s": st["cluster_s"],
+                "seconds": st["run_s"],
+                "wall_s": wall,
+                "points_per_s": n / st["run_s"],
+                "median_point_s": float(table["seconds"].iloc[workers:].median()),
+                "load": os.getloadavg()[0],
+                "outside_per_point_s": (workers * st["run_s"] - busy) / n,
+            }
             runs[f"workers_{workers}"].append(r)
-            print(f"[{rep + 1}] {workers} worker(s): cluster start {st['cluster_s']:.1f} s, {n} points in {st['run_s']:.1f} s = "
-                  f"{r['points_per_s']:.2f} points/s (wall {wall:.1f} s; median point {r['median_point_s']:.2f} s inside the worker; "
-                  f"{1000 * r['outside_per_point_s']:.0f} ms per point outside the assessment; load {r['load']:.1f})", flush=True)
+            print(
+                f"[{rep + 1}] {workers} worker(s): cluster start {st['cluster_s']:.1f} s, {n} points in {st['run_s']:.1f} s = "
+                f"{r['points_per_s']:.2f} points/s (wall {wall:.1f} s; median point {r['median_point_s']:.2f} s inside the worker; "
+                f"{1000 * r['outside_per_point_s']:.0f} ms per point outside the assessment; load {r['load']:.1f})",
+                flush=True,
+            )
     out["runs"] = runs
     for k, v in runs.items():  # best of the repeats: the least disturbed run
         out[k] = min(v, key=lambda r: r["seconds"])
-    out["workers_1"]["run_s"], out["workers_2"]["run_s"] = out["workers_1"]["seconds"], out["workers_2"]["seconds"]
+    out["workers_1"]["run_s"], out["workers_2"]["run_s"] = (
+        out["workers_1"]["seconds"],
+        out["workers_2"]["seconds"],
+    )
     w1, w2 = out["workers_1"], out["workers_2"]
     out["speedup_2_over_1"] = w1["run_s"] / w2["run_s"]
     # What two processes got from this machine at the time: 2 on an idle machine with 2 free cores.
-    out["machine_speedup_two_processes"] = out["two_loops_one_core"]["points_per_s"] / out["loop_one_core"]["points_per_s"]
+    out["machine_speedup_two_processes"] = (
+        out["two_loops_one_core"]["points_per_s"] / out["loop_one_core"]["points_per_s"]
+    )
     out["overhead_per_point_s"] = (w1["run_s"] - out["loop_one_core"]["seconds"]) / n
     out["overhead_per_point_vs_all_cores_s"] = (w1["run_s"] - out["loop"]["seconds"]) / n
     out["load_after"] = os.getloadavg()
-    print(f"speed-up 2 over 1 worker: {out['speedup_2_over_1']:.2f}x (two plain processes at once: "
-          f"{out['machine_speedup_two_processes']:.2f}x); overhead per point of the 1-worker sweep: "
-          f"{1000 * out['overhead_per_point_s']:.0f} ms against the one-core loop, {1000 * out['overhead_per_point_vs_all_cores_s']:.0f} ms "
-          f"against the all-core loop; load average before {out['load_before'][0]:.1f}, after {out['load_after'][0]:.1f} "
-          f"on {out['cpus']} cores")
+    print(
+        f"speed-up 2 over 1 worker: {out['speedup_2_over_1']:.2f}x (two plain processes at once: "
+        f"{out['machine_speedup_two_processes']:.2f}x); overhead per point of the 1-worker sweep: "
+        f"{1000 * out['overhead_per_point_s']:.0f} ms against the one-core loop, {1000 * out['overhead_per_point_vs_all_cores_s']:.0f} ms "
+        f"against the all-core loop; load average before {out['load_before'][0]:.1f}, after {out['load_after'][0]:.1f} "
+        f"on {out['cpus']} cores"
+    )
     res = Path(__file__).resolve().parent / "results" / "sweep.json"
     from patterns.outputs import atomic_output
 
@@ -144,5 +218,7 @@ def main() -> int:
     return 0
 
 
-if __name__ == "__main__":  # the workers are spawned and import this file: the guard keeps them from running it
+if (
+    __name__ == "__main__"
+):  # the workers are spawned and import this file: the guard keeps them from running it
     raise SystemExit(main())

@@ -50,10 +50,18 @@ def methods_figure(out: Path, start=(380.0, 120.0, 8.0)) -> list[str]:
         dt = time.perf_counter() - t0
         ax = axes[0, k]
         ax.imshow(scene.pattern.data, extent=scene.pattern.extent_um, cmap="gray", vmin=0, vmax=1.6)
-        sc = ax.scatter(t.path[:, 0], t.path[:, 1], c=t.path[:, 2], cmap="coolwarm", s=4, vmin=-25, vmax=25)
+        sc = ax.scatter(
+            t.path[:, 0], t.path[:, 1], c=t.path[:, 2], cmap="coolwarm", s=4, vmin=-25, vmax=25
+        )
         ax.plot(*t.path[0, :2], "o", color="C1", ms=6)
         ax.plot(*t.path[-1, :2], "s", color="C2", ms=6)
-        ax.set(xlim=(-420, 420), ylim=(-420, 420), xlabel="x (um)", ylabel="y (um)", title=f"{method}: {t.outcome}")
+        ax.set(
+            xlim=(-420, 420),
+            ylim=(-420, 420),
+            xlabel="x (um)",
+            ylabel="y (um)",
+            title=f"{method}: {t.outcome}",
+        )
         fig.colorbar(sc, ax=ax, shrink=0.75, label="twist (deg)")
         ax2 = axes[1, k]
         if t.t_s is not None:
@@ -66,8 +74,12 @@ def methods_figure(out: Path, start=(380.0, 120.0, 8.0)) -> list[str]:
         ax2.grid(alpha=0.3)
         f = [round(v, 1) + 0.0 for v in t.final]
         time_txt = f", {t.time_s * 1e3:.0f} ms of chip time" if t.time_s else ""
-        lines.append(f"| {method} | {t.outcome} | ({f[0]:g}, {f[1]:g}, {f[2]:g}) | {t.steps}{time_txt} | {dt:.2f} |")
-    fig.suptitle(f"730 um chip on the 730/50 um four-pad, 2 um/px, from ({start[0]:g}, {start[1]:g} um, {start[2]:g} deg)")
+        lines.append(
+            f"| {method} | {t.outcome} | ({f[0]:g}, {f[1]:g}, {f[2]:g}) | {t.steps}{time_txt} | {dt:.2f} |"
+        )
+    fig.suptitle(
+        f"730 um chip on the 730/50 um four-pad, 2 um/px, from ({start[0]:g}, {start[1]:g} um, {start[2]:g} deg)"
+    )
     fig.tight_layout()
     save_figure(fig, out / "methods.png", dpi=80)
     return lines
@@ -112,28 +124,43 @@ print(json.dumps({"wall_s": wall, "peak_mb": peak, "outcome": t.outcome, "steps"
 
 
 def large_run(engines=("fft", "path"), methods=("greedy", "gradient")) -> list[str]:
-    lines = ["| method | engine | outcome | steps | final (um, um, deg) | poses computed | wall (s) | peak RSS (MB) |",
-             "|---|---|---|---:|---|---:|---:|---:|"]
+    lines = [
+        "| method | engine | outcome | steps | final (um, um, deg) | poses computed | wall (s) | peak RSS (MB) |",
+        "|---|---|---|---:|---|---:|---:|---:|",
+    ]
     runs = {}
     with tempfile.TemporaryDirectory() as tmp:
         script = Path(tmp) / "run.py"
         script.write_text(LARGE_RUN)
         for method in methods:
             for engine in engines:
-                out = subprocess.run([sys.executable, str(script), method, engine], capture_output=True, text=True,
-                                     env=os.environ | {"PYTHONPATH": str(ROOT)})
+                out = subprocess.run(
+                    [sys.executable, str(script), method, engine],
+                    capture_output=True,
+                    text=True,
+                    env=os.environ | {"PYTHONPATH": str(ROOT)},
+                )
                 if out.returncode:
-                    lines.append(f"| {method} | {engine} | failed: {out.stderr.strip().splitlines()[-1]} |")
+                    lines.append(
+                        f"| {method} | {engine} | failed: {out.stderr.strip().splitlines()[-1]} |"
+                    )
                     continue
                 r = json.loads(out.stdout.strip().splitlines()[-1])
                 runs[method, engine] = r
                 f = ", ".join(f"{v:.3g}" for v in r["final"])
-                lines.append(f"| {method} | {engine} | {r['outcome']} | {r['steps']} | ({f}) | {r['poses']:,} | {r['wall_s']:.1f} | {r['peak_mb']:,.0f} |")
+                lines.append(
+                    f"| {method} | {engine} | {r['outcome']} | {r['steps']} | ({f}) | {r['poses']:,} | {r['wall_s']:.1f} | {r['peak_mb']:,.0f} |"
+                )
             if (method, "fft") in runs and (method, "path") in runs:
-                a, b = np.asarray(runs[method, "fft"]["path"]), np.asarray(runs[method, "path"]["path"])
+                a, b = (
+                    np.asarray(runs[method, "fft"]["path"]),
+                    np.asarray(runs[method, "path"]["path"]),
+                )
                 same = a.shape == b.shape and np.array_equal(a, b)
                 gap = np.abs(a[-1] - b[-1]).max()
-                lines.append(f"| {method} | | same path: {same}; final poses {gap:.2g} apart | | | | | |")
+                lines.append(
+                    f"| {method} | | same path: {same}; final poses {gap:.2g} apart | | | | | |"
+                )
     return lines
 
 

@@ -31,7 +31,18 @@ from simulator.landscape import build_landscape  # noqa: E402
 from simulator.physics import Liquid, Materials  # noqa: E402
 from simulator.scene import Effects, Scene, TwistGrid  # noqa: E402
 
-BIASES = [(50, 0), (100, 0), (300, 0), (400, 0), (500, 0), (600, 0), (50, 50), (100, 100), (200, -200), (300, -300)]
+BIASES = [
+    (50, 0),
+    (100, 0),
+    (300, 0),
+    (400, 0),
+    (500, 0),
+    (600, 0),
+    (50, 50),
+    (100, 100),
+    (200, -200),
+    (300, -300),
+]
 COLUMNS = [
     ("overlap, greedy", dict(meniscus=False, hysteresis=False), "greedy"),
     ("meniscus, gradient", dict(meniscus=True, hysteresis=False), "gradient"),
@@ -42,9 +53,15 @@ COLUMNS = [
 
 def scene(gap: int, meniscus: bool, hysteresis: bool, resolution: float) -> Scene:
     mat = Materials(pad_receding_deg=25.0, pad_advancing_deg=35.0) if hysteresis else Materials()
-    return Scene.from_inputs(ROOT / "patterns" / "library" / f"four_pad_730_{gap}.png", chip_size_um=730, resolution_um=resolution,
-                             effects=Effects(meniscus=meniscus, hysteresis=hysteresis), liquid=Liquid(volume_nl=20.0),
-                             materials=mat, twist=TwistGrid(2.0, -45.0, 45.0))
+    return Scene.from_inputs(
+        ROOT / "patterns" / "library" / f"four_pad_730_{gap}.png",
+        chip_size_um=730,
+        resolution_um=resolution,
+        effects=Effects(meniscus=meniscus, hysteresis=hysteresis),
+        liquid=Liquid(volume_nl=20.0),
+        materials=mat,
+        twist=TwistGrid(2.0, -45.0, 45.0),
+    )
 
 
 def main(argv=None) -> int:
@@ -61,18 +78,29 @@ def main(argv=None) -> int:
             ls = build_landscape(sc)
             ys = []
             for bx, by in BIASES:
-                starts = random_starts(args.starts, (10.0, 10.0, 2.0), seed=0, around=(float(bx), float(by), 0.0))
+                starts = random_starts(
+                    args.starts, (10.0, 10.0, 2.0), seed=0, around=(float(bx), float(by), 0.0)
+                )
                 res = run_batch(sc, starts, method, landscape=ls, progress=False)
                 ys.append(summarize(res)["yield"])
             seconds[name] = time.perf_counter() - t0
             yields[name] = ys
             print(f"  730/{gap} {name}: {seconds[name]:.1f} s", file=sys.stderr, flush=True)
-        print(f"\n730/{gap} um four-pad, 20 nl, {args.starts} placements per bias (sigma 10 um, 10 um, 2 deg), {args.resolution:g} um/px, 2 deg twists\n")
+        print(
+            f"\n730/{gap} um four-pad, 20 nl, {args.starts} placements per bias (sigma 10 um, 10 um, 2 deg), {args.resolution:g} um/px, 2 deg twists\n"
+        )
         print("| nominal bias (um) | " + " | ".join(n for n, _, _ in COLUMNS) + " |")
         print("|---|" + "---:|" * len(COLUMNS))
         for i, (bx, by) in enumerate(BIASES):
-            print(f"| ({bx}, {by}) | " + " | ".join(f"{100 * yields[n][i]:.1f} %" for n, _, _ in COLUMNS) + " |")
-        print("| time (s) | " + " | ".join(f"{seconds[n]:.0f}" for n, _, _ in COLUMNS) + " |", flush=True)
+            print(
+                f"| ({bx}, {by}) | "
+                + " | ".join(f"{100 * yields[n][i]:.1f} %" for n, _, _ in COLUMNS)
+                + " |"
+            )
+        print(
+            "| time (s) | " + " | ".join(f"{seconds[n]:.0f}" for n, _, _ in COLUMNS) + " |",
+            flush=True,
+        )
     return 0
 
 

@@ -70,8 +70,10 @@ def landscape_table() -> str:
     full = doc["args"]["twists"]
     m = doc["machine"]
     order = ["selfalign"] + [k for k in LANDSCAPE_METHODS if k != "selfalign"]
-    rows = sorted((r for r in doc["rows"] if "skipped" not in r),
-                  key=lambda r: (r["N"], order.index(r["method"]) if r["method"] in order else len(order)))
+    rows = sorted(
+        (r for r in doc["rows"] if "skipped" not in r),
+        key=lambda r: (r["N"], order.index(r["method"]) if r["method"] in order else len(order)),
+    )
     lines = [
         f"| N | method | twists | total s | ms/twist | s for {full} twists | peak MB (output MB) | max error / chip area |",
         "|---|---|---:|---:|---:|---:|---:|---:|",
@@ -85,24 +87,34 @@ def landscape_table() -> str:
             f"| {_g(per * full)}{' (extrap.)' if extrap else ''} | {r['peak_mb']:.0f} ({r['out_mb']:.0f}) "
             f"| {r['max_err_per_area']:.1e} |"
         )
-    lines += ["", _landscape_ratios(doc["rows"]), "",
-              f"Recorded with `python benchmarks/landscape.py --json benchmarks/results/landscape.json` "
-              f"(sizes {', '.join(map(str, doc['args']['sizes']))} px, chips `{doc['args']['chips']}`): "
-              f"{m['cpus']} CPUs ({m['processor']}), Python {m['python']}, numpy {m['numpy']}, scipy {m['scipy']}, "
-              f"OpenCV {m['opencv']}" + (f", JAX {m['jax']}" if "jax" in m else "") + "."]
+    lines += [
+        "",
+        _landscape_ratios(doc["rows"]),
+        "",
+        f"Recorded with `python benchmarks/landscape.py --json benchmarks/results/landscape.json` "
+        f"(sizes {', '.join(map(str, doc['args']['sizes']))} px, chips `{doc['args']['chips']}`): "
+        f"{m['cpus']} CPUs ({m['processor']}), Python {m['python']}, numpy {m['numpy']}, scipy {m['scipy']}, "
+        f"OpenCV {m['opencv']}" + (f", JAX {m['jax']}" if "jax" in m else "") + ".",
+    ]
     return "\n".join(lines)
 
 
 def _landscape_ratios(rows: list[dict]) -> str:
     out = []
     for n in sorted({r["N"] for r in rows}):
-        done = {r["method"]: r for r in rows if r["N"] == n and "skipped" not in r and not r.get("extrapolated")}
+        done = {
+            r["method"]: r
+            for r in rows
+            if r["N"] == n and "skipped" not in r and not r.get("extrapolated")
+        }
         peers = [done[k] for k in LANDSCAPE_PEERS if k in done]
         if "selfalign" not in done or not peers:
             continue
         best, me = min(peers, key=lambda r: r["seconds"]), done["selfalign"]
-        out.append(f"N = {n}: {best['seconds'] / me['seconds']:.2f}× ({_g(me['seconds'])} s against "
-                   f"{_g(best['seconds'])} s of {LANDSCAPE_METHODS.get(best['method'], best['method'])})")
+        out.append(
+            f"N = {n}: {best['seconds'] / me['seconds']:.2f}× ({_g(me['seconds'])} s against "
+            f"{_g(best['seconds'])} s of {LANDSCAPE_METHODS.get(best['method'], best['method'])})"
+        )
     return "selfalign against the fastest peer in this run: " + "; ".join(out) + "."
 
 
@@ -119,15 +131,19 @@ def sweep_table() -> str:
     """benchmarks/results/sweep.json: the same sweep as a plain loop and on 1 and 2 Dask workers."""
     doc = _load("sweep.json")
     n = doc["points"]
-    lines = [f"| {n} points, cold (imports and compilation included) | seconds | points/s | median point |",
-             "|---|---:|---:|---:|"]
+    lines = [
+        f"| {n} points, cold (imports and compilation included) | seconds | points/s | median point |",
+        "|---|---:|---:|---:|",
+    ]
     for key, label in SWEEP_RUNS.items():
         r = doc.get(key)
         if r is None:
             continue
         rate = f"{r['points_per_s']:.2f}" + (" together" if key == "two_loops_one_core" else "")
-        lines.append(f"| {label.format(points=n, cluster_s=r.get('cluster_s', 0.0))} | {r['seconds']:.1f} | {rate} "
-                     f"| {r['median_point_s']:.2g} s |")
+        lines.append(
+            f"| {label.format(points=n, cluster_s=r.get('cluster_s', 0.0))} | {r['seconds']:.1f} | {rate} "
+            f"| {r['median_point_s']:.2g} s |"
+        )
     w = [doc[k] for k in ("workers_1", "workers_2") if k in doc]
     outside = ", ".join(f"{r['outside_per_point_s'] * 1e3:.0f} ms" for r in w)
     lines += [
@@ -160,15 +176,26 @@ def accuracy_table() -> str:
     """benchmarks/results/accuracy.json: energy RMS % / force p90 % / landscape s per knob and case."""
     doc = _load("accuracy.json")
     cases = list(doc["cases"])
-    lines = ["| knob | value | " + " | ".join(doc["cases"][c]["title"] for c in cases) + " |",
-             "|---|---|" + "---|" * len(cases)]
-    keys = list(dict.fromkeys((r["knob"], r["value"]) for r in doc["rows"] if r["knob"] in ACCURACY_KNOBS))
+    lines = [
+        "| knob | value | " + " | ".join(doc["cases"][c]["title"] for c in cases) + " |",
+        "|---|---|" + "---|" * len(cases),
+    ]
+    keys = list(
+        dict.fromkeys((r["knob"], r["value"]) for r in doc["rows"] if r["knob"] in ACCURACY_KNOBS)
+    )
     last = None
     for knob, value in keys:
         label, fmt = ACCURACY_KNOBS[knob]
         cells = []
         for c in cases:
-            r = next((r for r in doc["rows"] if r["case"] == c and r["knob"] == knob and r["value"] == value), None)
+            r = next(
+                (
+                    r
+                    for r in doc["rows"]
+                    if r["case"] == c and r["knob"] == knob and r["value"] == value
+                ),
+                None,
+            )
             if r is None:
                 cells.append("—")
                 continue
@@ -230,7 +257,11 @@ def on_files(files, config):
     docs_dir = Path(config["docs_dir"])
     wanted = set()
     for f in files.documentation_pages():
-        wanted |= set(_outside_targets(Path(f.abs_src_path).read_text(encoding="utf-8"), f.src_uri, docs_dir).values())
+        wanted |= set(
+            _outside_targets(
+                Path(f.abs_src_path).read_text(encoding="utf-8"), f.src_uri, docs_dir
+            ).values()
+        )
     for rel in sorted(wanted):
         path = ROOT / rel
         if path.is_file():
@@ -246,11 +277,18 @@ def face_names(package: str) -> list[str]:
     stub = folder / "__init__.pyi"
     if stub.exists():
         tree = ast.parse(stub.read_text(encoding="utf-8"))
-        return [a.asname or a.name for node in tree.body if isinstance(node, ast.ImportFrom)
-                for a in node.names if a.asname in (None, a.name)]
+        return [
+            a.asname or a.name
+            for node in tree.body
+            if isinstance(node, ast.ImportFrom)
+            for a in node.names
+            if a.asname in (None, a.name)
+        ]
     tree = ast.parse((folder / "__init__.py").read_text(encoding="utf-8"))
     for node in tree.body:
-        if isinstance(node, ast.Assign) and any(getattr(t, "id", None) == "__all__" for t in node.targets):
+        if isinstance(node, ast.Assign) and any(
+            getattr(t, "id", None) == "__all__" for t in node.targets
+        ):
             return list(ast.literal_eval(node.value))
     return []
 
@@ -281,7 +319,9 @@ def on_page_markdown(markdown, page, config, files):
         if rel is None:
             return m.group(0)
         if not (ROOT / rel).is_file():
-            log.warning(f"{page.file.src_uri}: link to {m.group(2)!r}: no file {rel} in the repository")
+            log.warning(
+                f"{page.file.src_uri}: link to {m.group(2)!r}: no file {rel} in the repository"
+            )
             return m.group(0)
         new = posixpath.relpath(f"{REPO_PREFIX}/{rel}", posixpath.dirname(page.file.src_uri) or ".")
         return f"{m.group(1)}{new}{m.group(3) or ''}{m.group(4)}"
@@ -290,7 +330,9 @@ def on_page_markdown(markdown, page, config, files):
 
 
 def on_page_content(html, page, config, files):
-    return ROLE.sub(lambda m: f"<code>{m.group(2).split('.')[-1] if m.group(1) else m.group(2)}</code>", html)
+    return ROLE.sub(
+        lambda m: f"<code>{m.group(2).split('.')[-1] if m.group(1) else m.group(2)}</code>", html
+    )
 
 
 if __name__ == "__main__":

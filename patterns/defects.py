@@ -27,8 +27,15 @@ from patterns.shapes import EDGES, _choice, _finish, _length, rotate_quarter, sq
 # ---------------------------------------------------------------------------- defect
 
 
-def defect(size: float = 200.0, *, kind: str, position: str = "middle", edge: str = "right",
-           height: float, width: float) -> Polygon:
+def defect(
+    size: float = 200.0,
+    *,
+    kind: str,
+    position: str = "middle",
+    edge: str = "right",
+    height: float,
+    width: float,
+) -> Polygon:
     """Square of side ``size`` with one isosceles triangular defect (docs/physics.md §10).
 
     The triangle has its base (``width``) on the chosen ``edge`` and its apex ``height`` away
@@ -45,9 +52,14 @@ def defect(size: float = 200.0, *, kind: str, position: str = "middle", edge: st
     kind = _choice("kind", kind, ("inward", "outward"))
     position = _choice("position", position, ("middle", "corner"))
     edge = _choice("edge", edge, EDGES)
-    require(w <= L, f"width={w:g} um: the defect's base must fit on its edge, width <= size={L:g} um")
+    require(
+        w <= L, f"width={w:g} um: the defect's base must fit on its edge, width <= size={L:g} um"
+    )
     if kind == "inward":
-        require(h <= L / 2, f"height={h:g} um: an inward defect may reach at most the centre, height <= size/2 = {L / 2:g} um")
+        require(
+            h <= L / 2,
+            f"height={h:g} um: an inward defect may reach at most the centre, height <= size/2 = {L / 2:g} um",
+        )
     y0, y1 = (-w / 2, w / 2) if position == "middle" else (L / 2 - w, L / 2)
     apex_x = L / 2 + h if kind == "outward" else L / 2 - h
     tri = Polygon([(L / 2, y0), (apex_x, (y0 + y1) / 2), (L / 2, y1)])
@@ -97,7 +109,9 @@ def _from_edges(L: float, profiles: Sequence[tuple[np.ndarray, np.ndarray]], wha
     # Teeth touching at a corner can leave stray points or lines next to the polygon: drop them.
     parts = [g for g in shapely.get_parts(shape) if isinstance(g, Polygon) and g.area > 0]
     if len(parts) != 1 or len(parts[0].interiors) > 0:
-        raise InputError(f"{what}: the teeth cut the pattern apart into {len(parts)} pieces; use smaller teeth")
+        raise InputError(
+            f"{what}: the teeth cut the pattern apart into {len(parts)} pieces; use smaller teeth"
+        )
     return _finish(parts[0], what)
 
 
@@ -110,8 +124,14 @@ def _triangle_wave(t: np.ndarray, pitch: float, phase: str) -> np.ndarray:
     return 1.0 - 4.0 * np.abs(u - np.round(u))
 
 
-def constant_jagged(size: float = 200.0, *, amplitude: float, pitch: float | None = None,
-                    teeth: str = "centred", phase: str = "zero") -> Polygon:
+def constant_jagged(
+    size: float = 200.0,
+    *,
+    amplitude: float,
+    pitch: float | None = None,
+    teeth: str = "centred",
+    phase: str = "zero",
+) -> Polygon:
     """Square with every edge a regular zigzag (docs/physics.md §10).
 
     Teeth are triangles of height ``amplitude`` (peak to valley, perpendicular to the edge)
@@ -134,7 +154,10 @@ def constant_jagged(size: float = 200.0, *, amplitude: float, pitch: float | Non
     Corners follow the module rule: each edge's zigzag ends at the corner lines.
     """
     L, a = _length("size", size), _length("amplitude", amplitude)
-    require(a < L / 4, f"amplitude={a:g} um is too large for size={L:g} um; use amplitude < size/4 = {L / 4:g} um")
+    require(
+        a < L / 4,
+        f"amplitude={a:g} um is too large for size={L:g} um; use amplitude < size/4 = {L / 4:g} um",
+    )
     p = 2 * a if pitch is None else _length("pitch", pitch)
     require(p <= L, f"pitch={p:g} um must not exceed the edge, pitch <= size={L:g} um")
     teeth = _choice("teeth", teeth, ("centred", "outward", "inward"))
@@ -148,8 +171,14 @@ def constant_jagged(size: float = 200.0, *, amplitude: float, pitch: float | Non
     return _from_edges(L, [(t, d)] * 4, "constant-jagged")
 
 
-def random_jagged(size: float = 200.0, *, sigma: float, seed: int, pitch: float | None = None,
-                  profile: str = "teeth") -> Polygon:
+def random_jagged(
+    size: float = 200.0,
+    *,
+    sigma: float,
+    seed: int,
+    pitch: float | None = None,
+    profile: str = "teeth",
+) -> Polygon:
     """Square whose edges carry peaks of random signed height (docs/physics.md §10).
 
     Each edge holds ``n = floor(size / pitch)`` peaks at a fixed ``pitch`` (default
@@ -168,9 +197,14 @@ def random_jagged(size: float = 200.0, *, sigma: float, seed: int, pitch: float 
     """
     L, s = _length("size", size), _length("sigma", sigma)
     p = 4 * s if pitch is None else _length("pitch", pitch)
-    require(p <= L, f"pitch={p:g} um must not exceed the edge, pitch <= size={L:g} um (sigma <= size/4 for the default pitch)")
-    require(isinstance(seed, int | np.integer) and not isinstance(seed, bool) and seed >= 0,
-            f"seed must be an integer >= 0, got {seed!r}")
+    require(
+        p <= L,
+        f"pitch={p:g} um must not exceed the edge, pitch <= size={L:g} um (sigma <= size/4 for the default pitch)",
+    )
+    require(
+        isinstance(seed, int | np.integer) and not isinstance(seed, bool) and seed >= 0,
+        f"seed must be an integer >= 0, got {seed!r}",
+    )
     profile = _choice("profile", profile, ("teeth", "polyline"))
     n = math.floor(L / p + 1e-9)
     peaks_t = (np.arange(n) - (n - 1) / 2) * p
@@ -178,7 +212,13 @@ def random_jagged(size: float = 200.0, *, sigma: float, seed: int, pitch: float 
     profiles = []
     for h in heights:
         if profile == "teeth":
-            t = np.concatenate([[-L / 2], np.ravel(np.column_stack([peaks_t - p / 2, peaks_t])), [peaks_t[-1] + p / 2, L / 2]])
+            t = np.concatenate(
+                [
+                    [-L / 2],
+                    np.ravel(np.column_stack([peaks_t - p / 2, peaks_t])),
+                    [peaks_t[-1] + p / 2, L / 2],
+                ]
+            )
             d = np.concatenate([[0.0], np.ravel(np.column_stack([np.zeros(n), h])), [0.0, 0.0]])
         else:
             t = np.concatenate([[-L / 2], peaks_t, [L / 2]])
@@ -188,5 +228,7 @@ def random_jagged(size: float = 200.0, *, sigma: float, seed: int, pitch: float 
     try:
         return _from_edges(L, profiles, "random-jagged")
     except InputError:
-        raise InputError(f"sigma={s:g} um with seed={seed} cuts the {L:g} um pattern apart; "
-                         "use a smaller sigma or another seed") from None
+        raise InputError(
+            f"sigma={s:g} um with seed={seed} cuts the {L:g} um pattern apart; "
+            "use a smaller sigma or another seed"
+        ) from None

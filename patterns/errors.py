@@ -31,7 +31,9 @@ def positive(name: str, value: SupportsFloat | SupportsIndex | str, unit: str = 
     except (TypeError, ValueError):
         raise InputError(f"{name} must be a number, got {value!r}") from None
     if not (v > 0 and v < float("inf")):
-        raise InputError(f"{name} must be a finite number > 0{' ' + unit if unit else ''}, got {value!r}")
+        raise InputError(
+            f"{name} must be a finite number > 0{' ' + unit if unit else ''}, got {value!r}"
+        )
     return v
 
 
@@ -52,5 +54,7 @@ def require_regular_file(path: str | os.PathLike, what: str = "file") -> Path:
         raise InputError(f"{path}: is a directory, not {article} {what} file")
     if not stat.S_ISREG(st.st_mode):
         kind = "a FIFO (named pipe)" if stat.S_ISFIFO(st.st_mode) else "a device or socket"
-        raise InputError(f"{path}: is {kind}, not a regular {what} file; save the {what} to a file and give that")
+        raise InputError(
+            f"{path}: is {kind}, not a regular {what} file; save the {what} to a file and give that"
+        )
     return path

@@ -138,7 +138,9 @@ def _parse_points(value: Any, label: str) -> list[tuple[float, float]]:
             x, y = item.split(",")
             pts.append((float(x), float(y)))
         except ValueError:
-            raise InputError(f"{label}: cannot read point {item!r}; write \"X1,Y1;X2,Y2;X3,Y3\" in um") from None
+            raise InputError(
+                f'{label}: cannot read point {item!r}; write "X1,Y1;X2,Y2;X3,Y3" in um'
+            ) from None
     return pts
 
 
@@ -156,44 +158,136 @@ def _size_param(default: Any = REQUIRED, help: str = "side of the (nominal) squa
     return Param("size", "length", help, default, "um")
 
 
-DESIGNS: dict[str, Design] = {d.name: d for d in (
-    Design("square", square, "Square pad of side size.", (_size_param(),)),
-    Design("rectangle", rectangle, "Rectangular pad width x height.", (
-        Param("width", "length", "extent along x", unit="um"),
-        Param("height", "length", "extent along y", unit="um"))),
-    Design("circle", circle, "Circular pad (equal-area regular 1024-gon, radius error < 3.2e-6 r).", (
-        Param("diameter", "length", "circle diameter", unit="um"),
-        Param("segments", "int", "polygon vertices, a multiple of 4", 1024))),
-    Design("four-pad", four_pad, "2x2 square pads split by a cross-shaped gap (docs/physics.md §6.1).", (
-        _size_param(help="outer side, gaps included"),
-        Param("gap", "length", "width of the hydrophobic cross; pad side = (size - gap)/2", unit="um"))),
-    Design("defect", defect, "Square with one triangular defect on an edge (docs/physics.md §10.1).", (
-        _size_param(200.0),
-        Param("kind", "choice", "add the triangle (outward) or cut it out (inward)", choices=("inward", "outward")),
-        Param("position", "choice", "base centred on the edge, or flush with its counter-clockwise end",
-              "middle", choices=("middle", "corner")),
-        Param("edge", "choice", "edge carrying the defect", "right", choices=EDGES),
-        Param("height", "length", "triangle height, perpendicular to the edge", unit="um"),
-        Param("width", "length", "triangle base along the edge", unit="um"))),
-    Design("constant-jagged", constant_jagged, "Square with regular zigzag edges (docs/physics.md §10.2).", (
-        _size_param(200.0),
-        Param("amplitude", "length", "tooth height, peak to valley", unit="um"),
-        Param("pitch", "length", "tooth base along the edge (default 2 x amplitude: 45-degree flanks)",
-              lambda v: 2 * v["amplitude"], "um"),
-        Param("teeth", "choice", "teeth centred on the nominal edge, or all outside / inside it",
-              "centred", choices=("centred", "outward", "inward")),
-        Param("phase", "choice", "edge midpoint at a zero crossing (4-fold symmetric, exact area) "
-              "or at a tooth tip (also mirror symmetric)", "zero", choices=("zero", "peak")))),
-    Design("random-jagged", random_jagged, "Square with random-height teeth on every edge (docs/physics.md §10.3).", (
-        _size_param(200.0),
-        Param("sigma", "length", "standard deviation of the peak heights", unit="um"),
-        Param("pitch", "length", "peak spacing (default 4 x sigma)", lambda v: 4 * v["sigma"], "um"),
-        Param("seed", "int", "seed of numpy.random.default_rng for the peak heights"),
-        Param("profile", "choice", "triangular teeth on the nominal edge, or a polyline through the peaks",
-              "teeth", choices=("teeth", "polyline")))),
-    Design("polygon", polygon, "Any simple polygon, vertices in um about the pattern centre.", (
-        Param("points", "points", 'vertices "X1,Y1;X2,Y2;..." in order along the boundary', unit="um"),)),
-)}
+DESIGNS: dict[str, Design] = {
+    d.name: d
+    for d in (
+        Design("square", square, "Square pad of side size.", (_size_param(),)),
+        Design(
+            "rectangle",
+            rectangle,
+            "Rectangular pad width x height.",
+            (
+                Param("width", "length", "extent along x", unit="um"),
+                Param("height", "length", "extent along y", unit="um"),
+            ),
+        ),
+        Design(
+            "circle",
+            circle,
+            "Circular pad (equal-area regular 1024-gon, radius error < 3.2e-6 r).",
+            (
+                Param("diameter", "length", "circle diameter", unit="um"),
+                Param("segments", "int", "polygon vertices, a multiple of 4", 1024),
+            ),
+        ),
+        Design(
+            "four-pad",
+            four_pad,
+            "2x2 square pads split by a cross-shaped gap (docs/physics.md §6.1).",
+            (
+                _size_param(help="outer side, gaps included"),
+                Param(
+                    "gap",
+                    "length",
+                    "width of the hydrophobic cross; pad side = (size - gap)/2",
+                    unit="um",
+                ),
+            ),
+        ),
+        Design(
+            "defect",
+            defect,
+            "Square with one triangular defect on an edge (docs/physics.md §10.1).",
+            (
+                _size_param(200.0),
+                Param(
+                    "kind",
+                    "choice",
+                    "add the triangle (outward) or cut it out (inward)",
+                    choices=("inward", "outward"),
+                ),
+                Param(
+                    "position",
+                    "choice",
+                    "base centred on the edge, or flush with its counter-clockwise end",
+                    "middle",
+                    choices=("middle", "corner"),
+                ),
+                Param("edge", "choice", "edge carrying the defect", "right", choices=EDGES),
+                Param("height", "length", "triangle height, perpendicular to the edge", unit="um"),
+                Param("width", "length", "triangle base along the edge", unit="um"),
+            ),
+        ),
+        Design(
+            "constant-jagged",
+            constant_jagged,
+            "Square with regular zigzag edges (docs/physics.md §10.2).",
+            (
+                _size_param(200.0),
+                Param("amplitude", "length", "tooth height, peak to valley", unit="um"),
+                Param(
+                    "pitch",
+                    "length",
+                    "tooth base along the edge (default 2 x amplitude: 45-degree flanks)",
+                    lambda v: 2 * v["amplitude"],
+                    "um",
+                ),
+                Param(
+                    "teeth",
+                    "choice",
+                    "teeth centred on the nominal edge, or all outside / inside it",
+                    "centred",
+                    choices=("centred", "outward", "inward"),
+                ),
+                Param(
+                    "phase",
+                    "choice",
+                    "edge midpoint at a zero crossing (4-fold symmetric, exact area) "
+                    "or at a tooth tip (also mirror symmetric)",
+                    "zero",
+                    choices=("zero", "peak"),
+                ),
+            ),
+        ),
+        Design(
+            "random-jagged",
+            random_jagged,
+            "Square with random-height teeth on every edge (docs/physics.md §10.3).",
+            (
+                _size_param(200.0),
+                Param("sigma", "length", "standard deviation of the peak heights", unit="um"),
+                Param(
+                    "pitch",
+                    "length",
+                    "peak spacing (default 4 x sigma)",
+                    lambda v: 4 * v["sigma"],
+                    "um",
+                ),
+                Param("seed", "int", "seed of numpy.random.default_rng for the peak heights"),
+                Param(
+                    "profile",
+                    "choice",
+                    "triangular teeth on the nominal edge, or a polyline through the peaks",
+                    "teeth",
+                    choices=("teeth", "polyline"),
+                ),
+            ),
+        ),
+        Design(
+            "polygon",
+            polygon,
+            "Any simple polygon, vertices in um about the pattern centre.",
+            (
+                Param(
+                    "points",
+                    "points",
+                    'vertices "X1,Y1;X2,Y2;..." in order along the boundary',
+                    unit="um",
+                ),
+            ),
+        ),
+    )
+}
 
 
 def _design(name: str) -> Design:
@@ -206,13 +300,19 @@ def resolve(design_name: str, **params: Any) -> dict[str, Any]:
     """Validate and complete ``params`` for a design: coerce types, fill defaults, reject unknowns."""
     design = _design(design_name)
     unknown = set(params) - {p.name for p in design.params}
-    require(not unknown, f"design {design_name} has no parameter {', '.join(sorted(unknown))}; "
-            f"it takes {', '.join(p.name for p in design.params)}")
+    require(
+        not unknown,
+        f"design {design_name} has no parameter {', '.join(sorted(unknown))}; "
+        f"it takes {', '.join(p.name for p in design.params)}",
+    )
     values: dict[str, Any] = {}
     for p in design.params:
         v = params.get(p.name)
         if v is None:
-            require(not p.required, f"design {design_name} needs {p.name} ({p.help}, {p.unit or p.kind})")
+            require(
+                not p.required,
+                f"design {design_name} needs {p.name} ({p.help}, {p.unit or p.kind})",
+            )
             continue
         values[p.name] = p.coerce(v)
     for p in design.params:  # derived defaults, after every given value is known
@@ -236,5 +336,8 @@ def design_record(design_name: str, **params: Any) -> dict[str, Any]:
     for p in design.params:
         if p.name in values:
             v = values[p.name]
-            out[p.name] = {"value": [list(q) for q in v] if p.kind == "points" else v, "unit": p.unit}
+            out[p.name] = {
+                "value": [list(q) for q in v] if p.kind == "points" else v,
+                "unit": p.unit,
+            }
     return {"design": design_name, "parameters": out}

@@ -61,7 +61,9 @@ def _values(im: Image.Image, path: Path) -> tuple[np.ndarray, np.ndarray | None]
     if mode in _SIXTEEN_BIT:
         raw = np.asarray(im).astype(np.int64)
         if raw.min() < 0 or raw.max() > 65535:
-            raise InputError(f"{path}: 32-bit integer image with values outside 0..65535; save it as 8- or 16-bit grey")
+            raise InputError(
+                f"{path}: 32-bit integer image with values outside 0..65535; save it as 8- or 16-bit grey"
+            )
         alpha = None if trns is None else (raw != trns).astype(np.float64)
         return raw / 65535.0, alpha
     if mode == "F":
@@ -77,13 +79,21 @@ def _values(im: Image.Image, path: Path) -> tuple[np.ndarray, np.ndarray | None]
         return _luminance(np.asarray(im)), None
     # Palette, RGBA, RGB with tRNS, CMYK, YCbCr, LAB, HSV, ...: go through RGBA.
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)  # Pillow's note on palette transparency in bytes
+        warnings.simplefilter(
+            "ignore", UserWarning
+        )  # Pillow's note on palette transparency in bytes
         rgba = np.asarray(im.convert("RGBA"))
     return _luminance(rgba[..., :3]), rgba[..., 3] / 255.0
 
 
-def _scale_from_file(info: dict, params: dict, path: Path, default: float | None = None, flag: str = "--um-per-px",
-                     hint: str | None = None) -> float:
+def _scale_from_file(
+    info: dict,
+    params: dict,
+    path: Path,
+    default: float | None = None,
+    flag: str = "--um-per-px",
+    hint: str | None = None,
+) -> float:
     """um per px from the pHYs chunk (refined by the text chunk's exact value).
 
     A file without a usable scale takes ``default`` (the scale a flag gives for files that
@@ -92,7 +102,9 @@ def _scale_from_file(info: dict, params: dict, path: Path, default: float | None
     overrides stored scales by passing ``um_per_px`` to :func:`read_mask` instead).
     """
     hint = hint or flag
-    dpi = info.get("dpi")  # Pillow sets 'dpi' only for pHYs with unit = metre (as px_per_m * 0.0254)
+    dpi = info.get(
+        "dpi"
+    )  # Pillow sets 'dpi' only for pHYs with unit = metre (as px_per_m * 0.0254)
     if dpi is None:
         if default is not None:
             return default
@@ -101,20 +113,26 @@ def _scale_from_file(info: dict, params: dict, path: Path, default: float | None
     if px_per_m[0] <= 0 or px_per_m[1] <= 0:
         if default is not None:
             return default
-        raise InputError(f"{path}: its pHYs chunk gives a non-positive scale ({px_per_m[0]} x {px_per_m[1]} px/m); pass {hint}")
+        raise InputError(
+            f"{path}: its pHYs chunk gives a non-positive scale ({px_per_m[0]} x {px_per_m[1]} px/m); pass {hint}"
+        )
     if px_per_m[0] != px_per_m[1]:
         if default is not None:
             return default
-        raise InputError(f"{path}: its pHYs chunk gives non-square pixels ({px_per_m[0]} x {px_per_m[1]} px/m); "
-                         f"resample to square pixels or pass {hint}")
+        raise InputError(
+            f"{path}: its pHYs chunk gives non-square pixels ({px_per_m[0]} x {px_per_m[1]} px/m); "
+            f"resample to square pixels or pass {hint}"
+        )
     exact = params.get("um_per_px")
     if isinstance(exact, int | float) and exact > 0 and round(_UM_PER_M / exact) == px_per_m[0]:
         stored = float(exact)
     else:
         stored = _UM_PER_M / px_per_m[0]
     if default is not None and not math.isclose(default, stored, rel_tol=1e-6):
-        raise InputError(f"{path} stores its scale, {stored:g} um/px (pHYs chunk), but {flag} {default:g} contradicts it; "
-                         f"drop {flag} to use the file's scale, or add --override-scale to use {default:g} um/px")
+        raise InputError(
+            f"{path} stores its scale, {stored:g} um/px (pHYs chunk), but {flag} {default:g} contradicts it; "
+            f"drop {flag} to use the file's scale, or add --override-scale to use {default:g} um/px"
+        )
     return stored
 
 
@@ -170,15 +188,23 @@ def read_mask(
     except MemoryError:
         raise InputError(f"{path}: not enough memory to decode this image; downsample it") from None
     except (OSError, SyntaxError, ValueError, EOFError, struct.error) as err:
-        raise InputError(f"{path}: not a readable image ({type(err).__name__}: {err}); give a PNG file") from None
+        raise InputError(
+            f"{path}: not a readable image ({type(err).__name__}: {err}); give a PNG file"
+        ) from None
     params = parse_png_params(info.get(TEXT_KEY), path)
-    scale = um_per_px if um_per_px is not None else _scale_from_file(info, params, path, default_um_per_px, scale_flag, missing_hint)
+    scale = (
+        um_per_px
+        if um_per_px is not None
+        else _scale_from_file(info, params, path, default_um_per_px, scale_flag, missing_hint)
+    )
     if invert:
         value = 1.0 - value
     if alpha is not None:
         value = value * alpha
     if value.min() < 0 or value.max() > 1 or not np.all(np.isfinite(value)):
-        raise InputError(f"{path}: float image with values outside [0, 1]; save it as 8- or 16-bit grey")
+        raise InputError(
+            f"{path}: float image with values outside [0, 1]; save it as 8- or 16-bit grey"
+        )
     return Mask(data=value, um_per_px=scale, params=params)
 
 
@@ -198,15 +224,22 @@ def write_mask(path: str | os.PathLike, mask: Mask, params: dict[str, Any] | Non
     record["um_per_px"] = mask.um_per_px
     px_per_m = round(_UM_PER_M / mask.um_per_px)
     if px_per_m < 1 or px_per_m > 2**31 - 1:
-        raise InputError(f"um_per_px={mask.um_per_px:g} cannot be stored in a PNG pHYs chunk "
-                         f"(1 to 2^31-1 px per metre); use {_UM_PER_M / (2**31 - 1):.3g} <= um_per_px <= 1e6")
+        raise InputError(
+            f"um_per_px={mask.um_per_px:g} cannot be stored in a PNG pHYs chunk "
+            f"(1 to 2^31-1 px per metre); use {_UM_PER_M / (2**31 - 1):.3g} <= um_per_px <= 1e6"
+        )
     info = PngImagePlugin.PngInfo()
     info.add_text(TEXT_KEY, json.dumps(record, sort_keys=True))
     pixels = np.round(mask.data * 65535.0).astype(np.uint16)
     with atomic_output(path) as tmp:
         try:
-            Image.fromarray(pixels).save(tmp, format="PNG", pnginfo=info, compress_level=9,
-                                         dpi=(px_per_m * 0.0254, px_per_m * 0.0254))  # Pillow writes pHYs from dpi
+            Image.fromarray(pixels).save(
+                tmp,
+                format="PNG",
+                pnginfo=info,
+                compress_level=9,
+                dpi=(px_per_m * 0.0254, px_per_m * 0.0254),
+            )  # Pillow writes pHYs from dpi
         except OSError as err:
             raise InputError(f"output {path}: cannot write ({err.strerror or err})") from None
     return path

@@ -104,8 +104,13 @@ __all__ = [
 DEFAULT_UM_PER_PX = 1.0
 
 
-def read_layout(path: str | os.PathLike, cell: str | None = None, dxf_units: str | None = None,
-                budget_mb: float | None = None, max_polygons: int | None = None) -> Layout:
+def read_layout(
+    path: str | os.PathLike,
+    cell: str | None = None,
+    dxf_units: str | None = None,
+    budget_mb: float | None = None,
+    max_polygons: int | None = None,
+) -> Layout:
     """Read and flatten one cell of a GDSII, OASIS or DXF file (see the module notes).
 
     Raises:
@@ -118,7 +123,12 @@ def read_layout(path: str | os.PathLike, cell: str | None = None, dxf_units: str
     if fmt is None:
         raise InputError(f"{path}: not a layout file; give a .gds, .oas or .dxf file")
     size = path.stat().st_size
-    require_fits(f"reading {path} ({fmt_bytes(size)} {NAMES[fmt]})", size * READ_FACTOR[fmt], "split the layout or export only the cell needed", budget_mb)
+    require_fits(
+        f"reading {path} ({fmt_bytes(size)} {NAMES[fmt]})",
+        size * READ_FACTOR[fmt],
+        "split the layout or export only the cell needed",
+        budget_mb,
+    )
     if dxf_units is not None and dxf_units not in DXF_UNITS:
         raise InputError(f"--dxf-units must be one of {', '.join(DXF_UNITS)}, got {dxf_units!r}")
     if fmt == "dxf":
@@ -127,8 +137,11 @@ def read_layout(path: str | os.PathLike, cell: str | None = None, dxf_units: str
 
 
 # --------------------------------------------------------------------------- the scene's view
-def layout_geometry(path: str | os.PathLike, selection: LayoutSelection | None = None,
-                    budget_mb: float | None = None) -> tuple[BaseGeometry, BaseGeometry | None, dict]:
+def layout_geometry(
+    path: str | os.PathLike,
+    selection: LayoutSelection | None = None,
+    budget_mb: float | None = None,
+) -> tuple[BaseGeometry, BaseGeometry | None, dict]:
     """(pattern, chip or None, record): the selected layers, moved to the frame of the module notes.
 
     The record (JSON-ready, kept as ``Mask.params["layout"]``) names the file, cell,
@@ -141,24 +154,41 @@ def layout_geometry(path: str | os.PathLike, selection: LayoutSelection | None =
     if sel.layer is not None:
         key = lay.key(sel.layer)
     else:
-        others = [k for k in (*lay.rings, *lay.problems) if k != chip_key and (lay.rings.get(k) or k in lay.problems)]
+        others = [
+            k
+            for k in (*lay.rings, *lay.problems)
+            if k != chip_key and (lay.rings.get(k) or k in lay.problems)
+        ]
         others = list(dict.fromkeys(others))
         if len(others) != 1:
-            raise InputError(f"{lay.path}: cell {lay.cell} has {'no layer' if not others else 'several layers'} "
-                             f"({lay.layers_text()}); choose the pattern with --layer {'L/D' if lay.format != 'dxf' else 'NAME'}")
+            raise InputError(
+                f"{lay.path}: cell {lay.cell} has {'no layer' if not others else 'several layers'} "
+                f"({lay.layers_text()}); choose the pattern with --layer {'L/D' if lay.format != 'dxf' else 'NAME'}"
+            )
         key = others[0]
     if key == chip_key:
-        raise InputError(f"--layer and --chip-layer name the same layer {_layer_text(key)}; the chip outline needs its own layer")
+        raise InputError(
+            f"--layer and --chip-layer name the same layer {_layer_text(key)}; the chip outline needs its own layer"
+        )
     pattern = lay.geometry(key)
     chip = lay.geometry(chip_key) if chip_key is not None else None
     ref = (chip if chip is not None else pattern).bounds
     cx, cy = (ref[0] + ref[2]) / 2, (ref[1] + ref[3]) / 2
     record = {
-        "file": lay.path.name, "format": lay.format, "cell": lay.cell, "layer": _layer_text(key, quote=False),
-        "polygons": len(shapely.get_parts(pattern)), "area_um2": pattern.area, "units": lay.units,
-        "database_unit_um": lay.dbu_um, "origin_um": [cx, cy],
-        "origin": (f"the centre of the chip outline on layer {_layer_text(chip_key)}" if chip is not None
-                   else "the centre of the pattern's bounding box (no chip layer)"),
+        "file": lay.path.name,
+        "format": lay.format,
+        "cell": lay.cell,
+        "layer": _layer_text(key, quote=False),
+        "polygons": len(shapely.get_parts(pattern)),
+        "area_um2": pattern.area,
+        "units": lay.units,
+        "database_unit_um": lay.dbu_um,
+        "origin_um": [cx, cy],
+        "origin": (
+            f"the centre of the chip outline on layer {_layer_text(chip_key)}"
+            if chip is not None
+            else "the centre of the pattern's bounding box (no chip layer)"
+        ),
         "chip_layer": _layer_text(chip_key, quote=False) if chip is not None else None,
     }
     move = lambda g: affinity.translate(g, -cx, -cy)  # noqa: E731
@@ -173,12 +203,16 @@ def _fitting_scale(geometry: BaseGeometry, budget_mb: float | None) -> float:
     k = math.floor(math.log10(s))
     for m in (1, 2, 2.5, 5, 10):
         c = m * 10**k
-        if c >= s and (2 * math.ceil(hw / c) + 2) * (2 * math.ceil(hh / c) + 2) * RASTER_BYTES_PER_PX <= budget_bytes(budget_mb):
+        if c >= s and (2 * math.ceil(hw / c) + 2) * (
+            2 * math.ceil(hh / c) + 2
+        ) * RASTER_BYTES_PER_PX <= budget_bytes(budget_mb):
             return c
     return 10 ** (k + 1) * 2
 
 
-def layout_mask(geometry: BaseGeometry, um_per_px: float, what: str, params: dict, budget_mb: float | None) -> Mask:
+def layout_mask(
+    geometry: BaseGeometry, um_per_px: float, what: str, params: dict, budget_mb: float | None
+) -> Mask:
     """Rasterize layout geometry; over the budget, the refusal says which scale would fit."""
     from patterns.raster import mask_from_geometry
 
@@ -188,38 +222,65 @@ def layout_mask(geometry: BaseGeometry, um_per_px: float, what: str, params: dic
     need = float(w) * float(h) * RASTER_BYTES_PER_PX
     if not need <= budget_bytes(budget_mb):
         fit = _fitting_scale(geometry, budget_mb)
-        raise InputError(f"{what} at {s:g} um/px would be {w:,} x {h:,} px, about {fmt_bytes(need)}, over the memory budget of "
-                         f"{fmt_bytes(budget_bytes(budget_mb))}; --resolution {fit:g} (um/px) or coarser would fit (or raise --memory-budget)")
+        raise InputError(
+            f"{what} at {s:g} um/px would be {w:,} x {h:,} px, about {fmt_bytes(need)}, over the memory budget of "
+            f"{fmt_bytes(budget_bytes(budget_mb))}; --resolution {fit:g} (um/px) or coarser would fit (or raise --memory-budget)"
+        )
     return mask_from_geometry(geometry, s, params=params, budget_mb=budget_mb, what=what)
 
 
-def layout_masks(path: str | os.PathLike, selection: LayoutSelection | None, um_per_px: float,
-                 budget_mb: float | None = None) -> tuple[Mask, Mask | None]:
+def layout_masks(
+    path: str | os.PathLike,
+    selection: LayoutSelection | None,
+    um_per_px: float,
+    budget_mb: float | None = None,
+) -> tuple[Mask, Mask | None]:
     """(pattern mask, chip mask or None) of a layout at ``um_per_px``, exact geometry kept."""
     pattern, chip, record = layout_geometry(path, selection, budget_mb)
     name = Path(path).name
-    pm = layout_mask(pattern, um_per_px, f"the pattern raster of {name}", {"layout": record}, budget_mb)
+    pm = layout_mask(
+        pattern, um_per_px, f"the pattern raster of {name}", {"layout": record}, budget_mb
+    )
     cm = None
     if chip is not None:
-        cm = layout_mask(chip, um_per_px, f"the chip raster of {name} (layer {record['chip_layer']})",
-                         {"design": "layout", "layout": dict(record, layer=record["chip_layer"])}, budget_mb)
+        cm = layout_mask(
+            chip,
+            um_per_px,
+            f"the chip raster of {name} (layer {record['chip_layer']})",
+            {"design": "layout", "layout": dict(record, layer=record["chip_layer"])},
+            budget_mb,
+        )
     return pm, cm
 
 
-def layout_chip_mask(path: str | os.PathLike, um_per_px: float, selection: LayoutSelection | None = None,
-                     budget_mb: float | None = None) -> Mask:
+def layout_chip_mask(
+    path: str | os.PathLike,
+    um_per_px: float,
+    selection: LayoutSelection | None = None,
+    budget_mb: float | None = None,
+) -> Mask:
     """A chip footprint drawn in a layout of its own (``--chip chip.gds``): its only layer, centred on its bounding box.
 
     Only ``selection.dxf_units`` and ``selection.max_polygons`` apply (the cell is the single top cell).
     """
     units = selection.dxf_units if selection is not None else None
     limit = selection.max_polygons if selection is not None else None
-    chip, _, record = layout_geometry(path, LayoutSelection(dxf_units=units, max_polygons=limit), budget_mb)
-    return layout_mask(chip, um_per_px, f"the chip raster of {Path(path).name}", {"design": "layout", "layout": record}, budget_mb)
+    chip, _, record = layout_geometry(
+        path, LayoutSelection(dxf_units=units, max_polygons=limit), budget_mb
+    )
+    return layout_mask(
+        chip,
+        um_per_px,
+        f"the chip raster of {Path(path).name}",
+        {"design": "layout", "layout": record},
+        budget_mb,
+    )
 
 
 def frame_note(record: dict) -> str:
     """One line saying where the origin of the poses is in the layout."""
     x, y = record["origin_um"]
-    return (f"frame: {record['file']} cell {record['cell']} layer {record['layer']} ({_count(record['polygons'], 'polygon')}, "
-            f"{record['units']}); poses are relative to {record['origin']}, at layout ({x:.6g}, {y:.6g}) um")
+    return (
+        f"frame: {record['file']} cell {record['cell']} layer {record['layer']} ({_count(record['polygons'], 'polygon')}, "
+        f"{record['units']}); poses are relative to {record['origin']}, at layout ({x:.6g}, {y:.6g}) um"
+    )

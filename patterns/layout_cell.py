@@ -49,19 +49,27 @@ class Layout:
     def layers_text(self) -> str:
         """``1/0 (4 polygons), 2/0 (1 polygon)``: every layer with its polygon count."""
         keys = sorted(set(self.rings) | set(self.problems), key=lambda k: (isinstance(k, str), k))
-        items = [f"{_layer_text(k)} ({_count(len(self.rings.get(k, [])), 'polygon')}{', and a shape that is no closed outline' if k in self.problems else ''})"
-                 for k in keys]
+        items = [
+            f"{_layer_text(k)} ({_count(len(self.rings.get(k, [])), 'polygon')}{', and a shape that is no closed outline' if k in self.problems else ''})"
+            for k in keys
+        ]
         more = f", ... ({len(items) - _MAX_LISTED} more)" if len(items) > _MAX_LISTED else ""
         return ", ".join(items[:_MAX_LISTED]) + more if items else "none"
 
     def key(self, layer: Any, flag: str = "--layer") -> Any:
         """The layer key of ``layer`` (text as the flags take it), checked to exist."""
         key = _layer_key(layer, self.format, flag)
-        if isinstance(key, str) and key not in self.rings and key not in self.problems:  # DXF layer names ignore case
-            key = next((k for k in (*self.rings, *self.problems) if k.casefold() == key.casefold()), key)
+        if (
+            isinstance(key, str) and key not in self.rings and key not in self.problems
+        ):  # DXF layer names ignore case
+            key = next(
+                (k for k in (*self.rings, *self.problems) if k.casefold() == key.casefold()), key
+            )
         if key not in self.rings and key not in self.problems:
-            raise InputError(f"{self.path}: cell {self.cell} has nothing on layer {_layer_text(key)}; "
-                             f"layers present: {self.layers_text()}; choose one with {flag}")
+            raise InputError(
+                f"{self.path}: cell {self.cell} has nothing on layer {_layer_text(key)}; "
+                f"layers present: {self.layers_text()}; choose one with {flag}"
+            )
         return key
 
     def geometry(self, key: Any) -> BaseGeometry:
@@ -72,9 +80,10 @@ class Layout:
         rings = self.rings.get(key, [])
         polys, nested = _polygons(rings, where), self.format == "dxf"
         if not polys:
-            raise InputError(f"{where}: the layer is empty (no polygon with an area); choose another layer, present: {self.layers_text()}")
+            raise InputError(
+                f"{where}: the layer is empty (no polygon with an area); choose another layer, present: {self.layers_text()}"
+            )
         return _merge(polys, nested)
-
 
 
 # --------------------------------------------------------------------------- rings -> geometry
@@ -98,7 +107,9 @@ def _polygons(rings: list[np.ndarray], where: str) -> list[Polygon]:
     finite = np.ones(len(rings), dtype=bool)
     bad = ~np.isfinite(coords).all(axis=1)
     finite[ring_of[bad]] = False
-    keep = np.ones(len(coords), dtype=bool)  # a ring that repeats its first vertex at its end: the repeat dropped
+    keep = np.ones(
+        len(coords), dtype=bool
+    )  # a ring that repeats its first vertex at its end: the repeat dropped
     ends = np.cumsum(sizes) - 1
     has = sizes > 1
     closed = np.zeros(len(rings), dtype=bool)
@@ -109,7 +120,9 @@ def _polygons(rings: list[np.ndarray], where: str) -> list[Polygon]:
         return []
     pick = np.isin(ring_of, use) & keep
     # linearrings closes every ring (the rings are stored without their closing vertex).
-    polys = shapely.polygons(shapely.linearrings(coords[pick], indices=np.searchsorted(use, ring_of[pick])))
+    polys = shapely.polygons(
+        shapely.linearrings(coords[pick], indices=np.searchsorted(use, ring_of[pick]))
+    )
     valid = shapely.is_valid(polys)
     if valid.all():
         return list(polys)
@@ -119,15 +132,23 @@ def _polygons(rings: list[np.ndarray], where: str) -> list[Polygon]:
             out.append(poly)
             continue
         r = rings[i]
-        parts = [g for g in shapely.get_parts(shapely.make_valid(poly)) if isinstance(g, Polygon) and g.area > 0]
+        parts = [
+            g
+            for g in shapely.get_parts(shapely.make_valid(poly))
+            if isinstance(g, Polygon) and g.area > 0
+        ]
         area = sum(g.area for g in parts)
         if area == 0:
             continue  # a degenerate polygon (a line): no area
-        if not math.isclose(area, abs(_shoelace(r)), rel_tol=1e-9, abs_tol=1e-12):  # a keyhole keeps its area, a crossing does not
+        if not math.isclose(
+            area, abs(_shoelace(r)), rel_tol=1e-9, abs_tol=1e-12
+        ):  # a keyhole keeps its area, a crossing does not
             m = re.search(r"\[([-\d.e+]+) ([-\d.e+]+)\]", shapely.is_valid_reason(poly))
             near = f" near ({float(m[1]):.6g}, {float(m[2]):.6g}) um" if m else ""
-            raise InputError(f"{where}: polygon {i + 1} of {len(rings)} crosses itself{near}; "
-                             "split it into simple polygons in the layout editor")
+            raise InputError(
+                f"{where}: polygon {i + 1} of {len(rings)} crosses itself{near}; "
+                "split it into simple polygons in the layout editor"
+            )
         out.extend(parts)
     return out
 
@@ -135,7 +156,9 @@ def _polygons(rings: list[np.ndarray], where: str) -> list[Polygon]:
 def _merge(polys: list[Polygon], nested: bool) -> BaseGeometry:
     """Union of the polygons (DXF: an outline inside another outline is a hole, by nesting depth)."""
     if nested and len(polys) > 1:
-        unique = list({shapely.normalize(p).wkb: p for p in polys}.values())  # the same outline drawn twice counts once
+        unique = list(
+            {shapely.normalize(p).wkb: p for p in polys}.values()
+        )  # the same outline drawn twice counts once
         outer, inner = shapely.STRtree(unique).query(unique, predicate="contains")
         keep = outer != inner
         depth = np.bincount(inner[keep], minlength=len(unique))  # how many outlines hold each one
@@ -147,8 +170,12 @@ def _merge(polys: list[Polygon], nested: bool) -> BaseGeometry:
         geom = polys[0]
     else:
         a, b = shapely.STRtree(polys).query(polys, predicate="intersects")
-        geom = shapely.multipolygons(polys) if np.all(a == b) else shapely.union_all(polys)  # disjoint: vertices kept as drawn
+        geom = (
+            shapely.multipolygons(polys) if np.all(a == b) else shapely.union_all(polys)
+        )  # disjoint: vertices kept as drawn
     parts = shapely.get_parts(geom)
-    parts = parts[(shapely.get_type_id(parts) == shapely.GeometryType.POLYGON) & (shapely.area(parts) > 0)]
+    parts = parts[
+        (shapely.get_type_id(parts) == shapely.GeometryType.POLYGON) & (shapely.area(parts) > 0)
+    ]
     geom = parts[0] if len(parts) == 1 else shapely.multipolygons(parts)
     return shapely.orient_polygons(geom)

@@ -21,16 +21,33 @@ import numpy as np
 from patterns.errors import InputError
 
 #: File extensions of the layout formats (used when the content does not tell).
-SUFFIXES = {".gds": "gds", ".gdsii": "gds", ".gds2": "gds", ".oas": "oas", ".oasis": "oas", ".dxf": "dxf"}
+SUFFIXES = {
+    ".gds": "gds",
+    ".gdsii": "gds",
+    ".gds2": "gds",
+    ".oas": "oas",
+    ".oasis": "oas",
+    ".dxf": "dxf",
+}
 NAMES = {"gds": "GDSII", "oas": "OASIS", "dxf": "DXF"}
 #: Database unit of written layouts and snapping grid of DXF coordinates (um): 1 nm.
 DBU_UM = 1e-3
 #: ``--dxf-units`` choices, in um.
 DXF_UNITS = {"um": 1.0, "mm": 1e3, "nm": 1e-3}
 #: DXF $INSUNITS codes -> (name, um).
-INSUNITS = {1: ("inch", 25400.0), 2: ("foot", 304800.0), 4: ("mm", 1e3), 5: ("cm", 1e4), 6: ("m", 1e6),
-            8: ("microinch", 0.0254), 9: ("mil", 25.4), 11: ("angstrom", 1e-4), 12: ("nm", 1e-3), 13: ("um", 1.0),
-            14: ("dm", 1e5)}
+INSUNITS = {
+    1: ("inch", 25400.0),
+    2: ("foot", 304800.0),
+    4: ("mm", 1e3),
+    5: ("cm", 1e4),
+    6: ("m", 1e6),
+    8: ("microinch", 0.0254),
+    9: ("mil", 25.4),
+    11: ("angstrom", 1e-4),
+    12: ("nm", 1e-3),
+    13: ("um", 1.0),
+    14: ("dm", 1e5),
+}
 #: Peak bytes per flattened vertex and per polygon (gdstk/ezdxf copies, numpy rings, shapely).
 BYTES_PER_VERTEX, BYTES_PER_POLYGON = 200, 2000
 #: Peak bytes per byte of file while the parser holds it (gdstk; ezdxf keeps Python objects).
@@ -83,7 +100,9 @@ def _layer_key(text: Any, fmt: str, flag: str) -> Any:
         return text
     m = re.fullmatch(r"(\d{1,9})\s*(?:/\s*(\d{1,9}))?", text)
     if not m:
-        raise InputError(f"{flag} {text!r}: give a layer and datatype as L/D, e.g. 1/0 (whole numbers)")
+        raise InputError(
+            f"{flag} {text!r}: give a layer and datatype as L/D, e.g. 1/0 (whole numbers)"
+        )
     return (int(m[1]), int(m[2] or 0))
 
 
@@ -112,33 +131,48 @@ class LayoutSelection:
     def __post_init__(self) -> None:
         for name in ("layer", "cell", "chip_layer"):
             v = getattr(self, name)
-            if v is not None and (not isinstance(v, str | int) or isinstance(v, bool) or not str(v).strip()):
-                raise InputError(f"{name} must be a non-empty string (a layer L/D, a DXF layer or a cell name), got {v!r}")
+            if v is not None and (
+                not isinstance(v, str | int) or isinstance(v, bool) or not str(v).strip()
+            ):
+                raise InputError(
+                    f"{name} must be a non-empty string (a layer L/D, a DXF layer or a cell name), got {v!r}"
+                )
         if self.dxf_units is not None and self.dxf_units not in DXF_UNITS:
-            raise InputError(f"dxf_units must be one of {', '.join(DXF_UNITS)}, got {self.dxf_units!r}")
+            raise InputError(
+                f"dxf_units must be one of {', '.join(DXF_UNITS)}, got {self.dxf_units!r}"
+            )
         m = self.max_polygons
         if m is not None and (isinstance(m, bool) or not isinstance(m, int) or m < 1):
-            raise InputError(f"max_polygons (--max-polygons) must be a whole number >= 1, got {m!r}")
+            raise InputError(
+                f"max_polygons (--max-polygons) must be a whole number >= 1, got {m!r}"
+            )
 
     @property
     def given(self) -> list[str]:
         """The flags that were set, as the command line spells them."""
-        return [f"--{k.replace('_', '-')}" for k in ("layer", "cell", "chip_layer", "dxf_units") if getattr(self, k) is not None]
+        return [
+            f"--{k.replace('_', '-')}"
+            for k in ("layer", "cell", "chip_layer", "dxf_units")
+            if getattr(self, k) is not None
+        ]
 
     def require_unused(self, what: str, units_ok: bool = False) -> None:
         """InputError if a layout flag is set for a pattern that is not a layout (``units_ok``: a DXF chip may use --dxf-units)."""
         given = [f for f in self.given if not (units_ok and f == "--dxf-units")]
         if given:
-            raise InputError(f"{', '.join(given)} apply to layout patterns (.gds, .oas, .dxf); {what} is not one")
-
+            raise InputError(
+                f"{', '.join(given)} apply to layout patterns (.gds, .oas, .dxf); {what} is not one"
+            )
 
 
 def require_polygon_count(n: int, what: str, limit: int | None) -> None:
     """InputError unless ``n`` flattened polygons (counted from the hierarchy, before flattening) are within ``limit``."""
     limit = DEFAULT_MAX_POLYGONS if limit is None else int(limit)
     if n > limit:
-        raise InputError(f"{what} holds {n:,} polygons once flattened, over the limit of {limit:,} (reading, merging and "
-                         f"rasterizing take about 20 s per 100,000); choose a smaller --cell, or raise the limit with --max-polygons {n}")
+        raise InputError(
+            f"{what} holds {n:,} polygons once flattened, over the limit of {limit:,} (reading, merging and "
+            f"rasterizing take about 20 s per 100,000); choose a smaller --cell, or raise the limit with --max-polygons {n}"
+        )
 
 
 # --------------------------------------------------------------------------- units and counts

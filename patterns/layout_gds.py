@@ -126,7 +126,9 @@ def _oasis_incomplete(path: Path) -> str | None:
     return None
 
 
-def _read_gdstk(path: Path, fmt: str, cell: str | None, budget_mb: float | None, max_polygons: int | None = None) -> Layout:
+def _read_gdstk(
+    path: Path, fmt: str, cell: str | None, budget_mb: float | None, max_polygons: int | None = None
+) -> Layout:
     import gdstk
 
     if fmt == "oas":
@@ -135,44 +137,70 @@ def _read_gdstk(path: Path, fmt: str, cell: str | None, budget_mb: float | None,
             raise InputError(f"{path}: not a complete OASIS file ({why}); copy or export it again")
     failure = None
     with _c_stderr() as said, warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # "Missing reference": refused below when the cell read needs it
+        warnings.simplefilter(
+            "ignore"
+        )  # "Missing reference": refused below when the cell read needs it
         try:
             lib = gdstk.read_gds(str(path)) if fmt == "gds" else gdstk.read_oas(str(path))
         except (OSError, RuntimeError, ValueError, MemoryError) as err:
             failure = err
-    notes = "; ".join(t.strip() for t in " ".join(said).replace("[GDSTK]", ".").split(".") if t.strip())
+    notes = "; ".join(
+        t.strip() for t in " ".join(said).replace("[GDSTK]", ".").split(".") if t.strip()
+    )
     if failure is not None:
         detail = notes or str(failure)
-        raise InputError(f"{path}: not a readable {NAMES[fmt]} file ({detail}); export it again from the layout editor")
+        raise InputError(
+            f"{path}: not a readable {NAMES[fmt]} file ({detail}); export it again from the layout editor"
+        )
     cells = {c.name: c for c in lib.cells}
     counts: dict[str, int] = {}
     if cell is None:
         tops = lib.top_level()
         if len(tops) != 1:
-            listed = ", ".join(f"{c.name} ({_cell_count(c, counts)})" for c in tops[:_MAX_LISTED]) or "none"
-            raise InputError(f"{path}: {len(tops)} top cells ({listed}); choose one with --cell NAME")
+            listed = (
+                ", ".join(f"{c.name} ({_cell_count(c, counts)})" for c in tops[:_MAX_LISTED])
+                or "none"
+            )
+            raise InputError(
+                f"{path}: {len(tops)} top cells ({listed}); choose one with --cell NAME"
+            )
         top = tops[0]
     elif cell in cells:
         top = cells[cell]
     else:
-        listed = ", ".join(f"{n} ({_cell_count(c, counts)})" for n, c in list(cells.items())[:_MAX_LISTED]) or "none"
-        raise InputError(f"{path}: no cell named {cell!r}; cells present: {listed}; choose one with --cell NAME")
+        listed = (
+            ", ".join(
+                f"{n} ({_cell_count(c, counts)})" for n, c in list(cells.items())[:_MAX_LISTED]
+            )
+            or "none"
+        )
+        raise InputError(
+            f"{path}: no cell named {cell!r}; cells present: {listed}; choose one with --cell NAME"
+        )
     try:
         vertices, polygons = _flat_size(top, counts)
     except InputError as err:
         raise InputError(f"{path}: {err}") from None
     require_polygon_count(polygons, f"{path}: cell {top.name}", max_polygons)
-    require_fits(f"flattening cell {top.name} of {path} ({polygons:,} polygons, {vertices:,} vertices)",
-                 vertices * BYTES_PER_VERTEX + polygons * BYTES_PER_POLYGON, "choose a smaller --cell", budget_mb)
+    require_fits(
+        f"flattening cell {top.name} of {path} ({polygons:,} polygons, {vertices:,} vertices)",
+        vertices * BYTES_PER_VERTEX + polygons * BYTES_PER_POLYGON,
+        "choose a smaller --cell",
+        budget_mb,
+    )
     for name, v in (("database unit", lib.precision), ("user unit", lib.unit)):
         if not (math.isfinite(v) and v > 0):  # a zero unit would divide by zero below
-            raise InputError(f"{path}: the file's UNITS record gives a {name} of {v:g} m, not a length > 0; export it again from the layout editor")
+            raise InputError(
+                f"{path}: the file's UNITS record gives a {name} of {v:g} m, not a length > 0; export it again from the layout editor"
+            )
     db_per_user = lib.unit / lib.precision  # user coordinates x this = database units
     if abs(db_per_user - round(db_per_user)) < 1e-9 * db_per_user:
         db_per_user = float(round(db_per_user))
     rings: dict[Any, list[np.ndarray]] = {}
     for p in top.get_polygons(apply_repetitions=True, include_paths=True, depth=None):
-        rings.setdefault((int(p.layer), int(p.datatype)), []).append(np.round(p.points * db_per_user))
+        rings.setdefault((int(p.layer), int(p.datatype)), []).append(
+            np.round(p.points * db_per_user)
+        )
     dbu_um, to_um = _db_to_um(lib.precision)
     rings = {k: [to_um(r) for r in v] for k, v in rings.items()}
     units = f"user unit {_fmt_len(lib.unit)}, database unit {_fmt_len(lib.precision)}"
@@ -204,7 +232,9 @@ def _flat_size(cell: Any, memo: dict, stack: tuple = ()) -> tuple[int, int]:
     if cell.name in memo:
         return memo[cell.name]
     if cell.name in stack or len(stack) > MAX_DEPTH:
-        raise InputError(f"cell {cell.name} references itself or nests deeper than {MAX_DEPTH} levels; fix the layout's hierarchy")
+        raise InputError(
+            f"cell {cell.name} references itself or nests deeper than {MAX_DEPTH} levels; fix the layout's hierarchy"
+        )
     v = n = 0
     for p in cell.polygons:
         k = max(1, p.repetition.size)
@@ -214,8 +244,10 @@ def _flat_size(cell: Any, memo: dict, stack: tuple = ()) -> tuple[int, int]:
         v, n = v + k * (2 * path.size + 8), n + k
     for ref in cell.references:
         if not isinstance(ref.cell, gdstk.Cell):
-            raise InputError(f"cell {cell.name} references cell {ref.cell}, which the file does not hold; "
-                             "export the layout with every cell it uses")
+            raise InputError(
+                f"cell {cell.name} references cell {ref.cell}, which the file does not hold; "
+                "export the layout with every cell it uses"
+            )
         cv, cn = _flat_size(ref.cell, memo, (*stack, cell.name))
         k = max(1, ref.repetition.size)
         v, n = v + k * cv, n + k * cn

@@ -48,7 +48,11 @@ def write_layout(path: str | os.PathLike, geometry: BaseGeometry, cell: str = "P
     fmt = SUFFIXES.get(path.suffix.lower())
     if fmt is None:
         raise InputError(f"output {path}: a layout file name must end in .gds, .oas or .dxf")
-    parts = [g for g in shapely.get_parts(shapely.orient_polygons(geometry)) if isinstance(g, Polygon) and not g.is_empty]
+    parts = [
+        g
+        for g in shapely.get_parts(shapely.orient_polygons(geometry))
+        if isinstance(g, Polygon) and not g.is_empty
+    ]
     if not parts:
         raise InputError(f"output {path}: the geometry is empty; nothing to write")
     name = _cell_name(cell)
@@ -76,10 +80,16 @@ def _write_gdstk(tmp: Path, fmt: str, parts: list[Polygon], name: str) -> None:
         outer = gdstk.Polygon(_rounded(p.exterior), layer=layer, datatype=datatype)
         if p.interiors:
             holes = [gdstk.Polygon(_rounded(r)) for r in p.interiors]
-            cell.add(*gdstk.boolean(outer, holes, "not", precision=DBU_UM, layer=layer, datatype=datatype))
+            cell.add(
+                *gdstk.boolean(
+                    outer, holes, "not", precision=DBU_UM, layer=layer, datatype=datatype
+                )
+            )
         else:
             cell.add(outer)
-    if fmt == "gds":  # 8190 vertices: the most one GDSII XY record holds, so no polygon is fractured
+    if (
+        fmt == "gds"
+    ):  # 8190 vertices: the most one GDSII XY record holds, so no polygon is fractured
         lib.write_gds(str(tmp), max_points=8190, timestamp=datetime.datetime(2000, 1, 1))
     else:
         lib.write_oas(str(tmp))
@@ -95,5 +105,7 @@ def _write_dxf(tmp: Path, parts: list[Polygon]) -> None:
     msp = doc.modelspace()
     for p in parts:
         for ring in (p.exterior, *p.interiors):
-            msp.add_lwpolyline(_rounded(ring).tolist(), close=True, dxfattribs={"layer": WRITE_DXF_LAYER})
+            msp.add_lwpolyline(
+                _rounded(ring).tolist(), close=True, dxfattribs={"layer": WRITE_DXF_LAYER}
+            )
     doc.saveas(tmp)

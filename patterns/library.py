@@ -36,17 +36,38 @@ RANDOM_SEED = 1
 def _entries() -> list[tuple[str, str, dict[str, Any]]]:
     out: list[tuple[str, str, dict[str, Any]]] = [
         (f"four_pad_{size}_{gap}", "four-pad", {"size": size, "gap": gap})
-        for size in (730, 710) for gap in (50, 100)
+        for size in (730, 710)
+        for gap in (50, 100)
     ]
     out.append(("square_200", "square", {"size": 200}))
     for name, (position, h, w) in DEFECT_TYPES.items():
         for kind in ("inward", "outward"):
-            out.append((f"defect_{name}_{kind}", "defect",
-                        {"size": 200, "kind": kind, "position": position, "edge": "right", "height": h, "width": w}))
+            out.append(
+                (
+                    f"defect_{name}_{kind}",
+                    "defect",
+                    {
+                        "size": 200,
+                        "kind": kind,
+                        "position": position,
+                        "edge": "right",
+                        "height": h,
+                        "width": w,
+                    },
+                )
+            )
     for a in (1.7, 3.2, 5, 15):
-        out.append((f"constant_jagged_a{a:g}".replace(".", "p"), "constant-jagged", {"size": 200, "amplitude": a}))
+        out.append(
+            (
+                f"constant_jagged_a{a:g}".replace(".", "p"),
+                "constant-jagged",
+                {"size": 200, "amplitude": a},
+            )
+        )
     for s in (2, 4, 8):
-        out.append((f"random_jagged_s{s}", "random-jagged", {"size": 200, "sigma": s, "seed": RANDOM_SEED}))
+        out.append(
+            (f"random_jagged_s{s}", "random-jagged", {"size": 200, "sigma": s, "seed": RANDOM_SEED})
+        )
     return out
 
 
@@ -86,11 +107,18 @@ def _write_overview(path: Path, items: list[tuple[str, str, dict[str, Any], Mask
     rows = -(-len(items) // cols)
     fig = Figure(figsize=(2.7 * cols, 2.9 * rows), layout="constrained")
     axes = fig.subplots(rows, cols, squeeze=False)
-    for ax in axes.flat[len(items):]:
+    for ax in axes.flat[len(items) :]:
         ax.set_axis_off()
     for ax, (stem, design, params, mask) in zip(axes.flat, items, strict=False):
-        ax.imshow(mask.data, cmap="gray", vmin=0, vmax=1, extent=mask.extent_um, origin="upper",
-                  interpolation="nearest")
+        ax.imshow(
+            mask.data,
+            cmap="gray",
+            vmin=0,
+            vmax=1,
+            extent=mask.extent_um,
+            origin="upper",
+            interpolation="nearest",
+        )
         ax.set_title(_title(stem, design, params), fontsize=7.5)
         ax.tick_params(labelsize=6)
         ax.set_xlabel("x (um)", fontsize=6.5, labelpad=1)
@@ -99,8 +127,15 @@ def _write_overview(path: Path, items: list[tuple[str, str, dict[str, Any], Mask
         if design.endswith("jagged"):
             # Zoom on the top-right corner, drawn over the (plain white) middle of the pattern.
             zoom = ax.inset_axes((0.27, 0.27, 0.46, 0.46))
-            zoom.imshow(mask.data, cmap="gray", vmin=0, vmax=1, extent=mask.extent_um, origin="upper",
-                        interpolation="nearest")
+            zoom.imshow(
+                mask.data,
+                cmap="gray",
+                vmin=0,
+                vmax=1,
+                extent=mask.extent_um,
+                origin="upper",
+                interpolation="nearest",
+            )
             half = params["size"] / 2
             span = max(24.0, 5.0 * params.get("amplitude", 2 * params.get("sigma", 0)))
             zoom.set_xlim(half - 0.7 * span, half + 0.3 * span)
@@ -111,8 +146,10 @@ def _write_overview(path: Path, items: list[tuple[str, str, dict[str, Any], Mask
             for spine in zoom.spines.values():
                 spine.set_edgecolor("tab:orange")
             ax.indicate_inset_zoom(zoom, edgecolor="tab:orange")
-    fig.suptitle(f"selfalign pattern library ({UM_PER_PX:g} um/px; white = wettable; + = nominal centre)",
-                 fontsize=10)
+    fig.suptitle(
+        f"selfalign pattern library ({UM_PER_PX:g} um/px; white = wettable; + = nominal centre)",
+        fontsize=10,
+    )
     with atomic_output(path) as tmp:
         fig.savefig(tmp, format="png", dpi=80, metadata={"Software": None})
 
@@ -135,9 +172,18 @@ def build_library(out_dir: str | Path = LIBRARY_DIR, overview: bool = True) -> l
         record.update(margin_um=MARGIN_UM, area_um2=geometry.area)
         mask = mask_from_geometry(geometry, UM_PER_PX, margin_um=MARGIN_UM, params=record)
         write_mask(out / f"{stem}.png", mask)
-        index.append({"file": f"{stem}.png", "design": design, "parameters": record["parameters"],
-                      "um_per_px": UM_PER_PX, "margin_um": MARGIN_UM, "shape_px": list(mask.shape),
-                      "area_um2": geometry.area, "raster_area_um2": mask.area_um2})
+        index.append(
+            {
+                "file": f"{stem}.png",
+                "design": design,
+                "parameters": record["parameters"],
+                "um_per_px": UM_PER_PX,
+                "margin_um": MARGIN_UM,
+                "shape_px": list(mask.shape),
+                "area_um2": geometry.area,
+                "raster_area_um2": mask.area_um2,
+            }
+        )
         items.append((stem, design, params, mask))
     with atomic_output(out / "index.json") as tmp:
         tmp.write_text(json.dumps(index, indent=1) + "\n")
@@ -160,25 +206,40 @@ def _index_markdown(index: list[dict[str, Any]]) -> str:
         "|---|---|---|---|---|",
     ]
     for e in index:
-        params = ", ".join(f"{k} {v['value']:g} {v['unit']}".rstrip() if isinstance(v["value"], int | float)
-                           else f"{k} {v['value']}" for k, v in e["parameters"].items())
+        params = ", ".join(
+            f"{k} {v['value']:g} {v['unit']}".rstrip()
+            if isinstance(v["value"], int | float)
+            else f"{k} {v['value']}"
+            for k, v in e["parameters"].items()
+        )
         h, w = e["shape_px"]
-        lines.append(f"| `{e['file']}` | {e['design']} | {params} | {w} x {h} | {e['area_um2']:.2f} |")
+        lines.append(
+            f"| `{e['file']}` | {e['design']} | {params} | {w} x {h} | {e['area_um2']:.2f} |"
+        )
     return "\n".join(lines) + "\n"
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m patterns.library", description=__doc__.splitlines()[0])
-    parser.add_argument("--out", default=str(LIBRARY_DIR), help=f"output directory (default {LIBRARY_DIR})")
-    parser.add_argument("--no-overview", action="store_true", help="skip the matplotlib contact sheet")
+    parser = argparse.ArgumentParser(
+        prog="python -m patterns.library", description=__doc__.splitlines()[0]
+    )
+    parser.add_argument(
+        "--out", default=str(LIBRARY_DIR), help=f"output directory (default {LIBRARY_DIR})"
+    )
+    parser.add_argument(
+        "--no-overview", action="store_true", help="skip the matplotlib contact sheet"
+    )
     args = parser.parse_args(argv)
     try:
         index = build_library(args.out, overview=not args.no_overview)
     except InputError as err:
         print(f"patterns.library: error: {err}", file=sys.stderr)
         return 2
-    print(f"wrote {len(index)} patterns, index.json, index.md" + ("" if args.no_overview else ", overview.png")
-          + f" to {args.out}")
+    print(
+        f"wrote {len(index)} patterns, index.json, index.md"
+        + ("" if args.no_overview else ", overview.png")
+        + f" to {args.out}"
+    )
     return 0
 
 

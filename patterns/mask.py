@@ -44,9 +44,13 @@ class Mask:
         if data.ndim != 2 or min(data.shape) < 1:
             raise InputError(f"mask must be a 2-D image, got shape {data.shape}")
         if not np.all(np.isfinite(data)):
-            raise InputError("mask contains NaN or infinite values; give an image with finite values in [0, 1]")
+            raise InputError(
+                "mask contains NaN or infinite values; give an image with finite values in [0, 1]"
+            )
         if data.min() < 0 or data.max() > 1:
-            raise InputError(f"mask values must lie in [0, 1], got [{data.min():g}, {data.max():g}]")
+            raise InputError(
+                f"mask values must lie in [0, 1], got [{data.min():g}, {data.max():g}]"
+            )
         object.__setattr__(self, "data", data)
         object.__setattr__(self, "um_per_px", positive("um_per_px", self.um_per_px, "um per px"))
 
@@ -70,7 +74,9 @@ class Mask:
         """Raise InputError if the mask has no wettable pixel (naming the flag that inverts it)."""
         if not np.any(self.data > 0):
             fix = f", or use {invert_flag}" if invert_flag else ""
-            raise InputError(f"{name}: the mask is all black (no wettable area); white marks the wettable area{fix}")
+            raise InputError(
+                f"{name}: the mask is all black (no wettable area); white marks the wettable area{fix}"
+            )
         return self
 
 

@@ -61,7 +61,9 @@ _BARE_KEY = re.compile(r"[A-Za-z0-9_-]+")
 def _escape(text: str) -> str:
     """``text`` quoted, with every non-printable character escaped (so it stays on one line)."""
     body = "".join(
-        c if c.isprintable() and c not in '"\\' else ("\\" + c if c in '"\\' else c.encode("unicode_escape").decode("ascii"))
+        c
+        if c.isprintable() and c not in '"\\'
+        else ("\\" + c if c in '"\\' else c.encode("unicode_escape").decode("ascii"))
         for c in text
     )
     return f'"{body}"'
@@ -141,12 +143,18 @@ def check_nesting(obj: Any, max_depth: int, max_items: int) -> tuple[str, str] |
             continue
         label = where or "the document"
         if depth > max_depth:
-            return label, f"is nested {depth} levels deep (arrays and tables inside each other); at most {max_depth}"
+            return (
+                label,
+                f"is nested {depth} levels deep (arrays and tables inside each other); at most {max_depth}",
+            )
         if len(node) > max_items:
             what = "keys" if isinstance(node, dict) else "elements"
             return label, f"has {len(node):,} {what}; at most {max_items:,}"
         if isinstance(node, dict):
-            children = [(v, f"{where}.{show_key(k, 40)}" if where else show_key(k, 40), depth + 1) for k, v in node.items()]
+            children = [
+                (v, f"{where}.{show_key(k, 40)}" if where else show_key(k, 40), depth + 1)
+                for k, v in node.items()
+            ]
         else:
             children = [(v, f"{where}[{i}]", depth + 1) for i, v in enumerate(node)]
         stack.extend(reversed(children))
@@ -159,7 +167,11 @@ def _number(lo: float, hi: float, unit: str, lo_open: bool = True) -> Callable[[
     rule = f"must be a finite number {low} and <= {hi:g} {unit}".rstrip()
 
     def check(v: Any) -> str | None:
-        ok = isinstance(v, int | float) and not isinstance(v, bool) and (isinstance(v, int) or math.isfinite(v))
+        ok = (
+            isinstance(v, int | float)
+            and not isinstance(v, bool)
+            and (isinstance(v, int) or math.isfinite(v))
+        )
         ok = ok and (v > lo if lo_open else v >= lo) and v <= hi
         return None if ok else rule
 
@@ -168,7 +180,11 @@ def _number(lo: float, hi: float, unit: str, lo_open: bool = True) -> Callable[[
 
 def _text(max_chars: int) -> Callable[[Any], str | None]:
     def check(v: Any) -> str | None:
-        return None if isinstance(v, str) and len(v) <= max_chars else f"must be a string of at most {max_chars} characters"
+        return (
+            None
+            if isinstance(v, str) and len(v) <= max_chars
+            else f"must be a string of at most {max_chars} characters"
+        )
 
     return check
 
@@ -193,7 +209,9 @@ PNG_KEYS: dict[str, Any] = {
 
 
 def _fail(path: os.PathLike | str, key: str, value: Any, rule: str) -> InputError:
-    return InputError(f"{path}: selfalign metadata {key} = {show_value(value)}: {rule}; rewrite the PNG with `selfalign pattern` or remove its selfalign text chunk")
+    return InputError(
+        f"{path}: selfalign metadata {key} = {show_value(value)}: {rule}; rewrite the PNG with `selfalign pattern` or remove its selfalign text chunk"
+    )
 
 
 def _check_object(obj: dict, spec: dict[str, Any], prefix: str, path: os.PathLike | str) -> None:
@@ -219,7 +237,9 @@ def validate_png_params(params: object, path: os.PathLike | str) -> dict:
     a value out of range (NaN and infinity included). Unknown keys are kept.
     """
     if not isinstance(params, dict):
-        raise InputError(f"{path}: selfalign metadata must be a JSON object, got {show_value(params)}")
+        raise InputError(
+            f"{path}: selfalign metadata must be a JSON object, got {show_value(params)}"
+        )
     hit = check_nesting(params, MAX_PARAMS_DEPTH, MAX_PARAMS_ITEMS)
     if hit:
         where, problem = hit
@@ -239,15 +259,21 @@ def parse_png_params(text: str, path: os.PathLike | str) -> dict:
     if not isinstance(text, str):
         return {}
     if len(text) > MAX_PARAMS_CHARS:
-        raise InputError(f"{path}: its selfalign metadata note is {len(text):,} characters; at most {MAX_PARAMS_CHARS:,} are read")
+        raise InputError(
+            f"{path}: its selfalign metadata note is {len(text):,} characters; at most {MAX_PARAMS_CHARS:,} are read"
+        )
     try:
         params = json.loads(text)
     except json.JSONDecodeError:
         return {}  # provenance only: a damaged note does not make the image unusable
     except RecursionError:
-        raise InputError(f"{path}: its selfalign metadata note is nested too deeply (more than {MAX_PARAMS_DEPTH} levels)") from None
+        raise InputError(
+            f"{path}: its selfalign metadata note is nested too deeply (more than {MAX_PARAMS_DEPTH} levels)"
+        ) from None
     except ValueError as err:  # an integer past Python's int-string limit
-        raise InputError(f"{path}: its selfalign metadata note holds a number with too many digits ({_shorten(str(err), 80)})") from None
+        raise InputError(
+            f"{path}: its selfalign metadata note holds a number with too many digits ({_shorten(str(err), 80)})"
+        ) from None
     if not isinstance(params, dict):
         return {}
     return validate_png_params(params, path)

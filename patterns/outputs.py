@@ -68,7 +68,9 @@ def _same_file(a: Path, b: Path) -> bool:
         return a.resolve() == b.resolve()
 
 
-def check_output_file(path: str | os.PathLike, flag: str, inputs: Iterable[str | os.PathLike | None] = ()) -> Path:
+def check_output_file(
+    path: str | os.PathLike, flag: str, inputs: Iterable[str | os.PathLike | None] = ()
+) -> Path:
     """Refuse, before any work, an output file that cannot or must not be written.
 
     ``flag`` names the option in the message (``--json``); ``inputs`` are the files the
@@ -82,20 +84,30 @@ def check_output_file(path: str | os.PathLike, flag: str, inputs: Iterable[str |
     except (FileNotFoundError, NotADirectoryError):
         st = None
     except OSError as err:
-        raise InputError(f"{flag} {path}: cannot be checked ({err.strerror or err}); choose another path") from None
+        raise InputError(
+            f"{flag} {path}: cannot be checked ({err.strerror or err}); choose another path"
+        ) from None
     if st is not None:
         if stat.S_ISLNK(st.st_mode):
-            raise InputError(f"{flag} {path}: is a symbolic link; give the path of a regular file (the link is not replaced)")
+            raise InputError(
+                f"{flag} {path}: is a symbolic link; give the path of a regular file (the link is not replaced)"
+            )
         if stat.S_ISDIR(st.st_mode):
             raise InputError(f"{flag} {path} is a directory; give a file name")
         if not stat.S_ISREG(st.st_mode):
-            raise InputError(f"{flag} {path}: is a device, FIFO or socket, not a regular file; give a file name")
+            raise InputError(
+                f"{flag} {path}: is a device, FIFO or socket, not a regular file; give a file name"
+            )
         for inp in _resolved(inputs):
             if _same_file(p, inp):
-                raise InputError(f"{flag} {path}: is an input of this run; choose another file name (inputs are never overwritten)")
+                raise InputError(
+                    f"{flag} {path}: is an input of this run; choose another file name (inputs are never overwritten)"
+                )
     parent = p.parent if str(p.parent) else Path(".")
     if not parent.is_dir():
-        raise InputError(f"{flag} {path}: directory {parent} does not exist; create it or choose another path")
+        raise InputError(
+            f"{flag} {path}: directory {parent} does not exist; create it or choose another path"
+        )
     if not os.access(parent, os.W_OK):
         raise InputError(f"{flag} {path}: directory {parent} is not writable; choose another path")
     probe_writable(parent, f"{flag} {path}")
@@ -116,8 +128,14 @@ def probe_writable(directory: Path, what: str, kind: str = "file") -> None:
             os.close(fd)
             os.unlink(name)
     except OSError as err:
-        why = "a file system that takes no new files" if err.errno == errno.ENOENT else (err.strerror or str(err))
-        raise InputError(f"{what}: cannot write in directory {directory} ({why}); choose another path") from None
+        why = (
+            "a file system that takes no new files"
+            if err.errno == errno.ENOENT
+            else (err.strerror or str(err))
+        )
+        raise InputError(
+            f"{what}: cannot write in directory {directory} ({why}); choose another path"
+        ) from None
 
 
 def check_distinct(outputs: dict[str, str | os.PathLike | None]) -> None:
@@ -161,7 +179,11 @@ def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
 
 def _attributed(err: OSError, target: Path) -> OSError:
     """``err`` naming the output it failed on (a failed write() names no file)."""
-    if err.filename is None or ".selfalign-tmp" in str(err.filename) or Path(str(err.filename)).name.startswith("."):
+    if (
+        err.filename is None
+        or ".selfalign-tmp" in str(err.filename)
+        or Path(str(err.filename)).name.startswith(".")
+    ):
         return type(err)(err.errno, err.strerror or str(err), str(target))
     return err
 
@@ -196,34 +218,51 @@ def _previous_output(out: Path) -> bool:
                 return False
         elif entry not in listed:
             return False
-    return not any(os.path.islink(os.path.join(dp, n)) for dp, dn, fn in os.walk(out) for n in dn + fn)
+    return not any(
+        os.path.islink(os.path.join(dp, n)) for dp, dn, fn in os.walk(out) for n in dn + fn
+    )
 
 
-def check_output_dir(path: str | os.PathLike, flag: str = "--out", force: bool = False, inputs: Iterable[str | os.PathLike | None] = ()) -> Path:
+def check_output_dir(
+    path: str | os.PathLike,
+    flag: str = "--out",
+    force: bool = False,
+    inputs: Iterable[str | os.PathLike | None] = (),
+) -> Path:
     """Refuse, before any work, an output directory that must not be written or replaced."""
     out = Path(path)
     if str(path) == "":
         raise InputError(f"{flag}: give a directory name")
     if out.is_symlink():
-        raise InputError(f"{flag} {path}: is a symbolic link; give the real directory (links are never replaced)")
+        raise InputError(
+            f"{flag} {path}: is a symbolic link; give the real directory (links are never replaced)"
+        )
     r = out.resolve()
     cwd = Path.cwd().resolve()
     if r == cwd or r in cwd.parents:
-        raise InputError(f"{flag} {path}: is the working directory or holds it; give a new directory name, e.g. {flag} out")
+        raise InputError(
+            f"{flag} {path}: is the working directory or holds it; give a new directory name, e.g. {flag} out"
+        )
     for inp in _resolved(inputs):
         if r == inp or r in inp.parents:
-            raise InputError(f"{flag} {path}: holds an input of this run ({inp.name}); give a new directory name")
+            raise InputError(
+                f"{flag} {path}: holds an input of this run ({inp.name}); give a new directory name"
+            )
     if out.exists() and not out.is_dir():
         raise InputError(f"{flag} {path}: exists and is not a directory; choose a directory name")
     parent = r.parent
     if not parent.is_dir():
-        raise InputError(f"{flag} {path}: parent directory {out.parent} does not exist; create it first")
+        raise InputError(
+            f"{flag} {path}: parent directory {out.parent} does not exist; create it first"
+        )
     if not os.access(parent, os.W_OK):
         raise InputError(f"{flag} {path}: parent directory {out.parent} is not writable")
     probe_writable(parent, f"{flag} {path}", "dir")
     if out.is_dir():
         if not _writable_dir(out):
-            raise InputError(f"{flag} {path}: directory is read-only; make it writable or choose another")
+            raise InputError(
+                f"{flag} {path}: directory is read-only; make it writable or choose another"
+            )
         if any(out.iterdir()):
             if not force:
                 raise InputError(
@@ -231,13 +270,20 @@ def check_output_dir(path: str | os.PathLike, flag: str = "--out", force: bool =
                     "to replace a previous selfalign output"
                 )
             if not _previous_output(out):
-                raise InputError(f"{flag} {path}: holds files selfalign did not write; not replaced even with --force (choose another directory)")
+                raise InputError(
+                    f"{flag} {path}: holds files selfalign did not write; not replaced even with --force (choose another directory)"
+                )
     return out
 
 
 @contextlib.contextmanager
-def output_directory(path: str | os.PathLike, flag: str = "--out", force: bool = False, inputs: Iterable[str | os.PathLike | None] = (),
-                     command: str = "") -> Iterator[Path]:
+def output_directory(
+    path: str | os.PathLike,
+    flag: str = "--out",
+    force: bool = False,
+    inputs: Iterable[str | os.PathLike | None] = (),
+    command: str = "",
+) -> Iterator[Path]:
     """Yield a temporary directory beside ``path``; it becomes ``path`` only on success.
 
     On success a marker file listing what was written is added, and the directory is
@@ -254,12 +300,16 @@ def output_directory(path: str | os.PathLike, flag: str = "--out", force: bool =
         hold("output")
         yield tmp
         files = [e for e in _listing(tmp) if not e.endswith("/")]
-        (tmp / MARKER).write_text(json.dumps({"tool": "selfalign", "command": command, "files": files}, indent=1) + "\n")
+        (tmp / MARKER).write_text(
+            json.dumps({"tool": "selfalign", "command": command, "files": files}, indent=1) + "\n"
+        )
         check_output_dir(out, flag, force, inputs)  # nothing changed meanwhile
         if out.is_dir():
             mode = stat.S_IMODE(os.stat(out).st_mode)
             if any(out.iterdir()):  # a previous selfalign output, replaced as asked
-                old = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".selfalign-old", dir=parent))
+                old = Path(
+                    tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".selfalign-old", dir=parent)
+                )
                 os.replace(out, old / "d")
                 _PENDING.add(old)
             os.replace(tmp, out)
@@ -270,8 +320,13 @@ def output_directory(path: str | os.PathLike, flag: str = "--out", force: bool =
     except OSError as err:
         if old is not None and (old / "d").exists() and not out.exists():
             os.replace(old / "d", out)  # put the previous output back
-        if isinstance(err, FileExistsError | IsADirectoryError) or getattr(err, "errno", None) == 39:
-            raise InputError(f"{flag} {path}: was created by someone else while this ran; nothing replaced") from None
+        if (
+            isinstance(err, FileExistsError | IsADirectoryError)
+            or getattr(err, "errno", None) == 39
+        ):
+            raise InputError(
+                f"{flag} {path}: was created by someone else while this ran; nothing replaced"
+            ) from None
         raise _attributed(err, out) from None
     finally:
         if tmp.exists():

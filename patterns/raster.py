@@ -25,7 +25,9 @@ from patterns.mask import Mask
 from patterns.resources import price_raster
 
 
-def canvas_shape(geometry: BaseGeometry, um_per_px: float, margin_um: float = 0.0) -> tuple[int, int]:
+def canvas_shape(
+    geometry: BaseGeometry, um_per_px: float, margin_um: float = 0.0
+) -> tuple[int, int]:
     """Smallest even (H, W) in pixels, symmetric about the origin, holding geometry + margin."""
     s = positive("um_per_px", um_per_px, "um per px")
     if geometry.is_empty:
@@ -45,7 +47,9 @@ def canvas_shape(geometry: BaseGeometry, um_per_px: float, margin_um: float = 0.
     return h, w
 
 
-def to_pixel_frame(geometry: BaseGeometry, um_per_px: float, shape: tuple[int, int]) -> BaseGeometry:
+def to_pixel_frame(
+    geometry: BaseGeometry, um_per_px: float, shape: tuple[int, int]
+) -> BaseGeometry:
     """Map physical coordinates (um, y up, origin at centre) to (column, row) pixel units."""
     h, w = shape
     s = float(um_per_px)
@@ -93,7 +97,9 @@ def _coverage(geom_px: BaseGeometry, shape: tuple[int, int]) -> np.ndarray:
     return np.clip(np.abs(cov) if cov.sum() < 0 else cov, 0.0, 1.0)
 
 
-def _pieces(geom_px: BaseGeometry, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _pieces(
+    geom_px: BaseGeometry, shape: tuple[int, int]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The pieces of :func:`_coverage`: row, column, what the piece adds to its pixel, and
     its vertical extent (what it adds to every pixel further right)."""
     h, w = shape
@@ -125,7 +131,9 @@ def _pieces(geom_px: BaseGeometry, shape: tuple[int, int]) -> tuple[np.ndarray, 
     return r, c, here, dy
 
 
-def coverage_steps(geometry: BaseGeometry, um_per_px: float, shape: tuple[int, int], dtype=np.float64) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def coverage_steps(
+    geometry: BaseGeometry, um_per_px: float, shape: tuple[int, int], dtype=np.float64
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The row differences of :func:`rasterize`'s raster (cast to ``dtype``), sparse, at the
     cost of the outline: ``(rows, cols, steps)`` with ``raster[r, c] - raster[r, c - 1]``
     (0 before column 0 and after the last, column ``W``), rows y-down. The raster's values
@@ -134,7 +142,9 @@ def coverage_steps(geometry: BaseGeometry, um_per_px: float, shape: tuple[int, i
     h, w = int(shape[0]), int(shape[1])
     if geometry.is_empty:
         return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0)
-    r, c, here, dy = _pieces(to_pixel_frame(geometry, positive("um_per_px", um_per_px, "um per px"), (h, w)), (h, w))
+    r, c, here, dy = _pieces(
+        to_pixel_frame(geometry, positive("um_per_px", um_per_px, "um per px"), (h, w)), (h, w)
+    )
     rows = np.concatenate([r, r])
     cols = np.concatenate([c, c + 1])
     inc = np.concatenate([here, dy - here])
@@ -213,5 +223,7 @@ def mask_from_geometry(
     what: str = "the raster",
 ) -> Mask:
     """Rasterize ``geometry`` into a :class:`Mask` that keeps the exact geometry."""
-    data = rasterize(geometry, um_per_px, shape=shape, margin_um=margin_um, budget_mb=budget_mb, what=what)
+    data = rasterize(
+        geometry, um_per_px, shape=shape, margin_um=margin_um, budget_mb=budget_mb, what=what
+    )
     return Mask(data=data, um_per_px=um_per_px, geometry=geometry, params=dict(params or {}))

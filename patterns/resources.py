@@ -81,7 +81,9 @@ def check_budget_mb(value: float, name: str = "memory budget") -> float:
         raise InputError(f"{name} must be a finite number of MB > 0, got {value!r}")
     total = machine_memory_bytes() / MB
     if v > total:
-        raise InputError(f"{name} {v:,.0f} MB is more than this machine's memory ({total:,.0f} MB); give at most {total:,.0f} MB (--memory-budget)")
+        raise InputError(
+            f"{name} {v:,.0f} MB is more than this machine's memory ({total:,.0f} MB); give at most {total:,.0f} MB (--memory-budget)"
+        )
     return v
 
 
@@ -111,29 +113,50 @@ def require_fits(what: str, nbytes: float, knob: str, budget_mb: float | None = 
     """
     limit = budget_bytes(budget_mb)
     if not (nbytes <= limit):  # also catches nan
-        raise InputError(f"{what} would need about {fmt_bytes(nbytes)} but the memory budget is {fmt_bytes(limit)}; {knob} (or raise --memory-budget)")
+        raise InputError(
+            f"{what} would need about {fmt_bytes(nbytes)} but the memory budget is {fmt_bytes(limit)}; {knob} (or raise --memory-budget)"
+        )
 
 
-def price_raster(shape_hw: tuple[float, float], um_per_px: float, what: str, budget_mb: float | None = None) -> None:
+def price_raster(
+    shape_hw: tuple[float, float], um_per_px: float, what: str, budget_mb: float | None = None
+) -> None:
     """Refuse a raster of (H, W) pixels (floats allowed, may be huge) that cannot fit."""
     h, w = (float(v) for v in shape_hw)
     n = h * w
-    require_fits(f"{what} ({_px(w)} x {_px(h)} px at {um_per_px:g} um/px)", n * RASTER_BYTES_PER_PX,
-                 "use a coarser scale (--resolution or --um-per-px) or a smaller chip/pattern", budget_mb)
+    require_fits(
+        f"{what} ({_px(w)} x {_px(h)} px at {um_per_px:g} um/px)",
+        n * RASTER_BYTES_PER_PX,
+        "use a coarser scale (--resolution or --um-per-px) or a smaller chip/pattern",
+        budget_mb,
+    )
 
 
-def price_image(width: int, height: int, path: os.PathLike | str, max_mpx: float | None = None, budget_mb: float | None = None) -> None:
+def price_image(
+    width: int,
+    height: int,
+    path: os.PathLike | str,
+    max_mpx: float | None = None,
+    budget_mb: float | None = None,
+) -> None:
     """Refuse an image whose decoded size is over the pixel limit or the memory budget."""
     limit = DEFAULT_MAX_IMAGE_MPX if max_mpx is None else float(max_mpx)
     if not (math.isfinite(limit) and limit > 0):  # nan or inf would switch the guard off
-        raise InputError(f"the image limit (--max-image-mpx, max_image_mpx) must be a finite number of megapixels > 0, got {max_mpx!r}")
+        raise InputError(
+            f"the image limit (--max-image-mpx, max_image_mpx) must be a finite number of megapixels > 0, got {max_mpx!r}"
+        )
     mpx = width * height / 1e6
     if mpx > limit:
         raise InputError(
             f"{path}: {width} x {height} px ({mpx:,.1f} megapixels) is over the image limit of {limit:g} megapixels "
             f"(about {fmt_bytes(width * height * IMAGE_BYTES_PER_PX)} to read); downsample the image, or raise the limit with --max-image-mpx"
         )
-    require_fits(f"reading {path} ({width} x {height} px)", width * height * IMAGE_BYTES_PER_PX, "downsample the image", budget_mb)
+    require_fits(
+        f"reading {path} ({width} x {height} px)",
+        width * height * IMAGE_BYTES_PER_PX,
+        "downsample the image",
+        budget_mb,
+    )
 
 
 def _px(v: float) -> str:

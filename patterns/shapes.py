@@ -49,7 +49,9 @@ def _finish(geom: Any, what: str) -> Any:
     elif isinstance(geom, MultiPolygon):
         geom = MultiPolygon([orient(g, 1.0) for g in geom.geoms])
     if not geom.is_valid or geom.is_empty:
-        raise InputError(f"{what}: the parameters give an invalid shape ({shapely.is_valid_reason(geom)})")
+        raise InputError(
+            f"{what}: the parameters give an invalid shape ({shapely.is_valid_reason(geom)})"
+        )
     return geom
 
 
@@ -79,8 +81,10 @@ def circle(diameter: float, segments: int = 1024) -> Polygon:
     """
     r = _length("diameter", diameter) / 2
     n = segments
-    require(isinstance(n, int | np.integer) and n >= 8 and n % 4 == 0,
-            f"segments must be a multiple of 4 and >= 8, got {segments!r}")
+    require(
+        isinstance(n, int | np.integer) and n >= 8 and n % 4 == 0,
+        f"segments must be a multiple of 4 and >= 8, got {segments!r}",
+    )
     r_eff = r * math.sqrt(2 * math.pi / (n * math.sin(2 * math.pi / n)))
     k = np.arange(n)
     # Quarter-turn-exact vertices: compute one quadrant and rotate it by swapping coordinates.
@@ -99,7 +103,11 @@ def four_pad(size: float, gap: float) -> MultiPolygon:
     L, g = _length("size", size), _length("gap", gap)
     require(g < L, f"gap={g:g} um must be smaller than size={L:g} um (pads of side (size - gap)/2)")
     lo, hi = g / 2, L / 2
-    pads = [box(x0, y0, x1, y1) for (x0, x1) in ((-hi, -lo), (lo, hi)) for (y0, y1) in ((-hi, -lo), (lo, hi))]
+    pads = [
+        box(x0, y0, x1, y1)
+        for (x0, x1) in ((-hi, -lo), (lo, hi))
+        for (y0, y1) in ((-hi, -lo), (lo, hi))
+    ]
     return _finish(MultiPolygon(pads), "four-pad")
 
 
@@ -113,13 +121,19 @@ def polygon(points: Sequence[Sequence[float]]) -> Polygon:
         pts = np.asarray(points, dtype=np.float64)
     except (TypeError, ValueError):
         raise InputError(f"points must be a list of (x, y) pairs in um, got {points!r}") from None
-    require(pts.ndim == 2 and pts.shape[1] == 2, f"points must be (x, y) pairs, got array of shape {pts.shape}")
+    require(
+        pts.ndim == 2 and pts.shape[1] == 2,
+        f"points must be (x, y) pairs, got array of shape {pts.shape}",
+    )
     require(np.all(np.isfinite(pts)), "points must be finite numbers (um)")
     if len(pts) > 1 and np.array_equal(pts[0], pts[-1]):
         pts = pts[:-1]
     require(len(pts) >= 3, f"points: a polygon needs at least 3 distinct points, got {len(pts)}")
     poly = Polygon(pts)
-    require(poly.is_valid, f"points: the polygon is not simple ({shapely.is_valid_reason(poly)}); "
-            "give the vertices in order along the boundary, without crossings")
+    require(
+        poly.is_valid,
+        f"points: the polygon is not simple ({shapely.is_valid_reason(poly)}); "
+        "give the vertices in order along the boundary, without crossings",
+    )
     require(poly.area > 0, "points: the polygon has zero area")
     return orient(poly, 1.0)

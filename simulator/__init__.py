@@ -26,26 +26,48 @@ except PackageNotFoundError:  # a source tree that was never installed
 #: Public name -> the module that defines it ("module:name" where the name differs).
 _EXPORTS = {
     # what to simulate
-    "Scene": "simulator.scene", "TwistGrid": "simulator.scene", "Effects": "simulator.scene",
-    "Materials": "simulator.physics", "Liquid": "simulator.physics", "UM2": "simulator.core",
+    "Scene": "simulator.scene",
+    "TwistGrid": "simulator.scene",
+    "Effects": "simulator.scene",
+    "Materials": "simulator.physics",
+    "Liquid": "simulator.physics",
+    "UM2": "simulator.core",
     # the energy landscape
-    "build_landscape": "simulator.landscape", "estimate_bytes": "simulator.landscape", "Landscape": "simulator.landscape",
-    "global_minimum": "simulator.landscape", "GlobalMinimum": "simulator.landscape",
+    "build_landscape": "simulator.landscape",
+    "estimate_bytes": "simulator.landscape",
+    "Landscape": "simulator.landscape",
+    "global_minimum": "simulator.landscape",
+    "GlobalMinimum": "simulator.landscape",
     # trajectories and batches
-    "simulate": "simulator.motion", "Trajectory": "simulator.motion",
-    "run_batch": "simulator.batch", "StartGrid": "simulator.batch", "random_starts": "simulator.batch",
-    "summarize": "simulator.batch", "capture_map": "simulator.batch", "run_realizations": "simulator.batch",
+    "simulate": "simulator.motion",
+    "Trajectory": "simulator.motion",
+    "run_batch": "simulator.batch",
+    "StartGrid": "simulator.batch",
+    "random_starts": "simulator.batch",
+    "summarize": "simulator.batch",
+    "capture_map": "simulator.batch",
+    "run_realizations": "simulator.batch",
     "BatchResult": "simulator.batch",
     # assessment and accuracy
-    "evaluate": "simulator.batch", "assess": "simulator.batch", "exact_overlap_um2": "simulator.testing:overlap_um2",
-    "PRESETS": "simulator.scene", "apply_preset": "simulator.scene", "feature_warning": "simulator.scene",
+    "evaluate": "simulator.batch",
+    "assess": "simulator.batch",
+    "exact_overlap_um2": "simulator.testing:overlap_um2",
+    "PRESETS": "simulator.scene",
+    "apply_preset": "simulator.scene",
+    "feature_warning": "simulator.scene",
     "smallest_feature_um": "simulator.scene",
     # design sweeps
-    "sweep": "simulator.sweep", "load_sweep": "simulator.sweep",
+    "sweep": "simulator.sweep",
+    "load_sweep": "simulator.sweep",
     # pictures
-    "plot_pattern": "simulator.render", "plot_landscape": "simulator.render", "plot_forces": "simulator.render",
-    "plot_energy_curve": "simulator.render", "plot_capture_map": "simulator.render", "write_trajectory_gif": "simulator.render",
-    "save_figure": "simulator.render", "pyplot": "simulator.render",
+    "plot_pattern": "simulator.render",
+    "plot_landscape": "simulator.render",
+    "plot_forces": "simulator.render",
+    "plot_energy_curve": "simulator.render",
+    "plot_capture_map": "simulator.render",
+    "write_trajectory_gif": "simulator.render",
+    "save_figure": "simulator.render",
+    "pyplot": "simulator.render",
 }
 
 __all__ = sorted(_EXPORTS)

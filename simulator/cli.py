@@ -68,13 +68,22 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 #: OS errors a user can fix (disk full, quota, read-only or forbidden place): exit 2.
-USER_OS_ERRORS = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS, errno.EACCES, errno.EPERM, errno.ENAMETOOLONG}
+USER_OS_ERRORS = {
+    errno.ENOSPC,
+    errno.EDQUOT,
+    errno.EFBIG,
+    errno.EROFS,
+    errno.EACCES,
+    errno.EPERM,
+    errno.ENAMETOOLONG,
+}
 
 
 @contextlib.contextmanager
 def _boundary():
     """SIGTERM ends the process after removing temporary outputs; library warnings are
     one line each; for one command."""
+
     def terminate(signum, frame):
         # End at once: unwinding an exception raised at an arbitrary point (inside a lock,
         # a thread pool's shutdown, an XLA call) can hang. Temporaries are removed here;
@@ -94,7 +103,9 @@ def _boundary():
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("default")
-            warnings.simplefilter("ignore", ResourceWarning)  # files a failed library write left open
+            warnings.simplefilter(
+                "ignore", ResourceWarning
+            )  # files a failed library write left open
             warnings.showwarning = one_line
             yield
     finally:
@@ -119,7 +130,10 @@ def _internal_error(command: str, err: BaseException) -> int:
             f.write(text)
         where = f"traceback in {name}, or set SELFALIGN_DEBUG=1 to print it"
     summary = " ".join(f"{type(err).__name__}: {err}".split())[:300]
-    print(f"selfalign {command}: internal error: {summary} ({where}); please report it", file=sys.stderr)
+    print(
+        f"selfalign {command}: internal error: {summary} ({where}); please report it",
+        file=sys.stderr,
+    )
     return 1
 
 
@@ -133,7 +147,9 @@ def main(argv: list[str] | None = None) -> int:
             name = args.command
             from simulator.core import quiet_waits
 
-            with quiet_waits(bool(getattr(args, "quiet", False))):  # --quiet also silences the engine's waiting lines
+            with quiet_waits(
+                bool(getattr(args, "quiet", False))
+            ):  # --quiet also silences the engine's waiting lines
                 code = int(args.func(args) or 0)
             sys.stdout.flush()
             return code
@@ -148,10 +164,16 @@ def main(argv: list[str] | None = None) -> int:
             sys.stderr.close()
             return 141
         except MemoryError:
-            print(f"selfalign {name}: error: out of memory; lower --memory-budget, use a coarser --resolution or fewer starts", file=sys.stderr)
+            print(
+                f"selfalign {name}: error: out of memory; lower --memory-budget, use a coarser --resolution or fewer starts",
+                file=sys.stderr,
+            )
             return 2
         except RecursionError:
-            print(f"selfalign {name}: error: an input is nested too deeply to read; simplify it", file=sys.stderr)
+            print(
+                f"selfalign {name}: error: an input is nested too deeply to read; simplify it",
+                file=sys.stderr,
+            )
             return 2
         except OSError as err:
             if os.environ.get("SELFALIGN_DEBUG") == "1" or err.errno not in USER_OS_ERRORS:
@@ -161,14 +183,20 @@ def main(argv: list[str] | None = None) -> int:
             target = err.filename or "standard output"
             if target == "standard output":
                 _quiet_stdout()
-            print(f"selfalign {name}: error: cannot write {target}: {err.strerror}; free some space or choose another place "
-                  "(no partial output was kept)", file=sys.stderr)
+            print(
+                f"selfalign {name}: error: cannot write {target}: {err.strerror}; free some space or choose another place "
+                "(no partial output was kept)",
+                file=sys.stderr,
+            )
             return 2
         except Exception as err:
             if os.environ.get("SELFALIGN_DEBUG") == "1":
                 raise
             if "RESOURCE_EXHAUSTED" in str(err):
-                print(f"selfalign {name}: error: out of memory on the accelerator; lower --memory-budget or use a coarser --resolution", file=sys.stderr)
+                print(
+                    f"selfalign {name}: error: out of memory on the accelerator; lower --memory-budget or use a coarser --resolution",
+                    file=sys.stderr,
+                )
                 return 2
             return _internal_error(name, err)
 

@@ -26,9 +26,12 @@ def listing(d: Path) -> list[str]:
 #: (``make test &``, some CI runners) hands its children SIGINT ignored, and Python keeps an
 #: ignored SIGINT ignored, so a test that presses Ctrl-C would wait forever. A user's Ctrl-C
 #: in a terminal reaches a process whose SIGINT is the default; this reproduces that.
-WITH_CTRL_C = [sys.executable, "-c",
-               "import runpy, signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
-               "sys.argv = sys.argv[1:]; runpy.run_module(sys.argv[0], run_name='__main__', alter_sys=True)"]
+WITH_CTRL_C = [
+    sys.executable,
+    "-c",
+    "import runpy, signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
+    "sys.argv = sys.argv[1:]; runpy.run_module(sys.argv[0], run_name='__main__', alter_sys=True)",
+]
 
 
 def python_m(module: str, *args) -> list[str]:

@@ -36,7 +36,17 @@ def test_c1_square_on_square():
     np.testing.assert_allclose(a, u[:, 0] * u[:, 1], atol=1e-8)
 
 
-@pytest.mark.parametrize("alpha, area", [(0.5, 39_826.98), (1, 39_656.97), (5, 38_399.68), (10, 37_063.53), (30, 33_811.98), (45, 33_137.08)])
+@pytest.mark.parametrize(
+    "alpha, area",
+    [
+        (0.5, 39_826.98),
+        (1, 39_656.97),
+        (5, 38_399.68),
+        (10, 37_063.53),
+        (30, 33_811.98),
+        (45, 33_137.08),
+    ],
+)
 def test_c5_pure_twist(alpha, area):
     a = overlap_um2(SQ, SQ, (0, 0, alpha))[0]
     t = math.radians(alpha)
@@ -56,7 +66,9 @@ C11 = {
 
 @pytest.mark.parametrize("key", list(C11))
 def test_c11_defect_table(key):
-    a = overlap_um2(defect_type(*key), SQ, [(0, 0, 0), (1, 0, 0), (-1, 0, 0), (0, 0, 1), (0, 0, -1)])
+    a = overlap_um2(
+        defect_type(*key), SQ, [(0, 0, 0), (1, 0, 0), (-1, 0, 0), (0, 0, 1), (0, 0, -1)]
+    )
     np.testing.assert_array_equal(np.round(a, 2), C11[key])
 
 
@@ -71,7 +83,11 @@ def test_c6_twist_coupling_and_force_units():
 
 def test_c9_greedy_on_exact_overlap():
     fp = four_pad(200, 20)
-    for start, final, steps in [((89, 0, 0), (0, 0, 0), 89), ((100, 0, 0), (100, 0, 0), 0), ((120, 0, 5), (110, 0, 0), 10)]:
+    for start, final, steps in [
+        ((89, 0, 0), (0, 0, 0), 89),
+        ((100, 0, 0), (100, 0, 0), 0),
+        ((120, 0, 5), (110, 0, 0), 10),
+    ]:
         run = greedy(fp, SQ, start)
         assert run.final == final and run.steps == steps and run.status == "converged"
     assert greedy(fp, SQ, (91, 0, 0)).final == (0, 0, 0)  # the escape at the plateau end
@@ -111,14 +127,18 @@ def _energy_error(geom, chip, s, poses, **kw) -> float:
 POSES = np.random.default_rng(7).uniform(-1, 1, (60, 3)) * [60, 60, 10]
 
 
-@pytest.mark.parametrize("geom", [square(200), four_pad(200, 20)], ids=["square200", "fourpad200_20"])
+@pytest.mark.parametrize(
+    "geom", [square(200), four_pad(200, 20)], ids=["square200", "fourpad200_20"]
+)
 def test_energy_error_shrinks_with_the_pixel_size(geom):
     err = [_energy_error(geom, SQ, s, POSES) for s in (4.0, 2.0, 1.0)]
     assert err[0] > err[1] > err[2]
     assert err[2] < 2e-4  # 0.02 % of the chip area at 1 um/px
 
 
-@pytest.mark.parametrize("stem", ["random_jagged_s2", "defect_B_outward", "square_200", "constant_jagged_a3p2"])
+@pytest.mark.parametrize(
+    "stem", ["random_jagged_s2", "defect_B_outward", "square_200", "constant_jagged_a3p2"]
+)
 @pytest.mark.parametrize("name", list(PRESETS))
 def test_presets_meet_their_stated_energy_error(stem, name):
     design, params = next((d, p) for s, d, p in LIBRARY if s == stem)
@@ -176,6 +196,8 @@ def test_smallest_feature_of_geometry_and_png():
     assert smallest_feature_um(defect_type("A", "outward")) == pytest.approx(10 * math.sqrt(2))
     g = four_pad(730, 100)
     png = mask_from_geometry(g, 1.0)
-    assert smallest_feature_um(Mask(png.data, 1.0)) == pytest.approx(100.0, abs=1.0)  # no geometry: outline
+    assert smallest_feature_um(Mask(png.data, 1.0)) == pytest.approx(
+        100.0, abs=1.0
+    )  # no geometry: outline
     with pytest.raises(InputError, match="geometry or a patterns.mask.Mask"):
         smallest_feature_um(np.ones((4, 4)))

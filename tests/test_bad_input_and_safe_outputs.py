@@ -89,24 +89,38 @@ def test_evaluate_out_the_inputs_directory_is_refused(small_png, tmp_path, run_c
     assert small_png.exists()
 
 
-def test_evaluate_out_new_directory_then_force_replaces_only_its_own_output(small_png, tmp_path, run_cli):
+def test_evaluate_out_new_directory_then_force_replaces_only_its_own_output(
+    small_png, tmp_path, run_cli
+):
     out = tmp_path / "ev"
     assert run_cli(evaluate_args(small_png, out))[0] == 0
     marker = json.loads((out / MARKER).read_text())
-    assert set(marker["files"]) == {"summary.json", "report.html", "landscape.png", "force.png", "capture.png", "pattern.png"}
+    assert set(marker["files"]) == {
+        "summary.json",
+        "report.html",
+        "landscape.png",
+        "force.png",
+        "capture.png",
+        "pattern.png",
+    }
     first = (out / "summary.json").stat().st_mtime_ns
     rc, _, err = run_cli(evaluate_args(small_png, out))  # exists: refused without --force
     one_line_error(rc, err, "--force")
     assert run_cli(evaluate_args(small_png, out, "--force"))[0] == 0
     assert (out / "summary.json").stat().st_mtime_ns >= first
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["ev", "pad.png"]  # the old copy is gone, nothing hidden left
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "ev",
+        "pad.png",
+    ]  # the old copy is gone, nothing hidden left
     (out / "extra.txt").write_text("a user's file")
     rc, _, err = run_cli(evaluate_args(small_png, out, "--force"))
     one_line_error(rc, err, "did not write")
     assert (out / "extra.txt").exists()
 
 
-def test_evaluate_out_existing_empty_directory_is_filled_keeping_its_mode(small_png, tmp_path, run_cli):
+def test_evaluate_out_existing_empty_directory_is_filled_keeping_its_mode(
+    small_png, tmp_path, run_cli
+):
     out = tmp_path / "empty"
     out.mkdir()
     out.chmod(0o750)
@@ -137,31 +151,174 @@ def test_demo_out_refuses_a_directory_of_user_files(tmp_path, run_cli):
 
 # ======================================================= 2. priced before allocation
 MEMORY_CASES = {
-    "energy_chip_size_1e9": ["energy", "--pattern", FOUR_PAD, "--chip-size", "1e9", "--at", "0,0,0"],
+    "energy_chip_size_1e9": [
+        "energy",
+        "--pattern",
+        FOUR_PAD,
+        "--chip-size",
+        "1e9",
+        "--at",
+        "0,0,0",
+    ],
     # The library PNG stores 1 um/px: a contradicting --um-per-px needs --override-scale (issue 14).
-    "um_per_px_1e-6": ["energy", "--pattern", FOUR_PAD, "--chip-size", "730", "--at", "0,0,0", "--um-per-px", "1e-6", "--override-scale"],
+    "um_per_px_1e-6": [
+        "energy",
+        "--pattern",
+        FOUR_PAD,
+        "--chip-size",
+        "730",
+        "--at",
+        "0,0,0",
+        "--um-per-px",
+        "1e-6",
+        "--override-scale",
+    ],
     "pattern_square_size_1e9": ["pattern", "square", "--size", "1e9", "-o", "{d}/big.png"],
-    "max_steps_1e9_path_buffers": ["simulate", "--pattern", SQUARE, "--chip-size", "200", "--start", "10,10,0", "--max-steps", "1000000000"],
-    "montecarlo_random_1e8": ["montecarlo", "--pattern", SQUARE, "--chip-size", "200", "--random", "100000000", "--spread", "10,10,1", "--memory-budget", "4096"],
-    "curve_from_-1e9_to_1e9": ["energy", "--pattern", SQUARE, "--chip-size", "200", "--curve", "x", "--from=-1e9", "--to=1e9"],
-    "png_13000_px_rgba": ["energy", "--pattern", "{d}/bomb.png", "--um-per-px", "1", "--chip-size", "200", "--at", "0,0,0"],
-    "memory_budget_above_machine": ["energy", "--pattern", SQUARE, "--chip-size", "200", "--at", "0,0,0", "--memory-budget", "1e9"],
-    "phys_2_31_px_per_m": ["energy", "--pattern", "{d}/phys.png", "--chip-size", "200", "--at", "0,0,0"],
+    "max_steps_1e9_path_buffers": [
+        "simulate",
+        "--pattern",
+        SQUARE,
+        "--chip-size",
+        "200",
+        "--start",
+        "10,10,0",
+        "--max-steps",
+        "1000000000",
+    ],
+    "montecarlo_random_1e8": [
+        "montecarlo",
+        "--pattern",
+        SQUARE,
+        "--chip-size",
+        "200",
+        "--random",
+        "100000000",
+        "--spread",
+        "10,10,1",
+        "--memory-budget",
+        "4096",
+    ],
+    "curve_from_-1e9_to_1e9": [
+        "energy",
+        "--pattern",
+        SQUARE,
+        "--chip-size",
+        "200",
+        "--curve",
+        "x",
+        "--from=-1e9",
+        "--to=1e9",
+    ],
+    "png_13000_px_rgba": [
+        "energy",
+        "--pattern",
+        "{d}/bomb.png",
+        "--um-per-px",
+        "1",
+        "--chip-size",
+        "200",
+        "--at",
+        "0,0,0",
+    ],
+    "memory_budget_above_machine": [
+        "energy",
+        "--pattern",
+        SQUARE,
+        "--chip-size",
+        "200",
+        "--at",
+        "0,0,0",
+        "--memory-budget",
+        "1e9",
+    ],
+    "phys_2_31_px_per_m": [
+        "energy",
+        "--pattern",
+        "{d}/phys.png",
+        "--chip-size",
+        "200",
+        "--at",
+        "0,0,0",
+    ],
     "chip_size_1e5": ["energy", "--pattern", SQUARE, "--chip-size", "1e5", "--at", "0,0,0"],
     "chip_size_1e300": ["energy", "--pattern", SQUARE, "--chip-size", "1e300", "--at", "0,0,0"],
-    "twist_step_1e-300": ["energy", "--pattern", SQUARE, "--chip-size", "200", "--at", "0,0,0", "--twist-step", "1e-300"],
-    "max_steps_1e12": ["simulate", "--pattern", SQUARE, "--chip-size", "200", "--start", "10,10,0", "--max-steps", "1000000000000"],
-    "resolution_1e-6": ["energy", "--pattern", SQUARE, "--chip-size", "200", "--at", "0,0,0", "--resolution", "1e-6"],
-    "montecarlo_twist_step_1e-6": ["montecarlo", "--pattern", SQUARE, "--chip-size", "200", "--twist-step", "1e-6", "--random", "10", "--spread", "1,1,1"],
-    "overdamped_max_steps_1e12": ["simulate", "--pattern", SQUARE, "--chip-size", "200", "--start", "10,10,0", "--method", "overdamped", "--max-steps", "1000000000000"],
+    "twist_step_1e-300": [
+        "energy",
+        "--pattern",
+        SQUARE,
+        "--chip-size",
+        "200",
+        "--at",
+        "0,0,0",
+        "--twist-step",
+        "1e-300",
+    ],
+    "max_steps_1e12": [
+        "simulate",
+        "--pattern",
+        SQUARE,
+        "--chip-size",
+        "200",
+        "--start",
+        "10,10,0",
+        "--max-steps",
+        "1000000000000",
+    ],
+    "resolution_1e-6": [
+        "energy",
+        "--pattern",
+        SQUARE,
+        "--chip-size",
+        "200",
+        "--at",
+        "0,0,0",
+        "--resolution",
+        "1e-6",
+    ],
+    "montecarlo_twist_step_1e-6": [
+        "montecarlo",
+        "--pattern",
+        SQUARE,
+        "--chip-size",
+        "200",
+        "--twist-step",
+        "1e-6",
+        "--random",
+        "10",
+        "--spread",
+        "1,1,1",
+    ],
+    "overdamped_max_steps_1e12": [
+        "simulate",
+        "--pattern",
+        SQUARE,
+        "--chip-size",
+        "200",
+        "--start",
+        "10,10,0",
+        "--method",
+        "overdamped",
+        "--max-steps",
+        "1000000000000",
+    ],
 }
 #: Knob words each refusal must name (what shrinks the request).
 MEMORY_KNOBS = {
-    "energy_chip_size_1e9": "coarser scale", "um_per_px_1e-6": "coarser scale", "pattern_square_size_1e9": "coarser scale",
-    "max_steps_1e9_path_buffers": "--max-steps", "montecarlo_random_1e8": "fewer starts", "curve_from_-1e9_to_1e9": "--from/--to",
-    "png_13000_px_rgba": "--max-image-mpx", "memory_budget_above_machine": "machine's memory", "phys_2_31_px_per_m": "coarser scale",
-    "chip_size_1e5": "coarser scale", "chip_size_1e300": "coarser scale", "twist_step_1e-300": "--twist-step",
-    "max_steps_1e12": "32-bit", "resolution_1e-6": "coarser scale", "montecarlo_twist_step_1e-6": "--twist-step",
+    "energy_chip_size_1e9": "coarser scale",
+    "um_per_px_1e-6": "coarser scale",
+    "pattern_square_size_1e9": "coarser scale",
+    "max_steps_1e9_path_buffers": "--max-steps",
+    "montecarlo_random_1e8": "fewer starts",
+    "curve_from_-1e9_to_1e9": "--from/--to",
+    "png_13000_px_rgba": "--max-image-mpx",
+    "memory_budget_above_machine": "machine's memory",
+    "phys_2_31_px_per_m": "coarser scale",
+    "chip_size_1e5": "coarser scale",
+    "chip_size_1e300": "coarser scale",
+    "twist_step_1e-300": "--twist-step",
+    "max_steps_1e12": "32-bit",
+    "resolution_1e-6": "coarser scale",
+    "montecarlo_twist_step_1e-6": "--twist-step",
     "overdamped_max_steps_1e12": "32-bit",
 }
 RUNNER = textwrap.dedent("""
@@ -188,10 +345,20 @@ RUNNER = textwrap.dedent("""
 @pytest.fixture(scope="module")
 def memory_runs(tmp_path_factory):
     d = tmp_path_factory.mktemp("mem")
-    Image.new("RGBA", (13000, 13000), (0, 0, 0, 255)).save(d / "bomb.png")  # 0.7 MB on disk, 7.9 GB decoded
-    Image.fromarray(np.full((50, 50), 255, np.uint8)).save(d / "phys.png", dpi=((2**31 - 1) * 0.0254,) * 2)
+    Image.new("RGBA", (13000, 13000), (0, 0, 0, 255)).save(
+        d / "bomb.png"
+    )  # 0.7 MB on disk, 7.9 GB decoded
+    Image.fromarray(np.full((50, 50), 255, np.uint8)).save(
+        d / "phys.png", dpi=((2**31 - 1) * 0.0254,) * 2
+    )
     cases = {k: [a.replace("{d}", str(d)) for a in v] for k, v in MEMORY_CASES.items()}
-    proc = subprocess.run([sys.executable, "-c", RUNNER, json.dumps(cases)], capture_output=True, text=True, timeout=600, cwd=d)
+    proc = subprocess.run(
+        [sys.executable, "-c", RUNNER, json.dumps(cases)],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        cwd=d,
+    )
     assert proc.returncode == 0, proc.stderr[-3000:]
     return json.loads(proc.stdout.splitlines()[-1]), d
 
@@ -208,7 +375,9 @@ def test_memory_peak_of_all_refusals_stays_small(memory_runs):
     # VmHWM is the peak over the whole process: every refusal above came before any
     # large allocation (the requests range from 8 GB to 1e+290 TB).
     runs, _ = memory_runs
-    assert max(r["peak_kb"] for r in runs.values()) < 2**20  # 1 GiB; importing jax etc. is ~0.25 GiB
+    assert (
+        max(r["peak_kb"] for r in runs.values()) < 2**20
+    )  # 1 GiB; importing jax etc. is ~0.25 GiB
 
 
 # ======================================================= 3. one line instead of a traceback
@@ -234,13 +403,25 @@ def scene_file(tmp_path: Path, body: str) -> Path:
     [
         ("toml_5000_deep_arrays", "x = " + "[" * 5000 + "]" * 5000 + "\n", "nested too deeply"),
         ("toml_10000_digit_integer", "window_um = " + "9" * 10000 + "\n", "more than 4300 digits"),
-        ("toml_surface_tension_water", '[materials]\nsurface_tension_mN_m = "water"\n', "surface_tension_mN_m"),
+        (
+            "toml_surface_tension_water",
+            '[materials]\nsurface_tension_mN_m = "water"\n',
+            "surface_tension_mN_m",
+        ),
         ("toml_chip_size_three_numbers", "", "chip_size_um"),
         ("toml_pattern_42", "", "pattern"),
-        ("toml_allow_repulsive_string_false", '[materials]\nallow_repulsive = "false"\n', "allow_repulsive"),
+        (
+            "toml_allow_repulsive_string_false",
+            '[materials]\nallow_repulsive = "false"\n',
+            "allow_repulsive",
+        ),
         ("toml_effects_twist_no", '[effects]\ntwist = "no"\n', "twist"),
         ("toml_simulate_metod", '[simulate]\nmetod = "gradient"\nstart = [1, 2, 3]\n', "metod"),
-        ("toml_max_steps_1e12", "[simulate]\nmax_steps = 1000000000000\nstart = [1, 2, 3]\n", "max_steps"),
+        (
+            "toml_max_steps_1e12",
+            "[simulate]\nmax_steps = 1000000000000\nstart = [1, 2, 3]\n",
+            "max_steps",
+        ),
     ],
 )
 def test_toml_scene_errors_are_one_line(tmp_path, run_cli, name, body, needle):
@@ -287,7 +468,9 @@ def test_fifo_as_scene_file_does_not_hang(tmp_path, run_cli):
 def test_fifo_as_pattern_does_not_hang(tmp_path, run_cli):
     fifo = tmp_path / "p.png"
     os.mkfifo(fifo)
-    rc, _, err = in_thread(lambda: run_cli(["energy", "--pattern", fifo, "--chip-size", "10", "--at", "0,0,0"]))
+    rc, _, err = in_thread(
+        lambda: run_cli(["energy", "--pattern", fifo, "--chip-size", "10", "--at", "0,0,0"])
+    )
     one_line_error(rc, err, "FIFO")
 
 
@@ -303,10 +486,52 @@ def test_evaluate_1x1_px_pattern(tmp_path, run_cli):
 
 # ---------------------------------------------------------------- full disk
 FULL_DISK = {
-    "evaluate": ["evaluate", SQUARE, "--chip-size", "200", "--out", "ev", "--quiet", "--resolution", "4"],
-    "gif": ["simulate", "--pattern", SQUARE, "--chip-size", "200", "--start", "20,10,0", "--gif", "t.gif", "--quiet"],
-    "plot": ["simulate", "--pattern", SQUARE, "--chip-size", "200", "--start", "20,10,0", "--plot", "t.png", "--quiet"],
-    "csv": ["montecarlo", "--pattern", SQUARE, "--chip-size", "200", "--grid=-40:40:2,-40:40:2", "--csv", "m.csv", "--quiet"],
+    "evaluate": [
+        "evaluate",
+        SQUARE,
+        "--chip-size",
+        "200",
+        "--out",
+        "ev",
+        "--quiet",
+        "--resolution",
+        "4",
+    ],
+    "gif": [
+        "simulate",
+        "--pattern",
+        SQUARE,
+        "--chip-size",
+        "200",
+        "--start",
+        "20,10,0",
+        "--gif",
+        "t.gif",
+        "--quiet",
+    ],
+    "plot": [
+        "simulate",
+        "--pattern",
+        SQUARE,
+        "--chip-size",
+        "200",
+        "--start",
+        "20,10,0",
+        "--plot",
+        "t.png",
+        "--quiet",
+    ],
+    "csv": [
+        "montecarlo",
+        "--pattern",
+        SQUARE,
+        "--chip-size",
+        "200",
+        "--grid=-40:40:2,-40:40:2",
+        "--csv",
+        "m.csv",
+        "--quiet",
+    ],
 }
 
 
@@ -319,15 +544,30 @@ def test_full_disk_during_output(tmp_path, name):
         "resource.setrlimit(resource.RLIMIT_FSIZE, (4096, 4096)); "
         "from simulator.cli import main; sys.exit(main(sys.argv[1:]))"
     )
-    proc = subprocess.run([sys.executable, "-c", code, *FULL_DISK[name]], capture_output=True, text=True, cwd=tmp_path, timeout=300)
+    proc = subprocess.run(
+        [sys.executable, "-c", code, *FULL_DISK[name]],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        timeout=300,
+    )
     one_line_error(proc.returncode, proc.stderr, "cannot write", "no partial output")
     assert listing(tmp_path) == []  # no partial file, no temporary
 
 
 def test_stdout_to_a_full_device():
-    for args in (["pattern", "--list"], ["energy", "--pattern", SQUARE, "--chip-size", "200", "--at", "0,0,0"]):
+    for args in (
+        ["pattern", "--list"],
+        ["energy", "--pattern", SQUARE, "--chip-size", "200", "--at", "0,0,0"],
+    ):
         with open("/dev/full", "w") as full:
-            proc = subprocess.run([sys.executable, "-m", "simulator.cli", *args], stdout=full, stderr=subprocess.PIPE, text=True, timeout=120)
+            proc = subprocess.run(
+                [sys.executable, "-m", "simulator.cli", *args],
+                stdout=full,
+                stderr=subprocess.PIPE,
+                text=True,
+                timeout=120,
+            )
         one_line_error(proc.returncode, proc.stderr, "standard output", "No space left")
 
 
@@ -341,7 +581,12 @@ def test_unexpected_failure_is_one_line_with_the_traceback_saved(monkeypatch, ca
     monkeypatch.delenv("SELFALIGN_DEBUG", raising=False)
     rc = main(["energy", "--pattern", SQUARE, "--chip-size", "200", "--at", "0,0,0"])
     err = capsys.readouterr().err
-    assert rc == 1 and err.count("\n") == 1 and "internal error: ZeroDivisionError: a bug" in err and "SELFALIGN_DEBUG=1" in err
+    assert (
+        rc == 1
+        and err.count("\n") == 1
+        and "internal error: ZeroDivisionError: a bug" in err
+        and "SELFALIGN_DEBUG=1" in err
+    )
     saved = Path(err.split("traceback in ")[1].split(",")[0])
     assert "Traceback" in saved.read_text() and "boom" in saved.read_text()
     saved.unlink()
@@ -389,14 +634,38 @@ def test_python_api_refuses_string_booleans():
 # ======================================================= 5. finite outputs
 def test_overdamped_volume_1e300_writes_no_nan(tmp_path, run_cli):
     out = tmp_path / "v.json"
-    rc, _, err = run_cli(["simulate", "--pattern", SQUARE, "--chip-size", "200", "--start", "10,10,0", "--method", "overdamped",
-                          "--volume", "1e-300", "--json", out, "--quiet"])
+    rc, _, err = run_cli(
+        [
+            "simulate",
+            "--pattern",
+            SQUARE,
+            "--chip-size",
+            "200",
+            "--start",
+            "10,10,0",
+            "--method",
+            "overdamped",
+            "--volume",
+            "1e-300",
+            "--json",
+            out,
+            "--quiet",
+        ]
+    )
     one_line_error(rc, err, "--volume", "thinner than")
     assert not out.exists()
 
 
 def test_equal_angles_with_allow_repulsive_print_no_nan(tmp_path, run_cli):
-    args = ["--chip-size", "200", "--pad-angle", "50", "--substrate-angle", "50", "--allow-repulsive"]
+    args = [
+        "--chip-size",
+        "200",
+        "--pad-angle",
+        "50",
+        "--substrate-angle",
+        "50",
+        "--allow-repulsive",
+    ]
     rc, out, err = run_cli(["energy", "--pattern", SQUARE, "--at", "0,0,0", *args])
     one_line_error(rc, err, "no wettability contrast")
     assert "nan" not in out
@@ -416,7 +685,19 @@ def test_non_finite_result_is_refused_before_writing(tmp_path):
 
 # ======================================================= 7. unsafe output targets
 def test_json_onto_a_device_node_keeps_the_node(run_cli):
-    rc, _, err = run_cli(["energy", "--pattern", SQUARE, "--chip-size", "200", "--at", "0,0,0", "--json", "/dev/null"])
+    rc, _, err = run_cli(
+        [
+            "energy",
+            "--pattern",
+            SQUARE,
+            "--chip-size",
+            "200",
+            "--at",
+            "0,0,0",
+            "--json",
+            "/dev/null",
+        ]
+    )
     one_line_error(rc, err, "not a regular file")
     assert Path("/dev/null").is_char_device()
 
@@ -425,9 +706,11 @@ def test_json_and_csv_onto_the_input_pattern(tmp_path, run_cli):
     pat = tmp_path / "pad.png"
     pat.write_bytes(Path(SQUARE).read_bytes())
     before = pat.read_bytes()
-    for args in (["energy", "--pattern", pat, "--chip-size", "200", "--at", "0,0,0", "--json", pat],
-                 ["montecarlo", "--pattern", pat, "--chip-size", "200", "--grid", "0,0", "--csv", pat],
-                 ["simulate", "--pattern", pat, "--chip-size", "200", "--start", "1,1,0", "--plot", pat]):
+    for args in (
+        ["energy", "--pattern", pat, "--chip-size", "200", "--at", "0,0,0", "--json", pat],
+        ["montecarlo", "--pattern", pat, "--chip-size", "200", "--grid", "0,0", "--csv", pat],
+        ["simulate", "--pattern", pat, "--chip-size", "200", "--start", "1,1,0", "--plot", pat],
+    ):
         rc, _, err = run_cli(args)
         one_line_error(rc, err, "is an input")
     scene = tmp_path / "s.toml"
@@ -441,7 +724,19 @@ def test_json_onto_a_symlink_keeps_the_link(tmp_path, run_cli):
     target = tmp_path / "t.json"
     target.write_text("{}")
     (tmp_path / "l.json").symlink_to(target)
-    rc, _, err = run_cli(["energy", "--pattern", SQUARE, "--chip-size", "200", "--at", "0,0,0", "--json", tmp_path / "l.json"])
+    rc, _, err = run_cli(
+        [
+            "energy",
+            "--pattern",
+            SQUARE,
+            "--chip-size",
+            "200",
+            "--at",
+            "0,0,0",
+            "--json",
+            tmp_path / "l.json",
+        ]
+    )
     one_line_error(rc, err, "symbolic link")
     assert (tmp_path / "l.json").is_symlink() and target.read_text() == "{}"
 
@@ -453,26 +748,86 @@ def held_run(args: list[str], point: str, cwd: Path, env: dict | None = None) ->
     so the test signals at a known stage of the run, however fast the machine is.
     """
     env = (env or os.environ) | {"SELFALIGN_HOLD_AT": point}
-    proc = subprocess.Popen(python_m("simulator.cli", *args), cwd=cwd, stdout=subprocess.DEVNULL,
-                            stderr=subprocess.PIPE, text=True, env=env)
+    proc = subprocess.Popen(
+        python_m("simulator.cli", *args),
+        cwd=cwd,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
     seen = []
-    for line in proc.stderr:  # blocks until the hold line (or the end of a run that never got there)
+    for (
+        line
+    ) in proc.stderr:  # blocks until the hold line (or the end of a run that never got there)
         seen.append(line)
         if f"selfalign: holding at {point}" in line:  # after a progress bar's carriage returns
             return proc
     proc.wait(timeout=60)
-    pytest.fail(f"the run ended (exit {proc.returncode}) before holding at {point}: {''.join(seen)[-2000:]}")
+    pytest.fail(
+        f"the run ended (exit {proc.returncode}) before holding at {point}: {''.join(seen)[-2000:]}"
+    )
 
 
 @pytest.mark.parametrize(
     "name,args,point,sig",
     [
-        ("evaluate", ["evaluate", FOUR_PAD, "--chip-size", "730", "--out", "ev", "--resolution", "2"], "output", signal.SIGTERM),
-        ("evaluate", ["evaluate", FOUR_PAD, "--chip-size", "730", "--out", "ev", "--resolution", "2"], "output", signal.SIGINT),
-        ("montecarlo", ["montecarlo", "--pattern", FOUR_PAD, "--chip-size", "730", "--resolution", "4", "--random", "20000",
-                        "--spread", "200,200,5", "--json", "mc.json", "--csv", "mc.csv"], "batch", signal.SIGTERM),
-        ("montecarlo", ["montecarlo", "--pattern", FOUR_PAD, "--chip-size", "730", "--resolution", "4", "--random", "20000",
-                        "--spread", "200,200,5", "--json", "mc.json", "--csv", "mc.csv"], "batch", signal.SIGINT),
+        (
+            "evaluate",
+            ["evaluate", FOUR_PAD, "--chip-size", "730", "--out", "ev", "--resolution", "2"],
+            "output",
+            signal.SIGTERM,
+        ),
+        (
+            "evaluate",
+            ["evaluate", FOUR_PAD, "--chip-size", "730", "--out", "ev", "--resolution", "2"],
+            "output",
+            signal.SIGINT,
+        ),
+        (
+            "montecarlo",
+            [
+                "montecarlo",
+                "--pattern",
+                FOUR_PAD,
+                "--chip-size",
+                "730",
+                "--resolution",
+                "4",
+                "--random",
+                "20000",
+                "--spread",
+                "200,200,5",
+                "--json",
+                "mc.json",
+                "--csv",
+                "mc.csv",
+            ],
+            "batch",
+            signal.SIGTERM,
+        ),
+        (
+            "montecarlo",
+            [
+                "montecarlo",
+                "--pattern",
+                FOUR_PAD,
+                "--chip-size",
+                "730",
+                "--resolution",
+                "4",
+                "--random",
+                "20000",
+                "--spread",
+                "200,200,5",
+                "--json",
+                "mc.json",
+                "--csv",
+                "mc.csv",
+            ],
+            "batch",
+            signal.SIGINT,
+        ),
     ],
 )
 def test_sigterm_leaves_no_temporaries(tmp_path, name, args, point, sig):
@@ -487,9 +842,14 @@ def test_sigterm_leaves_no_temporaries(tmp_path, name, args, point, sig):
     proc.send_signal(sig)
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == (143 if sig == signal.SIGTERM else 130), err[-2000:]
-    lines = [x for x in err.replace("\r", "\n").splitlines() if x.strip()]  # a progress bar may close first
-    assert lines[-1] == ("selfalign: terminated (no partial output was kept)" if sig == signal.SIGTERM
-                         else "selfalign: interrupted (no partial output was kept)"), err[-2000:]
+    lines = [
+        x for x in err.replace("\r", "\n").splitlines() if x.strip()
+    ]  # a progress bar may close first
+    assert lines[-1] == (
+        "selfalign: terminated (no partial output was kept)"
+        if sig == signal.SIGTERM
+        else "selfalign: interrupted (no partial output was kept)"
+    ), err[-2000:]
     assert "Traceback" not in err and "Error" not in err
     assert listing(run_dir) == []
 
@@ -497,7 +857,9 @@ def test_sigterm_leaves_no_temporaries(tmp_path, name, args, point, sig):
 def test_sigterm_while_starting_up_is_one_line(tmp_path):
     # A signal that arrives before the command's modules are imported: the handler is
     # already installed, so the exit is 143 with one line and nothing written.
-    proc = held_run(["energy", "--pattern", SQUARE, "--chip-size", "200", "--at", "0,0,0"], "startup", tmp_path)
+    proc = held_run(
+        ["energy", "--pattern", SQUARE, "--chip-size", "200", "--at", "0,0,0"], "startup", tmp_path
+    )
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == 143, err

@@ -28,11 +28,25 @@ from simulator.testing import radius_of_gyration_um
 def small_scene(**kw) -> Scene:
     """A 200 um square on its own pad at 4 um/px, untwisted: cheap to build."""
     kw.setdefault("effects", Effects(twist=False))
-    return Scene(pattern=mask_from_geometry(square(200), 4.0, margin_um=20), chip=mask_from_geometry(square(200), 4.0), **kw)
+    return Scene(
+        pattern=mask_from_geometry(square(200), 4.0, margin_um=20),
+        chip=mask_from_geometry(square(200), 4.0),
+        **kw,
+    )
 
 
 def cli_scene(*flags: str) -> Scene:
-    argv = ["simulate", "--pattern", str(library_path("square_200")), "--chip-size", "200", "--resolution", "4", "--no-twist", *flags]
+    argv = [
+        "simulate",
+        "--pattern",
+        str(library_path("square_200")),
+        "--chip-size",
+        "200",
+        "--resolution",
+        "4",
+        "--no-twist",
+        *flags,
+    ]
     return scene_from_args(build_parser().parse_args(argv))
 
 
@@ -46,9 +60,13 @@ def test_an_explicit_meniscus_height_is_the_height_of_the_energy_and_of_the_damp
     assert scene.meniscus_height_um == scene.liquid_height_um == 8.0
     assert build_landscape(scene).meniscus_height_um == 8.0
     assert p.damping_N_s_m == pytest.approx(cal * couette_damping(mu, area, 8.0), rel=1e-12)
-    assert p.damping_N_s_m != pytest.approx(cal * couette_damping(mu, area, meniscus_height_um(0.5, area)), rel=1e-3)
+    assert p.damping_N_s_m != pytest.approx(
+        cal * couette_damping(mu, area, meniscus_height_um(0.5, area)), rel=1e-3
+    )
     j = area * (scene.chip_rg_px * scene.um_per_px) ** 2
-    assert p.rot_damping_N_m_s == pytest.approx(cal * couette_torsional_damping(mu, j, 8.0), rel=1e-12)
+    assert p.rot_damping_N_m_s == pytest.approx(
+        cal * couette_torsional_damping(mu, j, 8.0), rel=1e-12
+    )
 
 
 def test_without_a_given_height_energy_and_damping_take_the_volume_over_the_area():
@@ -56,7 +74,11 @@ def test_without_a_given_height_energy_and_damping_take_the_volume_over_the_area
     h = meniscus_height_um(0.5, scene.chip.area_um2)
     assert scene.meniscus_height_um == scene.liquid_height_um == h == pytest.approx(12.5)
     p = DynamicsParams.from_scene(scene)
-    assert p.damping_N_s_m == pytest.approx(scene.damping_calibration * couette_damping(scene.liquid.viscosity_Pa_s, scene.chip.area_um2, h), rel=1e-12)
+    assert p.damping_N_s_m == pytest.approx(
+        scene.damping_calibration
+        * couette_damping(scene.liquid.viscosity_Pa_s, scene.chip.area_um2, h),
+        rel=1e-12,
+    )
     # The overlap model (no meniscus) has no meniscus height; the film under the chip is the same.
     flat = cli_scene("--volume", "0.5")
     assert flat.meniscus_height_um is None and flat.liquid_height_um == h
@@ -66,7 +88,9 @@ def test_without_a_given_height_energy_and_damping_take_the_volume_over_the_area
 def test_the_height_is_derived_once_per_scene(monkeypatch):
     calls = []
     rule = Liquid.meniscus_height_um
-    monkeypatch.setattr(Liquid, "meniscus_height_um", lambda self, area: calls.append(area) or rule(self, area))
+    monkeypatch.setattr(
+        Liquid, "meniscus_height_um", lambda self, area: calls.append(area) or rule(self, area)
+    )
     scene = small_scene(effects=Effects(twist=False, meniscus=True), liquid=Liquid(volume_nl=0.5))
     for _ in range(3):
         assert scene.meniscus_height_um == scene.liquid_height_um
@@ -95,7 +119,10 @@ def test_one_radius_of_gyration_for_the_pose_grid_the_steppers_and_the_dynamics(
     assert p.inertia_kg_m2 == pytest.approx(rho_t * j * 1e-24, rel=1e-12)
     assert p.mass_kg == pytest.approx(rho_t * area * 1e-12, rel=1e-12)
     h = scene.liquid_height_um
-    assert p.rot_damping_N_m_s == pytest.approx(scene.damping_calibration * couette_torsional_damping(scene.liquid.viscosity_Pa_s, j, h), rel=1e-12)
+    assert p.rot_damping_N_m_s == pytest.approx(
+        scene.damping_calibration * couette_torsional_damping(scene.liquid.viscosity_Pa_s, j, h),
+        rel=1e-12,
+    )
 
 
 def test_the_raster_radius_of_gyration_is_the_exact_one_less_the_pixels_own_moment():
@@ -116,7 +143,10 @@ def test_one_rule_for_the_twist_step_of_a_pose_grid():
     assert whole.twist_step_deg == axis.grid_step_deg == 2.0
     assert one.twist_step_deg == axis.step_deg_for(1) == 1.0
     untwisted = small_scene().twist_axis
-    assert untwisted.count == 1 and untwisted.grid_step_deg == 1.0 == build_landscape(small_scene()).twist_step_deg
+    assert (
+        untwisted.count == 1
+        and untwisted.grid_step_deg == 1.0 == build_landscape(small_scene()).twist_step_deg
+    )
 
 
 # ---------------------------------------------------------------- the pixel size
@@ -133,9 +163,16 @@ def _scenes() -> dict[str, Scene]:
     fp = mask_from_geometry(four_pad(400, 40), 2.0, margin_um=10)
     png = read_mask(library_path("square_200"), default_um_per_px=1.0)
     return {
-        "four-pad geometry": Scene(pattern=fp, chip=mask_from_geometry(square(400), 2.0), twist=TwistGrid(3.0)),
-        "meniscus, window": Scene(pattern=fp, chip=mask_from_geometry(square(400), 2.0), effects=Effects(twist=False, meniscus=True),
-                                  liquid=Liquid(volume_nl=2.0), window_um=150.0),
+        "four-pad geometry": Scene(
+            pattern=fp, chip=mask_from_geometry(square(400), 2.0), twist=TwistGrid(3.0)
+        ),
+        "meniscus, window": Scene(
+            pattern=fp,
+            chip=mask_from_geometry(square(400), 2.0),
+            effects=Effects(twist=False, meniscus=True),
+            liquid=Liquid(volume_nl=2.0),
+            window_um=150.0,
+        ),
         "PNG pattern and chip": Scene.from_inputs(png, chip=png, twist=TwistGrid(5.0)),
     }
 
@@ -145,7 +182,10 @@ def test_the_size_of_a_landscape_at_another_pixel_size_is_computed(name):
     scene = _scenes()[name]
     for k in range(1, 17):
         s = scene.um_per_px * k
-        assert estimate_bytes(scene, um_per_px=s) == estimate_bytes(scene.at_resolution(s)), (name, k)
+        assert estimate_bytes(scene, um_per_px=s) == estimate_bytes(scene.at_resolution(s)), (
+            name,
+            k,
+        )
 
 
 @pytest.mark.parametrize("name", list(_scenes()))
@@ -156,13 +196,17 @@ def test_auto_resolution_chooses_what_the_resampling_search_chose(name, monkeypa
     sizes = [estimate_bytes(scene, um_per_px=scene.um_per_px * k) / 2**20 for k in (1, 2, 3, 5, 16)]
     resampled = []
     real = scene_module.resample_to_scale
-    monkeypatch.setattr(scene_module, "resample_to_scale", lambda m, s, b=None: resampled.append(s) or real(m, s, b))
+    monkeypatch.setattr(
+        scene_module, "resample_to_scale", lambda m, s, b=None: resampled.append(s) or real(m, s, b)
+    )
     for budget in sorted({*sizes, *(0.999 * v for v in sizes), 1e-9}):
         old = _old_auto_resolution(scene, budget).um_per_px
         resampled.clear()
         new = auto_resolution(scene, budget)
         assert new.um_per_px == old, (name, budget)
-        assert len(resampled) == (0 if new is scene else 2)  # pattern and chip, once, at the size chosen
+        assert len(resampled) == (
+            0 if new is scene else 2
+        )  # pattern and chip, once, at the size chosen
 
 
 # ---------------------------------------------------------------- the scene file
@@ -176,8 +220,10 @@ def count_toml_reads(monkeypatch):
 
 def _scene_file(tmp_path, table: str) -> str:
     p = tmp_path / "scene.toml"
-    p.write_text(f'pattern = "{library_path("square_200")}"\nchip_size_um = [200, 200]\nresolution_um = 4\n'
-                 f"[effects]\ntwist = false\n[liquid]\nvolume_nl = 0.5\n{table}")
+    p.write_text(
+        f'pattern = "{library_path("square_200")}"\nchip_size_um = [200, 200]\nresolution_um = 4\n'
+        f"[effects]\ntwist = false\n[liquid]\nvolume_nl = 0.5\n{table}"
+    )
     return str(p)
 
 

@@ -36,10 +36,14 @@ class Section:
 
 
 def _sections(lines: list[str]) -> dict[str, Section]:
-    heads = [(i, m.group(1)) for i, line in enumerate(lines) if (m := re.match(r"#{2,4} §(\d+(?:\.\d+)*)\b", line))]
+    heads = [
+        (i, m.group(1))
+        for i, line in enumerate(lines)
+        if (m := re.match(r"#{2,4} §(\d+(?:\.\d+)*)\b", line))
+    ]
     out = {}
     for k, (i, num) in enumerate(heads):
-        end = next((j for j, n in heads[k + 1:] if not n.startswith(num + ".")), len(lines))
+        end = next((j for j, n in heads[k + 1 :] if not n.startswith(num + ".")), len(lines))
         body_end = heads[k + 1][0] if k + 1 < len(heads) else len(lines)
         out[num] = Section(num, i, end, body_end)
     return out
@@ -47,12 +51,18 @@ def _sections(lines: list[str]) -> dict[str, Section]:
 
 PAGE = PHYSICS.read_text(encoding="utf-8").splitlines()
 SECTIONS = _sections(PAGE)
-EQUATIONS = {int(n): i for i, line in enumerate(PAGE) for n in re.findall(r"\[Eqs?\. (\d+)\]", line)}
+EQUATIONS = {
+    int(n): i for i, line in enumerate(PAGE) for n in re.findall(r"\[Eqs?\. (\d+)\]", line)
+}
 CHECKS = {int(m.group(1)) for line in PAGE if (m := re.match(r"\| C(\d+) \|", line))}
 
 
 def _numbered_items(section: Section) -> set[int]:
-    return {int(m.group(1)) for line in PAGE[section.start + 1:section.body_end] if (m := re.match(r"\s*(\d+)\. ", line))}
+    return {
+        int(m.group(1))
+        for line in PAGE[section.start + 1 : section.body_end]
+        if (m := re.match(r"\s*(\d+)\. ", line))
+    }
 
 
 # ------------------------------------------------------------------------ finding citations
@@ -100,7 +110,11 @@ def _chain(text: str, pos: int) -> tuple[list[tuple], int]:
             refs.append(("item", g["kind"], int(g["item"]), section))
         elif g["bare"]:
             # a bare number continues a list of sections: "§10-10.3", "§6 and 10"
-            if not refs or refs[-1][0] != "sec" or text[pos:sep_end].strip() not in {"-", "–", ",", "and"}:
+            if (
+                not refs
+                or refs[-1][0] != "sec"
+                or text[pos:sep_end].strip() not in {"-", "–", ",", "and"}
+            ):
                 break
             section = g["bare"]
             refs.append(("sec", section))
@@ -111,15 +125,21 @@ def _chain(text: str, pos: int) -> tuple[list[tuple], int]:
 def _text_files(dirs) -> list[Path]:
     files = []
     for d in dirs:
-        files += [p for p in sorted((ROOT / d).rglob("*")) if p.suffix in SUFFIXES and p.is_file()
-                  and ".ipynb_checkpoints" not in p.parts and "__pycache__" not in p.parts]
+        files += [
+            p
+            for p in sorted((ROOT / d).rglob("*"))
+            if p.suffix in SUFFIXES
+            and p.is_file()
+            and ".ipynb_checkpoints" not in p.parts
+            and "__pycache__" not in p.parts
+        ]
     return files
 
 
 def citations_in(where: str, text: str) -> list[Citation]:
     out = []
     pos = 0
-    while (m := _ANCHOR.search(text, pos)):
+    while m := _ANCHOR.search(text, pos):
         if text.startswith("physics.md", m.start()):
             start = m.end()
         elif text.startswith("(C", m.start()):
@@ -131,13 +151,21 @@ def citations_in(where: str, text: str) -> list[Citation]:
         refs, end = _chain(text, start)
         if refs:
             line = text.count("\n", 0, m.start()) + 1
-            out.append(Citation(f"{where}:{line}", text[m.start():end].replace("\n", " "), tuple(refs)))
+            out.append(
+                Citation(f"{where}:{line}", text[m.start() : end].replace("\n", " "), tuple(refs))
+            )
         pos = max(end, m.end())
     return out
 
 
 def citations(files: list[Path]) -> list[Citation]:
-    return [c for p in files for c in citations_in(str(p.relative_to(ROOT)), p.read_text(encoding="utf-8", errors="replace"))]
+    return [
+        c
+        for p in files
+        for c in citations_in(
+            str(p.relative_to(ROOT)), p.read_text(encoding="utf-8", errors="replace")
+        )
+    ]
 
 
 def _unresolved(cites: list[Citation]) -> list[str]:
@@ -151,7 +179,9 @@ def _unresolved(cites: list[Citation]) -> list[str]:
                 _, n, sec = ref
                 if n not in EQUATIONS:
                     bad.append(f"{c.where}: {c.text!r}: no equation label [Eq. {n}]")
-                elif sec in SECTIONS and not (SECTIONS[sec].start <= EQUATIONS[n] < SECTIONS[sec].end):
+                elif sec in SECTIONS and not (
+                    SECTIONS[sec].start <= EQUATIONS[n] < SECTIONS[sec].end
+                ):
                     bad.append(f"{c.where}: {c.text!r}: [Eq. {n}] is not in §{sec}")
             elif kind == "check" and ref[1] not in CHECKS:
                 bad.append(f"{c.where}: {c.text!r}: no check C{ref[1]}")
@@ -170,14 +200,22 @@ def test_the_physics_page_is_numbered():
     tops = [int(n) for n in SECTIONS if "." not in n]
     assert tops == list(range(1, len(tops) + 1))
     for top in tops:
-        subs = [int(n.split(".")[1]) for n in SECTIONS if n.count(".") == 1 and n.split(".")[0] == str(top)]
+        subs = [
+            int(n.split(".")[1])
+            for n in SECTIONS
+            if n.count(".") == 1 and n.split(".")[0] == str(top)
+        ]
         assert subs == list(range(1, len(subs) + 1)), (top, subs)
 
 
 def test_the_citation_finder_reads_every_form():
     cases = {
         "(docs/physics.md §3.2, Eq. 9).": [("sec", "3.2"), ("eq", 9, "3.2")],
-        "docs/physics.md §9 [Eq. 23] and C12 (h 12.5 um": [("sec", "9"), ("eq", 23, "9"), ("check", 12)],
+        "docs/physics.md §9 [Eq. 23] and C12 (h 12.5 um": [
+            ("sec", "9"),
+            ("eq", 23, "9"),
+            ("check", 12),
+        ],
         "(docs/physics.md §10-10.3) are built": [("sec", "10"), ("sec", "10.3")],
         "docs/physics.md section 11) a 1-D model": [("sec", "11")],
         "(docs/physics.md §5.2, step 3).": [("sec", "5.2"), ("item", "step", 3, "5.2")],
@@ -212,16 +250,27 @@ def test_every_citation_elsewhere_resolves():
 def test_no_citation_of_the_external_reference():
     """The code and the pages cite docs/physics.md, never the working notes it was written from."""
     pattern = re.compile(r"(?<![\"'])PHYSICS(?:\.md|\s+\d|\s+check)|DESIGN\.md|STYLE\.md")
-    files = _text_files(CODE_DIRS + TEXT_DIRS) + [ROOT / "README.md", ROOT / "Makefile", ROOT / "mkdocs.yml"]
-    hits = [f"{p.relative_to(ROOT)}:{i}: {line.strip()}" for p in files if p.exists() and p.name != "test_docs.py"
-            for i, line in enumerate(p.read_text(encoding="utf-8", errors="replace").splitlines(), 1) if pattern.search(line)]
+    files = _text_files(CODE_DIRS + TEXT_DIRS) + [
+        ROOT / "README.md",
+        ROOT / "Makefile",
+        ROOT / "mkdocs.yml",
+    ]
+    hits = [
+        f"{p.relative_to(ROOT)}:{i}: {line.strip()}"
+        for p in files
+        if p.exists() and p.name != "test_docs.py"
+        for i, line in enumerate(p.read_text(encoding="utf-8", errors="replace").splitlines(), 1)
+        if pattern.search(line)
+    ]
     assert not hits, "\n".join(hits)
 
 
 def test_pages_the_code_names_exist():
     named = set()
     for p in _text_files(CODE_DIRS):
-        named |= set(re.findall(r"\bdocs/[\w/.-]+?\.(?:md|png|gif)\b", p.read_text(encoding="utf-8")))
+        named |= set(
+            re.findall(r"\bdocs/[\w/.-]+?\.(?:md|png|gif)\b", p.read_text(encoding="utf-8"))
+        )
     assert "docs/physics.md" in named
     missing = sorted(n for n in named if not (ROOT / n).exists())
     assert not missing, missing
@@ -252,17 +301,29 @@ def test_benchmark_tables_come_from_the_results_files():
     import json
 
     hooks = _hooks()
-    markers = {m.group(1) for p in (ROOT / "docs").rglob("*.md") for m in hooks.MARKER.finditer(p.read_text(encoding="utf-8"))}
+    markers = {
+        m.group(1)
+        for p in (ROOT / "docs").rglob("*.md")
+        for m in hooks.MARKER.finditer(p.read_text(encoding="utf-8"))
+    }
     assert markers == set(hooks.TABLES)  # every table is shown, and every marker has a table
     landscape = hooks.render("landscape")
     for r in json.loads((ROOT / "benchmarks/results/landscape.json").read_text())["rows"]:
-        assert f"| {r['N']} | {hooks.LANDSCAPE_METHODS[r['method']]} | {r['twists']} | {hooks._g(r['seconds'])}" in landscape
+        assert (
+            f"| {r['N']} | {hooks.LANDSCAPE_METHODS[r['method']]} | {r['twists']} | {hooks._g(r['seconds'])}"
+            in landscape
+        )
     sweep = json.loads((ROOT / "benchmarks/results/sweep.json").read_text())
-    assert f"| {sweep['loop']['seconds']:.1f} | {sweep['loop']['points_per_s']:.2f} |" in hooks.render("sweep")
+    assert (
+        f"| {sweep['loop']['seconds']:.1f} | {sweep['loop']['points_per_s']:.2f} |"
+        in hooks.render("sweep")
+    )
     accuracy = json.loads((ROOT / "benchmarks/results/accuracy.json").read_text())
     base = next(r for r in accuracy["rows"] if r["knob"] == "baseline")
-    assert f"{hooks._acc(base['energy_rms_pct'])} / {hooks._acc(base['force_p90_pct'])} / {hooks._acc(base['landscape_s'])}" \
+    assert (
+        f"{hooks._acc(base['energy_rms_pct'])} / {hooks._acc(base['force_p90_pct'])} / {hooks._acc(base['landscape_s'])}"
         in hooks.render("accuracy")
+    )
     assert "| knob | value | energy RMS %" in hooks.render("accuracy-details")
 
 
@@ -272,10 +333,25 @@ def test_every_package_has_its_api_page():
 
     hooks = _hooks()
     nav = (ROOT / "mkdocs.yml").read_text(encoding="utf-8")
-    packages = sorted(p.name for p in (ROOT / "simulator").iterdir() if (p / "__init__.pyi").exists())
-    assert {"core", "scene", "physics", "liquid", "landscape", "motion", "batch", "sweep", "render", "testing"} <= set(packages)
+    packages = sorted(
+        p.name for p in (ROOT / "simulator").iterdir() if (p / "__init__.pyi").exists()
+    )
+    assert {
+        "core",
+        "scene",
+        "physics",
+        "liquid",
+        "landscape",
+        "motion",
+        "batch",
+        "sweep",
+        "render",
+        "testing",
+    } <= set(packages)
     for name in packages:
         page = ROOT / "docs" / "api" / f"{name}.md"
         assert f"::: simulator.{name}\n" in page.read_text(encoding="utf-8"), page
         assert f"api/{name}.md" in nav, name
-        assert sorted(hooks.face_names(f"simulator.{name}")) == sorted(importlib.import_module(f"simulator.{name}").__all__)
+        assert sorted(hooks.face_names(f"simulator.{name}")) == sorted(
+            importlib.import_module(f"simulator.{name}").__all__
+        )

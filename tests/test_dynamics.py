@@ -129,9 +129,7 @@ def test_potential_is_the_spring_plus_a_constant_and_its_gradient_the_central_di
         np.asarray(phi), 0.5 * k_idx * dx * dx + k_idx / 4, rtol=1e-5, atol=1e-6 * k_idx
     )
     np.testing.assert_allclose(np.asarray(grad[:, 2]), k_idx * dx, rtol=1e-5, atol=1e-5 * k_idx)
-    central = jax.jit(jax.vmap(gradient, (None, None, 0)), static_argnums=1)(
-        field, grid, q
-    )
+    central = jax.jit(jax.vmap(gradient, (None, None, 0)), static_argnums=1)(field, grid, q)
     np.testing.assert_allclose(
         np.asarray(grad[:, 2]), np.asarray(central[:, 2]), rtol=1e-5, atol=float(field.floor)
     )
@@ -205,10 +203,7 @@ def test_plateau_stops_overdamped_chips_and_inertia_can_cross_it(model, c, x0, s
     )
     assert int(s.status) == CONVERGED
     assert abs(float(s.q[2]) - XC - stop_px) <= 1.0
-    assert (
-        OUTCOMES[int(classify(field, grid, s.q, s.energy, s.status, s.flat))]
-        == outcome
-    )
+    assert OUTCOMES[int(classify(field, grid, s.q, s.energy, s.status, s.flat))] == outcome
     if outcome == "plateau":
         assert bool(s.flat)  # (at the well bottom, too: E does not depend on y here)
     if x0 == 50.0:
@@ -276,9 +271,7 @@ def test_params_from_physics_is_the_calibrated_couette_estimate():
     assert p.mass_kg == pytest.approx(2.4e-9) and p.inertia_kg_m2 == pytest.approx(
         2.4e-9 * 8e-8 / 12
     )
-    assert p.damping_ratio(K0) == pytest.approx(
-        30 * 0.0214, rel=0.01
-    )  # DAMPING_CALIBRATION table
+    assert p.damping_ratio(K0) == pytest.approx(30 * 0.0214, rel=0.01)  # DAMPING_CALIBRATION table
     bare = DynamicsParams.from_physics(chip, liquid, calibration=1.0)
     assert bare.damping_N_s_m == pytest.approx(p.damping_N_s_m / 30)
 
@@ -296,9 +289,7 @@ def test_params_reject_bad_values():
             mass_kg=1e-9, inertia_kg_m2=1e-17, damping_N_s_m=-1.0, rot_damping_N_m_s=1e-12
         )
     with pytest.raises(InputError, match="damping calibration"):
-        DynamicsParams.from_physics(
-            Chip(200.0, 200.0), Liquid(), calibration=0.0
-        )
+        DynamicsParams.from_physics(Chip(200.0, 200.0), Liquid(), calibration=0.0)
 
 
 # ------------------------------------------------------------------ real landscape
@@ -323,9 +314,9 @@ def test_phi_gradient_is_its_autodiff_gradient(square_200):
         np.random.default_rng(0).uniform([0, 100, 100], [17, 140, 140], size=(8, 3)), jnp.float32
     )
     _, grad = PHI_GRAD(field, grid, q)
-    auto = jax.jit(
-        jax.vmap(jax.grad(potential, argnums=2), (None, None, 0)), static_argnums=1
-    )(field, grid, q)
+    auto = jax.jit(jax.vmap(jax.grad(potential, argnums=2), (None, None, 0)), static_argnums=1)(
+        field, grid, q
+    )
     np.testing.assert_allclose(
         np.asarray(grad), np.asarray(auto), rtol=1e-4, atol=float(field.floor)
     )
@@ -338,9 +329,7 @@ def test_square_aligns_from_30_20_5(square_200):
     start = jnp.asarray(grid.to_index([30.0, 20.0, 5.0]), jnp.float32)
     s = INERTIAL(field, grid, p, start, MAX_STEPS_N)
     assert int(s.status) == CONVERGED and float(s.time_s) < float(p.t_max_s)
-    outcome = OUTCOMES[
-        int(classify(field, grid, s.q, s.energy, s.status, s.flat))
-    ]
+    outcome = OUTCOMES[int(classify(field, grid, s.q, s.energy, s.status, s.flat))]
     assert outcome == "aligned"
     x, y, twist = grid.to_pose(np.asarray(s.q))
     assert (
@@ -357,7 +346,4 @@ def test_no_contact_start_returns_immediately(square_200):
     s = INERTIAL(field, grid, p, start, MAX_STEPS_N)
     assert int(s.step) == 0 and int(s.status) == CONVERGED and float(s.time_s) == 0.0
     np.testing.assert_array_equal(np.asarray(s.q), np.asarray(start))
-    assert (
-        OUTCOMES[int(classify(field, grid, s.q, s.energy, s.status, s.flat))]
-        == "no_contact"
-    )
+    assert OUTCOMES[int(classify(field, grid, s.q, s.energy, s.status, s.flat))] == "no_contact"

@@ -66,7 +66,13 @@ def _align_time_s(traj, floor) -> float:
 
 
 def _run(scene, ls, start, method="overdamped", t_max_s=1.0):
-    return simulate(scene, start, method=method, landscape=ls, dynamics=DynamicsParams.from_scene(scene, t_max_s=t_max_s))
+    return simulate(
+        scene,
+        start,
+        method=method,
+        landscape=ls,
+        dynamics=DynamicsParams.from_scene(scene, t_max_s=t_max_s),
+    )
 
 
 def test_default_calibration_is_the_fitted_one():

@@ -34,8 +34,18 @@ from simulator.motion._dynamics_ode import _hessian
 
 
 def four_pad_scene(meniscus: bool):
-    argv = ["simulate", "--pattern", str(library_path("four_pad_730_100")), "--chip-size", "730",
-            "--volume", "20", "--resolution", "10", "--no-twist"] + (["--meniscus"] if meniscus else [])
+    argv = [
+        "simulate",
+        "--pattern",
+        str(library_path("four_pad_730_100")),
+        "--chip-size",
+        "730",
+        "--volume",
+        "20",
+        "--resolution",
+        "10",
+        "--no-twist",
+    ] + (["--meniscus"] if meniscus else [])
     return scene_from_args(build_parser().parse_args(argv))
 
 
@@ -51,7 +61,9 @@ def test_inertial_run_from_500_um_finishes_within_the_default_budget(scene):
     assert t.outcome in ("plateau", "aligned"), t.outcome
     assert t.steps < DEFAULT_MAX_STEPS // 10  # measured 138 (overlap), 208 (meniscus)
     assert t.time_s < 1.0  # the default t_max_s
-    assert 380.0 <= t.final[0] <= 440.0 and abs(t.final[1]) < 0.05 and t.final[2] == 0.0  # y: round-off only
+    assert (
+        380.0 <= t.final[0] <= 440.0 and abs(t.final[1]) < 0.05 and t.final[2] == 0.0
+    )  # y: round-off only
     assert np.all(np.diff(t.path[:, 0]) <= 1e-3)  # it moves towards the centre all the way
 
 
@@ -69,16 +81,24 @@ def test_phi_hessian_is_the_derivative_of_its_gradient():
     field, grid = field_and_grid(ls, radius_of_gyration_px(scene))
     rng = np.random.default_rng(1)
     for x in (15.0, 17.5, 300.0, 425.0):  # the floor's rounded edge, a pad, the flat part's edge
-        q = jnp.asarray(grid.to_index([x, 0.0, 0.0]), jnp.float32) + jnp.asarray([0.0, *rng.uniform(0.05, 0.95, 2)], jnp.float32)
+        q = jnp.asarray(grid.to_index([x, 0.0, 0.0]), jnp.float32) + jnp.asarray(
+            [0.0, *rng.uniform(0.05, 0.95, 2)], jnp.float32
+        )
         h = np.asarray(_hessian(field, grid, q))
         for k in (1, 2):
             e = jnp.zeros(3, jnp.float32).at[k].set(1e-2)
-            fd = (np.asarray(potential_and_gradient(field, grid, q + e)[1])
-                  - np.asarray(potential_and_gradient(field, grid, q - e)[1])) / 2e-2
-            np.testing.assert_allclose(h[k, 1:], fd[1:], rtol=1e-2, atol=1e-3 * float(reference_gradient(field, grid)))
+            fd = (
+                np.asarray(potential_and_gradient(field, grid, q + e)[1])
+                - np.asarray(potential_and_gradient(field, grid, q - e)[1])
+            ) / 2e-2
+            np.testing.assert_allclose(
+                h[k, 1:], fd[1:], rtol=1e-2, atol=1e-3 * float(reference_gradient(field, grid))
+            )
     # on a grid line (a node of the start) the one-sided value, not autodiff's branch
     q = jnp.asarray(grid.to_index([300.0, 0.0, 0.0]), jnp.float32)
-    assert abs(float(_hessian(field, grid, q)[2, 2])) < 1e-3 * float(reference_gradient(field, grid))
+    assert abs(float(_hessian(field, grid, q)[2, 2])) < 1e-3 * float(
+        reference_gradient(field, grid)
+    )
 
 
 def test_with_twists_the_run_that_creeps_on_the_plateau_until_its_time_is_up_is_a_plateau():
@@ -86,10 +106,23 @@ def test_with_twists_the_run_that_creeps_on_the_plateau_until_its_time_is_up_is_
     # overlap plateau is exactly flat only at twist 0 and the chip creeps along it until
     # the simulated second is up (measured at 2, 4 and 5 um/px: it ends within 386-400 um).
     # That is a stop on a plateau, reported as one, not as running out of steps.
-    argv = ["simulate", "--pattern", str(library_path("four_pad_730_100")), "--chip-size", "730", "--volume", "20",
-            "--resolution", "5", "--twist-step", "2"]
+    argv = [
+        "simulate",
+        "--pattern",
+        str(library_path("four_pad_730_100")),
+        "--chip-size",
+        "730",
+        "--volume",
+        "20",
+        "--resolution",
+        "5",
+        "--twist-step",
+        "2",
+    ]
     sc = scene_from_args(build_parser().parse_args(argv))
     t = simulate(sc, (500.0, 0.0, 0.0), method="inertial")
     assert t.steps < DEFAULT_MAX_STEPS  # not out of steps: out of time
     assert t.time_s == pytest.approx(1.0)  # the default t_max_s
-    assert t.outcome == "plateau" and 315.0 <= t.final[0] <= 415.0  # on the overlap model's flat part (p to p + g)
+    assert (
+        t.outcome == "plateau" and 315.0 <= t.final[0] <= 415.0
+    )  # on the overlap model's flat part (p to p + g)

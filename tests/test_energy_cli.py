@@ -27,11 +27,33 @@ def chip_png(tmp_path_factory):
 
 def test_poses_and_json_keys(fourpad_png, tmp_path, capsys):
     out = tmp_path / "e.json"
-    rc = main(["energy", "--pattern", str(fourpad_png), "--chip-size", "200", "--at", "40,25,0", "--at", "95,0,0", "--json", str(out)])
+    rc = main(
+        [
+            "energy",
+            "--pattern",
+            str(fourpad_png),
+            "--chip-size",
+            "200",
+            "--at",
+            "40,25,0",
+            "--at",
+            "95,0,0",
+            "--json",
+            str(out),
+        ]
+    )
     assert rc == 0
     doc = json.loads(out.read_text())
     first, second = doc["poses"]
-    assert set(first) == {"x_um", "y_um", "twist_deg", "overlap_um2", "energy_J", "force_N", "torque_Nm"}
+    assert set(first) == {
+        "x_um",
+        "y_um",
+        "twist_deg",
+        "overlap_um2",
+        "energy_J",
+        "force_N",
+        "torque_Nm",
+    }
     assert first["overlap_um2"] == pytest.approx(21700, abs=0.05)  # C2
     assert second["overlap_um2"] == pytest.approx(16200, abs=0.05)
     dg = Materials().delta_gamma_N_m
@@ -42,25 +64,95 @@ def test_poses_and_json_keys(fourpad_png, tmp_path, capsys):
 
 def test_chip_png_equals_chip_size(fourpad_png, chip_png, tmp_path):
     a, b = tmp_path / "a.json", tmp_path / "b.json"
-    assert main(["energy", "--pattern", str(fourpad_png), "--chip", str(chip_png), "--at", "30,-70,4", "--json", str(a)]) == 0
-    assert main(["energy", "--pattern", str(fourpad_png), "--chip-size", "200x200", "--at", "30,-70,4", "--json", str(b)]) == 0
+    assert (
+        main(
+            [
+                "energy",
+                "--pattern",
+                str(fourpad_png),
+                "--chip",
+                str(chip_png),
+                "--at",
+                "30,-70,4",
+                "--json",
+                str(a),
+            ]
+        )
+        == 0
+    )
+    assert (
+        main(
+            [
+                "energy",
+                "--pattern",
+                str(fourpad_png),
+                "--chip-size",
+                "200x200",
+                "--at",
+                "30,-70,4",
+                "--json",
+                str(b),
+            ]
+        )
+        == 0
+    )
     ea, eb = (json.loads(p.read_text())["poses"][0]["overlap_um2"] for p in (a, b))
     assert ea == pytest.approx(eb, rel=2e-3)  # bilinear resampling vs exact rotation
 
 
 def test_curve_reports_plateau(fourpad_png, tmp_path):
     out = tmp_path / "c.json"
-    rc = main(["energy", "--pattern", str(fourpad_png), "--chip-size", "200", "--no-twist", "--at", "0,0,0", "--curve", "x", "--from", "0", "--to", "150", "--json", str(out)])
+    rc = main(
+        [
+            "energy",
+            "--pattern",
+            str(fourpad_png),
+            "--chip-size",
+            "200",
+            "--no-twist",
+            "--at",
+            "0,0,0",
+            "--curve",
+            "x",
+            "--from",
+            "0",
+            "--to",
+            "150",
+            "--json",
+            str(out),
+        ]
+    )
     assert rc == 0
     cur = json.loads(out.read_text())["curve"]
     assert len(cur["values_um"]) == 151 and len(cur["energy_J"]) == 151
-    (start, end), = cur["plateaus_um"]
+    ((start, end),) = cur["plateaus_um"]
     assert abs(start - 90) <= 1 and abs(end - 110) <= 1
 
 
 def test_twist_curve(fourpad_png, tmp_path):
     out = tmp_path / "t.json"
-    assert main(["energy", "--pattern", str(fourpad_png), "--chip-size", "200", "--at", "0,0,0", "--curve", "twist", "--from", "-10", "--to", "10", "--json", str(out)]) == 0
+    assert (
+        main(
+            [
+                "energy",
+                "--pattern",
+                str(fourpad_png),
+                "--chip-size",
+                "200",
+                "--at",
+                "0,0,0",
+                "--curve",
+                "twist",
+                "--from",
+                "-10",
+                "--to",
+                "10",
+                "--json",
+                str(out),
+            ]
+        )
+        == 0
+    )
     cur = json.loads(out.read_text())["curve"]
     e = cur["energy_J"]
     assert cur["values_deg"][10] == 0 and e[10] == min(e)  # minimum at zero twist
@@ -74,10 +166,34 @@ def test_twist_curve(fourpad_png, tmp_path):
         (["--pattern", "{pat}", "--at", "0,0,0"], "no chip given"),
         (["--pattern", "{pat}", "--chip-size", "200", "--at", "1,2"], "--at must be X,Y,TWIST"),
         (["--pattern", "{pat}", "--chip-size", "-5", "--at", "0,0,0"], "--chip-size"),
-        (["--pattern", "{pat}", "--chip-size", "200", "--at", "0,0,0", "--pad-angle", "70"], "Delta_gamma"),
-        (["--pattern", "{pat}", "--chip-size", "200", "--at", "0,0,0", "--memory-budget", "1"], "memory budget"),
+        (
+            ["--pattern", "{pat}", "--chip-size", "200", "--at", "0,0,0", "--pad-angle", "70"],
+            "Delta_gamma",
+        ),
+        (
+            ["--pattern", "{pat}", "--chip-size", "200", "--at", "0,0,0", "--memory-budget", "1"],
+            "memory budget",
+        ),
         (["--pattern", "{pat}", "--chip-size", "200", "--curve", "x"], "--from"),
-        (["--pattern", "{pat}", "--chip-size", "200", "--at", "0,0,0", "--window", "20", "--curve", "x", "--from", "0", "--to", "100"], "outside"),
+        (
+            [
+                "--pattern",
+                "{pat}",
+                "--chip-size",
+                "200",
+                "--at",
+                "0,0,0",
+                "--window",
+                "20",
+                "--curve",
+                "x",
+                "--from",
+                "0",
+                "--to",
+                "100",
+            ],
+            "outside",
+        ),
     ],
 )
 def test_bad_input_one_line_exit_2_no_output(fourpad_png, tmp_path, capsys, args, message):

@@ -23,12 +23,21 @@ def fourpad_png(tmp_path_factory):
 @pytest.fixture(scope="module")
 def report(fourpad_png, tmp_path_factory):
     out = tmp_path_factory.mktemp("rep") / "report"
-    assert main(["evaluate", str(fourpad_png), "--out", str(out), "--quiet", "--twist-step", "3"]) == 0
+    assert (
+        main(["evaluate", str(fourpad_png), "--out", str(out), "--quiet", "--twist-step", "3"]) == 0
+    )
     return out
 
 
 def test_writes_every_file_with_units(report):
-    names = {"summary.json", "landscape.png", "force.png", "capture.png", "pattern.png", "report.html"}
+    names = {
+        "summary.json",
+        "landscape.png",
+        "force.png",
+        "capture.png",
+        "pattern.png",
+        "report.html",
+    }
     assert names <= {p.name for p in report.iterdir()}
     s = json.loads((report / "summary.json").read_text())
     g = s["global_minimum"]
@@ -57,7 +66,20 @@ def test_html_references_files_that_exist(report):
 
 def test_library_pattern_needs_no_other_flag(tmp_path):
     out = tmp_path / "sq"
-    assert main(["evaluate", str(library_path("square_200")), "--out", str(out), "--quiet", "--twist-step", "5"]) == 0
+    assert (
+        main(
+            [
+                "evaluate",
+                str(library_path("square_200")),
+                "--out",
+                str(out),
+                "--quiet",
+                "--twist-step",
+                "5",
+            ]
+        )
+        == 0
+    )
     s = json.loads((out / "summary.json").read_text())
     assert s["settings"]["chip_um"] == [200.0, 200.0]  # default chip: the pattern's bounding box
     assert s["capture"]["fraction"] == 1.0

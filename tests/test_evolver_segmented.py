@@ -38,14 +38,19 @@ def _rows(name: str) -> list[dict[str, str]]:
         return list(csv.DictReader(f))
 
 
-FOURPAD = _rows("evolver_fourpad.csv")  # each pose at its finest level, compared with the next coarser
+FOURPAD = _rows(
+    "evolver_fourpad.csv"
+)  # each pose at its finest level, compared with the next coarser
 LEVELS = _rows("evolver_fourpad_levels.csv")  # every pose at every level
 DEFECTS = _rows("evolver_defects.csv")
 
 
 def _path(name: str, level: str = "2") -> list[dict[str, str]]:
     """A continuation path at one refinement level (level 2 is complete for every path)."""
-    return sorted((r for r in LEVELS if r["path"] == name and r["level"] == level), key=lambda r: float(r["x_um"]))
+    return sorted(
+        (r for r in LEVELS if r["path"] == name and r["level"] == level),
+        key=lambda r: float(r["x_um"]),
+    )
 
 
 def _interior_N(gap: float, L: float = 730.0) -> float:
@@ -61,13 +66,27 @@ def test_fourpad_reference_covers_the_paths_asked_for():
         dense = [x for x in xs if 250.0 <= x <= 450.0]
         assert dense[0] <= 250.0 and dense[-1] >= 450.0 and max(np.diff(dense)) <= 10.0 + 1e-9
         r = _path(f"x_730_{gap}")[0]
-        assert float(r["L_um"]) == 730 and float(r["g_um"]) == gap and float(r["volume_um3"]) == pytest.approx(2.0e7)
+        assert (
+            float(r["L_um"]) == 730
+            and float(r["g_um"]) == gap
+            and float(r["volume_um3"]) == pytest.approx(2.0e7)
+        )
         diag = _path(f"diag_730_{gap}")
         assert float(diag[-1]["x_um"]) == float(diag[-1]["y_um"]) == 300.0
     small = _path("x_200_20")
-    assert float(small[0]["L_um"]) == 200 and float(small[0]["volume_um3"]) == pytest.approx(5.0e5) and float(small[-1]["x_um"]) >= 150
-    main = [r for r in FOURPAD if r["path"] in ("x_730_50", "x_730_100", "x_200_20", "diag_730_50", "diag_730_100")]
-    assert {r["theta_pad_deg"] for r in main} == {"30.0"} and {r["theta_sub_deg"] for r in main} == {"60.0"}
+    assert (
+        float(small[0]["L_um"]) == 200
+        and float(small[0]["volume_um3"]) == pytest.approx(5.0e5)
+        and float(small[-1]["x_um"]) >= 150
+    )
+    main = [
+        r
+        for r in FOURPAD
+        if r["path"] in ("x_730_50", "x_730_100", "x_200_20", "diag_730_50", "diag_730_100")
+    ]
+    assert {r["theta_pad_deg"] for r in main} == {"30.0"} and {
+        r["theta_sub_deg"] for r in main
+    } == {"60.0"}
 
 
 @pytest.mark.parametrize("gap", [50, 100])
@@ -76,7 +95,9 @@ def test_fourpad_force_vanishes_at_alignment_and_equals_the_overlap_slope_inside
     inside = _interior_N(gap)
     assert abs(float(rows[0]["force_x_N"])) < 1e-3 * inside  # x = 0: mirror symmetry
     settled = [r for r in rows if r["flag"] != "newton_not_settled"]
-    assert all(abs(float(r["force_y_N"])) < 1e-2 * inside for r in settled)  # no cross force on y = 0
+    assert all(
+        abs(float(r["force_y_N"])) < 1e-2 * inside for r in settled
+    )  # no cross force on y = 0
     # Deep inside a pad (more than 2 h from every feature) the meniscus adds nothing: the
     # force is the overlap model's |Delta_gamma| (L - g), to 0.5 %.
     for r in rows:
@@ -116,7 +137,9 @@ def test_fourpad_730_50_has_no_zero_force_part_and_its_dip_lies_beyond_the_overl
     # the chip has left, then lets go), which keeps more than 60 % of the interior force.
     rows = _path("x_730_50")
     inside = _interior_N(50)
-    near = [(float(r["x_um"]), -float(r["force_x_N"])) for r in rows if 330 <= float(r["x_um"]) <= 500]
+    near = [
+        (float(r["x_um"]), -float(r["force_x_N"])) for r in rows if 330 <= float(r["x_um"]) <= 500
+    ]
     x_min, f_min = min(near, key=lambda t: t[1])
     assert f_min > 0.6 * inside and 400 <= x_min <= 450
 
@@ -129,7 +152,11 @@ def test_fourpad_liquid_stays_on_the_far_pads_past_the_overlap_flat_part_onset(g
     p = (730 - gap) / 2
     inside = _interior_N(gap)
     h = float(rows[0]["chip_height_um"])
-    full = [r for r in rows if p < float(r["x_um"]) < p + 2 * h and -float(r["force_x_N"]) > 0.9 * inside]
+    full = [
+        r
+        for r in rows
+        if p < float(r["x_um"]) < p + 2 * h and -float(r["force_x_N"]) > 0.9 * inside
+    ]
     assert full and max(float(r["x_um"]) for r in full) >= p + 0.7 * h
     assert all(r["left_pads_wetted"] == "True" for r in full)
 
@@ -144,22 +171,39 @@ def test_fourpad_coming_inward_the_chip_meets_a_flat_part_the_outward_path_does_
     # on the gap, about 25 um beyond the chip edge, and nothing changes with x there, so the
     # force is near zero: a flat part, shifted outwards from the overlap model's (p to p + g)
     # by about that reach. Going outward the liquid still holds the left pads there and pulls.
-    inward = {float(r["x_um"]): r for r in INWARD if r["path"] == f"x_730_{gap}_inward" and r["level"] == "1"}
+    inward = {
+        float(r["x_um"]): r
+        for r in INWARD
+        if r["path"] == f"x_730_{gap}_inward" and r["level"] == "1"
+    }
     outward = {float(r["x_um"]): r for r in _path(f"x_730_{gap}", "1")}
     inside = _interior_N(gap)
     for x, r in inward.items():
         if lo <= x <= hi:
-            assert abs(float(r["force_x_N"])) < 0.15 * inside and r["left_pads_wetted"] == "False", x
+            assert (
+                abs(float(r["force_x_N"])) < 0.15 * inside and r["left_pads_wetted"] == "False"
+            ), x
         if 100 <= x <= 330:  # both branches wet every pad: the same force
-            assert float(r["force_x_N"]) == pytest.approx(float(outward[x]["force_x_N"]), abs=0.04 * inside), x
-    assert max(-float(outward[x]["force_x_N"]) for x in inward if lo <= x <= hi) > 0.3 * inside  # outward still pulls there
+            assert float(r["force_x_N"]) == pytest.approx(
+                float(outward[x]["force_x_N"]), abs=0.04 * inside
+            ), x
+    assert (
+        max(-float(outward[x]["force_x_N"]) for x in inward if lo <= x <= hi) > 0.3 * inside
+    )  # outward still pulls there
 
 
 # ----------------------------------------------------------------- the four-pad model comparison
 @functools.cache
 def _fourpad_landscapes(gap: int):
-    base = Scene.from_inputs(LIB / f"four_pad_730_{gap}.png", chip_size_um=730, resolution_um=2.0, effects=Effects(twist=False),
-                             liquid=Liquid(volume_nl=20.0), window_um=520, dtype="float64")
+    base = Scene.from_inputs(
+        LIB / f"four_pad_730_{gap}.png",
+        chip_size_um=730,
+        resolution_um=2.0,
+        effects=Effects(twist=False),
+        liquid=Liquid(volume_nl=20.0),
+        window_um=520,
+        dtype="float64",
+    )
     return build_landscape(base.replace(effects=Effects(twist=False, meniscus=True)))
 
 
@@ -170,7 +214,9 @@ def test_meniscus_model_within_10_percent_of_evolver_away_from_the_transitions(g
     p, h = (730 - gap) / 2, 37.5
     for r in _path(f"x_730_{gap}"):
         x = float(r["x_um"])
-        if 100 <= x <= p - 2 * h or x >= p + gap + 2 * h + 25:  # more than 2 h from the centre's rounding and the dip
+        if (
+            100 <= x <= p - 2 * h or x >= p + gap + 2 * h + 25
+        ):  # more than 2 h from the centre's rounding and the dip
             model = -float(ls.force_at(x, 0.0, 0.0)[0])
             assert model == pytest.approx(-float(r["force_x_N"]), rel=0.10), x
             checked += 1
@@ -180,8 +226,11 @@ def test_meniscus_model_within_10_percent_of_evolver_away_from_the_transitions(g
 def _inward(gap: int) -> dict[float, float]:
     """Surface Evolver's inward continuation (level 1): restoring force -F_x (N) by x (um),
     x = 0 left out (not relaxed after the last 50 um step, validation/FOURPAD_INWARD.md)."""
-    return {float(r["x_um"]): -float(r["force_x_N"]) for r in INWARD
-            if r["path"] == f"x_730_{gap}_inward" and r["level"] == "1" and float(r["x_um"]) > 1}
+    return {
+        float(r["x_um"]): -float(r["force_x_N"])
+        for r in INWARD
+        if r["path"] == f"x_730_{gap}_inward" and r["level"] == "1" and float(r["x_um"]) > 1
+    }
 
 
 def _onset(xs, fs, level: float) -> float:
@@ -195,7 +244,9 @@ def _onset(xs, fs, level: float) -> float:
 
 
 @pytest.mark.parametrize("gap,least", [(50, 4.0), (100, 40.0)])
-def test_meniscus_model_has_the_flat_part_where_evolver_has_one_and_its_onset_within_10_um(gap, least):
+def test_meniscus_model_has_the_flat_part_where_evolver_has_one_and_its_onset_within_10_um(
+    gap, least
+):
     # Free contact lines (the wall profile, simulator/meniscus.py): on the gap the trailing
     # line stands on the substrate and nothing changes with x, so the force is zero there, as
     # in Surface Evolver's inward path. The onset, where the force coming inward falls
@@ -209,9 +260,13 @@ def test_meniscus_model_has_the_flat_part_where_evolver_has_one_and_its_onset_wi
     model = np.array([-float(ls.force_at(x, 0.0, 0.0)[0]) for x in xs])
     flat = xs[np.abs(model) < 1e-3 * inside]
     assert flat.size and flat.max() - flat.min() >= least
-    assert np.all(np.abs(model[(xs >= flat.min()) & (xs <= flat.max())]) < 1e-3 * inside)  # one flat part, no dips in it
+    assert np.all(
+        np.abs(model[(xs >= flat.min()) & (xs <= flat.max())]) < 1e-3 * inside
+    )  # one flat part, no dips in it
     se = _inward(gap)
-    assert all(abs(se[x]) < 0.15 * inside for x in se if flat.min() <= x <= flat.max())  # Surface Evolver is flat there too
+    assert all(
+        abs(se[x]) < 0.15 * inside for x in se if flat.min() <= x <= flat.max()
+    )  # Surface Evolver is flat there too
     m_on, s_on = _onset(xs, model, 0.5 * inside), _onset(list(se), list(se.values()), 0.5 * inside)
     assert abs(m_on - s_on) <= 10.0, (m_on, s_on)
     # The overlap model's flat part (p to p + g) ends about the line's reach further in.
@@ -238,9 +293,19 @@ def test_meniscus_model_follows_evolver_inward_off_the_transitions_and_near_alig
 
 
 def test_free_contact_line_model_at_vanishing_height_is_the_overlap_landscape():
-    base = Scene.from_inputs(LIB / "four_pad_730_50.png", chip_size_um=730, resolution_um=10.0, effects=Effects(twist=False),
-                             liquid=Liquid(height_um=1e-9), window_um=100, dtype="float64")
-    off, on = build_landscape(base), build_landscape(base.replace(effects=Effects(twist=False, meniscus=True)))
+    base = Scene.from_inputs(
+        LIB / "four_pad_730_50.png",
+        chip_size_um=730,
+        resolution_um=10.0,
+        effects=Effects(twist=False),
+        liquid=Liquid(height_um=1e-9),
+        window_um=100,
+        dtype="float64",
+    )
+    off, on = (
+        build_landscape(base),
+        build_landscape(base.replace(effects=Effects(twist=False, meniscus=True))),
+    )
     assert on.meniscus_height_um == pytest.approx(1e-9) and not base.liquid.pinned
     assert np.max(np.abs(on.energy - off.energy)) <= 1e-12 * np.abs(off.energy).max()
 
@@ -255,8 +320,13 @@ def test_defect_reference_is_symmetric_where_the_set_up_is():
         elif r["defect"] in ("A", "C"):  # middle defects: mirror symmetric about y = 0
             assert abs(y) < 1e-4 and abs(t) < 1e-3
             assert (x > 0) == (r["kind"] == "outward")
-        assert float(r["force_rel_2gL"]) < 1e-3 and float(r["torque_rel_2gL2"]) < 1e-3  # an equilibrium
-        assert max(abs(float(r["dx_last_um"])), abs(float(r["dy_last_um"]))) < 0.01 or r["defect"] == "none"
+        assert (
+            float(r["force_rel_2gL"]) < 1e-3 and float(r["torque_rel_2gL2"]) < 1e-3
+        )  # an equilibrium
+        assert (
+            max(abs(float(r["dx_last_um"])), abs(float(r["dy_last_um"]))) < 0.01
+            or r["defect"] == "none"
+        )
 
 
 def test_evolver_puts_an_inward_defect_nearer_the_centre_than_an_outward_one():
@@ -268,14 +338,24 @@ def test_evolver_puts_an_inward_defect_nearer_the_centre_than_an_outward_one():
 
 @functools.cache
 def _defect_minimum(d: str, kind: str, volume_nl: float) -> dict:
-    sc = Scene.from_inputs(LIB / f"defect_{d}_{kind}.png", chip_size_um=200, effects=Effects(meniscus=True),
-                           liquid=Liquid(volume_nl=volume_nl, pinned=True), twist=TwistGrid(0.25, -3, 3), window_um=12,
-                           dtype="float64")
+    sc = Scene.from_inputs(
+        LIB / f"defect_{d}_{kind}.png",
+        chip_size_um=200,
+        effects=Effects(meniscus=True),
+        liquid=Liquid(volume_nl=volume_nl, pinned=True),
+        twist=TwistGrid(0.25, -3, 3),
+        window_um=12,
+        dtype="float64",
+    )
     ls = build_landscape(sc)
     return refine_minimum(ls, *ls.global_minimum()[:3])
 
 
-@pytest.mark.parametrize("row", [r for r in DEFECTS if r["defect"] != "none"], ids=lambda r: f"{r['defect']}-{r['kind']}-{r['volume_nl']}nl")
+@pytest.mark.parametrize(
+    "row",
+    [r for r in DEFECTS if r["defect"] != "none"],
+    ids=lambda r: f"{r['defect']}-{r['kind']}-{r['volume_nl']}nl",
+)
 def test_meniscus_model_puts_each_defect_minimum_where_evolver_does(row):
     m = _defect_minimum(row["defect"], row["kind"], float(row["volume_nl"]))
     for key, tol_abs in (("x_um", 0.5), ("y_um", 0.5), ("twist_deg", 0.1)):

@@ -25,7 +25,11 @@ def test_simulate_example(tmp_path):
     out = tmp_path / "t.json"
     assert main(["simulate", str(EX / "simulate_fourpad.toml"), "--json", str(out), "--quiet"]) == 0
     doc = json.loads(out.read_text())
-    assert doc["outcome"] == "aligned" and doc["start"] == {"x_um": 380.0, "y_um": 120.0, "twist_deg": 8.0}
+    assert doc["outcome"] == "aligned" and doc["start"] == {
+        "x_um": 380.0,
+        "y_um": 120.0,
+        "twist_deg": 8.0,
+    }
 
 
 def test_dynamics_example(tmp_path):
@@ -37,7 +41,10 @@ def test_dynamics_example(tmp_path):
 
 def test_montecarlo_example(tmp_path):
     out = tmp_path / "mc.json"
-    assert main(["montecarlo", str(EX / "montecarlo_fourpad.toml"), "--json", str(out), "--quiet"]) == 0
+    assert (
+        main(["montecarlo", str(EX / "montecarlo_fourpad.toml"), "--json", str(out), "--quiet"])
+        == 0
+    )
     doc = json.loads(out.read_text())
     assert doc["n"] == 2000 and doc["seed"] == 1 and 0.5 < doc["yield"] <= 1
 
@@ -47,7 +54,11 @@ def test_evaluate_example(tmp_path):
     assert main(["evaluate", str(EX / "evaluate_defect.toml"), "--out", str(out), "--quiet"]) == 0
     s = json.loads((out / "summary.json").read_text())
     g = s["global_minimum"]
-    assert (g["x_um"], g["y_um"], g["twist_deg"]) == (0.0, 0.0, 0.0)  # C11: the defect does not move it
+    assert (g["x_um"], g["y_um"], g["twist_deg"]) == (
+        0.0,
+        0.0,
+        0.0,
+    )  # C11: the defect does not move it
 
 
 @pytest.mark.parametrize("flags", [["--at", "40,25,0"]])

@@ -29,9 +29,52 @@ from simulator.cli import main
 MEMORY_LIMIT = 2**30
 SETTINGS = {"deadline": None, "derandomize": True, "suppress_health_check": [HealthCheck.too_slow]}
 
-NUMBERS = ["0", "-0", "1", "2", "-3", "7.5", "40", "200", "1e-300", "1e-6", "1e6", "1e9", "1e300", "-1e9", "nan", "inf", "-inf", "", "abc", "0x10", "1_0"]
-POSES = ["0,0,0", "1,2,3", "-40,25,0", "1e9,0,0", "nan,0,0", "1,2", "1,2,3,4", "a,b,c", "", "0,0,1e300", "5,5,-720"]
-RANGES = ["-10:10:5,-10:10:5", "0,0", "0:0:0,0", "-1e9:1e9:1e-3,0", "1:0:1,0", "a:b:c,0", "0,0,0:90:1e-6", "-4:4:2,-4:4:2,0"]
+NUMBERS = [
+    "0",
+    "-0",
+    "1",
+    "2",
+    "-3",
+    "7.5",
+    "40",
+    "200",
+    "1e-300",
+    "1e-6",
+    "1e6",
+    "1e9",
+    "1e300",
+    "-1e9",
+    "nan",
+    "inf",
+    "-inf",
+    "",
+    "abc",
+    "0x10",
+    "1_0",
+]
+POSES = [
+    "0,0,0",
+    "1,2,3",
+    "-40,25,0",
+    "1e9,0,0",
+    "nan,0,0",
+    "1,2",
+    "1,2,3,4",
+    "a,b,c",
+    "",
+    "0,0,1e300",
+    "5,5,-720",
+]
+RANGES = [
+    "-10:10:5,-10:10:5",
+    "0,0",
+    "0:0:0,0",
+    "-1e9:1e9:1e-3,0",
+    "1:0:1,0",
+    "a:b:c,0",
+    "0,0,0:90:1e-6",
+    "-4:4:2,-4:4:2,0",
+]
 
 
 def run_traced(args: list[str], workdir: Path) -> tuple[int, str, int]:
@@ -58,7 +101,11 @@ def check_run(rc, err: str, peak: int, workdir: Path, inputs: set[str], outputs:
     assert "Traceback" not in err and "internal error" not in err, err
     assert peak < MEMORY_LIMIT, f"{peak / 2**20:.0f} MB traced"
     if rc == 2:
-        lines = [ln for ln in err.splitlines() if not ln.startswith(("compiling", "selfalign: warning", "warning:"))]
+        lines = [
+            ln
+            for ln in err.splitlines()
+            if not ln.startswith(("compiling", "selfalign: warning", "warning:"))
+        ]
         assert len(lines) == 1 and "error" in lines[0], err
     left = {p.name for p in workdir.iterdir()}
     allowed = inputs | (outputs if rc == 0 else set())
@@ -66,7 +113,10 @@ def check_run(rc, err: str, peak: int, workdir: Path, inputs: set[str], outputs:
 
 
 def small_pattern(d: Path) -> str:
-    assert main(["pattern", "square", "--size", "40", "--um-per-px", "2", "-o", str(d / "pad.png")]) == 0
+    assert (
+        main(["pattern", "square", "--size", "40", "--um-per-px", "2", "-o", str(d / "pad.png")])
+        == 0
+    )
     return "pad.png"
 
 
@@ -89,15 +139,29 @@ SCENE_FLAGS = {
     "--max-image-mpx": pool(["1", "64"], ["0.0001", "1e9", "-1"]),
 }
 COMMAND_FLAGS = {
-    "energy": {"--at": pool(["0,0,0", "3,-2,5"], POSES), "--curve": st.sampled_from(["x", "y", "twist", "z"]),
-               "--from": pool(["-20", "0"]), "--to": pool(["20", "10"]), "--json": pool(["e.json"], ["pad.png", "/dev/null", ".", ""])},
-    "simulate": {"--start": pool(["4,-2,0", "10,0,5"], POSES), "--max-steps": pool(["1", "50"], ["0", "-5", "1000000000", "1000000000000", "1e3"]),
-                 "--method": st.sampled_from(["greedy", "gradient", "newton"]), "--json": pool(["t.json"], ["pad.png"]),
-                 "--volume": pool(["0.5", "20"])},
-    "montecarlo": {"--random": pool(["1", "20"], ["0", "1e7", "1e8", "1.5", "x"]), "--grid": pool(["-4:4:2,-4:4:2", "0,0"], RANGES),
-                   "--spread": pool(["2,2,1", "0,0,0"], POSES), "--seed": pool(["0", "7"], ["-1", "1e3", "x"]),
-                   "--max-steps": pool(["1", "50"], ["0", "3000000000"]), "--csv": pool(["m.csv"], ["pad.png"]),
-                   "--chunk": pool(["1", "64"], ["0", "1e9"])},
+    "energy": {
+        "--at": pool(["0,0,0", "3,-2,5"], POSES),
+        "--curve": st.sampled_from(["x", "y", "twist", "z"]),
+        "--from": pool(["-20", "0"]),
+        "--to": pool(["20", "10"]),
+        "--json": pool(["e.json"], ["pad.png", "/dev/null", ".", ""]),
+    },
+    "simulate": {
+        "--start": pool(["4,-2,0", "10,0,5"], POSES),
+        "--max-steps": pool(["1", "50"], ["0", "-5", "1000000000", "1000000000000", "1e3"]),
+        "--method": st.sampled_from(["greedy", "gradient", "newton"]),
+        "--json": pool(["t.json"], ["pad.png"]),
+        "--volume": pool(["0.5", "20"]),
+    },
+    "montecarlo": {
+        "--random": pool(["1", "20"], ["0", "1e7", "1e8", "1.5", "x"]),
+        "--grid": pool(["-4:4:2,-4:4:2", "0,0"], RANGES),
+        "--spread": pool(["2,2,1", "0,0,0"], POSES),
+        "--seed": pool(["0", "7"], ["-1", "1e3", "x"]),
+        "--max-steps": pool(["1", "50"], ["0", "3000000000"]),
+        "--csv": pool(["m.csv"], ["pad.png"]),
+        "--chunk": pool(["1", "64"], ["0", "1e9"]),
+    },
 }
 
 
@@ -111,8 +175,11 @@ def cli_args(draw):
         args += ["--chip-size", "20"]
     if "--memory-budget" not in chosen:
         args += ["--memory-budget", "512"]
-    required = {"energy": [("--at", "0,0,0")], "simulate": [("--start", "4,-2,0")],
-                "montecarlo": [] if "--grid" in chosen else [("--random", "10"), ("--spread", "2,2,1")]}[command]
+    required = {
+        "energy": [("--at", "0,0,0")],
+        "simulate": [("--start", "4,-2,0")],
+        "montecarlo": [] if "--grid" in chosen else [("--random", "10"), ("--spread", "2,2,1")],
+    }[command]
     for flag, value in required:
         if flag not in chosen:
             args += [flag, value]
@@ -135,21 +202,65 @@ def test_fuzz_cli_flags(args):
 
 
 # ------------------------------------------------------------------ TOML scenes
-TOML_VALUES = st.sampled_from([
-    "1", "0", "-1", "1e300", "-1e300", "nan", "inf", "true", "false", '"false"', '"no"', '"water"', "[1, 2, 3]", "[]", "[200]",
-    "[20, 10]", '"pad.png"', '"missing.png"', "42", "{a = 1}", "9" * 40, "[[1], [2]]", '"float16"', '"float64"', "2.0", "0.5",
-])
+TOML_VALUES = st.sampled_from(
+    [
+        "1",
+        "0",
+        "-1",
+        "1e300",
+        "-1e300",
+        "nan",
+        "inf",
+        "true",
+        "false",
+        '"false"',
+        '"no"',
+        '"water"',
+        "[1, 2, 3]",
+        "[]",
+        "[200]",
+        "[20, 10]",
+        '"pad.png"',
+        '"missing.png"',
+        "42",
+        "{a = 1}",
+        "9" * 40,
+        "[[1], [2]]",
+        '"float16"',
+        '"float64"',
+        "2.0",
+        "0.5",
+    ]
+)
 TOML_KEYS = [
-    (None, "chip_size_um"), (None, "um_per_px"), (None, "resolution_um"), (None, "dtype"), (None, "window_um"), (None, "memory_budget_mb"),
-    (None, "accuracy"), (None, "pattern"), (None, "colour"), ("materials", "surface_tension_mN_m"), ("materials", "pad_angle_deg"),
-    ("materials", "allow_repulsive"), ("twist", "step_deg"), ("twist", "min_deg"), ("effects", "twist"), ("liquid", "volume_nl"),
-    ("simulate", "metod"), ("montecarlo", "random"),
+    (None, "chip_size_um"),
+    (None, "um_per_px"),
+    (None, "resolution_um"),
+    (None, "dtype"),
+    (None, "window_um"),
+    (None, "memory_budget_mb"),
+    (None, "accuracy"),
+    (None, "pattern"),
+    (None, "colour"),
+    ("materials", "surface_tension_mN_m"),
+    ("materials", "pad_angle_deg"),
+    ("materials", "allow_repulsive"),
+    ("twist", "step_deg"),
+    ("twist", "min_deg"),
+    ("effects", "twist"),
+    ("liquid", "volume_nl"),
+    ("simulate", "metod"),
+    ("montecarlo", "random"),
 ]
 
 
 @st.composite
 def toml_scene(draw):
-    entries = draw(st.lists(st.tuples(st.sampled_from(TOML_KEYS), TOML_VALUES), max_size=6, unique_by=lambda e: e[0]))
+    entries = draw(
+        st.lists(
+            st.tuples(st.sampled_from(TOML_KEYS), TOML_VALUES), max_size=6, unique_by=lambda e: e[0]
+        )
+    )
     top = {k: v for (t, k), v in entries if t is None}
     top.setdefault("pattern", '"pad.png"')
     top.setdefault("chip_size_um", "20")
@@ -174,7 +285,12 @@ def test_fuzz_toml_scene(text):
 
 # ------------------------------------------------------------------ PNG reader
 def _png_chunk(kind: bytes, data: bytes) -> bytes:
-    return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
+    return (
+        struct.pack(">I", len(data))
+        + kind
+        + data
+        + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
+    )
 
 
 @st.composite
@@ -185,10 +301,24 @@ def png_bytes(draw):
     if mode == "I;16":
         im = Image.fromarray((rng.random((h, w)) * 65535).astype(np.uint16))
     else:
-        im = Image.fromarray((rng.random((h, w)) * 255).astype(np.uint8)).convert(mode if mode != "F" else "L")
+        im = Image.fromarray((rng.random((h, w)) * 255).astype(np.uint8)).convert(
+            mode if mode != "F" else "L"
+        )
     info = PngImagePlugin.PngInfo()
-    note = draw(st.sampled_from([None, "{}", '{"um_per_px": "x"}', '{"um_per_px": -1}', "[" * 200 + "]" * 200, "not json",
-                                 '{"parameters": {"gap": {"value": 1e999}}}', '{"design": 5}']))
+    note = draw(
+        st.sampled_from(
+            [
+                None,
+                "{}",
+                '{"um_per_px": "x"}',
+                '{"um_per_px": -1}',
+                "[" * 200 + "]" * 200,
+                "not json",
+                '{"parameters": {"gap": {"value": 1e999}}}',
+                '{"design": 5}',
+            ]
+        )
+    )
     if note is not None:
         info.add_text("selfalign", note)
     px_per_m = draw(st.sampled_from([None, 1, 1000, 10**6, 2**31 - 1]))
@@ -204,7 +334,12 @@ def png_bytes(draw):
         data[i] ^= 1 << draw(st.integers(0, 7))
     elif damage == "huge_ihdr":  # claims 60000 x 60000 px in a tiny file
         ihdr = struct.pack(">IIBBBBB", 60000, 60000, 8, 0, 0, 0, 0)
-        data = bytearray(b"\x89PNG\r\n\x1a\n" + _png_chunk(b"IHDR", ihdr) + _png_chunk(b"IDAT", zlib.compress(b"\0" * 100)) + _png_chunk(b"IEND", b""))
+        data = bytearray(
+            b"\x89PNG\r\n\x1a\n"
+            + _png_chunk(b"IHDR", ihdr)
+            + _png_chunk(b"IDAT", zlib.compress(b"\0" * 100))
+            + _png_chunk(b"IEND", b"")
+        )
     return bytes(data)
 
 
@@ -221,7 +356,12 @@ def test_fuzz_png_reader(data, scale):
             except InputError as err:
                 assert "\n" not in str(err)
             else:
-                assert np.all(np.isfinite(m.data)) and 0 <= m.data.min() and m.data.max() <= 1 and m.um_per_px > 0
+                assert (
+                    np.all(np.isfinite(m.data))
+                    and 0 <= m.data.min()
+                    and m.data.max() <= 1
+                    and m.um_per_px > 0
+                )
             peak = tracemalloc.get_traced_memory()[1]
         finally:
             tracemalloc.stop()
@@ -234,6 +374,22 @@ def test_fuzz_png_through_the_cli(data):
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(tmp)
         (d / "in.png").write_bytes(data)
-        rc, err, peak = run_traced(["energy", "--pattern", "in.png", "--um-per-px", "1", "--chip-size", "5", "--at", "0,0,0",
-                                 "--memory-budget", "512", "--json", "e.json"], d)
+        rc, err, peak = run_traced(
+            [
+                "energy",
+                "--pattern",
+                "in.png",
+                "--um-per-px",
+                "1",
+                "--chip-size",
+                "5",
+                "--at",
+                "0,0,0",
+                "--memory-budget",
+                "512",
+                "--json",
+                "e.json",
+            ],
+            d,
+        )
         check_run(rc, err, peak, d, {"in.png"}, {"e.json"})

@@ -59,8 +59,13 @@ RUNNER = textwrap.dedent("""
 
 def measured(args: list, cwd: Path) -> dict:
     """main(args) in a subprocess of its own: rc, err, seconds, peak_kb."""
-    proc = subprocess.run([sys.executable, "-c", RUNNER, json.dumps([str(a) for a in args])], capture_output=True, text=True,
-                          timeout=300, cwd=cwd)
+    proc = subprocess.run(
+        [sys.executable, "-c", RUNNER, json.dumps([str(a) for a in args])],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=cwd,
+    )
     assert proc.returncode == 0, proc.stderr[-3000:]
     return json.loads(proc.stdout.splitlines()[-1])
 
@@ -92,13 +97,19 @@ def silent_scheduler():
         c.close()
 
 
-def test_scheduler_that_accepts_and_never_answers_is_refused_within_the_handshake_timeout(silent_scheduler, tmp_path, run_cli):
+def test_scheduler_that_accepts_and_never_answers_is_refused_within_the_handshake_timeout(
+    silent_scheduler, tmp_path, run_cli
+):
     from simulator.sweep import CONNECT_TIMEOUT_S
 
     t0 = time.perf_counter()
-    rc, _, err = run_cli(["sweep", SWEEP, "--out", tmp_path / "out", "--scheduler", silent_scheduler, "--quiet"])
+    rc, _, err = run_cli(
+        ["sweep", SWEEP, "--out", tmp_path / "out", "--scheduler", silent_scheduler, "--quiet"]
+    )
     elapsed = time.perf_counter() - t0
-    one_line_error(rc, err, "cannot reach a Dask scheduler within 3 s", "no answer to the handshake")
+    one_line_error(
+        rc, err, "cannot reach a Dask scheduler within 3 s", "no answer to the handshake"
+    )
     assert CONNECT_TIMEOUT_S == 3.0 and elapsed < 30  # the handshake's own 3 s bound (93 s before)
     assert listing(tmp_path) == []  # no results directory for a sweep that never ran
 
@@ -106,19 +117,59 @@ def test_scheduler_that_accepts_and_never_answers_is_refused_within_the_handshak
 @pytest.mark.parametrize("window", ["1e-3", "1e-300", "0.5"])
 def test_simulate_window_below_a_pixel_is_refused(window, tmp_path, run_cli):
     t0 = time.perf_counter()
-    rc, out, err = run_cli(["simulate", "--pattern", SQUARE, "--chip-size", "200", "--start", "40,40,0", "--window", window,
-                            "--json", tmp_path / "t.json"])
+    rc, out, err = run_cli(
+        [
+            "simulate",
+            "--pattern",
+            SQUARE,
+            "--chip-size",
+            "200",
+            "--start",
+            "40,40,0",
+            "--window",
+            window,
+            "--json",
+            tmp_path / "t.json",
+        ]
+    )
     one_line_error(rc, err, "below one pixel", "--window", "give at least 1 um")
-    assert out == "" and listing(tmp_path) == [] and time.perf_counter() - t0 < 30  # no end after 60 s before
+    assert (
+        out == "" and listing(tmp_path) == [] and time.perf_counter() - t0 < 30
+    )  # no end after 60 s before
 
 
 def test_simulate_start_outside_the_window_is_refused_and_one_on_its_edge_ends(tmp_path, run_cli):
-    rc, _, err = run_cli(["simulate", "--pattern", SQUARE, "--chip-size", "200", "--start", "40,40,0", "--window", "5"])
+    rc, _, err = run_cli(
+        [
+            "simulate",
+            "--pattern",
+            SQUARE,
+            "--chip-size",
+            "200",
+            "--start",
+            "40,40,0",
+            "--window",
+            "5",
+        ]
+    )
     one_line_error(rc, err, "outside the translation window of +-5 um", "at least 40 um")
     # On the window's edge: the box around the chip cannot grow past the window; the run ends (it looped before).
     t0 = time.perf_counter()
-    rc, out, err = run_cli(["simulate", "--pattern", SQUARE, "--chip-size", "200", "--start", "5,5,0", "--window", "5",
-                            "--json", tmp_path / "t.json"])
+    rc, out, err = run_cli(
+        [
+            "simulate",
+            "--pattern",
+            SQUARE,
+            "--chip-size",
+            "200",
+            "--start",
+            "5,5,0",
+            "--window",
+            "5",
+            "--json",
+            tmp_path / "t.json",
+        ]
+    )
     assert rc == 0, err
     assert time.perf_counter() - t0 < 120
     doc = json.loads((tmp_path / "t.json").read_text())
@@ -138,8 +189,16 @@ def _grid_gds(path: Path, n_side: int) -> None:
 
 def test_gds_with_a_million_polygons_is_refused_before_flattening(tmp_path):
     _grid_gds(tmp_path / "many.gds", 1000)  # 10^6 squares of 1 um, 64 MB
-    r = measured(["energy", "--pattern", "many.gds", "--chip-size", "200", "--at", "0,0,0"], tmp_path)
-    one_line_error(r["rc"], r["err"], "1,000,000 polygons", "over the limit of 100,000", "--max-polygons 1000000")
+    r = measured(
+        ["energy", "--pattern", "many.gds", "--chip-size", "200", "--at", "0,0,0"], tmp_path
+    )
+    one_line_error(
+        r["rc"],
+        r["err"],
+        "1,000,000 polygons",
+        "over the limit of 100,000",
+        "--max-polygons 1000000",
+    )
     assert r["s"] < 30  # over 120 s before
     assert r["peak_kb"] < 2**20  # 1 GiB: refused from the hierarchy's count, nothing flattened
     assert listing(tmp_path) == ["many.gds"]
@@ -153,19 +212,52 @@ def test_layout_polygons_are_built_vectorized_and_exact(tmp_path):
     geom, _, record = layout_geometry(tmp_path / "grid.gds", LayoutSelection(max_polygons=30_000))
     assert time.perf_counter() - t0 < 60
     assert record["polygons"] == 22_500 and geom.area == pytest.approx(22_500.0, rel=1e-12)
-    with pytest.raises(InputError, match=r"22,500 polygons .* over the limit of 20,000 .* --max-polygons 22500"):
+    with pytest.raises(
+        InputError, match=r"22,500 polygons .* over the limit of 20,000 .* --max-polygons 22500"
+    ):
         layout_geometry(tmp_path / "grid.gds", LayoutSelection(max_polygons=20_000))
 
 
 # ============================================================== 3. a number does not switch a guard off
-@pytest.mark.parametrize("flag,value", [("--max-image-mpx", "nan"), ("--max-image-mpx", "inf"), ("--memory-budget", "nan"),
-                                        ("--memory-budget", "inf"), ("--max-polygons", "0")])
+@pytest.mark.parametrize(
+    "flag,value",
+    [
+        ("--max-image-mpx", "nan"),
+        ("--max-image-mpx", "inf"),
+        ("--memory-budget", "nan"),
+        ("--memory-budget", "inf"),
+        ("--max-polygons", "0"),
+    ],
+)
 def test_limit_flags_refuse_non_finite_values(flag, value, tmp_path):
     from PIL import Image
 
-    Image.new("L", (13000, 13000), 255).save(tmp_path / "big.png")  # 169 megapixels, 4 GB to read (25 s before)
-    r = measured(["energy", "--pattern", "big.png", "--um-per-px", "1", "--chip-size", "200", "--at", "0,0,0", flag, value], tmp_path)
-    one_line_error(r["rc"], r["err"], f"argument {flag}", f"got '{value}'", *(["cannot be switched off"] if value in ("nan", "inf") else []))
+    Image.new("L", (13000, 13000), 255).save(
+        tmp_path / "big.png"
+    )  # 169 megapixels, 4 GB to read (25 s before)
+    r = measured(
+        [
+            "energy",
+            "--pattern",
+            "big.png",
+            "--um-per-px",
+            "1",
+            "--chip-size",
+            "200",
+            "--at",
+            "0,0,0",
+            flag,
+            value,
+        ],
+        tmp_path,
+    )
+    one_line_error(
+        r["rc"],
+        r["err"],
+        f"argument {flag}",
+        f"got '{value}'",
+        *(["cannot be switched off"] if value in ("nan", "inf") else []),
+    )
     assert r["s"] < 30 and r["peak_kb"] < 2**20  # refused before the image is decoded
     assert listing(tmp_path) == ["big.png"]
 
@@ -190,7 +282,9 @@ def _dxf(path: Path, points: list[tuple[float, float, float]]) -> Path:
 
 def test_dxf_arc_of_bulge_1e9_is_priced_before_it_is_sampled(tmp_path):
     _dxf(tmp_path / "arc.dxf", [(0, 0, 0), (100, 0, 1e9), (100, 100, 0), (0, 100, 0)])
-    r = measured(["energy", "--pattern", "arc.dxf", "--chip-size", "200", "--at", "0,0,0"], tmp_path)
+    r = measured(
+        ["energy", "--pattern", "arc.dxf", "--chip-size", "200", "--at", "0,0,0"], tmp_path
+    )
     one_line_error(r["rc"], r["err"], "arc of radius 2.5e+10 um", "bulge 1e+09")
     assert r["s"] < 30 and r["peak_kb"] < 2**20  # 2.0 GB and 12 s before
 
@@ -206,33 +300,70 @@ def test_gds_database_unit_0_is_refused(tmp_path, run_cli):
     units = data.index(bytes([0x00, 0x14, 0x03, 0x05]))  # the UNITS record: two 8-byte reals
     data[units + 12 : units + 20] = bytes(8)  # database unit 0
     (tmp_path / "dbu0.gds").write_bytes(bytes(data))
-    rc, _, err = run_cli(["energy", "--pattern", tmp_path / "dbu0.gds", "--chip-size", "200", "--at", "0,0,0"])
+    rc, _, err = run_cli(
+        ["energy", "--pattern", tmp_path / "dbu0.gds", "--chip-size", "200", "--at", "0,0,0"]
+    )
     one_line_error(rc, err, "database unit of 0 m", "export it again")
 
 
-@pytest.mark.parametrize("name,points,needle", [
-    ("coords_1e300", [(0, 0, 0), (1e300, 0, 0), (1e300, 1e300, 0), (0, 1e300, 0)], "reaches 1e+300 um"),
-    ("bulge_1e12", [(0, 0, 0), (100, 0, 1e12), (100, 100, 0), (0, 100, 0)], "bulge 1e+12"),
-])
+@pytest.mark.parametrize(
+    "name,points,needle",
+    [
+        (
+            "coords_1e300",
+            [(0, 0, 0), (1e300, 0, 0), (1e300, 1e300, 0), (0, 1e300, 0)],
+            "reaches 1e+300 um",
+        ),
+        ("bulge_1e12", [(0, 0, 0), (100, 0, 1e12), (100, 100, 0), (0, 100, 0)], "bulge 1e+12"),
+    ],
+)
 def test_dxf_overflowing_shapes_are_refused(name, points, needle, tmp_path, run_cli):
     _dxf(tmp_path / f"{name}.dxf", points)
-    rc, _, err = run_cli(["energy", "--pattern", tmp_path / f"{name}.dxf", "--chip-size", "200", "--at", "0,0,0"])
+    rc, _, err = run_cli(
+        ["energy", "--pattern", tmp_path / f"{name}.dxf", "--chip-size", "200", "--at", "0,0,0"]
+    )
     one_line_error(rc, err, needle, "1,000,000 um (1 m)")
 
 
 def test_critical_volume_size_1e300_is_refused(run_cli):
-    rc, out, err = run_cli(["liquid", "critical-volume", "--size", "1e300", "--gap", "10", "--pad-angle", "30", "--substrate-angle", "60"])
+    rc, out, err = run_cli(
+        [
+            "liquid",
+            "critical-volume",
+            "--size",
+            "1e300",
+            "--gap",
+            "10",
+            "--pad-angle",
+            "30",
+            "--substrate-angle",
+            "60",
+        ]
+    )
     one_line_error(rc, err, "--size 1e+300 um is outside 0.001 to 1e+06 um")
     assert out == ""
 
 
 @pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs /proc")
-@pytest.mark.parametrize("args", [
-    ["energy", "--pattern", SQUARE, "--chip-size", "200", "--at", "0,0,0", "--json", "/proc/e.json"],
-    ["evaluate", SQUARE, "--chip-size", "200", "--out", "/proc/ev", "--quiet"],
-    ["sweep", str(SWEEP), "--out", "/proc/sw", "--workers", "0", "--quiet"],
-    ["liquid", "height", "--volume", "0.5", "--chip-size", "200", "--json", "/proc/h.json"],
-])
+@pytest.mark.parametrize(
+    "args",
+    [
+        [
+            "energy",
+            "--pattern",
+            SQUARE,
+            "--chip-size",
+            "200",
+            "--at",
+            "0,0,0",
+            "--json",
+            "/proc/e.json",
+        ],
+        ["evaluate", SQUARE, "--chip-size", "200", "--out", "/proc/ev", "--quiet"],
+        ["sweep", str(SWEEP), "--out", "/proc/sw", "--workers", "0", "--quiet"],
+        ["liquid", "height", "--volume", "0.5", "--chip-size", "200", "--json", "/proc/h.json"],
+    ],
+)
 def test_output_in_a_directory_that_takes_no_files_is_refused_before_any_work(args, run_cli):
     rc, out, err = run_cli(args)
     # The message comes from the output check made before any work (patterns.outputs.probe_writable);
@@ -247,14 +378,21 @@ def _interrupted_sweep(tmp_path: Path, sig: signal.Signals) -> tuple[int, list[s
     journalled (``SELFALIGN_HOLD_AT=sweep-point:1``, patterns/hold.py); (rc, stderr lines, out).
     The hold line is read from the pipe as it comes, so nothing waits on a clock."""
     out = tmp_path / "out"
-    proc = subprocess.Popen(python_m("simulator", "sweep", SWEEP, "--out", out, "--workers", "1"),
-                            cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True,
-                            env=os.environ | {"SELFALIGN_HOLD_AT": "sweep-point:1"})
+    proc = subprocess.Popen(
+        python_m("simulator", "sweep", SWEEP, "--out", out, "--workers", "1"),
+        cwd=tmp_path,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        start_new_session=True,
+        env=os.environ | {"SELFALIGN_HOLD_AT": "sweep-point:1"},
+    )
     seen = b""
     try:
         while b"selfalign: holding at sweep-point" not in seen:
             chunk = os.read(proc.stderr.fileno(), 4096)
-            assert chunk, f"the sweep ended before a point finished: {seen.decode(errors='replace')[-2000:]}"
+            assert chunk, (
+                f"the sweep ended before a point finished: {seen.decode(errors='replace')[-2000:]}"
+            )
             seen += chunk
         if sig == signal.SIGINT:
             os.killpg(proc.pid, signal.SIGINT)  # Ctrl-C in a terminal: the whole process group
@@ -268,7 +406,11 @@ def _interrupted_sweep(tmp_path: Path, sig: signal.Signals) -> tuple[int, list[s
             proc.wait()
         proc.stderr.close()
     after = rest.decode(errors="replace")
-    lines = [ln for ln in after.replace("\r", "\n").split("\n") if ln.strip() and not ln.startswith("sweep:")]  # less the bar
+    lines = [
+        ln
+        for ln in after.replace("\r", "\n").split("\n")
+        if ln.strip() and not ln.startswith("sweep:")
+    ]  # less the bar
     return proc.returncode, lines, out
 
 
@@ -280,8 +422,10 @@ def test_ctrl_c_on_a_sweep_prints_one_line(tmp_path):
     rc, lines, out = _interrupted_sweep(tmp_path, signal.SIGINT)
     kept = _journal_points(out)
     assert rc == 130, lines
-    assert lines == [f"selfalign sweep: interrupted; {kept} finished point{'s are' if kept != 1 else ' is'} kept in {out} "
-                     "(rerun the same command to resume)"]  # 63 lines with four worker tracebacks before
+    assert lines == [
+        f"selfalign sweep: interrupted; {kept} finished point{'s are' if kept != 1 else ' is'} kept in {out} "
+        "(rerun the same command to resume)"
+    ]  # 63 lines with four worker tracebacks before
     assert 1 <= kept < 24
 
 
@@ -289,8 +433,10 @@ def test_sigterm_on_a_sweep_says_how_many_points_were_kept(tmp_path):
     rc, lines, out = _interrupted_sweep(tmp_path, signal.SIGTERM)
     kept = _journal_points(out)
     assert rc == 143, lines
-    assert lines == [f"selfalign sweep: terminated; {kept} finished point{'s are' if kept != 1 else ' is'} kept in {out} "
-                     "(rerun the same command to resume)"]  # "no partial output was kept" and a leaked-semaphore warning before
+    assert lines == [
+        f"selfalign sweep: terminated; {kept} finished point{'s are' if kept != 1 else ' is'} kept in {out} "
+        "(rerun the same command to resume)"
+    ]  # "no partial output was kept" and a leaked-semaphore warning before
     assert 1 <= kept < 24
     assert not [p for p in out.parent.iterdir() if p.name.startswith(".")]  # no temporaries
 
@@ -306,9 +452,13 @@ def test_truncated_oasis_file_is_refused(tmp_path, run_cli):
     lib.write_oas(str(tmp_path / "full.oas"))
     data = (tmp_path / "full.oas").read_bytes()
     (tmp_path / "half.oas").write_bytes(data[: len(data) // 2])
-    rc, _, err = run_cli(["energy", "--pattern", tmp_path / "full.oas", "--chip-size", "200", "--at", "0,0,0"])
+    rc, _, err = run_cli(
+        ["energy", "--pattern", tmp_path / "full.oas", "--chip-size", "200", "--at", "0,0,0"]
+    )
     assert rc == 0, err
-    rc, _, err = run_cli(["energy", "--pattern", tmp_path / "half.oas", "--chip-size", "200", "--at", "0,0,0"])
+    rc, _, err = run_cli(
+        ["energy", "--pattern", tmp_path / "half.oas", "--chip-size", "200", "--at", "0,0,0"]
+    )
     one_line_error(rc, err, "not a complete OASIS file", "copy or export it again")
 
 
@@ -324,11 +474,16 @@ def test_oasis_completeness_check_accepts_validated_files_and_refuses_a_changed_
         lib.write_oas(str(p), validation=scheme)
         assert _oasis_incomplete(p) is None
         data = p.read_bytes()
-        assert all(_oasis_incomplete(_write(tmp_path / "cut.oas", data[:k])) for k in range(0, len(data), 7))
+        assert all(
+            _oasis_incomplete(_write(tmp_path / "cut.oas", data[:k]))
+            for k in range(0, len(data), 7)
+        )
         if scheme:
             changed = bytearray(data)
             changed[20] ^= 1
-            assert "does not match" in _oasis_incomplete(_write(tmp_path / "bad.oas", bytes(changed)))
+            assert "does not match" in _oasis_incomplete(
+                _write(tmp_path / "bad.oas", bytes(changed))
+            )
 
 
 def _write(p: Path, data: bytes) -> Path:
@@ -347,18 +502,56 @@ def test_liquid_height_of_a_film_thicker_than_the_chip_is_refused(run_cli):
 
 
 def test_liquid_overflow_edge_angle_0_is_refused(run_cli):
-    rc, out, err = run_cli(["liquid", "overflow", "--pad-advancing", "50", "--chip-angle", "30", "--edge-angle", "0",
-                            "--meniscus-height", "12.5"])
+    rc, out, err = run_cli(
+        [
+            "liquid",
+            "overflow",
+            "--pad-advancing",
+            "50",
+            "--chip-angle",
+            "30",
+            "--edge-angle",
+            "0",
+            "--meniscus-height",
+            "12.5",
+        ]
+    )
     one_line_error(rc, err, "--edge-angle must be a solid wedge angle in (0, 180]")
     assert out == ""
 
 
 def test_critical_volume_of_a_1e300_um_pattern_is_refused_without_a_numpy_warning(run_cli):
-    rc, out, err = run_cli(["liquid", "critical-volume", "--size", "1e-300", "--gap", "1e-301", "--pad-angle", "30",
-                            "--substrate-angle", "60"])
-    one_line_error(rc, err, "--size 1e-300 um is outside")  # "split at every volume up to 0 nl" and a warning before
-    rc, out, err = run_cli(["liquid", "critical-volume", "--size", "200", "--gap", "1e-200", "--pad-angle", "30",
-                            "--substrate-angle", "60"])
+    rc, out, err = run_cli(
+        [
+            "liquid",
+            "critical-volume",
+            "--size",
+            "1e-300",
+            "--gap",
+            "1e-301",
+            "--pad-angle",
+            "30",
+            "--substrate-angle",
+            "60",
+        ]
+    )
+    one_line_error(
+        rc, err, "--size 1e-300 um is outside"
+    )  # "split at every volume up to 0 nl" and a warning before
+    rc, out, err = run_cli(
+        [
+            "liquid",
+            "critical-volume",
+            "--size",
+            "200",
+            "--gap",
+            "1e-200",
+            "--pad-angle",
+            "30",
+            "--substrate-angle",
+            "60",
+        ]
+    )
     one_line_error(rc, err, "--gap 1e-200 um is below 0.001 um")
 
 

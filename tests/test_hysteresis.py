@@ -35,9 +35,20 @@ def _scene(h=20.0, window=(31.0, 50.0), hysteresis=True, L=200.0, s=2.0, pinned=
     """A square chip of side L over a square pad of side ``pad`` (default L), meniscus height h."""
     pad = L if pad is None else pad
     pat = mask_from_geometry(box(-pad / 2, -pad / 2, pad / 2, pad / 2), s, margin_um=4)
-    mat = Materials(pad_receding_deg=window[0], pad_advancing_deg=window[1]) if window else Materials()
-    return Scene.from_inputs(pat, chip_size_um=L, materials=mat, effects=Effects(twist=False, meniscus=True, hysteresis=hysteresis),
-                             liquid=Liquid(height_um=h, pinned=pinned), window_um=80, dtype="float64")
+    mat = (
+        Materials(pad_receding_deg=window[0], pad_advancing_deg=window[1])
+        if window
+        else Materials()
+    )
+    return Scene.from_inputs(
+        pat,
+        chip_size_um=L,
+        materials=mat,
+        effects=Effects(twist=False, meniscus=True, hysteresis=hysteresis),
+        liquid=Liquid(height_um=h, pinned=pinned),
+        window_um=80,
+        dtype="float64",
+    )
 
 
 def _dcos(w):
@@ -48,8 +59,12 @@ def test_pinning_forces_of_a_rectangle_and_a_square():
     f = pinning_force_per_length(GAMMA, 31, 50)
     assert f == pytest.approx(GAMMA * (math.cos(math.radians(31)) - math.cos(math.radians(50))))
     a, b = 200.0, 100.0
-    geo = Scene.from_inputs(mask_from_geometry(box(-a / 2, -b / 2, a / 2, b / 2), 1.0), chip_size_um=(a, b),
-                            materials=Materials(pad_receding_deg=31, pad_advancing_deg=50), effects=Effects(hysteresis=True))
+    geo = Scene.from_inputs(
+        mask_from_geometry(box(-a / 2, -b / 2, a / 2, b / 2), 1.0),
+        chip_size_um=(a, b),
+        materials=Materials(pad_receding_deg=31, pad_advancing_deg=50),
+        effects=Effects(hysteresis=True),
+    )
     pt, py, px = pinning(geo)
     # Furmidge: P = f * (width across the motion). Torque: f/2 * oint |(z x r) . n| ds; the
     # a-edges give 2 int |x| dx = a^2 / 2, the b-edges b^2 / 2.
@@ -57,12 +72,18 @@ def test_pinning_forces_of_a_rectangle_and_a_square():
     assert pt == pytest.approx(f / 2 * (a * a + b * b) / 2 * 1e-12, rel=1e-9)
     # Square of side L: P_t = f L^2 / 2 (each edge: 2 * int_0^{L/2} s ds = L^2 / 4; four edges, times f / 2).
     L = 200.0
-    sq = Scene.from_inputs(mask_from_geometry(box(-L / 2, -L / 2, L / 2, L / 2), 1.0), chip_size_um=L,
-                           materials=Materials(pad_receding_deg=31, pad_advancing_deg=50), effects=Effects(hysteresis=True))
+    sq = Scene.from_inputs(
+        mask_from_geometry(box(-L / 2, -L / 2, L / 2, L / 2), 1.0),
+        chip_size_um=L,
+        materials=Materials(pad_receding_deg=31, pad_advancing_deg=50),
+        effects=Effects(hysteresis=True),
+    )
     assert pinning(sq)[0] == pytest.approx(f * L**2 / 2 * 1e-12)
     # A chip image gives the same integrals as its exact geometry (pixel-aligned square).
     img = Mask(mask_from_geometry(box(-L / 2, -L / 2, L / 2, L / 2), 1.0).data, 1.0)
-    assert np.allclose(contact_line_integrals_um(img), contact_line_integrals_um(sq.chip), rtol=1e-9)
+    assert np.allclose(
+        contact_line_integrals_um(img), contact_line_integrals_um(sq.chip), rtol=1e-9
+    )
 
 
 def test_window_parsing_and_refusals():
@@ -96,11 +117,17 @@ def test_which_contact_lines_slide():
     # The overlap model (no meniscus): the line at the chip's edge, which lies on the pad's edge
     # at rest; half of it moves over the pad whichever way the chip goes.
     L = 200.0
-    ov = Scene.from_inputs(mask_from_geometry(box(-L / 2, -L / 2, L / 2, L / 2), 1.0, margin_um=4), chip_size_um=L, materials=mat,
-                           effects=Effects(hysteresis=True))
+    ov = Scene.from_inputs(
+        mask_from_geometry(box(-L / 2, -L / 2, L / 2, L / 2), 1.0, margin_um=4),
+        chip_size_um=L,
+        materials=mat,
+        effects=Effects(hysteresis=True),
+    )
     assert np.allclose(sliding_shares(ov), 0.5, atol=0.01)
     # A chip image gives the shares of its exact geometry.
-    img = ov.replace(chip=Mask(mask_from_geometry(box(-L / 2, -L / 2, L / 2, L / 2), 1.0).data, 1.0))
+    img = ov.replace(
+        chip=Mask(mask_from_geometry(box(-L / 2, -L / 2, L / 2, L / 2), 1.0).data, 1.0)
+    )
     assert np.allclose(sliding_shares(img), sliding_shares(ov), atol=0.01)
 
 
@@ -113,7 +140,11 @@ def test_zero_width_is_todays_stopping_rule_exactly(method, pinned):
     start = (30.0, -12.0, 0.0) if pinned else (48.0, -3.0, 0.0)
     off = simulate(_scene(hysteresis=False, **kw), start, method=method)
     zero = simulate(_scene(window=(40.0, 40.0), **kw), start, method=method)
-    assert np.array_equal(off.path, zero.path) and off.outcome == zero.outcome and off.steps == zero.steps
+    assert (
+        np.array_equal(off.path, zero.path)
+        and off.outcome == zero.outcome
+        and off.steps == zero.steps
+    )
 
 
 @pytest.mark.parametrize("method", ["greedy", "gradient", "overdamped", "inertial"])
@@ -137,10 +168,17 @@ def test_pinned_square_200_at_0p9_nl_stops_at_the_minimum(method):
     # from (40, 40) um and 2 deg. Before: (2.6, 2.5) um and 0.86 deg short (gradient).
     from simulator.scene import TwistGrid
 
-    sc = Scene.from_inputs("patterns/library/square_200.png", chip_size_um=200, resolution_um=2.0,
-                           materials=Materials(pad_receding_deg=31, pad_advancing_deg=50), twist=TwistGrid(0.5, -5, 5),
-                           effects=Effects(twist=True, meniscus=True, hysteresis=True), liquid=Liquid(volume_nl=0.9, pinned=True),
-                           window_um=60, dtype="float64")
+    sc = Scene.from_inputs(
+        "patterns/library/square_200.png",
+        chip_size_um=200,
+        resolution_um=2.0,
+        materials=Materials(pad_receding_deg=31, pad_advancing_deg=50),
+        twist=TwistGrid(0.5, -5, 5),
+        effects=Effects(twist=True, meniscus=True, hysteresis=True),
+        liquid=Liquid(volume_nl=0.9, pinned=True),
+        window_um=60,
+        dtype="float64",
+    )
     assert sc.meniscus_height_um == pytest.approx(22.5)
     t = simulate(sc, (40.0, 40.0, 2.0), method=method)
     assert t.outcome == "aligned"
@@ -170,7 +208,10 @@ def test_free_lines_on_the_pad_stop_where_the_force_falls_to_the_pinning_force(m
             assert short == pytest.approx(d_p - u, rel=0.25)
             assert abs(t.final[1]) < 0.05
     # Grows with the hysteresis window and with the height (the ramp is h wide).
-    assert finals[10.0, (31.0, 50.0)] > finals[10.0, (40.0, 50.0)] and finals[20.0, (31.0, 50.0)] > finals[20.0, (40.0, 50.0)]
+    assert (
+        finals[10.0, (31.0, 50.0)] > finals[10.0, (40.0, 50.0)]
+        and finals[20.0, (31.0, 50.0)] > finals[20.0, (40.0, 50.0)]
+    )
     assert finals[10.0, (31.0, 50.0)] < finals[20.0, (31.0, 50.0)]
 
 
@@ -193,15 +234,21 @@ def test_montecarlo_applies_the_same_pinning():
     # Pinned: the pad's hysteresis changes nothing, start by start.
     res = {}
     for w in ((49.0, 50.0), (31.0, 50.0), None):
-        r = run_batch(_scene(window=w or (31.0, 50.0), hysteresis=w is not None), starts, "gradient")
+        r = run_batch(
+            _scene(window=w or (31.0, 50.0), hysteresis=w is not None), starts, "gradient"
+        )
         res[w] = r
         assert summarize(r)["yield"] > 0.95
-    assert np.array_equal(res[31.0, 50.0].final, res[None].final) and np.array_equal(res[49.0, 50.0].final, res[None].final)
+    assert np.array_equal(res[31.0, 50.0].final, res[None].final) and np.array_equal(
+        res[49.0, 50.0].final, res[None].final
+    )
     assert np.abs(res[None].final[:, :2]).max() < 0.5
     # Free lines on the wider pad: every start from beyond the floor stops short of it, as a single run does.
     sc = _scene(h=10.0, pinned=False, pad=300.0)
     far = np.column_stack([np.linspace(44.0, 48.0, 5), np.zeros(5), np.zeros(5)])
     r = run_batch(sc, far, "gradient")
     for i in (0, 4):
-        assert r.final[i] == pytest.approx(simulate(sc, tuple(far[i]), method="gradient").final, abs=1e-6)
+        assert r.final[i] == pytest.approx(
+            simulate(sc, tuple(far[i]), method="gradient").final, abs=1e-6
+        )
     assert np.all(r.final[:, 0] > 50.0 - 10.0 / math.tan(math.radians(30)) + 5.0)

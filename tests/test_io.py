@@ -17,8 +17,8 @@ def chunks(path):
     """[(type, data)] of a PNG file."""
     data, out, i = path.read_bytes(), [], 8
     while i < len(data):
-        (n,) = struct.unpack(">I", data[i:i + 4])
-        out.append((data[i + 4:i + 8], data[i + 8:i + 8 + n]))
+        (n,) = struct.unpack(">I", data[i : i + 4])
+        out.append((data[i + 4 : i + 8], data[i + 8 : i + 8 + n]))
         i += 12 + n
     return out
 
@@ -66,14 +66,18 @@ def test_written_png_is_16_bit_grey_with_phys_in_pixels_per_metre(tmp_path, leve
 
 
 def test_params_argument_overrides_mask_params(tmp_path, levels):
-    path = write_mask(tmp_path / "m.png", Mask(levels, 1.0, params={"a": 1}), params={"design": "x", "gap": 5})
+    path = write_mask(
+        tmp_path / "m.png", Mask(levels, 1.0, params={"a": 1}), params={"design": "x", "gap": 5}
+    )
     assert read_mask(path).params == {"design": "x", "gap": 5, "um_per_px": 1.0}
 
 
 def test_phys_alone_gives_the_rounded_scale(tmp_path):
     path = tmp_path / "m.png"
     Image.fromarray(np.full((4, 4), 255, np.uint8)).save(path)
-    assert read_mask(with_phys(path, 333_333, 333_333, 1)).um_per_px == pytest.approx(1e6 / 333_333, rel=1e-15)
+    assert read_mask(with_phys(path, 333_333, 333_333, 1)).um_per_px == pytest.approx(
+        1e6 / 333_333, rel=1e-15
+    )
 
 
 def test_pillow_dpi_is_read_as_phys(tmp_path):
@@ -124,7 +128,10 @@ def test_mode_RGB_uses_luminance(tmp_path):
 
 
 def test_mode_RGBA_is_luminance_times_alpha(tmp_path):
-    a = np.array([[[255, 255, 255, 255], [255, 255, 255, 0], [255, 255, 255, 51], [128, 128, 128, 255]]], np.uint8)
+    a = np.array(
+        [[[255, 255, 255, 255], [255, 255, 255, 0], [255, 255, 255, 51], [128, 128, 128, 255]]],
+        np.uint8,
+    )
     m = read_mask(save(tmp_path, Image.fromarray(a, "RGBA")), um_per_px=1)
     assert m.data[0].tolist() == pytest.approx([1.0, 0.0, 0.2, 128 / 255], abs=1e-12)
 
@@ -141,14 +148,18 @@ def test_mode_P_palette(tmp_path):
     path = save(tmp_path, im)
     with Image.open(path) as check:
         assert check.mode == "P"
-    assert read_mask(path, um_per_px=1).data[0].tolist() == pytest.approx([0.0, 1.0, 0.299], abs=1e-12)
+    assert read_mask(path, um_per_px=1).data[0].tolist() == pytest.approx(
+        [0.0, 1.0, 0.299], abs=1e-12
+    )
 
 
 def test_mode_P_with_transparency(tmp_path):
     im = Image.fromarray(np.array([[0, 1, 2]], np.uint8), "P")
     im.putpalette([255, 255, 255] * 3)
     path = save(tmp_path, im, transparency=bytes([255, 0, 128]))
-    assert read_mask(path, um_per_px=1).data[0].tolist() == pytest.approx([1.0, 0.0, 128 / 255], abs=1e-12)
+    assert read_mask(path, um_per_px=1).data[0].tolist() == pytest.approx(
+        [1.0, 0.0, 128 / 255], abs=1e-12
+    )
 
 
 def test_grey_with_transparent_colour_is_not_wettable(tmp_path):
@@ -184,7 +195,9 @@ def test_directory_is_not_an_image(tmp_path):
         read_mask(tmp_path, um_per_px=1)
 
 
-@pytest.mark.parametrize("content", [b"", b"hello, not an image", b"\x89PNG\r\n\x1a\n" + b"\0" * 40])
+@pytest.mark.parametrize(
+    "content", [b"", b"hello, not an image", b"\x89PNG\r\n\x1a\n" + b"\0" * 40]
+)
 def test_corrupt_file(tmp_path, content):
     path = tmp_path / "bad.png"
     path.write_bytes(content)
@@ -202,7 +215,9 @@ def test_truncated_png(tmp_path, levels):
 
 def test_no_scale(tmp_path):
     path = save(tmp_path, Image.fromarray(np.full((3, 3), 255, np.uint8)), name="plain.png")
-    with pytest.raises(InputError, match=r"plain\.png has no scale \(pHYs chunk\); pass --um-per-px"):
+    with pytest.raises(
+        InputError, match=r"plain\.png has no scale \(pHYs chunk\); pass --um-per-px"
+    ):
         read_mask(path)
     assert read_mask(path, um_per_px=2).um_per_px == 2
 
@@ -244,7 +259,9 @@ def test_write_to_missing_directory_leaves_nothing(tmp_path, levels):
     assert list(tmp_path.iterdir()) == []
 
 
-@pytest.mark.parametrize("name,match", [("m.tif", r"must end in \.png"), ("sub.png", r"is a directory")])
+@pytest.mark.parametrize(
+    "name,match", [("m.tif", r"must end in \.png"), ("sub.png", r"is a directory")]
+)
 def test_write_rejects_bad_names(tmp_path, levels, name, match):
     (tmp_path / "sub.png").mkdir()
     with pytest.raises(InputError, match=match):
@@ -272,8 +289,12 @@ def test_library_files_are_found_and_carry_their_scale():
     mask = read_mask(library_path("four_pad_730_50"))
     assert mask.um_per_px == 1.0 and mask.area_um2 == 4 * 340**2
     assert mask.params["design"] == "four-pad"
-    assert read_mask(library_path("defect_B_inward")).area_um2 == pytest.approx(40000 - 900, abs=1e-2)
-    with pytest.raises(InputError, match=r"no library pattern 'hexagon'; choose one of four_pad_730_50"):
+    assert read_mask(library_path("defect_B_inward")).area_um2 == pytest.approx(
+        40000 - 900, abs=1e-2
+    )
+    with pytest.raises(
+        InputError, match=r"no library pattern 'hexagon'; choose one of four_pad_730_50"
+    ):
         library_path("hexagon")
 
 

@@ -45,7 +45,9 @@ def exact_overlap(pattern_geom, chip_geom, x, y, t):
 
 @pytest.fixture(scope="module")
 def square_flat():
-    return build_landscape(scene(square(200), square(200), effects=Effects(twist=False), dtype="float64"))
+    return build_landscape(
+        scene(square(200), square(200), effects=Effects(twist=False), dtype="float64")
+    )
 
 
 @pytest.fixture(scope="module")
@@ -55,7 +57,9 @@ def square_twist():
 
 @pytest.fixture(scope="module")
 def fourpad_flat():
-    return build_landscape(scene(four_pad(200, 20), square(200), effects=Effects(twist=False), dtype="float64"))
+    return build_landscape(
+        scene(four_pad(200, 20), square(200), effects=Effects(twist=False), dtype="float64")
+    )
 
 
 # ------------------------------------------------------------------ C1, C2, C8
@@ -71,7 +75,14 @@ def test_c1_check_value_and_no_contact(square_flat):
 
 
 def test_c1_chip_smaller_than_pattern():
-    ls = build_landscape(scene(square(200), affinity.scale(square(200), 0.6, 0.3), effects=Effects(twist=False), dtype="float64"))
+    ls = build_landscape(
+        scene(
+            square(200),
+            affinity.scale(square(200), 0.6, 0.3),
+            effects=Effects(twist=False),
+            dtype="float64",
+        )
+    )
 
     def u(s, lc, lp):
         return max(0.0, min(s + lc / 2, lp / 2) - max(s - lc / 2, -lp / 2))
@@ -80,7 +91,15 @@ def test_c1_chip_smaller_than_pattern():
         assert overlap(ls, x, y) == pytest.approx(u(x, 120, 200) * u(y, 60, 200), abs=1e-7)
 
 
-C2 = [((0, 0), 32400), ((40, 25), 21700), ((95, 0), 16200), ((105, 3), 15930), ((140, 50), 7800), ((-150, -40), 7000), ((10, -100), 15300)]
+C2 = [
+    ((0, 0), 32400),
+    ((40, 25), 21700),
+    ((95, 0), 16200),
+    ((105, 3), 15930),
+    ((140, 50), 7800),
+    ((-150, -40), 7000),
+    ((10, -100), 15300),
+]
 
 
 @pytest.mark.parametrize("pose, area", C2)
@@ -139,7 +158,9 @@ def test_c4_restoring_force(fourpad_flat):
 
 def test_c4_surface_tension_scales_force_only():
     base = scene(four_pad(200, 20), square(200), effects=Effects(twist=False))
-    other = base.replace(materials=Materials(surface_tension_N_m=0.03, pad_angle_deg=41, substrate_angle_deg=89))
+    other = base.replace(
+        materials=Materials(surface_tension_N_m=0.03, pad_angle_deg=41, substrate_angle_deg=89)
+    )
     a, b = build_landscape(base), build_landscape(other)
     ratio = other.materials.delta_gamma_N_m / base.materials.delta_gamma_N_m
     np.testing.assert_allclose(b.energy, a.energy * ratio, rtol=1e-5, atol=4 * b.noise_floor_J)
@@ -159,16 +180,30 @@ def test_c5_pure_twist(square_twist, alpha, area):
 
 def test_c5_half_degree_by_interpolation_is_within_cusp_bound(square_twist):
     # Linear interpolation across the V-shaped cusp at 0: within L^2 * (1 deg in rad) / 4.
-    assert overlap(square_twist, 0, 0, 0.5) == pytest.approx(39826.98, abs=200**2 * math.radians(1) / 4)
+    assert overlap(square_twist, 0, 0, 0.5) == pytest.approx(
+        39826.98, abs=200**2 * math.radians(1) / 4
+    )
 
 
-@pytest.mark.parametrize("x, y, want", [(40, 25, 1012.5), (25, 40, -1012.5), (50, 10, 2800), (10, 80, -3850)])
+@pytest.mark.parametrize(
+    "x, y, want", [(40, 25, 1012.5), (25, 40, -1012.5), (50, 10, 2800), (10, 80, -3850)]
+)
 def test_c6_twist_coupling(x, y, want):
-    ls = build_landscape(scene(square(200), square(200), dtype="float64", twist=TwistGrid(step_deg=0.1, min_deg=-0.2, max_deg=0.2)))
+    ls = build_landscape(
+        scene(
+            square(200),
+            square(200),
+            dtype="float64",
+            twist=TwistGrid(step_deg=0.1, min_deg=-0.2, max_deg=0.2),
+        )
+    )
     # dA/dalpha per radian from the torque; the exact polygon clipping gives the same.
     got = float(ls.torque_at(x, y, 0)) / (abs(ls.delta_gamma) * 1e-12)
     h = 1e-4
-    exact = (exact_overlap(square(200), square(200), x, y, math.degrees(h)) - exact_overlap(square(200), square(200), x, y, -math.degrees(h))) / (2 * h)
+    exact = (
+        exact_overlap(square(200), square(200), x, y, math.degrees(h))
+        - exact_overlap(square(200), square(200), x, y, -math.degrees(h))
+    ) / (2 * h)
     assert exact == pytest.approx(want, rel=1e-4)
     # Central difference over +-0.1 deg: error of order L^3 * (0.1 deg)^2 ~ 1 um^2/rad.
     assert got == pytest.approx(want, abs=2.0)
@@ -177,7 +212,9 @@ def test_c6_twist_coupling(x, y, want):
 # ------------------------------------------------------------------ C7
 @pytest.fixture(scope="module")
 def fourpad_twist():
-    return build_landscape(scene(four_pad(200, 20), square(200), dtype="float64", twist=TwistGrid(step_deg=3.0)))
+    return build_landscape(
+        scene(four_pad(200, 20), square(200), dtype="float64", twist=TwistGrid(step_deg=3.0))
+    )
 
 
 def test_c7_symmetries(fourpad_twist):
@@ -196,7 +233,9 @@ def test_c7_symmetries(fourpad_twist):
 def test_c7_square_chip_period(square_twist):
     assert square_twist.wrap and square_twist.period_deg == 90.0
     assert len(square_twist.twist_deg) == 90
-    assert overlap(square_twist, 30, -20, 17) == pytest.approx(overlap(square_twist, 30, -20, 17 - 90), abs=1e-6)
+    assert overlap(square_twist, 30, -20, 17) == pytest.approx(
+        overlap(square_twist, 30, -20, 17 - 90), abs=1e-6
+    )
 
 
 # ------------------------------------------------------------------ C11
@@ -211,12 +250,24 @@ C11 = {
 @pytest.mark.parametrize("kind", sorted(C11))
 def test_c11_single_defect(kind):
     geom = defect_type(*kind)
-    ls = build_landscape(scene(geom, square(200), dtype="float64", twist=TwistGrid(step_deg=1.0, min_deg=-3, max_deg=3), window_um=30))
+    ls = build_landscape(
+        scene(
+            geom,
+            square(200),
+            dtype="float64",
+            twist=TwistGrid(step_deg=1.0, min_deg=-3, max_deg=3),
+            window_um=30,
+        )
+    )
     a0, ax, amx, at, amt = C11[kind]
     # Sloped defect edges are anti-aliased: error at most ~ defect perimeter * 1 px / 4.
     tol = 0.25 * 2 * math.hypot(*{"C": (60, 60), "B": (30, 30)}[kind[0]])
-    for (x, y, t), want in zip([(0, 0, 0), (1, 0, 0), (-1, 0, 0), (0, 0, 1), (0, 0, -1)], C11[kind], strict=True):
-        assert overlap(ls, x, y, t) == pytest.approx(exact_overlap(geom, square(200), x, y, t), abs=tol)
+    for (x, y, t), want in zip(
+        [(0, 0, 0), (1, 0, 0), (-1, 0, 0), (0, 0, 1), (0, 0, -1)], C11[kind], strict=True
+    ):
+        assert overlap(ls, x, y, t) == pytest.approx(
+            exact_overlap(geom, square(200), x, y, t), abs=tol
+        )
         assert exact_overlap(geom, square(200), x, y, t) == pytest.approx(want, abs=0.01)
     xm, ym, tm, _ = ls.global_minimum()
     assert (xm, ym, tm) == (0.0, 0.0, 0.0)
@@ -227,7 +278,9 @@ def test_c11_single_defect(kind):
 def test_against_exact_polygon_overlap(um_per_px):
     """|A_raster - A_exact| <= 0.25 * (chip + pattern perimeter) * um_per_px (um^2)."""
     pat_g, chip_g = four_pad(200, 20), square(200)
-    ls = build_landscape(scene(pat_g, chip_g, um_per_px=um_per_px, dtype="float64", twist=TwistGrid(step_deg=1.0)))
+    ls = build_landscape(
+        scene(pat_g, chip_g, um_per_px=um_per_px, dtype="float64", twist=TwistGrid(step_deg=1.0))
+    )
     bound = 0.25 * (chip_g.length + pat_g.length) * um_per_px
     rng = np.random.default_rng(1)
     for _ in range(25):
@@ -252,7 +305,12 @@ def test_twist_free_scene_computes_one_rotation():
 
 def test_pattern_touching_border_has_no_wraparound():
     pat = Mask(np.ones((200, 200)), 1.0)  # fills the whole image: no margin at all
-    sc = Scene(pattern=pat, chip=mask_from_geometry(square(200), 1.0), effects=Effects(twist=False), dtype="float64")
+    sc = Scene(
+        pattern=pat,
+        chip=mask_from_geometry(square(200), 1.0),
+        effects=Effects(twist=False),
+        dtype="float64",
+    )
     ls = build_landscape(sc)
     for x, y in [(150, 0), (199, 199), (-199, 120), (0, -180)]:
         assert overlap(ls, x, y) == pytest.approx((200 - abs(x)) * (200 - abs(y)), abs=1e-7)
@@ -261,7 +319,12 @@ def test_pattern_touching_border_has_no_wraparound():
 def test_png_chip_rotation_keeps_area():
     chip_geom = affinity.scale(square(120), 1.0, 0.5)
     chip = Mask(mask_from_geometry(chip_geom, 1.0).data, 1.0)  # a raster without geometry
-    sc = Scene(pattern=mask_from_geometry(square(200), 1.0), chip=chip, twist=TwistGrid(step_deg=7.0), dtype="float64")
+    sc = Scene(
+        pattern=mask_from_geometry(square(200), 1.0),
+        chip=chip,
+        twist=TwistGrid(step_deg=7.0),
+        dtype="float64",
+    )
     ls = build_landscape(sc)
     a = ls.overlap_um2(ls.energy)
     rot_area = a.sum(axis=(1, 2)) / 200**2  # sum rule: sum = |P| |C_rot|
@@ -271,7 +334,10 @@ def test_png_chip_rotation_keeps_area():
 
 def test_symmetry_detection():
     assert chip_symmetry(mask_from_geometry(square(100), 1.0)) == (90.0, True)
-    assert chip_symmetry(mask_from_geometry(affinity.scale(square(100), 1, 0.5), 1.0)) == (180.0, True)
+    assert chip_symmetry(mask_from_geometry(affinity.scale(square(100), 1, 0.5), 1.0)) == (
+        180.0,
+        True,
+    )
     tri = shapely.Polygon([(0, 0), (40, 0), (0, 30)])
     assert chip_symmetry(mask_from_geometry(tri, 1.0))[0] == 360.0
 
@@ -293,12 +359,18 @@ def test_correlate_stack_is_linear_correlation():
     ref = np.stack([correlate(pat, c, mode="full", method="direct") for c in chips])
     np.testing.assert_allclose(out, ref, atol=1e-10)
     # binary masks as bool arrays: the same as their 0/1 floats
-    np.testing.assert_allclose(correlate_stack(pat > 0.5, chips > 0.5, dtype="float64"), correlate_stack((pat > 0.5) * 1.0, (chips > 0.5) * 1.0, dtype="float64"), atol=1e-10)
+    np.testing.assert_allclose(
+        correlate_stack(pat > 0.5, chips > 0.5, dtype="float64"),
+        correlate_stack((pat > 0.5) * 1.0, (chips > 0.5) * 1.0, dtype="float64"),
+        atol=1e-10,
+    )
 
 
 @pytest.mark.parametrize("backend", ["scipy", "jax"])
 @pytest.mark.parametrize("symmetric_pattern", [True, False])
-def test_correlate_stack_mirror_twins_and_repeats_match_direct_correlation(symmetric_pattern, backend):
+def test_correlate_stack_mirror_twins_and_repeats_match_direct_correlation(
+    symmetric_pattern, backend
+):
     from scipy.signal import correlate
 
     rng = np.random.default_rng(4)
@@ -334,12 +406,25 @@ def test_correlator_mirror_output_is_the_mirror_images_correlation():
     "pattern_geom, chip_geom, kind",
     [
         (four_pad(120, 20), square(100), "copied_twists"),  # both mirror-symmetric: planes flipped
-        (defect_type("B", "inward", 120), square(100), "mirrored_twists"),  # pattern not: spectra shared
-        (square(120), shapely.Polygon([(-50, -50), (50, -50), (30, 50), (-50, 30)]), None),  # chip not
+        (
+            defect_type("B", "inward", 120),
+            square(100),
+            "mirrored_twists",
+        ),  # pattern not: spectra shared
+        (
+            square(120),
+            shapely.Polygon([(-50, -50), (50, -50), (30, 50), (-50, 30)]),
+            None,
+        ),  # chip not
     ],
 )
 def test_landscape_symmetry_savings_change_nothing(pattern_geom, chip_geom, kind):
-    sc = scene(pattern_geom, chip_geom, um_per_px=2.0, twist=TwistGrid(step_deg=10.0, min_deg=-40, max_deg=40))
+    sc = scene(
+        pattern_geom,
+        chip_geom,
+        um_per_px=2.0,
+        twist=TwistGrid(step_deg=10.0, min_deg=-40, max_deg=40),
+    )
     ls = build_landscape(sc)
     t = ls.twist_deg
     pairs = int(np.sum(t > 0))
@@ -359,7 +444,9 @@ def test_memory_budget_error_names_the_knobs():
 
 
 def test_window_restricts_translations():
-    ls = build_landscape(scene(four_pad(200, 20), square(200), effects=Effects(twist=False), window_um=50))
+    ls = build_landscape(
+        scene(four_pad(200, 20), square(200), effects=Effects(twist=False), window_um=50)
+    )
     assert ls.x_um[0] == -50 and ls.x_um[-1] == 50 and not ls.full_reach
     with pytest.raises(InputError, match="outside the landscape"):
         ls.energy_at(80, 0, 0)

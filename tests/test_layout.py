@@ -110,7 +110,9 @@ def test_round_trip_design_to_the_database_unit(tmp_path, name, suffix):
     # The same polygon to the database unit: the design's vertices rounded to 1 nm, exactly.
     assert np.array_equal(coords_nm(back), coords_nm(snap(design)))
     assert shapely.hausdorff_distance(back, design) <= 0.5e-3 * math.sqrt(2) + 1e-12
-    assert abs(back.area - design.area) <= 0.5e-3 * design.length  # each vertex moved by at most half a database unit
+    assert (
+        abs(back.area - design.area) <= 0.5e-3 * design.length
+    )  # each vertex moved by at most half a database unit
     assert back.is_valid and len(shapely.get_parts(back)) == len(shapely.get_parts(design))
 
 
@@ -119,11 +121,18 @@ def test_pattern_command_writes_gds_and_dxf(tmp_path, run_cli):
         out = tmp_path / f"fourpad{suffix}"
         rc, text, err = run_cli(["pattern", "four-pad", "--size", "730", "--gap", "50", "-o", out])
         assert rc == 0, err
-        assert layer in text and "4 polygons" in text and "database unit 1 nm" in text and "area 462400 um^2" in text
+        assert (
+            layer in text
+            and "4 polygons" in text
+            and "database unit 1 nm" in text
+            and "area 462400 um^2" in text
+        )
         g, chip, record = layout_geometry(out)
         assert g.area == 462400 and g.bounds == (-365, -365, 365, 365) and chip is None
     lib = gdstk.read_gds(str(tmp_path / "fourpad.gds"))
-    assert (lib.unit, lib.precision) == (1e-6, 1e-9) and [c.name for c in lib.top_level()] == ["four_pad"]
+    assert (lib.unit, lib.precision) == (1e-6, 1e-9) and [c.name for c in lib.top_level()] == [
+        "four_pad"
+    ]
     assert {(p.layer, p.datatype) for p in lib.cells[0].polygons} == {(1, 0)}
     assert ezdxf.readfile(tmp_path / "fourpad.dxf").header["$INSUNITS"] == 13  # micrometres
     rc, _, err = run_cli(["pattern", "square", "--size", "10", "-o", tmp_path / "x.txt"])
@@ -134,7 +143,9 @@ def test_pattern_command_writes_gds_and_dxf(tmp_path, run_cli):
 def test_polygon_with_a_hole_survives_as_a_keyhole_and_as_nested_dxf(tmp_path):
     ring = box(-100, -100, 100, 100).difference(box(-40, -30, 40, 30))
     for suffix in (".gds", ".dxf"):
-        back = read_layout(write_layout(tmp_path / f"r{suffix}", ring)).geometry((1, 0) if suffix == ".gds" else "PATTERN")
+        back = read_layout(write_layout(tmp_path / f"r{suffix}", ring)).geometry(
+            (1, 0) if suffix == ".gds" else "PATTERN"
+        )
         assert back.geom_type == "Polygon" and len(back.interiors) == 1
         assert back.area == 200 * 200 - 80 * 60 and back.symmetric_difference(ring).area == 0
 
@@ -142,34 +153,63 @@ def test_polygon_with_a_hole_survives_as_a_keyhole_and_as_nested_dxf(tmp_path):
 # ------------------------------------------------------------------ hierarchy, layers, units
 def test_hierarchical_gds_flattens_references_arrays_rotations_magnification(tmp_path):
     pad = gdstk.rectangle((0, 0), (10, 10), layer=1)  # 100 um^2
-    path = gds(tmp_path / "h.gds", {
-        "PAD": [pad],
-        "PAIR": [lambda c: gdstk.Reference(c["PAD"], (0, 0)), lambda c: gdstk.Reference(c["PAD"], (20, 0))],  # 200
-        "TOP": [
-            lambda c: gdstk.Reference(c["PAD"], (-500, 0), rotation=math.radians(30)),  # rotated: 100
-            lambda c: gdstk.Reference(c["PAD"], (-300, 0), magnification=2.5),  # 625
-            lambda c: gdstk.Reference(c["PAD"], (-200, 0), rotation=math.pi / 2, magnification=1.5, x_reflection=True),  # 225
-            lambda c: gdstk.Reference(c["PAIR"], (0, 100), columns=3, rows=2, spacing=(100, 50)),  # array of a reference: 6 x 200
-            lambda c: gdstk.Reference(c["PAIR"], (0, -200), rotation=math.pi, magnification=2),  # 2 x 400
-            gdstk.FlexPath([(0, -400), (100, -400)], 4, layer=1),  # a path: 400
-            gdstk.rectangle((300, 300), (320, 310), layer=1),  # 200, overlapped by the next one
-            gdstk.rectangle((310, 300), (330, 310), layer=1),  # 200, 100 of it shared: the union adds 100
-        ],
-    })
+    path = gds(
+        tmp_path / "h.gds",
+        {
+            "PAD": [pad],
+            "PAIR": [
+                lambda c: gdstk.Reference(c["PAD"], (0, 0)),
+                lambda c: gdstk.Reference(c["PAD"], (20, 0)),
+            ],  # 200
+            "TOP": [
+                lambda c: gdstk.Reference(
+                    c["PAD"], (-500, 0), rotation=math.radians(30)
+                ),  # rotated: 100
+                lambda c: gdstk.Reference(c["PAD"], (-300, 0), magnification=2.5),  # 625
+                lambda c: gdstk.Reference(
+                    c["PAD"], (-200, 0), rotation=math.pi / 2, magnification=1.5, x_reflection=True
+                ),  # 225
+                lambda c: gdstk.Reference(
+                    c["PAIR"], (0, 100), columns=3, rows=2, spacing=(100, 50)
+                ),  # array of a reference: 6 x 200
+                lambda c: gdstk.Reference(
+                    c["PAIR"], (0, -200), rotation=math.pi, magnification=2
+                ),  # 2 x 400
+                gdstk.FlexPath([(0, -400), (100, -400)], 4, layer=1),  # a path: 400
+                gdstk.rectangle((300, 300), (320, 310), layer=1),  # 200, overlapped by the next one
+                gdstk.rectangle(
+                    (310, 300), (330, 310), layer=1
+                ),  # 200, 100 of it shared: the union adds 100
+            ],
+        },
+    )
     g = read_layout(path).geometry((1, 0))
     # Exact but for the 30-degree pad, whose vertices are snapped to the 1 nm grid (area error < perimeter x 0.5 nm).
     assert g.area == pytest.approx(100 + 625 + 225 + 1200 + 800 + 400 + 300, abs=40 * 0.5e-3)
     assert len(shapely.get_parts(g)) == 1 + 1 + 1 + 12 + 2 + 1 + 1
     rotated = [p for p in shapely.get_parts(g) if p.bounds[0] < -400][0]
     c, s = math.cos(math.radians(30)), math.sin(math.radians(30))
-    expected = np.round(np.array([(0, 0), (10 * c, 10 * s), (10 * c - 10 * s, 10 * s + 10 * c), (-10 * s, 10 * c)]) * 1000) / 1000
-    assert sorted(map(tuple, rotated.exterior.coords[:-1])) == sorted(map(tuple, expected + (-500, 0)))  # snapped to 1 nm
+    expected = (
+        np.round(
+            np.array(
+                [(0, 0), (10 * c, 10 * s), (10 * c - 10 * s, 10 * s + 10 * c), (-10 * s, 10 * c)]
+            )
+            * 1000
+        )
+        / 1000
+    )
+    assert sorted(map(tuple, rotated.exterior.coords[:-1])) == sorted(
+        map(tuple, expected + (-500, 0))
+    )  # snapped to 1 nm
     mirrored = [p for p in shapely.get_parts(g) if -250 < p.bounds[0] < -100][0]
-    assert mirrored.bounds == pytest.approx((-200, 0, -185, 15))  # x_reflection, then 90 deg: stays in the first quadrant
+    assert mirrored.bounds == pytest.approx(
+        (-200, 0, -185, 15)
+    )  # x_reflection, then 90 deg: stays in the first quadrant
 
 
 def test_hand_written_gds_with_a_box_record(tmp_path):
     """A GDSII file written byte by byte (no layout library): BOUNDARY and BOX elements, 1 nm in 1 um."""
+
     def rec(rt, dt, data=b""):
         return struct.pack(">HBB", 4 + len(data), rt, dt) + data
 
@@ -184,40 +224,82 @@ def test_hand_written_gds_with_a_box_record(tmp_path):
     def xy(*v):
         return struct.pack(f">{len(v)}i", *v)
 
-    body = rec(0, 2, struct.pack(">h", 600)) + rec(1, 2, bytes(24)) + rec(2, 6, b"HAND") + rec(3, 5, real8(1e-3) + real8(1e-9))
+    body = (
+        rec(0, 2, struct.pack(">h", 600))
+        + rec(1, 2, bytes(24))
+        + rec(2, 6, b"HAND")
+        + rec(3, 5, real8(1e-3) + real8(1e-9))
+    )
     body += rec(5, 2, bytes(24)) + rec(6, 6, b"TOP\0")
-    body += rec(8, 0) + rec(13, 2, b"\0\1") + rec(14, 2, b"\0\0") + rec(16, 3, xy(0, 0, 20000, 0, 20000, 10000, 0, 10000, 0, 0)) + rec(17, 0)
-    body += rec(45, 0) + rec(13, 2, b"\0\1") + rec(46, 2, b"\0\0") + rec(16, 3, xy(20000, 0, 30500, 0, 30500, 10000, 20000, 10000, 20000, 0)) + rec(17, 0)
+    body += (
+        rec(8, 0)
+        + rec(13, 2, b"\0\1")
+        + rec(14, 2, b"\0\0")
+        + rec(16, 3, xy(0, 0, 20000, 0, 20000, 10000, 0, 10000, 0, 0))
+        + rec(17, 0)
+    )
+    body += (
+        rec(45, 0)
+        + rec(13, 2, b"\0\1")
+        + rec(46, 2, b"\0\0")
+        + rec(16, 3, xy(20000, 0, 30500, 0, 30500, 10000, 20000, 10000, 20000, 0))
+        + rec(17, 0)
+    )
     body += rec(7, 0) + rec(4, 0)
     path = tmp_path / "hand.layout"  # no known extension: recognized by its content
     path.write_bytes(body)
     assert layout_format(path) == "gds"
     g = read_layout(path).geometry((1, 0))
-    assert g.geom_type == "Polygon" and g.area == 30.5 * 10 and g.bounds == (0, 0, 30.5, 10)  # box and boundary merged
+    assert (
+        g.geom_type == "Polygon" and g.area == 30.5 * 10 and g.bounds == (0, 0, 30.5, 10)
+    )  # box and boundary merged
 
 
 def test_layer_and_datatype_selection(tmp_path, capsys):
-    path = gds(tmp_path / "l.gds", {"TOP": [
-        gdstk.rectangle((0, 0), (10, 10), layer=1, datatype=0),
-        gdstk.rectangle((0, 0), (20, 10), layer=1, datatype=1),
-        gdstk.rectangle((0, 0), (30, 10), layer=2, datatype=0),
-        gdstk.rectangle((50, 0), (60, 10), layer=2, datatype=0),
-    ]})
+    path = gds(
+        tmp_path / "l.gds",
+        {
+            "TOP": [
+                gdstk.rectangle((0, 0), (10, 10), layer=1, datatype=0),
+                gdstk.rectangle((0, 0), (20, 10), layer=1, datatype=1),
+                gdstk.rectangle((0, 0), (30, 10), layer=2, datatype=0),
+                gdstk.rectangle((50, 0), (60, 10), layer=2, datatype=0),
+            ]
+        },
+    )
     for text, area in (("1/0", 100), ("1", 100), ("1/1", 200), (" 2 / 0 ", 400)):
         assert layout_geometry(path, LayoutSelection(layer=text))[0].area == area
-    with pytest.raises(InputError, match=r"several layers \(1/0 \(1 polygon\), 1/1 \(1 polygon\), 2/0 \(2 polygons\)\); choose the pattern with --layer"):
+    with pytest.raises(
+        InputError,
+        match=r"several layers \(1/0 \(1 polygon\), 1/1 \(1 polygon\), 2/0 \(2 polygons\)\); choose the pattern with --layer",
+    ):
         layout_geometry(path)
     with pytest.raises(InputError, match="give a layer and datatype as L/D"):
         layout_geometry(path, LayoutSelection(layer="one"))
     # A layout with one layer needs no --layer; with a chip layer, the other layer is the pattern.
-    two = gds(tmp_path / "two.gds", {"TOP": [gdstk.rectangle((0, 0), (10, 10), layer=5), gdstk.rectangle((-5, -5), (15, 15), layer=6)]})
+    two = gds(
+        tmp_path / "two.gds",
+        {
+            "TOP": [
+                gdstk.rectangle((0, 0), (10, 10), layer=5),
+                gdstk.rectangle((-5, -5), (15, 15), layer=6),
+            ]
+        },
+    )
     assert layout_geometry(two, LayoutSelection(chip_layer="6/0"))[0].area == 100
 
 
-@pytest.mark.parametrize(("unit", "precision", "side"), [(1e-3, 1e-6, 0.2), (1e-9, 1e-9, 200_000), (1e-6, 1e-10, 200)])
+@pytest.mark.parametrize(
+    ("unit", "precision", "side"), [(1e-3, 1e-6, 0.2), (1e-9, 1e-9, 200_000), (1e-6, 1e-10, 200)]
+)
 def test_gds_units_mm_nm_and_a_fine_database_unit(tmp_path, unit, precision, side):
     """A 200 um square drawn in mm, in nm, and in um with a 0.1 nm database unit."""
-    path = gds(tmp_path / "u.gds", {"TOP": [gdstk.rectangle((0, 0), (side, side / 2))]}, unit=unit, precision=precision)
+    path = gds(
+        tmp_path / "u.gds",
+        {"TOP": [gdstk.rectangle((0, 0), (side, side / 2))]},
+        unit=unit,
+        precision=precision,
+    )
     lay = read_layout(path)
     g = lay.geometry((0, 0))
     assert g.bounds == (0, 0, 200, 100) and g.area == 20000
@@ -229,11 +311,15 @@ def test_dxf_units_from_the_header_or_the_flag(tmp_path, capsys):
     mm = dxf(tmp_path / "mm.dxf", [(square, "PADS", True)], insunits=4)
     assert read_layout(mm).geometry("PADS").bounds == (0, 0, 200, 100)
     assert read_layout(mm).key("pads") == "PADS"  # DXF layer names ignore case, as in AutoCAD
-    nm = dxf(tmp_path / "nm.dxf", [([(x * 1e6, y * 1e6) for x, y in square], "PADS", True)], insunits=12)
+    nm = dxf(
+        tmp_path / "nm.dxf", [([(x * 1e6, y * 1e6) for x, y in square], "PADS", True)], insunits=12
+    )
     assert read_layout(nm).geometry("PADS").area == 20000
     bare = dxf(tmp_path / "bare.dxf", [(square, "PADS", True)], insunits=None)
     assert read_layout(bare, dxf_units="mm").geometry("PADS").area == 20000
-    with pytest.raises(InputError, match=r"states no units \(\$INSUNITS\); pass --dxf-units um, mm or nm"):
+    with pytest.raises(
+        InputError, match=r"states no units \(\$INSUNITS\); pass --dxf-units um, mm or nm"
+    ):
         read_layout(bare)
     with pytest.raises(InputError, match="drop --dxf-units"):
         read_layout(mm, dxf_units="um")
@@ -245,12 +331,24 @@ def test_dxf_blocks_inherit_the_insert_layer_and_arrays_flatten(tmp_path):
     pad = doc.blocks.new("PAD")
     pad.add_lwpolyline([(0, 0), (10, 0), (10, 10), (0, 10)], close=True, dxfattribs={"layer": "0"})
     msp = doc.modelspace()
-    msp.add_blockref("PAD", (0, 0), dxfattribs={"layer": "PADS", "rotation": 45, "xscale": 2, "yscale": 2})  # 400
-    msp.add_blockref("PAD", (100, 0), dxfattribs={"layer": "PADS"}).grid(size=(2, 3), spacing=(20, 30))  # 6 x 100
-    msp.add_circle((0, -100), 10, dxfattribs={"layer": "PADS"})  # sampled within 1 nm of the true circle
-    msp.add_lwpolyline([(-200, 0, 1), (-190, 0, 1)], format="xyb", close=True, dxfattribs={"layer": "PADS"})  # two bulges: a circle, r 5
-    msp.add_lwpolyline([(-50, -50), (50, -50), (50, 50), (-50, 50)], close=True, dxfattribs={"layer": "OUTLINE"})
-    msp.add_lwpolyline([(-10, -10), (10, -10), (10, 10), (-10, 10)], close=True, dxfattribs={"layer": "OUTLINE"})  # a hole
+    msp.add_blockref(
+        "PAD", (0, 0), dxfattribs={"layer": "PADS", "rotation": 45, "xscale": 2, "yscale": 2}
+    )  # 400
+    msp.add_blockref("PAD", (100, 0), dxfattribs={"layer": "PADS"}).grid(
+        size=(2, 3), spacing=(20, 30)
+    )  # 6 x 100
+    msp.add_circle(
+        (0, -100), 10, dxfattribs={"layer": "PADS"}
+    )  # sampled within 1 nm of the true circle
+    msp.add_lwpolyline(
+        [(-200, 0, 1), (-190, 0, 1)], format="xyb", close=True, dxfattribs={"layer": "PADS"}
+    )  # two bulges: a circle, r 5
+    msp.add_lwpolyline(
+        [(-50, -50), (50, -50), (50, 50), (-50, 50)], close=True, dxfattribs={"layer": "OUTLINE"}
+    )
+    msp.add_lwpolyline(
+        [(-10, -10), (10, -10), (10, 10), (-10, 10)], close=True, dxfattribs={"layer": "OUTLINE"}
+    )  # a hole
     msp.add_text("label", dxfattribs={"layer": "PADS"})
     doc.saveas(tmp_path / "b.dxf")
     lay = read_layout(tmp_path / "b.dxf")
@@ -260,7 +358,9 @@ def test_dxf_blocks_inherit_the_insert_layer_and_arrays_flatten(tmp_path):
     lost = 2 / 3 * 1e-3 * 2 * math.pi * (10 + 5) + 0.5e-3 * 80
     assert exact - lost <= pads.area < exact + 0.5e-3 * 80 and len(shapely.get_parts(pads)) == 9
     circle = [p for p in shapely.get_parts(pads) if p.bounds[0] < -150][0]
-    assert circle.bounds == pytest.approx((-200, -5, -190, 5), abs=1.5e-3)  # chords within 1 nm, then snapped to 1 nm
+    assert circle.bounds == pytest.approx(
+        (-200, -5, -190, 5), abs=1.5e-3
+    )  # chords within 1 nm, then snapped to 1 nm
     outline = lay.geometry("OUTLINE")
     assert outline.area == 100 * 100 - 20 * 20 and len(outline.interiors) == 1
     with pytest.raises(InputError, match=r"no block named 'X'; blocks present: PAD \(1 entity\)"):
@@ -271,10 +371,15 @@ def test_dxf_blocks_inherit_the_insert_layer_and_arrays_flatten(tmp_path):
 # ------------------------------------------------------------------ the chip layer and the frame
 def offset_site(tmp_path: Path) -> Path:
     """Chip outline 200 x 200 um on 2/0 at layout (1000, 500); the pad 30 um right of and 20 um below it."""
-    return gds(tmp_path / "offset.gds", {"TOP": [
-        gdstk.rectangle((900, 400), (1100, 600), layer=2),
-        gdstk.rectangle((930, 380), (1130, 580), layer=1),
-    ]})
+    return gds(
+        tmp_path / "offset.gds",
+        {
+            "TOP": [
+                gdstk.rectangle((900, 400), (1100, 600), layer=2),
+                gdstk.rectangle((930, 380), (1130, 580), layer=1),
+            ]
+        },
+    )
 
 
 def test_chip_layer_keeps_the_pattern_placement_relative_to_the_chip(tmp_path):
@@ -283,24 +388,54 @@ def test_chip_layer_keeps_the_pattern_placement_relative_to_the_chip(tmp_path):
     assert chip.bounds == (-100, -100, 100, 100) and pattern.bounds == (-70, -120, 130, 80)
     assert record["origin_um"] == [1000, 500] and "chip outline on layer 2/0" in record["origin"]
     pattern, chip, record = layout_geometry(path, LayoutSelection(layer="1/0"))
-    assert chip is None and pattern.bounds == (-100, -100, 100, 100) and record["origin_um"] == [1030, 480]
+    assert (
+        chip is None
+        and pattern.bounds == (-100, -100, 100, 100)
+        and record["origin_um"] == [1030, 480]
+    )
     assert "bounding box" in record["origin"]
 
 
 def test_chip_layer_reproduces_the_known_offset_in_energy_and_toml(tmp_path, run_cli):
     path = offset_site(tmp_path)
     out = tmp_path / "e.json"
-    rc, _, err = run_cli(["energy", "--pattern", path, "--layer", "1/0", "--chip-layer", "2/0", "--resolution", "2",
-                          "--at", "30,-20,0", "--at", "0,0,0", "--json", out])
+    rc, _, err = run_cli(
+        [
+            "energy",
+            "--pattern",
+            path,
+            "--layer",
+            "1/0",
+            "--chip-layer",
+            "2/0",
+            "--resolution",
+            "2",
+            "--at",
+            "30,-20,0",
+            "--at",
+            "0,0,0",
+            "--json",
+            out,
+        ]
+    )
     assert rc == 0, err
-    assert "poses are relative to the centre of the chip outline on layer 2/0, at layout (1000, 500) um" in err
+    assert (
+        "poses are relative to the centre of the chip outline on layer 2/0, at layout (1000, 500) um"
+        in err
+    )
     poses = json.loads(out.read_text())["poses"]
-    assert poses[0]["overlap_um2"] == pytest.approx(200 * 200) and poses[1]["overlap_um2"] == pytest.approx(170 * 180)
+    assert poses[0]["overlap_um2"] == pytest.approx(200 * 200) and poses[1][
+        "overlap_um2"
+    ] == pytest.approx(170 * 180)
     # The same scene from a TOML file: the flags are scene keys.
     scene = tmp_path / "s.toml"
-    scene.write_text('pattern = "offset.gds"\nlayer = "1/0"\nchip_layer = "2/0"\nresolution_um = 2\n')
+    scene.write_text(
+        'pattern = "offset.gds"\nlayer = "1/0"\nchip_layer = "2/0"\nresolution_um = 2\n'
+    )
     s = Scene.from_toml(scene)
-    assert s.chip.geometry.bounds == (-100, -100, 100, 100) and s.pattern.params["layout"]["origin_um"] == [1000, 500]
+    assert s.chip.geometry.bounds == (-100, -100, 100, 100) and s.pattern.params["layout"][
+        "origin_um"
+    ] == [1000, 500]
     scene.write_text('pattern = "offset.gds"\nlayer = "1/0"\ndxf_units = "cm"\n')
     rc, _, err = run_cli(["energy", scene, "--chip-size", "200", "--at", "0,0,0"])
     one_line_error(rc, err, 'dxf_units = "cm"', '"um", "mm", "nm"')
@@ -309,10 +444,27 @@ def test_chip_layer_reproduces_the_known_offset_in_energy_and_toml(tmp_path, run
 def test_evaluate_gds_written_by_gdstk_finds_the_offset(tmp_path, run_cli):
     path = offset_site(tmp_path)
     rep = tmp_path / "rep"
-    rc, out, err = run_cli(["evaluate", path, "--layer", "1/0", "--chip-layer", "2/0", "--out", rep, "--quiet",
-                            "--resolution", "5", "--twist-step", "3"])
+    rc, out, err = run_cli(
+        [
+            "evaluate",
+            path,
+            "--layer",
+            "1/0",
+            "--chip-layer",
+            "2/0",
+            "--out",
+            rep,
+            "--quiet",
+            "--resolution",
+            "5",
+            "--twist-step",
+            "3",
+        ]
+    )
     assert rc == 0, err
-    assert out.startswith("frame: offset.gds cell TOP layer 1/0 (1 polygon, user unit 1 um, database unit 1 nm)")
+    assert out.startswith(
+        "frame: offset.gds cell TOP layer 1/0 (1 polygon, user unit 1 um, database unit 1 nm)"
+    )
     s = json.loads((rep / "summary.json").read_text())
     g = s["global_minimum"]
     assert (g["x_um"], g["y_um"], g["twist_deg"]) == (30.0, -20.0, 0.0)
@@ -322,19 +474,51 @@ def test_evaluate_gds_written_by_gdstk_finds_the_offset(tmp_path, run_cli):
 
 def test_evaluate_the_example_site(tmp_path, run_cli):
     rep = tmp_path / "rep"
-    rc, out, err = run_cli(["evaluate", SITE, "--layer", "1/0", "--chip-layer", "2/0", "--out", rep, "--quiet",
-                            "--resolution", "4", "--twist-step", "2"])
+    rc, out, err = run_cli(
+        [
+            "evaluate",
+            SITE,
+            "--layer",
+            "1/0",
+            "--chip-layer",
+            "2/0",
+            "--out",
+            rep,
+            "--quiet",
+            "--resolution",
+            "4",
+            "--twist-step",
+            "2",
+        ]
+    )
     assert rc == 0, err
-    assert "poses are relative to the centre of the chip outline on layer 2/0, at layout (1500, 800) um" in out
+    assert (
+        "poses are relative to the centre of the chip outline on layer 2/0, at layout (1500, 800) um"
+        in out
+    )
     s = json.loads((rep / "summary.json").read_text())
     g = s["global_minimum"]
     assert (g["x_um"], g["y_um"], g["twist_deg"]) == (0.0, 0.0, 0.0)
     assert s["layout"]["area_um2"] == 4 * 180 * 180 and s["layout"]["polygons"] == 4
     # Without a chip layer the target is the pads' bounding-box centre, and the output says so.
-    rc, out, err = run_cli(["evaluate", SITE, "--layer", "1/0", "--out", tmp_path / "rep2", "--quiet", "--resolution", "8",
-                            "--no-twist"])
+    rc, out, err = run_cli(
+        [
+            "evaluate",
+            SITE,
+            "--layer",
+            "1/0",
+            "--out",
+            tmp_path / "rep2",
+            "--quiet",
+            "--resolution",
+            "8",
+            "--no-twist",
+        ]
+    )
     assert rc == 0, err
-    assert "the centre of the pattern's bounding box (no chip layer), at layout (1500, 800) um" in out
+    assert (
+        "the centre of the pattern's bounding box (no chip layer), at layout (1500, 800) um" in out
+    )
 
 
 def test_example_site_is_what_its_script_writes(tmp_path):
@@ -344,7 +528,9 @@ def test_example_site_is_what_its_script_writes(tmp_path):
     mod["main"](str(tmp_path / "site.gds"))
     assert (tmp_path / "site.gds").read_bytes() == SITE.read_bytes()
     cells = {c.name: c for c in gdstk.read_gds(str(SITE)).cells}
-    assert len(cells["SITE"].references) == 4 and {r.cell.name for r in cells["SITE"].references} == {"PAD"}
+    assert len(cells["SITE"].references) == 4 and {
+        r.cell.name for r in cells["SITE"].references
+    } == {"PAD"}
 
 
 def test_layout_chip_file_and_content_sniffing(tmp_path, capsys):
@@ -366,31 +552,105 @@ def test_schema_and_scene_agree_on_the_layout_keys():
 
 # ------------------------------------------------------------------ bad input: one line, exit 2, nothing written
 def bowtie(tmp_path):
-    return gds(tmp_path / "bow.gds", {"TOP": [gdstk.Polygon([(0, 0), (100, 100), (100, 0), (0, 100)], layer=1)]})
+    return gds(
+        tmp_path / "bow.gds",
+        {"TOP": [gdstk.Polygon([(0, 0), (100, 100), (100, 0), (0, 100)], layer=1)]},
+    )
 
 
 BAD = {
-    "missing_layer": (lambda t: [SITE, "--layer", "7/0"], ["cell SITE has nothing on layer 7/0", "layers present: 1/0 (4 polygons), 2/0 (1 polygon), 3/0 (4 polygons)"]),
-    "missing_cell": (lambda t: [SITE, "--layer", "1/0", "--cell", "PADS"], ["no cell named 'PADS'", "cells present: PAD (1 polygon), SITE (9 polygons)"]),
-    "several_top_cells": (lambda t: [gds(t / "tops.gds", {"A": [gdstk.rectangle((0, 0), (1, 1))], "B": [gdstk.rectangle((0, 0), (2, 1))]})],
-                          ["2 top cells (A (1 polygon), B (1 polygon)); choose one with --cell NAME"]),
-    "empty_dxf_layer": (lambda t: [dxf(t / "e.dxf", [([(0, 0), (9, 0), (9, 9)], "PADS", True)], layers=["EMPTY"]), "--layer", "EMPTY"],
-                        ["layer 'EMPTY': the layer is empty", "'PADS' (1 polygon)"]),
-    "zero_area_gds_layer": (lambda t: [gds(t / "z.gds", {"TOP": [gdstk.Polygon([(0, 0), (10, 0), (20, 0)], layer=1)]})], ["the layer is empty"]),
-    "open_dxf_polyline": (lambda t: [dxf(t / "o.dxf", [([(0, 0), (50, 0), (50, 40)], "PADS", False)])],
-                          ["LWPOLYLINE", "is open: it ends at (50, 40) um, not at its start (0, 0) um"]),
-    "self_intersecting": (lambda t: [bowtie(t)], ["polygon 1 of 1 crosses itself near (50, 50) um"]),
-    "dxf_without_units": (lambda t: [dxf(t / "n.dxf", [([(0, 0), (9, 0), (9, 9)], "PADS", True)], insunits=None)],
-                          ["states no units", "pass --dxf-units um, mm or nm"]),
-    "corrupt_gds": (lambda t: [_truncated(t)], ["not a readable GDSII file", "End of file reached unexpectedly"]),
-    "corrupt_dxf": (lambda t: [_written(t / "bad.dxf", "0\nSECTION\n2\nENTITIES\n0\nLWPOLYLINE\n10\nnot-a-number\n")], ["not a readable DXF file"]),
-    "missing_referenced_cell": (lambda t: [gds(t / "ghost.gds", {"TOP": [gdstk.Reference("GHOST", (0, 0)), gdstk.rectangle((0, 0), (9, 9))]})],
-                                ["cell TOP references cell GHOST, which the file does not hold"]),
-    "raster_over_budget": (lambda t: [SITE, "--layer", "1/0", "--chip-layer", "2/0", "--resolution", "0.01", "--memory-budget", "64"],
-                           ["the pattern raster of site.gds at 0.01 um/px would be 40,000 x 40,000 px", "--resolution 0.5 (um/px) or coarser would fit"]),
-    "layer_flag_on_a_png": (lambda t: [library_path("square_200"), "--layer", "1/0", "--chip-size", "200"], ["--layer apply to layout patterns"]),
-    "two_chips": (lambda t: [SITE, "--layer", "1/0", "--chip-layer", "2/0", "--chip-size", "400"], ["give one chip"]),
-    "same_layer_twice": (lambda t: [SITE, "--layer", "2/0", "--chip-layer", "2/0"], ["name the same layer 2/0"]),
+    "missing_layer": (
+        lambda t: [SITE, "--layer", "7/0"],
+        [
+            "cell SITE has nothing on layer 7/0",
+            "layers present: 1/0 (4 polygons), 2/0 (1 polygon), 3/0 (4 polygons)",
+        ],
+    ),
+    "missing_cell": (
+        lambda t: [SITE, "--layer", "1/0", "--cell", "PADS"],
+        ["no cell named 'PADS'", "cells present: PAD (1 polygon), SITE (9 polygons)"],
+    ),
+    "several_top_cells": (
+        lambda t: [
+            gds(
+                t / "tops.gds",
+                {"A": [gdstk.rectangle((0, 0), (1, 1))], "B": [gdstk.rectangle((0, 0), (2, 1))]},
+            )
+        ],
+        ["2 top cells (A (1 polygon), B (1 polygon)); choose one with --cell NAME"],
+    ),
+    "empty_dxf_layer": (
+        lambda t: [
+            dxf(t / "e.dxf", [([(0, 0), (9, 0), (9, 9)], "PADS", True)], layers=["EMPTY"]),
+            "--layer",
+            "EMPTY",
+        ],
+        ["layer 'EMPTY': the layer is empty", "'PADS' (1 polygon)"],
+    ),
+    "zero_area_gds_layer": (
+        lambda t: [gds(t / "z.gds", {"TOP": [gdstk.Polygon([(0, 0), (10, 0), (20, 0)], layer=1)]})],
+        ["the layer is empty"],
+    ),
+    "open_dxf_polyline": (
+        lambda t: [dxf(t / "o.dxf", [([(0, 0), (50, 0), (50, 40)], "PADS", False)])],
+        ["LWPOLYLINE", "is open: it ends at (50, 40) um, not at its start (0, 0) um"],
+    ),
+    "self_intersecting": (
+        lambda t: [bowtie(t)],
+        ["polygon 1 of 1 crosses itself near (50, 50) um"],
+    ),
+    "dxf_without_units": (
+        lambda t: [dxf(t / "n.dxf", [([(0, 0), (9, 0), (9, 9)], "PADS", True)], insunits=None)],
+        ["states no units", "pass --dxf-units um, mm or nm"],
+    ),
+    "corrupt_gds": (
+        lambda t: [_truncated(t)],
+        ["not a readable GDSII file", "End of file reached unexpectedly"],
+    ),
+    "corrupt_dxf": (
+        lambda t: [
+            _written(t / "bad.dxf", "0\nSECTION\n2\nENTITIES\n0\nLWPOLYLINE\n10\nnot-a-number\n")
+        ],
+        ["not a readable DXF file"],
+    ),
+    "missing_referenced_cell": (
+        lambda t: [
+            gds(
+                t / "ghost.gds",
+                {"TOP": [gdstk.Reference("GHOST", (0, 0)), gdstk.rectangle((0, 0), (9, 9))]},
+            )
+        ],
+        ["cell TOP references cell GHOST, which the file does not hold"],
+    ),
+    "raster_over_budget": (
+        lambda t: [
+            SITE,
+            "--layer",
+            "1/0",
+            "--chip-layer",
+            "2/0",
+            "--resolution",
+            "0.01",
+            "--memory-budget",
+            "64",
+        ],
+        [
+            "the pattern raster of site.gds at 0.01 um/px would be 40,000 x 40,000 px",
+            "--resolution 0.5 (um/px) or coarser would fit",
+        ],
+    ),
+    "layer_flag_on_a_png": (
+        lambda t: [library_path("square_200"), "--layer", "1/0", "--chip-size", "200"],
+        ["--layer apply to layout patterns"],
+    ),
+    "two_chips": (
+        lambda t: [SITE, "--layer", "1/0", "--chip-layer", "2/0", "--chip-size", "400"],
+        ["give one chip"],
+    ),
+    "same_layer_twice": (
+        lambda t: [SITE, "--layer", "2/0", "--chip-layer", "2/0"],
+        ["name the same layer 2/0"],
+    ),
 }
 
 
@@ -419,7 +679,20 @@ def test_bad_layout_input_is_one_line_and_writes_nothing(tmp_path, capfd, case):
 def test_the_suggested_scale_fits(tmp_path, run_cli):
     # The raster at the suggested scale fits the 64 MB it was suggested for; the landscape at
     # that scale is priced on its own (with its transforms' work space it needs about 89 MB).
-    args = ["energy", "--pattern", SITE, "--layer", "1/0", "--chip-layer", "2/0", "--resolution", "0.5", "--no-twist", "--at", "0,0,0"]
+    args = [
+        "energy",
+        "--pattern",
+        SITE,
+        "--layer",
+        "1/0",
+        "--chip-layer",
+        "2/0",
+        "--resolution",
+        "0.5",
+        "--no-twist",
+        "--at",
+        "0,0,0",
+    ]
     rc, _, err = run_cli([*args, "--memory-budget", "64"])
     assert rc == 2 and "the landscape needs about" in err and "raster" not in err, err
     rc, _, err = run_cli([*args, "--memory-budget", "128"])

@@ -71,23 +71,72 @@ def test_c12_meniscus_height_through_the_cli(run_cli):
     assert small["capillary_length_um"] == pytest.approx(math.sqrt(GAMMA / (998 * 9.80665)) * 1e6)
     # 0.9 nl under the 200 um chip of the defect experiment: 22.5 um, past 10 % of the side.
     exp = run_json(["liquid", "height", "--volume", "0.9", "--chip-size", "200"], run_cli)
-    assert exp["meniscus_height_um"] == pytest.approx(22.5) and exp["h_over_smallest_side"] == pytest.approx(0.1125)
+    assert exp["meniscus_height_um"] == pytest.approx(22.5) and exp[
+        "h_over_smallest_side"
+    ] == pytest.approx(0.1125)
     assert exp["thin_film_holds"] is False and "11.2 %" in exp["thin_film_notes"][0]
 
 
 def test_c12_overflow_bias_through_the_cli(run_cli):
-    r = run_json(["liquid", "overflow", "--pad-advancing", "60", "--edge-angle", "90", "--chip-angle", "20",
-                  "--meniscus-height", "12.5"], run_cli)
+    r = run_json(
+        [
+            "liquid",
+            "overflow",
+            "--pad-advancing",
+            "60",
+            "--edge-angle",
+            "90",
+            "--chip-angle",
+            "20",
+            "--meniscus-height",
+            "12.5",
+        ],
+        run_cli,
+    )
     assert round(r["overflow_bias_um"], 2) == 21.65 and r["overflow_angle_deg"] == 150
     # theta_edge <= theta_adv: never (no overflow bias at all), condition 1.
     for edge in ("60", "45"):
-        n = run_json(["liquid", "overflow", "--pad-advancing", "60", "--edge-angle", edge, "--chip-angle", "20",
-                      "--meniscus-height", "12.5"], run_cli)
-        assert n["overflow_bias_um"] is None and 1 in n["conditions_holding"] and n["overflows"] is False
+        n = run_json(
+            [
+                "liquid",
+                "overflow",
+                "--pad-advancing",
+                "60",
+                "--edge-angle",
+                edge,
+                "--chip-angle",
+                "20",
+                "--meniscus-height",
+                "12.5",
+            ],
+            run_cli,
+        )
+        assert (
+            n["overflow_bias_um"] is None
+            and 1 in n["conditions_holding"]
+            and n["overflows"] is False
+        )
     # h from the volume: 0.5 nl under 200 um is 12.5 um, the same 21.65 um.
-    v = run_json(["liquid", "overflow", "--pad-advancing", "60", "--edge-angle", "90", "--chip-angle", "20",
-                  "--volume", "0.5", "--chip-size", "200"], run_cli)
-    assert v["meniscus_height_um"] == pytest.approx(12.5) and round(v["overflow_bias_um"], 2) == 21.65
+    v = run_json(
+        [
+            "liquid",
+            "overflow",
+            "--pad-advancing",
+            "60",
+            "--edge-angle",
+            "90",
+            "--chip-angle",
+            "20",
+            "--volume",
+            "0.5",
+            "--chip-size",
+            "200",
+        ],
+        run_cli,
+    )
+    assert (
+        v["meniscus_height_um"] == pytest.approx(12.5) and round(v["overflow_bias_um"], 2) == 21.65
+    )
 
 
 def test_c13_parallelepiped_force_through_the_cli(run_cli):
@@ -98,11 +147,15 @@ def test_c13_parallelepiped_force_through_the_cli(run_cli):
     assert r["stiffness_N_per_m"] == pytest.approx(2 * GAMMA * L / h, rel=1e-12)
     assert r["force_limit_N"] == pytest.approx(-2 * GAMMA * L * 1e-6, rel=1e-12)
     at_h = run_json(base + ["--bias", repr(h)], run_cli)["parallelepiped"]["force_N"]
-    assert at_h == pytest.approx(-math.sqrt(2) * GAMMA * L * 1e-6, rel=1e-12)  # F(h) = -sqrt(2) gamma L
+    assert at_h == pytest.approx(
+        -math.sqrt(2) * GAMMA * L * 1e-6, rel=1e-12
+    )  # F(h) = -sqrt(2) gamma L
     far = run_json(base + ["--bias", repr(1e5 * h)], run_cli)["parallelepiped"]["force_N"]
     assert far == pytest.approx(r["force_limit_N"], rel=1e-9)  # -> -2 gamma L
     tiny = run_json(base + ["--bias", repr(1e-6 * h)], run_cli)["parallelepiped"]["force_N"]
-    assert tiny / (1e-6 * h * 1e-6) == pytest.approx(-r["stiffness_N_per_m"], rel=1e-9)  # slope -2 gamma L / h
+    assert tiny / (1e-6 * h * 1e-6) == pytest.approx(
+        -r["stiffness_N_per_m"], rel=1e-9
+    )  # slope -2 gamma L / h
 
 
 # ------------------------------------------------------------------ docs/physics.md §9 branches
@@ -112,27 +165,57 @@ OVER = ["liquid", "overflow", "--meniscus-height", "12.5"]
 @pytest.mark.parametrize(
     "adv, edge, chip, bias, holding, verdict",
     [
-        (60, 60, 0, 1e6, [1], False),     # (1) alone: edge = adv (never overrun); chip fully wetting, so (2) fails
-        (60, 90, 40, 30, [2], False),     # (2) alone: 90 < 60 + 40, bias 30 beyond 21.65 um
-        (60, 90, 20, 10, [3], False),     # (3) alone: 90 >= 60 + 20, bias 10 below 21.65 um
-        (60, 90, 20, 30, [], True),       # none: overflows
-        (60, 90, 20, 12.5 / math.tan(math.radians(30)), [], True),  # at the overflow bias itself: overflows (strict <)
-        (60, 90, 30, 10, [3], False),     # edge = adv + chip: (2) fails (strict <)
+        (
+            60,
+            60,
+            0,
+            1e6,
+            [1],
+            False,
+        ),  # (1) alone: edge = adv (never overrun); chip fully wetting, so (2) fails
+        (60, 90, 40, 30, [2], False),  # (2) alone: 90 < 60 + 40, bias 30 beyond 21.65 um
+        (60, 90, 20, 10, [3], False),  # (3) alone: 90 >= 60 + 20, bias 10 below 21.65 um
+        (60, 90, 20, 30, [], True),  # none: overflows
+        (
+            60,
+            90,
+            20,
+            12.5 / math.tan(math.radians(30)),
+            [],
+            True,
+        ),  # at the overflow bias itself: overflows (strict <)
+        (60, 90, 30, 10, [3], False),  # edge = adv + chip: (2) fails (strict <)
         (50, 45, 10, 1e6, [1, 2], False),  # sloped edge: (1) and (2), (3) does not apply
     ],
 )
 def test_each_branch_of_the_overflow_conditions(run_cli, adv, edge, chip, bias, holding, verdict):
-    r = run_json(OVER + ["--pad-advancing", str(adv), "--edge-angle", str(edge), "--chip-angle", str(chip),
-                         "--bias", repr(bias)], run_cli)
+    r = run_json(
+        OVER
+        + [
+            "--pad-advancing",
+            str(adv),
+            "--edge-angle",
+            str(edge),
+            "--chip-angle",
+            str(chip),
+            "--bias",
+            repr(bias),
+        ],
+        run_cli,
+    )
     assert r["conditions_holding"] == holding and r["overflows"] is verdict
 
 
 def test_only_condition_3_can_hold_depends_on_the_bias(capsys, run_cli):
-    r = run_json(OVER + ["--pad-advancing", "60", "--edge-angle", "90", "--chip-angle", "20"], run_cli)
+    r = run_json(
+        OVER + ["--pad-advancing", "60", "--edge-angle", "90", "--chip-angle", "20"], run_cli
+    )
     assert r["overflows"] == "depends on the bias" and r["conditions_holding"] == []
     assert round(r["overflow_bias_um"], 2) == 21.65 and r["bias_um"] is None
     # Past the pinning window at zero bias (edge - adv >= 90): overflows whatever the bias.
-    z = run_json(OVER + ["--pad-advancing", "10", "--edge-angle", "120", "--chip-angle", "20"], run_cli)
+    z = run_json(
+        OVER + ["--pad-advancing", "10", "--edge-angle", "120", "--chip-angle", "20"], run_cli
+    )
     assert z["overflow_bias_um"] == 0 and z["overflows"] is True
     assert main(OVER + ["--pad-advancing", "60", "--edge-angle", "90", "--chip-angle", "20"]) == 0
     assert "depends on the bias" in capsys.readouterr().out
@@ -143,15 +226,29 @@ def test_chip_angle_range_across_which_condition_2_switches(capsys, run_cli):
     r = run_json(argv + ["--bias", "30"], run_cli)
     assert r["condition_2_switch_chip_angle_deg"] == 30  # theta_edge - theta_adv
     lo, hi = r["over_chip_angle_range"]
-    assert (lo["chip_angle_from_deg"], lo["chip_angle_to_deg"], lo["conditions_holding"], lo["overflows"]) == (10, 30, [], True)
-    assert (hi["chip_angle_from_deg"], hi["chip_angle_to_deg"], hi["conditions_holding"], hi["overflows"]) == (30, 50, [2], False)
+    assert (
+        lo["chip_angle_from_deg"],
+        lo["chip_angle_to_deg"],
+        lo["conditions_holding"],
+        lo["overflows"],
+    ) == (10, 30, [], True)
+    assert (
+        hi["chip_angle_from_deg"],
+        hi["chip_angle_to_deg"],
+        hi["conditions_holding"],
+        hi["overflows"],
+    ) == (30, 50, [2], False)
     assert hi["from_excluded"] is True and r["overflows"] == "depends on the chip angle"
     # Below the overflow bias, condition 3 holds throughout: one verdict over the range.
     safe = run_json(argv + ["--bias", "5"], run_cli)
     assert safe["overflows"] is False and safe["conditions_holding"] == [3]
     assert [p["conditions_holding"] for p in safe["over_chip_angle_range"]] == [[3], [2, 3]]
     # A range that does not reach the switch: one piece.
-    one = run_json(OVER + ["--pad-advancing", "60", "--edge-angle", "90", "--chip-angle", "35:60", "--bias", "30"], run_cli)
+    one = run_json(
+        OVER
+        + ["--pad-advancing", "60", "--edge-angle", "90", "--chip-angle", "35:60", "--bias", "30"],
+        run_cli,
+    )
     assert len(one["over_chip_angle_range"]) == 1 and one["overflows"] is False
     assert one["condition_2_switch_chip_angle_deg"] is None
     # The text names the switch.
@@ -172,11 +269,64 @@ def test_overflow_agrees_with_the_python_conditions():
 @pytest.mark.parametrize(
     "argv, words",
     [
-        (["--pad-advancing", "60", "--edge-angle", "90", "--chip-angle", "20"], ["--meniscus-height"]),
-        (["--pad-advancing", "60", "--edge-angle", "200", "--chip-angle", "20", "--meniscus-height", "5"], ["--edge-angle", "[0, 180]"]),
-        (["--pad-advancing", "60", "--edge-angle", "90", "--chip-angle", "30:10", "--meniscus-height", "5"], ["--chip-angle", "smaller"]),
-        (["--pad-advancing", "60", "--edge-angle", "90", "--chip-angle", "a:b", "--meniscus-height", "5"], ["--chip-angle", "LO:HI"]),
-        (["--pad-advancing", "60", "--edge-angle", "90", "--chip-angle", "20", "--volume", "500", "--chip-size", "200"], ["--volume 500", "smallest side"]),
+        (
+            ["--pad-advancing", "60", "--edge-angle", "90", "--chip-angle", "20"],
+            ["--meniscus-height"],
+        ),
+        (
+            [
+                "--pad-advancing",
+                "60",
+                "--edge-angle",
+                "200",
+                "--chip-angle",
+                "20",
+                "--meniscus-height",
+                "5",
+            ],
+            ["--edge-angle", "[0, 180]"],
+        ),
+        (
+            [
+                "--pad-advancing",
+                "60",
+                "--edge-angle",
+                "90",
+                "--chip-angle",
+                "30:10",
+                "--meniscus-height",
+                "5",
+            ],
+            ["--chip-angle", "smaller"],
+        ),
+        (
+            [
+                "--pad-advancing",
+                "60",
+                "--edge-angle",
+                "90",
+                "--chip-angle",
+                "a:b",
+                "--meniscus-height",
+                "5",
+            ],
+            ["--chip-angle", "LO:HI"],
+        ),
+        (
+            [
+                "--pad-advancing",
+                "60",
+                "--edge-angle",
+                "90",
+                "--chip-angle",
+                "20",
+                "--volume",
+                "500",
+                "--chip-size",
+                "200",
+            ],
+            ["--volume 500", "smallest side"],
+        ),
     ],
 )
 def test_overflow_bad_input(run_cli, argv, words):
@@ -225,7 +375,9 @@ def test_a_free_drop_settles_at_young_angle_and_pins_at_a_pad_edge():
     v = 0.3 * v_edge
     b = float(free_cap_base_um2(v, 40.0))
     e, _ = minimise_footprint(p, np.array([v]), "one")
-    assert e[0] == pytest.approx(float(cap_area_um2(v, b)) - math.cos(math.radians(40)) * b, rel=1e-9)
+    assert e[0] == pytest.approx(
+        float(cap_area_um2(v, b)) - math.cos(math.radians(40)) * b, rel=1e-9
+    )
 
 
 #: Surface Evolver 2.70's energy of a unit-volume sessile drop at 60 degrees (the data file
@@ -264,7 +416,16 @@ def test_critical_volume_against_stored_surface_evolver():
     assert len(rows) >= 8
     L = 710.0
     for r in rows:
-        model_L3 = vcrit(L, float(r["relative_gap"]) * L, float(r["pad_angle_deg"]), float(r["substrate_angle_deg"])) * 1e6 / L**3
+        model_L3 = (
+            vcrit(
+                L,
+                float(r["relative_gap"]) * L,
+                float(r["pad_angle_deg"]),
+                float(r["substrate_angle_deg"]),
+            )
+            * 1e6
+            / L**3
+        )
         assert model_L3 == pytest.approx(float(r["model_critical_volume_L3"]), rel=0.02)
         assert 0.85 < model_L3 / float(r["evolver_critical_volume_L3"]) < 1.18
 
@@ -275,14 +436,50 @@ def vcrit(L, g, tp, ts) -> float:
 
 
 def test_critical_volume_through_the_cli(capsys, run_cli):
-    r = run_json(["liquid", "critical-volume", "--size", "710", "--gap", "71", "--pad-angle", "41", "--substrate-angle", "89"], run_cli)
+    r = run_json(
+        [
+            "liquid",
+            "critical-volume",
+            "--size",
+            "710",
+            "--gap",
+            "71",
+            "--pad-angle",
+            "41",
+            "--substrate-angle",
+            "89",
+        ],
+        run_cli,
+    )
     assert r["critical_volume_nl"] == pytest.approx(vcrit(710, 71, 41, 89), rel=1e-12)
-    assert r["dimensionless_volume_V_ND"] == pytest.approx((r["critical_volume_nl"] * 1e6) ** (2 / 3) / 710**2)
+    assert r["dimensionless_volume_V_ND"] == pytest.approx(
+        (r["critical_volume_nl"] * 1e6) ** (2 / 3) / 710**2
+    )
     assert "spherical-cap" in r["method"] and r["assumptions"] and r["validity"]
     assert 1 <= len(r["split_below_critical_volume"]) <= 4
-    assert main(["liquid", "critical-volume", "--size", "710", "--gap", "71", "--pad-angle", "41", "--substrate-angle", "89"]) == 0
+    assert (
+        main(
+            [
+                "liquid",
+                "critical-volume",
+                "--size",
+                "710",
+                "--gap",
+                "71",
+                "--pad-angle",
+                "41",
+                "--substrate-angle",
+                "89",
+            ]
+        )
+        == 0
+    )
     out = capsys.readouterr().out
-    assert out.startswith(f"critical volume {r['critical_volume_nl']:.4g} nl") and "method:" in out and "validity:" in out
+    assert (
+        out.startswith(f"critical volume {r['critical_volume_nl']:.4g} nl")
+        and "method:" in out
+        and "validity:" in out
+    )
 
 
 def test_at_the_critical_volume_the_energies_cross():
@@ -335,7 +532,9 @@ def test_critical_volume_in_the_pad_angle_has_a_minimum_and_a_finite_limit():
     assert v[10] > v[30] > v[45] < v[60] < v[75] < v[88.9], v
     side = (L - g) / 2 + g
     t = math.tan(math.radians(ts / 2))
-    limit = math.pi * (side / math.sqrt(math.pi)) ** 3 * t * (3 + t * t) / 6 / 1e6  # cap of base side^2 at ts, nl
+    limit = (
+        math.pi * (side / math.sqrt(math.pi)) ** 3 * t * (3 + t * t) / 6 / 1e6
+    )  # cap of base side^2 at ts, nl
     assert v[88.9] == pytest.approx(limit, rel=0.01)
     # The source's angle pairs: more hydrophobic pads need more liquid above the minimum.
     assert vcrit(710, 71, 50, 89) < vcrit(710, 71, 60, 89)
@@ -348,12 +547,38 @@ def test_critical_volume_scales_with_the_cube_of_the_pattern_size():
     assert exponent == pytest.approx(3.0, abs=1e-3)
 
 
-@pytest.mark.parametrize("argv, words", [
-    (["--size", "710", "--gap", "800", "--pad-angle", "41", "--substrate-angle", "89"], ["--gap 800", "smaller than --size"]),
-    (["--size", "710", "--gap", "71", "--pad-angle", "89", "--substrate-angle", "41"], ["--pad-angle 89", "--substrate-angle 41"]),
-    (["--size", "-710", "--gap", "71", "--pad-angle", "41", "--substrate-angle", "89"], ["--size"]),
-    (["--size", "710", "--gap", "71", "--pad-angle", "41", "--substrate-angle", "89", "--surface-tension", "0.0728"], ["--surface-tension", "72.8"]),
-])
+@pytest.mark.parametrize(
+    "argv, words",
+    [
+        (
+            ["--size", "710", "--gap", "800", "--pad-angle", "41", "--substrate-angle", "89"],
+            ["--gap 800", "smaller than --size"],
+        ),
+        (
+            ["--size", "710", "--gap", "71", "--pad-angle", "89", "--substrate-angle", "41"],
+            ["--pad-angle 89", "--substrate-angle 41"],
+        ),
+        (
+            ["--size", "-710", "--gap", "71", "--pad-angle", "41", "--substrate-angle", "89"],
+            ["--size"],
+        ),
+        (
+            [
+                "--size",
+                "710",
+                "--gap",
+                "71",
+                "--pad-angle",
+                "41",
+                "--substrate-angle",
+                "89",
+                "--surface-tension",
+                "0.0728",
+            ],
+            ["--surface-tension", "72.8"],
+        ),
+    ],
+)
 def test_critical_volume_bad_input(run_cli, argv, words):
     refused(["liquid", "critical-volume"] + argv, run_cli, *words)
 
@@ -362,8 +587,12 @@ def test_critical_volume_bad_input(run_cli, argv, words):
 def test_four_pad_is_recognised_from_the_pixels(tmp_path):
     from patterns.io import read_mask
 
-    assert liquid.four_pad_geometry(read_mask(library_path("four_pad_730_50"))) == pytest.approx((730, 50), abs=1)
-    assert liquid.four_pad_geometry(read_mask(library_path("four_pad_710_100"))) == pytest.approx((710, 100), abs=1)
+    assert liquid.four_pad_geometry(read_mask(library_path("four_pad_730_50"))) == pytest.approx(
+        (730, 50), abs=1
+    )
+    assert liquid.four_pad_geometry(read_mask(library_path("four_pad_710_100"))) == pytest.approx(
+        (710, 100), abs=1
+    )
     assert liquid.four_pad_geometry(read_mask(library_path("square_200"))) is None
     assert liquid.pad_count(read_mask(library_path("square_200"))) == 1
     coarse = mask_from_geometry(four_pad(200, 20), 2.0, margin_um=10)
@@ -385,14 +614,42 @@ def fast(pattern):
 def test_simulate_warns_below_the_critical_volume(fourpad, tmp_path, capsys):
     v_crit = vcrit(200, 20, 30, 60)
     out = tmp_path / "t.json"
-    assert main(["simulate", *fast(fourpad), "--start", "20,0,0", "--volume", f"{0.5 * v_crit:.6g}", "--json", str(out)]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                *fast(fourpad),
+                "--start",
+                "20,0,0",
+                "--volume",
+                f"{0.5 * v_crit:.6g}",
+                "--json",
+                str(out),
+            ]
+        )
+        == 0
+    )
     err = capsys.readouterr().err
     doc = json.loads(out.read_text())
     (w,) = [w for w in doc["liquid_warnings"] if "critical volume" in w]
     assert f"{v_crit:.3g} nl" in w and f"warning: {w}" in err.splitlines()
     assert "not used by the greedy method" in err  # --volume and a method that does not use it
     # Above the critical volume: no warning.
-    assert main(["simulate", *fast(fourpad), "--start", "20,0,0", "--volume", f"{2 * v_crit:.6g}", "--json", str(out)]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                *fast(fourpad),
+                "--start",
+                "20,0,0",
+                "--volume",
+                f"{2 * v_crit:.6g}",
+                "--json",
+                str(out),
+            ]
+        )
+        == 0
+    )
     assert json.loads(out.read_text())["liquid_warnings"] == []
     capsys.readouterr()
     # Without --volume nothing is checked and the key is still there.
@@ -403,7 +660,18 @@ def test_simulate_warns_below_the_critical_volume(fourpad, tmp_path, capsys):
 def test_simulate_warns_of_a_thick_film_and_an_overflowing_placement(tmp_path, capsys):
     square, out = str(library_path("square_200")), tmp_path / "t.json"
     # 0.9 nl under 200 um: h = 22.5 um; a vertical pad edge with advancing 50 deg overflows beyond 26.8 um.
-    argv = ["simulate", *fast(square), "--volume", "0.9", "--edge-angle", "90", "--pad-advancing", "50", "--json", str(out)]
+    argv = [
+        "simulate",
+        *fast(square),
+        "--volume",
+        "0.9",
+        "--edge-angle",
+        "90",
+        "--pad-advancing",
+        "50",
+        "--json",
+        str(out),
+    ]
     assert main(argv + ["--start", "40,10,0"]) == 0
     warns = json.loads(out.read_text())["liquid_warnings"]
     assert any(w.startswith("thick film") and "22.5 um" in w for w in warns)
@@ -420,8 +688,24 @@ def test_simulate_warns_of_a_thick_film_and_an_overflowing_placement(tmp_path, c
 
 def test_montecarlo_reports_the_fraction_of_starts_that_can_overflow(tmp_path, capsys):
     square, out = str(library_path("square_200")), tmp_path / "m.json"
-    assert main(["montecarlo", *fast(square), "--grid=-40:40:20,-40:40:20", "--volume", "0.5", "--edge-angle", "90",
-                 "--pad-advancing", "60", "--json", str(out)]) == 0
+    assert (
+        main(
+            [
+                "montecarlo",
+                *fast(square),
+                "--grid=-40:40:20,-40:40:20",
+                "--volume",
+                "0.5",
+                "--edge-angle",
+                "90",
+                "--pad-advancing",
+                "60",
+                "--json",
+                str(out),
+            ]
+        )
+        == 0
+    )
     doc = json.loads(out.read_text())
     (o,) = doc["liquid_warnings"]
     # h = 12.5 um, overflow bias 21.65 um: of the 25 starts, those with max(|x|, |y|) >= 40 (16 of 25) overflow.
@@ -432,7 +716,21 @@ def test_montecarlo_reports_the_fraction_of_starts_that_can_overflow(tmp_path, c
 def test_evaluate_puts_the_warnings_in_the_summary_and_the_report(fourpad, tmp_path, capsys):
     out = tmp_path / "rep"
     v = 0.5 * vcrit(200, 20, 30, 60)
-    assert main(["evaluate", fourpad, "--out", str(out), "--quiet", "--no-twist", "--volume", f"{v:.6g}"]) == 0
+    assert (
+        main(
+            [
+                "evaluate",
+                fourpad,
+                "--out",
+                str(out),
+                "--quiet",
+                "--no-twist",
+                "--volume",
+                f"{v:.6g}",
+            ]
+        )
+        == 0
+    )
     s = json.loads((out / "summary.json").read_text())
     (w,) = s["liquid_warnings"]
     assert "below the critical volume" in w
@@ -444,29 +742,88 @@ def test_evaluate_puts_the_warnings_in_the_summary_and_the_report(fourpad, tmp_p
 # ------------------------------------------------------------------ numbers as typed
 def test_surface_tension_typed_in_n_per_m_is_refused(run_cli):
     square = str(library_path("square_200"))
-    err = refused(["simulate", *fast(square), "--start", "10,0,0", "--surface-tension", "0.0728"], run_cli, "--surface-tension",
-                  "0.0728 mN/m", "looks like N/m", "72.8")
+    err = refused(
+        ["simulate", *fast(square), "--start", "10,0,0", "--surface-tension", "0.0728"],
+        run_cli,
+        "--surface-tension",
+        "0.0728 mN/m",
+        "looks like N/m",
+        "72.8",
+    )
     assert "selfalign simulate: error:" in err
-    refused(["simulate", *fast(square), "--start", "10,0,0", "--surface-tension", "5000"], run_cli, "5000", "above 1000 mN/m")
-    refused(["liquid", "height", "--volume", "1", "--area", "1e4", "--surface-tension", "0.0728"], run_cli, "72.8")
+    refused(
+        ["simulate", *fast(square), "--start", "10,0,0", "--surface-tension", "5000"],
+        run_cli,
+        "5000",
+        "above 1000 mN/m",
+    )
+    refused(
+        ["liquid", "height", "--volume", "1", "--area", "1e4", "--surface-tension", "0.0728"],
+        run_cli,
+        "72.8",
+    )
 
 
 def test_surface_tension_in_a_scene_file_is_checked(tmp_path, run_cli):
     scene = tmp_path / "s.toml"
-    scene.write_text(f'pattern = "{library_path("square_200")}"\nchip_size_um = [200, 200]\n[materials]\nsurface_tension_mN_m = 0.0728\n')
-    refused(["simulate", str(scene), "--start", "10,0,0", "--quiet"], run_cli, "surface_tension_mN_m", "72.8")
+    scene.write_text(
+        f'pattern = "{library_path("square_200")}"\nchip_size_um = [200, 200]\n[materials]\nsurface_tension_mN_m = 0.0728\n'
+    )
+    refused(
+        ["simulate", str(scene), "--start", "10,0,0", "--quiet"],
+        run_cli,
+        "surface_tension_mN_m",
+        "72.8",
+    )
 
 
 def test_a_volume_thicker_than_the_chip_is_refused(run_cli):
     # 500 nl under a 200 um chip: a 12.5 mm film.
     square = str(library_path("square_200"))
-    refused(["simulate", *fast(square), "--start", "10,0,0", "--volume", "500"], run_cli, "--volume 500", "12500 um thick", "--volume 0.5",
-            "smallest side", "at most 0.8 nl")
-    refused(["liquid", "overflow", "--pad-advancing", "60", "--edge-angle", "90", "--chip-angle", "20", "--volume", "500",
-             "--chip-size", "200"], run_cli, "--volume 500")
+    refused(
+        ["simulate", *fast(square), "--start", "10,0,0", "--volume", "500"],
+        run_cli,
+        "--volume 500",
+        "12500 um thick",
+        "--volume 0.5",
+        "smallest side",
+        "at most 0.8 nl",
+    )
+    refused(
+        [
+            "liquid",
+            "overflow",
+            "--pad-advancing",
+            "60",
+            "--edge-angle",
+            "90",
+            "--chip-angle",
+            "20",
+            "--volume",
+            "500",
+            "--chip-size",
+            "200",
+        ],
+        run_cli,
+        "--volume 500",
+    )
 
 
 def test_volume_with_a_dynamic_method_gives_no_note(capsys):
     square = str(library_path("square_200"))
-    assert main(["simulate", *fast(square), "--start", "10,0,0", "--volume", "0.5", "--method", "overdamped"]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                *fast(square),
+                "--start",
+                "10,0,0",
+                "--volume",
+                "0.5",
+                "--method",
+                "overdamped",
+            ]
+        )
+        == 0
+    )
     assert "not used" not in capsys.readouterr().err

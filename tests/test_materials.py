@@ -49,9 +49,7 @@ def test_delta_gamma_worked_values(theta_p, theta_s, mn_per_m, places):
 
 
 def test_delta_gamma_is_difference_of_wetting_energies():
-    assert delta_gamma(WATER, 30, 60) == pytest.approx(
-        gamma_wet(30, WATER) - gamma_wet(60, WATER)
-    )
+    assert delta_gamma(WATER, 30, 60) == pytest.approx(gamma_wet(30, WATER) - gamma_wet(60, WATER))
     assert gamma_wet(90, WATER) == 0.0
     assert gamma_wet(0, WATER) == -WATER
 
@@ -234,9 +232,9 @@ def test_couette_damping_units():
     j_m4 = 4e-8 * (2 * 200e-6**2) / 12
     expected = 1e-3 * j_m4 / 12.5e-6
     assert couette_rotational_damping(1e-3, 200, 200, 12.5) == pytest.approx(expected, rel=1e-12)
-    assert couette_torsional_damping(
-        1e-3, Chip(200, 200).polar_moment_um4, 12.5
-    ) == pytest.approx(expected)
+    assert couette_torsional_damping(1e-3, Chip(200, 200).polar_moment_um4, 12.5) == pytest.approx(
+        expected
+    )
     assert DAMPING_CALIBRATION > 1
 
 

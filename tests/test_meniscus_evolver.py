@@ -25,11 +25,20 @@ with CSV.open() as _f:
 @functools.cache
 def _landscape(family: str, a: float, b: float, h: float, gamma: float):
     pat = mask_from_geometry(box(-a / 2, -b / 2, a / 2, b / 2), 1.0, margin_um=2)
-    kw = dict(chip_size_um=(a, b), materials=Materials(surface_tension_N_m=gamma), liquid=Liquid(height_um=h, pinned=True), dtype="float64")
+    kw = dict(
+        chip_size_um=(a, b),
+        materials=Materials(surface_tension_N_m=gamma),
+        liquid=Liquid(height_um=h, pinned=True),
+        dtype="float64",
+    )
     if family == "twist":
-        sc = Scene.from_inputs(pat, effects=Effects(meniscus=True), twist=TwistGrid(0.25, -4, 4), window_um=3, **kw)
+        sc = Scene.from_inputs(
+            pat, effects=Effects(meniscus=True), twist=TwistGrid(0.25, -4, 4), window_um=3, **kw
+        )
     else:
-        sc = Scene.from_inputs(pat, effects=Effects(twist=False, meniscus=True), window_um=2.2 * h + 4, **kw)
+        sc = Scene.from_inputs(
+            pat, effects=Effects(twist=False, meniscus=True), window_um=2.2 * h + 4, **kw
+        )
     return build_landscape(sc)
 
 
@@ -40,16 +49,47 @@ def _cases(family):
         a, b, h = float(r["a_um"]), float(r["b_um"]), float(r["h_um"])
         x, y, t = float(r["x_um"]), float(r["y_um"]), float(r["twist_deg"])
         if family == "shift_x" and 0 < x <= 2 * h:
-            yield pytest.param(a, b, h, x, float(r["force_x_N"]), float(r["gamma_N_per_m"]), id=f"{a:g}x{b:g}-h{h:g}-x{x:g}")
+            yield pytest.param(
+                a,
+                b,
+                h,
+                x,
+                float(r["force_x_N"]),
+                float(r["gamma_N_per_m"]),
+                id=f"{a:g}x{b:g}-h{h:g}-x{x:g}",
+            )
         if family == "shift_y" and 0 < y <= 2 * h:
-            yield pytest.param(a, b, h, y, float(r["force_y_N"]), float(r["gamma_N_per_m"]), id=f"{a:g}x{b:g}-h{h:g}-y{y:g}")
+            yield pytest.param(
+                a,
+                b,
+                h,
+                y,
+                float(r["force_y_N"]),
+                float(r["gamma_N_per_m"]),
+                id=f"{a:g}x{b:g}-h{h:g}-y{y:g}",
+            )
         if family == "twist" and 0 < t <= 2:
-            yield pytest.param(a, b, h, t, float(r["torque_Nm"]), float(r["gamma_N_per_m"]), id=f"{a:g}-h{h:g}-t{t:g}")
+            yield pytest.param(
+                a,
+                b,
+                h,
+                t,
+                float(r["torque_Nm"]),
+                float(r["gamma_N_per_m"]),
+                id=f"{a:g}-h{h:g}-t{t:g}",
+            )
 
 
 def test_reference_covers_the_cases_the_model_claims():
     fams = {(r["family"], float(r["h_um"])) for r in ROWS}
-    assert {("shift_x", 10.0), ("shift_x", 20.0), ("shift_x", 40.0), ("shift_y", 20.0), ("twist", 10.0), ("twist", 20.0)} <= fams
+    assert {
+        ("shift_x", 10.0),
+        ("shift_x", 20.0),
+        ("shift_x", 40.0),
+        ("shift_y", 20.0),
+        ("twist", 10.0),
+        ("twist", 20.0),
+    } <= fams
 
 
 @pytest.mark.parametrize(("a", "b", "h", "x", "force", "gamma"), list(_cases("shift_x")))

@@ -17,8 +17,14 @@ LIB = Path(__file__).resolve().parents[1] / "patterns" / "library"
 
 
 def _scene(name: str, chip: float, volume: float, pinned: bool, s: float) -> Scene:
-    return Scene.from_inputs(LIB / f"{name}.png", chip_size_um=chip, resolution_um=s, effects=Effects(meniscus=True),
-                             liquid=Liquid(volume_nl=volume, pinned=pinned), dtype="float64")
+    return Scene.from_inputs(
+        LIB / f"{name}.png",
+        chip_size_um=chip,
+        resolution_um=s,
+        effects=Effects(meniscus=True),
+        liquid=Liquid(volume_nl=volume, pinned=pinned),
+        dtype="float64",
+    )
 
 
 CASES = {

@@ -134,15 +134,30 @@ def test_square_yield_is_one_inside_capture_region():
     r = run_batch(s, g, progress=False)
     summ = summarize(r, g)
     assert summ["yield"] == 1.0 and summ["outcomes"]["aligned"] == g.size
-    assert summ["aligned_error_um"]["x"]["max_abs"] == 0 and summ["aligned_error_deg"]["twist"]["max_abs"] == 0
-    assert all(summ["max_bias_limited_by_grid"].values())  # every start aligned, up to the grid edge
+    assert (
+        summ["aligned_error_um"]["x"]["max_abs"] == 0
+        and summ["aligned_error_deg"]["twist"]["max_abs"] == 0
+    )
+    assert all(
+        summ["max_bias_limited_by_grid"].values()
+    )  # every start aligned, up to the grid edge
 
 
 def test_placement_noise_yield(fp):
     scene, ls = fp
-    exact = run_batch(scene, random_starts(50, (0, 0, 0), seed=0, around=(40, 20, 0)), landscape=ls, progress=False)
+    exact = run_batch(
+        scene,
+        random_starts(50, (0, 0, 0), seed=0, around=(40, 20, 0)),
+        landscape=ls,
+        progress=False,
+    )
     assert summarize(exact)["yield"] == 1.0
-    wide = run_batch(scene, random_starts(400, (60, 60, 10), seed=0, around=(80, 0, 0)), landscape=ls, progress=False)
+    wide = run_batch(
+        scene,
+        random_starts(400, (60, 60, 10), seed=0, around=(80, 0, 0)),
+        landscape=ls,
+        progress=False,
+    )
     assert 0.2 < summarize(wide)["yield"] < 1.0
 
 
@@ -162,20 +177,28 @@ def test_four_pad_capture_map_is_mirror_symmetric(method):
     if method == "greedy":
         bias, limited = max_bias(r, g)
         # docs/physics.md §6.3 / C9: about one pad (p = 90 um); the plateau from p to p + g stops the chip.
-        assert set(bias.values()) == {bias["+x"]} and 88 <= bias["+x"] <= 96 and not any(limited.values())
+        assert (
+            set(bias.values()) == {bias["+x"]}
+            and 88 <= bias["+x"] <= 96
+            and not any(limited.values())
+        )
 
 
 def test_max_bias_walks_out_from_the_origin():
     g = StartGrid.from_ranges((-6, 6, 2), 0.0)  # x = -6 .. 6 at y = 0
     out = np.array([1, 0, 0, 0, 0, 1, 0], np.int8)  # aligned except x = -6 and x = 4
-    r = BatchResult("greedy", g.poses(), g.poses(), out, np.zeros(7, np.int32), np.zeros(7), 90.0, (0, 0, 0))
+    r = BatchResult(
+        "greedy", g.poses(), g.poses(), out, np.zeros(7, np.int32), np.zeros(7), 90.0, (0, 0, 0)
+    )
     bias, limited = max_bias(r, g)
     assert bias == {"+x": 2.0, "-x": 4.0, "+y": None, "-y": None}
     assert limited == {"+x": False, "-x": False, "+y": None, "-y": None}
 
 
 def test_starts_outside_the_twist_range_or_window_are_refused():
-    s = make_scene(200, 20, 4.0, 10.0).replace(twist=TwistGrid(step_deg=10, min_deg=-20, max_deg=20))
+    s = make_scene(200, 20, 4.0, 10.0).replace(
+        twist=TwistGrid(step_deg=10, min_deg=-20, max_deg=20)
+    )
     with pytest.raises(ValueError, match="twist range"):
         run_batch(s, [[0, 0, 40]], progress=False)
     with pytest.raises(ValueError, match="every start twist must be 0"):
@@ -187,12 +210,16 @@ def test_starts_outside_the_twist_range_or_window_are_refused():
 def test_realizations_per_sigma():
     chip = mask_from_geometry(square(200), 4.0)
     starts = StartGrid.from_ranges((-40, 40, 40), (-40, 40, 40), 0.0)
-    out = run_realizations([2.0, 8.0], [0, 1], chip, starts, scene_options={"twist": TwistGrid(step_deg=10)})
+    out = run_realizations(
+        [2.0, 8.0], [0, 1], chip, starts, scene_options={"twist": TwistGrid(step_deg=10)}
+    )
     assert [o["sigma_um"] for o in out] == [2.0, 8.0]
     for o in out:
         assert o["n"] == 2 * starts.size and o["seeds"] == [0, 1] and len(o["optima"]) == 2
         assert set(o) >= {"yield", "outcomes", "error_um", "error_deg", "aligned_error_um"}
-    again = run_realizations([8.0], [1], chip, starts, scene_options={"twist": TwistGrid(step_deg=10)})
+    again = run_realizations(
+        [8.0], [1], chip, starts, scene_options={"twist": TwistGrid(step_deg=10)}
+    )
     assert again[0]["optima"][0] == out[1]["optima"][1]
 
 
@@ -209,14 +236,35 @@ BASE = ["montecarlo", "--chip-size", "200", "--twist-step", "10", "--quiet"]
 
 def test_cli_grid_json_csv_map(fp_png, tmp_path, capsys):
     j, c, m = tmp_path / "mc.json", tmp_path / "mc.csv", tmp_path / "map.png"
-    rc = main(BASE + ["--pattern", str(fp_png), "--grid=-160:160:16,-160:160:16,-10:10:10", "--json", str(j), "--csv", str(c), "--map", str(m)])
+    rc = main(
+        BASE
+        + [
+            "--pattern",
+            str(fp_png),
+            "--grid=-160:160:16,-160:160:16,-10:10:10",
+            "--json",
+            str(j),
+            "--csv",
+            str(c),
+            "--map",
+            str(m),
+        ]
+    )
     assert rc == 0
     doc = json.loads(j.read_text())
     assert {"n", "yield", "outcomes", "error_um", "error_deg", "seed", "max_bias_um"} <= set(doc)
     assert doc["n"] == 21 * 21 * 3 and doc["seed"] is None and set(doc["outcomes"]) == set(OUTCOMES)
-    assert set(doc["error_um"]) == {"x", "y"} and set(doc["error_deg"]["twist"]) == {"mean", "mean_abs", "std", "max_abs"}
+    assert set(doc["error_um"]) == {"x", "y"} and set(doc["error_deg"]["twist"]) == {
+        "mean",
+        "mean_abs",
+        "std",
+        "max_abs",
+    }
     lines = c.read_text().splitlines()
-    assert lines[0] == "start_x_um,start_y_um,start_twist_deg,final_x_um,final_y_um,final_twist_deg,outcome,steps"
+    assert (
+        lines[0]
+        == "start_x_um,start_y_um,start_twist_deg,final_x_um,final_y_um,final_twist_deg,outcome,steps"
+    )
     assert len(lines) == doc["n"] + 1
     from PIL import Image
 
@@ -228,7 +276,20 @@ def test_cli_grid_json_csv_map(fp_png, tmp_path, capsys):
 
 def test_cli_random_placement(fp_png, tmp_path):
     j = tmp_path / "r.json"
-    args = BASE + ["--pattern", str(fp_png), "--random", "200", "--spread", "30,30,5", "--around", "40,0,0", "--seed", "4", "--json", str(j)]
+    args = BASE + [
+        "--pattern",
+        str(fp_png),
+        "--random",
+        "200",
+        "--spread",
+        "30,30,5",
+        "--around",
+        "40,0,0",
+        "--seed",
+        "4",
+        "--json",
+        str(j),
+    ]
     assert main(args) == 0
     doc = json.loads(j.read_text())
     assert doc["n"] == 200 and doc["seed"] == 4 and doc["starts"]["distribution"] == "normal"
@@ -262,7 +323,11 @@ def test_cli_bad_input_one_line_exit_2_no_files(fp_png, tmp_path, capsys, extra,
     out = tmp_path / "out"
     out.mkdir()
     extra = [e.replace("OUT", str(out)) for e in extra]
-    rc = main(BASE + ["--pattern", str(fp_png), "--json", str(out / "s.json"), "--csv", str(out / "s.csv")] + extra)
+    rc = main(
+        BASE
+        + ["--pattern", str(fp_png), "--json", str(out / "s.json"), "--csv", str(out / "s.csv")]
+        + extra
+    )
     err = capsys.readouterr().err
     assert rc == 2 and match in err and len(err.strip().splitlines()) == 1
     assert list(out.iterdir()) == []
@@ -276,6 +341,20 @@ def test_cli_failure_while_writing_leaves_no_files(fp_png, tmp_path, monkeypatch
         raise InputError("cannot draw")
 
     monkeypatch.setattr(cmd, "plot_capture_map", broken)
-    rc = main(BASE + ["--pattern", str(fp_png), "--grid", "0:40:20,0", "--json", str(tmp_path / "a.json"), "--csv", str(tmp_path / "a.csv"), "--map", str(tmp_path / "a.png")])
+    rc = main(
+        BASE
+        + [
+            "--pattern",
+            str(fp_png),
+            "--grid",
+            "0:40:20,0",
+            "--json",
+            str(tmp_path / "a.json"),
+            "--csv",
+            str(tmp_path / "a.csv"),
+            "--map",
+            str(tmp_path / "a.png"),
+        ]
+    )
     assert rc == 2 and "cannot draw" in capsys.readouterr().err
     assert sorted(p.name for p in tmp_path.iterdir()) == []

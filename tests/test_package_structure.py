@@ -20,7 +20,19 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "simulator"
 #: The subpackages by concept, in the order data flows through them (physics and render beside).
-SUBPACKAGES = ("core", "scene", "physics", "liquid", "landscape", "motion", "batch", "sweep", "render", "testing", "commands")
+SUBPACKAGES = (
+    "core",
+    "scene",
+    "physics",
+    "liquid",
+    "landscape",
+    "motion",
+    "batch",
+    "sweep",
+    "render",
+    "testing",
+    "commands",
+)
 
 
 def _modules() -> dict[str, Path]:
@@ -117,7 +129,11 @@ def test_the_cycle_finder_finds_a_cycle():
 
 
 def test_the_tree_is_the_subpackages_and_the_command_line():
-    top = sorted(p.name for p in PACKAGE.iterdir() if p.suffix == ".py" or (p.is_dir() and (p / "__init__.py").exists()))
+    top = sorted(
+        p.name
+        for p in PACKAGE.iterdir()
+        if p.suffix == ".py" or (p.is_dir() and (p / "__init__.py").exists())
+    )
     assert top == sorted(["__init__.py", "__main__.py", "cli.py", *SUBPACKAGES])
 
 
@@ -152,7 +168,11 @@ def test_each_package_face_exports_what_it_imports(package):
 
 def test_no_module_but_the_top_keeps_a_lazy_getattr():
     """No compatibility shims: only ``simulator/__init__.py`` resolves names lazily."""
-    shims = [name for name, path in MODULES.items() if name != "simulator" and "def __getattr__(" in path.read_text()]
+    shims = [
+        name
+        for name, path in MODULES.items()
+        if name != "simulator" and "def __getattr__(" in path.read_text()
+    ]
     assert shims == []
 
 
@@ -162,8 +182,12 @@ def test_the_top_level_names_are_the_package_faces_names():
     for name in simulator.__all__:
         module = simulator._EXPORTS[name].partition(":")[0]
         assert module.count(".") == 1 and module.split(".")[1] in SUBPACKAGES, (name, module)
-        value = getattr(importlib.import_module(module), simulator._EXPORTS[name].partition(":")[2] or name)
+        value = getattr(
+            importlib.import_module(module), simulator._EXPORTS[name].partition(":")[2] or name
+        )
         got = getattr(simulator, name)
         # ``simulator.sweep`` is both a package and a function: once the package is imported,
         # the attribute is the package, which calls the function.
-        assert got is value or (name == "sweep" and callable(got) and got.__name__ == "simulator.sweep"), name
+        assert got is value or (
+            name == "sweep" and callable(got) and got.__name__ == "simulator.sweep"
+        ), name

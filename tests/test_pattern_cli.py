@@ -14,11 +14,35 @@ DESIGN_ARGS = {
     "rectangle": (["--width", "120", "--height", "50.5"], {"width": 120, "height": 50.5}),
     "circle": (["--diameter", "90"], {"diameter": 90}),
     "four-pad": (["--size", "200", "--gap", "20"], {"size": 200, "gap": 20}),
-    "defect": (["--size", "200", "--kind", "inward", "--position", "corner", "--edge", "top",
-                "--height", "30", "--width", "60"],
-               {"size": 200, "kind": "inward", "position": "corner", "edge": "top", "height": 30, "width": 60}),
+    "defect": (
+        [
+            "--size",
+            "200",
+            "--kind",
+            "inward",
+            "--position",
+            "corner",
+            "--edge",
+            "top",
+            "--height",
+            "30",
+            "--width",
+            "60",
+        ],
+        {
+            "size": 200,
+            "kind": "inward",
+            "position": "corner",
+            "edge": "top",
+            "height": 30,
+            "width": 60,
+        },
+    ),
     "constant-jagged": (["--size", "200", "--amplitude", "3.2"], {"size": 200, "amplitude": 3.2}),
-    "random-jagged": (["--size", "200", "--sigma", "4", "--seed", "5"], {"size": 200, "sigma": 4, "seed": 5}),
+    "random-jagged": (
+        ["--size", "200", "--sigma", "4", "--seed", "5"],
+        {"size": 200, "sigma": 4, "seed": 5},
+    ),
     "polygon": (["--points", "0,0;60,0;60,40;-20,50"], {"points": "0,0;60,0;60,40;-20,50"}),
 }
 
@@ -45,15 +69,27 @@ def test_each_design_writes_a_scaled_png(tmp_path, run_cli, design, um_per_px):
 
 def test_four_pad_example(tmp_path, run_cli, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    rc, stdout, err = run_cli(["pattern", "four-pad", "--size", "730", "--gap", "50", "--um-per-px", "1",
-                               "-o", "fourpad.png"])
+    rc, stdout, err = run_cli(
+        [
+            "pattern",
+            "four-pad",
+            "--size",
+            "730",
+            "--gap",
+            "50",
+            "--um-per-px",
+            "1",
+            "-o",
+            "fourpad.png",
+        ]
+    )
     assert rc == 0 and err == ""
     with Image.open("fourpad.png") as im:
         assert im.mode == "I;16"
         assert round(im.info["dpi"][0] / 0.0254) == 1_000_000  # pHYs: 1e6 px/m = 1 um/px
     data = (tmp_path / "fourpad.png").read_bytes()
     i = data.index(b"pHYs")
-    assert struct.unpack(">IIB", data[i + 4:i + 13]) == (1_000_000, 1_000_000, 1)
+    assert struct.unpack(">IIB", data[i + 4 : i + 13]) == (1_000_000, 1_000_000, 1)
     mask = read_mask("fourpad.png")
     assert mask.area_um2 == pytest.approx(4 * 340**2, rel=1e-3)
     assert mask.area_um2 == 4 * 340**2  # pixel-aligned edges: exact
@@ -97,8 +133,14 @@ BAD = [
     (["square", "--size", "200", "--um-per-px", "0"], r"--um-per-px must be a finite number > 0"),
     (["square", "--size", "200", "--um-per-px", "-1"], r"--um-per-px must be a finite number > 0"),
     (["square", "--size", "200", "--margin", "-1"], r"--margin must be a finite number >= 0"),
-    (["defect", "--kind", "sideways", "--height", "10", "--width", "20"], r"--kind must be one of inward, outward"),
-    (["defect", "--kind", "inward", "--height", "150", "--width", "20"], r"height=150 um: an inward defect"),
+    (
+        ["defect", "--kind", "sideways", "--height", "10", "--width", "20"],
+        r"--kind must be one of inward, outward",
+    ),
+    (
+        ["defect", "--kind", "inward", "--height", "150", "--width", "20"],
+        r"height=150 um: an inward defect",
+    ),
     (["constant-jagged", "--amplitude", "60"], r"amplitude=60 um is too large"),
     (["polygon", "--points", "0,0;10,0;0,10;10,10"], r"the polygon is not simple"),
     (["polygon", "--points", "0,0;10"], r"--points: cannot read point '10'"),
@@ -117,12 +159,15 @@ def test_bad_input_is_one_line_exit_2_and_no_file(tmp_path, run_cli, args, match
     assert list(tmp_path.iterdir()) == []
 
 
-@pytest.mark.parametrize("target,match", [
-    ("missing/out.png", r"directory .*missing does not exist"),
-    ("afile/out.png", r"directory .*afile does not exist"),
-    ("adir", r"adir: is a directory"),
-    ("out.jpg", r"must end in \.png"),
-])
+@pytest.mark.parametrize(
+    "target,match",
+    [
+        ("missing/out.png", r"directory .*missing does not exist"),
+        ("afile/out.png", r"directory .*afile does not exist"),
+        ("adir", r"adir: is a directory"),
+        ("out.jpg", r"must end in \.png"),
+    ],
+)
 def test_bad_output_path(tmp_path, run_cli, target, match):
     (tmp_path / "afile").write_text("x")
     (tmp_path / "adir").mkdir()

@@ -20,8 +20,11 @@ from simulator.scene import Scene, TwistAxis, TwistGrid
 
 
 def scene(step_deg=5.0, **kw) -> Scene:
-    return Scene(pattern=mask_from_geometry(four_pad(60, 10), 2.0), chip=mask_from_geometry(square(60), 2.0),
-                 twist=TwistGrid(step_deg=step_deg, **kw))
+    return Scene(
+        pattern=mask_from_geometry(four_pad(60, 10), 2.0),
+        chip=mask_from_geometry(square(60), 2.0),
+        twist=TwistGrid(step_deg=step_deg, **kw),
+    )
 
 
 def test_landscape_axes_are_its_grid_and_steps_are_the_scenes_exactly():
@@ -52,8 +55,16 @@ def test_a_run_of_the_axis_is_located_on_it_and_a_box_is_cut():
     assert ls.cut == ((True, True), (True, True), (True, True))
     full = build_landscape(s)
     assert full.wrap and full.cut == ((False, False),) * 3
-    np.testing.assert_allclose(ls.energy, full.energy[2:6, full.grid.shape[1] // 2 - 4: full.grid.shape[1] // 2 + 5,
-                                                    full.grid.shape[2] // 2 - 4: full.grid.shape[2] // 2 + 5], rtol=0, atol=full.noise_floor_J)
+    np.testing.assert_allclose(
+        ls.energy,
+        full.energy[
+            2:6,
+            full.grid.shape[1] // 2 - 4 : full.grid.shape[1] // 2 + 5,
+            full.grid.shape[2] // 2 - 4 : full.grid.shape[2] // 2 + 5,
+        ],
+        rtol=0,
+        atol=full.noise_floor_J,
+    )
 
 
 def test_twists_must_be_one_evenly_spaced_axis():
@@ -110,7 +121,11 @@ def test_twist_axis_values_locate_and_runs():
 
 
 def test_importing_the_package_changes_no_jax_setting():
-    code = ("import jax, simulator, simulator.motion, simulator.motion, simulator.motion, simulator.batch; "
-            "print(jax.config.jax_enable_x64)")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True)
+    code = (
+        "import jax, simulator, simulator.motion, simulator.motion, simulator.motion, simulator.batch; "
+        "print(jax.config.jax_enable_x64)"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True
+    )
     assert out.stdout.strip() == "False"

@@ -69,16 +69,45 @@ def fp1k(tmp_path_factory) -> Path:
     path = tmp_path_factory.mktemp("pricing") / "fp1k.png"
     from simulator.cli import main
 
-    assert main(["pattern", "four-pad", "--size", "1000", "--gap", "50", "--um-per-px", "1", "-o", str(path)]) == 0
+    assert (
+        main(
+            [
+                "pattern",
+                "four-pad",
+                "--size",
+                "1000",
+                "--gap",
+                "50",
+                "--um-per-px",
+                "1",
+                "-o",
+                str(path),
+            ]
+        )
+        == 0
+    )
     return path
 
 
 def guarded(args: list, cwd: Path) -> tuple[int, str, float]:
     """(exit code, stderr, peak RSS in MB) of ``selfalign ARGS`` with the work forbidden."""
-    env = os.environ | {"PYTHONWARNINGS": "ignore", WAIT_ENV: "0"}  # every waiting line shown: none may come before the refusal
-    out = subprocess.run([sys.executable, "-c", GUARDED, *[str(a) for a in args]], capture_output=True, text=True,
-                         timeout=300, cwd=cwd, env=env)
-    rss = [float(line.split("=")[1]) for line in out.stdout.splitlines() if line.startswith("peak_rss_mb=")]
+    env = os.environ | {
+        "PYTHONWARNINGS": "ignore",
+        WAIT_ENV: "0",
+    }  # every waiting line shown: none may come before the refusal
+    out = subprocess.run(
+        [sys.executable, "-c", GUARDED, *[str(a) for a in args]],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=cwd,
+        env=env,
+    )
+    rss = [
+        float(line.split("=")[1])
+        for line in out.stdout.splitlines()
+        if line.startswith("peak_rss_mb=")
+    ]
     assert rss, out.stdout + out.stderr
     return out.returncode, out.stderr, rss[0]
 
@@ -91,29 +120,79 @@ def _chip(fp: Path) -> list:
 CASES = {
     "simulate greedy: the first box with its transforms": (
         ["simulate", "--start=300,-200,10", "--memory-budget", "64"],
-        ["the landscape needs about", "7 twists x", "work space", "memory budget is 64 MB", "--um-per-px", "--memory-budget"]),
+        [
+            "the landscape needs about",
+            "7 twists x",
+            "work space",
+            "memory budget is 64 MB",
+            "--um-per-px",
+            "--memory-budget",
+        ],
+    ),
     "simulate gradient, free contact lines: the footprint's distance transform": (
-        ["simulate", "--start=300,-200,10", "--method", "gradient", "--meniscus-height", "31", "--memory-budget", "200"],
-        ["meniscus footprint of the 1,000 x 1,000 um chip", "distance transform", "memory budget is 200 MB", "--resolution",
-         "--meniscus-height", "--memory-budget"]),
+        [
+            "simulate",
+            "--start=300,-200,10",
+            "--method",
+            "gradient",
+            "--meniscus-height",
+            "31",
+            "--memory-budget",
+            "200",
+        ],
+        [
+            "meniscus footprint of the 1,000 x 1,000 um chip",
+            "distance transform",
+            "memory budget is 200 MB",
+            "--resolution",
+            "--meniscus-height",
+            "--memory-budget",
+        ],
+    ),
     "simulate gradient, pinned lines: the footprint's K_h blur": (
-        ["simulate", "--start=300,-200,10", "--method", "gradient", "--meniscus-height", "31", "--pinned", "--memory-budget", "400"],
-        ["meniscus footprint of the 1,000 x 1,000 um chip", "K_h blur", "memory budget is 400 MB", "--memory-budget"]),
+        [
+            "simulate",
+            "--start=300,-200,10",
+            "--method",
+            "gradient",
+            "--meniscus-height",
+            "31",
+            "--pinned",
+            "--memory-budget",
+            "400",
+        ],
+        [
+            "meniscus footprint of the 1,000 x 1,000 um chip",
+            "K_h blur",
+            "memory budget is 400 MB",
+            "--memory-budget",
+        ],
+    ),
     "simulate greedy with the meniscus: the first box and its footprint": (
         ["simulate", "--start=300,-200,10", "--meniscus-height", "31", "--memory-budget", "330"],
-        ["the landscape needs about", "meniscus footprint", "memory budget is 330 MB", "--memory-budget"]),
+        [
+            "the landscape needs about",
+            "meniscus footprint",
+            "memory budget is 330 MB",
+            "--memory-budget",
+        ],
+    ),
     "simulate greedy, meniscus below a pixel: the proof's whole landscape, a twist at a time": (
         ["simulate", "--start=300,-200,10", "--meniscus-height", "0.5", "--memory-budget", "150"],
-        ["the landscape needs about", "(1 twist x ", "memory budget is 150 MB", "--memory-budget"]),
+        ["the landscape needs about", "(1 twist x ", "memory budget is 150 MB", "--memory-budget"],
+    ),
     "simulate overdamped: the whole landscape": (
         ["simulate", "--start=300,-200,10", "--method", "overdamped", "--memory-budget", "1000"],
-        ["the landscape needs about", "memory budget is 1,000 MB", "--memory-budget"]),
+        ["the landscape needs about", "memory budget is 1,000 MB", "--memory-budget"],
+    ),
     "energy with the meniscus: the footprint": (
         ["energy", "--at", "0,0,0", "--meniscus-height", "31", "--memory-budget", "200"],
-        ["meniscus footprint", "distance transform", "--memory-budget"]),
+        ["meniscus footprint", "distance transform", "--memory-budget"],
+    ),
     "montecarlo: the landscape with its transforms": (
         ["montecarlo", "--random", "100", "--spread", "10,10,1", "--memory-budget", "1000"],
-        ["the landscape needs about", "memory budget is 1,000 MB", "--memory-budget"]),
+        ["the landscape needs about", "memory budget is 1,000 MB", "--memory-budget"],
+    ),
 }
 
 
@@ -128,8 +207,21 @@ def test_oversize_run_is_refused_before_any_work(case, fp1k, tmp_path):
 def test_evaluate_oversize_is_refused_before_its_output_or_any_work(fp1k, tmp_path):
     # A pixel size given (no automatic coarsening): priced before the compile line and the output.
     out = tmp_path / "report"
-    rc, err, rss = guarded(["evaluate", fp1k, "--chip-size", "1000", "--resolution", "1", "--memory-budget", "1000",
-                            "--out", out], tmp_path)
+    rc, err, rss = guarded(
+        [
+            "evaluate",
+            fp1k,
+            "--chip-size",
+            "1000",
+            "--resolution",
+            "1",
+            "--memory-budget",
+            "1000",
+            "--out",
+            out,
+        ],
+        tmp_path,
+    )
     one_line_error(rc, err, "the landscape needs about", "--memory-budget")
     assert rss < REFUSED_RSS_MB and not out.exists()
 
@@ -137,7 +229,8 @@ def test_evaluate_oversize_is_refused_before_its_output_or_any_work(fp1k, tmp_pa
 def test_sweep_point_over_budget_fails_before_any_work(tmp_path):
     # The point's refusal is its row; the sweep itself goes on (and ends with exit code 0).
     spec = tmp_path / "sweep.toml"
-    spec.write_text(textwrap.dedent("""
+    spec.write_text(
+        textwrap.dedent("""
         [scene]
         chip_size_um = 1000
         resolution_um = 1
@@ -152,12 +245,19 @@ def test_sweep_point_over_budget_fails_before_any_work(tmp_path):
         gap = 50
         [axes]
         gap = [50]
-    """))
-    rc, err, rss = guarded(["sweep", spec, "--out", tmp_path / "out", "--workers", "0", "--quiet"], tmp_path)
+    """)
+    )
+    rc, err, rss = guarded(
+        ["sweep", spec, "--out", tmp_path / "out", "--workers", "0", "--quiet"], tmp_path
+    )
     assert rc == 0, err
     (point,) = (tmp_path / "out" / "points").glob("*.json")
     row = json.loads(point.read_text())["row"]
-    assert row["status"] == "error" and "the landscape needs about" in row["error"] and "--memory-budget" in row["error"], row
+    assert (
+        row["status"] == "error"
+        and "the landscape needs about" in row["error"]
+        and "--memory-budget" in row["error"]
+    ), row
     assert rss < REFUSED_RSS_MB
 
 
@@ -168,7 +268,9 @@ def test_a_build_takes_smaller_chunks_of_twists_before_it_refuses():
     from simulator.landscape import build_landscape
     from simulator.landscape._build import _build_bytes, _layout
 
-    sc = Scene.from_inputs(LIB / "four_pad_730_50.png", chip_size_um=730, resolution_um=5, dtype="float64")
+    sc = Scene.from_inputs(
+        LIB / "four_pad_730_50.png", chip_size_um=730, resolution_um=5, dtype="float64"
+    )
     lay = _layout(sc, None, (0, 0), None, check_budget=True)
     one, eight = _build_bytes(sc, lay, 1), _build_bytes(sc, lay, 8)
     assert eight > 1.3 * one
@@ -181,8 +283,14 @@ def test_the_bound_rotates_the_footprint_once_when_the_pattern_is_the_smaller(mo
     # twist's mass reaches |P| the others are not rotated (each is a whole chip canvas).
     from simulator.landscape._overlap_bound import _Bounds
 
-    sc = Scene.from_inputs(LIB / "four_pad_730_50.png", chip_size_um=730, resolution_um=5, effects=Effects(meniscus=True),
-                           liquid=Liquid(height_um=20.0), dtype="float64")
+    sc = Scene.from_inputs(
+        LIB / "four_pad_730_50.png",
+        chip_size_um=730,
+        resolution_um=5,
+        effects=Effects(meniscus=True),
+        liquid=Liquid(height_um=20.0),
+        dtype="float64",
+    )
     b = _Bounds(sc)
     assert b.footprint
     calls = []
@@ -195,8 +303,15 @@ def test_the_bound_rotates_the_footprint_once_when_the_pattern_is_the_smaller(mo
 def test_the_bounds_keep_the_rotations_that_fit_a_quarter_of_the_budget():
     from simulator.landscape._overlap_bound import _Bounds
 
-    sc = Scene.from_inputs(LIB / "four_pad_730_50.png", chip_size_um=730, resolution_um=5, effects=Effects(meniscus=True),
-                           liquid=Liquid(height_um=20.0), dtype="float64", memory_budget_mb=40)
+    sc = Scene.from_inputs(
+        LIB / "four_pad_730_50.png",
+        chip_size_um=730,
+        resolution_um=5,
+        effects=Effects(meniscus=True),
+        liquid=Liquid(height_um=20.0),
+        dtype="float64",
+        memory_budget_mb=40,
+    )
     b = _Bounds(sc)
     assert 1 <= b._fine_keep <= 40 * 2**20 / 4 / b._fine_bytes < len(b.twists)
     for j in range(len(b.twists)):
@@ -208,7 +323,13 @@ def test_the_bounds_keep_the_rotations_that_fit_a_quarter_of_the_budget():
 def test_wait_threshold(monkeypatch):
     monkeypatch.delenv(WAIT_ENV, raising=False)
     assert wait_threshold_s() == WAIT_S and shows_wait(WAIT_S) and not shows_wait(WAIT_S / 2)
-    for text, want in (("0", 0.0), ("12.5", 12.5), ("soon", WAIT_S), ("-1", WAIT_S), ("nan", WAIT_S)):
+    for text, want in (
+        ("0", 0.0),
+        ("12.5", 12.5),
+        ("soon", WAIT_S),
+        ("-1", WAIT_S),
+        ("nan", WAIT_S),
+    ):
         monkeypatch.setenv(WAIT_ENV, text)
         assert wait_threshold_s() == want, text
     monkeypatch.setenv(WAIT_ENV, "0")
@@ -217,8 +338,22 @@ def test_wait_threshold(monkeypatch):
     assert shows_wait(0.0)
 
 
-MENISCUS_RUN = ["simulate", "--pattern", LIB / "four_pad_730_50.png", "--chip-size", "730", "--resolution", "5",
-                "--meniscus-height", "20", "--method", "gradient", "--start=60,-40,4", "--max-steps", "200"]
+MENISCUS_RUN = [
+    "simulate",
+    "--pattern",
+    LIB / "four_pad_730_50.png",
+    "--chip-size",
+    "730",
+    "--resolution",
+    "5",
+    "--meniscus-height",
+    "20",
+    "--method",
+    "gradient",
+    "--start=60,-40,4",
+    "--max-steps",
+    "200",
+]
 
 
 def test_simulate_says_what_it_waits_for(monkeypatch, run_cli):
@@ -226,9 +361,16 @@ def test_simulate_says_what_it_waits_for(monkeypatch, run_cli):
     rc, out, err = run_cli(MENISCUS_RUN)
     assert rc == 0, err
     lines = err.splitlines()
-    assert any(line.startswith("meniscus footprint of the 730 x 730 um chip (distance transform of ") for line in lines), err
+    assert any(
+        line.startswith("meniscus footprint of the 730 x 730 um chip (distance transform of ")
+        for line in lines
+    ), err
     boxes = [line for line in lines if line.startswith("landscape box ")]
-    assert boxes and boxes[0].startswith("landscape box 1: 7 twists x ") and "poses (transforms of " in boxes[0], err
+    assert (
+        boxes
+        and boxes[0].startswith("landscape box 1: 7 twists x ")
+        and "poses (transforms of " in boxes[0]
+    ), err
     assert all(line.endswith("...") for line in boxes)
     assert "gradient:" in out and "landscape box" not in out  # results on stdout, waits on stderr
 
@@ -244,7 +386,11 @@ def test_no_waiting_line_under_the_threshold(monkeypatch, run_cli):
     monkeypatch.setenv(WAIT_ENV, "1e9")
     rc, out, err = run_cli(MENISCUS_RUN)
     assert rc == 0, err
-    assert "landscape box" not in err and "meniscus footprint" not in err and "global minimum" not in err
+    assert (
+        "landscape box" not in err
+        and "meniscus footprint" not in err
+        and "global minimum" not in err
+    )
 
 
 def test_the_global_minimums_proof_shows_its_progress(monkeypatch, capsys):
@@ -253,8 +399,14 @@ def test_the_global_minimums_proof_shows_its_progress(monkeypatch, capsys):
     from simulator.landscape import global_minimum
 
     monkeypatch.setenv(WAIT_ENV, "0")
-    sc = Scene.from_inputs(LIB / "defect_C_inward.png", chip_size_um=200, resolution_um=2, effects=Effects(meniscus=True),
-                           liquid=Liquid(volume_nl=0.9, pinned=True), dtype="float64")
+    sc = Scene.from_inputs(
+        LIB / "defect_C_inward.png",
+        chip_size_um=200,
+        resolution_um=2,
+        effects=Effects(meniscus=True),
+        liquid=Liquid(volume_nl=0.9, pinned=True),
+        dtype="float64",
+    )
     assert global_minimum(sc).how == "cell bound"
     err = capsys.readouterr().err
     assert "global minimum: nominal box: 5 twists x 33 x 33 poses" in err

@@ -52,7 +52,9 @@ def _fake(n: int, t_s=None) -> Trajectory:
     return Trajectory("greedy", "aligned", np.zeros((n, 3)), np.zeros(n), n - 1, t_s=t_s)
 
 
-@pytest.mark.parametrize("n, most", [(1, 120), (50, 120), (120, 120), (121, 120), (5000, 120), (5000, 2)])
+@pytest.mark.parametrize(
+    "n, most", [(1, 120), (50, 120), (120, 120), (121, 120), (5000, 120), (5000, 2)]
+)
 def test_frame_indices_keep_first_and_last_within_the_limit(n, most):
     idx = frame_indices(_fake(n), most)
     assert idx[0] == 0 and idx[-1] == n - 1 and len(idx) <= most
@@ -113,11 +115,18 @@ def test_gif_frames_show_the_chip_at_the_start_and_final_poses(run, tmp_path):
         crop = frame[box].astype(int)
         light_r, light_c = np.nonzero(crop.min(axis=-1) > 200)
         px_per_um = (light_c.max() - light_c.min() + 1) / 200.0
-        origin = np.array([(light_c.min() + light_c.max()) / 2, (light_r.min() + light_r.max()) / 2])
+        origin = np.array(
+            [(light_c.min() + light_c.max()) / 2, (light_r.min() + light_r.max()) / 2]
+        )
         origin += [box[1].start + 0.5, box[0].start + 0.5]
         # The chip outline: its bounding box is centred on the chip centre (a square).
         red = _chip_pixels(frame, box)
-        centre_px = np.array([(red[:, 1].min() + red[:, 1].max()) / 2, (red[:, 0].min() + red[:, 0].max()) / 2]) + 0.5
+        centre_px = (
+            np.array(
+                [(red[:, 1].min() + red[:, 1].max()) / 2, (red[:, 0].min() + red[:, 0].max()) / 2]
+            )
+            + 0.5
+        )
         x_um, y_um = (centre_px - origin) / px_per_um * [1, -1]  # image rows grow downwards, y up
         assert (x_um, y_um) == pytest.approx((pose[0], pose[1]), abs=2.5 / px_per_um)
         # ... and where the animation's own axes put it, within two pixels.
@@ -145,7 +154,9 @@ def test_gif_of_dynamics_titles_time_and_holds_the_last_frame(run, tmp_path):
     anim.close()
 
 
-@pytest.mark.parametrize("kwargs, message", [({"fps": 0}, "fps"), ({"max_frames": 1}, "max_frames")])
+@pytest.mark.parametrize(
+    "kwargs, message", [({"fps": 0}, "fps"), ({"max_frames": 1}, "max_frames")]
+)
 def test_gif_bad_arguments(run, tmp_path, kwargs, message):
     scene, traj = run
     with pytest.raises(InputError, match=message):
@@ -164,7 +175,11 @@ def test_plot_landscape_and_forces_write_pngs(small_landscape, tmp_path):
     for name in ("l.png", "f.png", "g.png"):
         img = iio.imread(tmp_path / name)
         assert img.ndim == 3 and min(img.shape[:2]) > 300
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["f.png", "g.png", "l.png"]  # no temporaries
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "f.png",
+        "g.png",
+        "l.png",
+    ]  # no temporaries
 
 
 def test_plots_of_an_untwisted_landscape(tmp_path):
@@ -185,13 +200,25 @@ def test_plot_forces_bad_span(small_landscape, tmp_path):
 def test_demo_writes_all_its_files(tmp_path, capsys):
     out = tmp_path / "out"
     assert main(["demo", "--out", str(out), "--quiet"]) == 0
-    assert sorted(p.name for p in out.iterdir()) == [".selfalign-output.json", "demo.gif", "demo_energy.png", "report", "summary.txt", "trajectory.json"]
+    assert sorted(p.name for p in out.iterdir()) == [
+        ".selfalign-output.json",
+        "demo.gif",
+        "demo_energy.png",
+        "report",
+        "summary.txt",
+        "trajectory.json",
+    ]
     assert (out / "report" / "report.html").exists() and (out / "report" / "summary.json").exists()
     captured = capsys.readouterr()
     assert captured.err == ""  # --quiet: no progress bars or waiting messages
-    assert "aligned at (0.00 um, 0.00 um, 0.00 deg)" in captured.out and f"wrote {out / 'demo.gif'}" in captured.out
+    assert (
+        "aligned at (0.00 um, 0.00 um, 0.00 deg)" in captured.out
+        and f"wrote {out / 'demo.gif'}" in captured.out
+    )
     doc = json.loads((out / "trajectory.json").read_text())
-    assert doc["outcome"] == "aligned" and max(abs(p["twist_deg"]) for p in doc["path"]) > 15  # escapes by twisting
+    assert (
+        doc["outcome"] == "aligned" and max(abs(p["twist_deg"]) for p in doc["path"]) > 15
+    )  # escapes by twisting
     summary = (out / "summary.txt").read_text()
     assert "outcome      aligned" in summary and "plateau at (380.00 um" in summary
     frames = iio.imread(out / "demo.gif", index=None)
@@ -206,7 +233,23 @@ def test_demo_out_with_a_missing_parent(tmp_path, capsys):
 
 def test_simulate_gif(tmp_path, capsys):
     out = tmp_path / "s.gif"
-    assert main(["simulate", "--pattern", SQUARE, "--chip-size", "200", "--start", "12,5,3", "--gif", str(out), "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                "--pattern",
+                SQUARE,
+                "--chip-size",
+                "200",
+                "--start",
+                "12,5,3",
+                "--gif",
+                str(out),
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     captured = capsys.readouterr()
     assert f"wrote {out}" in captured.out and captured.err == ""
     assert len(iio.imread(out, index=None)) == 13  # 12 steps + start
@@ -215,7 +258,21 @@ def test_simulate_gif(tmp_path, capsys):
 @pytest.mark.parametrize("gif", ["/nonexistent/dir/t.gif", "t.png"])
 def test_simulate_gif_bad_output_fails_before_any_work(gif, tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    rc = main(["simulate", "--pattern", SQUARE, "--chip-size", "200", "--start", "1,2,3", "--json", "t.json", "--gif", gif])
+    rc = main(
+        [
+            "simulate",
+            "--pattern",
+            SQUARE,
+            "--chip-size",
+            "200",
+            "--start",
+            "1,2,3",
+            "--json",
+            "t.json",
+            "--gif",
+            gif,
+        ]
+    )
     assert rc == 2
     err = capsys.readouterr().err
     assert "--gif" in err and len(err.strip().splitlines()) == 1

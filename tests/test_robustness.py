@@ -108,7 +108,11 @@ INERTIAL = jax.jit(inertial, static_argnames=STATIC)
 
 def scene(pattern_geom, chip_geom, um_per_px=1.0, margin=None, **kw):
     margin = 10 * um_per_px if margin is None else margin
-    return Scene(pattern=mask_from_geometry(pattern_geom, um_per_px, margin_um=margin), chip=mask_from_geometry(chip_geom, um_per_px), **kw)
+    return Scene(
+        pattern=mask_from_geometry(pattern_geom, um_per_px, margin_um=margin),
+        chip=mask_from_geometry(chip_geom, um_per_px),
+        **kw,
+    )
 
 
 def assert_finite(t, max_steps=5000):
@@ -166,7 +170,9 @@ def assert_dynamics_sane(state, floor):
     tol = mechanical_tolerance(state, floor)
     assert np.all(np.diff(h) <= tol), f"rise {np.diff(h).max():.3g} J > floor {floor:.3g} J"
     excess = h - np.minimum.accumulate(h)
-    assert np.all(excess <= tol), f"{excess.max():.3g} J above the lowest at step {int(np.argmax(excess))} of {len(h)}"
+    assert np.all(excess <= tol), (
+        f"{excess.max():.3g} J above the lowest at step {int(np.argmax(excess))} of {len(h)}"
+    )
 
 
 TWIST3 = TwistGrid(step_deg=3.0)
@@ -211,7 +217,10 @@ def test_plateau_four_pad_flat_part(fp100, start):
             assert r[m].steps == 0 and r[m].final == start and r[m].outcome == "plateau", (dt, m)
         if start == (50, 50, 0):  # flat in twist as well: the dynamics hold still too
             for m in ("overdamped", "inertial"):
-                assert r[m].steps == 0 and r[m].final == start and r[m].outcome == "plateau", (dt, m)
+                assert r[m].steps == 0 and r[m].final == start and r[m].outcome == "plateau", (
+                    dt,
+                    m,
+                )
     for m in METHODS:  # float32 and float64 agree on the outcome of every method
         assert runs["float32"][m].outcome == runs["float64"][m].outcome, m
 
@@ -256,7 +265,9 @@ def test_tie_mirror_symmetric_pattern():
             g, h = (simulate(s, p, method="gradient", landscape=ls) for p in (start, mirror))
             assert_finite(g)
             assert_finite(h)
-            np.testing.assert_allclose(h.final, np.multiply(g.final, [1, -1, -1]), atol=1e-3 if dt == "float32" else 1e-9)
+            np.testing.assert_allclose(
+                h.final, np.multiply(g.final, [1, -1, -1]), atol=1e-3 if dt == "float32" else 1e-9
+            )
             assert a.outcome == b.outcome and g.outcome == h.outcome
 
 
@@ -267,7 +278,11 @@ def test_degenerate_chip_of_1_to_3_px():
     for n in (1, 2, 3):
         s, ls = with_landscape(scene(four_pad(60, 6), square(n), twist=TWIST3))
         methods = QUICK if n == 1 else ("greedy",)
-        for start, outcome in [((15, 15, 6), "plateau"), ((0, 0, 0), "no_contact"), ((-20, 0, 0), "no_contact")]:
+        for start, outcome in [
+            ((15, 15, 6), "plateau"),
+            ((0, 0, 0), "no_contact"),
+            ((-20, 0, 0), "no_contact"),
+        ]:
             for m, t in run_all(s, start, methods, landscape=ls).items():
                 assert t.steps == 0 and t.outcome == outcome, (n, start, m)
         t = simulate(s, (3, 15, 0), landscape=ls)
@@ -301,15 +316,30 @@ def test_degenerate_chip_much_smaller_than_pad(tiny_chip):
     s, ls = tiny_chip
     for m, t in run_all(s, (50, 50, 12), QUICK, landscape=ls).items():
         assert t.steps == 0 and t.outcome == "plateau", m
-    for m, t in run_all(s, (10, 50, 0), QUICK, landscape=ls).items():  # half on the pad edge at x = 10
+    for m, t in run_all(
+        s, (10, 50, 0), QUICK, landscape=ls
+    ).items():  # half on the pad edge at x = 10
         assert t.steps >= 1 and t.energy_J[-1] < t.energy_J[0], m
     assert simulate(s, (10, 50, 0), landscape=ls).final == (12, 50, 0)  # fully on, in two moves
 
 
 def test_degenerate_pattern_touching_border():
     # The pattern fills its image: no margin; beyond it lies substrate, never the far side.
-    s, ls = with_landscape(Scene(pattern=Mask(np.ones((80, 120)), 1.0), chip=mask_from_geometry(square(40), 1.0), twist=TWIST3))
-    for x, y, want in [(70, 0, 400), (-70, 0, 400), (0, 50, 400), (0, -50, 400), (75, 55, 25), (-85, 0, 0)]:
+    s, ls = with_landscape(
+        Scene(
+            pattern=Mask(np.ones((80, 120)), 1.0),
+            chip=mask_from_geometry(square(40), 1.0),
+            twist=TWIST3,
+        )
+    )
+    for x, y, want in [
+        (70, 0, 400),
+        (-70, 0, 400),
+        (0, 50, 400),
+        (0, -50, 400),
+        (75, 55, 25),
+        (-85, 0, 0),
+    ]:
         assert ls.overlap_um2(ls.energy_at(x, y, 0)) == pytest.approx(want, abs=1e-2), (x, y)
     for m, t in run_all(s, (70, 45, 3), QUICK, landscape=ls).items():
         assert t.energy_J[-1] <= ls.energy.min() + 2 * ls.noise_floor_J, m  # fully on the pattern
@@ -320,9 +350,15 @@ def test_degenerate_start_without_overlap(fp100, tiny_chip):
     for dt, (s, ls) in fp100.items():
         for start in [(200, 0, 0), (-150, 150, 30), (120, -101, -40)]:
             for m, t in run_all(s, start, landscape=ls).items():
-                assert t.steps == 0 and t.outcome == "no_contact" and abs(t.energy_J[0]) <= ls.noise_floor_J, (dt, m)
+                assert (
+                    t.steps == 0
+                    and t.outcome == "no_contact"
+                    and abs(t.energy_J[0]) <= ls.noise_floor_J
+                ), (dt, m)
     s, ls = tiny_chip
-    for m, t in run_all(s, (0, 40, 0), QUICK, landscape=ls).items():  # inside the gap, 8 px from either pad
+    for m, t in run_all(
+        s, (0, 40, 0), QUICK, landscape=ls
+    ).items():  # inside the gap, 8 px from either pad
         assert t.steps == 0 and t.outcome == "no_contact", m
 
 
@@ -331,11 +367,16 @@ def test_degenerate_nearly_equal_wettability(fp100):
     # 30/60. Only the energy scale changes (C14): the same greedy paths bit for bit and
     # gradient paths within round-off; the weak force makes the dynamics slow (t_max).
     for dt, (s, ls) in fp100.items():
-        weak, weak_ls = with_landscape(s.replace(materials=Materials(pad_angle_deg=59.99, substrate_angle_deg=60.0)))
+        weak, weak_ls = with_landscape(
+            s.replace(materials=Materials(pad_angle_deg=59.99, substrate_angle_deg=60.0))
+        )
         assert -2e-5 < weak.materials.delta_gamma_N_m < 0
         for start in [START, (52, -48, 0), (50, 50, 0)]:
             for m in ("greedy", "gradient"):
-                a, b = simulate(s, start, method=m, landscape=ls), simulate(weak, start, method=m, landscape=weak_ls)
+                a, b = (
+                    simulate(s, start, method=m, landscape=ls),
+                    simulate(weak, start, method=m, landscape=weak_ls),
+                )
                 assert_finite(b)
                 assert a.outcome == b.outcome, (dt, start, m)
                 if m == "greedy":
@@ -357,8 +398,17 @@ def test_degenerate_graded_levels_1_and_0999():
     d = np.zeros((120, 120))
     d[10:110, 10:60], d[10:110, 60:110] = 1.0, 0.999
     for dt in DTYPES:
-        s, ls = with_landscape(Scene(pattern=Mask(d, 1.0), chip=mask_from_geometry(square(50), 1.0), twist=TWIST3, dtype=dt))
-        methods = ("greedy", "gradient", "overdamped") if dt == "float32" else ("greedy", "gradient")
+        s, ls = with_landscape(
+            Scene(
+                pattern=Mask(d, 1.0),
+                chip=mask_from_geometry(square(50), 1.0),
+                twist=TWIST3,
+                dtype=dt,
+            )
+        )
+        methods = (
+            ("greedy", "gradient", "overdamped") if dt == "float32" else ("greedy", "gradient")
+        )
         for m, t in run_all(s, (10, 0, 0), methods, landscape=ls).items():
             assert t.energy_J[-1] <= t.energy_J[0] and t.final[0] <= 10, (dt, m)
         t = simulate(s, (10, 0, 0), landscape=ls)
@@ -376,7 +426,10 @@ def test_extreme_surface_tension(fp100, gamma):
     for dt, (s, ls) in fp100.items():
         t_scene, t_ls = with_landscape(s.replace(materials=Materials(surface_tension_N_m=gamma)))
         for m in ("greedy", "gradient"):
-            a, b = simulate(s, START, method=m, landscape=ls), simulate(t_scene, START, method=m, landscape=t_ls)
+            a, b = (
+                simulate(s, START, method=m, landscape=ls),
+                simulate(t_scene, START, method=m, landscape=t_ls),
+            )
             assert_finite(b)
             assert a.outcome == b.outcome
             if m == "greedy":
@@ -404,7 +457,14 @@ def test_extreme_scale(fp100, k):
     # Geometry, droplet volume (x k^3) and chip thickness (x k) scaled with the pixel size:
     # the same poses in px; for the overdamped model, time scales with k.
     s, ls = with_landscape(
-        scene(four_pad(100 * k, 10 * k), square(100 * k), um_per_px=k, twist=TWIST3, liquid=Liquid(volume_nl=20 * k**3), chip_thickness_um=50 * k)
+        scene(
+            four_pad(100 * k, 10 * k),
+            square(100 * k),
+            um_per_px=k,
+            twist=TWIST3,
+            liquid=Liquid(volume_nl=20 * k**3),
+            chip_thickness_um=50 * k,
+        )
     )
     ref_s, ref_ls = fp100["float32"]
     for m in QUICK:
@@ -416,7 +476,10 @@ def test_extreme_scale(fp100, k):
         if m == "greedy":
             np.testing.assert_allclose(px, a.path, rtol=0, atol=1e-9)
         elif m in ("overdamped", "inertial"):  # within REST_TOL_STEPS of a grid step (see above)
-            assert np.all(np.abs(px[-1] - a.path[-1]) <= REST_TOL_STEPS * np.array([1.0, 1.0, ref_s.twist_axis.step_deg]))
+            assert np.all(
+                np.abs(px[-1] - a.path[-1])
+                <= REST_TOL_STEPS * np.array([1.0, 1.0, ref_s.twist_axis.step_deg])
+            )
         else:
             np.testing.assert_allclose(px[-1], a.path[-1], atol=1e-2)
         if m == "overdamped":
@@ -464,10 +527,16 @@ def test_extreme_twist_near_180(periods):
                 if m == "greedy":
                     np.testing.assert_array_equal(b.path, a.path - [0, 0, 360])
                 elif m == "overdamped":  # within REST_TOL_STEPS of a grid step (see above)
-                    tol = REST_TOL_STEPS * np.array([s.um_per_px, s.um_per_px, s.twist_axis.step_deg])
-                    assert np.all(np.abs(np.subtract(b.final, np.subtract(a.final, [0, 0, 360]))) <= tol)
+                    tol = REST_TOL_STEPS * np.array(
+                        [s.um_per_px, s.um_per_px, s.twist_axis.step_deg]
+                    )
+                    assert np.all(
+                        np.abs(np.subtract(b.final, np.subtract(a.final, [0, 0, 360]))) <= tol
+                    )
                 else:
-                    np.testing.assert_allclose(b.final, np.subtract(a.final, [0, 0, 360]), atol=2e-2)
+                    np.testing.assert_allclose(
+                        b.final, np.subtract(a.final, [0, 0, 360]), atol=2e-2
+                    )
                 assert a.steps > 0
                 if period < 360:  # the start is one period away from aligned
                     assert a.outcome == "aligned" and abs(a.final[2] - 180) <= 0.5, (period, up, m)
@@ -476,7 +545,9 @@ def test_extreme_twist_near_180(periods):
 @pytest.fixture(scope="module")
 def fine_twist():
     """Twist steps of 0.01 degrees over [-0.5, 0.5] (101 twists, a bounded axis)."""
-    return with_landscape(scene(square(100), square(100), twist=TwistGrid(step_deg=0.01, min_deg=-0.5, max_deg=0.5)))
+    return with_landscape(
+        scene(square(100), square(100), twist=TwistGrid(step_deg=0.01, min_deg=-0.5, max_deg=0.5))
+    )
 
 
 def test_extreme_fine_twist_step(fine_twist):
@@ -509,7 +580,9 @@ def run_dynamics(s, field, grid, method, pose=START):
     solver choice, stiff runs implicit), returning the full state."""
     p = DynamicsParams.from_scene(s)
     fn = dynamics_jitted(method, is_stiff(method, field, grid, p))
-    return fn(field, grid, p, jnp.asarray(grid.to_index(np.asarray(pose, float))), DEFAULT_MAX_STEPS), p
+    return fn(
+        field, grid, p, jnp.asarray(grid.to_index(np.asarray(pose, float))), DEFAULT_MAX_STEPS
+    ), p
 
 
 def test_dynamics_stiff_meniscus(fp100_field):
@@ -545,7 +618,9 @@ def test_dynamics_heavy_damping(fp100_field):
     for m in ("overdamped", "inertial"):
         state, p = run_dynamics(s, field, grid, m)
         assert_dynamics_sane(state, float(field.floor))
-        assert int(state.status) == MAX_STEPS and float(state.time_s) == pytest.approx(p.t_max_s, rel=1e-5)
+        assert int(state.status) == MAX_STEPS and float(state.time_s) == pytest.approx(
+            p.t_max_s, rel=1e-5
+        )
         assert float(state.energy) < float(state.path_energy[0])
 
 
@@ -561,7 +636,9 @@ def star(draw, radius):
     """A random star-shaped polygon about the origin, simple by construction: vertices at
     0, 90, 180 and 270 degrees at ``radius`` (so every example has one bounding box, one
     reach and one grid shape), and 1-6 more at random angles and radii."""
-    extra = draw(st.lists(st.integers(1, 359).filter(lambda a: a % 90), min_size=1, max_size=6, unique=True))
+    extra = draw(
+        st.lists(st.integers(1, 359).filter(lambda a: a % 90), min_size=1, max_size=6, unique=True)
+    )
     pts = {0: (radius, 0.0), 90: (0.0, radius), 180: (-radius, 0.0), 270: (0.0, -radius)}
     for a in extra:
         r = draw(st.floats(0.25 * radius, radius))
@@ -570,7 +647,10 @@ def star(draw, radius):
 
 
 def random_scene(pattern, chip, dtype="float32", um_per_px=1.0):
-    pat, chp = mask_from_geometry(pattern, um_per_px, margin_um=2 * um_per_px), mask_from_geometry(chip, um_per_px)
+    pat, chp = (
+        mask_from_geometry(pattern, um_per_px, margin_um=2 * um_per_px),
+        mask_from_geometry(chip, um_per_px),
+    )
     return with_landscape(Scene(pattern=pat, chip=chp, twist=TwistGrid(step_deg=30.0), dtype=dtype))
 
 
@@ -580,19 +660,32 @@ def starts_in_grid(integer):
 
 
 @settings(max_examples=50, deadline=None)
-@given(pattern=star(R_PATTERN), chip=star(R_CHIP), um_per_px=st.sampled_from([0.5, 1.0, 2.0]), poses=st.lists(starts_in_grid(True), min_size=10, max_size=10))
+@given(
+    pattern=star(R_PATTERN),
+    chip=star(R_CHIP),
+    um_per_px=st.sampled_from([0.5, 1.0, 2.0]),
+    poses=st.lists(starts_in_grid(True), min_size=10, max_size=10),
+)
 def test_property_landscape_matches_exact_overlap(pattern, chip, um_per_px, poses):
     # Stated bound: |A_raster - A_exact| <= 0.25 * (chip + pattern perimeter) * um_per_px (um^2).
-    pattern, chip = (affinity.scale(g, um_per_px, um_per_px, origin=(0, 0)) for g in (pattern, chip))
+    pattern, chip = (
+        affinity.scale(g, um_per_px, um_per_px, origin=(0, 0)) for g in (pattern, chip)
+    )
     s, ls = random_scene(pattern, chip, "float64", um_per_px)
     idx = np.array(poses)
     x, y = ls.x_um[idx[:, 2] % len(ls.x_um)], ls.y_um[idx[:, 1] % len(ls.y_um)]
     t = ls.twist_deg[idx[:, 0] % len(ls.twist_deg)]
     raster = ls.overlap_um2(ls.energy_at(x, y, t))
-    moved = [affinity.translate(affinity.rotate(chip, ti, origin=(0, 0)), xi, yi) for xi, yi, ti in zip(x, y, t, strict=True)]
+    moved = [
+        affinity.translate(affinity.rotate(chip, ti, origin=(0, 0)), xi, yi)
+        for xi, yi, ti in zip(x, y, t, strict=True)
+    ]
     exact = shapely.area(shapely.intersection(pattern, moved))
     assert np.abs(raster - exact).max() <= 0.25 * (pattern.length + chip.length) * s.um_per_px
-    assert np.all(np.isfinite(ls.energy)) and ls.overlap_um2(ls.energy.min()) <= min(pattern.area, chip.area) + 1e-6
+    assert (
+        np.all(np.isfinite(ls.energy))
+        and ls.overlap_um2(ls.energy.min()) <= min(pattern.area, chip.area) + 1e-6
+    )
 
 
 def random_field(pattern, chip):
@@ -615,10 +708,14 @@ def test_property_steppers_terminate_finite(pattern, chip, start):
     for m, r in runs.items():
         pose = r.idx if m == "greedy" else r.q
         n = int(r.step)
-        assert 0 <= n <= MAXP and int(r.status) in (CONVERGED, MAX_STEPS), m  # full landscape: no EDGE
+        assert 0 <= n <= MAXP and int(r.status) in (CONVERGED, MAX_STEPS), (
+            m
+        )  # full landscape: no EDGE
         for a in (pose, r.energy, r.path[: n + 1], r.path_energy[: n + 1]):
             assert np.all(np.isfinite(np.asarray(a))), m
-        flat = getattr(r, "flat", False) | on_plateau(field, grid, jnp.round(pose).astype(jnp.int32))
+        flat = getattr(r, "flat", False) | on_plateau(
+            field, grid, jnp.round(pose).astype(jnp.int32)
+        )
         assert 0 <= int(classify(field, grid, pose, r.energy, r.status, flat)) < len(OUTCOMES)
 
 
@@ -626,36 +723,54 @@ def test_property_steppers_terminate_finite(pattern, chip, start):
 @given(pattern=star(R_PATTERN), chip=star(R_CHIP), start=starts_in_grid(False))
 def test_property_energy_never_increases(pattern, chip, start):
     _, field, grid = random_field(pattern, chip)
-    for r in (GREEDY(field, grid, jnp.asarray(np.round(start), jnp.int32), MAXP), GRADIENT(field, grid, jnp.asarray(start), MAXP)):
+    for r in (
+        GREEDY(field, grid, jnp.asarray(np.round(start), jnp.int32), MAXP),
+        GRADIENT(field, grid, jnp.asarray(start), MAXP),
+    ):
         e = np.asarray(r.path_energy[: int(r.step) + 1], float)
         assert np.all(np.isfinite(e)) and np.all(np.diff(e) < 0)
 
 
-BATCH_GREEDY = jax.jit(jax.vmap(greedy, in_axes=(None, None, 0, None, None)), static_argnums=(1, 3, 4))
+BATCH_GREEDY = jax.jit(
+    jax.vmap(greedy, in_axes=(None, None, 0, None, None)), static_argnums=(1, 3, 4)
+)
 
 
 @settings(max_examples=20, deadline=None)
-@given(pattern=star(R_PATTERN), chip=star(R_CHIP), starts=st.lists(starts_in_grid(True), min_size=6, max_size=6))
+@given(
+    pattern=star(R_PATTERN),
+    chip=star(R_CHIP),
+    starts=st.lists(starts_in_grid(True), min_size=6, max_size=6),
+)
 def test_property_batch_equals_single(pattern, chip, starts):
     _, field, grid = random_field(pattern, chip)
     batch = BATCH_GREEDY(field, grid, jnp.asarray(starts, jnp.int32), MAXP, False)
     for i, start in enumerate(starts):
         one = GREEDY(field, grid, jnp.asarray(start, jnp.int32), MAXP)
         for name in ("idx", "energy", "step", "status"):
-            np.testing.assert_array_equal(np.asarray(getattr(batch, name)[i]), np.asarray(getattr(one, name)), err_msg=name)
+            np.testing.assert_array_equal(
+                np.asarray(getattr(batch, name)[i]), np.asarray(getattr(one, name)), err_msg=name
+            )
 
 
 # ====================================================================== resources
 def big_scene(budget_mb):
     """A 4096 x 4096 px pattern (filled) and a 4000 px chip at 1 um/px."""
-    return Scene(pattern=Mask(np.ones((4096, 4096)), 1.0), chip=mask_from_geometry(square(4000), 1.0), memory_budget_mb=budget_mb)
+    return Scene(
+        pattern=Mask(np.ones((4096, 4096)), 1.0),
+        chip=mask_from_geometry(square(4000), 1.0),
+        memory_budget_mb=budget_mb,
+    )
 
 
 def test_resources_over_budget_fails_before_allocating():
     s = big_scene(64)
     tracemalloc.start()
     try:
-        with pytest.raises(InputError, match=r"needs about [\d,]+ MB .* memory budget is 64 MB; use a coarser scale"):
+        with pytest.raises(
+            InputError,
+            match=r"needs about [\d,]+ MB .* memory budget is 64 MB; use a coarser scale",
+        ):
             build_landscape(s)
         _, peak = tracemalloc.get_traced_memory()
     finally:
@@ -687,7 +802,13 @@ def test_resources_4096_px_pattern_single_trajectory():
     # the full landscape would be 90 x 9755 x 9755 poses (32 GiB in float32); the run builds
     # a box of translations and a band of 7 twists. Fresh process: its own peak RSS.
     # The chip's edges lie on the pads for |x|, |y| <= 48 um: greedy stops at that corner.
-    out = subprocess.run([sys.executable, "-c", textwrap.dedent(BIG_RUN)], capture_output=True, text=True, timeout=300, env=os.environ | {"PYTHONWARNINGS": "ignore"})
+    out = subprocess.run(
+        [sys.executable, "-c", textwrap.dedent(BIG_RUN)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env=os.environ | {"PYTHONWARNINGS": "ignore"},
+    )
     assert out.returncode == 0, out.stderr[-2000:]
     r = json.loads(out.stdout.strip().splitlines()[-1])
     assert r["shape"] == [4096, 4096] and r["finite"]
@@ -703,7 +824,11 @@ def test_regression_over_budget_request_transformed_the_pattern_first():
     # build_landscape built the Correlator (the pattern's whole spectrum, about 1.5 GB and
     # 5 s for the 4096 px scene) before comparing with the budget, and left the stored
     # spectrum out of the estimate. Sizes are now computed first.
-    s = Scene(pattern=Mask(np.ones((2048, 2048)), 1.0), chip=mask_from_geometry(square(1900), 1.0), memory_budget_mb=16)
+    s = Scene(
+        pattern=Mask(np.ones((2048, 2048)), 1.0),
+        chip=mask_from_geometry(square(1900), 1.0),
+        memory_budget_mb=16,
+    )
     tracemalloc.start()
     try:
         with pytest.raises(InputError, match="memory budget is 16 MB"):
@@ -720,7 +845,10 @@ def test_regression_gradient_flat_test_underflowed_in_float32(fp100):
     # once with outcome "plateau".
     s, ls = fp100["float32"]
     weak, weak_ls = with_landscape(s.replace(materials=Materials(surface_tension_N_m=1e-12)))
-    a, b = simulate(s, START, method="gradient", landscape=ls), simulate(weak, START, method="gradient", landscape=weak_ls)
+    a, b = (
+        simulate(s, START, method="gradient", landscape=ls),
+        simulate(weak, START, method="gradient", landscape=weak_ls),
+    )
     assert b.steps > 0 and b.outcome == a.outcome == "aligned"
 
 
@@ -791,7 +919,9 @@ def test_regression_mechanical_energy_crept_up_in_long_runs(fp100_field):
     s, ls, field, grid = fp100_field
     state, _ = run_dynamics(s.replace(damping_calibration=1e-6), field, grid, "inertial")
     h = mechanical(state)
-    assert len(h) > 1000 and np.all(h - np.minimum.accumulate(h) <= mechanical_tolerance(state, float(field.floor)))
+    assert len(h) > 1000 and np.all(
+        h - np.minimum.accumulate(h) <= mechanical_tolerance(state, float(field.floor))
+    )
 
 
 def test_regression_twist_step_from_axis_difference(fine_twist):
@@ -819,7 +949,9 @@ def test_regression_huge_start_overflowed_grid_indices(fp100):
     # by 2**24 px (float32 holds every whole pixel up to there) and 3600 degrees.
     s, ls = fp100["float32"]
     for start in [(1e12, 0, 0), (60, 40, 1e20)]:
-        with pytest.raises(InputError, match=r"out of range: \|x\| and \|y\| must be at most 1.67772e\+07 um"):
+        with pytest.raises(
+            InputError, match=r"out of range: \|x\| and \|y\| must be at most 1.67772e\+07 um"
+        ):
             simulate(s, start)
     for start, outcome in [((1.6e7, -1e7, 0), "no_contact"), ((40, -30, -3600), "aligned")]:
         for m in ("greedy", "gradient"):

@@ -38,11 +38,23 @@ def test_from_toml_with_every_table(pattern_png, tmp_path):
 @pytest.mark.parametrize(
     "text, message",
     [
-        ('chip_size_um = 200\n', "needs a 'pattern'"),
-        ('pattern = "{p}"\nchip_size_um = 200\ncolour = 3\n', r"colour = 3: unknown key; top-level keys are"),
-        ('pattern = "{p}"\nchip_size_um = 200\n[twist]\nsteps = 3\n', r"\[twist\] steps = 3: unknown key"),
-        ('pattern = "{p}"\nchip_size_um = 200\n[twist]\nstep_deg = 0\n', r"\[twist\] step_deg = 0: must be a number > 0"),
-        ('pattern = "{p}"\nchip_size_um = 200\ndtype = "float16"\n', r'dtype = "float16": must be one of'),
+        ("chip_size_um = 200\n", "needs a 'pattern'"),
+        (
+            'pattern = "{p}"\nchip_size_um = 200\ncolour = 3\n',
+            r"colour = 3: unknown key; top-level keys are",
+        ),
+        (
+            'pattern = "{p}"\nchip_size_um = 200\n[twist]\nsteps = 3\n',
+            r"\[twist\] steps = 3: unknown key",
+        ),
+        (
+            'pattern = "{p}"\nchip_size_um = 200\n[twist]\nstep_deg = 0\n',
+            r"\[twist\] step_deg = 0: must be a number > 0",
+        ),
+        (
+            'pattern = "{p}"\nchip_size_um = 200\ndtype = "float16"\n',
+            r'dtype = "float16": must be one of',
+        ),
         ('pattern = "{p}"\n', "give exactly one of"),
         ('pattern = "{p}"\nchip_size_um = 200\nwindow_um = -3\n', "window_um"),
         ("this is [not toml", "not valid TOML"),
@@ -62,7 +74,9 @@ def test_missing_scene_file(tmp_path):
 
 def test_chip_png_at_other_scale_is_resampled(pattern_png, tmp_path):
     chip_png = tmp_path / "chip.png"
-    write_mask(chip_png, Mask(mask_from_geometry(square(100), 0.5).data, 0.5))  # no geometry in a PNG
+    write_mask(
+        chip_png, Mask(mask_from_geometry(square(100), 0.5).data, 0.5)
+    )  # no geometry in a PNG
     s = Scene.from_inputs(pattern_png, chip=chip_png)
     assert s.chip.um_per_px == 1.0 and s.chip.area_um2 == pytest.approx(100 * 100, rel=1e-3)
 
@@ -84,14 +98,18 @@ def test_scale_mismatch_is_refused():
 def test_resolution_resamples_raster_keeping_centre_and_area(tmp_path, resolution):
     path = tmp_path / "p.png"
     g = four_pad(200, 20)
-    write_mask(path, Mask(mask_from_geometry(g, 1.0, margin_um=7).data, 1.0))  # a raster: no geometry
+    write_mask(
+        path, Mask(mask_from_geometry(g, 1.0, margin_um=7).data, 1.0)
+    )  # a raster: no geometry
     s = Scene.from_inputs(path, chip_size_um=200, resolution_um=resolution)
     assert s.um_per_px == resolution and s.pattern.area_um2 == pytest.approx(g.area, rel=1e-9)
     # Centre kept: the mask's centroid stays at the image centre (the four-pad is symmetric).
     d = s.pattern.data
     h, w = d.shape
     ys, xs = np.mgrid[0:h, 0:w]
-    assert (d * (xs + 0.5)).sum() / d.sum() == pytest.approx(w / 2) and (d * (ys + 0.5)).sum() / d.sum() == pytest.approx(h / 2)
+    assert (d * (xs + 0.5)).sum() / d.sum() == pytest.approx(w / 2) and (
+        d * (ys + 0.5)
+    ).sum() / d.sum() == pytest.approx(h / 2)
 
 
 def test_resolution_that_would_move_the_centre_is_refused(tmp_path):
@@ -115,6 +133,17 @@ def test_scene_file_means_the_same_in_python_and_on_the_command_line(tmp_path, c
     out = tmp_path / "e.json"
     assert main(["energy", str(f), "--at", "0,0,0", "--json", str(out)]) == 0
     doc = json.loads(out.read_text())
-    assert (s.um_per_px, s.twist.step_deg, s.dtype) == (doc["um_per_px"], doc["twist_step_deg"], doc["dtype"])
-    expected = {'accuracy = "fast"\n': (4.0, 2.0), 'accuracy = "precise"\n': (0.5, 0.5), "": (1.0, 1.0)}[accuracy]
-    assert (s.um_per_px, s.twist.step_deg) == expected  # the preset's knobs, in Python as on the command line
+    assert (s.um_per_px, s.twist.step_deg, s.dtype) == (
+        doc["um_per_px"],
+        doc["twist_step_deg"],
+        doc["dtype"],
+    )
+    expected = {
+        'accuracy = "fast"\n': (4.0, 2.0),
+        'accuracy = "precise"\n': (0.5, 0.5),
+        "": (1.0, 1.0),
+    }[accuracy]
+    assert (
+        s.um_per_px,
+        s.twist.step_deg,
+    ) == expected  # the preset's knobs, in Python as on the command line

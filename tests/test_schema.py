@@ -69,7 +69,11 @@ def file_refused(path, *needles, before="validation"):
     def parsed(_text):
         raise AssertionError("the file was parsed before it was refused")
 
-    with mock.patch.object(schema.tomllib, "loads", parsed) if before in ("parse", "read") else contextlib.nullcontext():
+    with (
+        mock.patch.object(schema.tomllib, "loads", parsed)
+        if before in ("parse", "read")
+        else contextlib.nullcontext()
+    ):
         tracemalloc.start()
         try:
             with pytest.raises(InputError) as info:
@@ -102,9 +106,15 @@ def test_every_example_validates(path):
 
 
 def _readme_scene_block() -> str:
-    text = (ROOT / "docs" / "guide" / "scenes.md").read_text()  # the README's "Scenes as files", moved to the manual
+    text = (
+        ROOT / "docs" / "guide" / "scenes.md"
+    ).read_text()  # the README's "Scenes as files", moved to the manual
     start = text.index("Keys (all optional except")
-    block = text[text.index("```toml", start) + len("```toml") : text.index("```", text.index("```toml", start) + 7)]
+    block = text[
+        text.index("```toml", start) + len("```toml") : text.index(
+            "```", text.index("```toml", start) + 7
+        )
+    ]
     assert "[montecarlo]" in block
     return block
 
@@ -156,7 +166,11 @@ def test_sections_cover_the_dataclass_fields():
     from simulator.scene import Effects, TwistGrid
 
     def toml_names(cls):
-        rename = {"surface_tension_N_m": "surface_tension_mN_m", "viscosity_Pa_s": "viscosity_mPa_s", "height_um": "meniscus_height_um"}
+        rename = {
+            "surface_tension_N_m": "surface_tension_mN_m",
+            "viscosity_Pa_s": "viscosity_mPa_s",
+            "height_um": "meniscus_height_um",
+        }
         return {rename.get(f.name, f.name) for f in dataclasses.fields(cls)}
 
     assert set(SCHEMA["materials"]) == toml_names(Materials)
@@ -168,8 +182,15 @@ def test_sections_cover_the_dataclass_fields():
 
 # ------------------------------------------------------------- the reported bugs
 def test_allow_repulsive_string_false_is_refused():
-    msg = refused({"materials": {"allow_repulsive": "false"}}, '[materials] allow_repulsive = "false"', "true or false")
-    assert msg == 'scene.toml: [materials] allow_repulsive = "false": must be true or false (a TOML boolean, unquoted)'
+    msg = refused(
+        {"materials": {"allow_repulsive": "false"}},
+        '[materials] allow_repulsive = "false"',
+        "true or false",
+    )
+    assert (
+        msg
+        == 'scene.toml: [materials] allow_repulsive = "false": must be true or false (a TOML boolean, unquoted)'
+    )
     validate_scene({"materials": {"allow_repulsive": False}})
 
 
@@ -185,14 +206,22 @@ def test_allow_repulsive_string_in_a_file_is_refused(tmp_path):
 
 
 def test_unknown_simulate_key_metod_is_refused():
-    refused({"simulate": {"metod": "gradient"}}, '[simulate] metod = "gradient"', "unknown key", "did you mean method?",
-            "start, method, max_steps")
+    refused(
+        {"simulate": {"metod": "gradient"}},
+        '[simulate] metod = "gradient"',
+        "unknown key",
+        "did you mean method?",
+        "start, method, max_steps",
+    )
 
 
 @pytest.mark.parametrize(
     "doc, needles",
     [
-        ({"materials": {"surface_tension_mN_m": "water"}}, ['[materials] surface_tension_mN_m = "water"', "number", "mN/m", "got a string"]),
+        (
+            {"materials": {"surface_tension_mN_m": "water"}},
+            ['[materials] surface_tension_mN_m = "water"', "number", "mN/m", "got a string"],
+        ),
         ({"materials": {"surface_tension_mN_m": "72.8"}}, ["without quotes"]),
         ({"chip_size_um": [1, 2, 3]}, ["chip_size_um = [1, 2, 3]", "W or [W, H]", "um"]),
         ({"pattern": 42}, ["pattern = 42", "path", "quoted string", "got an integer"]),
@@ -202,12 +231,21 @@ def test_unknown_simulate_key_metod_is_refused():
         ({"window_um": float("inf")}, ["window_um = inf", "non-finite"]),
         ({"window_um": True}, ["window_um = true", "got a boolean"]),
         ({"liquid": {"volume_nl": -1}}, ["[liquid] volume_nl = -1", "nl"]),
-        ({"simulate": {"max_steps": 0}}, ["[simulate] max_steps = 0", "whole number from 1 to 2147483646"]),
+        (
+            {"simulate": {"max_steps": 0}},
+            ["[simulate] max_steps = 0", "whole number from 1 to 2147483646"],
+        ),
         ({"simulate": {"max_steps": 10.0}}, ["no decimal point"]),
-        ({"simulate": {"start": [1, 2]}}, ["[simulate] start = [1, 2]", "[x, y, twist]", "got 2 elements"]),
+        (
+            {"simulate": {"start": [1, 2]}},
+            ["[simulate] start = [1, 2]", "[x, y, twist]", "got 2 elements"],
+        ),
         ({"simulate": {"start": [0, 0, 4000]}}, ["twist must be a number from -3600 to 3600 deg"]),
         ({"simulate": {"method": "newton"}}, ['"greedy", "gradient", "overdamped", "inertial"']),
-        ({"montecarlo": {"method": "newton"}}, ['must be one of "greedy", "gradient", "overdamped", "inertial"']),
+        (
+            {"montecarlo": {"method": "newton"}},
+            ['must be one of "greedy", "gradient", "overdamped", "inertial"'],
+        ),
         ({"montecarlo": {"random": 2.5}}, ["[montecarlo] random = 2.5", "whole number"]),
         ({"montecarlo": {"random": 0}}, ["from 1 to 1e8"]),
         ({"montecarlo": {"seed": -1}}, ["[montecarlo] seed = -1", "from 0 to"]),
@@ -223,8 +261,14 @@ def test_unknown_simulate_key_metod_is_refused():
         ({"simulate": [1, 2, 3]}, ["simulate = [1, 2, 3]", "must be a table"]),
         ({"colour": 3}, ["colour = 3", "unknown key", "top-level keys are pattern"]),
         ({"patern": "a.png"}, ["did you mean pattern?"]),
-        ({"simulat": {"start": [0, 0, 0]}}, ["[simulat]", "unknown section", "did you mean simulate?"]),
-        ({"twist": {"steps": 3}}, ["[twist] steps = 3", "unknown key", "step_deg, min_deg, max_deg"]),
+        (
+            {"simulat": {"start": [0, 0, 0]}},
+            ["[simulat]", "unknown section", "did you mean simulate?"],
+        ),
+        (
+            {"twist": {"steps": 3}},
+            ["[twist] steps = 3", "unknown key", "step_deg, min_deg, max_deg"],
+        ),
         ({"window_um": 10**5000}, ["window_um = <a whole number of about", "digits>"]),
     ],
 )
@@ -269,7 +313,12 @@ def test_dotted_key_with_thousands_of_parts_refused_fast(tmp_path):
         ("header", "[" + ".".join(["a"] * 200_000) + "]\n"),
         ("quoted", "x" + '."a b"' * 100_000 + " = 1\n"),
     ]:
-        file_refused(write(tmp_path, text, f"{name}.toml"), "dotted key or table header", f"more than {MAX_DEPTH} parts", before="parse")
+        file_refused(
+            write(tmp_path, text, f"{name}.toml"),
+            "dotted key or table header",
+            f"more than {MAX_DEPTH} parts",
+            before="parse",
+        )
     # dots inside strings, comments and floats are not keys
     text = 'pattern = "a.b.c.d.e.f.g.h.i.j.k.png"  # a.b.c.d.e.f.g.h.i.j.k\nwindow_um = 1.5\n[twist]\nstep_deg = 0.5\n'
     assert read_scene_file(write(tmp_path, text))["window_um"] == 1.5
@@ -361,7 +410,13 @@ SCALARS = (
     | st.dates()
     | st.none()
 )
-VALUES = st.recursive(SCALARS, lambda inner: st.lists(inner, max_size=5) | st.dictionaries(st.text(max_size=10), inner, max_size=4), max_leaves=20)
+VALUES = st.recursive(
+    SCALARS,
+    lambda inner: (
+        st.lists(inner, max_size=5) | st.dictionaries(st.text(max_size=10), inner, max_size=4)
+    ),
+    max_leaves=20,
+)
 PLACES = [(section, key) for section, keys in SCHEMA.items() for key in keys]
 
 
@@ -426,7 +481,10 @@ def test_property_values_inside_the_table_validate(data):
 
 
 @settings(max_examples=200, deadline=None)
-@given(st.text(max_size=200) | st.sampled_from(["[a]\nb = [[[[[[[[[[1]]]]]]]]]]", "x = {a = {b = {c = 1}}}", 'a."b".c = 1']))
+@given(
+    st.text(max_size=200)
+    | st.sampled_from(["[a]\nb = [[[[[[[[[[1]]]]]]]]]]", "x = {a = {b = {c = 1}}}", 'a."b".c = 1'])
+)
 def test_property_any_file_text_gives_a_dict_or_one_line_error(text):
     with tempfile.TemporaryDirectory() as d:
         p = Path(d) / "s.toml"
@@ -439,8 +497,12 @@ def test_property_any_file_text_gives_a_dict_or_one_line_error(text):
 
 # ------------------------------------------------------------- helpers
 def test_show_value_and_check_nesting_are_bounded():
-    assert show_value("false") == '"false"' and show_value(True) == "true" and show_value(float("nan")) == "nan"
-    assert show_value("a\u2028b\x85c") .count("\\") == 2  # Unicode line breaks escaped
+    assert (
+        show_value("false") == '"false"'
+        and show_value(True) == "true"
+        and show_value(float("nan")) == "nan"
+    )
+    assert show_value("a\u2028b\x85c").count("\\") == 2  # Unicode line breaks escaped
     deep: list = []
     node = deep
     for _ in range(100_000):  # far past the recursion limit
@@ -482,8 +544,15 @@ def test_deeply_nested_png_json():
     png_refused(parse_png_params, "[" * 60_000, "nested too deeply")  # json.loads: RecursionError
     png_refused(parse_png_params, '{"a": ' + "[" * 20_000 + "]" * 20_000 + "}", "nested too deeply")
     depth = MAX_PARAMS_DEPTH + 1
-    png_refused(parse_png_params, '{"a": ' + "[" * depth + "]" * depth + "}", "selfalign metadata a[0]", "levels deep")
-    assert parse_png_params('{"a": ' + "[" * (MAX_PARAMS_DEPTH - 1) + "]" * (MAX_PARAMS_DEPTH - 1) + "}", PNG)
+    png_refused(
+        parse_png_params,
+        '{"a": ' + "[" * depth + "]" * depth + "}",
+        "selfalign metadata a[0]",
+        "levels deep",
+    )
+    assert parse_png_params(
+        '{"a": ' + "[" * (MAX_PARAMS_DEPTH - 1) + "]" * (MAX_PARAMS_DEPTH - 1) + "}", PNG
+    )
 
 
 def test_png_note_that_is_not_a_json_object_is_ignored():
@@ -492,10 +561,17 @@ def test_png_note_that_is_not_a_json_object_is_ignored():
 
 
 def test_png_note_limits():
-    png_refused(parse_png_params, '{"a": "' + "x" * MAX_PARAMS_CHARS + '"}', f"at most {MAX_PARAMS_CHARS:,}")
+    png_refused(
+        parse_png_params, '{"a": "' + "x" * MAX_PARAMS_CHARS + '"}', f"at most {MAX_PARAMS_CHARS:,}"
+    )
     png_refused(parse_png_params, '{"seed": ' + "1" * 5000 + "}", "too many digits")
     n = MAX_PARAMS_ITEMS + 1
-    png_refused(parse_png_params, json.dumps({"a": [0] * n}, separators=(",", ":")), "selfalign metadata a", f"{n:,} elements")
+    png_refused(
+        parse_png_params,
+        json.dumps({"a": [0] * n}, separators=(",", ":")),
+        "selfalign metadata a",
+        f"{n:,} elements",
+    )
 
 
 @pytest.mark.parametrize(
@@ -509,18 +585,31 @@ def test_png_note_limits():
         ({"design": 3}, ["design = 3", "string"]),
         ({"parameters": []}, ["parameters = []", "JSON object"]),
         ({"parameters": {"gap": 50}}, ["parameters.gap = 50", "JSON object"]),
-        ({"parameters": {"gap": {"value": "wide"}}}, ['parameters.gap.value = "wide"', "finite number >= 0"]),
+        (
+            {"parameters": {"gap": {"value": "wide"}}},
+            ['parameters.gap.value = "wide"', "finite number >= 0"],
+        ),
         ({"parameters": {"gap": {"value": float("-inf")}}}, ["parameters.gap.value = -inf"]),
     ],
 )
 def test_png_note_wrong_types_name_file_and_key(note, needles):
     png_refused(validate_png_params, note, *needles)
-    png_refused(parse_png_params, json.dumps(note), *needles)  # NaN/Infinity survive json.dumps/loads
+    png_refused(
+        parse_png_params, json.dumps(note), *needles
+    )  # NaN/Infinity survive json.dumps/loads
 
 
 def test_png_note_unknown_keys_are_kept():
-    note = {"design": "x", "gap": 5, "custom": {"nested": [1, "two", None]}, "area_um2": float("nan"),
-            "parameters": {"gap": {"value": 50.0, "unit": "um"}, "points": {"value": [[0, 0], [1, 2]], "unit": "um"}}}
+    note = {
+        "design": "x",
+        "gap": 5,
+        "custom": {"nested": [1, "two", None]},
+        "area_um2": float("nan"),
+        "parameters": {
+            "gap": {"value": 50.0, "unit": "um"},
+            "points": {"value": [[0, 0], [1, 2]], "unit": "um"},
+        },
+    }
     assert validate_png_params(note, PNG) is not note
     out = parse_png_params(json.dumps(note), PNG)
     assert out["custom"] == note["custom"] and math.isnan(out["area_um2"]) and out["gap"] == 5
@@ -528,8 +617,14 @@ def test_png_note_unknown_keys_are_kept():
 
 
 def test_png_note_of_a_polygon_with_many_vertices_is_read():
-    points = [[round(100 * math.cos(i / 800), 6), round(100 * math.sin(i / 800), 6)] for i in range(5000)]
-    note = {"design": "polygon", "parameters": {"points": {"value": points, "unit": "um"}}, "um_per_px": 1.0}
+    points = [
+        [round(100 * math.cos(i / 800), 6), round(100 * math.sin(i / 800), 6)] for i in range(5000)
+    ]
+    note = {
+        "design": "polygon",
+        "parameters": {"points": {"value": points, "unit": "um"}},
+        "um_per_px": 1.0,
+    }
     text = json.dumps(note)
     assert len(text) > 64 * 1024
     assert parse_png_params(text, PNG)["parameters"]["points"]["value"][4999] == points[4999]
@@ -551,17 +646,40 @@ def test_note_written_by_write_mask_reads_back(tmp_path):
     from patterns.raster import mask_from_geometry
 
     record = design_record("four-pad", size=200, gap=20)
-    path = write_mask(tmp_path / "fp.png", mask_from_geometry(four_pad(200, 20), 2.0, params=record))
+    path = write_mask(
+        tmp_path / "fp.png", mask_from_geometry(four_pad(200, 20), 2.0, params=record)
+    )
     with Image.open(path) as im:
         params = parse_png_params(im.info["selfalign"], path)
     assert params["um_per_px"] == 2.0 and params["parameters"]["gap"]["value"] == 20
 
 
 @settings(max_examples=200, deadline=None)
-@given(st.recursive(st.none() | st.booleans() | st.floats() | st.integers() | st.text(max_size=10),
-                    lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.sampled_from(
-                        ["um_per_px", "design", "width_um", "height_um", "parameters", "gap", "value", "x"]), inner, max_size=4),
-                    max_leaves=15))
+@given(
+    st.recursive(
+        st.none() | st.booleans() | st.floats() | st.integers() | st.text(max_size=10),
+        lambda inner: (
+            st.lists(inner, max_size=4)
+            | st.dictionaries(
+                st.sampled_from(
+                    [
+                        "um_per_px",
+                        "design",
+                        "width_um",
+                        "height_um",
+                        "parameters",
+                        "gap",
+                        "value",
+                        "x",
+                    ]
+                ),
+                inner,
+                max_size=4,
+            )
+        ),
+        max_leaves=15,
+    )
+)
 def test_property_png_note_gives_a_dict_or_one_line_error(obj):
     try:
         out = parse_png_params(json.dumps(obj), PNG)
@@ -569,4 +687,3 @@ def test_property_png_note_gives_a_dict_or_one_line_error(obj):
         assert len(str(err).splitlines()) == 1 and str(err).startswith(f"{PNG}: ")
     else:
         assert out == {} or isinstance(obj, dict)
-

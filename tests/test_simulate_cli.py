@@ -15,7 +15,25 @@ KEYS = {"method", "outcome", "start", "final", "steps", "time_s", "path"}
 @pytest.mark.parametrize("method", ["greedy", "gradient", "overdamped", "inertial"])
 def test_every_method_aligns_and_writes_json_and_plot(method, tmp_path, capsys):
     out, plot = tmp_path / "t.json", tmp_path / "t.png"
-    rc = main(["simulate", "--pattern", SQUARE, "--chip-size", "200", "--start", "40,-30,6", "--method", method, "--volume", "0.5", "--json", str(out), "--plot", str(plot)])
+    rc = main(
+        [
+            "simulate",
+            "--pattern",
+            SQUARE,
+            "--chip-size",
+            "200",
+            "--start",
+            "40,-30,6",
+            "--method",
+            method,
+            "--volume",
+            "0.5",
+            "--json",
+            str(out),
+            "--plot",
+            str(plot),
+        ]
+    )
     assert rc == 0
     doc = json.loads(out.read_text())
     assert KEYS <= set(doc) and doc["method"] == method and doc["outcome"] == "aligned"
@@ -34,7 +52,9 @@ def test_every_method_aligns_and_writes_json_and_plot(method, tmp_path, capsys):
 
 def test_scene_file_and_flag_override(tmp_path, capsys):
     scene = tmp_path / "scene.toml"
-    scene.write_text(f'pattern = "{SQUARE}"\nchip_size_um = [200, 200]\n[simulate]\nstart = [30, 0, 0]\nmethod = "greedy"\n')
+    scene.write_text(
+        f'pattern = "{SQUARE}"\nchip_size_um = [200, 200]\n[simulate]\nstart = [30, 0, 0]\nmethod = "greedy"\n'
+    )
     assert main(["simulate", str(scene)]) == 0
     assert "after 30 steps" in capsys.readouterr().out
     assert main(["simulate", str(scene), "--start", "12,0,0"]) == 0
@@ -45,11 +65,32 @@ def test_scene_file_and_flag_override(tmp_path, capsys):
     "args, message",
     [
         (["--pattern", SQUARE, "--chip-size", "200"], "--start"),
-        (["--pattern", SQUARE, "--chip-size", "200", "--start", "1,2,x"], "--start must be X,Y,TWIST"),
-        (["--pattern", SQUARE, "--chip-size", "200", "--start", "1,2,3", "--max-steps", "0"], "max steps"),
-        (["--pattern", SQUARE, "--chip-size", "200", "--start", "1,2,3", "--volume", "-1"], "droplet volume"),
+        (
+            ["--pattern", SQUARE, "--chip-size", "200", "--start", "1,2,x"],
+            "--start must be X,Y,TWIST",
+        ),
+        (
+            ["--pattern", SQUARE, "--chip-size", "200", "--start", "1,2,3", "--max-steps", "0"],
+            "max steps",
+        ),
+        (
+            ["--pattern", SQUARE, "--chip-size", "200", "--start", "1,2,3", "--volume", "-1"],
+            "droplet volume",
+        ),
         (["--pattern", SQUARE, "--chip", "nothere.png", "--start", "1,2,3"], "nothere.png"),
-        (["--pattern", SQUARE, "--chip-size", "200", "--start", "1,2,3", "--json", "/nonexistent/dir/t.json"], "does not exist"),
+        (
+            [
+                "--pattern",
+                SQUARE,
+                "--chip-size",
+                "200",
+                "--start",
+                "1,2,3",
+                "--json",
+                "/nonexistent/dir/t.json",
+            ],
+            "does not exist",
+        ),
     ],
 )
 def test_bad_input(args, message, tmp_path, capsys):

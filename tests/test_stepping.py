@@ -43,13 +43,26 @@ def reference(e: np.ndarray, wrap: bool, cut, it, iy, ix) -> float:
 
 
 def grid_for(wrap: bool, cut) -> Grid:
-    return Grid.uniform((T, NY, NX), wrap=wrap, cut=cut, um_per_px=1.0, twist_step_deg=1.0, period_deg=90.0, rg_px=3.0)
+    return Grid.uniform(
+        (T, NY, NX),
+        wrap=wrap,
+        cut=cut,
+        um_per_px=1.0,
+        twist_step_deg=1.0,
+        period_deg=90.0,
+        rg_px=3.0,
+    )
 
 
 CASES = [
     (wrap, ((False, False), (ylo, yhi), (xlo, xhi)))
     for wrap in (True, False)
-    for ylo, yhi, xlo, xhi in [(False, False, False, False), (True, True, True, True), (True, False, False, True), (False, True, True, False)]
+    for ylo, yhi, xlo, xhi in [
+        (False, False, False, False),
+        (True, True, True, True),
+        (True, False, False, True),
+        (False, True, True, False),
+    ]
 ]
 
 
@@ -61,16 +74,28 @@ def test_lookup_and_neighbourhood_follow_the_boundary_rules_far_outside(wrap, cu
     field = make_field(e, grid, 1e-9, [0, 0, 0])
     assert field.padded.shape == (T + 2 * PAD, NY + 2 * PAD, NX + 2 * PAD)
     # every node from 9 cells outside to 9 cells past the far side, on every axis
-    pts = np.array(list(itertools.product(range(-9, T + 9), range(-9, NY + 9), range(-9, NX + 9))), np.int32)
-    got = np.asarray(lookup(field, grid, jnp.asarray(pts[:, 0]), jnp.asarray(pts[:, 1]), jnp.asarray(pts[:, 2])))
+    pts = np.array(
+        list(itertools.product(range(-9, T + 9), range(-9, NY + 9), range(-9, NX + 9))), np.int32
+    )
+    got = np.asarray(
+        lookup(field, grid, jnp.asarray(pts[:, 0]), jnp.asarray(pts[:, 1]), jnp.asarray(pts[:, 2]))
+    )
     want = np.array([reference(e, wrap, cut, *p) for p in pts], np.float32)
     np.testing.assert_array_equal(got, want)
     # the (3, 3, 3) and (4, 4, 4) blocks read from one clipped base index hold the look-ups
     sample = pts[::7]
-    nb = np.asarray(jax.jit(jax.vmap(neighbourhood, (None, None, 0)), static_argnums=1)(field, grid, jnp.asarray(sample)))
+    nb = np.asarray(
+        jax.jit(jax.vmap(neighbourhood, (None, None, 0)), static_argnums=1)(
+            field, grid, jnp.asarray(sample)
+        )
+    )
     want = [[reference(e, wrap, cut, *(p + m)) for m in BLOCK_MOVES] for p in sample]
     np.testing.assert_array_equal(nb, np.array(want, np.float32))
-    blk = np.asarray(jax.jit(jax.vmap(block, (None, None, 0)), static_argnums=1)(field, grid, jnp.asarray(sample)))
+    blk = np.asarray(
+        jax.jit(jax.vmap(block, (None, None, 0)), static_argnums=1)(
+            field, grid, jnp.asarray(sample)
+        )
+    )
     offsets = list(itertools.product(range(-1, 3), repeat=3))
     want = [[reference(e, wrap, cut, *(p + np.array(o))) for o in offsets] for p in sample]
     np.testing.assert_array_equal(blk.reshape(len(sample), 64), np.array(want, np.float32))
@@ -116,8 +141,16 @@ def test_gradient_from_one_block_equals_seven_interpolations(wrap, cut):
     grid = grid_for(wrap, cut)
     field = make_field(e, grid, 1e-12, [0, 0, 0])
     # inside, across every side, and far outside
-    qs = np.concatenate([rng.uniform(-1.5, 1.5, (60, 3)) + np.array([T, NY, NX]) * rng.uniform(0, 1, (60, 3)), rng.uniform(-12, 14, (60, 3))])
+    qs = np.concatenate(
+        [
+            rng.uniform(-1.5, 1.5, (60, 3)) + np.array([T, NY, NX]) * rng.uniform(0, 1, (60, 3)),
+            rng.uniform(-12, 14, (60, 3)),
+        ]
+    )
     qs = np.concatenate([qs, np.floor(qs[:20])])  # on nodes: fractions exactly 0
-    batch = [jax.jit(jax.vmap(g, (None, None, 0)), static_argnums=1) for g in (gradient, gradient_from_interpolate)]
+    batch = [
+        jax.jit(jax.vmap(g, (None, None, 0)), static_argnums=1)
+        for g in (gradient, gradient_from_interpolate)
+    ]
     got, want = (np.asarray(b(field, grid, jnp.asarray(qs))) for b in batch)
     np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12)

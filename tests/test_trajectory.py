@@ -12,7 +12,12 @@ from simulator.scene import Scene, TwistGrid
 
 def make_scene(L, g, dtype="float32", um_per_px=1.0, **kw):
     pat = four_pad(L, g) if g else square(L)
-    return Scene(pattern=mask_from_geometry(pat, um_per_px, margin_um=10), chip=mask_from_geometry(square(L), um_per_px), dtype=dtype, **kw)
+    return Scene(
+        pattern=mask_from_geometry(pat, um_per_px, margin_um=10),
+        chip=mask_from_geometry(square(L), um_per_px),
+        dtype=dtype,
+        **kw,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -28,7 +33,13 @@ def fp730():
 # ------------------------------------------------------------------ C9
 @pytest.mark.parametrize(
     "start, final, steps",
-    [((89, 0, 0), (0, 0, 0), 89), ((100, 0, 0), (100, 0, 0), 0), ((120, 0, 0), (110, 0, 0), 10), ((120, 0, 5), (110, 0, 0), 10), ((120, 0, -5), (110, 0, 0), 10)],
+    [
+        ((89, 0, 0), (0, 0, 0), 89),
+        ((100, 0, 0), (100, 0, 0), 0),
+        ((120, 0, 0), (110, 0, 0), 10),
+        ((120, 0, 5), (110, 0, 0), 10),
+        ((120, 0, -5), (110, 0, 0), 10),
+    ],
 )
 def test_c9_four_pad_200(fp200, start, final, steps):
     t = simulate(fp200, start)
@@ -43,7 +54,11 @@ def test_c9_escape_at_plateau_end(fp200):
 
 @pytest.mark.parametrize(
     "start, final, steps",
-    [((300, 0, 0), (0, 0, 0), 300), ((400, 0, 0), (390, 0, 0), 10), ((600, 0, 0), (390, 0, 0), 210)],
+    [
+        ((300, 0, 0), (0, 0, 0), 300),
+        ((400, 0, 0), (390, 0, 0), 10),
+        ((600, 0, 0), (390, 0, 0), 210),
+    ],
 )
 def test_c9_four_pad_730(fp730, start, final, steps):
     t = simulate(fp730, start)
@@ -120,7 +135,10 @@ def test_diagonal_tie_follows_documented_rule():
     # takes dt = -1 on both diagonals, so the two paths mirror in y but share the twist.
     s = make_scene(200, 0)
     for dtype in ("float32", "float64"):
-        a, b = simulate(s.replace(dtype=dtype), (50, 50, 0)), simulate(s.replace(dtype=dtype), (50, -50, 0))
+        a, b = (
+            simulate(s.replace(dtype=dtype), (50, 50, 0)),
+            simulate(s.replace(dtype=dtype), (50, -50, 0)),
+        )
         assert tuple(a.path[1]) == (49, 49, -1) and tuple(b.path[1]) == (49, -49, -1)
         np.testing.assert_array_equal(b.path, a.path * [1, -1, 1])
         assert a.outcome == b.outcome == "aligned"
@@ -155,7 +173,9 @@ def test_same_inputs_same_bits(fp200):
 def test_lazy_boxes_equal_full_landscape(method):
     s = make_scene(730, 50, um_per_px=2.0, twist=TwistGrid(step_deg=2.0))
     full = build_landscape(s)
-    starts = [(680, 0, 0), (600, 400, 20), (-300, 250, -30)] if method == "greedy" else [(600, 400, 20)]
+    starts = (
+        [(680, 0, 0), (600, 400, 20), (-300, 250, -30)] if method == "greedy" else [(600, 400, 20)]
+    )
     for start in starts:
         lazy = simulate(s, start, method=method)
         ref = simulate(s, start, method=method, landscape=full)

@@ -55,8 +55,20 @@ sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 
 DELTA = 0.02
 VOLUMES = [round(v, 4) for v in np.arange(0.004, 0.1161, 0.008)]
-CASES = [(0.05, 41, 89), (0.1, 41, 89), (0.2, 41, 89), (0.3, 41, 89), (0.1, 20, 89), (0.1, 60, 89), (0.1, 75, 89),
-         (0.1, 85, 89), (0.1, 88, 89), (0.1, 41, 60), (0.1, 41, 110), (0.1, 30, 60)]
+CASES = [
+    (0.05, 41, 89),
+    (0.1, 41, 89),
+    (0.2, 41, 89),
+    (0.3, 41, 89),
+    (0.1, 20, 89),
+    (0.1, 60, 89),
+    (0.1, 75, 89),
+    (0.1, 85, 89),
+    (0.1, 88, 89),
+    (0.1, 41, 60),
+    (0.1, 41, 110),
+    (0.1, 30, 60),
+]
 
 
 def _H(z: str) -> str:  # integral of the smoothstep 3t^2 - 2t^3 (clamped to [0, 1])
@@ -135,8 +147,12 @@ def evolve(kind: str, g: float, tp: float, ts: float) -> np.ndarray:
     p = FourPad(1.0, g, tp, ts)
     s0 = float(minimise_footprint(p, np.array([VOLUMES[0]]), kind)[1][0])  # a start near the answer
     step = "g 200; u; V; g 100; hessian_seek; g 100; u; V; g 100; hessian_seek; g 50;"
-    cmds = ["integral_order_1d := 8;", "r; re; g 100; u; V; g 100;",
-            "r; re; g 200; u; V; g 100; hessian_seek; g 100; hessian_seek;", "re; g 100; u; V; g 100; hessian_seek;"]
+    cmds = [
+        "integral_order_1d := 8;",
+        "r; re; g 100; u; V; g 100;",
+        "r; re; g 200; u; V; g 100; hessian_seek; g 100; hessian_seek;",
+        "re; g 100; u; V; g 100; hessian_seek;",
+    ]
     for v in VOLUMES:
         cmds.append(f"set body[1] target {v / 4}; {step}")
         cmds.append('printf "RESULT %.10g %.12g\\n", 4*body[1].volume, 4*total_energy;')
@@ -146,8 +162,12 @@ def evolve(kind: str, g: float, tp: float, ts: float) -> np.ndarray:
             f.write(datafile(kind, g, tp, ts, VOLUMES[0], s0))
         with open(cmd, "w") as f:
             f.write("\n".join(cmds) + "\nq\nq\n")
-        out = subprocess.run(["evolver", "-f", cmd, fe], capture_output=True, text=True, timeout=20000).stdout
-    return np.array([[float(a), float(b)] for a, b in re.findall(r"^RESULT (\S+) (\S+)", out, re.M)])
+        out = subprocess.run(
+            ["evolver", "-f", cmd, fe], capture_output=True, text=True, timeout=20000
+        ).stdout
+    return np.array(
+        [[float(a), float(b)] for a, b in re.findall(r"^RESULT (\S+) (\S+)", out, re.M)]
+    )
 
 
 def free_cap_energy(v, theta_deg):
@@ -184,11 +204,17 @@ def main() -> int:
         converged = bool(np.all(np.diff(mid[:, 1]) > 0) and np.all(np.diff(one[:, 1]) > 0))
         v_se = crossing(mid, one, tp)
         v_model = critical_volume(1.0, g, tp, ts).critical_volume_nl * UM3_PER_NL
-        rows.append({"relative_gap": g, "pad_angle_deg": tp, "substrate_angle_deg": ts,
-                     "evolver_critical_volume_L3": "" if v_se is None else f"{v_se:.5f}",
-                     "model_critical_volume_L3": f"{v_model:.5f}",
-                     "model_over_evolver": "" if v_se is None else f"{v_model / v_se:.3f}",
-                     "evolver_converged": converged and v_se is not None})
+        rows.append(
+            {
+                "relative_gap": g,
+                "pad_angle_deg": tp,
+                "substrate_angle_deg": ts,
+                "evolver_critical_volume_L3": "" if v_se is None else f"{v_se:.5f}",
+                "model_critical_volume_L3": f"{v_model:.5f}",
+                "model_over_evolver": "" if v_se is None else f"{v_model / v_se:.3f}",
+                "evolver_converged": converged and v_se is not None,
+            }
+        )
         print(rows[-1], flush=True)
     with open(args.out, "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))

@@ -270,9 +270,7 @@ def datafile(case: Case, schedule: Schedule = Schedule()) -> str:
             elif k == m:
                 out.append(f"{vid(k, i)} {tx!r} {ty!r} boundary 1 fixed")
             else:
-                out.append(
-                    f"{vid(k, i)} {bx + t * (tx - bx)!r} {by + t * (ty - by)!r} {t * z0!r}"
-                )
+                out.append(f"{vid(k, i)} {bx + t * (tx - bx)!r} {by + t * (ty - by)!r} {t * z0!r}")
 
     edge_id: dict[tuple[int, int], int] = {}
     edge_lines: list[str] = []
@@ -401,8 +399,12 @@ def parse_levels(text: str) -> list[dict[str, float]]:
     return levels
 
 
-def run_case(case: Case, schedule: Schedule = Schedule(), evolver: str | None = None,
-             keep_dir: Path | None = None) -> dict:
+def run_case(
+    case: Case,
+    schedule: Schedule = Schedule(),
+    evolver: str | None = None,
+    keep_dir: Path | None = None,
+) -> dict:
     """Run Evolver on one case; return ``{case, levels, seconds, warnings}``."""
     exe = evolver or find_evolver()
     with tempfile.TemporaryDirectory(prefix="selfalign_evdef_") as tmp:
@@ -414,8 +416,11 @@ def run_case(case: Case, schedule: Schedule = Schedule(), evolver: str | None = 
         try:
             proc = subprocess.run(
                 [exe, "-x", "-f", str(cmd), str(fe)],
-                stdin=subprocess.DEVNULL, capture_output=True, text=True,
-                timeout=schedule.timeout_s, cwd=tmp,
+                stdin=subprocess.DEVNULL,
+                capture_output=True,
+                text=True,
+                timeout=schedule.timeout_s,
+                cwd=tmp,
             )
         except subprocess.TimeoutExpired as exc:
             raise EvolverError(f"{case.label}: timed out after {schedule.timeout_s:g} s") from exc
@@ -426,15 +431,21 @@ def run_case(case: Case, schedule: Schedule = Schedule(), evolver: str | None = 
             shutil.copy(cmd, keep_dir / f"{case.label}.cmd")
             (keep_dir / f"{case.label}.out").write_text(proc.stdout + proc.stderr)
     if proc.returncode != 0:
-        raise EvolverError(f"{case.label}: evolver exited {proc.returncode}:\n{(proc.stdout + proc.stderr)[-2000:]}")
+        raise EvolverError(
+            f"{case.label}: evolver exited {proc.returncode}:\n{(proc.stdout + proc.stderr)[-2000:]}"
+        )
     levels = parse_levels(proc.stdout)
     if len(levels) != schedule.refinements + 1:
-        raise EvolverError(f"{case.label}: expected {schedule.refinements + 1} LEVEL lines, got {len(levels)}"
-                           f"\n{(proc.stdout + proc.stderr)[-2000:]}")
+        raise EvolverError(
+            f"{case.label}: expected {schedule.refinements + 1} LEVEL lines, got {len(levels)}"
+            f"\n{(proc.stdout + proc.stderr)[-2000:]}"
+        )
     for rec in levels:
         if abs(rec["V"] - case.volume) > 1e-6 * case.volume:
             raise EvolverError(f"{case.label}: volume {rec['V']} != {case.volume}")
-    warnings = sum(1 for line in (proc.stdout + proc.stderr).splitlines() if "WARNING" in line.upper())
+    warnings = sum(
+        1 for line in (proc.stdout + proc.stderr).splitlines() if "WARNING" in line.upper()
+    )
     return {"case": case, "levels": levels, "seconds": seconds, "warnings": warnings}
 
 
@@ -500,12 +511,23 @@ def read_rows(path: Path) -> list[dict[str, str]]:
 
 
 def _row_key(row: dict[str, str]) -> tuple:
-    return (row["defect"], row["kind"], float(row["volume_um3"]), row["height_mode"],
-            int(row["refinements"]))
+    return (
+        row["defect"],
+        row["kind"],
+        float(row["volume_um3"]),
+        row["height_mode"],
+        int(row["refinements"]),
+    )
 
 
 def _case_key(case: Case, refinements: int) -> tuple:
-    return (case.defect, case.kind, case.volume, "free" if case.free_height else "fixed", refinements)
+    return (
+        case.defect,
+        case.kind,
+        case.volume,
+        "free" if case.free_height else "fixed",
+        refinements,
+    )
 
 
 # ---------------------------------------------------------------------------- cases and CLI
@@ -524,23 +546,39 @@ def all_cases(free_height: bool = True) -> list[Case]:
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--out", type=Path, default=None,
-                        help="output CSV (default validation/evolver_defects.csv; an existing "
-                             "file is extended: cases already in it with the same number of "
-                             "refinements are skipped, so a run resumes)")
-    parser.add_argument("--quick", action="store_true",
-                        help="one coarse case (C outward, 0.9 nl, 1 refinement; default output in the temp folder)")
-    parser.add_argument("--cases", default=None,
-                        help="comma-separated labels to run, e.g. C_inward_V0.9nl,none_none_V0.5nl "
-                             "(the suffix _free/_fixed is added)")
-    parser.add_argument("--fixed-height", action="store_true",
-                        help="chip height fixed at V / (pad area) instead of free")
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help="output CSV (default validation/evolver_defects.csv; an existing "
+        "file is extended: cases already in it with the same number of "
+        "refinements are skipped, so a run resumes)",
+    )
+    parser.add_argument(
+        "--quick",
+        action="store_true",
+        help="one coarse case (C outward, 0.9 nl, 1 refinement; default output in the temp folder)",
+    )
+    parser.add_argument(
+        "--cases",
+        default=None,
+        help="comma-separated labels to run, e.g. C_inward_V0.9nl,none_none_V0.5nl "
+        "(the suffix _free/_fixed is added)",
+    )
+    parser.add_argument(
+        "--fixed-height",
+        action="store_true",
+        help="chip height fixed at V / (pad area) instead of free",
+    )
     parser.add_argument("--refinements", type=int, default=Schedule.refinements)
     parser.add_argument("--vertical", type=int, default=Schedule.vertical)
     parser.add_argument("--timeout", type=float, default=Schedule.timeout_s)
-    parser.add_argument("--deadline", default=None,
-                        help="UTC time HH:MM after which no new case is started")
-    parser.add_argument("--keep", type=Path, default=None, help="folder for .fe/.cmd/.out of each run")
+    parser.add_argument(
+        "--deadline", default=None, help="UTC time HH:MM after which no new case is started"
+    )
+    parser.add_argument(
+        "--keep", type=Path, default=None, help="folder for .fe/.cmd/.out of each run"
+    )
     args = parser.parse_args(argv)
 
     try:
@@ -554,17 +592,24 @@ def main(argv: Sequence[str] | None = None) -> int:
         schedule = Schedule(refinements=1, vertical=args.vertical, timeout_s=args.timeout)
     else:
         cases = all_cases(free)
-        schedule = Schedule(refinements=args.refinements, vertical=args.vertical,
-                            timeout_s=args.timeout)
+        schedule = Schedule(
+            refinements=args.refinements, vertical=args.vertical, timeout_s=args.timeout
+        )
     if args.cases:
-        wanted = {w.strip() + ("" if w.strip().endswith(("_free", "_fixed")) else ("_free" if free else "_fixed"))
-                  for w in args.cases.split(",") if w.strip()}
+        wanted = {
+            w.strip()
+            + ("" if w.strip().endswith(("_free", "_fixed")) else ("_free" if free else "_fixed"))
+            for w in args.cases.split(",")
+            if w.strip()
+        }
         pool = {c.label: c for c in all_cases(free) + cases}
         missing = wanted - set(pool)
         if missing:
             parser.error(f"unknown case(s): {sorted(missing)}")
         cases = [pool[w] for w in sorted(wanted, key=list(pool).index)]
-    out = args.out or (Path(tempfile.gettempdir()) / "evolver_defects_quick.csv" if args.quick else DEFAULT_OUT)
+    out = args.out or (
+        Path(tempfile.gettempdir()) / "evolver_defects_quick.csv" if args.quick else DEFAULT_OUT
+    )
     rows = read_rows(out) if out.exists() and not args.quick else []
     done = {_row_key(r) for r in rows}
     deadline = None
@@ -579,7 +624,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(f"skip {case.label} (already in {out})", file=sys.stderr, flush=True)
             continue
         if deadline is not None and time.time() > deadline:
-            print(f"deadline {args.deadline} UTC passed; not starting {case.label}", file=sys.stderr, flush=True)
+            print(
+                f"deadline {args.deadline} UTC passed; not starting {case.label}",
+                file=sys.stderr,
+                flush=True,
+            )
             break
         print(f"run  {case.label} ...", file=sys.stderr, flush=True)
         try:
@@ -596,7 +645,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             f"tw={float(row['twist_deg']):+.5f} deg h={float(row['h_um']):.5f} um "
             f"|F|/2gL={row['force_rel_2gL']} |T|/2gL^2={row['torque_rel_2gL2']} "
             f"dx_last={float(row['dx_last_um']):+.2e} {row['seconds']} s, warnings {res['warnings']}",
-            file=sys.stderr, flush=True,
+            file=sys.stderr,
+            flush=True,
         )
     if out.exists():
         print(f"{out}: {len(rows)} rows; wall {time.perf_counter() - t0:.0f} s", file=sys.stderr)

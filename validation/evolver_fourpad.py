@@ -86,10 +86,14 @@ class Schedule:
     dshift: float = 0.05  # in-run derivative step, um
     timeout_s: float = 7200.0
     gsteps: int = 60  # conjugate-gradient steps before each Newton loop
-    fd_step: float = 2.5  # um; F_x = -(E(x+d) - E(x-d)) / 2d, the +-d states relaxed by Newton steps
+    fd_step: float = (
+        2.5  # um; F_x = -(E(x+d) - E(x-d)) / 2d, the +-d states relaxed by Newton steps
+    )
     tol: float = 1e-3  # stop the Newton loop when one hessian_seek lowers E by less (gamma um^2)
     newton_max: int = 10
-    integral_order: int = 16  # Gauss order of the contact-line integral (resolves the smoothed step)
+    integral_order: int = (
+        16  # Gauss order of the contact-line integral (resolves the smoothed step)
+    )
 
 
 # ----------------------------------------------------------------------------
@@ -246,7 +250,14 @@ U; g 50; u; V; g 50; qconv
 
 
 def command_file(p: Path_, s: Schedule) -> str:
-    text = _COMMANDS.format(fdstep=s.fd_step, iorder=s.integral_order, dshift=s.dshift, g1=s.gsteps, tol=s.tol, nit=s.newton_max)
+    text = _COMMANDS.format(
+        fdstep=s.fd_step,
+        iorder=s.integral_order,
+        dshift=s.dshift,
+        g1=s.gsteps,
+        tol=s.tol,
+        nit=s.newton_max,
+    )
     for _ in range(s.level):
         text += "r; qrelax\n"
     text += f"qlev := {s.level}\n"
@@ -316,7 +327,7 @@ def contact_line_stats(edges: np.ndarray, L: float, g: float) -> dict[str, float
     poly = _chain(edges)
     # crossings of y = 0
     xs = []
-    for (xa, ya, xb, yb) in edges:
+    for xa, ya, xb, yb in edges:
         if (ya <= 0 < yb) or (yb <= 0 < ya):
             xs.append(xa + (0 - ya) * (xb - xa) / (yb - ya))
     a, b = L / 2, g / 2
@@ -357,8 +368,13 @@ def run_path(p: Path_, s: Schedule, on_pose=None, log=None) -> tuple[list[dict],
         cmd.write_text(command_file(p, s))
         t0 = last = time.perf_counter()
         proc = subprocess.Popen(
-            [exe, "-x", "-f", str(cmd), str(fe)], stdin=subprocess.DEVNULL,
-            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=tmp)
+            [exe, "-x", "-f", str(cmd), str(fe)],
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+            cwd=tmp,
+        )
         cur: dict | None = None
         cl: list[list[float]] = []
         tail: list[str] = []
@@ -391,9 +407,13 @@ def run_path(p: Path_, s: Schedule, on_pose=None, log=None) -> tuple[list[dict],
                     if on_pose is not None:
                         on_pose(cur)
                     if log is not None:
-                        print(f"  {p.name} L{s.level} pose {cur['pose']} x={cur['X']:g} y={cur['Y']:g} "
-                              f"E={cur['E']:.6f} FD={cur['FD']:.5g} FX={cur['FX']:.5g} Z={cur['Z']:.4g} NF={int(cur['NF'])} "
-                              f"DH={cur['DH']:.2g} {cur['seconds']:.1f}s", file=log, flush=True)
+                        print(
+                            f"  {p.name} L{s.level} pose {cur['pose']} x={cur['X']:g} y={cur['Y']:g} "
+                            f"E={cur['E']:.6f} FD={cur['FD']:.5g} FX={cur['FX']:.5g} Z={cur['Z']:.4g} NF={int(cur['NF'])} "
+                            f"DH={cur['DH']:.2g} {cur['seconds']:.1f}s",
+                            file=log,
+                            flush=True,
+                        )
                     cur = None
             rc = proc.wait()
         finally:
@@ -439,22 +459,76 @@ def case_paths(quick: bool = False) -> list[Path_]:
 # CSV rows
 
 LEVEL_COLUMNS = (
-    "path", "L_um", "g_um", "volume_um3", "delta_um", "seg0_um", "level", "x_um", "y_um",
-    "energy_gamma_um2", "energy_J", "area_um2", "wetting_gamma_um2", "force_x_N", "force_x_fd_N",
+    "path",
+    "L_um",
+    "g_um",
+    "volume_um3",
+    "delta_um",
+    "seg0_um",
+    "level",
+    "x_um",
+    "y_um",
+    "energy_gamma_um2",
+    "energy_J",
+    "area_um2",
+    "wetting_gamma_um2",
+    "force_x_N",
+    "force_x_fd_N",
     "force_y_N",
-    "chip_height_um", "pressure_per_um", "volume_um3_measured", "wet_area_um2", "cl_xmin_um",
-    "cl_xmax_um", "cl_xmin_y0_um", "cl_xmax_y0_um", "wet_left_pads_um2", "wet_right_pads_um2",
-    "wet_far_pad_um2", "left_pads_wetted", "vertices", "facets", "last_newton_dE", "seconds", "flag",
+    "chip_height_um",
+    "pressure_per_um",
+    "volume_um3_measured",
+    "wet_area_um2",
+    "cl_xmin_um",
+    "cl_xmax_um",
+    "cl_xmin_y0_um",
+    "cl_xmax_y0_um",
+    "wet_left_pads_um2",
+    "wet_right_pads_um2",
+    "wet_far_pad_um2",
+    "left_pads_wetted",
+    "vertices",
+    "facets",
+    "last_newton_dE",
+    "seconds",
+    "flag",
 )
 
 COLUMNS = (
-    "path", "L_um", "g_um", "volume_um3", "theta_pad_deg", "theta_sub_deg", "delta_um", "x_um", "y_um",
-    "level", "energy_gamma_um2", "energy_J", "area_um2", "force_x_N", "force_x_fd_N",
-    "force_y_N", "chip_height_um",
-    "wet_area_um2", "cl_xmin_um", "cl_xmax_um", "cl_xmin_y0_um", "cl_xmax_y0_um", "wet_left_pads_um2",
-    "wet_far_pad_um2", "left_pads_wetted", "energy_from_force_J", "prev_level", "energy_prev_gamma_um2",
+    "path",
+    "L_um",
+    "g_um",
+    "volume_um3",
+    "theta_pad_deg",
+    "theta_sub_deg",
+    "delta_um",
+    "x_um",
+    "y_um",
+    "level",
+    "energy_gamma_um2",
+    "energy_J",
+    "area_um2",
+    "force_x_N",
+    "force_x_fd_N",
+    "force_y_N",
+    "chip_height_um",
+    "wet_area_um2",
+    "cl_xmin_um",
+    "cl_xmax_um",
+    "cl_xmin_y0_um",
+    "cl_xmax_y0_um",
+    "wet_left_pads_um2",
+    "wet_far_pad_um2",
+    "left_pads_wetted",
+    "energy_from_force_J",
+    "prev_level",
+    "energy_prev_gamma_um2",
     "force_x_prev_N",
-    "energy_change_rel", "force_x_change_N", "force_x_change_rel", "seconds", "flag",
+    "energy_change_rel",
+    "force_x_change_N",
+    "force_x_change_rel",
+    "seconds",
+    "flag",
 )
 
 
@@ -476,20 +550,44 @@ def level_row(p: Path_, rec: dict, flag: str = "ok") -> dict[str, str]:
         fl += ";cl_stats_error"
     left = rec.get("wet_left_pads_um2", float("nan"))
     return {
-        "path": p.name, "L_um": _f(p.L), "g_um": _f(p.g), "volume_um3": _f(p.volume),
-        "delta_um": _f(p.delta), "seg0_um": _f(p.seg), "level": str(rec["level"]),
-        "x_um": _f(rec["X"]), "y_um": _f(rec["Y"]), "energy_gamma_um2": _f(E),
-        "energy_J": _f(GAMMA_N_PER_M * E * UM2_TO_M2), "area_um2": _f(A), "wetting_gamma_um2": _f(E - A),
+        "path": p.name,
+        "L_um": _f(p.L),
+        "g_um": _f(p.g),
+        "volume_um3": _f(p.volume),
+        "delta_um": _f(p.delta),
+        "seg0_um": _f(p.seg),
+        "level": str(rec["level"]),
+        "x_um": _f(rec["X"]),
+        "y_um": _f(rec["Y"]),
+        "energy_gamma_um2": _f(E),
+        "energy_J": _f(GAMMA_N_PER_M * E * UM2_TO_M2),
+        "area_um2": _f(A),
+        "wetting_gamma_um2": _f(E - A),
         "force_x_N": _f(GAMMA_N_PER_M * rec["FX"] * UM_TO_M),
         "force_x_fd_N": _f(GAMMA_N_PER_M * rec["FD"] * UM_TO_M),
-        "force_y_N": _f(GAMMA_N_PER_M * rec["FY"] * UM_TO_M), "chip_height_um": _f(rec["Z"]),
-        "pressure_per_um": _f(rec["P"]), "volume_um3_measured": _f(rec["V"]),
-        **{k: _f(rec.get(k)) for k in ("wet_area_um2", "cl_xmin_um", "cl_xmax_um", "cl_xmin_y0_um",
-                                        "cl_xmax_y0_um", "wet_left_pads_um2", "wet_right_pads_um2",
-                                        "wet_far_pad_um2")},
+        "force_y_N": _f(GAMMA_N_PER_M * rec["FY"] * UM_TO_M),
+        "chip_height_um": _f(rec["Z"]),
+        "pressure_per_um": _f(rec["P"]),
+        "volume_um3_measured": _f(rec["V"]),
+        **{
+            k: _f(rec.get(k))
+            for k in (
+                "wet_area_um2",
+                "cl_xmin_um",
+                "cl_xmax_um",
+                "cl_xmin_y0_um",
+                "cl_xmax_y0_um",
+                "wet_left_pads_um2",
+                "wet_right_pads_um2",
+                "wet_far_pad_um2",
+            )
+        },
         "left_pads_wetted": str(bool(left > 1.0)) if not math.isnan(left) else "",
-        "vertices": str(int(rec["NV"])), "facets": str(int(rec["NF"])), "last_newton_dE": _f(rec["DH"]),
-        "seconds": f"{rec['seconds']:.2f}", "flag": fl,
+        "vertices": str(int(rec["NV"])),
+        "facets": str(int(rec["NF"])),
+        "last_newton_dE": _f(rec["DH"]),
+        "seconds": f"{rec['seconds']:.2f}",
+        "flag": fl,
     }
 
 
@@ -519,15 +617,25 @@ def pose_rows(level_rows: list[dict[str, str]], paths: Sequence[Path_]) -> list[
             q = lv[max(lower)]
             e1, e0 = float(r["energy_gamma_um2"]), float(q["energy_gamma_um2"])
             f1, f0 = float(r["force_x_N"]), float(q["force_x_N"])
-            row.update(prev_level=str(max(lower)), energy_prev_gamma_um2=q["energy_gamma_um2"],
-                       force_x_prev_N=q["force_x_N"], energy_change_rel=_f(abs(e1 - e0) / abs(e1)),
-                       force_x_change_N=_f(f1 - f0),
-                       force_x_change_rel=_f(abs(f1 - f0) / max(abs(f1), 1e-7)))
+            row.update(
+                prev_level=str(max(lower)),
+                energy_prev_gamma_um2=q["energy_gamma_um2"],
+                force_x_prev_N=q["force_x_N"],
+                energy_change_rel=_f(abs(e1 - e0) / abs(e1)),
+                force_x_change_N=_f(f1 - f0),
+                force_x_change_rel=_f(abs(f1 - f0) / max(abs(f1), 1e-7)),
+            )
             if q["flag"] != "ok" and flag == "ok":
                 flag = "prev_level_" + q["flag"]
         else:
-            row.update(prev_level="", energy_prev_gamma_um2="", force_x_prev_N="", energy_change_rel="",
-                       force_x_change_N="", force_x_change_rel="")
+            row.update(
+                prev_level="",
+                energy_prev_gamma_um2="",
+                force_x_prev_N="",
+                energy_change_rel="",
+                force_x_change_N="",
+                force_x_change_rel="",
+            )
             if flag == "ok":
                 flag = "single_level"
         row["flag"] = flag
@@ -565,26 +673,52 @@ def read_csv(path: Path) -> list[dict[str, str]]:
 
 def main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--out", type=Path, default=None, help="pose CSV (default validation/evolver_fourpad.csv)")
-    ap.add_argument("--levels-out", type=Path, default=None, help="per-level CSV (default <out>_levels.csv)")
-    ap.add_argument("--quick", action="store_true", help="3 poses (730/50, x = 0, 25, 50) at level 1")
-    ap.add_argument("--levels", default="1,2", help="comma-separated refinement levels (default 1,2)")
+    ap.add_argument(
+        "--out", type=Path, default=None, help="pose CSV (default validation/evolver_fourpad.csv)"
+    )
+    ap.add_argument(
+        "--levels-out", type=Path, default=None, help="per-level CSV (default <out>_levels.csv)"
+    )
+    ap.add_argument(
+        "--quick", action="store_true", help="3 poses (730/50, x = 0, 25, 50) at level 1"
+    )
+    ap.add_argument(
+        "--levels", default="1,2", help="comma-separated refinement levels (default 1,2)"
+    )
     ap.add_argument("--paths", default=None, help="comma-separated path names to run (default all)")
     ap.add_argument("--delta", type=float, default=None, help="override the smoothing width (um)")
-    ap.add_argument("--crosscheck", type=float, default=None, metavar="X",
-                    help="instead: x-path 0..X-step, X-step, X, X+step on the first selected path")
-    ap.add_argument("--xs", default=None,
-                    help="comma-separated x values replacing the poses of the selected paths "
-                    "(y = 0, or y = x on diagonal paths); the path name gets a _xs suffix")
-    ap.add_argument("--same-name", action="store_true",
-                    help="with --xs: keep the path name, so these rows merge with the full path "
-                    "(used to add a finer level on a subset of poses)")
+    ap.add_argument(
+        "--crosscheck",
+        type=float,
+        default=None,
+        metavar="X",
+        help="instead: x-path 0..X-step, X-step, X, X+step on the first selected path",
+    )
+    ap.add_argument(
+        "--xs",
+        default=None,
+        help="comma-separated x values replacing the poses of the selected paths "
+        "(y = 0, or y = x on diagonal paths); the path name gets a _xs suffix",
+    )
+    ap.add_argument(
+        "--same-name",
+        action="store_true",
+        help="with --xs: keep the path name, so these rows merge with the full path "
+        "(used to add a finer level on a subset of poses)",
+    )
     ap.add_argument("--step", type=float, default=2.5, help="step of --crosscheck (um)")
     ap.add_argument("--append", action="store_true", help="keep the rows already in the level CSV")
-    ap.add_argument("--rebuild", action="store_true",
-                    help="only rewrite the pose CSV from the level CSV (no Evolver run)")
-    ap.add_argument("--jobs", type=int, default=1, help="accepted for symmetry; paths run one at a time")
-    ap.add_argument("--timeout", type=float, default=Schedule.timeout_s, help="seconds per Evolver process")
+    ap.add_argument(
+        "--rebuild",
+        action="store_true",
+        help="only rewrite the pose CSV from the level CSV (no Evolver run)",
+    )
+    ap.add_argument(
+        "--jobs", type=int, default=1, help="accepted for symmetry; paths run one at a time"
+    )
+    ap.add_argument(
+        "--timeout", type=float, default=Schedule.timeout_s, help="seconds per Evolver process"
+    )
     args = ap.parse_args(argv)
     try:
         find_evolver()
@@ -596,17 +730,30 @@ def main(argv: Sequence[str] | None = None) -> int:
         names = args.paths.split(",")
         paths = [p for p in paths if p.name in names]
     if args.delta is not None:
-        paths = [dataclasses.replace(p, delta=args.delta, name=f"{p.name}_d{args.delta:g}") for p in paths]
+        paths = [
+            dataclasses.replace(p, delta=args.delta, name=f"{p.name}_d{args.delta:g}")
+            for p in paths
+        ]
     if args.xs:
         xv = [float(t) for t in args.xs.split(",")]
-        paths = [dataclasses.replace(p, name=p.name if args.same_name else f"{p.name}_xs", poses=tuple(
-            (x, x if p.name.startswith("diag") else 0.0) for x in xv)) for p in paths]
+        paths = [
+            dataclasses.replace(
+                p,
+                name=p.name if args.same_name else f"{p.name}_xs",
+                poses=tuple((x, x if p.name.startswith("diag") else 0.0) for x in xv),
+            )
+            for p in paths
+        ]
     if args.crosscheck is not None:
         p = paths[0]
         X, st = args.crosscheck, args.step
         xs = [x for x in _arange(0, 250, 25) if x < X - st] + [X - st, X, X + st]
-        paths = [dataclasses.replace(p, name=f"{p.name}_xc{X:g}", poses=tuple((x, 0.0) for x in xs))]
-    levels = [1] if args.quick and args.levels == "1,2" else [int(t) for t in args.levels.split(",")]
+        paths = [
+            dataclasses.replace(p, name=f"{p.name}_xc{X:g}", poses=tuple((x, 0.0) for x in xs))
+        ]
+    levels = (
+        [1] if args.quick and args.levels == "1,2" else [int(t) for t in args.levels.split(",")]
+    )
     out = args.out or (Path("/tmp/evolver_fourpad_quick.csv") if args.quick else DEFAULT_OUT)
     lout = args.levels_out or out.with_name(out.stem + "_levels.csv")
     lrows: list[dict[str, str]] = read_csv(lout) if args.append and lout.exists() else []
@@ -637,16 +784,30 @@ def main(argv: Sequence[str] | None = None) -> int:
 
             tp = time.perf_counter()
             recs, err = run_path(p, s, on_pose, sys.stderr)
-            print(f"{p.name} level {lev}: {len(recs)} poses in {time.perf_counter() - tp:.0f} s"
-                  + (f"; FAILED: {err}" if err else ""), file=sys.stderr, flush=True)
+            print(
+                f"{p.name} level {lev}: {len(recs)} poses in {time.perf_counter() - tp:.0f} s"
+                + (f"; FAILED: {err}" if err else ""),
+                file=sys.stderr,
+                flush=True,
+            )
             if err:
                 failed += 1
                 done = {(r["X"], r["Y"]) for r in recs}
                 for x, y in p.poses:
                     if not any(abs(x - a) < 1e-6 and abs(y - b) < 1e-6 for a, b in done):
-                        lrows.append({**{k: "" for k in LEVEL_COLUMNS}, "path": p.name, "L_um": _f(p.L),
-                                      "g_um": _f(p.g), "volume_um3": _f(p.volume), "level": str(lev),
-                                      "x_um": _f(x), "y_um": _f(y), "flag": "failed: " + err.replace("\n", " ")[:200]})
+                        lrows.append(
+                            {
+                                **{k: "" for k in LEVEL_COLUMNS},
+                                "path": p.name,
+                                "L_um": _f(p.L),
+                                "g_um": _f(p.g),
+                                "volume_um3": _f(p.volume),
+                                "level": str(lev),
+                                "x_um": _f(x),
+                                "y_um": _f(y),
+                                "flag": "failed: " + err.replace("\n", " ")[:200],
+                            }
+                        )
                         break  # one failure row marks where the path stopped
                 flush()
     print(f"wrote {out} and {lout}; wall {time.perf_counter() - t0:.0f} s", file=sys.stderr)

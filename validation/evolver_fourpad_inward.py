@@ -60,7 +60,11 @@ COLUMNS = list(ef.COLUMNS) + ["direction"] + EXTRA
 
 
 def inward_xs() -> list[float]:
-    return [500.0, 475.0, 450.0] + [float(x) for x in range(440, 299, -10)] + [250.0, 200.0, 150.0, 100.0, 50.0, 0.0]
+    return (
+        [500.0, 475.0, 450.0]
+        + [float(x) for x in range(440, 299, -10)]
+        + [250.0, 200.0, 150.0, 100.0, 50.0, 0.0]
+    )
 
 
 DIAG = "_x0diag"
@@ -68,7 +72,10 @@ DIAG = "_x0diag"
 DIAG_STEPS = (
     ("one more harness qrelax round", "qrelax"),
     ("g 1000 (conjugate gradient), Newton loop", "g 1000; qconv"),
-    ("u; V; g 2000; u; V; Newton loop; g 1000; Newton loop", "u; V; g 2000; u; V; qconv; g 1000; qconv"),
+    (
+        "u; V; g 2000; u; V; Newton loop; g 1000; Newton loop",
+        "u; V; g 2000; u; V; qconv; g 1000; qconv",
+    ),
 )
 
 
@@ -77,13 +84,18 @@ def inward_paths(gaps: list[float], diag: bool = False, stop: float = 0.0) -> li
     the ``DIAG_STEPS`` (more relaxation at that x, each reported)."""
     xs = [x for x in inward_xs() if x >= stop]
     xs = xs + ([xs[-1]] * len(DIAG_STEPS) if diag else [])
-    return [ef.Path_(f"x_730_{g:g}_inward", 730.0, g, 2.0e7, tuple((x, 0.0) for x in xs)) for g in gaps]
+    return [
+        ef.Path_(f"x_730_{g:g}_inward", 730.0, g, 2.0e7, tuple((x, 0.0) for x in xs)) for g in gaps
+    ]
 
 
 def n_main(p: ef.Path_) -> int:
     """Poses of ``p`` before its diagnostic tail (a tail repeats the last pose)."""
     k = len(DIAG_STEPS)
-    if len(p.poses) > k and len({p.poses[i] for i in range(len(p.poses) - k - 1, len(p.poses))}) == 1:
+    if (
+        len(p.poses) > k
+        and len({p.poses[i] for i in range(len(p.poses) - k - 1, len(p.poses))}) == 1
+    ):
         return len(p.poses) - k
     return len(p.poses)
 
@@ -98,7 +110,7 @@ def is_diag(name: str) -> bool:
 
 
 def diag_path(p: ef.Path_) -> ef.Path_:
-    return dataclasses.replace(p, name=diag_name(p), poses=p.poses[n_main(p):])
+    return dataclasses.replace(p, name=diag_name(p), poses=p.poses[n_main(p) :])
 
 
 _harness_command_file = ef.command_file
@@ -128,9 +140,13 @@ def cl_stats_keep(edges, L, g):
     x0 = st["cl_xmin_y0_um"]
     pts = edges[:, :2]
     far = pts[pts[:, 0] < x0 - 5.0]
-    _last_edges["lobe"] = (len(far), float(far[:, 1].min()) if len(far) else float("nan"),
-                           float(far[:, 1].max()) if len(far) else float("nan"),
-                           float(pts[:, 0].min()), float(pts[np.argmin(pts[:, 0]), 1]))
+    _last_edges["lobe"] = (
+        len(far),
+        float(far[:, 1].min()) if len(far) else float("nan"),
+        float(far[:, 1].max()) if len(far) else float("nan"),
+        float(pts[:, 0].min()),
+        float(pts[np.argmin(pts[:, 0]), 1]),
+    )
     return st
 
 
@@ -156,8 +172,12 @@ def out_rows(lrows: list[dict[str, str]], paths: list[ef.Path_]) -> list[dict[st
         if is_diag(name):  # repeated poses: level rows as they are, in run order
             p = meta.get(name)
             for lr in mine:
-                row = {**lr, "theta_pad_deg": ef._f(p.theta_p if p else ef.Path_.theta_p),
-                       "theta_sub_deg": ef._f(p.theta_s if p else ef.Path_.theta_s), "direction": "inward"}
+                row = {
+                    **lr,
+                    "theta_pad_deg": ef._f(p.theta_p if p else ef.Path_.theta_p),
+                    "theta_sub_deg": ef._f(p.theta_s if p else ef.Path_.theta_s),
+                    "direction": "inward",
+                }
                 rows.append({k: row.get(k, "") for k in COLUMNS})
             continue
         levels = sorted({int(r["level"]) for r in mine})
@@ -265,7 +285,11 @@ def report(runtime_note: str = "") -> str:
     for name, lev in inn_paths:
         g = name.split("_")[2]
         oname = f"x_730_{g}"
-        orows = {_xk(r["x_um"]): r for r in outl if r["path"] == oname and r["level"] == lev and r["energy_gamma_um2"]}
+        orows = {
+            _xk(r["x_um"]): r
+            for r in outl
+            if r["path"] == oname and r["level"] == lev and r["energy_gamma_um2"]
+        }
         irows = [r for r in inn if r["path"] == name and r["level"] == lev]
         L += [
             f"## g = {g} um, level {lev}",
@@ -290,56 +314,81 @@ def report(runtime_note: str = "") -> str:
                 f"{_num(_fl(o.get('cl_xmin_y0_um', '')), '.1f')}/{_num(_fl(r['cl_xmin_y0_um']), '.1f')} | "
                 f"{_num(_fl(o.get('chip_height_um', '')), '.2f')}/{_num(_fl(r['chip_height_um']), '.2f')} | "
                 f"{_num(dE, '+.0f')} | {_num(_fl(r['seconds']), '.1f')} | "
-                f"{_flag(o.get('flag', ''))}/{_flag(r['flag'])} |")
+                f"{_flag(o.get('flag', ''))}/{_flag(r['flag'])} |"
+            )
             if wi != wo or (not math.isnan(dF) and abs(dF) > DF_BIG):
                 diffs.append((_xk(r["x_um"]), fo, fi, dF, wo, wi, dE))
         secs = [_fl(r["seconds"]) for r in irows if r["seconds"]]
-        L += ["", f"{len([r for r in irows if r['energy_gamma_um2']])} of {len(inward_xs())} poses finished; "
-              f"inward wall time {sum(secs):.0f} s ({sum(secs) / max(len(secs), 1):.1f} s/pose, first pose "
-              f"includes the set-up and refinement).", ""]
+        L += [
+            "",
+            f"{len([r for r in irows if r['energy_gamma_um2']])} of {len(inward_xs())} poses finished; "
+            f"inward wall time {sum(secs):.0f} s ({sum(secs) / max(len(secs), 1):.1f} s/pose, first pose "
+            f"includes the set-up and refinement).",
+            "",
+        ]
         if diffs:
-            L.append(f"Poses where the branches differ (left-pad wetting differs, or |dF| > {DF_BIG:g} uN; "
-                     "for scale: away from the loop the two branches agree to ~0.1-0.8 uN at level 1, "
-                     "which is the mesh/relaxation noise of this level):")
+            L.append(
+                f"Poses where the branches differ (left-pad wetting differs, or |dF| > {DF_BIG:g} uN; "
+                "for scale: away from the loop the two branches agree to ~0.1-0.8 uN at level 1, "
+                "which is the mesh/relaxation noise of this level):"
+            )
             L.append("")
             for x, fo, fi, dF, wo, wi, dE in diffs:
-                L.append(f"* x = {x:g}: F_x out {fo:+.3f}, in {fi:+.3f} uN (dF {dF:+.3f} uN"
-                         + (f", {100 * dF / abs(fo):+.0f} %" if abs(fo) > 1 else "")
-                         + f"); left pads wetted out/in {_w(wo)}/{_w(wi)}; E_in - E_out = {dE:+.0f} gamma um^2")
+                L.append(
+                    f"* x = {x:g}: F_x out {fo:+.3f}, in {fi:+.3f} uN (dF {dF:+.3f} uN"
+                    + (f", {100 * dF / abs(fo):+.0f} %" if abs(fo) > 1 else "")
+                    + f"); left pads wetted out/in {_w(wo)}/{_w(wi)}; E_in - E_out = {dE:+.0f} gamma um^2"
+                )
             L.append("")
         else:
             L += [f"No pose differs by wetting state or by more than {DF_BIG:g} uN.", ""]
         summary.append(f"{name} L{lev}: {len(diffs)} differing poses")
     diag = [r for r in inn if is_diag(r["path"])]
     if diag:
-        L += ["## Diagnostic: further relaxation at a fixed pose (x = 0, 380, 400)", "",
-              f"Paths `*{DIAG}`: in the same Evolver run, after the inward path's last pose (x = 0 for `*_x0diag`, X for `*_x<X>diag`), "
-              "these steps, each followed by the harness's report: "
-              + "; ".join(f"row {k}: `{c}` ({d})" for k, (d, c) in enumerate(DIAG_STEPS)) + ".  Row -1 = the "
-              "inward pose itself as the path reached it (for `*_x0diag` copied from the main table; "
-              "`*_x<X>diag` paths ran the inward path only down to x = X, same poses as the main path).", "",
-              "| path | level | row | x um | F_x uN | E gamma um^2 | xmin(y=0) | xmax(y=0) | chip z | last dE | flag |",
-              "|:---|---:|---:|---:|---:|---:|---:|---:|---:|---:|:---|"]
+        L += [
+            "## Diagnostic: further relaxation at a fixed pose (x = 0, 380, 400)",
+            "",
+            f"Paths `*{DIAG}`: in the same Evolver run, after the inward path's last pose (x = 0 for `*_x0diag`, X for `*_x<X>diag`), "
+            "these steps, each followed by the harness's report: "
+            + "; ".join(f"row {k}: `{c}` ({d})" for k, (d, c) in enumerate(DIAG_STEPS))
+            + ".  Row -1 = the "
+            "inward pose itself as the path reached it (for `*_x0diag` copied from the main table; "
+            "`*_x<X>diag` paths ran the inward path only down to x = X, same poses as the main path).",
+            "",
+            "| path | level | row | x um | F_x uN | E gamma um^2 | xmin(y=0) | xmax(y=0) | chip z | last dE | flag |",
+            "|:---|---:|---:|---:|---:|---:|---:|---:|---:|---:|:---|",
+        ]
         seq = []
         for r in diag:
             key = (r["path"], r["level"])
             n_d = sum(1 for q in diag if (q["path"], q["level"]) == key)
             if n_d == len(DIAG_STEPS) and not any(key == (q["path"], q["level"]) for q in seq):
-                seq += [{**q, "path": r["path"]} for q in inn if q["path"] == r["path"][: -len(DIAG)]
-                        and q["level"] == r["level"] and q["energy_gamma_um2"] and abs(_fl(q["x_um"])) < 1e-6]
+                seq += [
+                    {**q, "path": r["path"]}
+                    for q in inn
+                    if q["path"] == r["path"][: -len(DIAG)]
+                    and q["level"] == r["level"]
+                    and q["energy_gamma_um2"]
+                    and abs(_fl(q["x_um"])) < 1e-6
+                ]
             seq.append(r)
         k = {}
         for r in seq:
             key = (r["path"], r["level"])
             k[key] = k.get(key, -2) + 1
-            L.append(f"| {r['path']} | {r['level']} | {k[key]} | {_xk(r['x_um']):g} | {_uN(r['force_x_N'])} | "
-                     f"{_num(_fl(r['energy_gamma_um2']), '.1f')} | {_num(_fl(r['cl_xmin_y0_um']), '.2f')} | "
-                     f"{_num(_fl(r['cl_xmax_y0_um']), '.2f')} | {_num(_fl(r['chip_height_um']), '.3f')} | "
-                     f"{_num(_fl(r['last_newton_dE']), '.2g')} | {r['flag']} |")
+            L.append(
+                f"| {r['path']} | {r['level']} | {k[key]} | {_xk(r['x_um']):g} | {_uN(r['force_x_N'])} | "
+                f"{_num(_fl(r['energy_gamma_um2']), '.1f')} | {_num(_fl(r['cl_xmin_y0_um']), '.2f')} | "
+                f"{_num(_fl(r['cl_xmax_y0_um']), '.2f')} | {_num(_fl(r['chip_height_um']), '.3f')} | "
+                f"{_num(_fl(r['last_newton_dE']), '.2g')} | {r['flag']} |"
+            )
         L.append("")
     if outp:
-        L += ["Outward pose CSV `validation/evolver_fourpad.csv` (finest level per pose) was read for "
-              "reference only; the tables above compare level by level.", ""]
+        L += [
+            "Outward pose CSV `validation/evolver_fourpad.csv` (finest level per pose) was read for "
+            "reference only; the tables above compare level by level.",
+            "",
+        ]
     if runtime_note:
         L += ["## Runtime", "", runtime_note, ""]
     L += [
@@ -389,22 +438,48 @@ def _seconds_to(deadline: str | None) -> float:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--gaps", default="50,100", help="comma-separated gaps (um) of the L=730 pattern")
-    ap.add_argument("--levels", default="1", help="comma-separated refinement levels (each a separate process)")
-    ap.add_argument("--append", action="store_true", help="keep the rows already in the CSV (other paths/levels)")
-    ap.add_argument("--diag-at", type=float, default=None, metavar="X",
-                    help="run the inward path only down to X, then DIAG_STEPS at X; only pose X and the "
-                    "diagnostic poses are recorded (path *_x<X>diag); the main rows are not touched")
-    ap.add_argument("--x0-diag", action="store_true",
-                    help="after the last pose (x = 0) run DIAG_STEPS (more relaxation), reported as path *_x0diag")
-    ap.add_argument("--report", action="store_true", help="only rewrite FOURPAD_INWARD.md from the CSVs")
-    ap.add_argument("--deadline", default=None, help="HH:MM UTC: start no path after it, kill a running one at it")
-    ap.add_argument("--timeout", type=float, default=ef.Schedule.timeout_s, help="seconds per Evolver process")
+    ap.add_argument(
+        "--gaps", default="50,100", help="comma-separated gaps (um) of the L=730 pattern"
+    )
+    ap.add_argument(
+        "--levels", default="1", help="comma-separated refinement levels (each a separate process)"
+    )
+    ap.add_argument(
+        "--append",
+        action="store_true",
+        help="keep the rows already in the CSV (other paths/levels)",
+    )
+    ap.add_argument(
+        "--diag-at",
+        type=float,
+        default=None,
+        metavar="X",
+        help="run the inward path only down to X, then DIAG_STEPS at X; only pose X and the "
+        "diagnostic poses are recorded (path *_x<X>diag); the main rows are not touched",
+    )
+    ap.add_argument(
+        "--x0-diag",
+        action="store_true",
+        help="after the last pose (x = 0) run DIAG_STEPS (more relaxation), reported as path *_x0diag",
+    )
+    ap.add_argument(
+        "--report", action="store_true", help="only rewrite FOURPAD_INWARD.md from the CSVs"
+    )
+    ap.add_argument(
+        "--deadline",
+        default=None,
+        help="HH:MM UTC: start no path after it, kill a running one at it",
+    )
+    ap.add_argument(
+        "--timeout", type=float, default=ef.Schedule.timeout_s, help="seconds per Evolver process"
+    )
     args = ap.parse_args(argv)
     known = inward_paths([50.0, 100.0]) + [diag_path(p) for p in inward_paths([50.0, 100.0], True)]
     if args.report:
         if OUT.exists():  # normalise (idempotent): level rows -> rows again
-            ef.write_csv_atomic(OUT, COLUMNS, out_rows(level_rows_from_out(ef.read_csv(OUT)), known))
+            ef.write_csv_atomic(
+                OUT, COLUMNS, out_rows(level_rows_from_out(ef.read_csv(OUT)), known)
+            )
         write_md()
         print(f"wrote {MD}", file=sys.stderr)
         return 0
@@ -415,8 +490,11 @@ def main(argv=None) -> int:
         run = inward_paths(gaps, True, args.diag_at)
     else:
         run = inward_paths(gaps, args.x0_diag)
-    paths = inward_paths([50.0, 100.0]) + [diag_path(p) for p in inward_paths([50.0, 100.0], True)] + [
-        diag_path(p) for p in run if n_main(p) < len(p.poses)]
+    paths = (
+        inward_paths([50.0, 100.0])
+        + [diag_path(p) for p in inward_paths([50.0, 100.0], True)]
+        + [diag_path(p) for p in run if n_main(p) < len(p.poses)]
+    )
     ef.command_file = command_file_with_diag  # in this process only; the harness file is untouched
     ef.contact_line_stats = cl_stats_keep
     lrows = level_rows_from_out(ef.read_csv(OUT)) if args.append and OUT.exists() else []
@@ -441,7 +519,11 @@ def main(argv=None) -> int:
             else:
                 names = (p.name, diag_name(p)) if args.x0_diag else (p.name,)
             lrows[:] = [r for r in lrows if not (r["path"] in names and r["level"] == str(lev))]
-            print(f"{p.name} level {lev}: {len(p.poses)} poses (harness sha {harness_sha()})", file=sys.stderr, flush=True)
+            print(
+                f"{p.name} level {lev}: {len(p.poses)} poses (harness sha {harness_sha()})",
+                file=sys.stderr,
+                flush=True,
+            )
 
             def on_pose(rec: dict, p=p, nm=nm) -> None:
                 if args.diag_at is not None and rec["pose"] < nm - 1:
@@ -453,21 +535,31 @@ def main(argv=None) -> int:
                         flush()
                         return
                     n, y0, y1, xm, ym = _last_edges.get("lobe", (0, 0, 0, 0, 0))
-                    print(f"  diag x={p.poses[-1][0]:g} step {k} ({DIAG_STEPS[k][0]}): FX={rec['FX']:.4g} E={rec['E']:.3f} "
-                          f"xmin_y0={rec.get('cl_xmin_y0_um', float('nan')):.2f} xmin={xm:.2f} at y={ym:.1f}; "
-                          f"{n} CL vertices left of xmin_y0-5 in y [{y0:.1f}, {y1:.1f}]", file=sys.stderr, flush=True)
+                    print(
+                        f"  diag x={p.poses[-1][0]:g} step {k} ({DIAG_STEPS[k][0]}): FX={rec['FX']:.4g} E={rec['E']:.3f} "
+                        f"xmin_y0={rec.get('cl_xmin_y0_um', float('nan')):.2f} xmin={xm:.2f} at y={ym:.1f}; "
+                        f"{n} CL vertices left of xmin_y0-5 in y [{y0:.1f}, {y1:.1f}]",
+                        file=sys.stderr,
+                        flush=True,
+                    )
                 else:
                     lrows.append(ef.level_row(p, rec))
                     if rec["pose"] == nm - 1 and "lobe" in _last_edges:
                         n, y0, y1, xm, ym = _last_edges["lobe"]
-                        print(f"  x=0 contact line: xmin={xm:.2f} at y={ym:.1f}; {n} CL vertices left of "
-                              f"xmin_y0-5 in y [{y0:.1f}, {y1:.1f}]", file=sys.stderr, flush=True)
+                        print(
+                            f"  x=0 contact line: xmin={xm:.2f} at y={ym:.1f}; {n} CL vertices left of "
+                            f"xmin_y0-5 in y [{y0:.1f}, {y1:.1f}]",
+                            file=sys.stderr,
+                            flush=True,
+                        )
                 flush()
 
             tp = time.perf_counter()
             recs, err = ef.run_path(p, s, on_pose, sys.stderr)
             wall = time.perf_counter() - tp
-            msg = f"{p.name} level {lev}: {len(recs)} poses in {wall:.0f} s" + (f"; FAILED: {err}" if err else "")
+            msg = f"{p.name} level {lev}: {len(recs)} poses in {wall:.0f} s" + (
+                f"; FAILED: {err}" if err else ""
+            )
             print(msg, file=sys.stderr, flush=True)
             notes.append(msg)
             if err:
@@ -475,11 +567,19 @@ def main(argv=None) -> int:
                 done = {r["X"] for r in recs}
                 for x, y in p.poses:
                     if not any(abs(x - a) < 1e-6 for a in done):
-                        lrows.append({**{k: "" for k in ef.LEVEL_COLUMNS},
-                                      "path": diag_name(p) if args.diag_at is not None else p.name, "L_um": ef._f(p.L),
-                                      "g_um": ef._f(p.g), "volume_um3": ef._f(p.volume), "level": str(lev),
-                                      "x_um": ef._f(x), "y_um": ef._f(y),
-                                      "flag": "failed: " + err.replace("\n", " ")[:200]})
+                        lrows.append(
+                            {
+                                **{k: "" for k in ef.LEVEL_COLUMNS},
+                                "path": diag_name(p) if args.diag_at is not None else p.name,
+                                "L_um": ef._f(p.L),
+                                "g_um": ef._f(p.g),
+                                "volume_um3": ef._f(p.volume),
+                                "level": str(lev),
+                                "x_um": ef._f(x),
+                                "y_um": ef._f(y),
+                                "flag": "failed: " + err.replace("\n", " ")[:200],
+                            }
+                        )
                         break
                 flush()
     print(f"wrote {OUT}; wall {time.perf_counter() - t_all:.0f} s", file=sys.stderr)

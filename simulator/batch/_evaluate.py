@@ -79,7 +79,14 @@ def auto_resolution(scene: Scene, budget_mb: float = AUTO_LANDSCAPE_MB) -> Scene
     once, to the pixel size chosen.
     """
     s = scene.um_per_px
-    k = next((k for k in range(1, AUTO_MAX_FACTOR + 1) if estimate_bytes(scene, um_per_px=s * k) / 2**20 <= budget_mb), AUTO_MAX_FACTOR)
+    k = next(
+        (
+            k
+            for k in range(1, AUTO_MAX_FACTOR + 1)
+            if estimate_bytes(scene, um_per_px=s * k) / 2**20 <= budget_mb
+        ),
+        AUTO_MAX_FACTOR,
+    )
     return scene if k == 1 else scene.at_resolution(s * k)
 
 
@@ -88,7 +95,9 @@ def chip_size(scene: Scene) -> tuple[float, float]:
     return footprint_um(scene.chip)
 
 
-def max_bias_along(values: np.ndarray, force: np.ndarray, x0: float, floor: list[float] | None = None) -> tuple[float, float]:
+def max_bias_along(
+    values: np.ndarray, force: np.ndarray, x0: float, floor: list[float] | None = None
+) -> tuple[float, float]:
     """(+, -) largest |v - x0| with the force pointing back to x0 at every sample in between.
 
     ``floor``: [first, last] of a flat floor around x0 (a chip floating within free contact
@@ -96,7 +105,9 @@ def max_bias_along(values: np.ndarray, force: np.ndarray, x0: float, floor: list
     """
     out = []
     if floor is not None:
-        keep = (values < floor[0] - 1e-9) | (values > floor[1] + 1e-9) | (np.abs(values - x0) < 1e-9)
+        keep = (
+            (values < floor[0] - 1e-9) | (values > floor[1] + 1e-9) | (np.abs(values - x0) < 1e-9)
+        )
         values, force = values[keep], force[keep]
     # Samples within a hundredth of a step of x0 are x0 itself (a refined minimum sits
     # a round-off away from the samples through it).
@@ -107,12 +118,25 @@ def max_bias_along(values: np.ndarray, force: np.ndarray, x0: float, floor: list
         order = np.argsort(v)
         v, f = v[order], f[order]
         bad = np.flatnonzero(f >= 0)  # zero force (plateau) or pushing away
-        out.append(float(v[bad[0] - 1]) if bad.size and bad[0] > 0 else (0.0 if bad.size else float(v[-1]) if v.size else 0.0))
+        out.append(
+            float(v[bad[0] - 1])
+            if bad.size and bad[0] > 0
+            else (0.0 if bad.size else float(v[-1]) if v.size else 0.0)
+        )
     return out[0], out[1]
 
 
-def evaluate(scene: Scene, out_dir: str | os.PathLike, quiet: bool = False, source: str = "", auto: bool = True,
-             force: bool = False, inputs: tuple = (), liquid_warnings: list[str] | None = None, method: str = "greedy") -> dict:
+def evaluate(
+    scene: Scene,
+    out_dir: str | os.PathLike,
+    quiet: bool = False,
+    source: str = "",
+    auto: bool = True,
+    force: bool = False,
+    inputs: tuple = (),
+    liquid_warnings: list[str] | None = None,
+    method: str = "greedy",
+) -> dict:
     """Assess ``scene`` and write the report into ``out_dir``.
 
     ``method``: how the capture and yield starts run (:data:`simulator.batch.METHODS`;
@@ -134,8 +158,13 @@ def evaluate(scene: Scene, out_dir: str | os.PathLike, quiet: bool = False, sour
     require_landscape_fits(scene)  # the landscape and the chip's footprint priced before any work
     with output_directory(out_dir, "--out", force, inputs, command="evaluate") as tmp:
         summary = assess(scene, quiet=quiet, pictures=tmp, method=method)
-        summary["settings"] |= {"source_um_per_px": native, "resolution_auto": bool(auto and scene.um_per_px != native)}
-        if "layout" in scene.pattern.params:  # a layout pattern: file, cell, layers, units, and where the origin is
+        summary["settings"] |= {
+            "source_um_per_px": native,
+            "resolution_auto": bool(auto and scene.um_per_px != native),
+        }
+        if (
+            "layout" in scene.pattern.params
+        ):  # a layout pattern: file, cell, layers, units, and where the origin is
             summary["layout"] = scene.pattern.params["layout"]
         summary["liquid_warnings"] = list(liquid_warnings or [])
         summary["seconds"] = round(time.perf_counter() - t_start, 2)
@@ -145,9 +174,17 @@ def evaluate(scene: Scene, out_dir: str | os.PathLike, quiet: bool = False, sour
     return summary
 
 
-def assess(scene: Scene, *, quiet: bool = True, pictures=None, method: str = "greedy", seed: int = 0,
-           placement_sigma: tuple[float, float, float] | None = None, yield_starts: int = YIELD_STARTS,
-           grid_cells: int = GRID_CELLS) -> dict:
+def assess(
+    scene: Scene,
+    *,
+    quiet: bool = True,
+    pictures=None,
+    method: str = "greedy",
+    seed: int = 0,
+    placement_sigma: tuple[float, float, float] | None = None,
+    yield_starts: int = YIELD_STARTS,
+    grid_cells: int = GRID_CELLS,
+) -> dict:
     """The numbers of :func:`evaluate` for ``scene`` (no resolution change, nothing written
     unless ``pictures`` names a directory for the four pictures).
 
@@ -166,7 +203,11 @@ def assess(scene: Scene, *, quiet: bool = True, pictures=None, method: str = "gr
     s = scene.um_per_px
     ls = build_landscape(scene, progress=not quiet)
     xm, ym, tm, em = ls.global_minimum()
-    gx, gy, gt = xm, ym, tm  # the grid's global minimum: centre of the capture grid and of the placement noise
+    gx, gy, gt = (
+        xm,
+        ym,
+        tm,
+    )  # the grid's global minimum: centre of the capture grid and of the placement noise
     meniscus = None
     floating = None
     if ls.meniscus_height_um is not None:
@@ -177,17 +218,35 @@ def assess(scene: Scene, *, quiet: bool = True, pictures=None, method: str = "gr
 
         if scene.wall_profile is not None and any(b > a for a, b in ls.floor_extent()):
             fr = ls.floor_range()
-            floating = {f"{k.split('_')[0]}_{end}_{k.split('_')[1]}": v[i] for k, v in fr.items() for i, end in enumerate(("from", "to"))}
+            floating = {
+                f"{k.split('_')[0]}_{end}_{k.split('_')[1]}": v[i]
+                for k, v in fr.items()
+                for i, end in enumerate(("from", "to"))
+            }
         else:
             r = refine_minimum(ls, xm, ym, tm)
             xm, ym, tm, em = r["x_um"], r["y_um"], r["twist_deg"], r["energy_J"]
-        meniscus = {"stiffness": stiffness(ls, xm, ym, tm), "overlap": build_landscape(scene.replace(
-            effects=replace(scene.effects, meniscus=False)), twists=np.array([ls.twist_deg[int(np.argmin(np.abs(ls.twist_deg - tm)))]]))}
-        if floating:  # on the floor the well is flat: no curvature where it spans the minimum (not round-off)
+        meniscus = {
+            "stiffness": stiffness(ls, xm, ym, tm),
+            "overlap": build_landscape(
+                scene.replace(effects=replace(scene.effects, meniscus=False)),
+                twists=np.array([ls.twist_deg[int(np.argmin(np.abs(ls.twist_deg - tm)))]]),
+            ),
+        }
+        if (
+            floating
+        ):  # on the floor the well is flat: no curvature where it spans the minimum (not round-off)
             k = meniscus["stiffness"]
-            for key, axis, v in (("x_N_per_m", "x", xm), ("y_N_per_m", "y", ym), ("twist_Nm_per_rad", "twist", tm)):
+            for key, axis, v in (
+                ("x_N_per_m", "x", xm),
+                ("y_N_per_m", "y", ym),
+                ("twist_Nm_per_rad", "twist", tm),
+            ):
                 unit = "deg" if axis == "twist" else "um"
-                if k.get(key) is not None and floating[f"{axis}_from_{unit}"] < v < floating[f"{axis}_to_{unit}"]:
+                if (
+                    k.get(key) is not None
+                    and floating[f"{axis}_from_{unit}"] < v < floating[f"{axis}_to_{unit}"]
+                ):
                     k[key] = 0.0
     w, h = chip_size(scene)
     near = max(2 * s, 0.02 * min(w, h))
@@ -214,10 +273,16 @@ def assess(scene: Scene, *, quiet: bool = True, pictures=None, method: str = "gr
     span = 0.6 * max(w, h)
     step = max(s, round(2 * span / (grid_cells - 1) / s) * s)
     n = int(span // step)
-    grid = StartGrid.from_ranges((gx - n * step, gx + n * step, step), (gy - n * step, gy + n * step, step), gt)
+    grid = StartGrid.from_ranges(
+        (gx - n * step, gx + n * step, step), (gy - n * step, gy + n * step, step), gt
+    )
     cap = run_batch(scene, grid, method, landscape=ls, progress=not quiet)
     cap_sum = summarize(cap, grid)
-    noise = (NOISE_FRACTION * w, NOISE_FRACTION * h, NOISE_TWIST_DEG) if placement_sigma is None else tuple(float(v) for v in placement_sigma)
+    noise = (
+        (NOISE_FRACTION * w, NOISE_FRACTION * h, NOISE_TWIST_DEG)
+        if placement_sigma is None
+        else tuple(float(v) for v in placement_sigma)
+    )
     if len(ls.twist_deg) == 1:
         noise = (noise[0], noise[1], 0.0)
     starts = random_starts(yield_starts, noise, seed=seed, around=(gx, gy, gt))
@@ -229,13 +294,26 @@ def assess(scene: Scene, *, quiet: bool = True, pictures=None, method: str = "gr
         out = pictures
         plot_pattern(scene.pattern, out / "pattern.png")
         plot_landscape(ls, out / "landscape.png", pattern=scene.pattern)
-        plot_forces(ls, out / "force.png", through=(xm, ym, tm), compare=meniscus["overlap"] if meniscus else None)
+        plot_forces(
+            ls,
+            out / "force.png",
+            through=(xm, ym, tm),
+            compare=meniscus["overlap"] if meniscus else None,
+        )
         plot_capture_map(
-            capture_map(cap, grid), grid, scene, out / "capture.png", title=f"capture map ({method}): capture fraction {100 * cap_sum['yield']:.1f} % of {cap_sum['n']} grid starts"
+            capture_map(cap, grid),
+            grid,
+            scene,
+            out / "capture.png",
+            title=f"capture map ({method}): capture fraction {100 * cap_sum['yield']:.1f} % of {cap_sum['n']} grid starts",
         )
         if yl.time_s is not None:
-            plot_time_to_align(time_histogram(yl.time_to_align_s), time_stats(yl.time_to_align_s), out / "time_to_align.png",
-                                      title=f"time to align ({method}): {yl_sum['outcomes']['aligned']:,} of {yl_sum['n']:,} placement-noise starts aligned")
+            plot_time_to_align(
+                time_histogram(yl.time_to_align_s),
+                time_stats(yl.time_to_align_s),
+                out / "time_to_align.png",
+                title=f"time to align ({method}): {yl_sum['outcomes']['aligned']:,} of {yl_sum['n']:,} placement-noise starts aligned",
+            )
     m = scene.materials
     extra = {}
     if meniscus:
@@ -243,18 +321,31 @@ def assess(scene: Scene, *, quiet: bool = True, pictures=None, method: str = "gr
             "meniscus_height_um": ls.meniscus_height_um,
             "pinned": scene.liquid.pinned,
             "stiffness": meniscus["stiffness"],
-            "offset_from_centre": {"x_um": round(xm, 1) + 0.0, "y_um": round(ym, 1) + 0.0, "twist_deg": round(tm, 1) + 0.0,
-                                   "distance_um": round(math.hypot(xm, ym), 1)},
+            "offset_from_centre": {
+                "x_um": round(xm, 1) + 0.0,
+                "y_um": round(ym, 1) + 0.0,
+                "twist_deg": round(tm, 1) + 0.0,
+                "distance_um": round(math.hypot(xm, ym), 1),
+            },
             "meniscus_warning": regime_warning(ls.meniscus_height_um, scene.chip_min_side_um),
             "contact_lines": "pinned" if scene.liquid.pinned else "free",
             "floating_range": floating,
         }
         prof = scene.wall_profile
         if prof is not None:
-            extra["contact_line_reach_um"] = {"substrate": prof.substrate_reach_px * s, "pad": prof.pad_reach_px * s}
+            extra["contact_line_reach_um"] = {
+                "substrate": prof.substrate_reach_px * s,
+                "pad": prof.pad_reach_px * s,
+            }
     return extra | {
-        "global_minimum": {"x_um": xm, "y_um": ym, "twist_deg": tm, "energy_J": em, "overlap_um2": float(ls.overlap_um2(em)),
-                           "refined": meniscus is not None and floating is None},
+        "global_minimum": {
+            "x_um": xm,
+            "y_um": ym,
+            "twist_deg": tm,
+            "energy_J": em,
+            "overlap_um2": float(ls.overlap_um2(em)),
+            "refined": meniscus is not None and floating is None,
+        },
         "restoring_force_N": {"bias_um": near, **forces},
         "restoring_torque_Nm": {"twist_deg": near_deg, **torques} if torques else None,
         "plateaus_um": {a: curves[a]["plateaus"] for a in ("x", "y")},
@@ -266,7 +357,8 @@ def assess(scene: Scene, *, quiet: bool = True, pictures=None, method: str = "gr
             "grid_um": {"from": -n * step, "to": n * step, "step": step},  # about the centre
             "center": {"x_um": gx, "y_um": gy},
             "twist_deg": gt,
-        } | ({"time_to_align_s": cap_sum["time_to_align_s"]} if "time_to_align_s" in cap_sum else {}),
+        }
+        | ({"time_to_align_s": cap_sum["time_to_align_s"]} if "time_to_align_s" in cap_sum else {}),
         "yield": {
             "fraction": yl_sum["yield"],
             "n": yl_sum["n"],
@@ -275,7 +367,8 @@ def assess(scene: Scene, *, quiet: bool = True, pictures=None, method: str = "gr
             "seed": seed,
             "error_um": yl_sum.get("aligned_error_um"),
             "error_deg": yl_sum.get("aligned_error_deg"),
-        } | ({"time_to_align_s": yl_sum["time_to_align_s"]} if "time_to_align_s" in yl_sum else {}),
+        }
+        | ({"time_to_align_s": yl_sum["time_to_align_s"]} if "time_to_align_s" in yl_sum else {}),
         "settings": {
             "um_per_px": s,
             "pattern_px": list(scene.pattern.shape),
@@ -316,7 +409,7 @@ def _liquid_rows(warnings: list[str] | None) -> str:
     if not warnings:
         return ""
     items = "".join(f"<li>{html.escape(w)}</li>" for w in warnings)
-    return f"\n<h2>The droplet</h2>\n<ul class=\"warn\">{items}</ul>"
+    return f'\n<h2>The droplet</h2>\n<ul class="warn">{items}</ul>'
 
 
 def _model_note(summary: dict) -> str:
@@ -324,13 +417,21 @@ def _model_note(summary: dict) -> str:
     if h is None:
         return "Overlap model (energy = &Delta;&gamma; &times; overlap area)."
     if summary.get("pinned"):
-        return (f"Finite meniscus, height meniscus_height_um = {h:.4g} um, contact lines pinned at the pad edges (the overlap "
-                "energy with every cusp rounded over h; dashed in the force plot: the overlap model).")
+        return (
+            f"Finite meniscus, height meniscus_height_um = {h:.4g} um, contact lines pinned at the pad edges (the overlap "
+            "energy with every cusp rounded over h; dashed in the force plot: the overlap model)."
+        )
     r = summary.get("contact_line_reach_um")
-    reach = f", reaching {r['substrate']:.3g} um beyond the chip on the substrate and {r['pad']:.3g} um on a pad" if r else ""
-    return (f"Finite meniscus, height meniscus_height_um = {h:.4g} um, free contact lines{reach} (the overlap energy of the "
-            "liquid's footprint: flat where the lines stand on one surface, rising where a pad edge holds a line; dashed in the "
-            "force plot: the overlap model).")
+    reach = (
+        f", reaching {r['substrate']:.3g} um beyond the chip on the substrate and {r['pad']:.3g} um on a pad"
+        if r
+        else ""
+    )
+    return (
+        f"Finite meniscus, height meniscus_height_um = {h:.4g} um, free contact lines{reach} (the overlap energy of the "
+        "liquid's footprint: flat where the lines stand on one surface, rising where a pad edge holds a line; dashed in the "
+        "force plot: the overlap model)."
+    )
 
 
 def _at(v: float) -> str:
@@ -353,29 +454,37 @@ def _meniscus_rows(summary: dict) -> str:
     warn_html = f'<p class="warn">warning: {html.escape(warn)}</p>' if warn else ""
     fl = summary.get("floating_range")
     if fl:
-        warn_html = (f"<p>The chip floats: the well's floor (no restoring force) spans x {_span(fl, 'x', 'um')}, "
-                     f"y {_span(fl, 'y', 'um')}, twist {_span(fl, 'twist', 'deg')}; a run that stops on it counts as "
-                     f"aligned. The stiffness is the floor's (zero where it is flat).</p>") + warn_html
-    return (f"<h2>Stiffness at alignment (finite meniscus)</h2><table><tr><th>k<sub>x</sub></th><td>{_fmt(k['x_N_per_m'], 'N/m')}</td></tr>"
-            f"<tr><th>k<sub>y</sub></th><td>{_fmt(k['y_N_per_m'], 'N/m')}</td></tr><tr><th>k<sub>twist</sub></th><td>{tw}</td></tr>"
-            f"<tr><th>offset of the minimum from the pattern centre</th><td>({_at(o['x_um'])} um, {_at(o['y_um'])} um, {_at(o['twist_deg'])} deg), "
-            f"{_at(o['distance_um'])} um</td></tr></table>{warn_html}\n")
+        warn_html = (
+            f"<p>The chip floats: the well's floor (no restoring force) spans x {_span(fl, 'x', 'um')}, "
+            f"y {_span(fl, 'y', 'um')}, twist {_span(fl, 'twist', 'deg')}; a run that stops on it counts as "
+            f"aligned. The stiffness is the floor's (zero where it is flat).</p>"
+        ) + warn_html
+    return (
+        f"<h2>Stiffness at alignment (finite meniscus)</h2><table><tr><th>k<sub>x</sub></th><td>{_fmt(k['x_N_per_m'], 'N/m')}</td></tr>"
+        f"<tr><th>k<sub>y</sub></th><td>{_fmt(k['y_N_per_m'], 'N/m')}</td></tr><tr><th>k<sub>twist</sub></th><td>{tw}</td></tr>"
+        f"<tr><th>offset of the minimum from the pattern centre</th><td>({_at(o['x_um'])} um, {_at(o['y_um'])} um, {_at(o['twist_deg'])} deg), "
+        f"{_at(o['distance_um'])} um</td></tr></table>{warn_html}\n"
+    )
 
 
 def _time_text(t: dict | None) -> str:
     if t is None:
         return "no start aligned"
-    return (f"median <b>{1e3 * t['median']:.3g} ms</b>, 90th percentile <b>{1e3 * t['p90']:.3g} ms</b>, "
-            f"range {1e3 * t['min']:.3g} to {1e3 * t['max']:.3g} ms over {t['n']:,} aligned starts")
+    return (
+        f"median <b>{1e3 * t['median']:.3g} ms</b>, 90th percentile <b>{1e3 * t['p90']:.3g} ms</b>, "
+        f"range {1e3 * t['min']:.3g} to {1e3 * t['max']:.3g} ms over {t['n']:,} aligned starts"
+    )
 
 
 def _time_rows(cap: dict, yl: dict) -> str:
     """The report's section on the time to align (dynamics only; empty for the steppers)."""
     if "time_to_align_s" not in yl:
         return ""
-    return (f"\n<h2>Time to align</h2>\n<p>Simulated time until an aligned run comes to rest (the solver's stop test), "
-            f"placement-noise starts: {_time_text(yl['time_to_align_s'])}; capture grid: {_time_text(cap.get('time_to_align_s'))}.</p>\n"
-            f'<img src="time_to_align.png" alt="histogram of the time to align">')
+    return (
+        f"\n<h2>Time to align</h2>\n<p>Simulated time until an aligned run comes to rest (the solver's stop test), "
+        f"placement-noise starts: {_time_text(yl['time_to_align_s'])}; capture grid: {_time_text(cap.get('time_to_align_s'))}.</p>\n"
+        f'<img src="time_to_align.png" alt="histogram of the time to align">'
+    )
 
 
 def _html(summary: dict, source: str) -> str:
@@ -391,17 +500,30 @@ def _html(summary: dict, source: str) -> str:
         if k != "bias_um"
     )
     rows_torque = (
-        "".join(f"<tr><td>twist {k}{tq['twist_deg']:g} deg</td><td colspan=2>{_fmt(v * 1e9, 'nN m')}</td></tr>" for k, v in tq.items() if k != "twist_deg")
+        "".join(
+            f"<tr><td>twist {k}{tq['twist_deg']:g} deg</td><td colspan=2>{_fmt(v * 1e9, 'nN m')}</td></tr>"
+            for k, v in tq.items()
+            if k != "twist_deg"
+        )
         if tq
         else "<tr><td colspan=3>twist not simulated</td></tr>"
     )
-    plateaus = "; ".join(f"{a}: " + (", ".join(f"[{p[0]:g}, {p[1]:g}] um" for p in pl) or "none") for a, pl in summary["plateaus_um"].items())
+    plateaus = "; ".join(
+        f"{a}: " + (", ".join(f"[{p[0]:g}, {p[1]:g}] um" for p in pl) or "none")
+        for a, pl in summary["plateaus_um"].items()
+    )
     outcomes = ", ".join(f"{k} {v}" for k, v in yl["outcomes"].items() if v)
     cap_out = ", ".join(f"{k} {v}" for k, v in cap["outcomes"].items() if v)
     ps = yl["placement_sigma"]
     err = yl.get("error_um") or {}
-    err_txt = ", ".join(f"{k}: mean |error| {v['mean_abs']:.3g} um" for k, v in err.items() if v) or "n/a"
-    auto = " (coarsened automatically to keep the landscape small; pass --resolution to choose)" if s.get("resolution_auto") else ""
+    err_txt = (
+        ", ".join(f"{k}: mean |error| {v['mean_abs']:.3g} um" for k, v in err.items() if v) or "n/a"
+    )
+    auto = (
+        " (coarsened automatically to keep the landscape small; pass --resolution to choose)"
+        if s.get("resolution_auto")
+        else ""
+    )
     return f"""<!doctype html>
 <html lang="en"><head><meta charset="utf-8"><title>selfalign evaluation: {e(source)}</title>
 <style>
@@ -413,30 +535,30 @@ img {{ max-width: 100%; border: 1px solid #ddd; }} .grid {{ display: grid; grid-
 </style></head><body>
 <h1>selfalign evaluation of <code>{e(source)}</code></h1>
 <p class="note">{_model_note(summary)} Positions in um of the chip centre from the
-pattern centre, x right, y up; twist in degrees, counter-clockwise positive. Computed in {summary['seconds']:.1f} s.</p>
+pattern centre, x right, y up; twist in degrees, counter-clockwise positive. Computed in {summary["seconds"]:.1f} s.</p>
 <h2>Inputs</h2>
 <div class="grid"><div><img src="pattern.png" alt="pattern as used"></div><div><table>
-<tr><th>pattern</th><td>{e(source)}, {s['pattern_px'][1]} x {s['pattern_px'][0]} px at {s['um_per_px']:g} um/px{e(auto)} (file scale {s['source_um_per_px']:g} um/px)</td></tr>
-<tr><th>chip</th><td>{s['chip_um'][0]:g} x {s['chip_um'][1]:g} um wettable footprint</td></tr>{_layout_row(summary.get("layout"))}
-<tr><th>liquid / wetting</th><td>surface tension {s['surface_tension_N_m'] * 1e3:g} mN/m, pad {s['pad_angle_deg']:g} deg, substrate {s['substrate_angle_deg']:g} deg: &Delta;&gamma; = {s['delta_gamma_N_m'] * 1e3:.4g} mN/m</td></tr>
-<tr><th>pose grid</th><td>{s['twists']} twists{f", step {s['twist_step_deg']:g} deg" if s['twist_step_deg'] else ""}; {s['dtype']}; landscape {s['landscape_MB']:g} MB in {s['landscape_s']:g} s</td></tr>
+<tr><th>pattern</th><td>{e(source)}, {s["pattern_px"][1]} x {s["pattern_px"][0]} px at {s["um_per_px"]:g} um/px{e(auto)} (file scale {s["source_um_per_px"]:g} um/px)</td></tr>
+<tr><th>chip</th><td>{s["chip_um"][0]:g} x {s["chip_um"][1]:g} um wettable footprint</td></tr>{_layout_row(summary.get("layout"))}
+<tr><th>liquid / wetting</th><td>surface tension {s["surface_tension_N_m"] * 1e3:g} mN/m, pad {s["pad_angle_deg"]:g} deg, substrate {s["substrate_angle_deg"]:g} deg: &Delta;&gamma; = {s["delta_gamma_N_m"] * 1e3:.4g} mN/m</td></tr>
+<tr><th>pose grid</th><td>{s["twists"]} twists{f", step {s['twist_step_deg']:g} deg" if s["twist_step_deg"] else ""}; {s["dtype"]}; landscape {s["landscape_MB"]:g} MB in {s["landscape_s"]:g} s</td></tr>
 </table></div></div>{_liquid_rows(summary.get("liquid_warnings"))}
 <h2>Where the chip ends up</h2>
-<p>Global minimum of the energy at <b>({_at(g['x_um'])} um, {_at(g['y_um'])} um, {_at(g['twist_deg'])} deg)</b>,
-overlap {g['overlap_um2']:,.0f} um&sup2;, energy {_fmt(g['energy_J'], 'J')}.</p>
+<p>Global minimum of the energy at <b>({_at(g["x_um"])} um, {_at(g["y_um"])} um, {_at(g["twist_deg"])} deg)</b>,
+overlap {g["overlap_um2"]:,.0f} um&sup2;, energy {_fmt(g["energy_J"], "J")}.</p>
 {_meniscus_rows(summary)}<h2>Restoring force and torque near alignment</h2>
 <table><tr><th>chip displaced by</th><th>F<sub>x</sub></th><th>F<sub>y</sub></th></tr>{rows_force}{rows_torque}</table>
 <p>Maximum bias from which the force points back to the minimum all the way:
-+x {b['+x']:g} um, &minus;x {b['-x']:g} um, +y {b['+y']:g} um, &minus;y {b['-y']:g} um (twist held at the minimum's).
++x {b["+x"]:g} um, &minus;x {b["-x"]:g} um, +y {b["+y"]:g} um, &minus;y {b["-y"]:g} um (twist held at the minimum's).
 Plateaus (zero force): {e(plateaus)}.</p>
 <img src="force.png" alt="energy, force and torque curves">
 <h2>Energy landscape</h2>
 <img src="landscape.png" alt="energy over x and y">
 <h2>Capture region and yield</h2>
-<p>Capture fraction: <b>{100 * cap['fraction']:.1f} %</b> of {cap['n']} {e(s['method'])} starts on a grid from {cap['grid_um']['from']:g} to {cap['grid_um']['to']:g} um
-in steps of {cap['grid_um']['step']:g} um in x and y around the global minimum, twist {cap['twist_deg']:g} deg ({e(cap_out)}).</p>
-<p>Yield under placement noise: <b>{100 * yl['fraction']:.1f} %</b> of {yl['n']} starts drawn normally around the aligned pose (the global minimum) with
-&sigma; = {ps['x_um']:.3g} um, {ps['y_um']:.3g} um, {ps['twist_deg']:g} deg (seed {yl['seed']}): {e(outcomes)}; aligned runs, final-pose error from the global minimum: {e(err_txt)}.</p>
+<p>Capture fraction: <b>{100 * cap["fraction"]:.1f} %</b> of {cap["n"]} {e(s["method"])} starts on a grid from {cap["grid_um"]["from"]:g} to {cap["grid_um"]["to"]:g} um
+in steps of {cap["grid_um"]["step"]:g} um in x and y around the global minimum, twist {cap["twist_deg"]:g} deg ({e(cap_out)}).</p>
+<p>Yield under placement noise: <b>{100 * yl["fraction"]:.1f} %</b> of {yl["n"]} starts drawn normally around the aligned pose (the global minimum) with
+&sigma; = {ps["x_um"]:.3g} um, {ps["y_um"]:.3g} um, {ps["twist_deg"]:g} deg (seed {yl["seed"]}): {e(outcomes)}; aligned runs, final-pose error from the global minimum: {e(err_txt)}.</p>
 <img src="capture.png" alt="capture map">{_time_rows(cap, yl)}
 <p class="note">Written by selfalign. The numbers are in summary.json (units in the key names).</p>
 </body></html>

@@ -123,7 +123,15 @@ def _one(field: Field, grid: Grid, params, start, method: str, max_steps: int, s
 
 
 @functools.partial(jax.jit, static_argnames=("grid", "method", "max_steps", "stiff"))
-def _run_chunk(field: Field, params, starts: jax.Array, grid: Grid, method: str, max_steps: int, stiff: bool = False):
+def _run_chunk(
+    field: Field,
+    params,
+    starts: jax.Array,
+    grid: Grid,
+    method: str,
+    max_steps: int,
+    stiff: bool = False,
+):
     """The jit boundary: vmap of :func:`_one` over a (chunk, 3) array of start indices
     (``params`` traced and shared by every lane).
 
@@ -135,6 +143,7 @@ def _run_chunk(field: Field, params, starts: jax.Array, grid: Grid, method: str,
     the root finder's tolerance, so a lane's path would depend on its neighbours
     (measured: up to 4e-4 um and 3x the steps after 1 s). Explicit solvers carry the
     same value either way, so their lanes are independent and equal single runs."""
+
     def one(s):
         return _one(field, grid, params, s, method, max_steps, stiff)
 
@@ -145,16 +154,25 @@ def _check_starts_fit(ls: Landscape, poses: np.ndarray) -> None:
     """Starts the landscape cannot hold: twist outside a bounded axis, pose outside a cut window."""
     t = ls.twist_deg
     if len(t) == 1:
-        require(bool(np.all(np.abs(poses[:, 2] - t[0]) <= 1e-9)), f"the landscape has one twist ({t[0]:g} deg, no twisting); every start twist must be {t[0]:g} degrees")
+        require(
+            bool(np.all(np.abs(poses[:, 2] - t[0]) <= 1e-9)),
+            f"the landscape has one twist ({t[0]:g} deg, no twisting); every start twist must be {t[0]:g} degrees",
+        )
     elif not ls.wrap:
         half = ls.twist_step_deg / 2
         lo, hi = poses[:, 2].min(), poses[:, 2].max()
-        require(t[0] - half <= lo and hi <= t[-1] + half, f"start twists {lo:g}..{hi:g} deg are outside the twist range {t[0]:g}..{t[-1]:g} deg; widen the twist range")
+        require(
+            t[0] - half <= lo and hi <= t[-1] + half,
+            f"start twists {lo:g}..{hi:g} deg are outside the twist range {t[0]:g}..{t[-1]:g} deg; widen the twist range",
+        )
     s = ls.um_per_px
     for k, (axis, (cut_lo, cut_hi)) in enumerate(((ls.x_um, ls.cut[2]), (ls.y_um, ls.cut[1]))):
         v = poses[:, k]
         bad = (cut_lo and v.min() < axis[0] - s / 2) or (cut_hi and v.max() > axis[-1] + s / 2)
-        require(not bad, f"start {'xy'[k]} values {v.min():g}..{v.max():g} um leave the translation window {axis[0]:g}..{axis[-1]:g} um; widen the window (--window / window_um)")
+        require(
+            not bad,
+            f"start {'xy'[k]} values {v.min():g}..{v.max():g} um leave the translation window {axis[0]:g}..{axis[-1]:g} um; widen the window (--window / window_um)",
+        )
 
 
 def _distance_in_steps(q: np.ndarray, best: np.ndarray, grid: Grid) -> np.ndarray:
@@ -236,12 +254,17 @@ def run_batch(
     for name, v in (("chunk", chunk), ("max steps", max_steps)):
         if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < 1:
             raise InputError(f"{name} must be a whole number >= 1, got {v!r}")
-    require(max_steps <= MAX_STEPS_LIMIT, f"max steps must be at most {MAX_STEPS_LIMIT:,} (the step counter is 32-bit), got {max_steps:,}")
+    require(
+        max_steps <= MAX_STEPS_LIMIT,
+        f"max steps must be at most {MAX_STEPS_LIMIT:,} (the step counter is 32-bit), got {max_steps:,}",
+    )
     require(chunk <= MAX_CHUNK, f"chunk must be at most {MAX_CHUNK:,} starts, got {chunk:,}")
     per_start = BATCH_BYTES_PER_START + (TIME_BYTES_PER_START if dynamic else 0)
     if isinstance(starts, StartGrid):
         price_starts(starts.size, scene.memory_budget_mb, per_start)
-    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int | np.integer) or workers < 1):
+    if workers is not None and (
+        isinstance(workers, bool) or not isinstance(workers, int | np.integer) or workers < 1
+    ):
         raise InputError(f"workers must be a whole number >= 1 or None, got {workers!r}")
     poses = _as_poses(starts)
     price_starts(len(poses), scene.memory_budget_mb, per_start)
@@ -262,8 +285,12 @@ def run_batch(
     t_land = time.perf_counter() - t0
     _check_starts_fit(ls, poses)
     pin = pin_per_index(scene, ls.um_per_px, ls.twist_step_deg)
-    fld, grid = field_and_grid(ls, pin=pin, align_tol=align_tolerance(ls, pin, floats=scene.wall_profile is not None))
-    stiff = bool(is_stiff(method, fld, grid, dynamics)) if dynamic else False  # the solver simulate() would choose
+    fld, grid = field_and_grid(
+        ls, pin=pin, align_tol=align_tolerance(ls, pin, floats=scene.wall_profile is not None)
+    )
+    stiff = (
+        bool(is_stiff(method, fld, grid, dynamics)) if dynamic else False
+    )  # the solver simulate() would choose
     q0 = grid.to_index(poses)
     q0 = np.round(q0).astype(np.int32) if method == "greedy" else q0  # as simulate()
     # A vmapped while loop runs until its slowest lane stops: starts run grouped by run
@@ -283,7 +310,15 @@ def run_batch(
         m = len(block)
         if m < chunk:  # pad with the block's first start: one compiled shape
             block = np.concatenate([block, np.repeat(block[:1], chunk - m, axis=0)])
-        q, st, _, out, e, ts = _run_chunk(fld, dynamics, jnp.asarray(block), grid=grid, method=method, max_steps=int(max_steps), stiff=stiff)
+        q, st, _, out, e, ts = _run_chunk(
+            fld,
+            dynamics,
+            jnp.asarray(block),
+            grid=grid,
+            method=method,
+            max_steps=int(max_steps),
+            stiff=stiff,
+        )
         dest = order[i : i + m]
         final_q[dest] = np.asarray(q)[:m]
         steps[dest] = np.asarray(st)[:m]
@@ -336,8 +371,12 @@ def run_batch(
 def price_dynamics_lanes(lanes: int, budget_mb: float | None) -> None:
     """Refuse a dynamics batch whose solver states (``lanes`` = chunk x threads in flight,
     :data:`DYNAMICS_BYTES_PER_LANE` each) would not fit the memory budget."""
-    require_fits(f"the solver states of {lanes:,} dynamics runs at once", float(lanes) * DYNAMICS_BYTES_PER_LANE,
-                 "use a smaller --chunk", budget_mb)
+    require_fits(
+        f"the solver states of {lanes:,} dynamics runs at once",
+        float(lanes) * DYNAMICS_BYTES_PER_LANE,
+        "use a smaller --chunk",
+        budget_mb,
+    )
 
 
 # --------------------------------------------------------------------- pattern realizations
@@ -386,11 +425,23 @@ def run_realizations(
         parts, optima = [], []
         for seed in seeds:
             geom = random_jagged(size_um, sigma=sigma, seed=seed, pitch=pitch_um)
-            pattern = mask_from_geometry(geom, chip.um_per_px, margin_um=margin_um, params={"design": "random-jagged", "sigma_um": sigma, "seed": seed})
+            pattern = mask_from_geometry(
+                geom,
+                chip.um_per_px,
+                margin_um=margin_um,
+                params={"design": "random-jagged", "sigma_um": sigma, "seed": seed},
+            )
             scene = Scene(pattern=pattern, chip=chip, **(scene_options or {}))
             r = run_batch(scene, poses, method, chunk=chunk, max_steps=max_steps, progress=progress)
             parts.append(r)
-            optima.append({"seed": int(seed), "x_um": r.optimum[0], "y_um": r.optimum[1], "twist_deg": r.optimum[2]})
+            optima.append(
+                {
+                    "seed": int(seed),
+                    "x_um": r.optimum[0],
+                    "y_um": r.optimum[1],
+                    "twist_deg": r.optimum[2],
+                }
+            )
         pooled = BatchResult(
             method=method,
             start=np.concatenate([p.start for p in parts]),
@@ -404,5 +455,9 @@ def run_realizations(
         )
         summary = summarize(pooled, target="nominal")  # each pattern's own shift is the error
         summary.pop("optimum")
-        out.append({"sigma_um": float(sigma), "seeds": [int(s) for s in seeds]} | summary | {"optima": optima})
+        out.append(
+            {"sigma_um": float(sigma), "seeds": [int(s) for s in seeds]}
+            | summary
+            | {"optima": optima}
+        )
     return out

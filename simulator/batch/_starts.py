@@ -26,9 +26,14 @@ def _axis(name: str, spec, unit: str) -> tuple[float, ...]:
         v = float(spec)
         require(math.isfinite(v), f"{name} must be finite, got {spec!r} {unit}")
         return (v,)
-    require(len(spec) == 3, f"{name} must be one value or (start, stop, step) in {unit}, got {spec!r}")
+    require(
+        len(spec) == 3, f"{name} must be one value or (start, stop, step) in {unit}, got {spec!r}"
+    )
     a, b, d = (float(v) for v in spec)
-    require(all(math.isfinite(v) for v in (a, b, d)), f"{name} must be finite numbers, got {spec!r} {unit}")
+    require(
+        all(math.isfinite(v) for v in (a, b, d)),
+        f"{name} must be finite numbers, got {spec!r} {unit}",
+    )
     require(d > 0, f"{name} step must be > 0 {unit}, got {d:g}")
     require(b >= a, f"{name} stop ({b:g}) must be >= start ({a:g}) {unit}")
     n = floor_whole((b - a) / d) + 1
@@ -52,8 +57,14 @@ class StartGrid:
     @classmethod
     def from_ranges(cls, x_um, y_um, twist_deg=0.0) -> StartGrid:
         """Each axis one value or (start, stop, step), stop included (um, um, degrees)."""
-        g = cls(_axis("grid x", x_um, "um"), _axis("grid y", y_um, "um"), _axis("grid twist", twist_deg, "degrees"))
-        require(g.size <= MAX_STARTS, f"the start grid has {g.size:,} starts; at most {MAX_STARTS:,}")
+        g = cls(
+            _axis("grid x", x_um, "um"),
+            _axis("grid y", y_um, "um"),
+            _axis("grid twist", twist_deg, "degrees"),
+        )
+        require(
+            g.size <= MAX_STARTS, f"the start grid has {g.size:,} starts; at most {MAX_STARTS:,}"
+        )
         price_starts(g.size, None, DRAW_BYTES_PER_START)
         return g
 
@@ -73,8 +84,12 @@ class StartGrid:
 
 def _triple(name: str, v, unit: str) -> np.ndarray:
     a = np.asarray(v, dtype=float).reshape(-1)
-    require(a.size == 3 and np.all(np.isfinite(a)), f"{name} must be three finite numbers ({unit}), got {v!r}")
+    require(
+        a.size == 3 and np.all(np.isfinite(a)),
+        f"{name} must be three finite numbers ({unit}), got {v!r}",
+    )
     return a
+
 
 #: Peak bytes per start of a batch: the start, its index, run order and sort keys, the
 #: final pose, energy, steps and outcome, and the summary's copies.
@@ -86,11 +101,22 @@ DRAW_BYTES_PER_START = 96
 
 def price_starts(n: int, budget_mb: float | None, per_start: int = BATCH_BYTES_PER_START) -> None:
     """Refuse ``n`` starts whose arrays would not fit the memory budget (before allocating)."""
-    require_fits(f"{n:,} starts", float(n) * per_start, "use fewer starts (--random N or a coarser --grid)", budget_mb)
+    require_fits(
+        f"{n:,} starts",
+        float(n) * per_start,
+        "use fewer starts (--random N or a coarser --grid)",
+        budget_mb,
+    )
 
 
-def random_starts(n: int, spread, seed: int, around=(0.0, 0.0, 0.0), distribution: str = "normal",
-                  budget_mb: float | None = None) -> np.ndarray:
+def random_starts(
+    n: int,
+    spread,
+    seed: int,
+    around=(0.0, 0.0, 0.0),
+    distribution: str = "normal",
+    budget_mb: float | None = None,
+) -> np.ndarray:
     """``n`` start poses drawn around a nominal pose (placement noise).
 
     Args:
@@ -109,16 +135,25 @@ def random_starts(n: int, spread, seed: int, around=(0.0, 0.0, 0.0), distributio
         (n, 3) float64 poses (x_um, y_um, twist_deg).
     """
     if isinstance(n, bool) or not isinstance(n, int | np.integer) or not 1 <= n <= MAX_STARTS:
-        raise InputError(f"number of random starts must be a whole number from 1 to {MAX_STARTS:,}, got {n!r}")
+        raise InputError(
+            f"number of random starts must be a whole number from 1 to {MAX_STARTS:,}, got {n!r}"
+        )
     if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
         raise InputError(f"seed must be a whole number >= 0, got {seed!r}")
-    require(distribution in DISTRIBUTIONS, f"distribution must be one of {DISTRIBUTIONS}, got {distribution!r}")
+    require(
+        distribution in DISTRIBUTIONS,
+        f"distribution must be one of {DISTRIBUTIONS}, got {distribution!r}",
+    )
     price_starts(int(n), budget_mb, DRAW_BYTES_PER_START)
     s = _triple("spread", spread, "um, um, degrees")
     require(bool(np.all(s >= 0)), f"spread must be >= 0 (um, um, degrees), got {tuple(s.tolist())}")
     c = _triple("around", around, "um, um, degrees")
     rng = np.random.default_rng(int(seed))
-    u = rng.standard_normal((int(n), 3)) if distribution == "normal" else rng.uniform(-1.0, 1.0, (int(n), 3))
+    u = (
+        rng.standard_normal((int(n), 3))
+        if distribution == "normal"
+        else rng.uniform(-1.0, 1.0, (int(n), 3))
+    )
     return c + s * u
 
 
@@ -126,10 +161,16 @@ def _as_poses(starts) -> np.ndarray:
     poses = starts.poses() if isinstance(starts, StartGrid) else np.asarray(starts, dtype=float)
     if poses.ndim == 1 and poses.size == 3:
         poses = poses[None]
-    require(poses.ndim == 2 and poses.shape[1] == 3 and len(poses) >= 1, f"starts must be an (N, 3) array of poses (um, um, degrees) with N >= 1, got shape {poses.shape}")
+    require(
+        poses.ndim == 2 and poses.shape[1] == 3 and len(poses) >= 1,
+        f"starts must be an (N, 3) array of poses (um, um, degrees) with N >= 1, got shape {poses.shape}",
+    )
     require(bool(np.all(np.isfinite(poses))), "starts must be finite poses (um, um, degrees)")
     require(
-        bool(np.all(np.abs(poses[:, :2]) <= MAX_OFFSET_UM) and np.all(np.abs(poses[:, 2]) <= MAX_TWIST_DEG)),
+        bool(
+            np.all(np.abs(poses[:, :2]) <= MAX_OFFSET_UM)
+            and np.all(np.abs(poses[:, 2]) <= MAX_TWIST_DEG)
+        ),
         f"start poses must lie within +-{MAX_OFFSET_UM:g} um and +-{MAX_TWIST_DEG:g} degrees",
     )
     return poses

@@ -78,7 +78,12 @@ def _stats(v: np.ndarray) -> dict | None:
     if v.size == 0:
         return None
     a = np.abs(v)
-    return {"mean": float(v.mean()), "mean_abs": float(a.mean()), "std": float(v.std()), "max_abs": float(a.max())}
+    return {
+        "mean": float(v.mean()),
+        "mean_abs": float(a.mean()),
+        "std": float(v.std()),
+        "max_abs": float(a.max()),
+    }
 
 
 #: Percentiles of the time to align that the summaries report (median and 90th).
@@ -94,7 +99,14 @@ def time_stats(times_s) -> dict | None:
     if t.size == 0:
         return None
     med, p90 = np.percentile(t, TIME_PERCENTILES)
-    return {"n": int(t.size), "median": float(med), "p90": float(p90), "mean": float(t.mean()), "min": float(t.min()), "max": float(t.max())}
+    return {
+        "n": int(t.size),
+        "median": float(med),
+        "p90": float(p90),
+        "mean": float(t.mean()),
+        "min": float(t.min()),
+        "max": float(t.max()),
+    }
 
 
 def time_histogram(times_s, bins: int = 20) -> dict | None:
@@ -113,7 +125,9 @@ def error_stats(final: np.ndarray, period_deg: float, target=(0.0, 0.0, 0.0)) ->
     """Final-pose error relative to ``target`` (x_um, y_um, twist_deg; default the nominal
     pose): ({"x": .., "y": ..} in um, {"twist": ..} in degrees, modulo the symmetry period)."""
     final = np.asarray(final, float).reshape(-1, 3) - np.asarray(target, float)
-    return {"x": _stats(final[:, 0]), "y": _stats(final[:, 1])}, {"twist": _stats(twist_error(final[:, 2], period_deg))}
+    return {"x": _stats(final[:, 0]), "y": _stats(final[:, 1])}, {
+        "twist": _stats(twist_error(final[:, 2], period_deg))
+    }
 
 
 def outcome_counts(outcome: np.ndarray) -> dict[str, int]:
@@ -163,7 +177,9 @@ def max_bias(result: BatchResult, grid: StartGrid) -> tuple[dict, dict]:
     return bias, limited
 
 
-def summarize(result: BatchResult, grid: StartGrid | None = None, target: str = "global_minimum") -> dict:
+def summarize(
+    result: BatchResult, grid: StartGrid | None = None, target: str = "global_minimum"
+) -> dict:
     """The statistics of a batch, JSON-ready (units in the key names).
 
     Keys: ``n``, ``method``, ``yield`` (fraction aligned), ``outcomes`` (counts),
@@ -176,7 +192,10 @@ def summarize(result: BatchResult, grid: StartGrid | None = None, target: str = 
     dynamic methods ``time_to_align_s``: :func:`time_stats` of the aligned starts' times
     (seconds of simulated time; None if none aligned).
     """
-    require(target in ("global_minimum", "nominal"), f"target must be 'global_minimum' or 'nominal', got {target!r}")
+    require(
+        target in ("global_minimum", "nominal"),
+        f"target must be 'global_minimum' or 'nominal', got {target!r}",
+    )
     counts = outcome_counts(result.outcome)
     goal = tuple(result.optimum) if target == "global_minimum" else (0.0, 0.0, 0.0)
     err_um, err_deg = error_stats(result.final, result.period_deg, goal)

@@ -18,21 +18,30 @@ from simulator.scene import Scene
 
 def finite_limit(flag: str, unit: str) -> Any:
     """An argparse type for a limit flag: a finite number > 0 (``nan`` or ``inf`` would switch the guard off)."""
+
     def parse(text: str) -> float:
         try:
             v = float(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"must be a finite number > 0 ({unit}), got {text!r}") from None
+            raise argparse.ArgumentTypeError(
+                f"must be a finite number > 0 ({unit}), got {text!r}"
+            ) from None
         if not (math.isfinite(v) and v > 0):
-            off = "; a limit cannot be switched off" if not (math.isfinite(v) or v < 0) else ""  # nan, inf
-            raise argparse.ArgumentTypeError(f"must be a finite number > 0 ({unit}), got {text!r}{off}")
+            off = (
+                "; a limit cannot be switched off" if not (math.isfinite(v) or v < 0) else ""
+            )  # nan, inf
+            raise argparse.ArgumentTypeError(
+                f"must be a finite number > 0 ({unit}), got {text!r}{off}"
+            )
         return v
+
     parse.__name__ = flag  # argparse names the type in its messages
     return parse
 
 
 def whole_limit(flag: str) -> Any:
     """An argparse type for a count limit: a whole number >= 1."""
+
     def parse(text: str) -> int:
         try:
             v = int(text)
@@ -41,70 +50,189 @@ def whole_limit(flag: str) -> Any:
         if v < 1:
             raise argparse.ArgumentTypeError(f"must be a whole number >= 1, got {text!r}")
         return v
+
     parse.__name__ = flag
     return parse
 
 
 def add_scene_args(p: argparse.ArgumentParser) -> None:
     """Pattern, chip, scale, materials and pose-grid options (a TOML scene may give them)."""
-    p.add_argument("scene", nargs="?", help="optional TOML scene file; flags given here override it")
+    p.add_argument(
+        "scene", nargs="?", help="optional TOML scene file; flags given here override it"
+    )
     g = p.add_argument_group("inputs")
-    g.add_argument("--pattern", help="pattern PNG (white = wettable pad) or layout (.gds, .oas, .dxf)")
-    g.add_argument("--chip", help="chip footprint PNG (white = wettable), or a layout holding only the chip outline")
+    g.add_argument(
+        "--pattern", help="pattern PNG (white = wettable pad) or layout (.gds, .oas, .dxf)"
+    )
+    g.add_argument(
+        "--chip",
+        help="chip footprint PNG (white = wettable), or a layout holding only the chip outline",
+    )
     g.add_argument("--chip-size", help="rectangular chip W[xH] in um, e.g. 730 or 730x500")
-    g.add_argument("--um-per-px", type=float, help="pixel size in um of the PNGs that store no scale (a file's own pHYs "
-                   "scale wins; one that contradicts it is refused, see --override-scale); for a layout, the raster's "
-                   "pixel size when --resolution is not given (default 1)")
-    g.add_argument("--pattern-um-per-px", type=float, metavar="UM", help="the same for the pattern file alone (wins over --um-per-px)")
-    g.add_argument("--chip-um-per-px", type=float, metavar="UM", help="the same for the chip file alone (wins over --um-per-px)")
-    g.add_argument("--override-scale", action="store_true", help="let the scale flags replace the scales the files store")
-    g.add_argument("--invert", action="store_true", help="the pattern image marks the pad in black: take 1 - value "
-                   "(transparent pixels stay non-wettable)")
+    g.add_argument(
+        "--um-per-px",
+        type=float,
+        help="pixel size in um of the PNGs that store no scale (a file's own pHYs "
+        "scale wins; one that contradicts it is refused, see --override-scale); for a layout, the raster's "
+        "pixel size when --resolution is not given (default 1)",
+    )
+    g.add_argument(
+        "--pattern-um-per-px",
+        type=float,
+        metavar="UM",
+        help="the same for the pattern file alone (wins over --um-per-px)",
+    )
+    g.add_argument(
+        "--chip-um-per-px",
+        type=float,
+        metavar="UM",
+        help="the same for the chip file alone (wins over --um-per-px)",
+    )
+    g.add_argument(
+        "--override-scale",
+        action="store_true",
+        help="let the scale flags replace the scales the files store",
+    )
+    g.add_argument(
+        "--invert",
+        action="store_true",
+        help="the pattern image marks the pad in black: take 1 - value "
+        "(transparent pixels stay non-wettable)",
+    )
     g.add_argument("--invert-chip", action="store_true", help="the same for the chip image")
     y = p.add_argument_group("layout patterns (.gds, .oas, .dxf)")
-    y.add_argument("--layer", metavar="L/D", help="the pattern's layer/datatype, e.g. 1/0 (DXF: the layer name; default: the only layer)")
-    y.add_argument("--cell", metavar="NAME", help="the cell to read (default: the single top cell; DXF: the model space, or a block)")
-    y.add_argument("--chip-layer", metavar="L/D", help="read the chip outline from this layer: its position in the layout is "
-                   "the aligned pose (default: no chip layer; the target is the pattern's bounding-box centre)")
-    y.add_argument("--dxf-units", choices=("um", "mm", "nm"), help="units of a DXF file that states none ($INSUNITS)")
+    y.add_argument(
+        "--layer",
+        metavar="L/D",
+        help="the pattern's layer/datatype, e.g. 1/0 (DXF: the layer name; default: the only layer)",
+    )
+    y.add_argument(
+        "--cell",
+        metavar="NAME",
+        help="the cell to read (default: the single top cell; DXF: the model space, or a block)",
+    )
+    y.add_argument(
+        "--chip-layer",
+        metavar="L/D",
+        help="read the chip outline from this layer: its position in the layout is "
+        "the aligned pose (default: no chip layer; the target is the pattern's bounding-box centre)",
+    )
+    y.add_argument(
+        "--dxf-units",
+        choices=("um", "mm", "nm"),
+        help="units of a DXF file that states none ($INSUNITS)",
+    )
     from patterns.layout_formats import DEFAULT_MAX_POLYGONS
 
-    y.add_argument("--max-polygons", type=whole_limit("--max-polygons"), metavar="N", help="most polygons the layout cell may "
-                   f"hold once flattened (default {DEFAULT_MAX_POLYGONS}; about 20 s of work per 100000)")
-    g.add_argument("--resolution", type=float, help="simulate at this pixel size in um (resamples the pattern; default: its own)")
+    y.add_argument(
+        "--max-polygons",
+        type=whole_limit("--max-polygons"),
+        metavar="N",
+        help="most polygons the layout cell may "
+        f"hold once flattened (default {DEFAULT_MAX_POLYGONS}; about 20 s of work per 100000)",
+    )
+    g.add_argument(
+        "--resolution",
+        type=float,
+        help="simulate at this pixel size in um (resamples the pattern; default: its own)",
+    )
     m = p.add_argument_group("materials")
-    m.add_argument("--surface-tension", type=float, help="liquid surface tension in mN/m (default 72.8, water)")
-    m.add_argument("--pad-angle", type=float, help="contact angle on the pads in degrees (default 30)")
-    m.add_argument("--substrate-angle", type=float, help="contact angle on the substrate in degrees (default 60)")
-    m.add_argument("--allow-repulsive", action="store_true", help="allow a pad that wets worse than the substrate")
+    m.add_argument(
+        "--surface-tension", type=float, help="liquid surface tension in mN/m (default 72.8, water)"
+    )
+    m.add_argument(
+        "--pad-angle", type=float, help="contact angle on the pads in degrees (default 30)"
+    )
+    m.add_argument(
+        "--substrate-angle",
+        type=float,
+        help="contact angle on the substrate in degrees (default 60)",
+    )
+    m.add_argument(
+        "--allow-repulsive",
+        action="store_true",
+        help="allow a pad that wets worse than the substrate",
+    )
     n = p.add_argument_group("pose grid and numerics")
     n.add_argument("--accuracy", choices=("fast", "balanced", "precise"), help=_accuracy_help())
     n.add_argument("--twist-step", type=float, help="twist grid step in degrees (default 1)")
-    n.add_argument("--no-twist", action="store_true", help="keep the chip untwisted (computes one rotation)")
-    n.add_argument("--window", type=float, help="translation half-width of the pose grid in um (default: full reach)")
-    n.add_argument("--dtype", choices=("float32", "float64"), help="landscape precision (default float32)")
-    n.add_argument("--memory-budget", type=finite_limit("--memory-budget", "MB"), help="memory budget in MB for the landscape and every other large array "
-                   "(default: half the available memory, at most 8192; never more than the machine has)")
-    g.add_argument("--max-image-mpx", type=finite_limit("--max-image-mpx", "megapixels"), help="largest image to read, in megapixels (default 64)")
+    n.add_argument(
+        "--no-twist", action="store_true", help="keep the chip untwisted (computes one rotation)"
+    )
+    n.add_argument(
+        "--window",
+        type=float,
+        help="translation half-width of the pose grid in um (default: full reach)",
+    )
+    n.add_argument(
+        "--dtype", choices=("float32", "float64"), help="landscape precision (default float32)"
+    )
+    n.add_argument(
+        "--memory-budget",
+        type=finite_limit("--memory-budget", "MB"),
+        help="memory budget in MB for the landscape and every other large array "
+        "(default: half the available memory, at most 8192; never more than the machine has)",
+    )
+    g.add_argument(
+        "--max-image-mpx",
+        type=finite_limit("--max-image-mpx", "megapixels"),
+        help="largest image to read, in megapixels (default 64)",
+    )
     q = p.add_argument_group("liquid and meniscus")
-    q.add_argument("--volume", type=float, help="droplet volume in nl (default 20): the meniscus height V / A under the "
-                   "chip for --meniscus, and the film of the dynamic methods")
-    q.add_argument("--meniscus", action="store_true", help="finite meniscus: round the overlap energy's cusps over the "
-                   "liquid height (default off: the thin-film overlap model)")
-    q.add_argument("--meniscus-height", type=float, metavar="UM", help="the meniscus height in um (default: --volume "
-                   "over the chip's wetted area); implies --meniscus")
+    q.add_argument(
+        "--volume",
+        type=float,
+        help="droplet volume in nl (default 20): the meniscus height V / A under the "
+        "chip for --meniscus, and the film of the dynamic methods",
+    )
+    q.add_argument(
+        "--meniscus",
+        action="store_true",
+        help="finite meniscus: round the overlap energy's cusps over the "
+        "liquid height (default off: the thin-film overlap model)",
+    )
+    q.add_argument(
+        "--meniscus-height",
+        type=float,
+        metavar="UM",
+        help="the meniscus height in um (default: --volume "
+        "over the chip's wetted area); implies --meniscus",
+    )
     t = p.add_argument_group("protruding pads (the overflow check, docs/physics.md §9)")
-    t.add_argument("--edge-angle", type=float, metavar="DEG", help="the pads stand up from the substrate with this edge "
-                   "(solid wedge) angle in degrees, 90 = vertical wall: warn when the placement can overflow them")
-    t.add_argument("--pad-advancing", type=float, metavar="DEG", help="advancing contact angle on the pads in degrees "
-                   "(default: the advancing angle of --hysteresis, else --pad-angle)")
-    t.add_argument("--chip-angle", type=float, metavar="DEG", help="the chip's advancing contact angle in degrees "
-                   "(its receding angle for the stricter case; default: unknown)")
-    q.add_argument("--hysteresis", metavar="RECEDING:ADVANCING", help="contact-angle hysteresis of the pads, in degrees "
-                   "(e.g. 31:50): runs stop where the restoring force falls below the contact lines' pinning force "
-                   "gamma (cos theta_r - cos theta_a) per unit length (default off)")
-    q.add_argument("--pinned", action="store_true", help="contact lines held at the pad edges (liquid confined by a "
-                   "superhydrophobic substrate): the energy is the liquid-air area, Delta_gamma = -2 gamma")
+    t.add_argument(
+        "--edge-angle",
+        type=float,
+        metavar="DEG",
+        help="the pads stand up from the substrate with this edge "
+        "(solid wedge) angle in degrees, 90 = vertical wall: warn when the placement can overflow them",
+    )
+    t.add_argument(
+        "--pad-advancing",
+        type=float,
+        metavar="DEG",
+        help="advancing contact angle on the pads in degrees "
+        "(default: the advancing angle of --hysteresis, else --pad-angle)",
+    )
+    t.add_argument(
+        "--chip-angle",
+        type=float,
+        metavar="DEG",
+        help="the chip's advancing contact angle in degrees "
+        "(its receding angle for the stricter case; default: unknown)",
+    )
+    q.add_argument(
+        "--hysteresis",
+        metavar="RECEDING:ADVANCING",
+        help="contact-angle hysteresis of the pads, in degrees "
+        "(e.g. 31:50): runs stop where the restoring force falls below the contact lines' pinning force "
+        "gamma (cos theta_r - cos theta_a) per unit length (default off)",
+    )
+    q.add_argument(
+        "--pinned",
+        action="store_true",
+        help="contact lines held at the pad edges (liquid confined by a "
+        "superhydrophobic substrate): the energy is the liquid-air area, Delta_gamma = -2 gamma",
+    )
 
 
 def _accuracy_help() -> str:
@@ -145,7 +273,9 @@ def scene_document(args: argparse.Namespace) -> dict[str, Any]:
     return read_toml(args.scene) if args.scene else {}
 
 
-def scene_from_args(args: argparse.Namespace, note_frame: bool = True, doc: dict[str, Any] | None = None) -> Scene:
+def scene_from_args(
+    args: argparse.Namespace, note_frame: bool = True, doc: dict[str, Any] | None = None
+) -> Scene:
     """Build the scene from an optional TOML file and the flags (flags win).
 
     Flags are merged into the TOML document under the TOML keys (see
@@ -158,18 +288,24 @@ def scene_from_args(args: argparse.Namespace, note_frame: bool = True, doc: dict
     base = Path(args.scene).parent if args.scene else Path(".")
     if args.pattern:
         doc["pattern"] = str(Path(args.pattern).resolve())
-    chips = {"chip": str(Path(args.chip).resolve()) if args.chip else None,
-             "chip_size_um": list(parse_chip_size(args.chip_size)) if args.chip_size else None,
-             "chip_layer": getattr(args, "chip_layer", None)}
+    chips = {
+        "chip": str(Path(args.chip).resolve()) if args.chip else None,
+        "chip_size_um": list(parse_chip_size(args.chip_size)) if args.chip_size else None,
+        "chip_layer": getattr(args, "chip_layer", None),
+    }
     given = {k: v for k, v in chips.items() if v is not None}
     if given:  # a chip on the command line replaces the scene file's (two on the command line: refused downstream)
         for k in chips:
             doc.pop(k, None)
         doc.update(given)
     if "pattern" not in doc:
-        raise InputError("no pattern given: pass --pattern P.png or a layout P.gds (or a TOML scene with pattern = ...)")
+        raise InputError(
+            "no pattern given: pass --pattern P.png or a layout P.gds (or a TOML scene with pattern = ...)"
+        )
     if not any(k in doc for k in chips):
-        raise InputError("no chip given: pass --chip C.png, --chip-size W[xH] (um) or, for a layout, --chip-layer L/D")
+        raise InputError(
+            "no chip given: pass --chip C.png, --chip-size W[xH] (um) or, for a layout, --chip-layer L/D"
+        )
     flags = {
         ("materials", "surface_tension_mN_m"): args.surface_tension,
         ("materials", "pad_angle_deg"): args.pad_angle,
@@ -177,7 +313,9 @@ def scene_from_args(args: argparse.Namespace, note_frame: bool = True, doc: dict
         ("materials", "allow_repulsive"): True if args.allow_repulsive else None,
         ("twist", "step_deg"): args.twist_step,
         ("effects", "twist"): False if args.no_twist else None,
-        ("effects", "meniscus"): True if (getattr(args, "meniscus", False) or getattr(args, "meniscus_height", None) is not None) else None,
+        ("effects", "meniscus"): True
+        if (getattr(args, "meniscus", False) or getattr(args, "meniscus_height", None) is not None)
+        else None,
         ("liquid", "meniscus_height_um"): getattr(args, "meniscus_height", None),
         ("liquid", "pinned"): True if getattr(args, "pinned", False) else None,
         ("effects", "hysteresis"): True if getattr(args, "hysteresis", None) else None,
@@ -216,8 +354,12 @@ def scene_from_args(args: argparse.Namespace, note_frame: bool = True, doc: dict
             (doc.setdefault(table, {}) if table else doc)[key] = value
     if getattr(args, "accuracy", None):
         doc["accuracy"] = args.accuracy
-    scene = Scene.from_dict(doc, base=base)  # the accuracy preset applies here, as for Scene.from_toml
-    if "volume_nl" in (doc.get("liquid") or {}):  # a volume as typed: a film thicker than the chip is refused
+    scene = Scene.from_dict(
+        doc, base=base
+    )  # the accuracy preset applies here, as for Scene.from_toml
+    if "volume_nl" in (
+        doc.get("liquid") or {}
+    ):  # a volume as typed: a film thicker than the chip is refused
         from simulator.liquid import check_scene_volume
 
         check_scene_volume(scene)
@@ -231,8 +373,14 @@ def scene_from_args(args: argparse.Namespace, note_frame: bool = True, doc: dict
     return scene
 
 
-def liquid_checks(args: argparse.Namespace, scene: Scene, method: str, biases_um: Any = None,
-                  placed: str = "the start", doc: dict[str, Any] | None = None) -> list[str]:
+def liquid_checks(
+    args: argparse.Namespace,
+    scene: Scene,
+    method: str,
+    biases_um: Any = None,
+    placed: str = "the start",
+    doc: dict[str, Any] | None = None,
+) -> list[str]:
     """The droplet checks of :mod:`simulator.liquid` for a volume the user gave (``--volume``
     or ``[liquid] volume_nl``; :func:`scene_from_args` has refused a film thicker than the
     chip): a note when ``method`` does not use the volume, and the warnings of
@@ -242,12 +390,16 @@ def liquid_checks(args: argparse.Namespace, scene: Scene, method: str, biases_um
     from simulator.liquid import scene_warnings, volume_note
 
     given = getattr(args, "volume", None) is not None or (
-        bool(args.scene) and "volume_nl" in ((scene_document(args) if doc is None else doc).get("liquid") or {}))
+        bool(args.scene)
+        and "volume_nl" in ((scene_document(args) if doc is None else doc).get("liquid") or {})
+    )
     if not given:
         warns = []
         if scene.topography is not None:
-            warns.append("overflow check skipped: the scene declares a protruding pad (edge angle) but no droplet "
-                         "volume; give --volume NL to check the placement against the overflow bias")
+            warns.append(
+                "overflow check skipped: the scene declares a protruding pad (edge angle) but no droplet "
+                "volume; give --volume NL to check the placement against the overflow bias"
+            )
     else:
         note = volume_note(scene, method)
         if note:
@@ -282,7 +434,9 @@ def input_paths(args: argparse.Namespace, doc: dict[str, Any] | None = None) -> 
     return [Path(p) for p in paths if isinstance(p, str) and p]
 
 
-def check_outputs(args: argparse.Namespace, flags: tuple[str, ...], doc: dict[str, Any] | None = None) -> None:
+def check_outputs(
+    args: argparse.Namespace, flags: tuple[str, ...], doc: dict[str, Any] | None = None
+) -> None:
     """Fail before any work when an output file cannot or must not be written.
 
     ``flags`` are attribute names (``json`` for ``--json``). An output may not be an
@@ -317,7 +471,10 @@ def write_csv(path: str | os.PathLike, columns: list[str], values: list) -> None
     from simulator.core import require_finite
 
     cols = [np.asarray(v) for v in values]
-    require_finite({c: v for c, v in zip(columns, cols, strict=True) if v.dtype.kind in "fiu"}, f"output {path}")
+    require_finite(
+        {c: v for c, v in zip(columns, cols, strict=True) if v.dtype.kind in "fiu"},
+        f"output {path}",
+    )
     n = len(cols[0]) if cols else 0
 
     def cell(v) -> str:

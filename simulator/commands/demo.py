@@ -45,9 +45,19 @@ def register(sub: argparse._SubParsersAction) -> None:
             "trajectory.json and summary.txt into --out. Takes well under a minute."
         ),
     )
-    p.add_argument("--out", default="out", metavar="DIR", help="output directory: new or empty (default: out)")
-    p.add_argument("--force", action="store_true", help="replace --out if it holds a previous selfalign output (and nothing else)")
-    p.add_argument("--quiet", action="store_true", help="print only the results (no progress bars or waiting messages)")
+    p.add_argument(
+        "--out", default="out", metavar="DIR", help="output directory: new or empty (default: out)"
+    )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="replace --out if it holds a previous selfalign output (and nothing else)",
+    )
+    p.add_argument(
+        "--quiet",
+        action="store_true",
+        help="print only the results (no progress bars or waiting messages)",
+    )
     p.set_defaults(func=run)
 
 
@@ -70,7 +80,9 @@ def run(args: argparse.Namespace) -> int:
         files = write_trajectory_files(tmp, scene, traj, args.quiet)
         evaluate(scene, tmp / "report", quiet=args.quiet, source=f"{PATTERN}.png")
         files.append(tmp / "report" / "report.html")
-        files.append(write_summary(tmp / "summary.txt", scene, traj, stuck, time.perf_counter() - t0, files))
+        files.append(
+            write_summary(tmp / "summary.txt", scene, traj, stuck, time.perf_counter() - t0, files)
+        )
     for path in files:
         print(f"wrote {out / path.relative_to(tmp)}")
     return 0
@@ -94,8 +106,9 @@ def write_trajectory_files(out: Path, scene: Scene, traj: Trajectory, quiet: boo
     return paths
 
 
-def write_summary(path: Path, scene: Scene, traj: Trajectory, stuck: Trajectory, seconds: float,
-                  files: list[Path]) -> Path:
+def write_summary(
+    path: Path, scene: Scene, traj: Trajectory, stuck: Trajectory, seconds: float, files: list[Path]
+) -> Path:
     """A short text summary of the scene, the run and the comparison run."""
     m = scene.materials
     um2 = m.delta_gamma_N_m * 1e-12  # J per um^2 of overlap

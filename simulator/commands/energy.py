@@ -28,13 +28,28 @@ def register(sub: argparse._SubParsersAction) -> None:
         ),
     )
     add_scene_args(p)
-    p.add_argument("--at", action="append", default=[], metavar="X,Y,TWIST", help="pose in um, um, degrees (repeatable)")
-    p.add_argument("--curve", choices=("x", "y", "twist"), help="also sample a curve along this axis through the first --at pose")
-    p.add_argument("--from", dest="start", type=float, help="curve start (um, or degrees for twist)")
+    p.add_argument(
+        "--at",
+        action="append",
+        default=[],
+        metavar="X,Y,TWIST",
+        help="pose in um, um, degrees (repeatable)",
+    )
+    p.add_argument(
+        "--curve",
+        choices=("x", "y", "twist"),
+        help="also sample a curve along this axis through the first --at pose",
+    )
+    p.add_argument(
+        "--from", dest="start", type=float, help="curve start (um, or degrees for twist)"
+    )
     p.add_argument("--to", dest="stop", type=float, help="curve end (um, or degrees for twist)")
     p.add_argument("--json", help="write the results as JSON to this file")
-    p.add_argument("--csv", help="write the poses (kind 'pose') and the curve samples (kind 'curve') as CSV: kind, x_um, "
-                   "y_um, twist_deg, overlap_um2, energy_J, force_x_N, force_y_N, torque_Nm")
+    p.add_argument(
+        "--csv",
+        help="write the poses (kind 'pose') and the curve samples (kind 'curve') as CSV: kind, x_um, "
+        "y_um, twist_deg, overlap_um2, energy_J, force_x_N, force_y_N, torque_Nm",
+    )
     p.set_defaults(func=run)
 
 
@@ -44,7 +59,9 @@ def run(args: argparse.Namespace) -> int:
 
     poses = [parse_pose(a, "--at") for a in args.at] or ([(0.0, 0.0, 0.0)] if args.curve else [])
     if not poses:
-        raise InputError("give at least one pose with --at X,Y,TWIST (um, um, degrees), or a --curve")
+        raise InputError(
+            "give at least one pose with --at X,Y,TWIST (um, um, degrees), or a --curve"
+        )
     if args.curve and (args.start is None or args.stop is None):
         raise InputError("--curve needs --from A --to B (um for x/y, degrees for twist)")
     doc = scene_document(args)  # the scene file, read and validated once for the whole command
@@ -100,17 +117,27 @@ def run(args: argparse.Namespace) -> int:
             f"plateaus_{unit}": cur["plateaus"],
             f"no_contact_{unit}": cur["no_contact"],
         }
-        print(f"curve along {args.curve} through the first pose, {cur['values'][0]:g} to {cur['values'][-1]:g} {unit}, {len(cur['values'])} samples")
+        print(
+            f"curve along {args.curve} through the first pose, {cur['values'][0]:g} to {cur['values'][-1]:g} {unit}, {len(cur['values'])} samples"
+        )
         for v, e, f in _sampled(cur):
             e = 0.0 if abs(e) <= ls.noise_floor_J else e  # round-off beyond contact reads as 0
             f = f + 0.0
-            print(f"  {args.curve} = {v:10.3f} {unit}: energy {e:.6e} J, {'torque' if unit == 'deg' else 'force'} {f:.4e} {funit.replace('Nm', 'N m')}")
+            print(
+                f"  {args.curve} = {v:10.3f} {unit}: energy {e:.6e} J, {'torque' if unit == 'deg' else 'force'} {f:.4e} {funit.replace('Nm', 'N m')}"
+            )
         if cur["plateaus"]:
-            print("plateaus (zero force, energy changes below the noise floor): " + ", ".join(f"[{a:g}, {b:g}] {unit}" for a, b in cur["plateaus"]))
+            print(
+                "plateaus (zero force, energy changes below the noise floor): "
+                + ", ".join(f"[{a:g}, {b:g}] {unit}" for a, b in cur["plateaus"])
+            )
         else:
             print("plateaus: none")
         if cur["no_contact"]:
-            print("no contact (chip off the pattern): " + ", ".join(f"[{a:g}, {b:g}] {unit}" for a, b in cur["no_contact"]))
+            print(
+                "no contact (chip off the pattern): "
+                + ", ".join(f"[{a:g}, {b:g}] {unit}" for a, b in cur["no_contact"])
+            )
     if args.json:
         write_json(args.json, result)
         print(f"wrote {args.json}")
@@ -135,7 +162,17 @@ def _write_csv(path, ls, poses: list, cur: dict | None) -> None:
     e = ls.energy_at(x, y, t)
     fx, fy = ls.force_at(x, y, t)
     tq = ls.torque_at(x, y, t)
-    cols = ["kind", "x_um", "y_um", "twist_deg", "overlap_um2", "energy_J", "force_x_N", "force_y_N", "torque_Nm"]
+    cols = [
+        "kind",
+        "x_um",
+        "y_um",
+        "twist_deg",
+        "overlap_um2",
+        "energy_J",
+        "force_x_N",
+        "force_y_N",
+        "torque_Nm",
+    ]
     write_csv(path, cols, [kind, x, y, t, ls.overlap_um2(e), e, fx + 0.0, fy + 0.0, tq + 0.0])
 
 
@@ -144,5 +181,3 @@ def _sampled(cur: dict, most: int = 21):
     n = len(cur["values"])
     idx = np.unique(np.linspace(0, n - 1, min(n, most)).round().astype(int))
     return zip(cur["values"][idx], cur["energy_J"][idx], cur["force"][idx], strict=True)
-
-

@@ -34,12 +34,30 @@ def register(sub: argparse._SubParsersAction) -> None:
             "the scene) also reporting the time each start takes to align (median, 90th percentile, time_to_align.png)."
         ),
     )
-    p.add_argument("image", nargs="?", metavar="PATTERN", help="the pattern PNG or layout (.gds, .oas, .dxf), or give --pattern / a TOML scene")
+    p.add_argument(
+        "image",
+        nargs="?",
+        metavar="PATTERN",
+        help="the pattern PNG or layout (.gds, .oas, .dxf), or give --pattern / a TOML scene",
+    )
     add_scene_args(p)
-    p.add_argument("--out", required=True, metavar="DIR", help="output directory: new, or empty (never '.', an input's directory or a link)")
-    p.add_argument("--force", action="store_true", help="replace --out if it holds a previous selfalign output (and nothing else)")
-    p.add_argument("--method", choices=BATCH_METHODS, default="greedy",
-                   help="how the capture and yield starts run: greedy, gradient, or the dynamics overdamped, inertial (default greedy)")
+    p.add_argument(
+        "--out",
+        required=True,
+        metavar="DIR",
+        help="output directory: new, or empty (never '.', an input's directory or a link)",
+    )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="replace --out if it holds a previous selfalign output (and nothing else)",
+    )
+    p.add_argument(
+        "--method",
+        choices=BATCH_METHODS,
+        default="greedy",
+        help="how the capture and yield starts run: greedy, gradient, or the dynamics overdamped, inertial (default greedy)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=run)
 
@@ -59,7 +77,9 @@ def run(args: argparse.Namespace) -> int:
     if not (args.chip or args.chip_size or args.chip_layer or args.scene):
         args.chip_size = _bbox_chip(args)
     scene = scene_from_args(args, note_frame=False, doc=doc)
-    liquid_warnings = liquid_checks(args, scene, args.method, _noise_biases(scene), "the placement-noise starts", doc=doc)
+    liquid_warnings = liquid_checks(
+        args, scene, args.method, _noise_biases(scene), "the placement-noise starts", doc=doc
+    )
     layout = scene.pattern.params.get("layout")
     if layout:
         from patterns.layout import frame_note
@@ -69,7 +89,9 @@ def run(args: argparse.Namespace) -> int:
     from simulator.landscape import require_landscape_fits, twist_axis
 
     twist_axis(scene)  # a twist step that gives too many twists fails before the announcement
-    if args.resolution is not None:  # the pixel size stays: the landscape and footprint priced now (else after coarsening)
+    if (
+        args.resolution is not None
+    ):  # the pixel size stays: the landscape and footprint priced now (else after coarsening)
         require_landscape_fits(scene)
     if args.method in DYNAMIC_METHODS:
         from simulator.motion import DynamicsParams
@@ -80,27 +102,42 @@ def run(args: argparse.Namespace) -> int:
     from simulator.batch import evaluate
 
     compiling(args.method, args.quiet)
-    summary = evaluate(scene, args.out, quiet=args.quiet, source=Path(args.pattern or args.scene).name, auto=args.resolution is None,
-                       force=args.force, inputs=tuple(inputs), liquid_warnings=liquid_warnings, method=args.method)
+    summary = evaluate(
+        scene,
+        args.out,
+        quiet=args.quiet,
+        source=Path(args.pattern or args.scene).name,
+        auto=args.resolution is None,
+        force=args.force,
+        inputs=tuple(inputs),
+        liquid_warnings=liquid_warnings,
+        method=args.method,
+    )
     g, cap, yl = summary["global_minimum"], summary["capture"], summary["yield"]
     b = summary["max_bias_um"]
     if g.get("refined"):  # below the grid (finite meniscus): to 0.1 um and 0.1 degree
         x, y, t = (round(g[k], 1) + 0.0 for k in ("x_um", "y_um", "twist_deg"))
         k = summary["stiffness"]
         tw = "" if k["twist_Nm_per_rad"] is None else f", twist {k['twist_Nm_per_rad']:.3g} N m/rad"
-        print(f"global minimum at ({x:.1f} um, {y:.1f} um, {t:.1f} deg), refined below the grid "
-              f"(meniscus {summary['meniscus_height_um']:.3g} um)")
+        print(
+            f"global minimum at ({x:.1f} um, {y:.1f} um, {t:.1f} deg), refined below the grid "
+            f"(meniscus {summary['meniscus_height_um']:.3g} um)"
+        )
         print(f"stiffness at alignment: x {k['x_N_per_m']:.3g} N/m, y {k['y_N_per_m']:.3g} N/m{tw}")
     else:
         print(f"global minimum at ({g['x_um']:g} um, {g['y_um']:g} um, {g['twist_deg']:g} deg)")
     fl = summary.get("floating_range")
     if fl:
         r = summary["contact_line_reach_um"]
-        print(f"the chip floats on the well's floor: x {fl['x_from_um']:g} to {fl['x_to_um']:g} um, y {fl['y_from_um']:g} to "
-              f"{fl['y_to_um']:g} um, twist {fl['twist_from_deg']:g} to {fl['twist_to_deg']:g} deg (free contact lines "
-              f"{r['substrate']:.3g} um beyond the chip on the substrate, {r['pad']:.3g} um on a pad)")
+        print(
+            f"the chip floats on the well's floor: x {fl['x_from_um']:g} to {fl['x_to_um']:g} um, y {fl['y_from_um']:g} to "
+            f"{fl['y_to_um']:g} um, twist {fl['twist_from_deg']:g} to {fl['twist_to_deg']:g} deg (free contact lines "
+            f"{r['substrate']:.3g} um beyond the chip on the substrate, {r['pad']:.3g} um on a pad)"
+        )
     print(f"max bias: +x {b['+x']:g} um, -x {b['-x']:g} um, +y {b['+y']:g} um, -y {b['-y']:g} um")
-    print(f"capture fraction {100 * cap['fraction']:.1f} % of {cap['n']} grid starts; yield {100 * yl['fraction']:.1f} % under placement noise ({args.method})")
+    print(
+        f"capture fraction {100 * cap['fraction']:.1f} % of {cap['n']} grid starts; yield {100 * yl['fraction']:.1f} % under placement noise ({args.method})"
+    )
     pics = "landscape.png, force.png, capture.png, pattern.png"
     if "time_to_align_s" in yl:
         from simulator.commands.montecarlo import time_line
@@ -117,7 +154,9 @@ def _noise_biases(scene):
     from simulator.liquid import placement_biases
 
     w, h = chip_size(scene)
-    return placement_biases(random_starts(YIELD_STARTS, (NOISE_FRACTION * w, NOISE_FRACTION * h, 0.0), seed=0))
+    return placement_biases(
+        random_starts(YIELD_STARTS, (NOISE_FRACTION * w, NOISE_FRACTION * h, 0.0), seed=0)
+    )
 
 
 def _bbox_chip(args: argparse.Namespace) -> str:
@@ -127,14 +166,36 @@ def _bbox_chip(args: argparse.Namespace) -> str:
     from patterns.mask import footprint_um
 
     if is_layout(args.pattern):
-        sel = LayoutSelection(layer=args.layer, cell=args.cell, dxf_units=args.dxf_units, max_polygons=args.max_polygons)
+        sel = LayoutSelection(
+            layer=args.layer,
+            cell=args.cell,
+            dxf_units=args.dxf_units,
+            max_polygons=args.max_polygons,
+        )
         x0, y0, x1, y1 = layout_geometry(args.pattern, sel, args.memory_budget)[0].bounds
         return f"{x1 - x0:.12g}x{y1 - y0:.12g}"
-    own = args.pattern_um_per_px is not None  # the scale rule of Scene.from_inputs: a file's own scale wins
-    scale, flag = (args.pattern_um_per_px, "--pattern-um-per-px") if own else (args.um_per_px, "--um-per-px")
-    kw = {"um_per_px": scale} if args.override_scale else {"default_um_per_px": scale, "scale_flag": flag,
-                                                           "missing_hint": "--um-per-px (or --pattern-um-per-px)"}
-    m = read_mask(args.pattern, invert=args.invert, max_mpx=args.max_image_mpx, budget_mb=args.memory_budget, **kw)
+    own = (
+        args.pattern_um_per_px is not None
+    )  # the scale rule of Scene.from_inputs: a file's own scale wins
+    scale, flag = (
+        (args.pattern_um_per_px, "--pattern-um-per-px") if own else (args.um_per_px, "--um-per-px")
+    )
+    kw = (
+        {"um_per_px": scale}
+        if args.override_scale
+        else {
+            "default_um_per_px": scale,
+            "scale_flag": flag,
+            "missing_hint": "--um-per-px (or --pattern-um-per-px)",
+        }
+    )
+    m = read_mask(
+        args.pattern,
+        invert=args.invert,
+        max_mpx=args.max_image_mpx,
+        budget_mb=args.memory_budget,
+        **kw,
+    )
     m.require_nonempty(f"pattern {args.pattern}")
     w, h = footprint_um(m)
     return f"{w:g}x{h:g}"

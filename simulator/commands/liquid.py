@@ -36,10 +36,28 @@ class _SubParser(OneLineParser):
 
 
 def _common(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--surface-tension", type=float, default=72.8, metavar="MN_M", help="liquid surface tension in mN/m (default 72.8, water)")
-    p.add_argument("--density", type=float, default=998.0, metavar="KG_M3", help="liquid density in kg/m^3 (default 998, water)")
-    p.add_argument("--json", nargs="?", const="-", metavar="FILE", help="the answer as JSON: alone, on standard output instead of "
-                   "the text; with FILE, written there")
+    p.add_argument(
+        "--surface-tension",
+        type=float,
+        default=72.8,
+        metavar="MN_M",
+        help="liquid surface tension in mN/m (default 72.8, water)",
+    )
+    p.add_argument(
+        "--density",
+        type=float,
+        default=998.0,
+        metavar="KG_M3",
+        help="liquid density in kg/m^3 (default 998, water)",
+    )
+    p.add_argument(
+        "--json",
+        nargs="?",
+        const="-",
+        metavar="FILE",
+        help="the answer as JSON: alone, on standard output instead of "
+        "the text; with FILE, written there",
+    )
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -52,43 +70,121 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     calc = p.add_subparsers(dest="calculator", metavar="CALCULATOR", parser_class=_SubParser)
     calc.required = True
-    h = calc.add_parser("height", help="meniscus height h = V / A and the thin-film check",
-                        description="The flat-film meniscus height h = V / A under the chip, compared with the chip's "
-                        "smallest side and the capillary length; with --chip-size also the parallelepiped meniscus "
-                        "(stiffness 2 gamma L / h, force -2 gamma L x / sqrt(x^2 + h^2) at --bias).")
-    h.add_argument("--volume", type=float, required=True, metavar="NL", help="droplet volume in nl (1 nl = 1e6 um^3)")
-    h.add_argument("--chip-size", metavar="W[xH]", help="the chip in um, e.g. 200 or 730x500 (the wetted area is W H)")
-    h.add_argument("--area", type=float, metavar="UM2", help="the wetted area in um^2 instead of a chip size")
-    h.add_argument("--bias", type=float, metavar="UM", help="a shift along x in um: the parallelepiped force there")
+    h = calc.add_parser(
+        "height",
+        help="meniscus height h = V / A and the thin-film check",
+        description="The flat-film meniscus height h = V / A under the chip, compared with the chip's "
+        "smallest side and the capillary length; with --chip-size also the parallelepiped meniscus "
+        "(stiffness 2 gamma L / h, force -2 gamma L x / sqrt(x^2 + h^2) at --bias).",
+    )
+    h.add_argument(
+        "--volume",
+        type=float,
+        required=True,
+        metavar="NL",
+        help="droplet volume in nl (1 nl = 1e6 um^3)",
+    )
+    h.add_argument(
+        "--chip-size",
+        metavar="W[xH]",
+        help="the chip in um, e.g. 200 or 730x500 (the wetted area is W H)",
+    )
+    h.add_argument(
+        "--area", type=float, metavar="UM2", help="the wetted area in um^2 instead of a chip size"
+    )
+    h.add_argument(
+        "--bias",
+        type=float,
+        metavar="UM",
+        help="a shift along x in um: the parallelepiped force there",
+    )
     _common(h)
     h.set_defaults(func=run_height)
 
-    o = calc.add_parser("overflow", help="do the no-overflow conditions (1)-(3) of a protruding pad hold?",
-                        description="The no-overflow conditions of a pad standing up from the substrate (docs/physics.md §9): "
-                        "(1) edge angle <= pad advancing angle; (2) edge angle < pad advancing angle + chip angle (the chip "
-                        "de-wets first); (3) the bias stays below the overflow bias h / tan(edge - pad advancing). The liquid "
-                        "overflows when none holds. Without --bias, a case where only (3) can hold 'depends on the bias'.")
-    o.add_argument("--pad-advancing", type=float, required=True, metavar="DEG", help="advancing contact angle on the pad, degrees")
-    o.add_argument("--chip-angle", required=True, metavar="DEG|LO:HI", help="the chip's advancing angle (placed with a bias) or "
-                   "receding angle (placed without and dragged: the stricter case), degrees; a range LO:HI reports the "
-                   "verdict over it")
-    o.add_argument("--edge-angle", type=float, required=True, metavar="DEG", help="solid wedge angle of the pad edge, degrees (90 = vertical wall)")
-    o.add_argument("--meniscus-height", type=float, metavar="UM", help="the liquid height h in um (or --volume with --chip-size)")
-    o.add_argument("--volume", type=float, metavar="NL", help="droplet volume in nl: h = V / A with --chip-size")
+    o = calc.add_parser(
+        "overflow",
+        help="do the no-overflow conditions (1)-(3) of a protruding pad hold?",
+        description="The no-overflow conditions of a pad standing up from the substrate (docs/physics.md §9): "
+        "(1) edge angle <= pad advancing angle; (2) edge angle < pad advancing angle + chip angle (the chip "
+        "de-wets first); (3) the bias stays below the overflow bias h / tan(edge - pad advancing). The liquid "
+        "overflows when none holds. Without --bias, a case where only (3) can hold 'depends on the bias'.",
+    )
+    o.add_argument(
+        "--pad-advancing",
+        type=float,
+        required=True,
+        metavar="DEG",
+        help="advancing contact angle on the pad, degrees",
+    )
+    o.add_argument(
+        "--chip-angle",
+        required=True,
+        metavar="DEG|LO:HI",
+        help="the chip's advancing angle (placed with a bias) or "
+        "receding angle (placed without and dragged: the stricter case), degrees; a range LO:HI reports the "
+        "verdict over it",
+    )
+    o.add_argument(
+        "--edge-angle",
+        type=float,
+        required=True,
+        metavar="DEG",
+        help="solid wedge angle of the pad edge, degrees (90 = vertical wall)",
+    )
+    o.add_argument(
+        "--meniscus-height",
+        type=float,
+        metavar="UM",
+        help="the liquid height h in um (or --volume with --chip-size)",
+    )
+    o.add_argument(
+        "--volume",
+        type=float,
+        metavar="NL",
+        help="droplet volume in nl: h = V / A with --chip-size",
+    )
     o.add_argument("--chip-size", metavar="W[xH]", help="the chip (and pad) in um, for h = V / A")
-    o.add_argument("--bias", type=float, metavar="UM", help="the placement bias in um (its magnitude): decides condition (3)")
+    o.add_argument(
+        "--bias",
+        type=float,
+        metavar="UM",
+        help="the placement bias in um (its magnitude): decides condition (3)",
+    )
     _common(o)
     o.set_defaults(func=run_overflow)
 
-    c = calc.add_parser("critical-volume", help="the smallest droplet that wets all four pads of a four-pad pattern",
-                        description="The critical volume of a four-pad pattern (docs/physics.md §8): the energy of one drop centred "
-                        "on the pattern against the best split onto single pads, as functions of volume, from a reduced "
-                        "spherical-cap model (method, assumptions and validity are printed with the answer). Gravity is "
-                        "neglected; the volume does not depend on the surface tension.")
-    c.add_argument("--size", type=float, required=True, metavar="L", help="outer side of the pattern in um, gaps included")
-    c.add_argument("--gap", type=float, required=True, metavar="G", help="width of the cross-shaped gap in um")
-    c.add_argument("--pad-angle", type=float, required=True, metavar="DEG", help="contact angle on the pads, degrees")
-    c.add_argument("--substrate-angle", type=float, required=True, metavar="DEG", help="contact angle on the substrate (gap), degrees")
+    c = calc.add_parser(
+        "critical-volume",
+        help="the smallest droplet that wets all four pads of a four-pad pattern",
+        description="The critical volume of a four-pad pattern (docs/physics.md §8): the energy of one drop centred "
+        "on the pattern against the best split onto single pads, as functions of volume, from a reduced "
+        "spherical-cap model (method, assumptions and validity are printed with the answer). Gravity is "
+        "neglected; the volume does not depend on the surface tension.",
+    )
+    c.add_argument(
+        "--size",
+        type=float,
+        required=True,
+        metavar="L",
+        help="outer side of the pattern in um, gaps included",
+    )
+    c.add_argument(
+        "--gap", type=float, required=True, metavar="G", help="width of the cross-shaped gap in um"
+    )
+    c.add_argument(
+        "--pad-angle",
+        type=float,
+        required=True,
+        metavar="DEG",
+        help="contact angle on the pads, degrees",
+    )
+    c.add_argument(
+        "--substrate-angle",
+        type=float,
+        required=True,
+        metavar="DEG",
+        help="contact angle on the substrate (gap), degrees",
+    )
     _common(c)
     c.set_defaults(func=run_critical_volume)
 
@@ -98,7 +194,9 @@ def _finite(flag: str, value: float | None, positive: bool = True) -> float | No
     if value is None:
         return None
     if not math.isfinite(value) or (positive and value <= 0):
-        raise InputError(f"{flag} must be a finite number{' > 0' if positive else ''}, got {value!r}")
+        raise InputError(
+            f"{flag} must be a finite number{' > 0' if positive else ''}, got {value!r}"
+        )
     return float(value)
 
 
@@ -115,7 +213,9 @@ def _chip_angle(text: str) -> float | tuple[float, float]:
     except ValueError:
         vals = []
     if len(vals) not in (1, 2) or not all(math.isfinite(v) for v in vals):
-        raise InputError(f"--chip-angle must be an angle in degrees or a range LO:HI, e.g. 10:30, got {text!r}")
+        raise InputError(
+            f"--chip-angle must be an angle in degrees or a range LO:HI, e.g. 10:30, got {text!r}"
+        )
     return vals[0] if len(vals) == 1 else (vals[0], vals[1])
 
 
@@ -160,7 +260,9 @@ def run_height(args: argparse.Namespace) -> int:
     area = sides[0] * sides[1] if sides else _finite("--area", args.area)
     bias = _finite("--bias", args.bias, positive=False)
     if bias is not None and sides is None:
-        raise InputError("--bias needs --chip-size (the parallelepiped force needs the chip's edge length)")
+        raise InputError(
+            "--bias needs --chip-size (the parallelepiped force needs the chip's edge length)"
+        )
     from simulator.liquid import require_film
 
     # As simulate and evaluate: a film thicker than the chip is a typing slip (nl for pl), refused.
@@ -170,15 +272,24 @@ def run_height(args: argparse.Namespace) -> int:
     r["surface_tension_mN_m"], r["density_kg_m3"] = gamma * 1000, rho
     h = r["meniscus_height_um"]
     lines = [f"meniscus height h = V / A = {h:.4g} um ({v:g} nl over {area:.6g} um^2)"]
-    against = [f"{100 * r['h_over_capillary_length']:.3g} % of the capillary length {r['capillary_length_um']:.4g} um"]
+    against = [
+        f"{100 * r['h_over_capillary_length']:.3g} % of the capillary length {r['capillary_length_um']:.4g} um"
+    ]
     if sides:
-        against.insert(0, f"{100 * r['h_over_smallest_side']:.3g} % of the chip's smallest side {r['smallest_side_um']:g} um")
-    lines.append(f"thin-film picture {'holds' if r['thin_film_holds'] else 'does not hold'} (h is {', '.join(against)})")
+        against.insert(
+            0,
+            f"{100 * r['h_over_smallest_side']:.3g} % of the chip's smallest side {r['smallest_side_um']:g} um",
+        )
+    lines.append(
+        f"thin-film picture {'holds' if r['thin_film_holds'] else 'does not hold'} (h is {', '.join(against)})"
+    )
     lines += [f"  {note}" for note in r["thin_film_notes"]]
     if sides:
         pp = r["parallelepiped"]
-        line = (f"parallelepiped meniscus, shift along x (edge {pp['edge_length_um']:g} um): stiffness 2 gamma L / h = "
-                f"{pp['stiffness_N_per_m']:.4g} N/m, large-shift force -2 gamma L = {pp['force_limit_N'] * 1e6:.4g} uN")
+        line = (
+            f"parallelepiped meniscus, shift along x (edge {pp['edge_length_um']:g} um): stiffness 2 gamma L / h = "
+            f"{pp['stiffness_N_per_m']:.4g} N/m, large-shift force -2 gamma L = {pp['force_limit_N'] * 1e6:.4g} uN"
+        )
         if bias is not None:
             line += f", force at {bias:g} um = {pp['force_N'] * 1e6:.4g} uN"
         lines.append(line)
@@ -193,36 +304,54 @@ def run_overflow(args: argparse.Namespace) -> int:
     chip = _chip_angle(args.chip_angle)
     if args.meniscus_height is not None:
         if args.volume is not None:
-            raise InputError("give the liquid height once: --meniscus-height UM, or --volume NL with --chip-size W[xH]")
+            raise InputError(
+                "give the liquid height once: --meniscus-height UM, or --volume NL with --chip-size W[xH]"
+            )
         h = _finite("--meniscus-height", args.meniscus_height)
     else:
         if args.volume is None or args.chip_size is None:
-            raise InputError("give the liquid height: --meniscus-height UM, or --volume NL with --chip-size W[xH]")
+            raise InputError(
+                "give the liquid height: --meniscus-height UM, or --volume NL with --chip-size W[xH]"
+            )
         from simulator.liquid import require_film
 
         w, ht = _chip_size(args.chip_size)
         # As `liquid height`, simulate and evaluate: h = V / A, a film thicker than the chip refused.
         h = require_film(_finite("--volume", args.volume), w, ht)
-    r = overflow_report(args.pad_advancing, chip, args.edge_angle, h, _finite("--bias", args.bias, positive=False))
+    r = overflow_report(
+        args.pad_advancing, chip, args.edge_angle, h, _finite("--bias", args.bias, positive=False)
+    )
     xo = r["overflow_bias_um"]
-    lines = [f"meniscus height {h:.4g} um; overflow angle (180 - edge) + pad advancing = {r['overflow_angle_deg']:g} deg; "
-             f"overflow bias h / tan(edge - pad advancing) = {'never (condition 1)' if xo is None else f'{xo:.4g} um'}"]
+    lines = [
+        f"meniscus height {h:.4g} um; overflow angle (180 - edge) + pad advancing = {r['overflow_angle_deg']:g} deg; "
+        f"overflow bias h / tan(edge - pad advancing) = {'never (condition 1)' if xo is None else f'{xo:.4g} um'}"
+    ]
 
     def said(piece: dict) -> str:
         held = piece["conditions_holding"]
         names = ", ".join(f"({i})" for i in held)
-        conds = (f"conditions {names} hold" if len(held) > 1 else f"condition {names} holds") if held else "no condition holds"
+        conds = (
+            (f"conditions {names} hold" if len(held) > 1 else f"condition {names} holds")
+            if held
+            else "no condition holds"
+        )
         v = piece["overflows"]
         return f"{conds}: {'overflows' if v is True else 'does not overflow' if v is False else v}"
 
     if isinstance(chip, tuple):
         for piece in r["over_chip_angle_range"]:
-            lo = f"{piece['chip_angle_from_deg']:g}" + (" (excluded)" if piece.get("from_excluded") else "")
+            lo = f"{piece['chip_angle_from_deg']:g}" + (
+                " (excluded)" if piece.get("from_excluded") else ""
+            )
             lines.append(f"chip angle {lo} to {piece['chip_angle_to_deg']:g} deg: {said(piece)}")
         if r["condition_2_switch_chip_angle_deg"] is not None:
-            lines.append(f"condition (2) switches on above a chip angle of {r['condition_2_switch_chip_angle_deg']:g} deg (edge - pad advancing)")
+            lines.append(
+                f"condition (2) switches on above a chip angle of {r['condition_2_switch_chip_angle_deg']:g} deg (edge - pad advancing)"
+            )
     else:
-        lines.append(f"chip angle {chip:g} deg{'' if args.bias is None else f', bias {abs(args.bias):g} um'}: {said(r)}")
+        lines.append(
+            f"chip angle {chip:g} deg{'' if args.bias is None else f', bias {abs(args.bias):g} um'}: {said(r)}"
+        )
     return _emit(args, r, lines)
 
 
@@ -232,7 +361,12 @@ def run_critical_volume(args: argparse.Namespace) -> int:
 
     gamma, rho = _liquid(args)
     size, gap = _finite("--size", args.size), _finite("--gap", args.gap)
-    cv = critical_volume(size, gap, _finite("--pad-angle", args.pad_angle), _finite("--substrate-angle", args.substrate_angle))
+    cv = critical_volume(
+        size,
+        gap,
+        _finite("--pad-angle", args.pad_angle),
+        _finite("--substrate-angle", args.substrate_angle),
+    )
     doc = cv.to_json(gamma, rho)
     mid, split = doc["middle_drop"], doc["split_below_critical_volume"]
     lines = [
@@ -240,7 +374,8 @@ def run_critical_volume(args: argparse.Namespace) -> int:
         f"A = L^2 = {size**2:.6g} um^2, relative gap {100 * gap / size:.3g} %)",
         f"at it, one drop on the pattern centre has a footprint of {mid['footprint_side_um']:.4g} um and an apparent angle of "
         f"{mid['apparent_angle_deg']:.3g} deg; below it the liquid prefers {len(split)} drop{'s' if len(split) != 1 else ''} on single pads ("
-        + ", ".join(f"{d['volume_nl']:.3g} nl at {d['apparent_angle_deg']:.3g} deg" for d in split) + ")",
+        + ", ".join(f"{d['volume_nl']:.3g} nl at {d['apparent_angle_deg']:.3g} deg" for d in split)
+        + ")",
         f"method: {doc['method']}",
         "assumptions: " + "; ".join(doc["assumptions"]),
         "validity: " + "; ".join(doc["validity"]),

@@ -64,21 +64,49 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="SX,SY,STWIST",
         help="placement spread in um, um, degrees: standard deviations (normal) or half-widths (uniform)",
     )
-    s.add_argument("--around", metavar="X,Y,TWIST", help="nominal pose the random starts scatter around (default 0,0,0)")
-    s.add_argument("--distribution", choices=DISTRIBUTIONS, help="random start distribution per coordinate (default normal)")
-    s.add_argument("--seed", type=int, help="seed of numpy.random.default_rng for --random (default 0)")
+    s.add_argument(
+        "--around",
+        metavar="X,Y,TWIST",
+        help="nominal pose the random starts scatter around (default 0,0,0)",
+    )
+    s.add_argument(
+        "--distribution",
+        choices=DISTRIBUTIONS,
+        help="random start distribution per coordinate (default normal)",
+    )
+    s.add_argument(
+        "--seed", type=int, help="seed of numpy.random.default_rng for --random (default 0)"
+    )
     r = p.add_argument_group("runs")
-    r.add_argument("--method", choices=METHODS, help="stepper: greedy, gradient, or the dynamics overdamped, inertial (default greedy)")
-    r.add_argument("--max-steps", type=int, help=f"bound on moves (solver steps for the dynamics) per start (default {DEFAULT_MAX_STEPS})")
-    r.add_argument("--chunk", type=int, help=f"starts per compiled batch (default {DEFAULT_CHUNK}, dynamics {DEFAULT_DYNAMICS_CHUNK}); "
-                   "results do not depend on it")
+    r.add_argument(
+        "--method",
+        choices=METHODS,
+        help="stepper: greedy, gradient, or the dynamics overdamped, inertial (default greedy)",
+    )
+    r.add_argument(
+        "--max-steps",
+        type=int,
+        help=f"bound on moves (solver steps for the dynamics) per start (default {DEFAULT_MAX_STEPS})",
+    )
+    r.add_argument(
+        "--chunk",
+        type=int,
+        help=f"starts per compiled batch (default {DEFAULT_CHUNK}, dynamics {DEFAULT_DYNAMICS_CHUNK}); "
+        "results do not depend on it",
+    )
     r.add_argument("--quiet", action="store_true", help="no progress bars")
     o = p.add_argument_group("outputs (written only when the whole run succeeds)")
     o.add_argument("--json", help="summary statistics as JSON")
-    o.add_argument("--csv", help="one row per start: start and final pose, outcome, steps (dynamics: and time_to_align_s)")
+    o.add_argument(
+        "--csv",
+        help="one row per start: start and final pose, outcome, steps (dynamics: and time_to_align_s)",
+    )
     o.add_argument("--map", help="capture map picture (.png, .svg or .pdf; needs --grid)")
-    o.add_argument("--time-plot", metavar="PICTURE",
-                   help="histogram of the time to align of the aligned starts (.png, .svg or .pdf; needs --method overdamped or inertial)")
+    o.add_argument(
+        "--time-plot",
+        metavar="PICTURE",
+        help="histogram of the time to align of the aligned starts (.png, .svg or .pdf; needs --method overdamped or inertial)",
+    )
     p.set_defaults(func=run)
 
 
@@ -106,7 +134,9 @@ def parse_grid(text: str) -> StartGrid:
     """'X0:X1:DX,Y0:Y1:DY[,TWISTS]' (um, um, degrees; ends included) -> StartGrid."""
     parts = text.split(",")
     if len(parts) not in (2, 3):
-        raise InputError(f"--grid must be X0:X1:DX,Y0:Y1:DY[,TWISTS] (um, um, degrees), got {text!r}")
+        raise InputError(
+            f"--grid must be X0:X1:DX,Y0:Y1:DY[,TWISTS] (um, um, degrees), got {text!r}"
+        )
     names = ("--grid x", "--grid y", "--grid twist")
     axes = [_range(v.strip(), n) for v, n in zip(parts, names, strict=False)]
     try:
@@ -122,7 +152,9 @@ def parse_count(text: str) -> int:
     except ValueError:
         v = math.nan
     if not (math.isfinite(v) and v == int(v) and 1 <= v <= MAX_STARTS):
-        raise InputError(f"--random N must be a whole number from 1 to {MAX_STARTS:,}, got {text!r}")
+        raise InputError(
+            f"--random N must be a whole number from 1 to {MAX_STARTS:,}, got {text!r}"
+        )
     return int(v)
 
 
@@ -139,13 +171,27 @@ def _options(args: argparse.Namespace, doc: dict | None = None) -> dict:
     table = (scene_document(args) if doc is None else doc).get("montecarlo", {})
     if not isinstance(table, dict):
         raise InputError("[montecarlo] in the scene file must be a table")
-    allowed = {"grid", "random", "spread", "around", "distribution", "seed", "method", "max_steps", "chunk"}
+    allowed = {
+        "grid",
+        "random",
+        "spread",
+        "around",
+        "distribution",
+        "seed",
+        "method",
+        "max_steps",
+        "chunk",
+    }
     unknown = set(table) - allowed
     if unknown:
         raise InputError(f"unknown [montecarlo] keys {sorted(unknown)}; allowed: {sorted(allowed)}")
     # A kind of starts given as a flag replaces the scene's, with the keys that belong to it.
     if args.grid is not None:
-        table = {k: v for k, v in table.items() if k not in ("random", "spread", "around", "distribution", "seed")}
+        table = {
+            k: v
+            for k, v in table.items()
+            if k not in ("random", "spread", "around", "distribution", "seed")
+        }
     if args.random is not None:
         table = {k: v for k, v in table.items() if k != "grid"}
 
@@ -154,7 +200,11 @@ def _options(args: argparse.Namespace, doc: dict | None = None) -> dict:
         return v if v is not None else table.get(key, default)
 
     def text(v):
-        return ",".join(str(x) for x in v) if isinstance(v, list | tuple) else (None if v is None else str(v))
+        return (
+            ",".join(str(x) for x in v)
+            if isinstance(v, list | tuple)
+            else (None if v is None else str(v))
+        )
 
     opt = {
         "grid": text(pick("grid", "grid")),
@@ -172,13 +222,17 @@ def _options(args: argparse.Namespace, doc: dict | None = None) -> dict:
     if opt["chunk"] is None:
         opt["chunk"] = DEFAULT_DYNAMICS_CHUNK if opt["method"] in DYNAMIC_METHODS else DEFAULT_CHUNK
     if opt["distribution"] not in (None, *DISTRIBUTIONS):
-        raise InputError(f"distribution must be one of {', '.join(DISTRIBUTIONS)}, got {opt['distribution']!r}")
+        raise InputError(
+            f"distribution must be one of {', '.join(DISTRIBUTIONS)}, got {opt['distribution']!r}"
+        )
     for key in ("max_steps", "chunk"):
         v = opt[key]
         if isinstance(v, bool) or not isinstance(v, int) or v < 1:
             raise InputError(f"--{key.replace('_', '-')} must be a whole number >= 1, got {v!r}")
         if v > MAX_STEPS_LIMIT:
-            raise InputError(f"--{key.replace('_', '-')} must be at most {MAX_STEPS_LIMIT:,}, got {v:,}")
+            raise InputError(
+                f"--{key.replace('_', '-')} must be at most {MAX_STEPS_LIMIT:,}, got {v:,}"
+            )
     seed = opt["seed"]
     if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int) or seed < 0):
         raise InputError(f"--seed must be a whole number >= 0, got {seed!r}")
@@ -190,13 +244,17 @@ def _starts(opt: dict):
     from simulator.batch import random_starts
 
     if (opt["grid"] is None) == (opt["random"] is None):
-        raise InputError("give exactly one of --grid X0:X1:DX,Y0:Y1:DY[,TWISTS] or --random N --spread SX,SY,STWIST")
+        raise InputError(
+            "give exactly one of --grid X0:X1:DX,Y0:Y1:DY[,TWISTS] or --random N --spread SX,SY,STWIST"
+        )
     if opt["grid"] is not None:
         extra = [k for k in ("spread", "around", "distribution", "seed") if opt[k] is not None]
         if extra:
             raise InputError(f"--{extra[0]} applies to --random starts, not to --grid")
         g = parse_grid(opt["grid"])
-        desc = {"kind": "grid", "spec": opt["grid"], "shape": list(g.shape)} | {k: _axis_doc(getattr(g, k)) for k in ("x_um", "y_um", "twist_deg")}
+        desc = {"kind": "grid", "spec": opt["grid"], "shape": list(g.shape)} | {
+            k: _axis_doc(getattr(g, k)) for k in ("x_um", "y_um", "twist_deg")
+        }
         return g, desc, None
     n = parse_count(opt["random"])
     if opt["spread"] is None:
@@ -222,19 +280,27 @@ def _axis_doc(values: tuple[float, ...]) -> dict:
     return {"from": values[0], "to": values[-1], "step": step, "count": len(values)}
 
 
-def _check_outputs(args: argparse.Namespace, is_grid: bool, method: str, doc: dict | None = None) -> None:
+def _check_outputs(
+    args: argparse.Namespace, is_grid: bool, method: str, doc: dict | None = None
+) -> None:
     """Fail before any work when an output cannot or must not be written."""
     check_outputs(args, ("json", "csv", "map", "time_plot"), doc)
     if args.map:
         if not is_grid:
-            raise InputError("--map needs --grid starts (a capture map is drawn over the start grid)")
+            raise InputError(
+                "--map needs --grid starts (a capture map is drawn over the start grid)"
+            )
         if Path(args.map).suffix.lower() not in MAP_SUFFIXES:
             raise InputError(f"--map {args.map}: the picture must end in {', '.join(MAP_SUFFIXES)}")
     if args.time_plot:
         if method not in DYNAMIC_METHODS:
-            raise InputError(f"--time-plot needs --method overdamped or inertial (the {method} stepper has no time)")
+            raise InputError(
+                f"--time-plot needs --method overdamped or inertial (the {method} stepper has no time)"
+            )
         if Path(args.time_plot).suffix.lower() not in MAP_SUFFIXES:
-            raise InputError(f"--time-plot {args.time_plot}: the picture must end in {', '.join(MAP_SUFFIXES)}")
+            raise InputError(
+                f"--time-plot {args.time_plot}: the picture must end in {', '.join(MAP_SUFFIXES)}"
+            )
 
 
 # --------------------------------------------------------------------- run
@@ -250,7 +316,9 @@ def run(args: argparse.Namespace) -> int:
     from simulator.core import threads
     from simulator.motion import OUTCOMES
 
-    scene_doc = scene_document(args)  # the scene file, read and validated once for the whole command
+    scene_doc = scene_document(
+        args
+    )  # the scene file, read and validated once for the whole command
     opt = _options(args, scene_doc)
     starts, desc, seed = _starts(opt)
     grid = starts if isinstance(starts, StartGrid) else None
@@ -258,7 +326,9 @@ def run(args: argparse.Namespace) -> int:
     scene = scene_from_args(args, doc=scene_doc)
     from simulator.liquid import placement_biases
 
-    liquid_warnings = liquid_checks(args, scene, opt["method"], lambda: placement_biases(starts), "the starts", doc=scene_doc)
+    liquid_warnings = liquid_checks(
+        args, scene, opt["method"], lambda: placement_biases(starts), "the starts", doc=scene_doc
+    )
     from simulator.core import compiling
     from simulator.landscape import require_landscape_fits
 
@@ -267,11 +337,21 @@ def run(args: argparse.Namespace) -> int:
         from simulator.motion import DynamicsParams
 
         n = starts.size if grid is not None else len(starts)
-        price_dynamics_lanes(min(opt["chunk"], n) * max(1, min(threads(), -(-n // opt["chunk"]))), scene.memory_budget_mb)
+        price_dynamics_lanes(
+            min(opt["chunk"], n) * max(1, min(threads(), -(-n // opt["chunk"]))),
+            scene.memory_budget_mb,
+        )
         DynamicsParams.from_scene(scene)  # a liquid the model cannot take fails before compiling
 
     compiling(opt["method"], args.quiet)
-    result = run_batch(scene, starts, opt["method"], chunk=opt["chunk"], max_steps=opt["max_steps"], progress=not args.quiet)
+    result = run_batch(
+        scene,
+        starts,
+        opt["method"],
+        chunk=opt["chunk"],
+        max_steps=opt["max_steps"],
+        progress=not args.quiet,
+    )
     summary = summarize(result, grid)
     st = result.stats
     doc = summary | {
@@ -286,8 +366,14 @@ def run(args: argparse.Namespace) -> int:
             "dtype": scene.dtype,
             "meniscus_height_um": scene.meniscus_height_um,
             "pinned": scene.liquid.pinned,
-            "hysteresis_deg": ({"receding": scene.materials.pad_receding_deg, "advancing": scene.materials.pad_advancing_deg}
-                               if scene.effects.hysteresis else None),
+            "hysteresis_deg": (
+                {
+                    "receding": scene.materials.pad_receding_deg,
+                    "advancing": scene.materials.pad_advancing_deg,
+                }
+                if scene.effects.hysteresis
+                else None
+            ),
         },
         "landscape_shape": list(st["landscape_shape"]),
         "landscape_s": st["landscape_s"],
@@ -304,15 +390,24 @@ def run(args: argparse.Namespace) -> int:
         if args.csv:
             write_csv(stack.enter_context(atomic_output(args.csv)), result, OUTCOMES)
         if args.json:
-            stack.enter_context(atomic_output(args.json)).write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n")
+            stack.enter_context(atomic_output(args.json)).write_text(
+                json.dumps(doc, indent=2, allow_nan=False) + "\n"
+            )
         if args.time_plot:  # moved into place with the files above, when every output is ready
             from simulator.batch import time_histogram, time_stats
             from simulator.render import plot_time_to_align
 
             times = result.time_to_align_s
-            plot_time_to_align(time_histogram(times), time_stats(times), stack.enter_context(atomic_output(args.time_plot)), title=_time_title(args, summary))
+            plot_time_to_align(
+                time_histogram(times),
+                time_stats(times),
+                stack.enter_context(atomic_output(args.time_plot)),
+                title=_time_title(args, summary),
+            )
         if args.map:
-            plot_capture_map(capture_map(result, grid), grid, scene, args.map, title=_map_title(args, summary))
+            plot_capture_map(
+                capture_map(result, grid), grid, scene, args.map, title=_map_title(args, summary)
+            )
     for flag in ("csv", "json", "map", "time_plot"):
         if getattr(args, flag):
             print(f"wrote {getattr(args, flag)}")
@@ -331,7 +426,9 @@ def _print_summary(summary: dict, result, desc: dict, st: dict) -> None:
             f"{desc['spread_means']}s {sp['x_um']:g} um, {sp['y_um']:g} um, {sp['twist_deg']:g} deg, seed {summary['seed']}"
         )
     shape = " x ".join(str(v) for v in st["landscape_shape"])
-    print(f"{result.method}: {n:,} starts ({what}); landscape {shape} (twist, y, x) in {st['landscape_s']:.2f} s; runs {st['run_s']:.2f} s incl. compilation ({st['starts_per_s']:,.0f} starts/s)")
+    print(
+        f"{result.method}: {n:,} starts ({what}); landscape {shape} (twist, y, x) in {st['landscape_s']:.2f} s; runs {st['run_s']:.2f} s incl. compilation ({st['starts_per_s']:,.0f} starts/s)"
+    )
     c = summary["outcomes"]
     print(f"yield: {100 * summary['yield']:.2f} % aligned ({c['aligned']:,} of {n:,} starts)")
     print("outcomes (starts): " + ", ".join(f"{k} {v:,}" for k, v in c.items()))
@@ -350,7 +447,10 @@ def _print_summary(summary: dict, result, desc: dict, st: dict) -> None:
     if "max_bias_um" in summary:
         b, lim = summary["max_bias_um"], summary["max_bias_limited_by_grid"]
         if any(v is not None for v in b.values()):
-            items = [f"{k} {'n/a' if v is None else f'{v:g} um'}{' (grid edge: at least)' if lim[k] else ''}" for k, v in b.items()]
+            items = [
+                f"{k} {'n/a' if v is None else f'{v:g} um'}{' (grid edge: at least)' if lim[k] else ''}"
+                for k, v in b.items()
+            ]
             print("max bias at twist 0 (every grid start up to it aligned): " + ", ".join(items))
 
 
@@ -358,8 +458,10 @@ def time_line(t: dict | None) -> str:
     """The printed line on the time to align of the aligned starts (ms)."""
     if t is None:
         return "time to align: no start aligned"
-    return (f"time to align ({t['n']:,} aligned starts, simulated): median {1e3 * t['median']:.3g} ms, "
-            f"90th percentile {1e3 * t['p90']:.3g} ms, max {1e3 * t['max']:.3g} ms")
+    return (
+        f"time to align ({t['n']:,} aligned starts, simulated): median {1e3 * t['median']:.3g} ms, "
+        f"90th percentile {1e3 * t['p90']:.3g} ms, max {1e3 * t['max']:.3g} ms"
+    )
 
 
 def write_csv(path: Path, result, outcomes) -> None:
@@ -367,25 +469,47 @@ def write_csv(path: Path, result, outcomes) -> None:
     for the dynamics the time to align in seconds (empty where the start did not align)."""
     names = np.asarray(outcomes)[result.outcome]
     times = result.time_to_align_s
-    head = "start_x_um,start_y_um,start_twist_deg,final_x_um,final_y_um,final_twist_deg,outcome,steps" + (",time_to_align_s" if times is not None else "") + "\n"
+    head = (
+        "start_x_um,start_y_um,start_twist_deg,final_x_um,final_y_um,final_twist_deg,outcome,steps"
+        + (",time_to_align_s" if times is not None else "")
+        + "\n"
+    )
     with open(path, "w") as f:
         f.write(head)
         for i in range(0, result.n, 65536):
             s, e = result.start[i : i + 65536], result.final[i : i + 65536]
-            t = [""] * len(s) if times is None else ["," + (f"{v:.10g}" if np.isfinite(v) else "") for v in times[i : i + 65536].tolist()]
+            t = (
+                [""] * len(s)
+                if times is None
+                else [
+                    "," + (f"{v:.10g}" if np.isfinite(v) else "")
+                    for v in times[i : i + 65536].tolist()
+                ]
+            )
             rows = [
                 f"{a[0]:.10g},{a[1]:.10g},{a[2]:.10g},{b[0]:.10g},{b[1]:.10g},{b[2]:.10g},{o},{k}{tt}\n"
-                for a, b, o, k, tt in zip(s.tolist(), e.tolist(), names[i : i + 65536], result.steps[i : i + 65536].tolist(), t, strict=True)
+                for a, b, o, k, tt in zip(
+                    s.tolist(),
+                    e.tolist(),
+                    names[i : i + 65536],
+                    result.steps[i : i + 65536].tolist(),
+                    t,
+                    strict=True,
+                )
             ]
             f.write("".join(rows))
 
 
 # --------------------------------------------------------------------- picture
 def _map_title(args: argparse.Namespace, summary: dict) -> str:
-    name = Path(args.pattern).name if args.pattern else (Path(args.scene).name if args.scene else "")
+    name = (
+        Path(args.pattern).name if args.pattern else (Path(args.scene).name if args.scene else "")
+    )
     return f"{name}: capture map, {summary['method']}, yield {100 * summary['yield']:.1f} % of {summary['n']:,} starts"
 
 
 def _time_title(args: argparse.Namespace, summary: dict) -> str:
-    name = Path(args.pattern).name if args.pattern else (Path(args.scene).name if args.scene else "")
+    name = (
+        Path(args.pattern).name if args.pattern else (Path(args.scene).name if args.scene else "")
+    )
     return f"{name}: time to align, {summary['method']}, {summary['outcomes']['aligned']:,} of {summary['n']:,} starts aligned"

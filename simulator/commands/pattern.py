@@ -46,19 +46,37 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description="Draw a pattern design (lengths in um) as a 16-bit grey PNG whose pHYs chunk "
         "records the scale. White = wettable. Use --list to see the designs and their parameters.",
     )
-    parser.add_argument("--list", action="store_true", help="describe every design and its parameters")
+    parser.add_argument(
+        "--list", action="store_true", help="describe every design and its parameters"
+    )
     designs = parser.add_subparsers(dest="design", metavar="DESIGN", parser_class=_OneLineParser)
     for design in DESIGNS.values():
-        sub = designs.add_parser(design.name, help=design.description, description=design.description)
+        sub = designs.add_parser(
+            design.name, help=design.description, description=design.description
+        )
         for p in design.params:
-            sub.add_argument(p.flag, dest=f"p_{p.name}", metavar=p.unit.upper() or p.kind.upper(),
-                             help=p.describe().split(": ", 1)[1])
-        sub.add_argument("--um-per-px", default="1", metavar="UM",
-                         help="pixel size in micrometres (default 1)")
-        sub.add_argument("--margin", default=str(DEFAULT_MARGIN_UM), metavar="UM",
-                         help=f"substrate border around the design in um (default {DEFAULT_MARGIN_UM:g})")
-        sub.add_argument("-o", "--output", metavar="OUT.png", help="output file (required): a PNG, or a layout .gds, .oas or .dxf "
-                         "(exact polygon, 1 nm database unit, layer 1/0; DXF layer PATTERN)")
+            sub.add_argument(
+                p.flag,
+                dest=f"p_{p.name}",
+                metavar=p.unit.upper() or p.kind.upper(),
+                help=p.describe().split(": ", 1)[1],
+            )
+        sub.add_argument(
+            "--um-per-px", default="1", metavar="UM", help="pixel size in micrometres (default 1)"
+        )
+        sub.add_argument(
+            "--margin",
+            default=str(DEFAULT_MARGIN_UM),
+            metavar="UM",
+            help=f"substrate border around the design in um (default {DEFAULT_MARGIN_UM:g})",
+        )
+        sub.add_argument(
+            "-o",
+            "--output",
+            metavar="OUT.png",
+            help="output file (required): a PNG, or a layout .gds, .oas or .dxf "
+            "(exact polygon, 1 nm database unit, layer 1/0; DXF layer PATTERN)",
+        )
         sub.set_defaults(func=run)
     parser.set_defaults(func=run, design=None)
 
@@ -69,8 +87,10 @@ def describe_designs() -> str:
     for design in DESIGNS.values():
         lines.append(f"{design.name}: {design.description}")
         lines.extend(f"    {p.describe()}" for p in design.params)
-    lines.append("every design also takes: --um-per-px UM (default 1), "
-                 f"--margin UM (default {DEFAULT_MARGIN_UM:g}), -o OUT.png (required; or OUT.gds, OUT.oas, OUT.dxf for a layout)")
+    lines.append(
+        "every design also takes: --um-per-px UM (default 1), "
+        f"--margin UM (default {DEFAULT_MARGIN_UM:g}), -o OUT.png (required; or OUT.gds, OUT.oas, OUT.dxf for a layout)"
+    )
     return "\n".join(lines)
 
 
@@ -80,7 +100,9 @@ def _design_values(design: Design, args: argparse.Namespace) -> dict:
         text = getattr(args, f"p_{p.name}")
         if text is None:
             if p.required:
-                raise InputError(f"{design.name} needs {p.flag} ({p.help}{', ' + p.unit if p.unit else ''})")
+                raise InputError(
+                    f"{design.name} needs {p.flag} ({p.help}{', ' + p.unit if p.unit else ''})"
+                )
             continue
         values[p.name] = p.coerce(text, p.flag)
     return values
@@ -107,7 +129,9 @@ def run(args: argparse.Namespace) -> int:
     if not 0 <= margin < float("inf"):
         raise InputError(f"--margin must be a finite number >= 0 um, got {args.margin!r}")
     if args.output is None:
-        raise InputError("-o OUT.png is required (the PNG file to write; or OUT.gds, OUT.oas, OUT.dxf for a layout)")
+        raise InputError(
+            "-o OUT.png is required (the PNG file to write; or OUT.gds, OUT.oas, OUT.dxf for a layout)"
+        )
     geometry = build(design.name, **values)
     from patterns.layout import SUFFIXES
 
@@ -115,15 +139,19 @@ def run(args: argparse.Namespace) -> int:
     if suffix in SUFFIXES:
         return _write_layout(args.output, design.name, geometry)
     if suffix != ".png" and not Path(args.output).is_dir():  # a directory: write_mask says so
-        raise InputError(f"-o {args.output}: the file name must end in .png, or in .gds, .oas or .dxf for a layout")
+        raise InputError(
+            f"-o {args.output}: the file name must end in .png, or in .gds, .oas or .dxf for a layout"
+        )
     record = design_record(design.name, **values)
     record.update(margin_um=margin, area_um2=geometry.area)
     mask = mask_from_geometry(geometry, scale, margin_um=margin, params=record)
     mask.require_nonempty(f"{design.name} at --um-per-px {scale:g}")
     path = write_mask(args.output, mask)
     h, w = mask.shape
-    print(f"wrote {path}: {w} x {h} px at {scale:g} um/px ({w * scale:g} x {h * scale:g} um), "
-          f"wettable area {mask.area_um2:.6g} um^2 (exact {geometry.area:.6g} um^2)")
+    print(
+        f"wrote {path}: {w} x {h} px at {scale:g} um/px ({w * scale:g} x {h * scale:g} um), "
+        f"wettable area {mask.area_um2:.6g} um^2 (exact {geometry.area:.6g} um^2)"
+    )
     return 0
 
 
@@ -134,9 +162,13 @@ def _write_layout(output: str, name: str, geometry) -> int:
     from patterns.layout import WRITE_DXF_LAYER, WRITE_LAYER, snap, write_layout
 
     path = write_layout(output, geometry, cell=name)
-    layer = WRITE_DXF_LAYER if path.suffix.lower() == ".dxf" else f"{WRITE_LAYER[0]}/{WRITE_LAYER[1]}"
+    layer = (
+        WRITE_DXF_LAYER if path.suffix.lower() == ".dxf" else f"{WRITE_LAYER[0]}/{WRITE_LAYER[1]}"
+    )
     n = len(shapely.get_parts(geometry))
     where = "model space" if path.suffix.lower() == ".dxf" else f"cell {name.replace('-', '_')}"
-    print(f"wrote {path}: {where}, layer {layer}, {n} polygon{'' if n == 1 else 's'}, database unit 1 nm, "
-          f"area {snap(geometry).area:.12g} um^2 (exact {geometry.area:.12g} um^2)")
+    print(
+        f"wrote {path}: {where}, layer {layer}, {n} polygon{'' if n == 1 else 's'}, database unit 1 nm, "
+        f"area {snap(geometry).area:.12g} um^2 (exact {geometry.area:.12g} um^2)"
+    )
     return 0

@@ -34,26 +34,49 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_scene_args(p)
     p.add_argument("--start", metavar="X,Y,TWIST", help="initial pose in um, um, degrees")
     p.add_argument("--method", choices=METHODS, default=None, help="stepper (default greedy)")
-    p.add_argument("--max-steps", type=int, default=None, help=f"bound on moves or solver steps (default {DEFAULT_MAX_STEPS})")
-    p.add_argument("--engine", choices=("auto", "fft", "path"), default="auto",
-                   help="how greedy and gradient compute the energies they step on: fft (boxes of the landscape "
-                   "holding the start and the centre, by FFT correlation), path (small boxes that follow the chip, "
-                   "pose by pose at the cost of the chip's outline: seconds instead of minutes for chips of "
-                   "thousands of px; exact geometry or chip images, no K_h meniscus, no free contact lines) or "
-                   "auto (path for chips of at least 1000 x 1000 px greedy, 2000 x 2000 px gradient; default). "
-                   "The JSON's cost.engine says which ran")
+    p.add_argument(
+        "--max-steps",
+        type=int,
+        default=None,
+        help=f"bound on moves or solver steps (default {DEFAULT_MAX_STEPS})",
+    )
+    p.add_argument(
+        "--engine",
+        choices=("auto", "fft", "path"),
+        default="auto",
+        help="how greedy and gradient compute the energies they step on: fft (boxes of the landscape "
+        "holding the start and the centre, by FFT correlation), path (small boxes that follow the chip, "
+        "pose by pose at the cost of the chip's outline: seconds instead of minutes for chips of "
+        "thousands of px; exact geometry or chip images, no K_h meniscus, no free contact lines) or "
+        "auto (path for chips of at least 1000 x 1000 px greedy, 2000 x 2000 px gradient; default). "
+        "The JSON's cost.engine says which ran",
+    )
     d = p.add_argument_group("liquid and chip body (dynamic methods)")
     d.add_argument("--viscosity", type=float, help="liquid viscosity in mPa s (default 1.0, water)")
     d.add_argument("--chip-thickness", type=float, help="chip thickness in um (default 50)")
     d.add_argument("--chip-density", type=float, help="chip density in kg/m^3 (default 1200, SU-8)")
-    d.add_argument("--damping-calibration", type=float, help=f"multiplier on the Couette damping estimate (default {DAMPING_CALIBRATION:g})")
+    d.add_argument(
+        "--damping-calibration",
+        type=float,
+        help=f"multiplier on the Couette damping estimate (default {DAMPING_CALIBRATION:g})",
+    )
     o = p.add_argument_group("outputs")
     o.add_argument("--json", help="write the trajectory as JSON")
-    o.add_argument("--csv", help="write the path as CSV, one row per step: step, x_um, y_um, twist_deg, energy_J "
-                   "(and t_s for the dynamic methods)")
+    o.add_argument(
+        "--csv",
+        help="write the path as CSV, one row per step: step, x_um, y_um, twist_deg, energy_J "
+        "(and t_s for the dynamic methods)",
+    )
     o.add_argument("--plot", help="write the energy-versus-step (or time) curve as PNG")
-    o.add_argument("--gif", help="write an animation of the chip moving over the pattern (GIF, at most 120 frames)")
-    o.add_argument("--quiet", action="store_true", help="print only the results (no progress bars or waiting messages)")
+    o.add_argument(
+        "--gif",
+        help="write an animation of the chip moving over the pattern (GIF, at most 120 frames)",
+    )
+    o.add_argument(
+        "--quiet",
+        action="store_true",
+        help="print only the results (no progress bars or waiting messages)",
+    )
     p.set_defaults(func=run)
 
 
@@ -68,33 +91,49 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("give the start pose with --start X,Y,TWIST (um, um, degrees)")
     start = parse_pose(start_text, "--start")
     method = args.method or sim.get("method", "greedy")
-    max_steps = args.max_steps if args.max_steps is not None else sim.get("max_steps", DEFAULT_MAX_STEPS)
+    max_steps = (
+        args.max_steps if args.max_steps is not None else sim.get("max_steps", DEFAULT_MAX_STEPS)
+    )
     _check_outputs(args, doc)
     scene = scene_from_args(args, doc=doc)
     from simulator.liquid import placement_biases
 
-    liquid_warnings = liquid_checks(args, scene, method, placement_biases(start), "the start", doc=doc)
+    liquid_warnings = liquid_checks(
+        args, scene, method, placement_biases(start), "the start", doc=doc
+    )
     price_run(scene, method, max_steps)
     require_start_in_window(scene, start)
     if method in ("overdamped", "inertial"):
         from simulator.motion import DynamicsParams
 
         DynamicsParams.from_scene(scene)  # a liquid the model cannot take fails before compiling
-    require_run_fits(scene, start, method)  # the first landscape (and footprint) priced before any work
+    require_run_fits(
+        scene, start, method
+    )  # the first landscape (and footprint) priced before any work
     compiling(method, args.quiet)
     if args.engine == "path" and method in ("overdamped", "inertial"):
-        raise InputError(f"--engine path runs greedy and gradient; {method} builds the whole landscape (leave --engine out)")
+        raise InputError(
+            f"--engine path runs greedy and gradient; {method} builds the whole landscape (leave --engine out)"
+        )
     traj = simulate(scene, start, method=method, max_steps=max_steps, engine=args.engine)
     print(end_line(scene, traj))
     if traj.refined is not None:
         r = [round(v, 1) + 0.0 for v in traj.refined]
-        print(f"refined below the grid (meniscus {scene.meniscus_height_um:.3g} um): ({r[0]:.1f} um, {r[1]:.1f} um, {r[2]:.1f} deg)")
+        print(
+            f"refined below the grid (meniscus {scene.meniscus_height_um:.3g} um): ({r[0]:.1f} um, {r[1]:.1f} um, {r[2]:.1f} deg)"
+        )
     c = traj.cost
     if c.get("poses_computed"):
-        print(f"landscape computed: {c['poses_computed']:,} of {c['poses_full']:,} poses ({100 * c['fraction_of_full']:.3g} %), {c['landscape_s']:.2f} s"
-              + (" (path engine)" if c.get("engine") == "path" else ""))
+        print(
+            f"landscape computed: {c['poses_computed']:,} of {c['poses_full']:,} poses ({100 * c['fraction_of_full']:.3g} %), {c['landscape_s']:.2f} s"
+            + (" (path engine)" if c.get("engine") == "path" else "")
+        )
     if args.json:
-        write_json(args.json, traj.to_json() | {"liquid_warnings": liquid_warnings, "meniscus_height_um": scene.meniscus_height_um})
+        write_json(
+            args.json,
+            traj.to_json()
+            | {"liquid_warnings": liquid_warnings, "meniscus_height_um": scene.meniscus_height_um},
+        )
         print(f"wrote {args.json}")
     if args.csv:
         write_path_csv(args.csv, traj)
@@ -117,7 +156,10 @@ def write_path_csv(path, traj) -> None:
     from simulator.commands._common import write_csv
 
     p = traj.path
-    cols, vals = ["step", "x_um", "y_um", "twist_deg", "energy_J"], [np.arange(len(p)), p[:, 0], p[:, 1], p[:, 2], traj.energy_J]
+    cols, vals = (
+        ["step", "x_um", "y_um", "twist_deg", "energy_J"],
+        [np.arange(len(p)), p[:, 0], p[:, 1], p[:, 2], traj.energy_J],
+    )
     if traj.t_s is not None:
         cols.append("t_s")
         vals.append(traj.t_s)
@@ -132,7 +174,11 @@ def end_line(scene, traj) -> str:
     time_txt = f", {traj.time_s * 1e3:.3g} ms" if traj.time_s is not None else ""
     period = scene.twist_axis.period_deg
     same = round(float(np.mod(traj.final[2] + period / 2, period) - period / 2), 2) + 0.0
-    twin = f" (twist {f[2]:g} deg = {same:g} deg for {chip_symmetry_words(scene, period)})" if abs(same - f[2]) > DEG_TOL else ""
+    twin = (
+        f" (twist {f[2]:g} deg = {same:g} deg for {chip_symmetry_words(scene, period)})"
+        if abs(same - f[2]) > DEG_TOL
+        else ""
+    )
     line = f"{traj.method}: {traj.outcome} at ({f[0]:.2f} um, {f[1]:.2f} um, {f[2]:.2f} deg){twin} after {traj.steps} steps{time_txt}"
     if traj.optimum is not None and traj.outcome != "aligned":
         g = [round(v, 2) + 0.0 for v in traj.optimum]

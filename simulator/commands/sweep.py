@@ -29,15 +29,40 @@ def register(sub: argparse._SubParsersAction) -> None:
             "sweep into the same --out skips the points done. A point that fails records its error and the sweep goes on."
         ),
     )
-    p.add_argument("sweep_file", metavar="SWEEP.toml", help="the sweep file (see docs/guide/sweeps.md)")
-    p.add_argument("--out", required=True, metavar="DIR", help="results directory: new, empty, or holding this same sweep (resumed)")
-    p.add_argument("--workers", type=int, metavar="N", help="local Dask worker processes (default: one per core, at most one per point); "
-                   "0 runs the points in this process without Dask")
-    p.add_argument("--scheduler", metavar="ADDRESS", help=f"run on the Dask cluster of this scheduler (tcp://HOST:PORT) instead of local "
-                   f"workers; its workers need selfalign and the pattern files (refused after {CONNECT_TIMEOUT_S:g} s if unreachable)")
-    p.add_argument("--max-points", type=int, default=DEFAULT_MAX_POINTS, metavar="N",
-                   help=f"refuse a sweep of more points (default {DEFAULT_MAX_POINTS})")
-    p.add_argument("--retry-failed", action="store_true", help="when resuming, run the points that failed again")
+    p.add_argument(
+        "sweep_file", metavar="SWEEP.toml", help="the sweep file (see docs/guide/sweeps.md)"
+    )
+    p.add_argument(
+        "--out",
+        required=True,
+        metavar="DIR",
+        help="results directory: new, empty, or holding this same sweep (resumed)",
+    )
+    p.add_argument(
+        "--workers",
+        type=int,
+        metavar="N",
+        help="local Dask worker processes (default: one per core, at most one per point); "
+        "0 runs the points in this process without Dask",
+    )
+    p.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help=f"run on the Dask cluster of this scheduler (tcp://HOST:PORT) instead of local "
+        f"workers; its workers need selfalign and the pattern files (refused after {CONNECT_TIMEOUT_S:g} s if unreachable)",
+    )
+    p.add_argument(
+        "--max-points",
+        type=int,
+        default=DEFAULT_MAX_POINTS,
+        metavar="N",
+        help=f"refuse a sweep of more points (default {DEFAULT_MAX_POINTS})",
+    )
+    p.add_argument(
+        "--retry-failed",
+        action="store_true",
+        help="when resuming, run the points that failed again",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
@@ -57,8 +82,11 @@ def _sigterm_says_what_was_kept(out: str) -> Iterator[None]:
         remove_pending()
         n = kept_points(out) if os.path.isdir(out) else 0
         release_semaphores()
-        said = (f"{n} finished point{'s are' if n != 1 else ' is'} kept in {out} (rerun the same command to resume)" if n
-                else "no point had finished, none was kept")
+        said = (
+            f"{n} finished point{'s are' if n != 1 else ' is'} kept in {out} (rerun the same command to resume)"
+            if n
+            else "no point had finished, none was kept"
+        )
         os.write(2, f"selfalign sweep: terminated; {said}\n".encode())
         os._exit(143)
 
@@ -75,19 +103,34 @@ def run(args: argparse.Namespace) -> int:
     spec = load_sweep(args.sweep_file)
     try:
         with _sigterm_says_what_was_kept(args.out):
-            table = sweep(spec, args.out, workers=args.workers, scheduler=args.scheduler, max_points=args.max_points,
-                          retry_failed=args.retry_failed, quiet=args.quiet)
+            table = sweep(
+                spec,
+                args.out,
+                workers=args.workers,
+                scheduler=args.scheduler,
+                max_points=args.max_points,
+                retry_failed=args.retry_failed,
+                quiet=args.quiet,
+            )
     except KeyboardInterrupt:
         n = kept_points(args.out) if os.path.isdir(args.out) else 0
-        print(f"selfalign sweep: interrupted; {n} finished point{'s are' if n != 1 else ' is'} kept in {args.out} "
-              "(rerun the same command to resume)", file=sys.stderr)
+        print(
+            f"selfalign sweep: interrupted; {n} finished point{'s are' if n != 1 else ' is'} kept in {args.out} "
+            "(rerun the same command to resume)",
+            file=sys.stderr,
+        )
         return 130
     st = table.attrs["sweep"]
     where = f"{st['workers']} Dask workers" if st["workers"] else "this process"
     rate = f" ({st['points_per_s']:.2f} points/s on {where})" if st["points_per_s"] else ""
-    print(f"sweep {st['hash'][:12]}: {st['points']} points ({spec.shape_text()}); {st['run_now']} run now{rate}, "
-          f"{st['resumed']} done before; {st['failed']} failed")
+    print(
+        f"sweep {st['hash'][:12]}: {st['points']} points ({spec.shape_text()}); {st['run_now']} run now{rate}, "
+        f"{st['resumed']} done before; {st['failed']} failed"
+    )
     pics = sorted(p.name for p in Path(args.out).glob("*.png"))
-    print(f"wrote {Path(args.out) / 'results.parquet'} (and results.csv, report.html, points/*.json"
-          + (f", {len(pics)} pictures" if pics else "") + ")")
+    print(
+        f"wrote {Path(args.out) / 'results.parquet'} (and results.csv, report.html, points/*.json"
+        + (f", {len(pics)} pictures" if pics else "")
+        + ")"
+    )
     return 0

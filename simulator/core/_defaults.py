@@ -23,7 +23,9 @@ def threads() -> int:
     if not v.isdigit() or int(v) < 1:
         from patterns.errors import InputError
 
-        raise InputError(f"{THREADS_ENV}={v!r} must be a whole number of threads >= 1; set it to e.g. 1, or unset it")
+        raise InputError(
+            f"{THREADS_ENV}={v!r} must be a whole number of threads >= 1; set it to e.g. 1, or unset it"
+        )
     return int(v)
 
 

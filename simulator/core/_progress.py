@@ -83,7 +83,9 @@ def announce_once(message: str, quiet: bool = False) -> None:
 def compiling(method: str, quiet: bool = False) -> None:
     """Explain the pause before the first trajectory: JAX compiles the stepper."""
     seconds = "a few" if method in ("greedy", "gradient") else "5-10"
-    announce_once(f"compiling the {method} stepper with JAX ({seconds} seconds, once per process)...", quiet)
+    announce_once(
+        f"compiling the {method} stepper with JAX ({seconds} seconds, once per process)...", quiet
+    )
 
 
 class NoBar:

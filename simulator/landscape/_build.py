@@ -89,7 +89,9 @@ def _check_energy_range(scene: Scene) -> None:
         )
 
 
-def estimate_bytes(scene: Scene, twists: np.ndarray | None = None, um_per_px: float | None = None) -> int:
+def estimate_bytes(
+    scene: Scene, twists: np.ndarray | None = None, um_per_px: float | None = None
+) -> int:
     """Bytes the landscape array of ``scene`` would take (before building it; nothing is rotated).
 
     ``um_per_px``: the landscape of ``scene.at_resolution(um_per_px)``, computed from the
@@ -105,7 +107,9 @@ def estimate_bytes(scene: Scene, twists: np.ndarray | None = None, um_per_px: fl
     return int(n_twists * (2 * ry + 1) * (2 * rx + 1) * np.dtype(scene.dtype).itemsize)
 
 
-def _refuse_over_budget(scene: Scene, need: float, n_twists: int, ny: int, nx: int, what: str = "") -> None:
+def _refuse_over_budget(
+    scene: Scene, need: float, n_twists: int, ny: int, nx: int, what: str = ""
+) -> None:
     """InputError unless ``need`` bytes fit ``scene.memory_budget_mb``; ``what`` says what
     the estimate holds beyond the energy array (the transforms' work space, the footprint)."""
     if need > scene.memory_budget_mb * 2**20:
@@ -147,7 +151,13 @@ def _twist_run(scene: Scene, twists) -> tuple[TwistAxis, int, int, tuple[bool, b
     return evenly_spaced_axis(tw, axis), 0, len(tw), _twist_cut(axis.values(), axis.periodic, tw)
 
 
-def _box(scene: Scene, twists, center_px: tuple[int, int] = (0, 0), half_px: int | None = None, extent: dict | None = None) -> dict:
+def _box(
+    scene: Scene,
+    twists,
+    center_px: tuple[int, int] = (0, 0),
+    half_px: int | None = None,
+    extent: dict | None = None,
+) -> dict:
     """Twists and translation box of a build, and its landscape bytes: sizes only, no rotation
     (the pose grid is made by :func:`_grid_of`, complete, once the budget is checked;
     ``extent``: the scene's :func:`_extent`, when a caller keeps it for many boxes)."""
@@ -157,17 +167,34 @@ def _box(scene: Scene, twists, center_px: tuple[int, int] = (0, 0), half_px: int
     cx, rx, x_lo, x_hi = _axis_box(e["full"][0], limit, int(center_px[0]), half_px)
     cy, ry, y_lo, y_hi = _axis_box(e["full"][1], limit, int(center_px[1]), half_px)
     shape = (n_twists, 2 * ry + 1, 2 * rx + 1)
-    return {"axis": axis, "t_first": t_first, "shape": shape, "cut": (t_cut, (y_lo, y_hi), (x_lo, x_hi)),
-            "first_px": (cx - rx, cy - ry), "origin": e["origin"], "crop": e["crop"],
-            "landscape_bytes": int(math.prod(shape) * np.dtype(scene.dtype).itemsize), "margin": e["margin"]}
+    return {
+        "axis": axis,
+        "t_first": t_first,
+        "shape": shape,
+        "cut": (t_cut, (y_lo, y_hi), (x_lo, x_hi)),
+        "first_px": (cx - rx, cy - ry),
+        "origin": e["origin"],
+        "crop": e["crop"],
+        "landscape_bytes": int(math.prod(shape) * np.dtype(scene.dtype).itemsize),
+        "margin": e["margin"],
+    }
 
 
 def _grid_of(scene: Scene, b: dict) -> PoseGrid:
     """The pose grid of a box (:func:`_box`), complete: its twist run, translations, cut sides
     and the chip's radius of gyration (the scene's, derived once per scene)."""
     axis, (x_first, y_first), n_twists = b["axis"], b["first_px"], b["shape"][0]
-    return PoseGrid(shape=b["shape"], um_per_px=scene.um_per_px, twist=axis, wrap=axis.periodic and n_twists == axis.count,
-                    cut=b["cut"], rg_px=scene.chip_rg_px, x_first_px=x_first, y_first_px=y_first, t_first=b["t_first"])
+    return PoseGrid(
+        shape=b["shape"],
+        um_per_px=scene.um_per_px,
+        twist=axis,
+        wrap=axis.periodic and n_twists == axis.count,
+        cut=b["cut"],
+        rg_px=scene.chip_rg_px,
+        x_first_px=x_first,
+        y_first_px=y_first,
+        t_first=b["t_first"],
+    )
 
 
 def _extent(scene: Scene, um_per_px: float | None = None) -> dict:
@@ -182,7 +209,9 @@ def _extent(scene: Scene, um_per_px: float | None = None) -> dict:
     native = um_per_px is None
     s = scene.um_per_px if native else um_per_px
     pat = scene.pattern
-    (h, w), (r0, r1, c0, c1) = (pat.shape, nonzero_box(pat.data > 0)) if native else resampled_extent(pat, s)
+    (h, w), (r0, r1, c0, c1) = (
+        (pat.shape, nonzero_box(pat.data > 0)) if native else resampled_extent(pat, s)
+    )
     # Cropped pattern, y-up; origin (physical 0, 0) in pixel-corner coordinates.
     origin = (w / 2 - c0, r1 - h / 2)
     reach = (max(w / 2 - c0, c1 - w / 2), max(h / 2 - r0, r1 - h / 2))
@@ -192,11 +221,21 @@ def _extent(scene: Scene, um_per_px: float | None = None) -> dict:
     chip_rx, chip_ry = chip_rx + margin, chip_ry + margin
     limit = None if scene.window_um is None else math.ceil(scene.window_um / s - 1e-9)
     full = (math.ceil(reach[0] + chip_rx - 1e-9), math.ceil(reach[1] + chip_ry - 1e-9))
-    return {"full": full, "limit": limit, "origin": origin, "crop": (r0, r1, c0, c1), "margin": margin}
+    return {
+        "full": full,
+        "limit": limit,
+        "origin": origin,
+        "crop": (r0, r1, c0, c1),
+        "margin": margin,
+    }
 
 
-def require_landscape_fits(scene: Scene, twists: np.ndarray | None = None, center_px: tuple[int, int] = (0, 0),
-                           half_px: int | None = None) -> None:
+def require_landscape_fits(
+    scene: Scene,
+    twists: np.ndarray | None = None,
+    center_px: tuple[int, int] = (0, 0),
+    half_px: int | None = None,
+) -> None:
     """Refuse (InputError) a landscape over the memory budget or with too many twists, cheaply
     (no rotation, no allocation): for commands to call before announcing a long run.
 
@@ -232,8 +271,13 @@ class Plan:
         return self.grid.twist_deg()
 
 
-def plan(scene: Scene, twists: np.ndarray | None = None, center_px: tuple[int, int] = (0, 0), half_px: int | None = None,
-         check_budget: bool = True) -> Plan:
+def plan(
+    scene: Scene,
+    twists: np.ndarray | None = None,
+    center_px: tuple[int, int] = (0, 0),
+    half_px: int | None = None,
+    check_budget: bool = True,
+) -> Plan:
     """Everything the build will do, computed without allocating the landscape.
 
     Refuses (InputError) a build over the scene's memory budget before any chip rotation
@@ -250,18 +294,34 @@ def _plan_of(scene: Scene, lay: dict) -> Plan:
     """The plan of a priced layout (:func:`_layout`): the chip's rotator made (with a
     meniscus, its footprint: the expensive part, after the pricing)."""
     grid, win, pat_up = lay["grid"], lay["window"], lay["pattern_up"]
-    rot = ChipRotator(scene.chip, grid.twist_deg(), lay["parity"], blur_px=lay["chip_blur"], margin_px=lay["rot_margin"],
-                      profile=scene.wall_profile)
+    rot = ChipRotator(
+        scene.chip,
+        grid.twist_deg(),
+        lay["parity"],
+        blur_px=lay["chip_blur"],
+        margin_px=lay["rot_margin"],
+        profile=scene.wall_profile,
+    )
     assert rot.shape == lay["canvas"], "the rotator's canvas is the one priced"
     m = lay["pad"]
     if m:  # room for the blurred footprint, so that the meniscus blur does not wrap around
         pat_up = np.pad(pat_up, m)
         win = Window(rx=win.rx, ry=win.ry, dx=win.dx + m, dy=win.dy + m)
     h_px = scene.meniscus_height_px
-    return Plan(grid, pat_up, rot, win, int(lay["landscape_bytes"]), h_px if not lay["chip_blur"] else 0.0, bool(lay["chip_blur"]))
+    return Plan(
+        grid,
+        pat_up,
+        rot,
+        win,
+        int(lay["landscape_bytes"]),
+        h_px if not lay["chip_blur"] else 0.0,
+        bool(lay["chip_blur"]),
+    )
 
 
-def _layout(scene: Scene, twists, center_px: tuple[int, int], half_px: int | None, check_budget: bool) -> dict:
+def _layout(
+    scene: Scene, twists, center_px: tuple[int, int], half_px: int | None, check_budget: bool
+) -> dict:
     """The plan's sizes (grid, window, cropped pattern, the rotator's canvas), priced against
     the budget (see :func:`plan`): nothing rotated, rasterized or transformed."""
     b = _box(scene, twists, center_px, half_px)
@@ -293,8 +353,17 @@ def _layout(scene: Scene, twists, center_px: tuple[int, int], half_px: int | Non
     pat_up = pat_up[ya:yb, xa:xb]
     win = Window(rx=win.rx, ry=win.ry, dx=win.dx - xa, dy=win.dy - ya)
     m = b["margin"] if 0 < h_px < CHIP_BLUR_MIN_PX else 0
-    out = {"grid": grid, "window": win, "pattern_up": pat_up, "parity": parity, "chip_blur": chip_blur, "rot_margin": rot_margin,
-           "canvas": (hc, wc), "pad": m, "landscape_bytes": b["landscape_bytes"]}
+    out = {
+        "grid": grid,
+        "window": win,
+        "pattern_up": pat_up,
+        "parity": parity,
+        "chip_blur": chip_blur,
+        "rot_margin": rot_margin,
+        "canvas": (hc, wc),
+        "pad": m,
+        "landscape_bytes": b["landscape_bytes"],
+    }
     # The footprint (made once per chip, kept) and the rotations onto the canvas.
     make, kept = smooth_bytes(scene.chip, chip_blur, rot_margin, scene.wall_profile, parity)
     rotating = hc * wc * (SMOOTH_ROTATE_BYTES_PER_PX if kept else RASTER_BYTES_PER_PX)
@@ -304,8 +373,15 @@ def _layout(scene: Scene, twists, center_px: tuple[int, int], half_px: int | Non
     if check_budget:
         need = _build_bytes(scene, out, 1)
         if need > scene.memory_budget_mb * 2**20:
-            _refuse_over_budget(scene, need, n_twists, ny, nx, ", with the transforms' work space"
-                                + (" and the chip's meniscus footprint" if kept else ""))
+            _refuse_over_budget(
+                scene,
+                need,
+                n_twists,
+                ny,
+                nx,
+                ", with the transforms' work space"
+                + (" and the chip's meniscus footprint" if kept else ""),
+            )
     return out
 
 
@@ -327,8 +403,12 @@ def _build_bytes(scene: Scene, lay: dict, chunk: int) -> int:
     per_chunk = chunk * (2 if mirror_twins(scene.twist_axis.mirror, twists_deg) else 1)
     hc, wc = lay["canvas"]
     rasters = 2 * chunk * hc * wc * 8
-    return int(lay["landscape_bytes"] + work_bytes(fft, 2 * win.ry + 1, scene.dtype, per_chunk, -(-n_twists // chunk))
-               + rasters + lay["rotator_bytes"])
+    return int(
+        lay["landscape_bytes"]
+        + work_bytes(fft, 2 * win.ry + 1, scene.dtype, per_chunk, -(-n_twists // chunk))
+        + rasters
+        + lay["rotator_bytes"]
+    )
 
 
 def build_landscape(
@@ -370,8 +450,10 @@ def build_landscape(
     if not progress:
         n, ny, nx = lay["grid"].shape
         fy, fx = _fft_of(lay)
-        wait_line(f"{label}: {n} twist{'s' if n != 1 else ''} x {ny:,} x {nx:,} poses (transforms of {fy:,} x {fx:,} px)",
-                  n * fy * fx / FFT_PX_PER_S)
+        wait_line(
+            f"{label}: {n} twist{'s' if n != 1 else ''} x {ny:,} x {nx:,} poses (transforms of {fy:,} x {fx:,} px)",
+            n * fy * fx / FFT_PX_PER_S,
+        )
     p = _plan_of(scene, lay)
     win, rot = p.window, p.rotator
     twists_deg = p.twists
@@ -386,7 +468,11 @@ def build_landscape(
     # Pattern mirror-symmetric too (about y = 0) and the window centred on y = 0:
     # E(x, y, -alpha) = E(x, -y, +alpha), the twin's plane upside down, no transform.
     pat = scene.pattern.data
-    copy = exact and p.grid.y_first_px + win.ry == 0 and bool(np.abs(pat - pat[::-1]).max() <= SAME_CHIP_TOL)
+    copy = (
+        exact
+        and p.grid.y_first_px + win.ry == 0
+        and bool(np.abs(pat - pat[::-1]).max() <= SAME_CHIP_TOL)
+    )
     work = cor.workspace(chunk, mirror=bool(twins) and not copy)
     rotations = 0
 
@@ -401,9 +487,19 @@ def build_landscape(
         return direct if np.abs(direct - img[::-1]).max() > SAME_CHIP_TOL else None
 
     with progress_bar(progress, len(twists_deg), "landscape", "twist") as bar:
-        n_mirror, n_copied = correlate_planes(cor, rasters, len(twists_deg), energy, scale, work, chunk, twins=twins,
-                                              flip_rows=energy.shape[1] if copy else None,
-                                              verify=None if exact else verify, progress=bar.update)
+        n_mirror, n_copied = correlate_planes(
+            cor,
+            rasters,
+            len(twists_deg),
+            energy,
+            scale,
+            work,
+            chunk,
+            twins=twins,
+            flip_rows=energy.shape[1] if copy else None,
+            verify=None if exact else verify,
+            progress=bar.update,
+        )
     from simulator.landscape._landscape import Landscape
 
     return Landscape(

@@ -46,13 +46,19 @@ class Window:
     dy: int
 
 
-def fft_shape(pattern_shape: tuple[int, int], chip_shape: tuple[int, int], window: Window) -> tuple[int, int]:
+def fft_shape(
+    pattern_shape: tuple[int, int], chip_shape: tuple[int, int], window: Window
+) -> tuple[int, int]:
     """(ny, nx) of the transforms for a correlation window: sizes only, nothing allocated."""
     (hp, wp), (hc, wc) = pattern_shape, chip_shape
     # Alias-free: the partners m +- N of every wanted shift m lie outside the linear
     # support [-(hc - 1), hp - 1], and the window does not wrap onto itself.
-    need_y = max(hp, hc, 2 * window.ry + 1, hp - (window.dy - window.ry), window.dy + window.ry + hc)
-    need_x = max(wp, wc, 2 * window.rx + 1, wp - (window.dx - window.rx), window.dx + window.rx + wc)
+    need_y = max(
+        hp, hc, 2 * window.ry + 1, hp - (window.dy - window.ry), window.dy + window.ry + hc
+    )
+    need_x = max(
+        wp, wc, 2 * window.rx + 1, wp - (window.dx - window.rx), window.dx + window.rx + wc
+    )
     return sfft.next_fast_len(need_y, real=False), sfft.next_fast_len(need_x, real=True)
 
 
@@ -93,8 +99,15 @@ class Correlator:
     chips are not transformed. One multiply per twist remains.
     """
 
-    def __init__(self, pattern: np.ndarray, chip_shape: tuple[int, int], window: Window, dtype: str, backend: str = "auto",
-                 meniscus_px: float = 0.0):
+    def __init__(
+        self,
+        pattern: np.ndarray,
+        chip_shape: tuple[int, int],
+        window: Window,
+        dtype: str,
+        backend: str = "auto",
+        meniscus_px: float = 0.0,
+    ):
         if backend not in BACKENDS:
             raise InputError(f"backend must be one of {BACKENDS}, got {backend!r}")
         self.backend = _default_backend() if backend == "auto" else backend
@@ -110,7 +123,12 @@ class Correlator:
         # kernel = P * e^{+i w (hc - 1)} * e^{+i w m0} so that corr[m0 + j] = IFFT(kernel F(f))[j].
         ky = np.exp(2j * np.pi * np.fft.fftfreq(self.ny) * (hc - 1 + window.dy - window.ry))
         kx = np.exp(2j * np.pi * np.fft.rfftfreq(self.nx) * (wc - 1 + window.dx - window.rx))
-        spec = sfft.fft(sfft.rfft(np.asarray(pattern, self.dtype), n=self.nx, axis=1, workers=self.workers), n=self.ny, axis=0, workers=self.workers)
+        spec = sfft.fft(
+            sfft.rfft(np.asarray(pattern, self.dtype), n=self.nx, axis=1, workers=self.workers),
+            n=self.ny,
+            axis=0,
+            workers=self.workers,
+        )
         cdt = spec.dtype
         if meniscus_px > 0:  # the finite meniscus: the pattern blurred by K_h (simulator.physics)
             from simulator.physics import kernel_spectrum
@@ -121,7 +139,9 @@ class Correlator:
             self._jax_fn = self._make_jax()
 
     def bytes_per_twist(self) -> int:
-        return work_bytes((self.ny, self.nx), self.out_shape[0], self.dtype, 1, 1) - kernel_bytes((self.ny, self.nx), self.dtype, 1)
+        return work_bytes((self.ny, self.nx), self.out_shape[0], self.dtype, 1, 1) - kernel_bytes(
+            (self.ny, self.nx), self.dtype, 1
+        )
 
     def workspace(self, chunk: int, mirror: bool = False) -> Workspace:
         """Work arrays for calls of up to ``chunk`` chips (with mirror images if ``mirror``).
@@ -134,11 +154,19 @@ class Correlator:
         if not mirror:
             return Workspace(np.empty(shape, cdt), None, None)
         # The mirror images' kernel: kernel * exp(-2 pi i ky (hc - 1) / ny).
-        ramp = np.exp(-2j * np.pi * np.fft.fftfreq(self.ny) * (self.chip_shape[0] - 1)).astype(self.kernel.dtype)
+        ramp = np.exp(-2j * np.pi * np.fft.fftfreq(self.ny) * (self.chip_shape[0] - 1)).astype(
+            self.kernel.dtype
+        )
         return Workspace(np.empty(shape, cdt), np.empty(shape, cdt), self.kernel * ramp[:, None])
 
-    def __call__(self, chips: np.ndarray, out: np.ndarray | None = None, scale: float = 1.0, mirror_out: np.ndarray | None = None,
-                 work: Workspace | None = None) -> np.ndarray:
+    def __call__(
+        self,
+        chips: np.ndarray,
+        out: np.ndarray | None = None,
+        scale: float = 1.0,
+        mirror_out: np.ndarray | None = None,
+        work: Workspace | None = None,
+    ) -> np.ndarray:
         """(B, hc, wc) chips -> ``scale`` * correlation window (B, 2 ry + 1, 2 rx + 1), into ``out``.
 
         mirror_out: if given, (B, 2 ry + 1, 2 rx + 1) that receives the same for each
@@ -149,7 +177,11 @@ class Correlator:
         work: the :meth:`workspace` to compute in (default: one made for this call).
         """
         chips = np.asarray(chips, dtype=self.dtype)
-        if work is None or work.spec.shape[0] < len(chips) or (mirror_out is not None and work.mspec is None):
+        if (
+            work is None
+            or work.spec.shape[0] < len(chips)
+            or (mirror_out is not None and work.mspec is None)
+        ):
             work = self.workspace(len(chips), mirror_out is not None)
         if out is None:
             out = np.empty((len(chips),) + self.out_shape, self.dtype)
@@ -178,7 +210,9 @@ class Correlator:
             # The mirror image's flipped rows are f[hc - 1 - k]:
             # F'(ky) = exp(-2 pi i ky (hc - 1) / ny) F(-ky), the ramp folded into a kernel.
             mk, mspec = work.mkernel, work.mspec
-            assert mk is not None and mspec is not None  # a mirror workspace (made above if not given)
+            assert (
+                mk is not None and mspec is not None
+            )  # a mirror workspace (made above if not given)
             mspec = mspec[: len(chips)]
             np.multiply(spec[:, :1], mk[:1], out=mspec[:, :1])
             np.multiply(spec[:, :0:-1], mk[1:], out=mspec[:, 1:])  # rows ky -> -ky mod ny
@@ -279,15 +313,26 @@ def _run(idx: list[int], step: int) -> bool:
     return idx == list(range(idx[0], idx[0] + step * len(idx), step))
 
 
-def _correlate_into(cor: Correlator, stack: np.ndarray, energy: np.ndarray, idx: list[int], scale: float, mirror_idx: list[int] | None = None,
-                    work: Workspace | None = None) -> None:
+def _correlate_into(
+    cor: Correlator,
+    stack: np.ndarray,
+    energy: np.ndarray,
+    idx: list[int],
+    scale: float,
+    mirror_idx: list[int] | None = None,
+    work: Workspace | None = None,
+) -> None:
     """``cor(stack)`` into ``energy[idx]`` (and the chips' mirror images into
     ``energy[mirror_idx]``), straight into views of ``energy`` where the indices run
     consecutively (mirror indices descending), through a copy otherwise."""
     out = energy[idx[0] : idx[-1] + 1] if _run(idx, 1) else None
     mirror = None
     if mirror_idx is not None:
-        mirror = energy[mirror_idx[-1] : mirror_idx[0] + 1][::-1] if _run(mirror_idx, -1) else np.empty((len(idx),) + energy.shape[1:], energy.dtype)
+        mirror = (
+            energy[mirror_idx[-1] : mirror_idx[0] + 1][::-1]
+            if _run(mirror_idx, -1)
+            else np.empty((len(idx),) + energy.shape[1:], energy.dtype)
+        )
     res = cor(stack, out=out, scale=scale, mirror_out=mirror, work=work)
     if out is None:
         energy[idx] = res
@@ -295,9 +340,20 @@ def _correlate_into(cor: Correlator, stack: np.ndarray, energy: np.ndarray, idx:
         energy[mirror_idx] = mirror
 
 
-def correlate_planes(cor: Correlator, rasters, count: int, out: np.ndarray, scale: float, work: Workspace | None, chunk: int,
-                     twins: dict[int, int] | None = None, repeats: dict[int, int] | None = None, flip_rows: int | None = None,
-                     verify=None, progress=None) -> tuple[int, int]:
+def correlate_planes(
+    cor: Correlator,
+    rasters,
+    count: int,
+    out: np.ndarray,
+    scale: float,
+    work: Workspace | None,
+    chunk: int,
+    twins: dict[int, int] | None = None,
+    repeats: dict[int, int] | None = None,
+    flip_rows: int | None = None,
+    verify=None,
+    progress=None,
+) -> tuple[int, int]:
     """Planes ``out[0:count]`` of a stack of chips, saving every transform their symmetry
     allows: the one symmetry-saving path of :func:`simulator.landscape.build_landscape` and
     :func:`correlate_stack`.
@@ -354,7 +410,13 @@ def correlate_planes(cor: Correlator, rasters, count: int, out: np.ndarray, scal
     return n_mirror, n_copied
 
 
-def correlate_stack(pattern: np.ndarray, chips: np.ndarray, dtype: str = "float32", backend: str = "auto", chunk: int = 8) -> np.ndarray:
+def correlate_stack(
+    pattern: np.ndarray,
+    chips: np.ndarray,
+    dtype: str = "float32",
+    backend: str = "auto",
+    chunk: int = 8,
+) -> np.ndarray:
     """Full linear cross-correlation of ``pattern`` (H, W) with each of ``chips`` (T, h, w).
 
     ``out[t, m + h - 1, n + w - 1] = sum_{k,l} chips[t, k, l] * pattern[k + m, l + n]``,
@@ -384,7 +446,11 @@ def correlate_stack(pattern: np.ndarray, chips: np.ndarray, dtype: str = "float3
     pf = np.asarray(pattern, np.float64)
     pattern_mirror = bool(np.abs(pf - pf[::-1]).max() <= SAME_CHIP_TOL)
     # Every other chip repeats a first one, or its twin (the first upside down).
-    repeats = {i: (twin[j] if mirrored else j) for i, (j, mirrored) in enumerate(rel) if i != j and twin.get(j) != i}
+    repeats = {
+        i: (twin[j] if mirrored else j)
+        for i, (j, mirrored) in enumerate(rel)
+        if i != j and twin.get(j) != i
+    }
     out = np.empty((t, 2 * win.ry + 1, 2 * win.rx + 1), cor.dtype)
     work = cor.workspace(min(chunk, max(t, 1)), mirror=not pattern_mirror and bool(twin))
     H, W = hp + hc - 1, wp + wc - 1  # the full layout (a window of out)
@@ -392,5 +458,16 @@ def correlate_stack(pattern: np.ndarray, chips: np.ndarray, dtype: str = "float3
     def rasters(sel: list[int]) -> np.ndarray:
         return chips[sel[0] : sel[-1] + 1] if _run(sel, 1) else chips[sel]
 
-    correlate_planes(cor, rasters, t, out, 1.0, work, chunk, twins=twin, repeats=repeats, flip_rows=H if pattern_mirror else None)
+    correlate_planes(
+        cor,
+        rasters,
+        t,
+        out,
+        1.0,
+        work,
+        chunk,
+        twins=twin,
+        repeats=repeats,
+        flip_rows=H if pattern_mirror else None,
+    )
     return out[:, :H, :W]

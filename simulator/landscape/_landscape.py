@@ -44,7 +44,6 @@ from simulator.landscape._posegrid import PoseGrid
 UM2_TO_M2 = UM2
 
 
-
 def _frozen(a: np.ndarray) -> np.ndarray:
     a.setflags(write=False)
     return a
@@ -85,7 +84,9 @@ class Landscape:
 
     def __post_init__(self) -> None:
         if tuple(np.shape(self.energy)) != self.grid.shape:
-            raise ValueError(f"energy of shape {np.shape(self.energy)} on a pose grid of shape {self.grid.shape}")
+            raise ValueError(
+                f"energy of shape {np.shape(self.energy)} on a pose grid of shape {self.grid.shape}"
+            )
 
     # -- the pose grid's axes (read-only arrays, computed from the grid on each access)
     @property
@@ -211,7 +212,14 @@ class Landscape:
         cand = np.flatnonzero(e <= float(e.min()) + self.noise_floor_J)
         it, iy, ix = np.unravel_index(cand, e.shape)
         if cand.size > 1:
-            k = nominal_order(self.x_um[ix], self.y_um[iy], self.twist_deg[it], self.um_per_px, self.twist_step_deg, self.period_deg)[0]
+            k = nominal_order(
+                self.x_um[ix],
+                self.y_um[iy],
+                self.twist_deg[it],
+                self.um_per_px,
+                self.twist_step_deg,
+                self.period_deg,
+            )[0]
             it, iy, ix = it[k : k + 1], iy[k : k + 1], ix[k : k + 1]
         return int(it[0]), int(iy[0]), int(ix[0])
 
@@ -241,15 +249,25 @@ class Landscape:
         """The floor of :meth:`floor_extent` in physical units: ``x_um``, ``y_um`` and
         ``twist_deg`` as [first, last] pose."""
         (t0, t1), (y0, y1), (x0, x1) = self.floor_extent()
-        return {"x_um": [float(self.x_um[x0]), float(self.x_um[x1])], "y_um": [float(self.y_um[y0]), float(self.y_um[y1])],
-                "twist_deg": [float(self.twist_deg[t0]), float(self.twist_deg[t1])]}
+        return {
+            "x_um": [float(self.x_um[x0]), float(self.x_um[x1])],
+            "y_um": [float(self.y_um[y0]), float(self.y_um[y1])],
+            "twist_deg": [float(self.twist_deg[t0]), float(self.twist_deg[t1])],
+        }
 
     def global_minimum(self) -> tuple[float, float, float, float]:
         """(x_um, y_um, twist_deg, energy_J) of the global minimum on this grid (:meth:`minimum_index`)."""
         it, iy, ix = self.minimum_index()
-        return float(self.x_um[ix]), float(self.y_um[iy]), float(self.twist_deg[it]), float(self.energy[it, iy, ix])
+        return (
+            float(self.x_um[ix]),
+            float(self.y_um[iy]),
+            float(self.twist_deg[it]),
+            float(self.energy[it, iy, ix]),
+        )
 
-    def curve(self, axis: str, through: tuple[float, float, float], start: float, stop: float) -> dict:
+    def curve(
+        self, axis: str, through: tuple[float, float, float], start: float, stop: float
+    ) -> dict:
         """Energy, force and plateaus along one axis through a pose.
 
         Args:
@@ -268,7 +286,9 @@ class Landscape:
             raise InputError(f"curve axis must be x, y or twist, got {axis!r}")
         step = self.twist_step_deg if axis == "twist" else self.um_per_px
         if not (math.isfinite(start) and math.isfinite(stop) and stop > start):
-            raise InputError(f"curve range must be finite with --to > --from, got {start} .. {stop}")
+            raise InputError(
+                f"curve range must be finite with --to > --from, got {start} .. {stop}"
+            )
         samples = (stop - start) / step + 1
         if not samples <= MAX_CURVE_SAMPLES:
             raise InputError(
@@ -299,18 +319,25 @@ class Landscape:
 NOMINAL_BALL_PX, NOMINAL_PX_PER_STEP = 16, 8
 
 
-def nominal_distance(x_um, y_um, twist_deg, um_per_px: float, twist_step_deg: float, period_deg: float):
+def nominal_distance(
+    x_um, y_um, twist_deg, um_per_px: float, twist_step_deg: float, period_deg: float
+):
     """(r, twist steps) of poses from the nominal pose (0, 0, 0): r = max(|x|, |y|, 8 |twist|)
     with x, y in px and the twist in steps, taken modulo the chip's symmetry period."""
     p = float(period_deg)
     tw = np.asarray(twist_deg, float)
     ts = np.abs(np.mod(tw + p / 2, p) - p / 2) / twist_step_deg
-    xp, yp = np.abs(np.asarray(x_um, float)) / um_per_px, np.abs(np.asarray(y_um, float)) / um_per_px
+    xp, yp = (
+        np.abs(np.asarray(x_um, float)) / um_per_px,
+        np.abs(np.asarray(y_um, float)) / um_per_px,
+    )
     r = np.maximum(np.maximum(xp, yp), NOMINAL_PX_PER_STEP * ts)
     return np.round(r, 6), np.round(ts, 6)
 
 
-def nominal_order(x_um, y_um, twist_deg, um_per_px: float, twist_step_deg: float, period_deg: float) -> np.ndarray:
+def nominal_order(
+    x_um, y_um, twist_deg, um_per_px: float, twist_step_deg: float, period_deg: float
+) -> np.ndarray:
     """Indices that sort poses by their distance from the nominal pose (0, 0, 0): by r of
     :func:`nominal_distance`, then twist steps, then x^2 + y^2, then |twist|, twist, y, x."""
     x, y, t = (np.asarray(v, float) for v in (x_um, y_um, twist_deg))
@@ -344,11 +371,18 @@ def trilinear(e: np.ndarray, it, iy, ix, wrap: bool, cut=((False, False),) * 3) 
     nt, ny, nx = e.shape
     it, iy, ix = np.broadcast_arrays(*(np.asarray(a, float) for a in (it, iy, ix)))
     inside = (iy >= 0) & (iy <= ny - 1) & (ix >= 0) & (ix <= nx - 1)
-    unknown = (cut[1][0] & (iy < 0)) | (cut[1][1] & (iy > ny - 1)) | (cut[2][0] & (ix < 0)) | (cut[2][1] & (ix > nx - 1))
+    unknown = (
+        (cut[1][0] & (iy < 0))
+        | (cut[1][1] & (iy > ny - 1))
+        | (cut[2][0] & (ix < 0))
+        | (cut[2][1] & (ix > nx - 1))
+    )
     if not wrap and nt > 1:
         unknown |= (it < -WHOLE_TOL) | (it > nt - 1 + WHOLE_TOL)
     if np.any(unknown):
-        raise InputError("pose outside the landscape's pose grid; widen the window (window_um) or the twist range")
+        raise InputError(
+            "pose outside the landscape's pose grid; widen the window (window_um) or the twist range"
+        )
     x0 = np.clip(np.floor(ix), 0, max(nx - 2, 0)).astype(int)
     y0 = np.clip(np.floor(iy), 0, max(ny - 2, 0)).astype(int)
     fx, fy = np.clip(ix - x0, 0, 1), np.clip(iy - y0, 0, 1)
@@ -376,4 +410,15 @@ def trilinear(e: np.ndarray, it, iy, ix, wrap: bool, cut=((False, False),) * 3) 
     val = plane(t0) * (1 - ft) + plane(t1) * ft
     return np.where(inside, val, 0.0)
 
-__all__ = ["Landscape", "MAX_CURVE_SAMPLES", "NOMINAL_BALL_PX", "NOMINAL_PX_PER_STEP", "UM2_TO_M2", "nominal_distance", "nominal_order", "runs", "trilinear"]
+
+__all__ = [
+    "Landscape",
+    "MAX_CURVE_SAMPLES",
+    "NOMINAL_BALL_PX",
+    "NOMINAL_PX_PER_STEP",
+    "UM2_TO_M2",
+    "nominal_distance",
+    "nominal_order",
+    "runs",
+    "trilinear",
+]

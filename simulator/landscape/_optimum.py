@@ -90,7 +90,12 @@ def landscape_minimum(ls: Landscape) -> GlobalMinimum:
     return GlobalMinimum(*ls.global_minimum(), how="landscape")
 
 
-def global_minimum(scene: Scene, landscape: Landscape | None = None, evaluated: tuple | list = (), backend: str = "auto") -> GlobalMinimum:
+def global_minimum(
+    scene: Scene,
+    landscape: Landscape | None = None,
+    evaluated: tuple | list = (),
+    backend: str = "auto",
+) -> GlobalMinimum:
     """The global minimum of ``scene``'s energy over its whole pose grid.
 
     Args:
@@ -127,7 +132,9 @@ def require_minimum_fits(scene: Scene) -> None:
 
 def _full_search(scene: Scene) -> bool:
     """Whether the search builds the whole landscape (no bound covers the scene)."""
-    return _delta_gamma(scene) >= 0 or (getattr(scene.effects, "meniscus", False) and not _Bounds.covers_meniscus(scene))
+    return _delta_gamma(scene) >= 0 or (
+        getattr(scene.effects, "meniscus", False) and not _Bounds.covers_meniscus(scene)
+    )
 
 
 # ----------------------------------------------------------------------------- search
@@ -140,7 +147,12 @@ class _Piece:
         self.low = float(e.min())
         idx = np.flatnonzero(e <= self.low + floor)
         it, iy, ix = np.unravel_index(idx, e.shape)
-        self.x, self.y, self.t, self.e = ls.x_um[ix], ls.y_um[iy], ls.twist_deg[it], e.reshape(-1)[idx].astype(float)
+        self.x, self.y, self.t, self.e = (
+            ls.x_um[ix],
+            ls.y_um[iy],
+            ls.twist_deg[it],
+            e.reshape(-1)[idx].astype(float),
+        )
         s = ls.um_per_px
         self.rect = (ls.x_um[0] / s, ls.x_um[-1] / s, ls.y_um[0] / s, ls.y_um[-1] / s)
         self.twists = np.asarray(ls.twist_deg, float)
@@ -149,6 +161,7 @@ class _Piece:
 class _Search:
     def __init__(self, scene: Scene, backend: str):
         from simulator.landscape._build import energy_scale_J
+
         self.scene, self.backend = scene, backend
         ta = scene.twist_axis
         self.axis, self.wrap, self.period = ta.values(), ta.periodic, ta.period_deg
@@ -165,7 +178,9 @@ class _Search:
     # -- pieces
     def add(self, ls: Landscape, counted: bool = True) -> None:
         self.pieces.append(_Piece(ls, self.floor))
-        _debug(f"piece {ls.energy.shape} at x {ls.x_um[0]:g}..{ls.x_um[-1]:g}, twists {ls.twist_deg[0]:g}..{ls.twist_deg[-1]:g}: low {self.pieces[-1].low:.6g}{'' if counted else ' (given)'}")
+        _debug(
+            f"piece {ls.energy.shape} at x {ls.x_um[0]:g}..{ls.x_um[-1]:g}, twists {ls.twist_deg[0]:g}..{ls.twist_deg[-1]:g}: low {self.pieces[-1].low:.6g}{'' if counted else ' (given)'}"
+        )
         if counted:
             self.poses += int(ls.energy.size)
 
@@ -174,7 +189,13 @@ class _Search:
         from simulator.landscape._build import _box, build_landscape
         from simulator.landscape._posegrid import consecutive_runs
 
-        twist_idx = sorted({int(j) % len(self.axis) if self.wrap else int(j) for j in twist_idx if self.wrap or 0 <= j < len(self.axis)})
+        twist_idx = sorted(
+            {
+                int(j) % len(self.axis) if self.wrap else int(j)
+                for j in twist_idx
+                if self.wrap or 0 <= j < len(self.axis)
+            }
+        )
         if not twist_idx:
             return
         one = _box(self.scene, self.axis[twist_idx[:1]], center_px, half_px)["landscape_bytes"]
@@ -182,8 +203,16 @@ class _Search:
         for run in consecutive_runs(twist_idx):  # each landscape holds one run of the twist axis
             for i in range(0, len(run), chunk):
                 tw = self.axis[run[i : i + chunk]]
-                self.add(build_landscape(self.scene, twists=tw, center_px=center_px, half_px=half_px, backend=self.backend,
-                                         label=f"global minimum: {self.how} box"))
+                self.add(
+                    build_landscape(
+                        self.scene,
+                        twists=tw,
+                        center_px=center_px,
+                        half_px=half_px,
+                        backend=self.backend,
+                        label=f"global minimum: {self.how} box",
+                    )
+                )
 
     def low(self) -> float:
         return min(p.low for p in self.pieces)
@@ -222,7 +251,11 @@ class _Search:
         band = NOMINAL_BALL_PX // NOMINAL_PX_PER_STEP
         near = list(range(k0 - band, k0 + band + 1)) if n > 1 else [0]
         h = NOMINAL_BALL_PX
-        if not all(self.covered(j % n if self.wrap else j, -h, h, -h, h) for j in near if self.wrap or 0 <= j < n):
+        if not all(
+            self.covered(j % n if self.wrap else j, -h, h, -h, h)
+            for j in near
+            if self.wrap or 0 <= j < n
+        ):
             self.build(near, (0, 0), h)  # the nominal box
         bounds = _Bounds(scene)
         x, y, t, e = self.best()
@@ -230,7 +263,11 @@ class _Search:
         # An axis longer than one symmetry period holds poses equivalent to those near 0
         # outside the nominal box, which could win a tie: the bound alone does not settle it.
         one_period = self.wrap or n == 1 or self.axis[-1] - self.axis[0] < self.period - 1e-9
-        if one_period and r <= NOMINAL_BALL_PX and e <= bounds.scale * bounds.absolute_px() + self.floor:
+        if (
+            one_period
+            and r <= NOMINAL_BALL_PX
+            and e <= bounds.scale * bounds.absolute_px() + self.floor
+        ):
             return "absolute bound"
         return self._cells(bounds)
 
@@ -239,12 +276,18 @@ class _Search:
 
         n = len(self.axis)
         k = max(2, math.ceil(max(b.ny, b.nx) / CELLS_PER_AXIS))
-        regions = {j: None for j in range(n)}  # twist index -> translations (x0, x1, y0, y1) px left (None: all)
+        regions = {
+            j: None for j in range(n)
+        }  # twist index -> translations (x0, x1, y0, y1) px left (None: all)
         first = True
         self.how = "cell-bound"
         while regions:
-            with progress_bar(shows_wait(len(regions) * b.seconds_per_twist(k)), len(regions),
-                              f"global minimum: bound over {k} x {k} px cells", "twist") as bar:
+            with progress_bar(
+                shows_wait(len(regions) * b.seconds_per_twist(k)),
+                len(regions),
+                f"global minimum: bound over {k} x {k} px cells",
+                "twist",
+            ) as bar:
                 cand = {}
                 for j, reg in regions.items():
                     cand[j] = b.cells(j, k, reg)
@@ -261,7 +304,11 @@ class _Search:
             likely = left[j][2][i] / b.scale - k * b.perimeter_px() > self.low() / b.scale
             if first and likely:
                 x0, x1, y0, y1 = (int(v) for v in b.cell_px(left[j][0][i], left[j][1][i], k))
-                self.build(range(j - 2, j + 3) if n > 1 else [0], ((x0 + x1) // 2, (y0 + y1) // 2), (max(x1 - x0, y1 - y0) + 1) // 2 + 8)
+                self.build(
+                    range(j - 2, j + 3) if n > 1 else [0],
+                    ((x0 + x1) // 2, (y0 + y1) // 2),
+                    (max(x1 - x0, y1 - y0) + 1) // 2 + 8,
+                )
                 left = self._prune(left, k, b)
                 if not left:
                     break
@@ -272,7 +319,9 @@ class _Search:
                 regions[j] = (int(x0.min()), int(x1.max()), int(y0.min()), int(y1.max()))
             union = _union(regions.values())
             poses = len(regions) * (union[1] - union[0] + 1) * (union[3] - union[2] + 1)
-            _debug(f"level k={k}: {sum(len(v[0]) for v in left.values())} cells left at {len(left)} twists, {poses:,} poses to compute")
+            _debug(
+                f"level k={k}: {sum(len(v[0]) for v in left.values())} cells left at {len(left)} twists, {poses:,} poses to compute"
+            )
             if k <= 4 or poses <= EXACT_POSES:
                 self._exact(regions)
                 break
@@ -296,6 +345,7 @@ class _Search:
     def _exact(self, regions: dict) -> None:
         """Compute the cells left: one box over their union at the twists that have any, or,
         when that box would be more than twice their own, one box per twist."""
+
         def square(r):
             return (int(math.ceil(max(r[1] - r[0], r[3] - r[2]) / 2)) + 1) * 2 + 1
 
@@ -305,7 +355,11 @@ class _Search:
         else:
             groups = [([j], r) for j, r in sorted(regions.items())]
         for twists, (x0, x1, y0, y1) in groups:
-            self.build(twists, ((x0 + x1) // 2, (y0 + y1) // 2), int(math.ceil(max(x1 - x0, y1 - y0) / 2)) + 1)
+            self.build(
+                twists,
+                ((x0 + x1) // 2, (y0 + y1) // 2),
+                int(math.ceil(max(x1 - x0, y1 - y0) / 2)) + 1,
+            )
 
     def _full(self) -> str:
         self.how = "full-landscape"

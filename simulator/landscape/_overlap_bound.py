@@ -77,9 +77,12 @@ class _Bounds:
         from patterns.resources import require_fits
 
         hc, wc = canvas
-        require_fits(f"the global minimum's bound ({hc:,} x {wc:,} px chip canvas at {scene.um_per_px:g} um/px)",
-                     hc * wc * 8 * 3 + (hc * wc * SMOOTH_ROTATE_BYTES_PER_PX if footprint else 0),
-                     "use a coarser scale (--resolution)", scene.memory_budget_mb)
+        require_fits(
+            f"the global minimum's bound ({hc:,} x {wc:,} px chip canvas at {scene.um_per_px:g} um/px)",
+            hc * wc * 8 * 3 + (hc * wc * SMOOTH_ROTATE_BYTES_PER_PX if footprint else 0),
+            "use a coarser scale (--resolution)",
+            scene.memory_budget_mb,
+        )
 
     @staticmethod
     def covers_meniscus(scene: Scene) -> bool:
@@ -165,7 +168,9 @@ class _Bounds:
             hb, wb = -(-hc // k), -(-wc // k)
             # um -> block units (x right, y up, origin at the canvas corner) -> rasterize's frame
             a = 1.0 / (self.s * k)
-            g = affinity.affine_transform(g, [a, 0.0, 0.0, a, wc / 2 / k - wb / 2, hc / 2 / k - hb / 2]).buffer(1e-3, quad_segs=1)
+            g = affinity.affine_transform(
+                g, [a, 0.0, 0.0, a, wc / 2 / k - wb / 2, hc / 2 / k - hb / 2]
+            ).buffer(1e-3, quad_segs=1)
             # Coverage > 1e-6 block: the raster's row sums leave round-off (1e-17) right of
             # every edge, which "> 0" would count. A block the outline meets has at least the
             # grown rim, so only blocks it touches with less than 1e-6 of a block are missed:
@@ -182,7 +187,12 @@ class _Bounds:
 
     def cell_range(self, k: int) -> tuple[int, int, int, int]:
         """Cells (m0, m1, n0, n1) that hold the window's offsets."""
-        return ((self.dy - self.ry) // k, (self.dy + self.ry) // k, (self.dx - self.rx) // k, (self.dx + self.rx) // k)
+        return (
+            (self.dy - self.ry) // k,
+            (self.dy + self.ry) // k,
+            (self.dx - self.rx) // k,
+            (self.dx + self.rx) // k,
+        )
 
     def cell_px(self, m, n, k: int):
         """Translations (x0, x1, y0, y1) in px that cells (m, n) hold, within the window."""

@@ -102,7 +102,9 @@ class PathEnergy:
         # Prefix sums along rows, one column more (the row total), one zero row more (rows off the pattern).
         self.P = np.zeros((hp + 1, wp + 1), np.float64)
         np.cumsum(pat, axis=1, out=self.P[:hp, 1:])
-        self.T = self.P[:, wp].copy()  # row totals (what a step beyond the right end reads), contiguous
+        self.T = self.P[
+            :, wp
+        ].copy()  # row totals (what a step beyond the right end reads), contiguous
         self.hp, self.wp = hp, wp
         self.parity = (int((2 * self.origin[1]) % 2), int((2 * self.origin[0]) % 2))
         self.scale = scene.delta_gamma_N_m * scene.um_per_px**2 * UM2
@@ -110,7 +112,9 @@ class PathEnergy:
         h_px = scene.meniscus_height_px
         self.chip_blur = h_px if h_px >= CHIP_BLUR_MIN_PX else 0.0
         self._outlines: dict[int, _Outline] = {}
-        self._cache: dict[int, dict[int, list]] = {}  # twist index -> row y -> [first column, energies]
+        self._cache: dict[
+            int, dict[int, list]
+        ] = {}  # twist index -> row y -> [first column, energies]
         self.energy_scale = energy_scale_J(scene)
         self.rg_px = scene.chip_rg_px
         self.poses = 0  # poses computed
@@ -124,8 +128,14 @@ class PathEnergy:
         if o is not None:
             return o
         tw = float(self.axis.values_at(np.asarray([k]))[0])
-        rot = ChipRotator(self.scene.chip, np.asarray([tw]), self.parity, blur_px=self.chip_blur,
-                          margin_px=self.margin if self.chip_blur else 0, profile=self.scene.wall_profile)
+        rot = ChipRotator(
+            self.scene.chip,
+            np.asarray([tw]),
+            self.parity,
+            blur_px=self.chip_blur,
+            margin_px=self.margin if self.chip_blur else 0,
+            profile=self.scene.wall_profile,
+        )
         self.rotations += 1
         hc, wc = rot.shape
         oy, ox = self.origin[1] - hc / 2, self.origin[0] - wc / 2
@@ -141,7 +151,9 @@ class PathEnergy:
             # The FFT engine correlates the raster in the scene's dtype.
             img = np.asarray(rot(tw), self.dtype)
             rows, cols, vals = [], [], []
-            for a in range(0, hc, 256):  # row blocks: the difference never holds the whole raster twice
+            for a in range(
+                0, hc, 256
+            ):  # row blocks: the difference never holds the whole raster twice
                 blk = np.asarray(img[a : a + 256], np.float64)
                 d = np.diff(blk, axis=1, prepend=0.0, append=0.0)
                 r, c = np.nonzero(d)
@@ -151,7 +163,9 @@ class PathEnergy:
             del img
         r, c, v = (np.concatenate(a) for a in (rows, cols, vals))
         order = np.argsort(r, kind="stable")  # by row (_rows slices the rows on the pattern)
-        o = _Outline(r[order].astype(np.int64) + int(oy), c[order].astype(np.int64) + int(ox), v[order])
+        o = _Outline(
+            r[order].astype(np.int64) + int(oy), c[order].astype(np.int64) + int(ox), v[order]
+        )
         self._outlines[k] = o
         self.nnz_max = max(self.nnz_max, o.nnz)
         return o
@@ -174,7 +188,9 @@ class PathEnergy:
         columns are cut so that one gather (steps x columns) stays near 2 M values."""
         cols = max(16, 2_000_000 // max(o.nnz, 1))
         if n > cols:
-            return np.concatenate([self._rows(o, ys, x0 + i, min(cols, n - i)) for i in range(0, n, cols)], axis=1)
+            return np.concatenate(
+                [self._rows(o, ys, x0 + i, min(cols, n - i)) for i in range(0, n, cols)], axis=1
+            )
         out = np.zeros((len(ys), n))
         if len(ys) == 0 or n == 0:
             return out
@@ -229,7 +245,9 @@ class PathEnergy:
             if have is not None:
                 a, e = have
                 b = a + len(e) - 1
-                if x0 > b + ROW_GAP or x1 < a - ROW_GAP:  # far from the run kept: start the row afresh
+                if (
+                    x0 > b + ROW_GAP or x1 < a - ROW_GAP
+                ):  # far from the run kept: start the row afresh
                     del rows[y]
                     have = None
             if have is None:
@@ -245,7 +263,9 @@ class PathEnergy:
             t0 = time.perf_counter()
             o = self.outline(k)
             for (xa, n), ys in todo.items():
-                e = np.multiply(self._rows(o, np.asarray(ys, np.int64), xa, n), self.scale).astype(self.dtype)
+                e = np.multiply(self._rows(o, np.asarray(ys, np.int64), xa, n), self.scale).astype(
+                    self.dtype
+                )
                 self.poses += e.size
                 for y, v in zip(ys, e, strict=True):
                     have = rows.get(y)

@@ -55,11 +55,19 @@ def evenly_spaced_axis(twists, scene_axis: TwistAxis, what: str = "twists") -> T
     ascending. Its step is the scene's for a single twist (1 degree when twist is off)."""
     tw = np.asarray(twists, float)
     if tw.ndim != 1 or tw.size == 0 or not np.all(np.isfinite(tw)):
-        raise InputError(f"{what} must be a non-empty list of finite twists in degrees, got {twists!r}")
+        raise InputError(
+            f"{what} must be a non-empty list of finite twists in degrees, got {twists!r}"
+        )
     step = scene_axis.step_deg if tw.size == 1 else float(tw[-1] - tw[0]) / (tw.size - 1)
-    if tw.size > 1 and not (step > 0 and np.all(np.abs(np.diff(tw) - step) <= EVEN_SPACING_REL * step)):
-        raise InputError(f"{what} must be evenly spaced and ascending (one pose grid), got {tw[:4].tolist()}...")
-    return TwistAxis(float(tw[0]), step, 0, int(tw.size), False, scene_axis.period_deg, scene_axis.mirror)
+    if tw.size > 1 and not (
+        step > 0 and np.all(np.abs(np.diff(tw) - step) <= EVEN_SPACING_REL * step)
+    ):
+        raise InputError(
+            f"{what} must be evenly spaced and ascending (one pose grid), got {tw[:4].tolist()}..."
+        )
+    return TwistAxis(
+        float(tw[0]), step, 0, int(tw.size), False, scene_axis.period_deg, scene_axis.mirror
+    )
 
 
 #: Where the cut sides of a grid are: ((twist low, high), (y low, high), (x low, high)).
@@ -101,7 +109,9 @@ class PoseGrid:
     t_first: int = field(default=0, compare=False)
 
     def __post_init__(self) -> None:
-        if len(self.shape) != 3 or not all(isinstance(n, int | np.integer) and n >= 1 for n in self.shape):
+        if len(self.shape) != 3 or not all(
+            isinstance(n, int | np.integer) and n >= 1 for n in self.shape
+        ):
             raise ValueError(f"PoseGrid shape must be three whole numbers >= 1, got {self.shape!r}")
         object.__setattr__(self, "shape", tuple(int(n) for n in self.shape))
         if not (math.isfinite(self.um_per_px) and self.um_per_px > 0):
@@ -110,8 +120,12 @@ class PoseGrid:
             raise ValueError(f"PoseGrid rg_px must be finite and >= 0, got {self.rg_px!r}")
         if self.wrap and not (self.twist.periodic and self.shape[0] == self.twist.count):
             raise ValueError("a PoseGrid wraps only when it holds the whole periodic twist axis")
-        if not self.twist.periodic and not (0 <= self.t_first and self.t_first + self.shape[0] <= self.twist.count):
-            raise ValueError(f"twists {self.t_first}..{self.t_first + self.shape[0] - 1} lie outside the bounded axis of {self.twist.count}")
+        if not self.twist.periodic and not (
+            0 <= self.t_first and self.t_first + self.shape[0] <= self.twist.count
+        ):
+            raise ValueError(
+                f"twists {self.t_first}..{self.t_first + self.shape[0] - 1} lie outside the bounded axis of {self.twist.count}"
+            )
         object.__setattr__(self, "cut", tuple((bool(a), bool(b)) for a, b in self.cut))
 
     # -- axes
@@ -161,7 +175,11 @@ class PoseGrid:
         """Grid indices (..., 3) (it, iy, ix) -> physical poses (..., 3) (x_um, y_um, twist_deg)."""
         idx = np.asarray(idx, dtype=float)
         return np.stack(
-            [self.x0_um + idx[..., 2] * self.um_per_px, self.y0_um + idx[..., 1] * self.um_per_px, self.t0_deg + idx[..., 0] * self.twist_step_deg],
+            [
+                self.x0_um + idx[..., 2] * self.um_per_px,
+                self.y0_um + idx[..., 1] * self.um_per_px,
+                self.t0_deg + idx[..., 0] * self.twist_step_deg,
+            ],
             axis=-1,
         )
 
@@ -169,20 +187,50 @@ class PoseGrid:
         """Physical poses (..., 3) (x_um, y_um, twist_deg) -> fractional grid indices (..., 3)."""
         pose = np.asarray(pose, dtype=float)
         return np.stack(
-            [(pose[..., 2] - self.t0_deg) / self.twist_step_deg, (pose[..., 1] - self.y0_um) / self.um_per_px, (pose[..., 0] - self.x0_um) / self.um_per_px],
+            [
+                (pose[..., 2] - self.t0_deg) / self.twist_step_deg,
+                (pose[..., 1] - self.y0_um) / self.um_per_px,
+                (pose[..., 0] - self.x0_um) / self.um_per_px,
+            ],
             axis=-1,
         )
 
     @classmethod
-    def uniform(cls, shape, um_per_px: float = 1.0, twist_step_deg: float = 1.0, wrap: bool = False, cut: Cut = NO_CUT,
-                period_deg: float = 90.0, rg_px: float = 0.0, x_first_px: int = 0, y_first_px: int = 0,
-                t0_deg: float = 0.0) -> PoseGrid:
+    def uniform(
+        cls,
+        shape,
+        um_per_px: float = 1.0,
+        twist_step_deg: float = 1.0,
+        wrap: bool = False,
+        cut: Cut = NO_CUT,
+        period_deg: float = 90.0,
+        rg_px: float = 0.0,
+        x_first_px: int = 0,
+        y_first_px: int = 0,
+        t0_deg: float = 0.0,
+    ) -> PoseGrid:
         """A grid of ``shape`` on its own twist axis (for tests and hand-made landscapes):
         twists ``t0_deg + twist_step_deg * k``; ``wrap``: the axis is periodic (T steps)."""
         t = int(shape[0])
-        axis = TwistAxis(None if wrap else float(t0_deg), float(twist_step_deg), round(t0_deg / twist_step_deg) if wrap else 0,
-                         t, bool(wrap), float(period_deg), False)
-        return cls(tuple(shape), float(um_per_px), axis, bool(wrap), cut, float(rg_px), int(x_first_px), int(y_first_px))
+        axis = TwistAxis(
+            None if wrap else float(t0_deg),
+            float(twist_step_deg),
+            round(t0_deg / twist_step_deg) if wrap else 0,
+            t,
+            bool(wrap),
+            float(period_deg),
+            False,
+        )
+        return cls(
+            tuple(shape),
+            float(um_per_px),
+            axis,
+            bool(wrap),
+            cut,
+            float(rg_px),
+            int(x_first_px),
+            int(y_first_px),
+        )
 
 
 def twist_axis(scene: Scene) -> tuple[np.ndarray, bool, float]:
@@ -222,7 +270,9 @@ def twists_around(scene: Scene, twist_values, margin_steps: int = 1) -> np.ndarr
     return axis[lo : hi + 1]
 
 
-def _axis_box(full: int, limit: int | None, center: int, half: int | None) -> tuple[int, int, bool, bool]:
+def _axis_box(
+    full: int, limit: int | None, center: int, half: int | None
+) -> tuple[int, int, bool, bool]:
     """(centre, half-width, cut below, cut above) of a window on an axis of reach ``full``.
 
     ``limit`` caps the half-width about 0 (the scene's window); ``center``/``half`` ask

@@ -50,7 +50,11 @@ class _Local:
         block = np.asarray(ls.energy, np.float64)[np.ix_(ts, ys, xs)]
         self.origin = (it - (BLOCK_T if nt > 1 else 0), iy - BLOCK_XY, ix - BLOCK_XY)
         self.scale = float(np.abs(block).max()) or 1.0
-        self.coeffs = ndimage.spline_filter(block / self.scale, order=3, mode="nearest") if block.size > 1 else block / self.scale
+        self.coeffs = (
+            ndimage.spline_filter(block / self.scale, order=3, mode="nearest")
+            if block.size > 1
+            else block / self.scale
+        )
         self.nt = nt
         self.bounds = (
             (it - REACH_STEPS, it + REACH_STEPS) if nt > 1 else (it, it),
@@ -62,15 +66,30 @@ class _Local:
         from scipy import ndimage
 
         it, iy, ix = idx
-        c = np.array([[it - self.origin[0] if self.nt > 1 else 0.0], [iy - self.origin[1]], [ix - self.origin[2]]])
-        return float(ndimage.map_coordinates(self.coeffs, c, order=3, mode="nearest", prefilter=False)[0]) * self.scale
+        c = np.array(
+            [
+                [it - self.origin[0] if self.nt > 1 else 0.0],
+                [iy - self.origin[1]],
+                [ix - self.origin[2]],
+            ]
+        )
+        return (
+            float(
+                ndimage.map_coordinates(self.coeffs, c, order=3, mode="nearest", prefilter=False)[0]
+            )
+            * self.scale
+        )
 
     def pose(self, idx) -> tuple[float, float, float]:
         it, iy, ix = idx
         ls = self.ls
         x = float(ls.x_um[0] + ix * ls.um_per_px)
         y = float(ls.y_um[0] + iy * ls.um_per_px)
-        t = float(ls.twist_deg[0] + it * ls.twist_step_deg) if self.nt > 1 else float(ls.twist_deg[0])
+        t = (
+            float(ls.twist_deg[0] + it * ls.twist_step_deg)
+            if self.nt > 1
+            else float(ls.twist_deg[0])
+        )
         if ls.wrap and self.nt > 1:
             p = ls.period_deg
             t = (t - ls.twist_deg[0]) % p + ls.twist_deg[0]
@@ -115,11 +134,13 @@ def stiffness(ls, x_um: float, y_um: float, twist_deg: float) -> dict:
     dt = twist_deg - float(ls.twist_deg[it])
     if ls.wrap:
         dt = (dt + ls.period_deg / 2) % ls.period_deg - ls.period_deg / 2
-    c = np.array([
-        it + dt / ls.twist_step_deg if len(ls.twist_deg) > 1 else it,
-        iy + (y_um - float(ls.y_um[iy])) / ls.um_per_px,
-        ix + (x_um - float(ls.x_um[ix])) / ls.um_per_px,
-    ])
+    c = np.array(
+        [
+            it + dt / ls.twist_step_deg if len(ls.twist_deg) > 1 else it,
+            iy + (y_um - float(ls.y_um[iy])) / ls.um_per_px,
+            ix + (x_um - float(ls.x_um[ix])) / ls.um_per_px,
+        ]
+    )
     e0 = f(c)
 
     def second(axis: int) -> float:
@@ -127,7 +148,11 @@ def stiffness(ls, x_um: float, y_um: float, twist_deg: float) -> dict:
         d[axis] = 1.0
         return f(c + d) + f(c - d) - 2 * e0
 
-    out = {"x_N_per_m": second(2) / s_m**2, "y_N_per_m": second(1) / s_m**2, "twist_Nm_per_rad": None}
+    out = {
+        "x_N_per_m": second(2) / s_m**2,
+        "y_N_per_m": second(1) / s_m**2,
+        "twist_Nm_per_rad": None,
+    }
     if len(ls.twist_deg) > 1:
         out["twist_Nm_per_rad"] = second(0) / math.radians(ls.twist_step_deg) ** 2
     return out

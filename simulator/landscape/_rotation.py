@@ -55,7 +55,9 @@ def _chip_reach_px(chip: Mask, twist: bool, um_per_px: float | None = None) -> t
     if chip.geometry is not None:
         from shapely.geometry import Point
 
-        rad = chip.geometry.hausdorff_distance(Point(0, 0)) / (chip.um_per_px if um_per_px is None else um_per_px)
+        rad = chip.geometry.hausdorff_distance(Point(0, 0)) / (
+            chip.um_per_px if um_per_px is None else um_per_px
+        )
     else:
         rad = math.hypot(np.abs(xs).max(), np.abs(ys).max())
     return rad, rad
@@ -64,7 +66,12 @@ def _chip_reach_px(chip: Mask, twist: bool, um_per_px: float | None = None) -> t
 def _rotated_extent_px(chip: Mask, twists: np.ndarray) -> tuple[float, float]:
     """Half-extent (x, y) in px of the chip's wettable area over the given twists."""
     if chip.geometry is not None:  # exact: no pass over the raster
-        bounds = np.array([affinity.rotate(chip.geometry, float(t), origin=(0, 0)).bounds for t in twists]) / chip.um_per_px
+        bounds = (
+            np.array(
+                [affinity.rotate(chip.geometry, float(t), origin=(0, 0)).bounds for t in twists]
+            )
+            / chip.um_per_px
+        )
         return float(np.abs(bounds[:, [0, 2]]).max()), float(np.abs(bounds[:, [1, 3]]).max())
     h, w = chip.shape
     r0, r1, c0, c1 = nonzero_box(chip.data > 0)
@@ -76,7 +83,9 @@ def _rotated_extent_px(chip: Mask, twists: np.ndarray) -> tuple[float, float]:
     return float(np.abs(xr).max()), float(np.abs(yr).max())
 
 
-def canvas_shape(chip: Mask, twists: np.ndarray, parity: tuple[int, int], margin_px: int = 0) -> tuple[int, int]:
+def canvas_shape(
+    chip: Mask, twists: np.ndarray, parity: tuple[int, int], margin_px: int = 0
+) -> tuple[int, int]:
     """(H, W) of the rotator's canvas: just large enough for the chip (grown by ``margin_px``)
     at the given twists, with W % 2 and H % 2 the pattern's parity (a size, nothing rasterized)."""
     rx, ry = _rotated_extent_px(chip, twists)
@@ -92,14 +101,18 @@ def smooth_canvas(chip: Mask, margin_px: int, parity: tuple[int, int]) -> tuple[
     return side + parity[0] % 2, side + parity[1] % 2
 
 
-def smooth_cached(chip: Mask, blur_px: float, margin_px: int, profile, parity: tuple[int, int]) -> bool:
+def smooth_cached(
+    chip: Mask, blur_px: float, margin_px: int, profile, parity: tuple[int, int]
+) -> bool:
     """Whether the smooth chip of these settings is made already (:data:`_SMOOTH`)."""
     key = (id(chip), float(blur_px), int(margin_px), profile, parity[0] % 2, parity[1] % 2)
     cached = _SMOOTH.get("entry")
     return cached is not None and cached[0] == key and cached[1]() is chip
 
 
-def smooth_bytes(chip: Mask, blur_px: float, margin_px: int, profile, parity: tuple[int, int]) -> tuple[int, int]:
+def smooth_bytes(
+    chip: Mask, blur_px: float, margin_px: int, profile, parity: tuple[int, int]
+) -> tuple[int, int]:
     """(peak bytes while the smooth chip is made, 0 when it is made already; bytes kept)
     of a rotator with a meniscus footprint (both 0 without one): sizes only."""
     if not (blur_px > 0 or profile is not None):
@@ -107,7 +120,11 @@ def smooth_bytes(chip: Mask, blur_px: float, margin_px: int, profile, parity: tu
     ho, wo = smooth_canvas(chip, margin_px, parity)
     kind = "blur" if profile is None else "profile"
     kept = ho * wo * SMOOTH_KEPT_BYTES_PER_PX[kind]
-    make = 0 if smooth_cached(chip, blur_px, margin_px, profile, parity) else ho * wo * SMOOTH_BYTES_PER_PX[kind]
+    make = (
+        0
+        if smooth_cached(chip, blur_px, margin_px, profile, parity)
+        else ho * wo * SMOOTH_BYTES_PER_PX[kind]
+    )
     return int(make), int(kept)
 
 
@@ -123,8 +140,15 @@ class ChipRotator:
     crosses a pixel boundary.
     """
 
-    def __init__(self, chip: Mask, twists: np.ndarray, parity: tuple[int, int], blur_px: float = 0.0, margin_px: int = 0,
-                 profile=None):
+    def __init__(
+        self,
+        chip: Mask,
+        twists: np.ndarray,
+        parity: tuple[int, int],
+        blur_px: float = 0.0,
+        margin_px: int = 0,
+        profile=None,
+    ):
         self.chip = chip
         self.profile = profile
         self.blur_px = float(blur_px)
@@ -149,14 +173,24 @@ class ChipRotator:
     def _turn_shape(self) -> tuple[int, int]:
         """The canvas of a full turn (a chip image is resampled on it: see __init__)."""
         rad = max(_chip_reach_px(self.chip, True))
-        return tuple(max(2 * ceil_whole(rad) + 2 + p, n) for p, n in zip(self._parity, self.shape, strict=True))
+        return tuple(
+            max(2 * ceil_whole(rad) + 2 + p, n)
+            for p, n in zip(self._parity, self.shape, strict=True)
+        )
 
     def _smooth_chip(self) -> None:
         """The blurred chip (or the footprint of its free contact lines) and its spline
         coefficients: made once per chip and canvas, and kept for the next ChipRotator of the
         same chip (a trajectory builds one per box; the distance transform and the spline
         prefilter of a 4000 px chip take tens of seconds each)."""
-        key = (id(self.chip), self.blur_px, self.margin_px, self.profile, self.shape[0] % 2, self.shape[1] % 2)
+        key = (
+            id(self.chip),
+            self.blur_px,
+            self.margin_px,
+            self.profile,
+            self.shape[0] % 2,
+            self.shape[1] % 2,
+        )
         cached = _SMOOTH.get("entry")
         if cached is not None and cached[0] == key and cached[1]() is self.chip:
             self._blurred, self._half, self._sdf, self._coeffs = cached[2]
@@ -167,13 +201,19 @@ class ChipRotator:
         ho, wo = smooth_canvas(self.chip, self.margin_px, self.shape)
         w_um, h_um = (v * self.chip.um_per_px for v in self.chip.shape[::-1])
         how = "distance transform" if self.profile is not None else "K_h blur"
-        wait_line(f"meniscus footprint of the {w_um:,.4g} x {h_um:,.4g} um chip ({how} of {wo:,} x {ho:,} px)",
-                  ho * wo / SMOOTH_PX_PER_S)
+        wait_line(
+            f"meniscus footprint of the {w_um:,.4g} x {h_um:,.4g} um chip ({how} of {wo:,} x {ho:,} px)",
+            ho * wo / SMOOTH_PX_PER_S,
+        )
         self._blurred = self._blur()
         from scipy import ndimage
 
         self._coeffs = ndimage.spline_filter(self._blurred, order=SPLINE_ORDER, mode="constant")
-        _SMOOTH["entry"] = (key, weakref.ref(self.chip), (self._blurred, self._half, self._sdf, self._coeffs))
+        _SMOOTH["entry"] = (
+            key,
+            weakref.ref(self.chip),
+            (self._blurred, self._half, self._sdf, self._coeffs),
+        )
 
     def _blur(self) -> np.ndarray:
         """The unrotated chip blurred by K_h, or its free-contact-line footprint (a
@@ -193,7 +233,9 @@ class ChipRotator:
             h, w = c.shape
             img = np.zeros((ho, wo))
             r0, c0 = (ho - h) // 2, (wo - w) // 2
-            if (ho - h) % 2 or (wo - w) % 2 or r0 < 0 or c0 < 0:  # cannot centre: resample onto the canvas
+            if (
+                (ho - h) % 2 or (wo - w) % 2 or r0 < 0 or c0 < 0
+            ):  # cannot centre: resample onto the canvas
                 img = self._resample(0.0, (ho, wo), c.data)
             else:
                 img[r0 : r0 + h, c0 : c0 + w] = c.data
@@ -232,7 +274,11 @@ class ChipRotator:
                 return np.clip(self._spline_rotate(twist_deg), 0.0, 1.0)[::-1]
             return self._spline_rotate(twist_deg)[::-1]
         if c.geometry is not None:
-            g = c.geometry if twist_deg == 0 else affinity.rotate(c.geometry, twist_deg, origin=(0, 0))
+            g = (
+                c.geometry
+                if twist_deg == 0
+                else affinity.rotate(c.geometry, twist_deg, origin=(0, 0))
+            )
             img = rasterize(g, c.um_per_px, shape=self.shape)
         else:
             full = self._resample(twist_deg, self._turn_shape)
@@ -246,12 +292,17 @@ class ChipRotator:
         as steps in the energy at small twists)."""
         from scipy import ndimage
 
-        assert self._blurred is not None and self._coeffs is not None  # a smooth chip (_smooth_chip)
+        assert (
+            self._blurred is not None and self._coeffs is not None
+        )  # a smooth chip (_smooth_chip)
         ho, wo = self.shape
         h, w = self._blurred.shape
         if getattr(self, "_xy", None) is None:
             v, u = np.mgrid[0:ho, 0:wo].astype(float)
-            self._xy = (u - (wo / 2 - 0.5), -(v - (ho / 2 - 0.5)))  # physical, y up, about the centre
+            self._xy = (
+                u - (wo / 2 - 0.5),
+                -(v - (ho / 2 - 0.5)),
+            )  # physical, y up, about the centre
         a = math.radians(twist_deg)
         ca, sa = math.cos(a), math.sin(a)
         f = self.sample_px
@@ -268,17 +319,28 @@ class ChipRotator:
             # only in the band between (with 3 px for the splines' support and the nearest-pixel
             # lookup), exactly 1 and 0 elsewhere; the band is a few per cent of the canvas.
             assert self._sdf is not None  # made with the footprint (_blur)
-            s = self._sdf[np.clip(np.rint(rows), 0, h - 1).astype(np.intp), np.clip(np.rint(cols), 0, w - 1).astype(np.intp)]
+            s = self._sdf[
+                np.clip(np.rint(rows), 0, h - 1).astype(np.intp),
+                np.clip(np.rint(cols), 0, w - 1).astype(np.intp),
+            ]
             prof = self.profile
             lo, hi = min(prof.substrate_reach_px, 0.0) - 3.0, prof.pad_reach_px + 3.0
             band = (s >= lo) & (s <= hi)
             vals = (s < lo).astype(float)
-            vals[band] = ndimage.map_coordinates(self._coeffs, np.array([rows[band], cols[band]]), order=SPLINE_ORDER, mode="constant",
-                                                 cval=0.0, prefilter=False)
+            vals[band] = ndimage.map_coordinates(
+                self._coeffs,
+                np.array([rows[band], cols[band]]),
+                order=SPLINE_ORDER,
+                mode="constant",
+                cval=0.0,
+                prefilter=False,
+            )
             out[inside] = vals
             return out
         coords = np.array([rows, cols])
-        out[inside] = ndimage.map_coordinates(self._coeffs, coords, order=SPLINE_ORDER, mode="constant", cval=0.0, prefilter=False)
+        out[inside] = ndimage.map_coordinates(
+            self._coeffs, coords, order=SPLINE_ORDER, mode="constant", cval=0.0, prefilter=False
+        )
         return out
 
     def _coarse_rotate(self, ca: float, sa: float, f: int) -> np.ndarray:
@@ -296,17 +358,26 @@ class ChipRotator:
         # whole landscape, so boxes and the landscape agree to round-off.
         reach = max(math.hypot(*self._half), (ho - 1) / 2, (wo - 1) / 2)
         ky = kx = int(math.ceil(reach / f)) + 4
-        yk = -f * np.arange(-ky, ky + 1, dtype=float)[:, None]  # physical y of coarse rows (top row first)
+        yk = (
+            -f * np.arange(-ky, ky + 1, dtype=float)[:, None]
+        )  # physical y of coarse rows (top row first)
         xk = f * np.arange(-kx, kx + 1, dtype=float)[None, :]
         xi, yi = xk * ca + yk * sa, -xk * sa + yk * ca
         coords = np.array([-yi + (h / 2 - 0.5), xi + (w / 2 - 0.5)])
-        coarse = ndimage.map_coordinates(self._coeffs, coords, order=SPLINE_ORDER, mode="constant", cval=0.0, prefilter=False)
+        coarse = ndimage.map_coordinates(
+            self._coeffs, coords, order=SPLINE_ORDER, mode="constant", cval=0.0, prefilter=False
+        )
         c = ndimage.spline_filter(coarse, order=3, mode="mirror")
         out = _bspline_rows(c, (np.arange(ho) - (ho - 1) / 2) / f + ky)
         return _bspline_rows(out.T, (np.arange(wo) - (wo - 1) / 2) / f + kx).T
 
-    def _resample(self, twist_deg: float, shape: tuple[int, int] | None = None, data: np.ndarray | None = None,
-                  cubic: bool = False) -> np.ndarray:
+    def _resample(
+        self,
+        twist_deg: float,
+        shape: tuple[int, int] | None = None,
+        data: np.ndarray | None = None,
+        cubic: bool = False,
+    ) -> np.ndarray:
         import cv2
 
         data = self.chip.data if data is None else data
@@ -322,8 +393,12 @@ class ChipRotator:
         m[0, 2] = cxi - ca * cxo + sa * cyo
         m[1, 2] = cyi - sa * cxo - ca * cyo
         out = cv2.warpAffine(
-            data, m, (wo, ho), flags=(cv2.INTER_CUBIC if cubic else cv2.INTER_LINEAR) | cv2.WARP_INVERSE_MAP,
-            borderMode=cv2.BORDER_CONSTANT, borderValue=0.0
+            data,
+            m,
+            (wo, ho),
+            flags=(cv2.INTER_CUBIC if cubic else cv2.INTER_LINEAR) | cv2.WARP_INVERSE_MAP,
+            borderMode=cv2.BORDER_CONSTANT,
+            borderValue=0.0,
         )
         return out if cubic else np.clip(out, 0.0, 1.0)
 
@@ -367,4 +442,8 @@ def mirror_twins(mirror: bool, twists_deg: np.ndarray) -> dict[int, int]:
     if len(twists_deg) < 2 or not mirror:
         return {}
     pos = {round(float(t), 9): i for i, t in enumerate(twists_deg)}
-    return {i: pos[round(-float(t), 9)] for i, t in enumerate(twists_deg) if t > 0 and round(-float(t), 9) in pos}
+    return {
+        i: pos[round(-float(t), 9)]
+        for i, t in enumerate(twists_deg)
+        if t > 0 and round(-float(t), 9) in pos
+    }

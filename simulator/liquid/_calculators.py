@@ -35,16 +35,22 @@ def check_surface_tension_mN_m(value: float, where: str = "--surface-tension") -
     v = positive(where, value, "mN/m")
     lo, hi = SURFACE_TENSION_RANGE_MN_M
     if v < lo:
-        raise InputError(f"{where} {v:g} mN/m is below {lo:g} mN/m, lower than any liquid: it looks like N/m; "
-                         f"give {v * 1000:g} (mN/m; water is 72.8)")
+        raise InputError(
+            f"{where} {v:g} mN/m is below {lo:g} mN/m, lower than any liquid: it looks like N/m; "
+            f"give {v * 1000:g} (mN/m; water is 72.8)"
+        )
     if v > hi:
-        raise InputError(f"{where} {v:g} mN/m is above {hi:g} mN/m, more than any liquid (mercury is 485): it looks like "
-                         f"uN/m; give {v / 1000:g} (mN/m; water is 72.8)")
+        raise InputError(
+            f"{where} {v:g} mN/m is above {hi:g} mN/m, more than any liquid (mercury is 485): it looks like "
+            f"uN/m; give {v / 1000:g} (mN/m; water is 72.8)"
+        )
     return v
 
 
-def capillary_length_um(surface_tension_N_m: float = WATER_SURFACE_TENSION_N_M,
-                        density_kg_m3: float = WATER_DENSITY_KG_M3) -> float:
+def capillary_length_um(
+    surface_tension_N_m: float = WATER_SURFACE_TENSION_N_M,
+    density_kg_m3: float = WATER_DENSITY_KG_M3,
+) -> float:
     """``sqrt(gamma / (rho g))`` in um (water: 2.73 mm); below it gravity does not shape a drop."""
     g = positive("surface tension", surface_tension_N_m, "N/m")
     rho = positive("liquid density", density_kg_m3, "kg/m^3")
@@ -52,10 +58,15 @@ def capillary_length_um(surface_tension_N_m: float = WATER_SURFACE_TENSION_N_M,
 
 
 # --------------------------------------------------------------------- meniscus height
-def height_report(volume_nl: float, area_um2: float, sides_um: tuple[float, float] | None = None,
-                  surface_tension_N_m: float = WATER_SURFACE_TENSION_N_M,
-                  density_kg_m3: float = WATER_DENSITY_KG_M3, bias_um: float | None = None,
-                  height_um: float | None = None) -> dict:
+def height_report(
+    volume_nl: float,
+    area_um2: float,
+    sides_um: tuple[float, float] | None = None,
+    surface_tension_N_m: float = WATER_SURFACE_TENSION_N_M,
+    density_kg_m3: float = WATER_DENSITY_KG_M3,
+    bias_um: float | None = None,
+    height_um: float | None = None,
+) -> dict:
     """The flat-film meniscus height and whether the thin-film picture holds (units in the keys).
 
     ``height_um``: the height when it is known already (a scene's,
@@ -70,20 +81,36 @@ def height_report(volume_nl: float, area_um2: float, sides_um: tuple[float, floa
 
     h = meniscus_height_um(volume_nl, area_um2) if height_um is None else float(height_um)
     lc = capillary_length_um(surface_tension_N_m, density_kg_m3)
-    out: dict = {"volume_nl": float(volume_nl), "area_um2": float(area_um2), "meniscus_height_um": h,
-                 "capillary_length_um": lc, "h_over_capillary_length": h / lc}
+    out: dict = {
+        "volume_nl": float(volume_nl),
+        "area_um2": float(area_um2),
+        "meniscus_height_um": h,
+        "capillary_length_um": lc,
+        "h_over_capillary_length": h / lc,
+    }
     notes = []
     if h > THIN_FILM_FRACTION * lc:
-        notes.append(f"h = {h:.4g} um is more than {THIN_FILM_FRACTION:g} of the capillary length ({lc:.4g} um): gravity flattens the film")
+        notes.append(
+            f"h = {h:.4g} um is more than {THIN_FILM_FRACTION:g} of the capillary length ({lc:.4g} um): gravity flattens the film"
+        )
     if sides_um is not None:
         w, ht = sides_um
         side = min(w, ht)
-        out |= {"chip_width_um": w, "chip_height_um": ht, "smallest_side_um": side, "h_over_smallest_side": h / side}
+        out |= {
+            "chip_width_um": w,
+            "chip_height_um": ht,
+            "smallest_side_um": side,
+            "h_over_smallest_side": h / side,
+        }
         if h > side:
-            notes.append(f"h = {h:.4g} um is more than the chip's smallest side ({side:g} um): this is a drop, not a film under the chip")
+            notes.append(
+                f"h = {h:.4g} um is more than the chip's smallest side ({side:g} um): this is a drop, not a film under the chip"
+            )
         elif h > THIN_FILM_FRACTION * side:
-            notes.append(f"h = {h:.4g} um is {100 * h / side:.3g} % of the chip's smallest side ({side:g} um), more than "
-                         f"{100 * THIN_FILM_FRACTION:g} %: the overlap model is off within about h of every feature")
+            notes.append(
+                f"h = {h:.4g} um is {100 * h / side:.3g} % of the chip's smallest side ({side:g} um), more than "
+                f"{100 * THIN_FILM_FRACTION:g} %: the overlap model is off within about h of every feature"
+            )
         g = surface_tension_N_m
         out["parallelepiped"] = {
             "edge_length_um": ht,
@@ -91,7 +118,10 @@ def height_report(volume_nl: float, area_um2: float, sides_um: tuple[float, floa
             "force_limit_N": -2.0 * g * ht * UM,
         }
         if bias_um is not None:
-            out["parallelepiped"] |= {"bias_um": float(bias_um), "force_N": parallelepiped_force(bias_um, h, ht, g)}
+            out["parallelepiped"] |= {
+                "bias_um": float(bias_um),
+                "force_N": parallelepiped_force(bias_um, h, ht, g),
+            }
     out["thin_film_holds"] = not notes
     out["thin_film_notes"] = notes
     return out
@@ -105,8 +135,10 @@ def _edge_angle(name: str, value: float) -> float:
     """
     v = contact_angle_deg(name, value)
     if not v > 0:
-        raise InputError(f"{name} must be a solid wedge angle in (0, 180] degrees (90 = a vertical wall, 180 = no edge), "
-                         f"got {value!r}: a wedge of 0 degrees is no solid")
+        raise InputError(
+            f"{name} must be a solid wedge angle in (0, 180] degrees (90 = a vertical wall, 180 = no edge), "
+            f"got {value!r}: a wedge of 0 degrees is no solid"
+        )
     return v
 
 
@@ -129,7 +161,9 @@ def overflow_bias_um(h_um: float, theta_edge_deg: float, theta_adv_pad_deg: floa
     (the flat-face meniscus is already past the pinning window at zero bias).
     """
     h = positive("meniscus height", h_um, "um")
-    diff = _edge_angle("edge angle", theta_edge_deg) - contact_angle_deg("pad advancing angle", theta_adv_pad_deg)
+    diff = _edge_angle("edge angle", theta_edge_deg) - contact_angle_deg(
+        "pad advancing angle", theta_adv_pad_deg
+    )
     if diff <= 0:
         return math.inf
     if diff >= 90:
@@ -217,8 +251,13 @@ def _verdict(edge: float, adv: float, chip: float, h: float, bias: float | None)
     return {"conditions_holding": holding, "overflows": verdict}
 
 
-def overflow_report(pad_advancing_deg: float, chip_angle_deg: float | tuple[float, float], edge_angle_deg: float,
-                    h_um: float, bias_um: float | None = None) -> dict:
+def overflow_report(
+    pad_advancing_deg: float,
+    chip_angle_deg: float | tuple[float, float],
+    edge_angle_deg: float,
+    h_um: float,
+    bias_um: float | None = None,
+) -> dict:
     """The no-overflow conditions of docs/physics.md §9 and the verdict (units in the keys).
 
     ``overflows`` is True, False, or ``"depends on the bias"`` when only condition (3) can
@@ -234,7 +273,9 @@ def overflow_report(pad_advancing_deg: float, chip_angle_deg: float | tuple[floa
         raise InputError(f"--bias must be a finite number of um, got {bias_um!r}")
     xo = overflow_bias_um(h, edge, adv)
     out: dict = {
-        "pad_advancing_deg": adv, "edge_angle_deg": edge, "meniscus_height_um": h,
+        "pad_advancing_deg": adv,
+        "edge_angle_deg": edge,
+        "meniscus_height_um": h,
         "overflow_angle_deg": overflow_angle_deg(edge, adv),
         "overflow_bias_um": None if math.isinf(xo) else xo,
         "bias_um": None if bias_um is None else abs(float(bias_um)),
@@ -245,21 +286,30 @@ def overflow_report(pad_advancing_deg: float, chip_angle_deg: float | tuple[floa
         return out | {"chip_angle_deg": chip} | _verdict(edge, adv, chip, h, bias_um)
     lo, hi = (contact_angle_deg("--chip-angle", v) for v in chip_angle_deg)
     if hi < lo:
-        raise InputError(f"--chip-angle {lo:g}:{hi:g}: the range must go from the smaller angle to the larger")
+        raise InputError(
+            f"--chip-angle {lo:g}:{hi:g}: the range must go from the smaller angle to the larger"
+        )
     pieces = []
     if lo <= switch < hi:
         below = _verdict(edge, adv, switch, h, bias_um)  # at the switch itself condition 2 fails
         above = _verdict(edge, adv, hi, h, bias_um)
-        pieces = [{"chip_angle_from_deg": lo, "chip_angle_to_deg": switch} | below,
-                  {"chip_angle_from_deg": switch, "chip_angle_to_deg": hi, "from_excluded": True} | above]
+        pieces = [
+            {"chip_angle_from_deg": lo, "chip_angle_to_deg": switch} | below,
+            {"chip_angle_from_deg": switch, "chip_angle_to_deg": hi, "from_excluded": True} | above,
+        ]
     else:
-        pieces = [{"chip_angle_from_deg": lo, "chip_angle_to_deg": hi} | _verdict(edge, adv, lo, h, bias_um)]
+        pieces = [
+            {"chip_angle_from_deg": lo, "chip_angle_to_deg": hi}
+            | _verdict(edge, adv, lo, h, bias_um)
+        ]
     verdicts = {str(p["overflows"]) for p in pieces}
     out |= {
         "chip_angle_deg": {"from": lo, "to": hi},
         "condition_2_switch_chip_angle_deg": switch if lo <= switch < hi else None,
         "over_chip_angle_range": pieces,
-        "conditions_holding": sorted(set.intersection(*(set(p["conditions_holding"]) for p in pieces))),
+        "conditions_holding": sorted(
+            set.intersection(*(set(p["conditions_holding"]) for p in pieces))
+        ),
         "overflows": pieces[0]["overflows"] if len(verdicts) == 1 else DEPENDS_ON_CHIP_ANGLE,
     }
     return out

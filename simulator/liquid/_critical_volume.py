@@ -126,14 +126,25 @@ class FourPad:
     def __post_init__(self) -> None:
         L = positive("--size (pattern size L)", self.size_um, "um")
         g = positive("--gap", self.gap_um, "um")
-        if not MIN_SIZE_UM <= L <= MAX_SIZE_UM:  # volumes go as L^3: 1e300 overflows, 1e-300 underflows to 0 nl
-            raise InputError(f"--size {L:g} um is outside {MIN_SIZE_UM:g} to {MAX_SIZE_UM:g} um (1 nm to 1 m), where the "
-                             "volumes (L^3) stay numbers; give the pattern's outer side in um")
+        if (
+            not MIN_SIZE_UM <= L <= MAX_SIZE_UM
+        ):  # volumes go as L^3: 1e300 overflows, 1e-300 underflows to 0 nl
+            raise InputError(
+                f"--size {L:g} um is outside {MIN_SIZE_UM:g} to {MAX_SIZE_UM:g} um (1 nm to 1 m), where the "
+                "volumes (L^3) stay numbers; give the pattern's outer side in um"
+            )
         if g < MIN_SIZE_UM:  # a gap of 1e-200 um divides by zero in the gap's wetting
-            raise InputError(f"--gap {g:g} um is below {MIN_SIZE_UM:g} um (1 nm); give the width of the gap in um")
+            raise InputError(
+                f"--gap {g:g} um is below {MIN_SIZE_UM:g} um (1 nm); give the width of the gap in um"
+            )
         if g >= L:
-            raise InputError(f"--gap {g:g} um must be smaller than --size {L:g} um (the four pads are (L - g) / 2 wide)")
-        for flag, v in (("--pad-angle", self.pad_angle_deg), ("--substrate-angle", self.substrate_angle_deg)):
+            raise InputError(
+                f"--gap {g:g} um must be smaller than --size {L:g} um (the four pads are (L - g) / 2 wide)"
+            )
+        for flag, v in (
+            ("--pad-angle", self.pad_angle_deg),
+            ("--substrate-angle", self.substrate_angle_deg),
+        ):
             if not (isinstance(v, int | float) and 0 < v < 180):
                 raise InputError(f"{flag} must be a contact angle in (0, 180) degrees, got {v!r}")
         if self.pad_angle_deg >= self.substrate_angle_deg:
@@ -164,7 +175,11 @@ class FourPad:
     def energy_um2(self, volume_um3, s, kind: str):
         """Energy / gamma (um^2) of a drop of volume V on a centred square footprint of side s."""
         area = self.middle_pad_area(s) if kind == "middle" else self.one_pad_area(s)
-        return cap_area_um2(volume_um3, s * s) - self.cos_pad * area - self.cos_substrate * (s * s - area)
+        return (
+            cap_area_um2(volume_um3, s * s)
+            - self.cos_pad * area
+            - self.cos_substrate * (s * s - area)
+        )
 
     def footprint_bounds(self, kind: str) -> tuple[float, float]:
         """Smallest and largest footprint side (um) of each kind of drop."""
@@ -173,7 +188,9 @@ class FourPad:
         return 1e-4 * self.pad_um, self.pad_um + self.gap_um
 
 
-def minimise_footprint(pattern: FourPad, volumes_um3: np.ndarray, kind: str) -> tuple[np.ndarray, np.ndarray]:
+def minimise_footprint(
+    pattern: FourPad, volumes_um3: np.ndarray, kind: str
+) -> tuple[np.ndarray, np.ndarray]:
     """Lowest energy / gamma (um^2) and its footprint side (um) for each volume (um^3).
 
     A logarithmic grid of sides (pad edges, the gap and the pattern edge included
@@ -182,7 +199,11 @@ def minimise_footprint(pattern: FourPad, volumes_um3: np.ndarray, kind: str) -> 
     v = np.asarray(volumes_um3, dtype=np.float64)
     lo, hi = pattern.footprint_bounds(kind)
     kinks = [pattern.pad_um, pattern.pad_um + pattern.gap_um, pattern.size_um, pattern.gap_um]
-    grid = np.unique(np.concatenate([np.geomspace(lo, hi, FOOTPRINT_POINTS), [k for k in kinks if lo <= k <= hi]]))
+    grid = np.unique(
+        np.concatenate(
+            [np.geomspace(lo, hi, FOOTPRINT_POINTS), [k for k in kinks if lo <= k <= hi]]
+        )
+    )
     e = pattern.energy_um2(v[:, None], grid[None, :], kind)
     i = np.argmin(e, axis=1)
     a, b = grid[np.maximum(i - 1, 0)], grid[np.minimum(i + 1, grid.size - 1)]
@@ -202,7 +223,9 @@ def min_plus(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     n = a.size
     k = np.arange(n)
     j = np.arange(n)
-    total = a[None, :] + np.where(k[:, None] >= j[None, :], b[np.clip(k[:, None] - j[None, :], 0, n - 1)], np.inf)
+    total = a[None, :] + np.where(
+        k[:, None] >= j[None, :], b[np.clip(k[:, None] - j[None, :], 0, n - 1)], np.inf
+    )
     arg = np.argmin(total, axis=1)
     return total[k, arg], arg
 
@@ -230,9 +253,18 @@ def energies(pattern: FourPad, v_max_um3: float, points: int = GRID_POINTS) -> E
     four, j4 = min_plus(two, two)
     k = np.arange(v.size)
     first, second = j4, k - j4  # volumes (grid steps) of the two pairs
-    vols = np.stack([j2[first], first - j2[first], j2[second], second - j2[second]], axis=1) * (v[1] - v[0])
-    return Energies(v, np.concatenate([[np.inf], mid]), np.concatenate([[pattern.gap_um], mid_s]), one,
-                    np.concatenate([[0.0], one_s]), four, vols)
+    vols = np.stack([j2[first], first - j2[first], j2[second], second - j2[second]], axis=1) * (
+        v[1] - v[0]
+    )
+    return Energies(
+        v,
+        np.concatenate([[np.inf], mid]),
+        np.concatenate([[pattern.gap_um], mid_s]),
+        one,
+        np.concatenate([[0.0], one_s]),
+        four,
+        vols,
+    )
 
 
 def _crossing(en: Energies) -> float | None:
@@ -285,13 +317,15 @@ class CriticalVolume:
             if vol <= 0:
                 continue
             s = float(minimise_footprint(p, np.array([vol]), "one")[1][0])
-            out.append({
-                "volume_nl": float(vol / UM3_PER_NL),
-                "footprint_side_um": s,
-                "apparent_angle_deg": float(cap_angle_deg(vol, s * s)),
-                "spills_past_pad": bool(s > p.pad_um * (1 + EDGE_REL_TOL)),
-                "touches_neighbour": bool(s >= (p.pad_um + p.gap_um) * (1 - EDGE_REL_TOL)),
-            })
+            out.append(
+                {
+                    "volume_nl": float(vol / UM3_PER_NL),
+                    "footprint_side_um": s,
+                    "apparent_angle_deg": float(cap_angle_deg(vol, s * s)),
+                    "spills_past_pad": bool(s > p.pad_um * (1 + EDGE_REL_TOL)),
+                    "touches_neighbour": bool(s >= (p.pad_um + p.gap_um) * (1 - EDGE_REL_TOL)),
+                }
+            )
         return out
 
     def to_json(self, surface_tension_N_m: float, density_kg_m3: float) -> dict:
@@ -307,35 +341,53 @@ class CriticalVolume:
             "surface tension does not enter: the volume holds for any liquid with these contact angles",
             "against the source's method run in Surface Evolver (docs/physics.md §8) the critical volume agrees within 15 % "
             "for pad angles of 30-88 deg and gaps of 5-20 %"
-            + ("; outside that, treat it as rough (the centred drop can split into lobes on the pads' inner corners, "
-               "which square footprints cannot represent)" if p.pad_angle_deg < 30 or p.gap_um > 0.25 * p.size_um else ""),
+            + (
+                "; outside that, treat it as rough (the centred drop can split into lobes on the pads' inner corners, "
+                "which square footprints cannot represent)"
+                if p.pad_angle_deg < 30 or p.gap_um > 0.25 * p.size_um
+                else ""
+            ),
             "static (Young) angles: contact-angle hysteresis, which lets a pad hold a drop up to its advancing angle, is not included",
         ]
         return {
             "critical_volume_nl": self.critical_volume_nl,
             "dimensionless_volume_V_ND": self.dimensionless_volume,
             "pattern": {
-                "size_um": p.size_um, "gap_um": p.gap_um, "pad_um": p.pad_um, "relative_gap": p.gap_um / p.size_um,
-                "area_um2": p.size_um**2, "pad_angle_deg": p.pad_angle_deg, "substrate_angle_deg": p.substrate_angle_deg,
+                "size_um": p.size_um,
+                "gap_um": p.gap_um,
+                "pad_um": p.pad_um,
+                "relative_gap": p.gap_um / p.size_um,
+                "area_um2": p.size_um**2,
+                "pad_angle_deg": p.pad_angle_deg,
+                "substrate_angle_deg": p.substrate_angle_deg,
             },
             "middle_drop": self.middle_drop(),
             "split_below_critical_volume": self.split_drops(),
-            "energy_at_critical_volume_J": self._at(self.energies.middle) * surface_tension_N_m * 1e-12,
+            "energy_at_critical_volume_J": self._at(self.energies.middle)
+            * surface_tension_N_m
+            * 1e-12,
             "method": METHOD,
             "assumptions": list(ASSUMPTIONS),
             "validity": validity,
         }
 
 
-def critical_volume(size_um: float, gap_um: float, pad_angle_deg: float, substrate_angle_deg: float,
-                    points: int = GRID_POINTS) -> CriticalVolume:
+def critical_volume(
+    size_um: float,
+    gap_um: float,
+    pad_angle_deg: float,
+    substrate_angle_deg: float,
+    points: int = GRID_POINTS,
+) -> CriticalVolume:
     """The critical volume (nl) of a four-pad pattern: see the module docstring.
 
     A first pass on a coarse volume grid brackets the crossing (the range doubles until
     the whole-pattern drop wins at its end); a second pass of ``points`` volumes up to
     1.25 times that estimate gives the answer.
     """
-    pattern = FourPad(float(size_um), float(gap_um), float(pad_angle_deg), float(substrate_angle_deg))
+    pattern = FourPad(
+        float(size_um), float(gap_um), float(pad_angle_deg), float(substrate_angle_deg)
+    )
     v_max = 0.25 * pattern.size_um**3
     for _ in range(12):
         rough = _crossing(energies(pattern, v_max, 300))
@@ -343,8 +395,10 @@ def critical_volume(size_um: float, gap_um: float, pad_angle_deg: float, substra
             break
         v_max *= 2.0
     else:
-        raise InputError("no critical volume found: the drop prefers to split at every volume up to "
-                         f"{v_max / UM3_PER_NL:.3g} nl; check the contact angles")
+        raise InputError(
+            "no critical volume found: the drop prefers to split at every volume up to "
+            f"{v_max / UM3_PER_NL:.3g} nl; check the contact angles"
+        )
     v_max = 1.25 * rough
     for _ in range(6):
         en = energies(pattern, v_max, points)

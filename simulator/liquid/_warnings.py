@@ -51,7 +51,10 @@ def four_pad_geometry(mask) -> tuple[float, float] | None:
     if g <= 0:
         return None
     for rows, cols in boxes:  # each pad in one corner of the outer square
-        if not ((rows.start - r0 < tol or r1 - rows.stop < tol) and (cols.start - c0 < tol or c1 - cols.stop < tol)):
+        if not (
+            (rows.start - r0 < tol or r1 - rows.stop < tol)
+            and (cols.start - c0 < tol or c1 - cols.stop < tol)
+        ):
             return None
     return L, g
 
@@ -76,7 +79,13 @@ def check_scene_volume(scene) -> None:
     require_film(scene.liquid.volume_nl, w, ht, scene.chip.area_um2)
 
 
-def require_film(volume_nl: float, w_um: float, h_um: float, area_um2: float | None = None, what: str | None = None) -> float:
+def require_film(
+    volume_nl: float,
+    w_um: float,
+    h_um: float,
+    area_um2: float | None = None,
+    what: str | None = None,
+) -> float:
     """The film height ``h = V / A`` (um) of a typed volume under a ``w_um`` x ``h_um`` chip (wetted area
     ``area_um2``, default w x h), or InputError when it is thicker than the chip's smallest side."""
     v = volume_nl
@@ -96,13 +105,19 @@ def require_film(volume_nl: float, w_um: float, h_um: float, area_um2: float | N
 
 def volume_note(scene, method: str) -> str | None:
     """A note when ``method`` does not use the droplet volume (None when it does)."""
-    if getattr(scene.liquid, "height_um", None) is not None:  # the height is given: the volume sets nothing
-        return (f"--volume {scene.liquid.volume_nl:g} nl is not used by the {method} method: --meniscus-height gives the "
-                "liquid's height (the meniscus's and the dynamics' damping's); it is used here only for the liquid checks")
+    if (
+        getattr(scene.liquid, "height_um", None) is not None
+    ):  # the height is given: the volume sets nothing
+        return (
+            f"--volume {scene.liquid.volume_nl:g} nl is not used by the {method} method: --meniscus-height gives the "
+            "liquid's height (the meniscus's and the dynamics' damping's); it is used here only for the liquid checks"
+        )
     if method in ("overdamped", "inertial") or getattr(scene.effects, "meniscus", False):
         return None
-    return (f"--volume {scene.liquid.volume_nl:g} nl is not used by the {method} method (only overdamped and inertial "
-            "use it, and --meniscus for the height); it is used here only for the liquid checks")
+    return (
+        f"--volume {scene.liquid.volume_nl:g} nl is not used by the {method} method (only overdamped and inertial "
+        "use it, and --meniscus for the height); it is used here only for the liquid checks"
+    )
 
 
 def placement_biases(poses) -> np.ndarray:
@@ -111,7 +126,9 @@ def placement_biases(poses) -> np.ndarray:
     ``poses``: an (N, 3) array of poses, one pose, or a start grid (its x and y axes;
     the twists do not change the bias)."""
     if hasattr(poses, "x_um") and hasattr(poses, "y_um"):
-        return np.maximum.outer(np.abs(np.asarray(poses.y_um)), np.abs(np.asarray(poses.x_um))).ravel()
+        return np.maximum.outer(
+            np.abs(np.asarray(poses.y_um)), np.abs(np.asarray(poses.x_um))
+        ).ravel()
     p = np.atleast_2d(np.asarray(poses, dtype=np.float64))
     return np.max(np.abs(p[:, :2]), axis=1)
 
@@ -140,25 +157,45 @@ def scene_warnings(scene, biases_um=None, placed: str = "the start") -> list[str
             cv = None
             out.append(f"critical volume of this four-pad pattern not found ({err})")
         if cv is not None and v < cv.critical_volume_nl:
-            out.append(f"droplet {v:g} nl is below the critical volume {cv.critical_volume_nl:.3g} nl of this four-pad pattern "
-                       f"(L {fp[0]:g} um, gap {fp[1]:g} um, {m.pad_angle_deg:g}/{m.substrate_angle_deg:g} deg): it may split onto "
-                       "single pads or leave a pad dry (selfalign liquid critical-volume)")
+            out.append(
+                f"droplet {v:g} nl is below the critical volume {cv.critical_volume_nl:.3g} nl of this four-pad pattern "
+                f"(L {fp[0]:g} um, gap {fp[1]:g} um, {m.pad_angle_deg:g}/{m.substrate_angle_deg:g} deg): it may split onto "
+                "single pads or leave a pad dry (selfalign liquid critical-volume)"
+            )
     elif fp is None and (n := pad_count(scene.pattern)) > 1:
-        out.append(f"the pattern has {n} separate pads: one drop must touch them all; the critical volume is computed "
-                   "for 2 x 2 four-pad patterns only, so check this one another way")
+        out.append(
+            f"the pattern has {n} separate pads: one drop must touch them all; the critical volume is computed "
+            "for 2 x 2 four-pad patterns only, so check this one another way"
+        )
     w, ht = _footprint_um(scene.chip)
     # The scene's one height (the meniscus's and the damping's): V / A, or --meniscus-height when given.
-    rep = height_report(v, scene.chip.area_um2, (w, ht), m.surface_tension_N_m, scene.liquid.density_kg_m3,
-                        height_um=scene.liquid_height_um)
+    rep = height_report(
+        v,
+        scene.chip.area_um2,
+        (w, ht),
+        m.surface_tension_N_m,
+        scene.liquid.density_kg_m3,
+        height_um=scene.liquid_height_um,
+    )
     h = rep["meniscus_height_um"]
     if not rep["thin_film_holds"] and not getattr(scene.effects, "meniscus", False):
-        out.append("thick film: " + "; ".join(rep["thin_film_notes"]) + " (--meniscus models the finite height)")
+        out.append(
+            "thick film: "
+            + "; ".join(rep["thin_film_notes"])
+            + " (--meniscus models the finite height)"
+        )
     topo = getattr(scene, "topography", None)
     if topo is not None:
         adv = topo.pad_advancing_deg
         if adv is None:  # the hysteresis window's advancing angle, else the static pad angle
             adv = getattr(m, "pad_advancing_deg", None) or m.pad_angle_deg
-        c = overflow_conditions(topo.edge_angle_deg, adv, 0.0 if topo.chip_angle_deg is None else topo.chip_angle_deg, 0.0, h)
+        c = overflow_conditions(
+            topo.edge_angle_deg,
+            adv,
+            0.0 if topo.chip_angle_deg is None else topo.chip_angle_deg,
+            0.0,
+            h,
+        )
         safe = c.edge_confines or (topo.chip_angle_deg is not None and c.chip_dewets)
         if not safe:
             xo = c.overflow_bias_um
@@ -166,8 +203,14 @@ def scene_warnings(scene, biases_um=None, placed: str = "the start") -> list[str
             b = np.zeros(1) if b is None else np.atleast_1d(np.asarray(b, dtype=np.float64))
             over = float(np.mean(b >= xo))
             if over > 0:
-                unknown = "" if topo.chip_angle_deg is not None else " (chip angle not given: condition 2 not counted on)"
+                unknown = (
+                    ""
+                    if topo.chip_angle_deg is not None
+                    else " (chip angle not given: condition 2 not counted on)"
+                )
                 where = f"{placed} is" if b.size == 1 else f"{100 * over:.3g} % of {placed} are"
-                out.append(f"overflow: {where} placed at or beyond the overflow bias {xo:.3g} um of the protruding pad (edge "
-                           f"{topo.edge_angle_deg:g} deg, pad advancing {adv:g} deg, h {h:.3g} um; docs/physics.md §9){unknown}")
+                out.append(
+                    f"overflow: {where} placed at or beyond the overflow bias {xo:.3g} um of the protruding pad (edge "
+                    f"{topo.edge_angle_deg:g} deg, pad advancing {adv:g} deg, h {h:.3g} um; docs/physics.md §9){unknown}"
+                )
     return out

@@ -195,7 +195,9 @@ def _run(
     y0 = (zeros, zeros) if inertial else zeros
     if isinstance(solver, IMEX):
         if not inertial:
-            raise InputError("an IMEX solver (KenCarp) splits the inertial model; the overdamped one has no damping term to split")
+            raise InputError(
+                "an IMEX solver (KenCarp) splits the inertial model; the overdamped one has no damping term to split"
+            )
         term = diffrax.MultiTerm(diffrax.ODETerm(_vf_force), diffrax.ODETerm(_vf_damping))
     else:
         term = diffrax.ODETerm(_vf_inertial if inertial else _vf_overdamped)
@@ -205,7 +207,9 @@ def _run(
         if record
         else diffrax.SaveAt(t1=True, fn=save_fn)
     )
-    pid = diffrax.PIDController(rtol=rtol, atol=atol, norm=error_norm(co) if inertial else optx.rms_norm)
+    pid = diffrax.PIDController(
+        rtol=rtol, atol=atol, norm=error_norm(co) if inertial else optx.rms_norm
+    )
     sol = diffrax.diffeqsolve(
         term,
         diffrax.Tsit5() if solver is None else solver,

@@ -82,7 +82,10 @@ def _stop_flags(field: Field, grid: Grid, co: _Coeffs, q, grad, kinetic):
         # force and the kinetic energy left is below the pinning work over one grid step.
         pin = jnp.asarray(field.pin, q.dtype)
         work = jnp.min(jnp.where(active & (pin > 0), pin, jnp.inf))
-        converged = converged | (jnp.all(jnp.abs(grad) <= jnp.maximum(pin, f_stop)) & (kinetic <= jnp.maximum(work, ke_stop)))
+        converged = converged | (
+            jnp.all(jnp.abs(grad) <= jnp.maximum(pin, f_stop))
+            & (kinetic <= jnp.maximum(work, ke_stop))
+        )
     converged = converged | _near_rest(field, grid, q, grad, kinetic)
     edge = at_cut_edge(grid, q)
     if not grid.wrap and grid.shape[0] > 1:
@@ -124,7 +127,9 @@ def _hessian(field: Field, grid: Grid, q):
             dws.append(dw)
             d2s.append(d2)
             idx.append(b[k] + off)
-    e = _node_energy(field, grid, idx[0][:, None, None], idx[1][None, :, None], idx[2][None, None, :])
+    e = _node_energy(
+        field, grid, idx[0][:, None, None], idx[1][None, :, None], idx[2][None, None, :]
+    )
 
     def term(a, c):
         f = [ws[0], ws[1], ws[2]]

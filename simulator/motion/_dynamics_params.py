@@ -121,7 +121,14 @@ class DynamicsParams:
             else positive("polar moment", polar_moment_um4, "um^4")
         )
         return cls._film(
-            chip.mass_kg, chip.moment_of_inertia_kg_m2, area, j, liquid.meniscus_height_um(area), liquid, calibration, t_max_s
+            chip.mass_kg,
+            chip.moment_of_inertia_kg_m2,
+            area,
+            j,
+            liquid.meniscus_height_um(area),
+            liquid,
+            calibration,
+            t_max_s,
         )
 
     @classmethod

@@ -37,8 +37,11 @@ def enable_float64() -> None:
 PAD = 4
 
 
-@functools.partial(jax.tree_util.register_dataclass, data_fields=["padded", "floor", "best", "scale"],
-                   meta_fields=["pin", "align_tol"])
+@functools.partial(
+    jax.tree_util.register_dataclass,
+    data_fields=["padded", "floor", "best", "scale"],
+    meta_fields=["pin", "align_tol"],
+)
 @dataclass(frozen=True)
 class Field:
     """The landscape arrays a stepper reads, and the rules that end a run on them.
@@ -98,8 +101,14 @@ def pad_energy(energy: np.ndarray, wrap: bool, cut) -> np.ndarray:
     return np.pad(out, ((PAD, PAD), (0, 0), (0, 0)), constant_values=np.inf)
 
 
-def make_field(energy, grid: PoseGrid, floor, best, pin: tuple[float, float, float] = (0.0, 0.0, 0.0),
-               align_tol: tuple[float, float] = (1.0, 1.0)) -> Field:
+def make_field(
+    energy,
+    grid: PoseGrid,
+    floor,
+    best,
+    pin: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    align_tol: tuple[float, float] = (1.0, 1.0),
+) -> Field:
     """A :class:`Field` from a (T, Ny, Nx) energy array (J) on ``grid``."""
     enable_float64()
     energy = np.asarray(energy)
@@ -114,14 +123,21 @@ def make_field(energy, grid: PoseGrid, floor, best, pin: tuple[float, float, flo
     )
 
 
-def field_and_grid(ls: Landscape, rg_px: float | None = None, dtype=None, pin: tuple[float, float, float] = (0.0, 0.0, 0.0),
-                   align_tol: tuple[float, float] = (1.0, 1.0)) -> tuple[Field, PoseGrid]:
+def field_and_grid(
+    ls: Landscape,
+    rg_px: float | None = None,
+    dtype=None,
+    pin: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    align_tol: tuple[float, float] = (1.0, 1.0),
+) -> tuple[Field, PoseGrid]:
     """The stepper view of a landscape: its arrays and its pose grid. ``rg_px``: a radius of
     gyration in px other than the grid's own (a landscape's grid carries its scene's,
     :attr:`simulator.scene.Scene.chip_rg_px`); ``pin``: the pinning work per grid step (J,
     twist/y/x) of contact-angle hysteresis."""
     e = ls.energy if dtype is None else ls.energy.astype(dtype)
-    it, iy, ix = ls.minimum_index()  # the global minimum: ties decided by position (Landscape.minimum_index)
+    it, iy, ix = (
+        ls.minimum_index()
+    )  # the global minimum: ties decided by position (Landscape.minimum_index)
     grid = ls.grid if rg_px is None else replace(ls.grid, rg_px=float(rg_px))
     return make_field(e, grid, ls.noise_floor_J, [it, iy, ix], pin, align_tol), grid
 
@@ -135,7 +151,9 @@ def lookup(field: Field, grid: Grid, it, iy, ix):
     the same."""
     t, ny, nx = grid.shape
     itw = jnp.mod(it, t) if grid.wrap else jnp.clip(it, -PAD, t - 1 + PAD)
-    return field.padded[itw + PAD, jnp.clip(iy, -PAD, ny - 1 + PAD) + PAD, jnp.clip(ix, -PAD, nx - 1 + PAD) + PAD]
+    return field.padded[
+        itw + PAD, jnp.clip(iy, -PAD, ny - 1 + PAD) + PAD, jnp.clip(ix, -PAD, nx - 1 + PAD) + PAD
+    ]
 
 
 def _cube(field: Field, grid: Grid, b, side: int):
@@ -159,7 +177,9 @@ def _cube(field: Field, grid: Grid, b, side: int):
     span = range(-1, side - 1)
     rows = jnp.asarray([dt * st + dy * sy - 1 for dt in span for dy in span], itype)
     flat = field.padded.reshape(-1)
-    return jax.vmap(lambda r: jax.lax.dynamic_slice(flat, (base + r,), (side,)))(rows).reshape(side, side, side)
+    return jax.vmap(lambda r: jax.lax.dynamic_slice(flat, (base + r,), (side,)))(rows).reshape(
+        side, side, side
+    )
 
 
 def neighbourhood(field: Field, grid: Grid, idx):
@@ -206,7 +226,11 @@ def interpolate(field: Field, grid: Grid, q):
     q = jnp.asarray(q, field.dtype)
     base = jnp.floor(q)
     b = base.astype(jnp.int32)
-    return _trilinear(q - base, lambda c: lookup(field, grid, b[..., 0] + c[0], b[..., 1] + c[1], b[..., 2] + c[2]), field.dtype)
+    return _trilinear(
+        q - base,
+        lambda c: lookup(field, grid, b[..., 0] + c[0], b[..., 1] + c[1], b[..., 2] + c[2]),
+        field.dtype,
+    )
 
 
 def block(field: Field, grid: Grid, b):
@@ -244,7 +268,9 @@ def gradient(field: Field, grid: Grid, q):
         em = interp(tuple(step))
         fp, fm = jnp.isfinite(ep), jnp.isfinite(em)
         central = jnp.where(fp & fm, ep - em, 0.0) / 2
-        one_sided = jnp.where(fm, e0 - jnp.where(fm, em, 0.0), jnp.where(fp, jnp.where(fp, ep, 0.0) - e0, 0.0))
+        one_sided = jnp.where(
+            fm, e0 - jnp.where(fm, em, 0.0), jnp.where(fp, jnp.where(fp, ep, 0.0) - e0, 0.0)
+        )
         de = jnp.where(fp & fm, central, jnp.where(jnp.isfinite(e0), one_sided, 0.0))
         # the floor applies to the energy difference actually taken (two steps or one)
         span = jnp.where(fp & fm, 2.0, 1.0)

@@ -44,8 +44,10 @@ def _chip_px(scene: Scene) -> int:
     return int(round(w / scene.um_per_px) * round(h / scene.um_per_px))
 
 
-def choose_engine(scene: Scene, start, method: str, engine: str, band_steps: int, band_px: int) -> str:
-    """"fft" or "path" for a greedy or gradient run without a landscape (``engine``: as asked;
+def choose_engine(
+    scene: Scene, start, method: str, engine: str, band_steps: int, band_px: int
+) -> str:
+    """ "fft" or "path" for a greedy or gradient run without a landscape (``engine``: as asked;
     "auto": the path engine where it covers the scene, the run's outcome is classified the
     same, and the chip is large enough for it to be the faster, :data:`AUTO_MIN_CHIP_PX`)."""
     if engine not in ENGINES:
@@ -98,10 +100,24 @@ def path_boxes(scene: Scene, method: str, cost):
                 template = ls
                 planes.update({j: ls.energy[i] for i, j in enumerate(run)})
             g = template.grid
-            grid = PoseGrid((len(want),) + g.shape[1:], g.um_per_px, ta, ta.periodic and len(want) == n,
-                            (ta.cut_of(lo, len(want)), g.cut[1], g.cut[2]), g.rg_px, g.x_first_px, g.y_first_px, lo)
-            pose = yield Landscape(energy=np.stack([planes[j % n] for j in want]), grid=grid, delta_gamma=template.delta_gamma,
-                                   energy_scale_J=template.energy_scale_J, stats=template.stats)
+            grid = PoseGrid(
+                (len(want),) + g.shape[1:],
+                g.um_per_px,
+                ta,
+                ta.periodic and len(want) == n,
+                (ta.cut_of(lo, len(want)), g.cut[1], g.cut[2]),
+                g.rg_px,
+                g.x_first_px,
+                g.y_first_px,
+                lo,
+            )
+            pose = yield Landscape(
+                energy=np.stack([planes[j % n] for j in want]),
+                grid=grid,
+                delta_gamma=template.delta_gamma,
+                energy_scale_J=template.energy_scale_J,
+                stats=template.stats,
+            )
 
     return gen(), pe
 

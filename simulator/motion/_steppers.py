@@ -60,22 +60,54 @@ def _greedy(field, grid, params, start, max_steps: int, record: bool = True) -> 
     s = greedy(field, grid, jnp.round(jnp.asarray(start)).astype(jnp.int32), max_steps, record)
     dt = field.dtype
     nan = jnp.full(s.path_energy.shape, jnp.nan, dt)
-    return RunState(s.idx.astype(dt), s.energy, s.step, s.status, jnp.asarray(False), s.path.astype(dt), s.path_energy, nan, jnp.asarray(jnp.nan, dt))
+    return RunState(
+        s.idx.astype(dt),
+        s.energy,
+        s.step,
+        s.status,
+        jnp.asarray(False),
+        s.path.astype(dt),
+        s.path_energy,
+        nan,
+        jnp.asarray(jnp.nan, dt),
+    )
 
 
 def _gradient(field, grid, params, start, max_steps: int, record: bool = True) -> RunState:
     s = gradient_descent(field, grid, jnp.asarray(start), max_steps, record)
     dt = field.dtype
     nan = jnp.full(s.path_energy.shape, jnp.nan, dt)
-    return RunState(s.q, s.energy, s.step, s.status, s.flat, s.path, s.path_energy, nan, jnp.asarray(jnp.nan, dt))
+    return RunState(
+        s.q,
+        s.energy,
+        s.step,
+        s.status,
+        s.flat,
+        s.path,
+        s.path_energy,
+        nan,
+        jnp.asarray(jnp.nan, dt),
+    )
 
 
-def _dynamic(method: str, solver, field, grid, params, start, max_steps: int, record: bool = True) -> RunState:
+def _dynamic(
+    method: str, solver, field, grid, params, start, max_steps: int, record: bool = True
+) -> RunState:
     from simulator.motion._dynamics import inertial, overdamped
 
     fn = overdamped if method == "overdamped" else inertial
     s = fn(field, grid, params, jnp.asarray(start), max_steps, record, solver=solver)
-    return RunState(s.q, s.energy, s.step, s.status, jnp.asarray(False), s.path, s.path_energy, s.path_t, s.time_s)
+    return RunState(
+        s.q,
+        s.energy,
+        s.step,
+        s.status,
+        jnp.asarray(False),
+        s.path,
+        s.path_energy,
+        s.path_t,
+        s.time_s,
+    )
 
 
 def stepper(method: str, stiff: bool = False):
@@ -90,7 +122,9 @@ def stepper(method: str, stiff: bool = False):
     if method in DYNAMIC:
         from simulator.motion._dynamics_ode import stiff_solver
 
-        return functools.partial(_dynamic, method, stiff_solver() if stiff and method == "inertial" else None)
+        return functools.partial(
+            _dynamic, method, stiff_solver() if stiff and method == "inertial" else None
+        )
     raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
 
 
@@ -110,7 +144,9 @@ def dynamics_jitted(method: str, stiff: bool = False):
 
     fn = overdamped if method == "overdamped" else inertial
     solver = stiff_solver() if stiff and method == "inertial" else None
-    return jax.jit(functools.partial(fn, solver=solver), static_argnames=("grid", "max_steps", "record"))
+    return jax.jit(
+        functools.partial(fn, solver=solver), static_argnames=("grid", "max_steps", "record")
+    )
 
 
 def ran_out(step, status, max_steps: int):
@@ -126,5 +162,15 @@ def flat_at(field, grid, flat, q) -> jax.Array:
 def finish(field, grid, state: RunState, max_steps: int) -> tuple[jax.Array, jax.Array]:
     """(status, outcome index into OUTCOMES) of a run, on the landscape it ran on."""
     status = ran_out(state.step, state.status, max_steps)
-    timed_out = jnp.isfinite(state.time_s) & (state.step < max_steps)  # a dynamic run out of time, not steps
-    return status, classify(field, grid, state.q, state.energy, status, flat_at(field, grid, state.flat, state.q), timed_out)
+    timed_out = jnp.isfinite(state.time_s) & (
+        state.step < max_steps
+    )  # a dynamic run out of time, not steps
+    return status, classify(
+        field,
+        grid,
+        state.q,
+        state.energy,
+        status,
+        flat_at(field, grid, state.flat, state.q),
+        timed_out,
+    )

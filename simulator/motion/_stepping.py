@@ -64,7 +64,9 @@ GREEDY_MOVES = _move_order()
 #: :func:`neighbourhood`'s (3, 3, 3) block; "stay" is BLOCK_MOVES[13].
 BLOCK_MOVES = np.array(list(itertools.product((-1, 0, 1), repeat=3)), dtype=np.int32)
 #: TIE_RANK[k]: the place of BLOCK_MOVES[k] in the tie-break order (0 = stay).
-TIE_RANK = np.array([[tuple(m) for m in GREEDY_MOVES].index(tuple(b)) for b in BLOCK_MOVES], dtype=np.int32)
+TIE_RANK = np.array(
+    [[tuple(m) for m in GREEDY_MOVES].index(tuple(b)) for b in BLOCK_MOVES], dtype=np.int32
+)
 STAY = 13
 
 
@@ -92,7 +94,9 @@ def greedy(field: Field, grid: Grid, start, max_steps: int, record: bool = True)
     moves, rank = jnp.asarray(BLOCK_MOVES), jnp.asarray(TIE_RANK)
     pin_work = None
     if any(field.pin):
-        pin_work = jnp.asarray(np.abs(np.asarray(BLOCK_MOVES, float)) @ np.asarray(field.pin, float), field.dtype)
+        pin_work = jnp.asarray(
+            np.abs(np.asarray(BLOCK_MOVES, float)) @ np.asarray(field.pin, float), field.dtype
+        )
     start = clamp_start(grid, jnp.asarray(start, jnp.int32))
     n = max_steps + 1 if record else 1
     e0 = lookup(field, grid, *start)
@@ -114,7 +118,11 @@ def greedy(field: Field, grid: Grid, start, max_steps: int, record: bool = True)
         moved = r != 0
         new_idx = jnp.where(moved, s.idx + moves[choice], s.idx)
         step = s.step + moved.astype(jnp.int32)
-        status = jnp.where(at_edge, EDGE, jnp.where(~moved, CONVERGED, jnp.where(step >= max_steps, MAX_STEPS, RUNNING)))
+        status = jnp.where(
+            at_edge,
+            EDGE,
+            jnp.where(~moved, CONVERGED, jnp.where(step >= max_steps, MAX_STEPS, RUNNING)),
+        )
         new_idx = jnp.where(at_edge, s.idx, new_idx)
         step = jnp.where(at_edge, s.step, step)
         energy = jnp.where(at_edge, s.energy, e_true[choice])
@@ -125,7 +133,9 @@ def greedy(field: Field, grid: Grid, start, max_steps: int, record: bool = True)
             p, pe = s.path, s.path_energy
         return GreedyState(new_idx, energy, step, status.astype(jnp.int32), p, pe)
 
-    init = GreedyState(start, e0, jnp.int32(0), jnp.int32(MAX_STEPS if max_steps <= 0 else RUNNING), path, path_e)
+    init = GreedyState(
+        start, e0, jnp.int32(0), jnp.int32(MAX_STEPS if max_steps <= 0 else RUNNING), path, path_e
+    )
     return jax.lax.while_loop(cond, body, init)
 
 
@@ -154,7 +164,9 @@ class GradientState(NamedTuple):
     flat: jax.Array  # stopped because the force is exactly zero
 
 
-def gradient_descent(field: Field, grid: Grid, start, max_steps: int, record: bool = True, min_step_px: float = 1e-2) -> GradientState:
+def gradient_descent(
+    field: Field, grid: Grid, start, max_steps: int, record: bool = True, min_step_px: float = 1e-2
+) -> GradientState:
     """Steepest descent on the interpolated landscape with backtracking.
 
     Twist is measured as arc length at the chip's radius of gyration, so one metric
@@ -206,19 +218,35 @@ def gradient_descent(field: Field, grid: Grid, start, max_steps: int, record: bo
         q = jnp.where(accept, s.q + scale * d / metric, s.q)
         energy = jnp.where(accept, e_new, s.energy)
         step = s.step + accept.astype(jnp.int32)
-        status = jnp.where(edge, EDGE, jnp.where(~accept, CONVERGED, jnp.where(step >= max_steps, MAX_STEPS, RUNNING)))
+        status = jnp.where(
+            edge,
+            EDGE,
+            jnp.where(~accept, CONVERGED, jnp.where(step >= max_steps, MAX_STEPS, RUNNING)),
+        )
         if record:
             p, pe = s.path.at[step].set(q), s.path_energy.at[step].set(energy)
         else:
             p, pe = s.path, s.path_energy
-        return GradientState(q, energy, step, status.astype(jnp.int32), p, pe, flat & ~accept & ~edge & ~pinned)
+        return GradientState(
+            q, energy, step, status.astype(jnp.int32), p, pe, flat & ~accept & ~edge & ~pinned
+        )
 
-    init = GradientState(start, e0, jnp.int32(0), jnp.int32(MAX_STEPS if max_steps <= 0 else RUNNING), path, path_e, jnp.asarray(False))
+    init = GradientState(
+        start,
+        e0,
+        jnp.int32(0),
+        jnp.int32(MAX_STEPS if max_steps <= 0 else RUNNING),
+        path,
+        path_e,
+        jnp.asarray(False),
+    )
     return jax.lax.while_loop(lambda s: s.status == RUNNING, body, init)
 
 
 # ----------------------------------------------------------------- outcome
-def classify(field: Field, grid: Grid, q, energy, status, flat, timed_out: bool | jax.Array = False) -> jax.Array:
+def classify(
+    field: Field, grid: Grid, q, energy, status, flat, timed_out: bool | jax.Array = False
+) -> jax.Array:
     """Outcome index into :data:`OUTCOMES` for a final pose q (fractional indices).
 
     aligned: within ``field.align_tol`` (twist steps, px) of the global minimum, twist
@@ -236,7 +264,9 @@ def classify(field: Field, grid: Grid, q, energy, status, flat, timed_out: bool 
     period = grid.period_deg / grid.twist_step_deg
     dtw = q[0] - field.best[0]
     dtw = dtw - period * jnp.round(dtw / period)
-    near = (jnp.abs(dtw) <= field.align_tol[0] + 1e-6) & jnp.all(jnp.abs(q[1:] - field.best[1:]) <= field.align_tol[1] + 1e-6)
+    near = (jnp.abs(dtw) <= field.align_tol[0] + 1e-6) & jnp.all(
+        jnp.abs(q[1:] - field.best[1:]) <= field.align_tol[1] + 1e-6
+    )
     no_contact = jnp.abs(energy) <= field.floor
     ran_out = (status == MAX_STEPS) & ~(jnp.asarray(timed_out) & jnp.asarray(flat))
     if max(field.align_tol) > 1.0:  # static: a floor or a hysteresis window

@@ -121,7 +121,9 @@ def is_stiff(method: str, field, grid, params) -> bool:
     (:func:`simulator.motion.stiff_solver`) takes ~100 steps where an explicit one takes ~10^4."""
     if method != "inertial":
         return False
-    f_ref = float(reference_gradient(field, grid)) / (grid.um_per_px * 1e-6)  # N (J per px -> J per m)
+    f_ref = float(reference_gradient(field, grid)) / (
+        grid.um_per_px * 1e-6
+    )  # N (J per px -> J per m)
     tau_m = params.mass_kg / params.damping_N_s_m
     tau_c = params.damping_N_s_m * grid.um_per_px * 1e-6 / max(f_ref, tiny())
     return tau_m < 0.1 * tau_c
@@ -133,9 +135,18 @@ def price_run(scene: Scene, method: str, max_steps: int) -> None:
     if isinstance(max_steps, bool) or not isinstance(max_steps, int | np.integer) or max_steps < 1:
         raise InputError(f"max steps must be a whole number >= 1, got {max_steps!r}")
     if max_steps > MAX_STEPS_LIMIT:
-        raise InputError(f"max steps must be at most {MAX_STEPS_LIMIT:,} (the step counter is 32-bit), got {max_steps:,}")
-    per_step = PATH_BYTES_PER_STEP["dynamics" if method in ("overdamped", "inertial") else "stepping"]
-    require_fits(f"the path of up to {max_steps:,} steps", float(max_steps + 1) * per_step, "use a smaller --max-steps", scene.memory_budget_mb)
+        raise InputError(
+            f"max steps must be at most {MAX_STEPS_LIMIT:,} (the step counter is 32-bit), got {max_steps:,}"
+        )
+    per_step = PATH_BYTES_PER_STEP[
+        "dynamics" if method in ("overdamped", "inertial") else "stepping"
+    ]
+    require_fits(
+        f"the path of up to {max_steps:,} steps",
+        float(max_steps + 1) * per_step,
+        "use a smaller --max-steps",
+        scene.memory_budget_mb,
+    )
 
 
 def simulate(
@@ -192,11 +203,16 @@ def simulate(
         dynamics = DynamicsParams.from_scene(scene)
     t0 = time.perf_counter()
     ta = scene.twist_axis
-    axis, wrap, step = ((ta.values(), ta.periodic, ta.grid_step_deg) if landscape is None
-                        else (landscape.twist_deg, landscape.wrap, landscape.twist_step_deg))
+    axis, wrap, step = (
+        (ta.values(), ta.periodic, ta.grid_step_deg)
+        if landscape is None
+        else (landscape.twist_deg, landscape.wrap, landscape.twist_step_deg)
+    )
     n = len(axis)
     if not wrap and n > 1 and not (axis[0] - step / 2 <= start[2] <= axis[-1] + step / 2):
-        raise InputError(f"start twist {start[2]:g} deg is outside the twist range {axis[0]:g}..{axis[-1]:g} deg")
+        raise InputError(
+            f"start twist {start[2]:g} deg is outside the twist range {axis[0]:g}..{axis[-1]:g} deg"
+        )
     if n == 1 and abs(start[2] - axis[0]) > DEG_TOL:
         raise InputError(
             f"start twist {start[2]:g} deg: this scene has one twist ({axis[0]:g} deg, twist turned off), "
@@ -228,7 +244,9 @@ def simulate(
             if ls is None:  # moving the box would not move the chip: stop here
                 break
         pin = pin_per_index(scene, ls.um_per_px, ls.twist_step_deg)
-        field, grid = field_and_grid(ls, pin=pin, align_tol=align_tolerance(ls, pin, floats=scene.wall_profile is not None))
+        field, grid = field_and_grid(
+            ls, pin=pin, align_tol=align_tolerance(ls, pin, floats=scene.wall_profile is not None)
+        )
         run = jitted(method, is_stiff(method, field, grid, dynamics))
         state = run(field, grid, dynamics, jnp.asarray(grid.to_index(pose)), max_steps)
         pieces.append(_to_trajectory(method, state, grid))
@@ -241,7 +259,15 @@ def simulate(
     status = int(state.status)
     if traj.steps >= max_steps and (status != CONVERGED or traj.steps > max_steps):
         status = MAX_STEPS
-        traj = Trajectory(method, "", traj.path[: max_steps + 1], traj.energy_J[: max_steps + 1], max_steps, traj.time_s, None if traj.t_s is None else traj.t_s[: max_steps + 1])
+        traj = Trajectory(
+            method,
+            "",
+            traj.path[: max_steps + 1],
+            traj.energy_J[: max_steps + 1],
+            max_steps,
+            traj.time_s,
+            None if traj.t_s is None else traj.t_s[: max_steps + 1],
+        )
     # Outcome: flatness where the run ended; "aligned" against the scene's global minimum
     # (simulator.landscape: the same pose every command uses, found without the full landscape).
     q_end = grid.to_index(np.asarray(traj.final))
@@ -249,14 +275,26 @@ def simulate(
     if path_engine is not None:
         from simulator.motion._pathrun import nominal_box
 
-        boxes.built[:] = nominal_box(scene, path_engine)  # the global minimum's first look, pose by pose
-    opt = global_minimum(scene, landscape=landscape if landscape is not None else (ls if dynamic else None),
-                         evaluated=boxes.built, backend=backend)
+        boxes.built[:] = nominal_box(
+            scene, path_engine
+        )  # the global minimum's first look, pose by pose
+    opt = global_minimum(
+        scene,
+        landscape=landscape if landscape is not None else (ls if dynamic else None),
+        evaluated=boxes.built,
+        backend=backend,
+    )
     if path_engine is not None:
-        boxes.poses, boxes.planes, boxes.seconds = path_engine.poses, path_engine.rotations, path_engine.seconds
+        boxes.poses, boxes.planes, boxes.seconds = (
+            path_engine.poses,
+            path_engine.rotations,
+            path_engine.seconds,
+        )
     best = jnp.asarray(grid.to_index(np.asarray(opt.pose)), field.dtype)
     timed_out = dynamic and traj.steps < max_steps  # the simulated time ran out, not the steps
-    out = classify(field._replace(best=best), grid, q_end, float(traj.energy_J[-1]), status, flat, timed_out)
+    out = classify(
+        field._replace(best=best), grid, q_end, float(traj.energy_J[-1]), status, flat, timed_out
+    )
     full = full_landscape_poses(scene) if landscape is None else landscape.energy.size
     cost = {
         "engine": engine,
@@ -272,13 +310,28 @@ def simulate(
     }
     refined = None
     outcome = OUTCOMES[int(out)]
-    if scene.meniscus_height_um is not None and not any(pin) and method != "greedy" and outcome in ("aligned", "local_minimum"):
+    if (
+        scene.meniscus_height_um is not None
+        and not any(pin)
+        and method != "greedy"
+        and outcome in ("aligned", "local_minimum")
+    ):
         from simulator.landscape import refine_minimum
 
         r = refine_minimum(ls, *traj.final)
         refined = (r["x_um"], r["y_um"], r["twist_deg"])
-    return Trajectory(method, outcome, traj.path, traj.energy_J, traj.steps, traj.time_s, traj.t_s, cost,
-                      optimum=opt.pose, refined=refined)
+    return Trajectory(
+        method,
+        outcome,
+        traj.path,
+        traj.energy_J,
+        traj.steps,
+        traj.time_s,
+        traj.t_s,
+        cost,
+        optimum=opt.pose,
+        refined=refined,
+    )
 
 
 @dataclass
@@ -316,7 +369,10 @@ def _outside(t: Landscape, pose_px: np.ndarray) -> bool:
     x, y = pose_px * s
     (xlo, xhi), (ylo, yhi) = t.cut[2], t.cut[1]
     return bool(
-        (xlo and x <= t.x_um[0] + s) or (xhi and x >= t.x_um[-1] - s) or (ylo and y <= t.y_um[0] + s) or (yhi and y >= t.y_um[-1] - s)
+        (xlo and x <= t.x_um[0] + s)
+        or (xhi and x >= t.x_um[-1] - s)
+        or (ylo and y <= t.y_um[0] + s)
+        or (yhi and y >= t.y_um[-1] - s)
     )
 
 
@@ -325,8 +381,10 @@ def require_start_in_window(scene: Scene, start) -> None:
     ends there, so there is no landscape to step on (the run would grow its box forever)."""
     w = scene.window_um
     if w is not None and max(abs(start[0]), abs(start[1])) > w:
-        raise InputError(f"start pose ({start[0]:g}, {start[1]:g}) um lies outside the translation window of +-{w:g} um "
-                         f"(--window / window_um); widen the window to at least {max(abs(start[0]), abs(start[1])):g} um, or leave it out")
+        raise InputError(
+            f"start pose ({start[0]:g}, {start[1]:g}) um lies outside the translation window of +-{w:g} um "
+            f"(--window / window_um); widen the window to at least {max(abs(start[0]), abs(start[1])):g} um, or leave it out"
+        )
 
 
 def _extent(t: Landscape) -> tuple[float, float, float, float]:
@@ -368,8 +426,14 @@ def _box_landscapes(scene: Scene, band_steps: int, band_px: int, backend: str, c
         want = list(range(lo, hi + 1))
         (cx, cy), half = box
         for run in consecutive_runs({j % n for j in want} - set(planes)):
-            ls = build_landscape(scene, twists=ta.values_at(np.asarray(run)), center_px=(cx, cy), half_px=half, backend=backend,
-                                 label=f"landscape box {builds + 1}")
+            ls = build_landscape(
+                scene,
+                twists=ta.values_at(np.asarray(run)),
+                center_px=(cx, cy),
+                half_px=half,
+                backend=backend,
+                label=f"landscape box {builds + 1}",
+            )
             builds += 1
             cost.count(ls)
             cost.built.append(ls)
@@ -379,8 +443,17 @@ def _box_landscapes(scene: Scene, band_steps: int, band_px: int, backend: str, c
         if before is not None and _extent(template) == before:
             stuck = True
         g = template.grid
-        grid = PoseGrid((len(want),) + g.shape[1:], g.um_per_px, ta, ta.periodic and len(want) == n,
-                        (ta.cut_of(lo, len(want)), g.cut[1], g.cut[2]), g.rg_px, g.x_first_px, g.y_first_px, lo)
+        grid = PoseGrid(
+            (len(want),) + g.shape[1:],
+            g.um_per_px,
+            ta,
+            ta.periodic and len(want) == n,
+            (ta.cut_of(lo, len(want)), g.cut[1], g.cut[2]),
+            g.rg_px,
+            g.x_first_px,
+            g.y_first_px,
+            lo,
+        )
         pose = yield Landscape(
             energy=np.stack([planes[j % n] for j in want]),
             grid=grid,
@@ -403,7 +476,9 @@ def _twist_band(ta, twist_deg: float, band_steps: int) -> tuple[int, int]:
     return lo, hi
 
 
-def require_run_fits(scene: Scene, start, method: str, band_steps: int = BAND_STEPS, band_px: int = BAND_PX) -> None:
+def require_run_fits(
+    scene: Scene, start, method: str, band_steps: int = BAND_STEPS, band_px: int = BAND_PX
+) -> None:
     """Refuse (InputError), before anything is compiled, rotated or transformed, a run whose
     first landscape does not fit the memory budget: the first box and band of twists of a
     greedy or gradient run (:func:`simulate`), the whole landscape of the dynamics, each with
@@ -416,16 +491,22 @@ def require_run_fits(scene: Scene, start, method: str, band_steps: int = BAND_ST
         require_landscape_fits(scene)
         return
     ta = scene.twist_axis
-    (cx, cy), half = _fit_box(None, np.round(np.asarray(start[:2], float) / scene.um_per_px), band_px)
+    (cx, cy), half = _fit_box(
+        None, np.round(np.asarray(start[:2], float) / scene.um_per_px), band_px
+    )
     lo, hi = _twist_band(ta, float(start[2]), band_steps)
     runs = consecutive_runs({j % ta.count for j in range(lo, hi + 1)})
     if runs:  # else a start twist beyond the axis: refused by simulate with its own message
         longest = max(runs, key=len)
-        require_landscape_fits(scene, twists=ta.values_at(np.asarray(longest)), center_px=(cx, cy), half_px=half)
+        require_landscape_fits(
+            scene, twists=ta.values_at(np.asarray(longest)), center_px=(cx, cy), half_px=half
+        )
     require_minimum_fits(scene)
 
 
-def reference_landscape(scene: Scene, backend: str = "auto", reach_steps: int = 2, half_px: int = 16) -> Landscape:
+def reference_landscape(
+    scene: Scene, backend: str = "auto", reach_steps: int = 2, half_px: int = 16
+) -> Landscape:
     """A small box around the aligned pose (0, 0, 0) that locates the global minimum.
 
     Assumes the minimum lies within ``half_px`` px and ``reach_steps`` twist steps of
@@ -470,7 +551,9 @@ def _join(method: str, pieces: list[Trajectory]) -> Trajectory:
     if pieces[0].t_s is not None:
         offs, ts = 0.0, [pieces[0].t_s]
         for prev, p in zip(pieces, pieces[1:], strict=False):
-            assert prev.t_s is not None and p.t_s is not None  # every piece of a dynamic run is timed
+            assert (
+                prev.t_s is not None and p.t_s is not None
+            )  # every piece of a dynamic run is timed
             offs += prev.t_s[-1]
             ts.append(p.t_s[1:] + offs)
         t_s = np.concatenate(ts)

@@ -68,14 +68,20 @@ def parse_window(text: str, flag: str = "--hysteresis") -> tuple[float, float]:
     try:
         r, a = (float(p) for p in parts)
     except ValueError:
-        raise InputError(f"{flag} must be RECEDING:ADVANCING contact angles in degrees, e.g. 31:50, got {text!r}") from None
+        raise InputError(
+            f"{flag} must be RECEDING:ADVANCING contact angles in degrees, e.g. 31:50, got {text!r}"
+        ) from None
     return require_window(r, a, flag)
 
 
-def require_window(receding_deg: float, advancing_deg: float, flag: str = "--hysteresis") -> tuple[float, float]:
+def require_window(
+    receding_deg: float, advancing_deg: float, flag: str = "--hysteresis"
+) -> tuple[float, float]:
     for name, v in (("receding", receding_deg), ("advancing", advancing_deg)):
         if not (isinstance(v, int | float) and math.isfinite(v) and 0 <= v <= 180):
-            raise InputError(f"{flag}: the {name} angle must be a contact angle in [0, 180] degrees, got {v!r}")
+            raise InputError(
+                f"{flag}: the {name} angle must be a contact angle in [0, 180] degrees, got {v!r}"
+            )
     if receding_deg > advancing_deg:
         raise InputError(
             f"{flag}: the receding angle {receding_deg:g} deg is larger than the advancing angle {advancing_deg:g} deg; "
@@ -86,7 +92,9 @@ def require_window(receding_deg: float, advancing_deg: float, flag: str = "--hys
 
 def pinning_force_per_length(gamma_N_m: float, receding_deg: float, advancing_deg: float) -> float:
     """``gamma (cos theta_r - cos theta_a)`` in N/m."""
-    return gamma_N_m * (math.cos(math.radians(receding_deg)) - math.cos(math.radians(advancing_deg)))
+    return gamma_N_m * (
+        math.cos(math.radians(receding_deg)) - math.cos(math.radians(advancing_deg))
+    )
 
 
 def _outline_elements(chip: Mask, piece_um: float):
@@ -100,7 +108,9 @@ def _outline_elements(chip: Mask, piece_um: float):
 
         mids, normals, wx, wy, wt = [], [], [], [], []
         for poly in shapely.get_parts(chip.geometry):
-            poly = orient(poly, 1.0)  # exterior counter-clockwise, holes clockwise: outward normal (dy, -dx)
+            poly = orient(
+                poly, 1.0
+            )  # exterior counter-clockwise, holes clockwise: outward normal (dy, -dx)
             for ring in (poly.exterior, *poly.interiors):
                 c = np.asarray(ring.coords)
                 for p0, p1 in zip(c[:-1], c[1:], strict=True):
@@ -126,13 +136,22 @@ def _outline_elements(chip: Mask, piece_um: float):
         if not mids:
             z = np.zeros((0, 2))
             return z, z, np.zeros(0), np.zeros(0), np.zeros(0)
-        return (np.concatenate(mids), np.concatenate(normals), np.concatenate(wx), np.concatenate(wy),
-                np.concatenate(wt))
+        return (
+            np.concatenate(mids),
+            np.concatenate(normals),
+            np.concatenate(wx),
+            np.concatenate(wy),
+            np.concatenate(wt),
+        )
     s = chip.um_per_px
     a = np.asarray(chip.data, float)
     h, w = a.shape
-    gx = np.diff(a, axis=1, prepend=0.0, append=0.0)  # (h, w + 1): jumps across vertical pixel edges
-    gy = np.diff(a, axis=0, prepend=0.0, append=0.0)  # (h + 1, w): jumps down across horizontal ones
+    gx = np.diff(
+        a, axis=1, prepend=0.0, append=0.0
+    )  # (h, w + 1): jumps across vertical pixel edges
+    gy = np.diff(
+        a, axis=0, prepend=0.0, append=0.0
+    )  # (h + 1, w): jumps down across horizontal ones
     xe = (np.arange(w + 1) - w / 2) * s  # vertical edges' x
     yc = (h / 2 - np.arange(h) - 0.5) * s  # rows' centre y (y up)
     xc = (np.arange(w) + 0.5 - w / 2) * s
@@ -142,7 +161,12 @@ def _outline_elements(chip: Mask, piece_um: float):
     iy2, jx2 = np.nonzero(gy)
     vy = gy[iy2, jx2]  # > 0: the chip lies below (lower y), outward normal +y
     mids = np.concatenate([np.stack([xe[jx], yc[iy]], 1), np.stack([xc[jx2], ye[iy2]], 1)])
-    normals = np.concatenate([np.stack([-np.sign(vx), np.zeros_like(vx)], 1), np.stack([np.zeros_like(vy), np.sign(vy)], 1)])
+    normals = np.concatenate(
+        [
+            np.stack([-np.sign(vx), np.zeros_like(vx)], 1),
+            np.stack([np.zeros_like(vy), np.sign(vy)], 1),
+        ]
+    )
     wx = np.concatenate([np.abs(vx) * s, np.zeros_like(vy)])
     wy = np.concatenate([np.zeros_like(vx), np.abs(vy) * s])
     # (z x r) . n ds: a vertical edge (normal x) at (xe, yc) contributes |y| |jump| s; a horizontal one |x|.
@@ -160,7 +184,9 @@ def contact_line_integrals_um(chip: Mask) -> tuple[float, float, float]:
 def pinning_force_scale(scene) -> float:
     """``f_pin / 2`` in N/m: what one sliding line holds per unit length across the motion."""
     m = scene.materials
-    return pinning_force_per_length(m.surface_tension_N_m, m.pad_receding_deg, m.pad_advancing_deg) / 2
+    return (
+        pinning_force_per_length(m.surface_tension_N_m, m.pad_receding_deg, m.pad_advancing_deg) / 2
+    )
 
 
 def pinning(scene) -> tuple[float, float, float]:
@@ -240,7 +266,9 @@ def pin_per_index(scene, um_per_px: float, twist_step_deg: float) -> tuple[float
 ALIGN_MARGIN = 3.0
 
 
-def align_tolerance(ls, pin: tuple[float, float, float], floats: bool = False) -> tuple[float, float]:
+def align_tolerance(
+    ls, pin: tuple[float, float, float], floats: bool = False
+) -> tuple[float, float]:
     """(twist steps, px) within which a run that stopped counts as aligned: one step, or with
     hysteresis :data:`ALIGN_MARGIN` times the distance ``P_k / c_k`` at which the well's
     restoring force (curvature ``c_k`` per step^2 at the landscape's minimum) equals the
@@ -258,7 +286,10 @@ def align_tolerance(ls, pin: tuple[float, float, float], floats: bool = False) -
         (t0, t1), (y0, y1), (x0, x1) = ls.floor_extent()
         # The floor's last grid pose, and the cell beyond it, where a continuous run stops
         # on the interpolated edge of the floor.
-        tol = (max(1.0, float(max(it - t0, t1 - it)) + 1.0), max(1.0, float(max(iy - y0, y1 - iy, ix - x0, x1 - ix)) + 1.0))
+        tol = (
+            max(1.0, float(max(it - t0, t1 - it)) + 1.0),
+            max(1.0, float(max(iy - y0, y1 - iy, ix - x0, x1 - ix)) + 1.0),
+        )
     if not any(pin):
         return tol
     hyst = _hysteresis_tolerance(ls, pin)

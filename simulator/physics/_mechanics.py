@@ -140,8 +140,15 @@ class Liquid:
         set_(self, "pinned", bool(self.pinned))
         if self.height_um is not None:
             h = self.height_um
-            if isinstance(h, bool) or not isinstance(h, int | float | np.floating | np.integer) or not math.isfinite(h) or h <= 0:
-                raise InputError(f"meniscus height (--meniscus-height) must be a positive, finite number of um, got {h!r}")
+            if (
+                isinstance(h, bool)
+                or not isinstance(h, int | float | np.floating | np.integer)
+                or not math.isfinite(h)
+                or h <= 0
+            ):
+                raise InputError(
+                    f"meniscus height (--meniscus-height) must be a positive, finite number of um, got {h!r}"
+                )
             set_(self, "height_um", float(h))
         set_(
             self,
@@ -251,7 +258,9 @@ def couette_added_mass_kg(density_kg_m3: float, wetted_area_um2: float, h_um: fl
     return rho * a * UM2 * h * UM / 3.0
 
 
-def couette_added_inertia_kg_m2(density_kg_m3: float, polar_moment_um4: float, h_um: float) -> float:
+def couette_added_inertia_kg_m2(
+    density_kg_m3: float, polar_moment_um4: float, h_um: float
+) -> float:
     """The twist analogue of :func:`couette_added_mass_kg`: ``rho h J / 3`` in kg m^2."""
     rho = positive("liquid density", density_kg_m3, "kg/m^3")
     j = positive("polar moment", polar_moment_um4, "um^4")

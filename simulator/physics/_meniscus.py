@@ -162,7 +162,9 @@ class WallProfile:
 
     @classmethod
     def from_angles(cls, h_px: float, pad_deg: float, substrate_deg: float) -> WallProfile:
-        return cls(float(h_px), math.cos(math.radians(pad_deg)), math.cos(math.radians(substrate_deg)))
+        return cls(
+            float(h_px), math.cos(math.radians(pad_deg)), math.cos(math.radians(substrate_deg))
+        )
 
     def reach_px(self, cos_theta: float) -> float:
         """``h cot(theta)``: where a free line on a surface of this angle stands beyond the

@@ -124,10 +124,14 @@ class Materials:
         )
         set_(self, "pad_angle_deg", contact_angle_deg("pad contact angle", self.pad_angle_deg))
         set_(
-            self, "substrate_angle_deg", contact_angle_deg("substrate contact angle", self.substrate_angle_deg)
+            self,
+            "substrate_angle_deg",
+            contact_angle_deg("substrate contact angle", self.substrate_angle_deg),
         )
         if (self.pad_receding_deg is None) != (self.pad_advancing_deg is None):
-            raise InputError("give the pad's receding and advancing angles together (--hysteresis RECEDING:ADVANCING)")
+            raise InputError(
+                "give the pad's receding and advancing angles together (--hysteresis RECEDING:ADVANCING)"
+            )
         if self.pad_receding_deg is not None:
             from simulator.physics._hysteresis import require_window
 
@@ -178,7 +182,6 @@ class Materials:
             raise InputError(f"grey level must lie in [0, 1], got {v!r}")
         cs, cp = _cos_deg(self.substrate_angle_deg), _cos_deg(self.pad_angle_deg)
         return math.degrees(math.acos(min(1.0, max(-1.0, cs + v * (cp - cs)))))
-
 
 
 __all__ = ["Materials", "delta_gamma", "gamma_wet"]

@@ -77,7 +77,9 @@ def _place(xy: np.ndarray, pose) -> np.ndarray:
     """Chip-frame points (K, 2) um at pose (x_um, y_um, twist_deg): rotate CCW about (0, 0), then translate."""
     a = np.radians(pose[2])
     c, s = np.cos(a), np.sin(a)
-    return np.column_stack([xy[:, 0] * c - xy[:, 1] * s + pose[0], xy[:, 0] * s + xy[:, 1] * c + pose[1]])
+    return np.column_stack(
+        [xy[:, 0] * c - xy[:, 1] * s + pose[0], xy[:, 0] * s + xy[:, 1] * c + pose[1]]
+    )
 
 
 # ------------------------------------------------------------------ animation
@@ -87,7 +89,11 @@ def frame_indices(traj, max_frames: int = 120) -> np.ndarray:
     Stepping methods are sampled evenly in steps, dynamics evenly in time (so the
     animation runs at a constant multiple of physical time).
     """
-    if isinstance(max_frames, bool) or not isinstance(max_frames, int | np.integer) or max_frames < 2:
+    if (
+        isinstance(max_frames, bool)
+        or not isinstance(max_frames, int | np.integer)
+        or max_frames < 2
+    ):
         raise InputError(f"max_frames must be a whole number >= 2, got {max_frames!r}")
     n = len(traj.path)
     if n <= max_frames:
@@ -138,27 +144,61 @@ class TrajectoryAnimation:
         from matplotlib.path import Path
 
         fig, traj, path = self.fig, self.traj, self.path
-        gs = fig.add_gridspec(2, 2, width_ratios=(1.0, 1.05), height_ratios=(1.6, 1.0),
-                              left=0.085, right=0.975, bottom=0.15, top=0.86, wspace=0.22, hspace=0.12)
+        gs = fig.add_gridspec(
+            2,
+            2,
+            width_ratios=(1.0, 1.05),
+            height_ratios=(1.6, 1.0),
+            left=0.085,
+            right=0.975,
+            bottom=0.15,
+            top=0.86,
+            wspace=0.22,
+            hspace=0.12,
+        )
         ax = self.ax = fig.add_subplot(gs[:, 0])
         ax_e = self.ax_e = fig.add_subplot(gs[0, 1])
         ax_t = self.ax_t = fig.add_subplot(gs[1, 1], sharex=ax_e)
         pat = scene.pattern
         ax.set_facecolor(_substrate_rgb())
-        ax.imshow(pat.data, cmap=_pattern_cmap(), vmin=0, vmax=1, extent=pat.extent_um, origin="upper",
-                  interpolation="antialiased")
+        ax.imshow(
+            pat.data,
+            cmap=_pattern_cmap(),
+            vmin=0,
+            vmax=1,
+            extent=pat.extent_um,
+            origin="upper",
+            interpolation="antialiased",
+        )
         xlim, ylim = self._limits(pat)
         ax.set_xlim(*xlim)
         ax.set_ylim(*ylim)
         ax.set_aspect("equal")
         ax.plot([0], [0], "+", color="k", ms=9, mew=1.2, zorder=3)
-        ax.add_patch(PathPatch(Path(_place(self._verts, path[0]), self._codes), fill=False, ec=PATH_COLOUR,
-                               lw=1.0, ls=(0, (4, 3)), alpha=0.8, zorder=3))
+        ax.add_patch(
+            PathPatch(
+                Path(_place(self._verts, path[0]), self._codes),
+                fill=False,
+                ec=PATH_COLOUR,
+                lw=1.0,
+                ls=(0, (4, 3)),
+                alpha=0.8,
+                zorder=3,
+            )
+        )
         ax.set_xlabel("x (µm)")
         ax.set_ylabel("y (µm)")
         ax.set_title("red: chip now · dashed: at start · blue: path of its centre", fontsize=9)
-        self.chip = ax.add_patch(PathPatch(Path(_place(self._verts, path[0]), self._codes), fc=(0.91, 0.07, 0.18, 0.16),
-                                           ec=CHIP_COLOUR, lw=2.0, zorder=5, animated=True))
+        self.chip = ax.add_patch(
+            PathPatch(
+                Path(_place(self._verts, path[0]), self._codes),
+                fc=(0.91, 0.07, 0.18, 0.16),
+                ec=CHIP_COLOUR,
+                lw=2.0,
+                zorder=5,
+                animated=True,
+            )
+        )
         (self.trail,) = ax.plot([], [], "-", color=PATH_COLOUR, lw=1.6, zorder=4, animated=True)
         (self.centre,) = ax.plot([], [], "o", color=PATH_COLOUR, ms=5, zorder=6, animated=True)
 
@@ -182,7 +222,15 @@ class TrajectoryAnimation:
         ax_t.set_xlabel(xlabel)
         ax_e.set_title("energy E = Δγ · overlap area (lower = better aligned)", fontsize=9)
         self.title = fig.text(0.5, 0.955, "", ha="center", va="center", fontsize=12, animated=True)
-        fig.text(0.5, 0.025, _scene_caption(scene, traj), ha="center", va="center", fontsize=9, color="0.3")
+        fig.text(
+            0.5,
+            0.025,
+            _scene_caption(scene, traj),
+            ha="center",
+            va="center",
+            fontsize=9,
+            color="0.3",
+        )
 
     def _limits(self, pat: Mask) -> tuple[tuple[float, float], tuple[float, float]]:
         """Square axis limits holding the pattern's pads, the chip at every frame and the path."""
@@ -190,8 +238,15 @@ class TrajectoryAnimation:
         cols = np.flatnonzero(pat.data.max(axis=0) > 0)
         h, w = pat.shape
         s = pat.um_per_px
-        pts = [np.array([[(cols[0] - w / 2) * s, (h / 2 - rows[-1] - 1) * s], [(cols[-1] + 1 - w / 2) * s, (h / 2 - rows[0]) * s]]),
-               self.path[:, :2]]
+        pts = [
+            np.array(
+                [
+                    [(cols[0] - w / 2) * s, (h / 2 - rows[-1] - 1) * s],
+                    [(cols[-1] + 1 - w / 2) * s, (h / 2 - rows[0]) * s],
+                ]
+            ),
+            self.path[:, :2],
+        ]
         pts += [_place(self._verts, self.path[i]) for i in self.indices]
         pts = np.concatenate(pts)
         lo, hi = pts.min(axis=0), pts.max(axis=0)
@@ -219,7 +274,13 @@ class TrajectoryAnimation:
             done.set_data(self.xs[: i + 1], ys[: i + 1])
             dot.set_data(self.xs[i : i + 1], ys[i : i + 1])
         self.title.set_text(self.title_of(i))
-        for artist in (self.trail, self.chip, self.centre, self.title, *(a for pair in self.live for a in pair[:2])):
+        for artist in (
+            self.trail,
+            self.chip,
+            self.centre,
+            self.title,
+            *(a for pair in self.live for a in pair[:2]),
+        ):
             self.fig.draw_artist(artist)
         return np.asarray(self.canvas.buffer_rgba())[..., :3].copy()
 
@@ -240,8 +301,15 @@ class TrajectoryAnimation:
         self.fig.clear()
 
 
-def write_trajectory_gif(scene, traj, path: str | os.PathLike, max_frames: int = 120, fps: float = 20.0,
-                         hold_s: float = 1.5, quiet: bool = True) -> int:
+def write_trajectory_gif(
+    scene,
+    traj,
+    path: str | os.PathLike,
+    max_frames: int = 120,
+    fps: float = 20.0,
+    hold_s: float = 1.5,
+    quiet: bool = True,
+) -> int:
     """Write the trajectory as an animated GIF (loops forever); returns the number of frames.
 
     Long trajectories are subsampled to at most ``max_frames`` frames (first and last
@@ -266,8 +334,16 @@ def write_trajectory_gif(scene, traj, path: str | os.PathLike, max_frames: int =
     durations[0] = durations[-1] = max(ms, int(round(hold_s * 100)) * 10)
     # Encoded in memory, then written: a full disk fails in our write, not inside the encoder.
     # optimize: pixels unchanged since the last frame are written as transparent
-    data = iio.imwrite("<bytes>", index, extension=".gif", mode="P", palette=palette, optimize=True,
-                       duration=durations, loop=0)
+    data = iio.imwrite(
+        "<bytes>",
+        index,
+        extension=".gif",
+        mode="P",
+        palette=palette,
+        optimize=True,
+        duration=durations,
+        loop=0,
+    )
     with atomic_output(path) as tmp:
         tmp.write_bytes(data)
     return len(frames)
@@ -285,10 +361,17 @@ def _palette_frames(frames: np.ndarray, colours: int = 128) -> tuple[np.ndarray,
 
     n, _, w, _ = frames.shape
     keys = [to_rgb(c) for c in (CHIP_COLOUR, PATH_COLOUR, "white", "black", _substrate_rgb())]
-    strip = np.repeat((np.array(keys) * 255).round().astype(np.uint8), 8 * w // len(keys) + 1, axis=0)[: 8 * w]
+    strip = np.repeat(
+        (np.array(keys) * 255).round().astype(np.uint8), 8 * w // len(keys) + 1, axis=0
+    )[: 8 * w]
     sample = np.concatenate([frames[0], frames[n // 2], frames[-1], strip.reshape(8, w, 3)], axis=0)
     pal = Image.fromarray(sample).quantize(colors=colours, method=Image.Quantize.MEDIANCUT)
-    index = np.stack([np.asarray(Image.fromarray(f).quantize(palette=pal, dither=Image.Dither.NONE)) for f in frames])
+    index = np.stack(
+        [
+            np.asarray(Image.fromarray(f).quantize(palette=pal, dither=Image.Dither.NONE))
+            for f in frames
+        ]
+    )
     return index, bytes(pal.getpalette()[: 3 * colours])
 
 
@@ -307,10 +390,18 @@ def _scene_caption(scene, traj) -> str:
     p, c = scene.pattern, scene.chip
     h, w = p.shape
     chip = c.params.get("design", "PNG") if c.geometry is not None else "PNG"
-    cw, ch = (c.params.get("width_um"), c.params.get("height_um")) if chip == "rectangle" else (None, None)
+    cw, ch = (
+        (c.params.get("width_um"), c.params.get("height_um"))
+        if chip == "rectangle"
+        else (None, None)
+    )
     chip_txt = f"{cw:g} x {ch:g} µm chip" if cw else f"chip footprint {c.area_um2:,.0f} µm²"
     s = traj.start
     grey = bool(np.any((p.data > 0.02) & (p.data < 0.98)))  # graded pads, or the anti-aliased edges
-    shades = ", lighter = graded" if grey else ""  # partly wettable: graded pads, anti-aliased edges
-    return (f"pattern {w * p.um_per_px:g} x {h * p.um_per_px:g} µm at {p.um_per_px:g} µm/px (white = pad, "
-            f"grey = substrate{shades}, + = centre), {chip_txt}; start ({s[0]:g} µm, {s[1]:g} µm, {s[2]:g}°), twist CCW +")
+    shades = (
+        ", lighter = graded" if grey else ""
+    )  # partly wettable: graded pads, anti-aliased edges
+    return (
+        f"pattern {w * p.um_per_px:g} x {h * p.um_per_px:g} µm at {p.um_per_px:g} µm/px (white = pad, "
+        f"grey = substrate{shades}, + = centre), {chip_txt}; start ({s[0]:g} µm, {s[1]:g} µm, {s[2]:g}°), twist CCW +"
+    )

@@ -43,4 +43,3 @@ def save_figure(fig, path: str | os.PathLike, dpi: int = 120) -> None:
     with atomic_output(path) as tmp:
         fig.savefig(tmp, dpi=dpi, format=suffix[1:], bbox_inches="tight")
     pyplot().close(fig)
-

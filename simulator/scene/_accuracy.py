@@ -74,7 +74,9 @@ def _geometry_of(pattern: Mask | BaseGeometry) -> tuple[BaseGeometry, float, flo
             raise InputError("pattern geometry is empty; nothing to measure")
         return pattern, 0.05, 0.1
     if not isinstance(pattern, Mask):
-        raise InputError(f"expected a shapely geometry or a patterns.mask.Mask, got {type(pattern).__name__}")
+        raise InputError(
+            f"expected a shapely geometry or a patterns.mask.Mask, got {type(pattern).__name__}"
+        )
     if pattern.geometry is not None:
         return pattern.geometry, 0.05, 0.1
     return _mask_outline(pattern), 0.5 * pattern.um_per_px, 1.5 * pattern.um_per_px
@@ -116,7 +118,11 @@ def _stretches(ring_xy: np.ndarray, corner_deg: float, merge: float) -> np.ndarr
     keep = length > 0
     p, seg, length = p[keep], seg[keep], length[keep]
     prev = np.roll(seg, 1, axis=0)
-    turn = np.degrees(np.abs(np.arctan2(prev[:, 0] * seg[:, 1] - prev[:, 1] * seg[:, 0], (prev * seg).sum(axis=1))))
+    turn = np.degrees(
+        np.abs(
+            np.arctan2(prev[:, 0] * seg[:, 1] - prev[:, 1] * seg[:, 0], (prev * seg).sum(axis=1))
+        )
+    )
     corners = np.flatnonzero(turn > corner_deg)
     perimeter = length.sum()
     if len(corners) < 2:
@@ -152,7 +158,11 @@ def smallest_feature_um(pattern: Mask | BaseGeometry, corner_deg: float = CORNER
     """
     geom, tol, merge = _geometry_of(pattern)
     # Islands and holes smaller than merge^2 are noise (a mask's stray pixels).
-    parts = [g for g in shapely.get_parts(shapely.simplify(geom, tol, preserve_topology=True)) if g.area > merge**2]
+    parts = [
+        g
+        for g in shapely.get_parts(shapely.simplify(geom, tol, preserve_topology=True))
+        if g.area > merge**2
+    ]
     if not parts:
         raise InputError("pattern has no area to measure")
     sizes, gaps = [], []
@@ -170,7 +180,9 @@ def smallest_feature_um(pattern: Mask | BaseGeometry, corner_deg: float = CORNER
     return min([feature, *gaps])
 
 
-def feature_warning(pattern: Mask | BaseGeometry, um_per_px: float, min_px: float = 3.0) -> str | None:
+def feature_warning(
+    pattern: Mask | BaseGeometry, um_per_px: float, min_px: float = 3.0
+) -> str | None:
     """A one-line warning when the pattern's smallest feature spans fewer than ``min_px`` pixels.
 
     Returns None when the scale resolves it. The warning names the feature size, its
@@ -230,7 +242,9 @@ class Preset:
     cost: tuple[float, float]
     summary: str
 
-    def knobs(self, feature_um: float | None = None, native_um_per_px: float | None = None) -> dict[str, Any]:
+    def knobs(
+        self, feature_um: float | None = None, native_um_per_px: float | None = None
+    ) -> dict[str, Any]:
         """The knob values for a pattern with this smallest feature (um), if known."""
         s = self.max_um_per_px
         if feature_um is not None:
@@ -254,18 +268,42 @@ class Preset:
 
 PRESETS: dict[str, Preset] = {
     "fast": Preset(
-        "fast", px_per_feature=2.0, max_um_per_px=4.0, min_um_per_px=1.0, twist_step_deg=2.0, dtype="float32",
-        energy_rms_pct=0.08, energy_max_pct=0.4, force_p90_pct=8.0, cost=(0.03, 0.17),
+        "fast",
+        px_per_feature=2.0,
+        max_um_per_px=4.0,
+        min_um_per_px=1.0,
+        twist_step_deg=2.0,
+        dtype="float32",
+        energy_rms_pct=0.08,
+        energy_max_pct=0.4,
+        force_p90_pct=8.0,
+        cost=(0.03, 0.17),
         summary="pixel = smallest feature / 2 (1 to 4 um/px), 2 degree twist step, float32",
     ),
     "balanced": Preset(
-        "balanced", px_per_feature=4.0, max_um_per_px=1.0, min_um_per_px=0.5, twist_step_deg=1.0, dtype="float32",
-        energy_rms_pct=0.015, energy_max_pct=0.1, force_p90_pct=3.0, cost=(1.0, 1.0),
+        "balanced",
+        px_per_feature=4.0,
+        max_um_per_px=1.0,
+        min_um_per_px=0.5,
+        twist_step_deg=1.0,
+        dtype="float32",
+        energy_rms_pct=0.015,
+        energy_max_pct=0.1,
+        force_p90_pct=3.0,
+        cost=(1.0, 1.0),
         summary="pixel = smallest feature / 4 (0.5 to 1 um/px), 1 degree twist step, float32",
     ),
     "precise": Preset(
-        "precise", px_per_feature=8.0, max_um_per_px=0.5, min_um_per_px=0.25, twist_step_deg=0.5, dtype="float32",
-        energy_rms_pct=0.004, energy_max_pct=0.05, force_p90_pct=1.0, cost=(9.0, 13.0),
+        "precise",
+        px_per_feature=8.0,
+        max_um_per_px=0.5,
+        min_um_per_px=0.25,
+        twist_step_deg=0.5,
+        dtype="float32",
+        energy_rms_pct=0.004,
+        energy_max_pct=0.05,
+        force_p90_pct=1.0,
+        cost=(9.0, 13.0),
         summary="pixel = smallest feature / 8 (0.25 to 0.5 um/px), 0.5 degree twist step, float32",
     ),
 }
@@ -303,7 +341,9 @@ def apply_preset(
     explicit = dict(explicit or {})
     unknown = sorted(set(explicit) - set(KNOBS))
     if unknown:
-        raise InputError(f"unknown accuracy knob(s) {', '.join(unknown)}; presets set {', '.join(KNOBS)}")
+        raise InputError(
+            f"unknown accuracy knob(s) {', '.join(unknown)}; presets set {', '.join(KNOBS)}"
+        )
     knobs = PRESETS[name].knobs(feature_um, native_um_per_px)
     knobs.update({k: v for k, v in explicit.items() if v is not None})
     return knobs

@@ -88,42 +88,84 @@ class SceneBuilders:
             budget = check_budget_mb(budget, "memory_budget_mb")
         layout = layout if layout is not None else LayoutSelection()
         layout_chip = None
-        p_scale, p_flag = (pattern_um_per_px, "--pattern-um-per-px") if pattern_um_per_px is not None else (um_per_px, "--um-per-px")
-        c_scale, c_flag = (chip_um_per_px, "--chip-um-per-px") if chip_um_per_px is not None else (um_per_px, "--um-per-px")
+        p_scale, p_flag = (
+            (pattern_um_per_px, "--pattern-um-per-px")
+            if pattern_um_per_px is not None
+            else (um_per_px, "--um-per-px")
+        )
+        c_scale, c_flag = (
+            (chip_um_per_px, "--chip-um-per-px")
+            if chip_um_per_px is not None
+            else (um_per_px, "--um-per-px")
+        )
 
         def image(path, scale, flag, hint, inv):
             if override_scale:
-                return read_mask(path, um_per_px=scale, invert=inv, max_mpx=max_image_mpx, budget_mb=budget)
-            return read_mask(path, default_um_per_px=scale, scale_flag=flag, missing_hint=hint, invert=inv, max_mpx=max_image_mpx, budget_mb=budget)
+                return read_mask(
+                    path, um_per_px=scale, invert=inv, max_mpx=max_image_mpx, budget_mb=budget
+                )
+            return read_mask(
+                path,
+                default_um_per_px=scale,
+                scale_flag=flag,
+                missing_hint=hint,
+                invert=inv,
+                max_mpx=max_image_mpx,
+                budget_mb=budget,
+            )
 
         if is_layout(pattern):
-            require(not invert, f"--invert reads a pattern image with black as the pad; {pattern} is a layout (its polygons are the pads)")
-            pattern, layout_chip = layout_masks(pattern, layout, resolution_um or p_scale or DEFAULT_UM_PER_PX, budget)
+            require(
+                not invert,
+                f"--invert reads a pattern image with black as the pad; {pattern} is a layout (its polygons are the pads)",
+            )
+            pattern, layout_chip = layout_masks(
+                pattern, layout, resolution_um or p_scale or DEFAULT_UM_PER_PX, budget
+            )
             resolution_um = None  # rasterized at it already
         else:
-            layout.require_unused("the pattern" if isinstance(pattern, Mask) else f"the pattern {pattern}", units_ok=is_layout(chip))
+            layout.require_unused(
+                "the pattern" if isinstance(pattern, Mask) else f"the pattern {pattern}",
+                units_ok=is_layout(chip),
+            )
             if not isinstance(pattern, Mask):
-                pattern = image(pattern, p_scale, p_flag, "--um-per-px (or --pattern-um-per-px)", invert)
+                pattern = image(
+                    pattern, p_scale, p_flag, "--um-per-px (or --pattern-um-per-px)", invert
+                )
             elif um_per_px is not None:
                 pattern = Mask(pattern.data, um_per_px, pattern.geometry, pattern.params)
         if layout_chip is not None:
-            require(chip is None and chip_size_um is None, "give one chip: a chip image (--chip), a chip size (--chip-size) or a chip layer (--chip-layer)")
+            require(
+                chip is None and chip_size_um is None,
+                "give one chip: a chip image (--chip), a chip size (--chip-size) or a chip layer (--chip-layer)",
+            )
             chip = layout_chip
-        require((chip is None) != (chip_size_um is None), "give exactly one of a chip image (--chip), a chip size (--chip-size) or a chip layer (--chip-layer)")
+        require(
+            (chip is None) != (chip_size_um is None),
+            "give exactly one of a chip image (--chip), a chip size (--chip-size) or a chip layer (--chip-layer)",
+        )
         if resolution_um is not None:
-            pattern = resample_to_scale(pattern, positive("resolution", resolution_um, "um per px"), budget)
+            pattern = resample_to_scale(
+                pattern, positive("resolution", resolution_um, "um per px"), budget
+            )
         s = pattern.um_per_px
         if chip_size_um is not None:
             w, h = (chip_size_um, chip_size_um) if np.isscalar(chip_size_um) else chip_size_um
             w, h = positive("chip width", w, "um"), positive("chip height", h, "um")
             chip = mask_from_geometry(
-                box(-w / 2, -h / 2, w / 2, h / 2), s, params={"design": "rectangle", "width_um": w, "height_um": h}, budget_mb=budget, what=f"the {w:g} x {h:g} um chip raster"
+                box(-w / 2, -h / 2, w / 2, h / 2),
+                s,
+                params={"design": "rectangle", "width_um": w, "height_um": h},
+                budget_mb=budget,
+                what=f"the {w:g} x {h:g} um chip raster",
             )
         else:
             if is_layout(chip):
                 chip = layout_chip_mask(chip, s, layout, budget)
             elif not isinstance(chip, Mask):
-                chip = image(chip, c_scale, c_flag, "--chip-um-per-px (or --um-per-px)", invert_chip)
+                chip = image(
+                    chip, c_scale, c_flag, "--chip-um-per-px (or --um-per-px)", invert_chip
+                )
             chip = resample_to_scale(chip, s, budget)
         return cls(pattern=pattern, chip=chip, **kwargs)
 
@@ -141,9 +183,25 @@ class SceneBuilders:
     @classmethod
     def from_dict(cls, doc: dict, base: Path = Path("."), **overrides: Any) -> Self:
         known = {
-            "pattern", "chip", "chip_size_um", "um_per_px", "resolution_um", "dtype", "window_um", "memory_budget_mb", "materials", "twist",
-            "effects", "liquid", "chip_thickness_um", "chip_density_kg_m3", "damping_calibration", "max_image_mpx",
-            "topography", *LAYOUT_KEYS, *IMAGE_KEYS,
+            "pattern",
+            "chip",
+            "chip_size_um",
+            "um_per_px",
+            "resolution_um",
+            "dtype",
+            "window_um",
+            "memory_budget_mb",
+            "materials",
+            "twist",
+            "effects",
+            "liquid",
+            "chip_thickness_um",
+            "chip_density_kg_m3",
+            "damping_calibration",
+            "max_image_mpx",
+            "topography",
+            *LAYOUT_KEYS,
+            *IMAGE_KEYS,
         }
         unknown = set(doc) - known - {"simulate", "montecarlo", "accuracy"}
         require(not unknown, f"unknown scene keys {sorted(unknown)}; allowed: {sorted(known)}")
@@ -152,7 +210,11 @@ class SceneBuilders:
             scene = cls._from_dict(doc, base, overrides)
         except TypeError as err:  # an unknown key inside a TOML table
             raise InputError(f"scene: {err}") from None
-        explicit = {"um_per_px": doc.get("resolution_um"), "twist_step_deg": (doc.get("twist") or {}).get("step_deg"), "dtype": doc.get("dtype")}
+        explicit = {
+            "um_per_px": doc.get("resolution_um"),
+            "twist_step_deg": (doc.get("twist") or {}).get("step_deg"),
+            "dtype": doc.get("dtype"),
+        }
         return scene.with_preset(doc.get("accuracy"), explicit)
 
     @classmethod
@@ -165,7 +227,9 @@ class SceneBuilders:
             m = dict(doc["materials"])
             if "surface_tension_mN_m" in m:
                 where = "surface tension (--surface-tension, [materials] surface_tension_mN_m)"
-                m["surface_tension_N_m"] = check_surface_tension_mN_m(m.pop("surface_tension_mN_m"), where) / 1000
+                m["surface_tension_N_m"] = (
+                    check_surface_tension_mN_m(m.pop("surface_tension_mN_m"), where) / 1000
+                )
             kw["materials"] = Materials(**m)
         if "twist" in doc:
             kw["twist"] = TwistGrid(**doc["twist"])
@@ -175,17 +239,29 @@ class SceneBuilders:
             liq = dict(doc["liquid"])
             if "surface_tension_mN_m" in liq:
                 where = "[liquid] surface_tension_mN_m"
-                liq["surface_tension_N_m"] = check_surface_tension_mN_m(liq.pop("surface_tension_mN_m"), where) / 1000
+                liq["surface_tension_N_m"] = (
+                    check_surface_tension_mN_m(liq.pop("surface_tension_mN_m"), where) / 1000
+                )
             if "viscosity_mPa_s" in liq:
                 liq["viscosity_Pa_s"] = float(liq.pop("viscosity_mPa_s")) / 1000
             if "meniscus_height_um" in liq:
                 liq["height_um"] = liq.pop("meniscus_height_um")
             kw["liquid"] = Liquid(**liq)
         if "topography" in doc:
-            require("edge_angle_deg" in doc["topography"], "a protruding pad needs its edge angle: give --edge-angle DEG "
-                    "([topography] edge_angle_deg; 90 = vertical wall) with --pad-advancing / --chip-angle")
+            require(
+                "edge_angle_deg" in doc["topography"],
+                "a protruding pad needs its edge angle: give --edge-angle DEG "
+                "([topography] edge_angle_deg; 90 = vertical wall) with --pad-advancing / --chip-angle",
+            )
             kw["topography"] = Topography(**doc["topography"])
-        for key in ("dtype", "window_um", "memory_budget_mb", "chip_thickness_um", "chip_density_kg_m3", "damping_calibration"):
+        for key in (
+            "dtype",
+            "window_um",
+            "memory_budget_mb",
+            "chip_thickness_um",
+            "chip_density_kg_m3",
+            "damping_calibration",
+        ):
             if key in doc:
                 kw[key] = doc[key]
         kw.update({k: v for k, v in overrides.items() if v is not None})
@@ -209,7 +285,14 @@ class SceneBuilders:
 def _padded_size(n: int, f: float, mask: Mask, um_per_px: float) -> int:
     """The size (px) a raster axis of ``n`` px is padded to, symmetrically, so that it maps to
     whole pixels at ``f`` new pixels per old pixel (:func:`resample_to_scale`)."""
-    m = next((m for m in range(n, n + 2001, 2) if abs(m * f - round(m * f)) < 1e-6 and round(m * f) >= 1), None)
+    m = next(
+        (
+            m
+            for m in range(n, n + 2001, 2)
+            if abs(m * f - round(m * f)) < 1e-6 and round(m * f) >= 1
+        ),
+        None,
+    )
     if m is None:
         raise InputError(
             f"cannot resample a {mask.um_per_px:g} um/px image to {um_per_px:g} um/px without moving its centre; "
@@ -218,7 +301,9 @@ def _padded_size(n: int, f: float, mask: Mask, um_per_px: float) -> int:
     return m
 
 
-def resampled_extent(mask: Mask, um_per_px: float) -> tuple[tuple[int, int], tuple[int, int, int, int]]:
+def resampled_extent(
+    mask: Mask, um_per_px: float
+) -> tuple[tuple[int, int], tuple[int, int, int, int]]:
     """(shape, nonzero box) of :func:`resample_to_scale` ``(mask, um_per_px)``, computed
     without making the raster: the box (row0, row1, col0, col1, end-exclusive) as
     :func:`patterns.mask.nonzero_box` would give it.
@@ -238,7 +323,9 @@ def resampled_extent(mask: Mask, um_per_px: float) -> tuple[tuple[int, int], tup
     if mask.geometry is not None:
         h, w = canvas_shape(mask.geometry, s)
         xmin, ymin, xmax, ymax = mask.geometry.bounds
-        a = 1 / s  # the pixel frame of patterns.raster.to_pixel_frame: column = x / s + w / 2, row = h / 2 - y / s
+        a = (
+            1 / s
+        )  # the pixel frame of patterns.raster.to_pixel_frame: column = x / s + w / 2, row = h / 2 - y / s
         c0, c1 = math.floor(a * xmin + w / 2), math.ceil(a * xmax + w / 2)
         r0, r1 = math.floor(-a * ymax + h / 2), math.ceil(-a * ymin + h / 2)
         return (h, w), (max(r0, 0), min(r1, h), max(c0, 0), min(c1, w))
@@ -249,7 +336,12 @@ def resampled_extent(mask: Mask, um_per_px: float) -> tuple[tuple[int, int], tup
         ph, pw = _padded_size(h, f, mask, s), _padded_size(w, f, mask, s)
         r0, r1, c0, c1 = nonzero_box(mask.data > 0)
         oy, ox = (ph - h) // 2, (pw - w) // 2
-        return (ph // k, pw // k), ((r0 + oy) // k, -(-(r1 + oy) // k), (c0 + ox) // k, -(-(c1 + ox) // k))
+        return (ph // k, pw // k), (
+            (r0 + oy) // k,
+            -(-(r1 + oy) // k),
+            (c0 + ox) // k,
+            -(-(c1 + ox) // k),
+        )
     out = resample_to_scale(mask, s)
     return out.shape, nonzero_box(out.data > 0)
 
@@ -266,12 +358,27 @@ def resample_to_scale(mask: Mask, um_per_px: float, budget_mb: float | None = No
     if math.isclose(mask.um_per_px, um_per_px, rel_tol=1e-9):
         return mask
     if mask.geometry is not None:
-        return mask_from_geometry(mask.geometry, um_per_px, params=mask.params, budget_mb=budget_mb, what=f"the raster at {um_per_px:g} um/px")
+        return mask_from_geometry(
+            mask.geometry,
+            um_per_px,
+            params=mask.params,
+            budget_mb=budget_mb,
+            what=f"the raster at {um_per_px:g} um/px",
+        )
     import cv2
 
     f = mask.um_per_px / um_per_px  # new pixels per old pixel
-    price_raster(tuple(n * f for n in mask.shape), um_per_px, f"the image resampled to {um_per_px:g} um/px", budget_mb)
+    price_raster(
+        tuple(n * f for n in mask.shape),
+        um_per_px,
+        f"the image resampled to {um_per_px:g} um/px",
+        budget_mb,
+    )
     (h, w), (ph, pw) = mask.shape, [_padded_size(n, f, mask, um_per_px) for n in mask.shape]
     data = np.pad(mask.data, (((ph - h) // 2,) * 2, ((pw - w) // 2,) * 2))
-    out = cv2.resize(data, (round(pw * f), round(ph * f)), interpolation=cv2.INTER_AREA if f < 1 else cv2.INTER_NEAREST)
+    out = cv2.resize(
+        data,
+        (round(pw * f), round(ph * f)),
+        interpolation=cv2.INTER_AREA if f < 1 else cv2.INTER_NEAREST,
+    )
     return Mask(np.clip(out, 0, 1), um_per_px, None, mask.params)

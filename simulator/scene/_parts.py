@@ -36,8 +36,14 @@ class TwistGrid:
             raise InputError("twist min_deg and max_deg must be given together (or neither)")
         if self.min_deg is not None:
             for name, v in (("min_deg", self.min_deg), ("max_deg", self.max_deg)):
-                require(math.isfinite(v) and abs(v) <= 3600, f"twist {name} must be a finite angle within +-3600 degrees, got {v}")
-            require(self.max_deg >= self.min_deg, f"twist max_deg ({self.max_deg}) must be >= min_deg ({self.min_deg})")
+                require(
+                    math.isfinite(v) and abs(v) <= 3600,
+                    f"twist {name} must be a finite angle within +-3600 degrees, got {v}",
+                )
+            require(
+                self.max_deg >= self.min_deg,
+                f"twist max_deg ({self.max_deg}) must be >= min_deg ({self.min_deg})",
+            )
 
 
 @dataclass(frozen=True)
@@ -59,5 +65,6 @@ class Effects:
     def __post_init__(self) -> None:
         for name in ("twist", "meniscus", "hysteresis"):
             if not isinstance(getattr(self, name), bool | np.bool_):
-                raise InputError(f"effects {name} must be true or false, got {getattr(self, name)!r}")
-
+                raise InputError(
+                    f"effects {name} must be true or false, got {getattr(self, name)!r}"
+                )

@@ -150,14 +150,18 @@ class Scene(SceneBuilders):
         )
         if self.window_um is not None and self.window_um < ps:
             # Below a pixel the pose grid has no translation to step to (and 1e-300 rounds to none at all).
-            raise InputError(f"window_um (--window) {self.window_um:g} um is below one pixel of the pose grid ({ps:g} um); "
-                             f"give at least {ps:g} um, or leave it out for the full reach")
+            raise InputError(
+                f"window_um (--window) {self.window_um:g} um is below one pixel of the pose grid ({ps:g} um); "
+                f"give at least {ps:g} um, or leave it out for the full reach"
+            )
         if self.effects.meniscus:
             _ = self.meniscus_height_um  # validated here: positive, finite, not above the chip
         if self.effects.hysteresis:
-            require(self.materials.pad_receding_deg is not None,
-                    "contact-angle hysteresis needs the pad's receding and advancing angles: --hysteresis RECEDING:ADVANCING "
-                    "(or [materials] pad_receding_deg and pad_advancing_deg)")
+            require(
+                self.materials.pad_receding_deg is not None,
+                "contact-angle hysteresis needs the pad's receding and advancing angles: --hysteresis RECEDING:ADVANCING "
+                "(or [materials] pad_receding_deg and pad_advancing_deg)",
+            )
 
     @property
     def delta_gamma_N_m(self) -> float:
@@ -183,7 +187,10 @@ class Scene(SceneBuilders):
         (:attr:`meniscus_height_um`) and the dynamics' Couette damping
         (:meth:`simulator.motion.DynamicsParams.from_scene`) both take it."""
         if self.liquid.height_um is None:
-            require(self.chip.area_um2 > 0, "the meniscus height needs a chip with a wetted area to divide the volume by; give --meniscus-height")
+            require(
+                self.chip.area_um2 > 0,
+                "the meniscus height needs a chip with a wetted area to divide the volume by; give --meniscus-height",
+            )
         return self.liquid.meniscus_height_um(self.chip.area_um2)
 
     @functools.cached_property
@@ -232,8 +239,12 @@ class Scene(SceneBuilders):
         """:attr:`meniscus_margin_px` for pixels of ``um_per_px`` (the scene's height, not resampled)."""
         from simulator.physics import margin_px
 
-        prof = self.wall_profile if um_per_px == self.um_per_px else self._wall_profile_at(um_per_px)
-        return prof.margin_px if prof is not None else margin_px(self.meniscus_height_px_at(um_per_px))
+        prof = (
+            self.wall_profile if um_per_px == self.um_per_px else self._wall_profile_at(um_per_px)
+        )
+        return (
+            prof.margin_px if prof is not None else margin_px(self.meniscus_height_px_at(um_per_px))
+        )
 
     @property
     def um_per_px(self) -> float:
@@ -265,7 +276,9 @@ class Scene(SceneBuilders):
         if math.isclose(s, self.um_per_px, rel_tol=1e-9):
             return self
         b = self.memory_budget_mb
-        return self.replace(pattern=resample_to_scale(self.pattern, s, b), chip=resample_to_scale(self.chip, s, b))
+        return self.replace(
+            pattern=resample_to_scale(self.pattern, s, b), chip=resample_to_scale(self.chip, s, b)
+        )
 
     def with_preset(self, name: str | None = None, explicit: dict | None = None) -> Scene:
         """The scene with the knobs of an accuracy preset (pixel size, twist step, dtype)
@@ -274,10 +287,14 @@ class Scene(SceneBuilders):
         from simulator.scene._accuracy import apply_preset
 
         native = None if self.pattern.geometry is not None else self.pattern.um_per_px
-        knobs = apply_preset(name, explicit, feature_um=self.smallest_feature_um(), native_um_per_px=native)
+        knobs = apply_preset(
+            name, explicit, feature_um=self.smallest_feature_um(), native_um_per_px=native
+        )
         scene = self.at_resolution(knobs["um_per_px"])
         if knobs["twist_step_deg"] != scene.twist.step_deg:
-            scene = scene.replace(twist=TwistGrid(knobs["twist_step_deg"], scene.twist.min_deg, scene.twist.max_deg))
+            scene = scene.replace(
+                twist=TwistGrid(knobs["twist_step_deg"], scene.twist.min_deg, scene.twist.max_deg)
+            )
         if knobs["dtype"] != scene.dtype:
             scene = scene.replace(dtype=knobs["dtype"])
         return scene

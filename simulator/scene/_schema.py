@@ -101,11 +101,15 @@ SCHEMA: dict[str | None, dict[str, Kind]] = {
     None: {
         "pattern": FilePath("the pattern image (PNG) or layout (.gds, .oas, .dxf)"),
         "chip": FilePath("the chip footprint image (PNG) or layout"),
-        "layer": Text(200),  # layout pattern layer "L/D" (DXF: the layer name); checked by patterns.layout
+        "layer": Text(
+            200
+        ),  # layout pattern layer "L/D" (DXF: the layer name); checked by patterns.layout
         "cell": Text(200),
         "chip_layer": Text(200),
         "dxf_units": Choice(DXF_UNITS),
-        "max_polygons": integer("[1, 1e9]", "polygons"),  # a layout cell's flattened polygons (patterns.layout)
+        "max_polygons": integer(
+            "[1, 1e9]", "polygons"
+        ),  # a layout cell's flattened polygons (patterns.layout)
         "chip_size_um": Size(LENGTH_UM),
         "um_per_px": number(f"(0, {MAX_UM:g}]", "um per px"),  # as write_mask's pHYs range
         "pattern_um_per_px": number(f"(0, {MAX_UM:g}]", "um per px"),
@@ -116,7 +120,9 @@ SCHEMA: dict[str | None, dict[str, Kind]] = {
         "resolution_um": number(f"(0, {MAX_UM:g}]", "um per px"),
         "dtype": Choice(DTYPES),
         "window_um": LENGTH_UM,
-        "memory_budget_mb": number("(0, 1e9]", "MB"),  # downstream also caps it at the machine's memory
+        "memory_budget_mb": number(
+            "(0, 1e9]", "MB"
+        ),  # downstream also caps it at the machine's memory
         "max_image_mpx": number("(0, 1e6]", "megapixels"),
         "accuracy": Choice(ACCURACY_PRESETS),
         "chip_thickness_um": LENGTH_UM,
@@ -164,8 +170,11 @@ SCHEMA: dict[str | None, dict[str, Kind]] = {
         "grid": StartRanges((("x", POSITION_UM), ("y", POSITION_UM), ("twist", TWIST_DEG))),
         "random": integer(f"[1, {MAX_STARTS:g}]", whole_floats=True),  # 1e6 as --random 1e6
         "spread": Pose(
-            (("sx", number(f"[0, {MAX_UM:g}]", "um")), ("sy", number(f"[0, {MAX_UM:g}]", "um")),
-             ("stwist", number(f"[0, {MAX_TWIST_DEG}]", "deg"))),
+            (
+                ("sx", number(f"[0, {MAX_UM:g}]", "um")),
+                ("sy", number(f"[0, {MAX_UM:g}]", "um")),
+                ("stwist", number(f"[0, {MAX_TWIST_DEG}]", "deg")),
+            ),
             text_ok=True,
         ),
         "around": Pose(START_POSE.parts, text_ok=True),
@@ -206,7 +215,9 @@ def validate_scene(doc: dict, source: str = "scene") -> None:
         elif key in SCHEMA and key is not None:
             keys = SCHEMA[key]
             if not isinstance(value, dict):
-                raise InputError(f"{src}: {key} = {show_value(value)}: must be a table ([{key}] with keys {', '.join(keys)})")
+                raise InputError(
+                    f"{src}: {key} = {show_value(value)}: must be a table ([{key}] with keys {', '.join(keys)})"
+                )
             for sub, v in value.items():
                 if sub not in keys:
                     raise InputError(
@@ -216,7 +227,9 @@ def validate_scene(doc: dict, source: str = "scene") -> None:
                 _check(src, key, sub, v, keys[sub])
         elif isinstance(value, dict):
             sections = [s for s in SCHEMA if s is not None]
-            raise InputError(f"{src}: [{show_key(key)}]: unknown section{_suggest(key, sections)}; sections are {_sections_text()}")
+            raise InputError(
+                f"{src}: [{show_key(key)}]: unknown section{_suggest(key, sections)}; sections are {_sections_text()}"
+            )
         else:
             raise InputError(
                 f"{src}: {show_key(key)} = {show_value(value)}: unknown key{_suggest(key, list(top))}; "
@@ -236,7 +249,9 @@ def _display(path: Any) -> str:
     """A path (or source name) as one printable line."""
     text = os.fsdecode(path) if isinstance(path, str | bytes | os.PathLike) else str(path)
     if not text.isprintable():
-        text = "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii") for c in text)
+        text = "".join(
+            c if c.isprintable() else c.encode("unicode_escape").decode("ascii") for c in text
+        )
     return text if len(text) <= 300 else text[:297] + "..."
 
 
@@ -322,7 +337,9 @@ def read_scene_file(path: str | os.PathLike) -> dict[str, Any]:
     except PermissionError:
         raise InputError(f"scene file {shown} cannot be read: permission denied") from None
     except OSError as err:
-        raise InputError(f"scene file {shown} cannot be read ({err.strerror or _one_line(err)})") from None
+        raise InputError(
+            f"scene file {shown} cannot be read ({err.strerror or _one_line(err)})"
+        ) from None
     with os.fdopen(fd, "rb") as f:
         why = _kind_of(os.fstat(f.fileno()).st_mode)
         if why:
@@ -330,7 +347,9 @@ def read_scene_file(path: str | os.PathLike) -> dict[str, Any]:
         try:
             data = f.read(MAX_SCENE_BYTES + 1)
         except OSError as err:
-            raise InputError(f"scene file {shown} cannot be read ({err.strerror or _one_line(err)})") from None
+            raise InputError(
+                f"scene file {shown} cannot be read ({err.strerror or _one_line(err)})"
+            ) from None
     if len(data) > MAX_SCENE_BYTES:
         raise _size_error(shown, len(data))
     try:
@@ -341,7 +360,9 @@ def read_scene_file(path: str | os.PathLike) -> dict[str, Any]:
         ) from None
     text = text.removeprefix("\ufeff")  # a byte-order mark from some editors
     if _too_many_key_parts(text):
-        raise InputError(f"scene file {shown} is not a usable scene: a dotted key or table header has more than {MAX_DEPTH} parts")
+        raise InputError(
+            f"scene file {shown} is not a usable scene: a dotted key or table header has more than {MAX_DEPTH} parts"
+        )
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
@@ -352,7 +373,9 @@ def read_scene_file(path: str | os.PathLike) -> dict[str, Any]:
         ) from None
     except ValueError as err:
         if "integer string conversion" in str(err):
-            raise InputError(f"scene file {shown} is not a usable scene: an integer has more than 4300 digits") from None
+            raise InputError(
+                f"scene file {shown} is not a usable scene: an integer has more than 4300 digits"
+            ) from None
         raise InputError(f"scene file {shown} is not valid TOML: {_one_line(err)[:200]}") from None
     hit = check_nesting(doc, MAX_DEPTH, MAX_ARRAY_ITEMS)
     if hit:

@@ -105,7 +105,9 @@ class Bounds:
     def parse(cls, text: str) -> Bounds:
         m = re.fullmatch(r"\s*([\[(])\s*([^,\s]+)\s*,\s*([^,\s]+)\s*([\])])\s*", text)
         if not m:
-            raise ValueError(f"interval {text!r}: write it as [lo, hi], (lo, hi], [lo, hi) or (lo, hi)")
+            raise ValueError(
+                f"interval {text!r}: write it as [lo, hi], (lo, hi], [lo, hi) or (lo, hi)"
+            )
 
         def num(t: str) -> float:
             try:
@@ -173,7 +175,12 @@ class Integer(Kind):
         return f"must be a whole number {self.bounds.text(self.unit)}"
 
     def check(self, value: Any) -> str | None:
-        if isinstance(value, float) and _is_number(value) and value.is_integer() and self.whole_floats:
+        if (
+            isinstance(value, float)
+            and _is_number(value)
+            and value.is_integer()
+            and self.whole_floats
+        ):
             return None if value in self.bounds else self.describe()
         if isinstance(value, float) and _is_number(value):
             return self.describe() + " (an integer, no decimal point)"
@@ -239,7 +246,9 @@ class FilePath(Kind):
         if not value.strip():
             return self.describe() + ", got an empty string"
         if len(value) > MAX_PATH_CHARS or "\x00" in value:
-            return self.describe() + f" of at most {MAX_PATH_CHARS} characters, without NUL characters"
+            return (
+                self.describe() + f" of at most {MAX_PATH_CHARS} characters, without NUL characters"
+            )
         return None
 
 
@@ -316,8 +325,10 @@ class StartRanges(Kind):
 
     def describe(self) -> str:
         units = ", ".join(k.unit for _, k in self.axes)
-        return (f'must be "X0:X1:DX,Y0:Y1:DY[,TWISTS]" ({units}; ends included) or a list of 2 or 3 axes, '
-                'each a number or "START:STOP:STEP" text')
+        return (
+            f'must be "X0:X1:DX,Y0:Y1:DY[,TWISTS]" ({units}; ends included) or a list of 2 or 3 axes, '
+            'each a number or "START:STOP:STEP" text'
+        )
 
     def _axis(self, name: str, kind: Number, spec: Any) -> str | None:
         if _is_number(spec):

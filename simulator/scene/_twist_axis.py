@@ -33,7 +33,9 @@ def chip_symmetry(chip: Mask) -> tuple[float, bool]:
         def same(other) -> bool:
             return g.symmetric_difference(other).area <= tol
 
-        period = next((p for p in (90.0, 180.0) if same(affinity.rotate(g, p, origin=(0, 0)))), 360.0)
+        period = next(
+            (p for p in (90.0, 180.0) if same(affinity.rotate(g, p, origin=(0, 0)))), 360.0
+        )
         return period, same(affinity.scale(g, 1.0, -1.0, origin=(0, 0)))
     d = chip.data
     if d.shape[0] == d.shape[1] and np.array_equal(np.rot90(d), d):

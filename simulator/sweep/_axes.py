@@ -46,39 +46,102 @@ def _interval(text: str, unit: str) -> Callable[[Any], str | None]:
 
 def _choice_check(choices: tuple[str, ...]) -> Callable[[Any], str | None]:
     def check(v: Any) -> str | None:
-        return None if isinstance(v, str) and v in choices else "must be one of " + ", ".join(f'"{c}"' for c in choices)
+        return (
+            None
+            if isinstance(v, str) and v in choices
+            else "must be one of " + ", ".join(f'"{c}"' for c in choices)
+        )
 
     return check
 
 
 def _path_check(v: Any) -> str | None:
-    return None if isinstance(v, str) and v.strip() and "\x00" not in v else "must be the path of a pattern file as a quoted string"
+    return (
+        None
+        if isinstance(v, str) and v.strip() and "\x00" not in v
+        else "must be the path of a pattern file as a quoted string"
+    )
 
 
 def _scene_axes() -> dict[str, AxisKind]:
     from simulator.scene import MONTECARLO_METHODS as METHODS
 
     return {
-        "pattern": AxisKind("pattern", "path", "pattern files (PNG or layout), relative to the sweep file", _path_check),
-        "chip_size_um": AxisKind("chip_size_um", "number", "side of a square chip (um)", _interval("(0, 1e6]", "um")),
-        "volume_nl": AxisKind("volume_nl", "number", "droplet volume (nl)", _interval("(0, 1e9]", "nl")),
-        "pad_angle_deg": AxisKind("pad_angle_deg", "number", "contact angle on the pads (deg)", _interval("[0, 180]", "deg")),
-        "substrate_angle_deg": AxisKind("substrate_angle_deg", "number", "contact angle on the substrate (deg)", _interval("[0, 180]", "deg")),
-        "surface_tension_mN_m": AxisKind("surface_tension_mN_m", "number", "surface tension (mN/m)", _interval("(0, 1e4]", "mN/m")),
-        "placement_sigma_um": AxisKind("placement_sigma_um", "number", "placement noise, standard deviation in x and y (um); default 10 % of the chip",
-                                       _interval("[0, 1e6]", "um")),
-        "placement_sigma_deg": AxisKind("placement_sigma_deg", "number", "placement noise in twist, standard deviation (deg); default 2",
-                                        _interval("[0, 3600]", "deg")),
-        "method": AxisKind("method", "choice", "stepper of the capture and yield runs: greedy, gradient, or the dynamics overdamped, inertial",
-                           _choice_check(METHODS), METHODS),
-        "resolution_um": AxisKind("resolution_um", "number", "pixel size simulated at (um)", _interval("(0, 1e6]", "um per px")),
-        "twist_step_deg": AxisKind("twist_step_deg", "number", "twist grid step (deg)", _interval("(0, 90]", "deg")),
+        "pattern": AxisKind(
+            "pattern",
+            "path",
+            "pattern files (PNG or layout), relative to the sweep file",
+            _path_check,
+        ),
+        "chip_size_um": AxisKind(
+            "chip_size_um", "number", "side of a square chip (um)", _interval("(0, 1e6]", "um")
+        ),
+        "volume_nl": AxisKind(
+            "volume_nl", "number", "droplet volume (nl)", _interval("(0, 1e9]", "nl")
+        ),
+        "pad_angle_deg": AxisKind(
+            "pad_angle_deg",
+            "number",
+            "contact angle on the pads (deg)",
+            _interval("[0, 180]", "deg"),
+        ),
+        "substrate_angle_deg": AxisKind(
+            "substrate_angle_deg",
+            "number",
+            "contact angle on the substrate (deg)",
+            _interval("[0, 180]", "deg"),
+        ),
+        "surface_tension_mN_m": AxisKind(
+            "surface_tension_mN_m",
+            "number",
+            "surface tension (mN/m)",
+            _interval("(0, 1e4]", "mN/m"),
+        ),
+        "placement_sigma_um": AxisKind(
+            "placement_sigma_um",
+            "number",
+            "placement noise, standard deviation in x and y (um); default 10 % of the chip",
+            _interval("[0, 1e6]", "um"),
+        ),
+        "placement_sigma_deg": AxisKind(
+            "placement_sigma_deg",
+            "number",
+            "placement noise in twist, standard deviation (deg); default 2",
+            _interval("[0, 3600]", "deg"),
+        ),
+        "method": AxisKind(
+            "method",
+            "choice",
+            "stepper of the capture and yield runs: greedy, gradient, or the dynamics overdamped, inertial",
+            _choice_check(METHODS),
+            METHODS,
+        ),
+        "resolution_um": AxisKind(
+            "resolution_um",
+            "number",
+            "pixel size simulated at (um)",
+            _interval("(0, 1e6]", "um per px"),
+        ),
+        "twist_step_deg": AxisKind(
+            "twist_step_deg", "number", "twist grid step (deg)", _interval("(0, 90]", "deg")
+        ),
     }
 
 
 #: Axes that every sweep has (design parameters come on top, see :func:`axis_kinds`).
-AXES: tuple[str, ...] = ("pattern", "chip_size_um", "volume_nl", "pad_angle_deg", "substrate_angle_deg", "surface_tension_mN_m",
-                         "placement_sigma_um", "placement_sigma_deg", "method", "resolution_um", "twist_step_deg")
+AXES: tuple[str, ...] = (
+    "pattern",
+    "chip_size_um",
+    "volume_nl",
+    "pad_angle_deg",
+    "substrate_angle_deg",
+    "surface_tension_mN_m",
+    "placement_sigma_um",
+    "placement_sigma_deg",
+    "method",
+    "resolution_um",
+    "twist_step_deg",
+)
 
 
 def _design_axes(design: str) -> dict[str, AxisKind]:
@@ -99,7 +162,9 @@ def _design_axes(design: str) -> dict[str, AxisKind]:
                 return str(err)
             return None
 
-        out[p.name] = AxisKind(column, {"length": "number"}.get(p.kind, p.kind), p.help, check, p.choices)
+        out[p.name] = AxisKind(
+            column, {"length": "number"}.get(p.kind, p.kind), p.help, check, p.choices
+        )
     return out
 
 
@@ -127,7 +192,12 @@ class Axis:
         return len(self.values) if self.values is not None else 0
 
     def record(self) -> dict:
-        return {"name": self.name, "values": list(self.values) if self.values is not None else None, "lo": self.lo, "hi": self.hi}
+        return {
+            "name": self.name,
+            "values": list(self.values) if self.values is not None else None,
+            "lo": self.lo,
+            "hi": self.hi,
+        }
 
 
 def _parse_axis(name: str, raw: Any, kind: AxisKind, sampling: bool, src: str) -> Axis:
@@ -145,39 +215,71 @@ def _parse_axis(name: str, raw: Any, kind: AxisKind, sampling: bool, src: str) -
         require(len(raw) > 0, f"{where}: the list is empty; give at least one value")
         vals = tuple(checked(v) for v in raw)
         dup = next((v for i, v in enumerate(vals) if v in vals[:i]), None)
-        require(dup is None, f"{where}: lists {show_value(dup)} twice; give each value once (realizations = N repeats points)")
+        require(
+            dup is None,
+            f"{where}: lists {show_value(dup)} twice; give each value once (realizations = N repeats points)",
+        )
         return Axis(name, kind.column, kind.kind, vals)
     if isinstance(raw, dict):
-        require(kind.kind in ("number", "int"), f"{where}: {name} takes a list of values, not a range")
+        require(
+            kind.kind in ("number", "int"), f"{where}: {name} takes a list of values, not a range"
+        )
         extra = sorted(set(raw) - {"from", "to", "num", "step"})
         if extra:
-            raise InputError(f"{where}: unknown key {extra[0]}; a range is {{from = A, to = B}} with num = N or step = D")
+            raise InputError(
+                f"{where}: unknown key {extra[0]}; a range is {{from = A, to = B}} with num = N or step = D"
+            )
         require("from" in raw and "to" in raw, f"{where}: a range needs from and to")
         a, b = checked(raw["from"]), checked(raw["to"])
-        require(a != b, f"{where}: the range is empty (from = to); give a list of one value instead")
-        require(a < b, f"{where}: the range is inverted (from > to); write from = {show_value(b)}, to = {show_value(a)}")
+        require(
+            a != b, f"{where}: the range is empty (from = to); give a list of one value instead"
+        )
+        require(
+            a < b,
+            f"{where}: the range is inverted (from > to); write from = {show_value(b)}, to = {show_value(a)}",
+        )
         require(not ("num" in raw and "step" in raw), f"{where}: give num or step, not both")
         if "num" in raw:
             n = raw["num"]
-            require(isinstance(n, int) and not isinstance(n, bool) and 2 <= n <= HARD_MAX_POINTS,
-                    f"{where}: num must be a whole number >= 2 (the values from..to, ends included)")
+            require(
+                isinstance(n, int) and not isinstance(n, bool) and 2 <= n <= HARD_MAX_POINTS,
+                f"{where}: num must be a whole number >= 2 (the values from..to, ends included)",
+            )
             vals = tuple(float(v) for v in np.linspace(a, b, n))
         elif "step" in raw:
             d = raw["step"]
-            require(isinstance(d, int | float) and not isinstance(d, bool) and math.isfinite(d) and d > 0, f"{where}: step must be a number > 0")
+            require(
+                isinstance(d, int | float)
+                and not isinstance(d, bool)
+                and math.isfinite(d)
+                and d > 0,
+                f"{where}: step must be a number > 0",
+            )
             n = math.floor((b - a) / d + 1e-9) + 1
-            require(n <= HARD_MAX_POINTS, f"{where}: the step gives more than {HARD_MAX_POINTS:,} values")
+            require(
+                n <= HARD_MAX_POINTS,
+                f"{where}: the step gives more than {HARD_MAX_POINTS:,} values",
+            )
             vals = tuple(float(a + k * d) for k in range(n))
         elif kind.kind == "int":
-            require(b - a < HARD_MAX_POINTS, f"{where}: the range holds more than {HARD_MAX_POINTS:,} values")
+            require(
+                b - a < HARD_MAX_POINTS,
+                f"{where}: the range holds more than {HARD_MAX_POINTS:,} values",
+            )
             vals = tuple(range(int(a), int(b) + 1)) if not sampling else None
         else:
-            require(sampling, f"{where}: a grid needs num = N or step = D in the range (or set [sweep] samples = N for random points)")
+            require(
+                sampling,
+                f"{where}: a grid needs num = N or step = D in the range (or set [sweep] samples = N for random points)",
+            )
             return Axis(name, kind.column, kind.kind, None, float(a), float(b))
         if vals is None:
             return Axis(name, kind.column, kind.kind, None, float(a), float(b))
         if kind.kind == "int":
-            require(all(float(v).is_integer() for v in vals), f"{where}: {name} takes whole numbers; choose a whole step")
+            require(
+                all(float(v).is_integer() for v in vals),
+                f"{where}: {name} takes whole numbers; choose a whole step",
+            )
             vals = tuple(int(round(v)) for v in vals)
         else:
             vals = tuple(round(v, 12) for v in vals)

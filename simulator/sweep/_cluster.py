@@ -30,8 +30,10 @@ CONNECT_TIMEOUT_S = 3.0
 WORKER_MEMORY_MB = 1024
 
 #: Why spawned workers fail to start from a script, and the fix.
-MAIN_GUARD = ("worker processes are spawned and import the main script, so a script that calls simulator.sweep must do so "
-              "under `if __name__ == \"__main__\":`")
+MAIN_GUARD = (
+    "worker processes are spawned and import the main script, so a script that calls simulator.sweep must do so "
+    'under `if __name__ == "__main__":`'
+)
 
 
 # ----------------------------------------------------------------------- running
@@ -44,11 +46,21 @@ def worker_cap(requested: int, points: int) -> tuple[int, str | None]:
     cores = os.cpu_count() or 1
     by_memory = max(1, int(available_memory_bytes() // (WORKER_MEMORY_MB * MB)))
     n = max(1, min(requested, cores, by_memory, max(points, 1)))
-    if n >= requested or requested <= min(cores, by_memory):  # only the points bound it: nothing to say
+    if n >= requested or requested <= min(
+        cores, by_memory
+    ):  # only the points bound it: nothing to say
         return n, None
-    why = f"{cores} core{'s' if cores != 1 else ''}" if cores <= by_memory else (
-        f"the memory available ({available_memory_bytes() / 2**30:.1f} GB) holds {by_memory} workers of {WORKER_MEMORY_MB / 1024:g} GB")
-    return n, f"--workers {requested} capped at {n}: this machine has {why}; more workers would only wait for each other"
+    why = (
+        f"{cores} core{'s' if cores != 1 else ''}"
+        if cores <= by_memory
+        else (
+            f"the memory available ({available_memory_bytes() / 2**30:.1f} GB) holds {by_memory} workers of {WORKER_MEMORY_MB / 1024:g} GB"
+        )
+    )
+    return (
+        n,
+        f"--workers {requested} capped at {n}: this machine has {why}; more workers would only wait for each other",
+    )
 
 
 def _worker_env() -> dict[str, str]:
@@ -69,8 +81,10 @@ def _check_address(address: str) -> None:
         if scheme in ("tcp", "tls"):
             parse_host_port(loc)
     except (ValueError, TypeError) as err:
-        raise InputError(f"--scheduler {address}: not a Dask scheduler address ({' '.join(str(err).split())[:200]}); "
-                         "write it as tcp://HOST:PORT, e.g. tcp://10.0.0.5:8786") from None
+        raise InputError(
+            f"--scheduler {address}: not a Dask scheduler address ({' '.join(str(err).split())[:200]}); "
+            "write it as tcp://HOST:PORT, e.g. tcp://10.0.0.5:8786"
+        ) from None
 
 
 @contextlib.contextmanager
@@ -88,7 +102,9 @@ def _sigint_blocked() -> Iterator[None]:
     import signal
     import threading
 
-    if threading.current_thread() is not threading.main_thread() or not hasattr(signal, "pthread_sigmask"):
+    if threading.current_thread() is not threading.main_thread() or not hasattr(
+        signal, "pthread_sigmask"
+    ):
         yield
         return
     old_mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
@@ -137,7 +153,9 @@ def _handshake(address: str, timeout_s: float = CONNECT_TIMEOUT_S) -> None:
     from distributed.comm import connect
     from distributed.security import Security
 
-    tls = Security().get_connection_args("client")  # as Client() connects: the TLS settings of the Dask config
+    tls = Security().get_connection_args(
+        "client"
+    )  # as Client() connects: the TLS settings of the Dask config
 
     async def probe() -> None:
         # connect's own message (refused, unreachable) comes within the deadline
@@ -169,8 +187,10 @@ def _handshake(address: str, timeout_s: float = CONNECT_TIMEOUT_S) -> None:
     err = outcome[0] if outcome else TimeoutError()
     if isinstance(err, OSError | TimeoutError | ValueError | TypeError):
         reason = " ".join(str(err).split())[:200] or "no answer to the handshake"
-        raise InputError(f"--scheduler {address}: cannot reach a Dask scheduler within {timeout_s:g} s ({reason}); "
-                         "check the address (tcp://HOST:PORT), or leave out --scheduler to start local workers") from None
+        raise InputError(
+            f"--scheduler {address}: cannot reach a Dask scheduler within {timeout_s:g} s ({reason}); "
+            "check the address (tcp://HOST:PORT), or leave out --scheduler to start local workers"
+        ) from None
     if err is not None:
         raise err
 
@@ -184,12 +204,20 @@ def dask_client(workers: int | None = None, scheduler: str | None = None) -> Ite
     import dask
     from distributed import Client, LocalCluster
 
-    config = {"distributed.worker.multiprocessing-method": "spawn", "distributed.comm.timeouts.connect": f"{CONNECT_TIMEOUT_S}s",
-              "distributed.scheduler.allowed-failures": 1, "distributed.worker.daemon": True,
-              "distributed.worker.profile.enabled": False,  # the statistical profiler costs ~15 % of a point; no dashboard shows it
-              # Dask's default environment of a new worker, less MALLOC_TRIM_THRESHOLD_=65536: with it every large
-              # array is mapped and unmapped afresh, which doubled the time of a point (measured).
-              "distributed.nanny.pre-spawn-environ": {"OMP_NUM_THREADS": 1, "MKL_NUM_THREADS": 1, "OPENBLAS_NUM_THREADS": 1}}
+    config = {
+        "distributed.worker.multiprocessing-method": "spawn",
+        "distributed.comm.timeouts.connect": f"{CONNECT_TIMEOUT_S}s",
+        "distributed.scheduler.allowed-failures": 1,
+        "distributed.worker.daemon": True,
+        "distributed.worker.profile.enabled": False,  # the statistical profiler costs ~15 % of a point; no dashboard shows it
+        # Dask's default environment of a new worker, less MALLOC_TRIM_THRESHOLD_=65536: with it every large
+        # array is mapped and unmapped afresh, which doubled the time of a point (measured).
+        "distributed.nanny.pre-spawn-environ": {
+            "OMP_NUM_THREADS": 1,
+            "MKL_NUM_THREADS": 1,
+            "OPENBLAS_NUM_THREADS": 1,
+        },
+    }
     cluster = client = None
     with dask.config.set(config):
         try:
@@ -200,20 +228,32 @@ def dask_client(workers: int | None = None, scheduler: str | None = None) -> Ite
                     client = Client(scheduler, timeout=CONNECT_TIMEOUT_S, set_as_default=False)
                 except (OSError, TimeoutError, ValueError, TypeError) as err:
                     reason = " ".join(str(err).split())[:200] or type(err).__name__
-                    raise InputError(f"--scheduler {scheduler}: cannot reach a Dask scheduler within {CONNECT_TIMEOUT_S:g} s ({reason}); "
-                                     "check the address (tcp://HOST:PORT), or leave out --scheduler to start local workers") from None
+                    raise InputError(
+                        f"--scheduler {scheduler}: cannot reach a Dask scheduler within {CONNECT_TIMEOUT_S:g} s ({reason}); "
+                        "check the address (tcp://HOST:PORT), or leave out --scheduler to start local workers"
+                    ) from None
             else:
                 import multiprocessing
 
                 if getattr(multiprocessing.current_process(), "_inheriting", False):
                     # A spawned worker is importing the script that called sweep(): the call lacks the main guard.
                     raise SystemExit(f"selfalign sweep: error: {MAIN_GUARD}")
-                with _sigint_blocked():  # the workers, their threads and every later worker inherit it
+                with (
+                    _sigint_blocked()
+                ):  # the workers, their threads and every later worker inherit it
                     try:
-                        cluster = LocalCluster(n_workers=int(workers or 1), threads_per_worker=1, processes=True, dashboard_address=None,
-                                               silence_logs=logging.ERROR, env=_worker_env())
+                        cluster = LocalCluster(
+                            n_workers=int(workers or 1),
+                            threads_per_worker=1,
+                            processes=True,
+                            dashboard_address=None,
+                            silence_logs=logging.ERROR,
+                            env=_worker_env(),
+                        )
                     except RuntimeError as err:
-                        raise InputError(f"the local Dask workers did not start ({' '.join(str(err).split())[:120]}); {MAIN_GUARD}") from None
+                        raise InputError(
+                            f"the local Dask workers did not start ({' '.join(str(err).split())[:120]}); {MAIN_GUARD}"
+                        ) from None
                     client = Client(cluster, set_as_default=False)
             yield client
         finally:
@@ -249,11 +289,21 @@ def _run_dask(client: Any, tasks: list[dict], handle: Callable[[dict, dict], Non
         try:
             result = f.result()
         except Exception as err:  # the worker died (memory, a crash): the point's error row
-            result = {"point": t["point"], "status": "error", "error": _one_line(err), "seconds": None, "summary": None}
+            result = {
+                "point": t["point"],
+                "status": "error",
+                "error": _one_line(err),
+                "seconds": None,
+                "summary": None,
+            }
         f.release()
         handle(t, result)
         submit()
-    return {"run_s": time.perf_counter() - t0, "workers": len(client.nthreads()), "threads": threads}
+    return {
+        "run_s": time.perf_counter() - t0,
+        "workers": len(client.nthreads()),
+        "threads": threads,
+    }
 
 
 def _run_here(tasks: list[dict], handle: Callable[[dict, dict], None]) -> dict:

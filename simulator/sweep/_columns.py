@@ -21,7 +21,26 @@ STATUS_COLUMNS = ("status", "error", "seconds")
 
 # ----------------------------------------------------------------------- flattening
 #: Unit suffixes of summary keys, longest first; a key ``name_UNIT`` puts UNIT at the end of its column.
-UNITS = ("um_per_px", "Nm_per_rad", "N_per_m", "mN_m", "N_m", "kg_m3", "mPa_s", "Pa_s", "um2", "um", "deg", "Nm", "nl", "MB", "J", "N", "s", "px")
+UNITS = (
+    "um_per_px",
+    "Nm_per_rad",
+    "N_per_m",
+    "mN_m",
+    "N_m",
+    "kg_m3",
+    "mPa_s",
+    "Pa_s",
+    "um2",
+    "um",
+    "deg",
+    "Nm",
+    "nl",
+    "MB",
+    "J",
+    "N",
+    "s",
+    "px",
+)
 #: Names of list components, by key (default x, y, twist).
 COMPONENTS = {"pattern_px": ("rows", "cols"), "chip_um": ("width", "height")}
 
@@ -67,8 +86,12 @@ def flatten(summary: dict) -> dict[str, Any]:
             if isinstance(v, dict):
                 walk(v, (*parts, name), u)
             elif isinstance(v, list | tuple):
-                if v and all(isinstance(x, int | float | np.number) and not isinstance(x, bool) for x in v):
-                    comps = COMPONENTS.get(str(k)) or (("x", "y", "twist") if len(v) <= 3 else tuple(str(i) for i in range(len(v))))
+                if v and all(
+                    isinstance(x, int | float | np.number) and not isinstance(x, bool) for x in v
+                ):
+                    comps = COMPONENTS.get(str(k)) or (
+                        ("x", "y", "twist") if len(v) <= 3 else tuple(str(i) for i in range(len(v)))
+                    )
                     for c, x in zip(comps, v, strict=False):
                         emit((*parts, name, c), u, x)
             elif isinstance(v, bool | int | float | np.number):
@@ -85,5 +108,7 @@ def flatten(summary: dict) -> dict[str, Any]:
         out["global_minimum_offset_um"] = float(math.hypot(g["x_um"], g["y_um"]))
     fl = summary.get("floating_range")
     if isinstance(fl, dict):  # free contact lines: the chip floats on the well's floor
-        out["floating_half_width_um"] = float(max(fl["x_to_um"] - fl["x_from_um"], fl["y_to_um"] - fl["y_from_um"]) / 2)
+        out["floating_half_width_um"] = float(
+            max(fl["x_to_um"] - fl["x_from_um"], fl["y_to_um"] - fl["y_from_um"]) / 2
+        )
     return out

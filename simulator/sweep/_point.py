@@ -56,9 +56,13 @@ def point_scene(task: dict):
         for k in ("chip", "chip_layer"):
             doc.pop(k, None)
         doc["chip_size_um"] = v["chip_size_um"]
-    for key, table, name in (("volume_nl", "liquid", "volume_nl"), ("pad_angle_deg", "materials", "pad_angle_deg"),
-                             ("substrate_angle_deg", "materials", "substrate_angle_deg"),
-                             ("surface_tension_mN_m", "materials", "surface_tension_mN_m"), ("twist_step_deg", "twist", "step_deg")):
+    for key, table, name in (
+        ("volume_nl", "liquid", "volume_nl"),
+        ("pad_angle_deg", "materials", "pad_angle_deg"),
+        ("substrate_angle_deg", "materials", "substrate_angle_deg"),
+        ("surface_tension_mN_m", "materials", "surface_tension_mN_m"),
+        ("twist_step_deg", "twist", "step_deg"),
+    ):
         if key in v:
             doc.setdefault(table, {})[name] = v[key]
     if "resolution_um" in v:
@@ -74,10 +78,18 @@ def point_scene(task: dict):
         record = design_record(design["name"], **params)
         record.update(margin_um=design["margin_um"], area_um2=geometry.area)
         um = doc.get("resolution_um") or doc.get("um_per_px") or 1.0
-        doc["pattern"] = mask_from_geometry(geometry, um, margin_um=design["margin_um"], params=record,
-                                            budget_mb=doc.get("memory_budget_mb"), what="the pattern raster")
+        doc["pattern"] = mask_from_geometry(
+            geometry,
+            um,
+            margin_um=design["margin_um"],
+            params=record,
+            budget_mb=doc.get("memory_budget_mb"),
+            what="the pattern raster",
+        )
         if not any(k in doc for k in ("chip", "chip_size_um", "chip_layer")):
-            x0, y0, x1, y1 = geometry.bounds  # evaluate's default chip: the pattern's wettable bounding box
+            x0, y0, x1, y1 = (
+                geometry.bounds
+            )  # evaluate's default chip: the pattern's wettable bounding box
             doc["chip_size_um"] = [x1 - x0, y1 - y0]
     elif not any(k in doc for k in ("chip", "chip_size_um", "chip_layer")):
         # evaluate's default chip: the pattern's wettable bounding box (the pattern read once with a stand-in chip)
@@ -106,12 +118,26 @@ def assess_point(task: dict) -> dict:
     sigma = None
     if "placement_sigma_um" in v or "placement_sigma_deg" in v:
         w, h = chip_size(scene)
-        sx, sy = (v["placement_sigma_um"],) * 2 if "placement_sigma_um" in v else (NOISE_FRACTION * w, NOISE_FRACTION * h)
+        sx, sy = (
+            (v["placement_sigma_um"],) * 2
+            if "placement_sigma_um" in v
+            else (NOISE_FRACTION * w, NOISE_FRACTION * h)
+        )
         sigma = (sx, sy, v.get("placement_sigma_deg", NOISE_TWIST_DEG))
-    summary = assess(scene, quiet=True, method=v.get("method", "greedy"), seed=task["point_seed"], placement_sigma=sigma,
-                     yield_starts=task["yield_starts"], grid_cells=task["capture_grid"])
-    summary["settings"] |= {"source_um_per_px": native, "resolution_auto": bool(auto and scene.um_per_px != native),
-                            "volume_nl": scene.liquid.volume_nl}
+    summary = assess(
+        scene,
+        quiet=True,
+        method=v.get("method", "greedy"),
+        seed=task["point_seed"],
+        placement_sigma=sigma,
+        yield_starts=task["yield_starts"],
+        grid_cells=task["capture_grid"],
+    )
+    summary["settings"] |= {
+        "source_um_per_px": native,
+        "resolution_auto": bool(auto and scene.um_per_px != native),
+        "volume_nl": scene.liquid.volume_nl,
+    }
     if "layout" in scene.pattern.params:
         summary["layout"] = scene.pattern.params["layout"]
     return require_finite(summary, f"point {task['point']}")
@@ -133,5 +159,17 @@ def run_point(task: dict) -> dict:
         with quiet_waits():  # the sweep's own bar says how the points go
             summary = assess_point(task)
     except Exception as err:  # the point's failure is its row; the sweep goes on
-        return {"point": task["point"], "status": "error", "error": _one_line(err), "seconds": round(time.perf_counter() - t0, 3), "summary": None}
-    return {"point": task["point"], "status": "ok", "error": None, "seconds": round(time.perf_counter() - t0, 3), "summary": summary}
+        return {
+            "point": task["point"],
+            "status": "error",
+            "error": _one_line(err),
+            "seconds": round(time.perf_counter() - t0, 3),
+            "summary": None,
+        }
+    return {
+        "point": task["point"],
+        "status": "ok",
+        "error": None,
+        "seconds": round(time.perf_counter() - t0, 3),
+        "summary": summary,
+    }

@@ -40,14 +40,30 @@ MAX_ROWS = 1000
 def metrics(table) -> list[tuple[str, str, float]]:
     """The metrics to draw: :data:`METRICS` present with a finite value, and any stiffness column."""
     out = [m for m in METRICS if m[0] in table.columns]
-    out += [(c, column_label(c), 1.0) for c in table.columns if c.startswith("stiffness") and c not in {m[0] for m in out}]
+    out += [
+        (c, column_label(c), 1.0)
+        for c in table.columns
+        if c.startswith("stiffness") and c not in {m[0] for m in out}
+    ]
     ok = table[table["status"] == "ok"] if len(table) else table
     return [m for m in out if len(ok) and np.isfinite(np.asarray(ok[m[0]], float)).any()]
 
 
 #: How units in column names are written on the pictures.
-UNIT_TEXT = {"um": "um", "nl": "nl", "deg": "deg", "mN_m": "mN/m", "N_m": "N/m", "N_per_m": "N/m", "Nm_per_rad": "N m/rad", "N": "N",
-             "Nm": "N m", "J": "J", "um2": "um^2", "s": "s"}
+UNIT_TEXT = {
+    "um": "um",
+    "nl": "nl",
+    "deg": "deg",
+    "mN_m": "mN/m",
+    "N_m": "N/m",
+    "N_per_m": "N/m",
+    "Nm_per_rad": "N m/rad",
+    "N": "N",
+    "Nm": "N m",
+    "J": "J",
+    "um2": "um^2",
+    "s": "s",
+}
 
 
 def column_label(column: str) -> str:
@@ -61,7 +77,11 @@ def column_label(column: str) -> str:
 
 def _levels(values) -> tuple[list, bool]:
     """Distinct values in order, and whether they are numbers (else drawn as categories)."""
-    vals = list(dict.fromkeys(v for v in values if v is not None and not (isinstance(v, float) and math.isnan(v))))
+    vals = list(
+        dict.fromkeys(
+            v for v in values if v is not None and not (isinstance(v, float) and math.isnan(v))
+        )
+    )
     numeric = all(isinstance(v, int | float | np.number) and not isinstance(v, bool) for v in vals)
     return (sorted(vals) if numeric else vals), numeric
 
@@ -84,7 +104,9 @@ def plot_one_axis(table, axis, path: Path, mets) -> None:
     n = len(mets)
     cols = 2 if n > 1 else 1
     rows = -(-n // cols)
-    fig, axes = plt.subplots(rows, cols, figsize=(5.2 * cols, 3.3 * rows), squeeze=False, layout="constrained")
+    fig, axes = plt.subplots(
+        rows, cols, figsize=(5.2 * cols, 3.3 * rows), squeeze=False, layout="constrained"
+    )
     levels, numeric = _levels(table[axis.column])
     pos = {v: (v if numeric else k) for k, v in enumerate(levels)}
     ok = table["status"] == "ok"
@@ -99,12 +121,29 @@ def plot_one_axis(table, axis, path: Path, mets) -> None:
             hi.append(y[sel].max() if sel.any() else np.nan)
         xs = [pos[v] for v in levels]
         if table["realization"].max() > 0:
-            ax.fill_between(xs, lo, hi, color="tab:blue", alpha=0.18, lw=0, label="range over realizations")
+            ax.fill_between(
+                xs, lo, hi, color="tab:blue", alpha=0.18, lw=0, label="range over realizations"
+            )
             ax.plot(x[ok], y[ok], ".", color="tab:blue", ms=3, alpha=0.6)
-        ax.plot(xs, m, "-o", color="tab:blue", ms=4, label="mean" if table["realization"].max() > 0 else None)
+        ax.plot(
+            xs,
+            m,
+            "-o",
+            color="tab:blue",
+            ms=4,
+            label="mean" if table["realization"].max() > 0 else None,
+        )
         bad = ~ok.to_numpy()
         if bad.any():
-            ax.plot(x[bad], np.full(bad.sum(), np.nanmin(y) if np.isfinite(y).any() else 0.0), "x", color="tab:red", ms=7, mew=1.5, label="failed")
+            ax.plot(
+                x[bad],
+                np.full(bad.sum(), np.nanmin(y) if np.isfinite(y).any() else 0.0),
+                "x",
+                color="tab:red",
+                ms=7,
+                mew=1.5,
+                label="failed",
+            )
         ax.set_xlabel(_label(axis))
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
@@ -140,22 +179,56 @@ def plot_heatmap(table, ax_x, ax_y, col: str, label: str, f: float, path: Path, 
                 failed[iy[vy], ix[vx]] = True
         with np.errstate(invalid="ignore"):
             mean = np.where(count > 0, total / np.maximum(count, 1), np.nan)
-        fig, ax = plt.subplots(figsize=(1.2 + 0.9 * max(len(xs), 4), 1.4 + 0.62 * max(len(ys), 3)), layout="constrained")
+        fig, ax = plt.subplots(
+            figsize=(1.2 + 0.9 * max(len(xs), 4), 1.4 + 0.62 * max(len(ys), 3)),
+            layout="constrained",
+        )
         finite = mean[np.isfinite(mean)]
         vmin, vmax = (finite.min(), finite.max()) if finite.size else (0.0, 1.0)
         if vmin == vmax:
             vmin, vmax = vmin - 0.5 * (abs(vmin) or 1), vmax + 0.5 * (abs(vmax) or 1)
-        im = ax.imshow(np.ma.masked_invalid(mean), origin="lower", cmap="viridis", vmin=vmin, vmax=vmax, aspect="auto",
-                       extent=(-0.5, len(xs) - 0.5, -0.5, len(ys) - 0.5))
+        im = ax.imshow(
+            np.ma.masked_invalid(mean),
+            origin="lower",
+            cmap="viridis",
+            vmin=vmin,
+            vmax=vmax,
+            aspect="auto",
+            extent=(-0.5, len(xs) - 0.5, -0.5, len(ys) - 0.5),
+        )
         for (r, c), v in np.ndenumerate(mean):
             if np.isfinite(v):
                 light = (v - vmin) / (vmax - vmin) < 0.6
-                ax.text(c, r, _fmt(v), ha="center", va="center", fontsize=7.5, color="white" if light else "black")
+                ax.text(
+                    c,
+                    r,
+                    _fmt(v),
+                    ha="center",
+                    va="center",
+                    fontsize=7.5,
+                    color="white" if light else "black",
+                )
             elif failed[r, c]:
-                ax.add_patch(plt.Rectangle((c - 0.5, r - 0.5), 1, 1, fill=False, hatch="xx", edgecolor="tab:red", lw=0))
-                ax.text(c, r, "failed", ha="center", va="center", fontsize=7, color="tab:red",
-                        bbox={"boxstyle": "round,pad=0.2", "facecolor": "white", "edgecolor": "none"})
-        ax.set_xticks(range(len(xs)), [_fmt(v) if xnum else str(v) for v in xs], rotation=0 if len(xs) < 9 else 45)
+                ax.add_patch(
+                    plt.Rectangle(
+                        (c - 0.5, r - 0.5), 1, 1, fill=False, hatch="xx", edgecolor="tab:red", lw=0
+                    )
+                )
+                ax.text(
+                    c,
+                    r,
+                    "failed",
+                    ha="center",
+                    va="center",
+                    fontsize=7,
+                    color="tab:red",
+                    bbox={"boxstyle": "round,pad=0.2", "facecolor": "white", "edgecolor": "none"},
+                )
+        ax.set_xticks(
+            range(len(xs)),
+            [_fmt(v) if xnum else str(v) for v in xs],
+            rotation=0 if len(xs) < 9 else 45,
+        )
         ax.set_yticks(range(len(ys)), [_fmt(v) if ynum else str(v) for v in ys])
         reps = int(table["realization"].max()) + 1
         title = label + (f", mean of {reps} realizations" if reps > 1 else "")
@@ -163,7 +236,9 @@ def plot_heatmap(table, ax_x, ax_y, col: str, label: str, f: float, path: Path, 
         fig, ax = plt.subplots(figsize=(6.2, 4.6), layout="constrained")
         x = np.asarray(table[ax_x.column], float)
         y = np.asarray(table[ax_y.column], float)
-        im = ax.scatter(x[ok], y[ok], c=y_all[ok], cmap="viridis", s=28, edgecolor="k", linewidth=0.3)
+        im = ax.scatter(
+            x[ok], y[ok], c=y_all[ok], cmap="viridis", s=28, edgecolor="k", linewidth=0.3
+        )
         if (~ok).any():
             ax.plot(x[~ok], y[~ok], "x", color="tab:red", ms=7, mew=1.5, label="failed")
             ax.legend(fontsize=7)
@@ -180,7 +255,9 @@ def plot_effects(table, axes, col: str, label: str, f: float, path: Path) -> Non
     from simulator.render import pyplot, save_figure
 
     plt = pyplot()
-    fig, axs = plt.subplots(1, len(axes), figsize=(3.6 * len(axes), 3.2), squeeze=False, layout="constrained")
+    fig, axs = plt.subplots(
+        1, len(axes), figsize=(3.6 * len(axes), 3.2), squeeze=False, layout="constrained"
+    )
     ok = (table["status"] == "ok").to_numpy()
     y = np.asarray(table[col], float) * f
     for ax, a in zip(axs.flat, axes, strict=True):
@@ -210,7 +287,9 @@ def write_pictures(out: Path, spec, table) -> list[str]:
     elif len(swept) == 2:
         for col, label, f in mets:
             name = f"heatmap_{col}.png"
-            plot_heatmap(table, swept[0], swept[1], col, label, f, out / name, grid=spec.samples is None)
+            plot_heatmap(
+                table, swept[0], swept[1], col, label, f, out / name, grid=spec.samples is None
+            )
             names.append(name)
     else:
         for col, label, f in mets:
@@ -238,32 +317,69 @@ def write_report(out: Path, spec, table, stats: dict) -> list[str]:
     width = max(5, len(str(spec.n_points - 1)))
     axis_cols = [a.column for a in spec.axes]
     shown = [c for c, _, _ in metrics(table)]
-    head = "".join(f"<th>{e(c)}</th>" for c in ["point", "realization", *axis_cols, "status", *shown, "numbers"])
+    head = "".join(
+        f"<th>{e(c)}</th>"
+        for c in ["point", "realization", *axis_cols, "status", *shown, "numbers"]
+    )
     rows = []
     for _, r in table.head(MAX_ROWS).iterrows():
         link = f'<a href="points/{int(r["point"]):0{width}d}.json">json</a>'
-        status = "ok" if r["status"] == "ok" else f'<span class="err">error: {e(str(r["error"]))}</span>'
-        cells = [_cell(r["point"]), _cell(r["realization"]), *(_cell(r.get(c)) for c in axis_cols), status,
-                 *(_cell(r.get(c)) for c in shown), link]
+        status = (
+            "ok" if r["status"] == "ok" else f'<span class="err">error: {e(str(r["error"]))}</span>'
+        )
+        cells = [
+            _cell(r["point"]),
+            _cell(r["realization"]),
+            *(_cell(r.get(c)) for c in axis_cols),
+            status,
+            *(_cell(r.get(c)) for c in shown),
+            link,
+        ]
         rows.append("<tr>" + "".join(f"<td>{c}</td>" for c in cells) + "</tr>")
-    more = f"<p class='note'>The first {MAX_ROWS} of {len(table)} points; every point is in results.csv.</p>" if len(table) > MAX_ROWS else ""
+    more = (
+        f"<p class='note'>The first {MAX_ROWS} of {len(table)} points; every point is in results.csv.</p>"
+        if len(table) > MAX_ROWS
+        else ""
+    )
     axes = "".join(
         f"<tr><td><code>{e(a.name)}</code></td><td>{e(a.column)}</td><td>"
-        + (e(", ".join(str(v) for v in a.values)) if a.values is not None else f"{a.lo:g} to {a.hi:g} (sampled)") + "</td></tr>"
+        + (
+            e(", ".join(str(v) for v in a.values))
+            if a.values is not None
+            else f"{a.lo:g} to {a.hi:g} (sampled)"
+        )
+        + "</td></tr>"
         for a in spec.axes
     )
     n_ok = int((table["status"] == "ok").sum()) if len(table) else 0
     pps = stats.get("points_per_s")
-    timing = (f"{stats['run_now']} points run now in {stats['run_s']:.1f} s ({pps:.2f} points/s"
-              + (f" on {stats['workers']} Dask workers" if stats.get("workers") else " in one process") + f"; cluster start {stats['cluster_s']:.1f} s)"
-              if pps else "no point run now")
+    timing = (
+        f"{stats['run_now']} points run now in {stats['run_s']:.1f} s ({pps:.2f} points/s"
+        + (f" on {stats['workers']} Dask workers" if stats.get("workers") else " in one process")
+        + f"; cluster start {stats['cluster_s']:.1f} s)"
+        if pps
+        else "no point run now"
+    )
     design = spec.design
-    pattern = (f"design <code>{e(design['name'])}</code> " + e(", ".join(f"{k} = {v}" for k, v in design["params"].items()))
-               if design else "pattern files")
+    pattern = (
+        f"design <code>{e(design['name'])}</code> "
+        + e(", ".join(f"{k} = {v}" for k, v in design["params"].items()))
+        if design
+        else "pattern files"
+    )
     fx = dict(spec.scene.get("effects") or {})
-    effects = ", ".join(f"{k} {'on' if v else 'off'}" for k, v in ({"twist": True, "meniscus": False} | fx).items())
-    noise = "a draw of its own for every point" if spec.independent_noise else "the same draws for every design of one realization"
-    imgs = "".join(f'<figure><img src="{e(p)}" alt="{e(p)}"><figcaption>{e(p)}</figcaption></figure>' for p in pics)
+    effects = ", ".join(
+        f"{k} {'on' if v else 'off'}" for k, v in ({"twist": True, "meniscus": False} | fx).items()
+    )
+    noise = (
+        "a draw of its own for every point"
+        if spec.independent_noise
+        else "the same draws for every design of one realization"
+    )
+    imgs = "".join(
+        f'<figure><img src="{e(p)}" alt="{e(p)}"><figcaption>{e(p)}</figcaption></figure>'
+        for p in pics
+    )
     page = f"""<!doctype html>
 <html lang="en"><head><meta charset="utf-8"><title>selfalign sweep {e(spec.digest[:12])}</title>
 <style>

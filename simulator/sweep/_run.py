@@ -116,9 +116,19 @@ def _bar(show: bool, total: int):
     return tqdm(total=total, desc="sweep", unit="point", postfix="failed 0", dynamic_ncols=True)
 
 
-def sweep(spec: str | os.PathLike | dict, out: str | os.PathLike | None = None, *, workers: int | None = None,
-          scheduler: str | None = None, max_points: int = DEFAULT_MAX_POINTS, retry_failed: bool = False, quiet: bool = True,
-          base: str | os.PathLike | None = None, pictures: bool = True, flush_s: float = FLUSH_S):
+def sweep(
+    spec: str | os.PathLike | dict,
+    out: str | os.PathLike | None = None,
+    *,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    max_points: int = DEFAULT_MAX_POINTS,
+    retry_failed: bool = False,
+    quiet: bool = True,
+    base: str | os.PathLike | None = None,
+    pictures: bool = True,
+    flush_s: float = FLUSH_S,
+):
     """Run a design sweep and return its table (a pandas DataFrame, one row per point).
 
     Args:
@@ -138,33 +148,66 @@ def sweep(spec: str | os.PathLike | dict, out: str | os.PathLike | None = None, 
     """
     spec = spec if isinstance(spec, SweepSpec) else load_sweep(spec, base)
     n = spec.n_points
-    require(isinstance(max_points, int) and max_points >= 1, f"--max-points must be a whole number >= 1, got {max_points!r}")
-    require(n <= HARD_MAX_POINTS, f"the sweep has {n:,} points ({spec.shape_text()}); at most {HARD_MAX_POINTS:,}")
-    require(n <= max_points, f"the sweep has {n:,} points ({spec.shape_text()}), more than the cap of {max_points:,}; "
-            f"pass --max-points {n} to run it, or use fewer values or [sweep] samples = N")
+    require(
+        isinstance(max_points, int) and max_points >= 1,
+        f"--max-points must be a whole number >= 1, got {max_points!r}",
+    )
+    require(
+        n <= HARD_MAX_POINTS,
+        f"the sweep has {n:,} points ({spec.shape_text()}); at most {HARD_MAX_POINTS:,}",
+    )
+    require(
+        n <= max_points,
+        f"the sweep has {n:,} points ({spec.shape_text()}), more than the cap of {max_points:,}; "
+        f"pass --max-points {n} to run it, or use fewer values or [sweep] samples = N",
+    )
     if workers is not None:
-        require(isinstance(workers, int) and not isinstance(workers, bool) and 0 <= workers <= 4096, f"--workers must be a whole number >= 0, got {workers!r}")
-        require(not scheduler, "give --workers or --scheduler, not both (the cluster at --scheduler has its own workers)")
+        require(
+            isinstance(workers, int) and not isinstance(workers, bool) and 0 <= workers <= 4096,
+            f"--workers must be a whole number >= 0, got {workers!r}",
+        )
+        require(
+            not scheduler,
+            "give --workers or --scheduler, not both (the cluster at --scheduler has its own workers)",
+        )
     inputs = [Path(p) for p in spec.files] + ([Path(spec.source)] if spec.source != "sweep" else [])
-    store = _Store(spec, out, inputs, flush_s)  # checks out; reads the points a previous run finished
+    store = _Store(
+        spec, out, inputs, flush_s
+    )  # checks out; reads the points a previous run finished
     t0 = time.perf_counter()
     failed = [0]
     try:
         done = store.done(retry_failed)
         todo = [spec.task(p) for p in spec.points() if p["point"] not in done]
-        n_workers, capped = (None, None) if scheduler else worker_cap(workers or os.cpu_count() or 1, len(todo))
+        n_workers, capped = (
+            (None, None) if scheduler else worker_cap(workers or os.cpu_count() or 1, len(todo))
+        )
         if capped and workers and todo:
             print(f"note: {capped}", file=sys.stderr, flush=True)
         with contextlib.ExitStack() as stack:
             t_cluster = time.perf_counter()
-            client = stack.enter_context(dask_client(n_workers, scheduler)) if todo and workers != 0 else None
+            client = (
+                stack.enter_context(dask_client(n_workers, scheduler))
+                if todo and workers != 0
+                else None
+            )
             t_cluster = time.perf_counter() - t_cluster
             store.open()  # only now: a scheduler that cannot be reached leaves no directory
             if todo and not quiet:
-                where = f"the Dask cluster at {scheduler}" if scheduler else "this process" if client is None else f"{n_workers} local Dask workers"
-                print(f"sweep {spec.digest[:12]}: {n} points ({spec.shape_text()}), {n - len(todo)} done before; running {len(todo)} on {where}",
-                      file=sys.stderr, flush=True)
+                where = (
+                    f"the Dask cluster at {scheduler}"
+                    if scheduler
+                    else "this process"
+                    if client is None
+                    else f"{n_workers} local Dask workers"
+                )
+                print(
+                    f"sweep {spec.digest[:12]}: {n} points ({spec.shape_text()}), {n - len(todo)} done before; running {len(todo)} on {where}",
+                    file=sys.stderr,
+                    flush=True,
+                )
             with _bar(not quiet and bool(todo), len(todo)) as bar:
+
                 def handle(task: dict, result: dict) -> None:
                     store.add(task, result)
                     failed[0] += result["status"] != "ok"
@@ -184,9 +227,15 @@ def sweep(spec: str | os.PathLike | dict, out: str | os.PathLike | None = None, 
                 store.write_tables()
         store.close()
     table = store.table()
-    stats |= {"hash": spec.digest, "points": n, "run_now": len(todo), "resumed": n - len(todo),
-              "failed": int((table["status"] != "ok").sum()) if len(table) else 0, "failed_now": failed[0],
-              "seconds": time.perf_counter() - t0}
+    stats |= {
+        "hash": spec.digest,
+        "points": n,
+        "run_now": len(todo),
+        "resumed": n - len(todo),
+        "failed": int((table["status"] != "ok").sum()) if len(table) else 0,
+        "failed_now": failed[0],
+        "seconds": time.perf_counter() - t0,
+    }
     stats["points_per_s"] = len(todo) / stats["run_s"] if stats["run_s"] > 0 else None
     if store.out is not None:
         if pictures:

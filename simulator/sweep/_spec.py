@@ -47,7 +47,14 @@ DEFAULT_MAX_POINTS = 2000
 MAX_SWEEP_BYTES = 1 << 20
 
 SECTIONS = ("scene", "design", "axes", "sweep")
-SWEEP_KEYS = ("seed", "realizations", "samples", "yield_starts", "capture_grid", "independent_noise")
+SWEEP_KEYS = (
+    "seed",
+    "realizations",
+    "samples",
+    "yield_starts",
+    "capture_grid",
+    "independent_noise",
+)
 #: The point's own columns, first in every table.
 ID_COLUMNS = ("point", "realization", "point_seed")
 
@@ -59,16 +66,22 @@ def _read_toml(path: Path) -> dict:
 
     require_regular_file(path, "sweep")
     size = path.stat().st_size
-    require(size <= MAX_SWEEP_BYTES, f"sweep file {path} is {size:,} bytes; at most {MAX_SWEEP_BYTES:,}")
+    require(
+        size <= MAX_SWEEP_BYTES, f"sweep file {path} is {size:,} bytes; at most {MAX_SWEEP_BYTES:,}"
+    )
     try:
         text = path.read_bytes().decode("utf-8").removeprefix("\ufeff")
         doc = tomllib.loads(text)
     except UnicodeDecodeError:
         raise InputError(f"sweep file {path} is not UTF-8 text; save it as UTF-8") from None
     except tomllib.TOMLDecodeError as err:
-        raise InputError(f"sweep file {path} is not valid TOML: {' '.join(str(err).split())}") from None
+        raise InputError(
+            f"sweep file {path} is not valid TOML: {' '.join(str(err).split())}"
+        ) from None
     except (RecursionError, ValueError) as err:
-        raise InputError(f"sweep file {path} is not a usable TOML file: {' '.join(str(err).split())[:200]}") from None
+        raise InputError(
+            f"sweep file {path} is not a usable TOML file: {' '.join(str(err).split())[:200]}"
+        ) from None
     hit = check_nesting(doc, MAX_DEPTH, MAX_ARRAY_ITEMS)
     if hit:
         raise InputError(f"sweep file {path}: {hit[0]} {hit[1]}")
@@ -133,15 +146,24 @@ class SweepSpec:
         if self.samples is not None:
             text = f"Latin hypercube of {self.samples} over {', '.join(a.name for a in self.swept) or 'no axis'}"
         else:
-            text = "grid " + (" x ".join(f"{a.size} {a.name}" for a in self.swept) or "of one point")
+            text = "grid " + (
+                " x ".join(f"{a.size} {a.name}" for a in self.swept) or "of one point"
+            )
         return text + (f", {self.realizations} realizations each" if self.realizations > 1 else "")
 
     @property
     def digest(self) -> str:
         doc = {
-            "version": SPEC_VERSION, "scene": self.scene, "design": self.design, "axes": [a.record() for a in self.axes],
-            "samples": self.samples, "seed": self.seed, "realizations": self.realizations,
-            "yield_starts": self.yield_starts, "capture_grid": self.capture_grid, "files": self.files,
+            "version": SPEC_VERSION,
+            "scene": self.scene,
+            "design": self.design,
+            "axes": [a.record() for a in self.axes],
+            "samples": self.samples,
+            "seed": self.seed,
+            "realizations": self.realizations,
+            "yield_starts": self.yield_starts,
+            "capture_grid": self.capture_grid,
+            "files": self.files,
             "independent_noise": self.independent_noise,
         }
         return hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()
@@ -154,7 +176,9 @@ class SweepSpec:
         rng = np.random.default_rng(np.random.SeedSequence(entropy=self.seed, spawn_key=(2**31,)))
         n = self.samples
         cols = {}
-        for a in self.axes:  # Latin hypercube: one point per stratum of every axis, strata shuffled per axis
+        for a in (
+            self.axes
+        ):  # Latin hypercube: one point per stratum of every axis, strata shuffled per axis
             u = (rng.permutation(n) + rng.random(n)) / n
             if a.values is not None:
                 cols[a.name] = [a.values[min(int(x * a.size), a.size - 1)] for x in u]
@@ -172,13 +196,26 @@ class SweepSpec:
         for values in self._design_values():
             for r in range(self.realizations):
                 i = len(out)
-                out.append({"point": i, "realization": r, "point_seed": _point_seed(self.seed, r, i, self.independent_noise), "values": values})
+                out.append(
+                    {
+                        "point": i,
+                        "realization": r,
+                        "point_seed": _point_seed(self.seed, r, i, self.independent_noise),
+                        "values": values,
+                    }
+                )
         return out
 
     def task(self, point: dict) -> dict:
         """What a worker needs to run ``point`` (:func:`run_point`): plain data, no paths relative to here."""
-        return {**point, "scene": self.scene, "design": self.design, "base": str(self.base_dir),
-                "yield_starts": self.yield_starts, "capture_grid": self.capture_grid}
+        return {
+            **point,
+            "scene": self.scene,
+            "design": self.design,
+            "base": str(self.base_dir),
+            "yield_starts": self.yield_starts,
+            "capture_grid": self.capture_grid,
+        }
 
     def columns(self, point: dict) -> dict:
         """The point's identity and settings as table columns (units in the names)."""
@@ -197,16 +234,28 @@ class SweepSpec:
 
     def describe(self) -> dict:
         """JSON-ready description for sweep.json and the report."""
-        return {"source": self.source, "points": self.n_points, "shape": self.shape_text(), "samples": self.samples, "seed": self.seed,
-                "realizations": self.realizations, "yield_starts": self.yield_starts, "capture_grid": self.capture_grid,
-                "independent_noise": self.independent_noise,
-                "design": self.design, "scene": self.scene, "axes": [a.record() | {"column": a.column} for a in self.axes],
-                "files": self.files}
+        return {
+            "source": self.source,
+            "points": self.n_points,
+            "shape": self.shape_text(),
+            "samples": self.samples,
+            "seed": self.seed,
+            "realizations": self.realizations,
+            "yield_starts": self.yield_starts,
+            "capture_grid": self.capture_grid,
+            "independent_noise": self.independent_noise,
+            "design": self.design,
+            "scene": self.scene,
+            "axes": [a.record() | {"column": a.column} for a in self.axes],
+            "files": self.files,
+        }
 
 
 def _design_seed(design: dict, point: dict) -> int:
     """A seeded design's (random-jagged) seed at this point: the given seed (default 0) plus the realization."""
-    return int(point["values"].get("seed", design["params"].get("seed", 0))) + int(point["realization"])
+    return int(point["values"].get("seed", design["params"].get("seed", 0))) + int(
+        point["realization"]
+    )
 
 
 def load_sweep(spec: str | os.PathLike | dict, base: str | os.PathLike | None = None) -> SweepSpec:
@@ -227,8 +276,11 @@ def load_sweep(spec: str | os.PathLike | dict, base: str | os.PathLike | None = 
         base_dir = Path(base).resolve() if base is not None else path.resolve().parent
     require(isinstance(doc, dict), f"{src}: a sweep must be a table of sections")
     unknown = [k for k in doc if k not in SECTIONS]
-    require(not unknown, f"{src}: unknown section or key {show_value(unknown[0]) if unknown else ''}; a sweep file has the tables "
-            + ", ".join(f"[{s}]" for s in SECTIONS))
+    require(
+        not unknown,
+        f"{src}: unknown section or key {show_value(unknown[0]) if unknown else ''}; a sweep file has the tables "
+        + ", ".join(f"[{s}]" for s in SECTIONS),
+    )
     for s in SECTIONS:
         require(isinstance(doc.get(s, {}), dict), f"{src}: {s} must be a table ([{s}])")
     scene = dict(doc.get("scene", {}))
@@ -236,13 +288,19 @@ def load_sweep(spec: str | os.PathLike | dict, base: str | os.PathLike | None = 
     # [sweep]
     sw = doc.get("sweep", {})
     bad = [k for k in sw if k not in SWEEP_KEYS]
-    require(not bad, f"{src}: [sweep] {bad[0] if bad else ''}: unknown key; [sweep] takes {', '.join(SWEEP_KEYS)}")
+    require(
+        not bad,
+        f"{src}: [sweep] {bad[0] if bad else ''}: unknown key; [sweep] takes {', '.join(SWEEP_KEYS)}",
+    )
 
     def whole(key: str, default: Any, lo: int, hi: int) -> Any:
         v = sw.get(key, default)
         if v is None:
             return None
-        require(isinstance(v, int) and not isinstance(v, bool) and lo <= v <= hi, f"{src}: [sweep] {key} = {show_value(v)}: must be a whole number from {lo:,} to {hi:,}")
+        require(
+            isinstance(v, int) and not isinstance(v, bool) and lo <= v <= hi,
+            f"{src}: [sweep] {key} = {show_value(v)}: must be a whole number from {lo:,} to {hi:,}",
+        )
         return v
 
     samples = whole("samples", None, 1, HARD_MAX_POINTS)
@@ -251,20 +309,30 @@ def load_sweep(spec: str | os.PathLike | dict, base: str | os.PathLike | None = 
     yield_starts = whole("yield_starts", 2000, 1, 10**7)
     capture_grid = whole("capture_grid", 25, 2, 1001)
     independent = sw.get("independent_noise", False)
-    require(isinstance(independent, bool), f"{src}: [sweep] independent_noise = {show_value(independent)}: must be true or false")
+    require(
+        isinstance(independent, bool),
+        f"{src}: [sweep] independent_noise = {show_value(independent)}: must be true or false",
+    )
     # [design]
     design = None
     if "design" in doc:
         d = dict(doc["design"])
         name = d.pop("name", None)
-        require(isinstance(name, str) and name in DESIGNS,
-                f"{src}: [design] name = {show_value(name)}: must be one of {', '.join(DESIGNS)}")
+        require(
+            isinstance(name, str) and name in DESIGNS,
+            f"{src}: [design] name = {show_value(name)}: must be one of {', '.join(DESIGNS)}",
+        )
         margin = d.pop("margin_um", 10.0)
-        require(isinstance(margin, int | float) and not isinstance(margin, bool) and 0 <= margin <= 1e6,
-                f"{src}: [design] margin_um = {show_value(margin)}: must be a number from 0 to 1e6 um")
+        require(
+            isinstance(margin, int | float) and not isinstance(margin, bool) and 0 <= margin <= 1e6,
+            f"{src}: [design] margin_um = {show_value(margin)}: must be a number from 0 to 1e6 um",
+        )
         dk = _design_axes(name)
         for k, v in d.items():
-            require(k in dk, f"{src}: [design] {k}: design {name} has no parameter {k}; it has {', '.join(dk)}")
+            require(
+                k in dk,
+                f"{src}: [design] {k}: design {name} has no parameter {k}; it has {', '.join(dk)}",
+            )
             problem = dk[k].check(v)
             require(problem is None, f"{src}: [design] {k} = {show_value(v)}: {problem}")
         design = {"name": name, "margin_um": float(margin), "params": d}
@@ -274,21 +342,46 @@ def load_sweep(spec: str | os.PathLike | dict, base: str | os.PathLike | None = 
     axes = []
     for name, raw in raw_axes.items():
         key = name
-        if key not in kinds and design is not None and key.endswith("_um") and key[:-3] in kinds and kinds[key[:-3]].column == key:
+        if (
+            key not in kinds
+            and design is not None
+            and key.endswith("_um")
+            and key[:-3] in kinds
+            and kinds[key[:-3]].column == key
+        ):
             key = key[:-3]  # gap_um: the design's gap
         if key not in kinds:
-            has = f"design {design['name']} has {', '.join(k for k in kinds if k not in AXES) or 'no parameters'}; " if design else "no [design] is given; "
-            raise InputError(f"{src}: [axes] {name}: not a parameter of this sweep: {has}the other axes are {', '.join(AXES)}")
+            has = (
+                f"design {design['name']} has {', '.join(k for k in kinds if k not in AXES) or 'no parameters'}; "
+                if design
+                else "no [design] is given; "
+            )
+            raise InputError(
+                f"{src}: [axes] {name}: not a parameter of this sweep: {has}the other axes are {', '.join(AXES)}"
+            )
         require(all(a.name != key for a in axes), f"{src}: [axes] gives {key} twice")
         axes.append(_parse_axis(key, raw, kinds[key], samples is not None, src))
     names = [a.name for a in axes]
     # where the pattern comes from: exactly one of [design], a pattern axis, [scene] pattern
-    sources = [s for s, given in (("[design]", design is not None), ("the pattern axis", "pattern" in names),
-                                  ("[scene] pattern", "pattern" in scene)) if given]
-    require(len(sources) == 1, f"{src}: give the pattern once: a [design], a pattern axis or [scene] pattern = \"file\"; "
-            + (f"got {' and '.join(sources)}" if sources else "got none"))
+    sources = [
+        s
+        for s, given in (
+            ("[design]", design is not None),
+            ("the pattern axis", "pattern" in names),
+            ("[scene] pattern", "pattern" in scene),
+        )
+        if given
+    ]
+    require(
+        len(sources) == 1,
+        f'{src}: give the pattern once: a [design], a pattern axis or [scene] pattern = "file"; '
+        + (f"got {' and '.join(sources)}" if sources else "got none"),
+    )
     if samples is None:
-        require(all(a.values is not None for a in axes), f"{src}: a grid needs every range with num or step")
+        require(
+            all(a.values is not None for a in axes),
+            f"{src}: a grid needs every range with num or step",
+        )
     # files: absolute paths, digests
     files = {}
     for key in ("pattern", "chip"):
@@ -302,4 +395,17 @@ def load_sweep(spec: str | os.PathLike | dict, base: str | os.PathLike | None = 
             p = (base_dir / v).resolve()
             require_regular_file(p, "pattern")
             files[str(p)] = _digest_file(p)
-    return SweepSpec(src, base_dir, scene, design, tuple(axes), samples, seed, realizations, yield_starts, capture_grid, files, independent)
+    return SweepSpec(
+        src,
+        base_dir,
+        scene,
+        design,
+        tuple(axes),
+        samples,
+        seed,
+        realizations,
+        yield_starts,
+        capture_grid,
+        files,
+        independent,
+    )

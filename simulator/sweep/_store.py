@@ -53,7 +53,13 @@ def _version() -> str:
 class _Store:
     """The rows of a sweep, in memory and (with ``out``) in a resumable directory."""
 
-    def __init__(self, spec: SweepSpec, out: str | os.PathLike | None, inputs: Iterable[Path] = (), flush_s: float = FLUSH_S):
+    def __init__(
+        self,
+        spec: SweepSpec,
+        out: str | os.PathLike | None,
+        inputs: Iterable[Path] = (),
+        flush_s: float = FLUSH_S,
+    ):
         """Check ``out`` (and, for a sweep already there, take its lock and read its rows); create nothing."""
         from patterns.outputs import check_output_dir
 
@@ -89,8 +95,21 @@ class _Store:
             self._take_lock()
         (out / POINTS_DIR).mkdir(exist_ok=True)
         if not (out / MANIFEST).exists():
-            _write_text(out / MANIFEST, json.dumps({"tool": "selfalign", "version": _version(), "command": "sweep", "hash": self.spec.digest,
-                                                    **self.spec.describe()}, indent=1, default=str) + "\n")
+            _write_text(
+                out / MANIFEST,
+                json.dumps(
+                    {
+                        "tool": "selfalign",
+                        "version": _version(),
+                        "command": "sweep",
+                        "hash": self.spec.digest,
+                        **self.spec.describe(),
+                    },
+                    indent=1,
+                    default=str,
+                )
+                + "\n",
+            )
         self._journal = open(out / JOURNAL, "a", encoding="utf-8")  # noqa: SIM115 (closed in close())
 
     def _check_same(self, out: Path, inputs: list[Path]) -> None:
@@ -99,17 +118,27 @@ class _Store:
         man = out / MANIFEST
         r = out.resolve()
         cwd = Path.cwd().resolve()
-        require(not (r == cwd or r in cwd.parents), f"{flag} {out}: is the working directory or holds it; give a new directory name")
+        require(
+            not (r == cwd or r in cwd.parents),
+            f"{flag} {out}: is the working directory or holds it; give a new directory name",
+        )
         for inp in inputs:
             ri = inp.resolve()
-            require(not (r == ri or r in ri.parents), f"{flag} {out}: holds an input of this sweep ({inp.name}); give a new directory name")
+            require(
+                not (r == ri or r in ri.parents),
+                f"{flag} {out}: holds an input of this sweep ({inp.name}); give a new directory name",
+            )
         if not man.is_file():
-            raise InputError(f"{flag} {out}: holds files that are not a selfalign sweep; choose a new or empty directory")
+            raise InputError(
+                f"{flag} {out}: holds files that are not a selfalign sweep; choose a new or empty directory"
+            )
         try:
             doc = json.loads(man.read_text())
             theirs = doc["hash"]
         except (OSError, ValueError, KeyError, TypeError):
-            raise InputError(f"{flag} {out}: its {MANIFEST} cannot be read; choose a new or empty directory") from None
+            raise InputError(
+                f"{flag} {out}: its {MANIFEST} cannot be read; choose a new or empty directory"
+            ) from None
         if theirs != self.spec.digest:
             raise InputError(
                 f"{flag} {out}: holds a different sweep ({doc.get('source', '?')}, {doc.get('points', '?')} points, hash {str(theirs)[:12]}; "
@@ -125,7 +154,9 @@ class _Store:
             fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:
             f.close()
-            raise InputError(f"--out {self.out}: another selfalign sweep is writing into it; wait for it to end or choose another --out") from None
+            raise InputError(
+                f"--out {self.out}: another selfalign sweep is writing into it; wait for it to end or choose another --out"
+            ) from None
         self._lock = f
 
     def _read_journal(self) -> None:
@@ -159,8 +190,16 @@ class _Store:
         self.rows[i] = row
         if self.out is not None:
             width = max(5, len(str(self.spec.n_points - 1)))
-            doc = {"point": i, "settings": point["values"], "row": row, "summary": result.get("summary")}
-            _write_text(self.out / POINTS_DIR / f"{i:0{width}d}.json", json.dumps(doc, indent=1, allow_nan=False) + "\n")
+            doc = {
+                "point": i,
+                "settings": point["values"],
+                "row": row,
+                "summary": result.get("summary"),
+            }
+            _write_text(
+                self.out / POINTS_DIR / f"{i:0{width}d}.json",
+                json.dumps(doc, indent=1, allow_nan=False) + "\n",
+            )
             self._journal.write(json.dumps(row, allow_nan=False) + "\n")
             self._journal.flush()
             hold("sweep-point")
@@ -174,7 +213,9 @@ class _Store:
 
         rows = [self.rows[i] for i in sorted(self.rows)]
         cols: dict[str, None] = {}
-        for r in rows:  # rows are built identity, settings, status, metrics: their union keeps that order
+        for r in (
+            rows
+        ):  # rows are built identity, settings, status, metrics: their union keeps that order
             cols.update(dict.fromkeys(r))
         return pd.DataFrame(rows, columns=list(cols)) if rows else pd.DataFrame(columns=list(cols))
 
@@ -193,13 +234,25 @@ class _Store:
         with atomic_output(self.out / TABLES[1]) as tmp:
             df.to_csv(tmp, index=False)
         now = time.monotonic()
-        self._next_flush = now + max(self.flush_s, 10 * (now - t0))  # a large table: at most a tenth of the time on rewriting it
+        self._next_flush = now + max(
+            self.flush_s, 10 * (now - t0)
+        )  # a large table: at most a tenth of the time on rewriting it
 
     def write_marker(self) -> None:
         from patterns.outputs import MARKER, _listing
 
-        files = [e for e in _listing(self.out) if not e.endswith("/") and e != MARKER and not e.startswith(".") and "/." not in e]
-        _write_text(self.out / MARKER, json.dumps({"tool": "selfalign", "command": "sweep", "files": sorted(files + [LOCK])}, indent=1) + "\n")
+        files = [
+            e
+            for e in _listing(self.out)
+            if not e.endswith("/") and e != MARKER and not e.startswith(".") and "/." not in e
+        ]
+        _write_text(
+            self.out / MARKER,
+            json.dumps(
+                {"tool": "selfalign", "command": "sweep", "files": sorted(files + [LOCK])}, indent=1
+            )
+            + "\n",
+        )
 
     def close(self) -> None:
         if self._journal is not None:
@@ -227,4 +280,3 @@ def kept_points(out: str | os.PathLike) -> int:
         except (ValueError, KeyError, TypeError):
             continue
     return len(seen)
-

@@ -65,7 +65,9 @@ def _as_poses(poses) -> np.ndarray:
     if p.ndim == 1:
         p = p[None]
     if p.ndim != 2 or p.shape[1] != 3 or not np.all(np.isfinite(p)):
-        raise InputError(f"poses must be finite (N, 3) rows (x_um, y_um, twist_deg), got shape {p.shape}")
+        raise InputError(
+            f"poses must be finite (N, 3) rows (x_um, y_um, twist_deg), got shape {p.shape}"
+        )
     return p
 
 
@@ -114,20 +116,30 @@ def overlap_um2(pattern: BaseGeometry, chip: BaseGeometry, poses) -> np.ndarray:
     return total
 
 
-def energy_J(pattern: BaseGeometry, chip: BaseGeometry, poses, materials: Materials | None = None) -> np.ndarray:
+def energy_J(
+    pattern: BaseGeometry, chip: BaseGeometry, poses, materials: Materials | None = None
+) -> np.ndarray:
     """E = Delta_gamma * A_ol (J) at each pose (docs/physics.md Eq. 9), shape (N,)."""
     dg = (materials or Materials()).delta_gamma_N_m
     return dg * overlap_um2(pattern, chip, poses) * UM2
 
 
-def gradient_um2(pattern: BaseGeometry, chip: BaseGeometry, poses, h_um: float = 1e-3, h_deg: float = 1e-3) -> np.ndarray:
+def gradient_um2(
+    pattern: BaseGeometry, chip: BaseGeometry, poses, h_um: float = 1e-3, h_deg: float = 1e-3
+) -> np.ndarray:
     """(N, 3) exact dA/dx (um), dA/dy (um) and dA/dtwist (um^2 per radian).
 
     Central differences of the exact overlap with steps ``h_um`` and ``h_deg``; the
     six shifted poses of every pose are clipped in one vectorized call.
     """
     p = _as_poses(poses)
-    h = np.array([positive("h_um", h_um, "um"), positive("h_um", h_um, "um"), positive("h_deg", h_deg, "degrees")])
+    h = np.array(
+        [
+            positive("h_um", h_um, "um"),
+            positive("h_um", h_um, "um"),
+            positive("h_deg", h_deg, "degrees"),
+        ]
+    )
     shifts = np.concatenate([np.diag(h), -np.diag(h)])  # (6, 3): +x, +y, +t, -x, -y, -t
     a = overlap_um2(pattern, chip, (p[:, None, :] + shifts[None]).reshape(-1, 3)).reshape(len(p), 6)
     g = (a[:, :3] - a[:, 3:]) / (2 * h)
@@ -135,14 +147,18 @@ def gradient_um2(pattern: BaseGeometry, chip: BaseGeometry, poses, h_um: float =
     return g
 
 
-def force_N(pattern: BaseGeometry, chip: BaseGeometry, poses, materials: Materials | None = None, **steps) -> np.ndarray:
+def force_N(
+    pattern: BaseGeometry, chip: BaseGeometry, poses, materials: Materials | None = None, **steps
+) -> np.ndarray:
     """(N, 2) restoring force (Fx, Fy) in N: F = -grad E (docs/physics.md §3.4)."""
     dg = (materials or Materials()).delta_gamma_N_m
     g = gradient_um2(pattern, chip, poses, **steps)
     return -dg * g[:, :2] * UM2 / 1e-6
 
 
-def torque_Nm(pattern: BaseGeometry, chip: BaseGeometry, poses, materials: Materials | None = None, **steps) -> np.ndarray:
+def torque_Nm(
+    pattern: BaseGeometry, chip: BaseGeometry, poses, materials: Materials | None = None, **steps
+) -> np.ndarray:
     """(N,) restoring torque about z in N m: tau = -dE/dtwist (twist in radians, CCW +)."""
     dg = (materials or Materials()).delta_gamma_N_m
     return -dg * gradient_um2(pattern, chip, poses, **steps)[:, 2] * UM2
@@ -190,7 +206,9 @@ class ExactOverlap:
     (um^2), clipping only the poses not seen before (docs/physics.md §5.2, step 3).
     """
 
-    def __init__(self, pattern: BaseGeometry, chip: BaseGeometry, step_um: float = 1.0, step_deg: float = 1.0):
+    def __init__(
+        self, pattern: BaseGeometry, chip: BaseGeometry, step_um: float = 1.0, step_deg: float = 1.0
+    ):
         self.pattern, self.chip = pattern, chip
         self.step_um = positive("step_um", step_um, "um")
         self.step_deg = positive("step_deg", step_deg, "degrees")
@@ -198,7 +216,10 @@ class ExactOverlap:
 
     def pose(self, idx) -> np.ndarray:
         idx = np.asarray(idx, dtype=np.float64)
-        return np.stack([idx[..., 2] * self.step_um, idx[..., 1] * self.step_um, idx[..., 0] * self.step_deg], axis=-1)
+        return np.stack(
+            [idx[..., 2] * self.step_um, idx[..., 1] * self.step_um, idx[..., 0] * self.step_deg],
+            axis=-1,
+        )
 
     def __call__(self, idx) -> np.ndarray:
         keys = [tuple(int(v) for v in row) for row in np.atleast_2d(idx)]
@@ -248,7 +269,9 @@ def greedy(
     else:
         if not np.any(ev(idx[None] + GREEDY_MOVES[1:]) > ev(idx[None])[0] + tie):
             status = "converged"
-    return ReferenceRun(ev.pose(np.array(path)), np.array(areas), len(path) - 1, status, len(ev.memo))
+    return ReferenceRun(
+        ev.pose(np.array(path)), np.array(areas), len(path) - 1, status, len(ev.memo)
+    )
 
 
 def gradient_descent(
@@ -280,12 +303,19 @@ def gradient_descent(
     tie = TIE_PER_UM2 * chip.area if tie_um2 is None else float(tie_um2)
     rg_px = (radius_of_gyration_um(chip) if rg_um is None else float(rg_um)) / s_um
     metric = np.array([math.radians(s_deg) * rg_px, 1.0, 1.0])  # index units -> px
-    a_max = (min(pattern.area, chip.area) if force_scale_um2 is None else float(force_scale_um2)) / s_um**2
+    a_max = (
+        min(pattern.area, chip.area) if force_scale_um2 is None else float(force_scale_um2)
+    ) / s_um**2
     g_ref = a_max / (2 * rg_px + 1)
     to_idx = np.array([1 / s_deg, 1 / s_um, 1 / s_um])  # (twist, y, x) physical -> index
 
     def area(q: np.ndarray) -> np.ndarray:  # q: (M, 3) index units (it, iy, ix) -> px^2
-        return overlap_um2(pattern, chip, np.stack([q[:, 2] * s_um, q[:, 1] * s_um, q[:, 0] * s_deg], axis=1)) / s_um**2
+        return (
+            overlap_um2(
+                pattern, chip, np.stack([q[:, 2] * s_um, q[:, 1] * s_um, q[:, 0] * s_deg], axis=1)
+            )
+            / s_um**2
+        )
 
     s0 = np.asarray(start, float)
     q = np.array([s0[2], s0[1], s0[0]]) * to_idx
@@ -296,7 +326,9 @@ def gradient_descent(
         pose = np.array([[q[2] * s_um, q[1] * s_um, q[0] * s_deg]])
         g = gradient_um2(pattern, chip, pose)[0]  # dA/dx, dA/dy (um), dA/dtwist (per rad)
         g = np.where(np.abs(g) * 2 * H_DIFF <= tie, 0.0, g)  # differences at round-off: flat
-        g_idx = np.array([g[2] * math.radians(s_deg), g[1] * s_um, g[0] * s_um]) / s_um**2  # px^2 per index
+        g_idx = (
+            np.array([g[2] * math.radians(s_deg), g[1] * s_um, g[0] * s_um]) / s_um**2
+        )  # px^2 per index
         evals += 6
         d = g_idx / metric / g_ref  # ascent on A = descent on E, in px
         dlen = float(np.sqrt(np.sum(d * d)))
