@@ -132,7 +132,10 @@ def _pieces(
 
 
 def coverage_steps(
-    geometry: BaseGeometry, um_per_px: float, shape: tuple[int, int], dtype=np.float64
+    geometry: BaseGeometry,
+    um_per_px: float,
+    shape: tuple[int, int],
+    dtype: np.typing.DTypeLike = np.float64,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The row differences of :func:`rasterize`'s raster (cast to ``dtype``), sparse, at the
     cost of the outline: ``(rows, cols, steps)`` with ``raster[r, c] - raster[r, c - 1]``

@@ -90,7 +90,7 @@ def canvas_shape(
     at the given twists, with W % 2 and H % 2 the pattern's parity (a size, nothing rasterized)."""
     rx, ry = _rotated_extent_px(chip, twists)
     rx, ry = rx + margin_px, ry + margin_px
-    return tuple(2 * ceil_whole(r) + 2 + p for r, p in ((ry, parity[0]), (rx, parity[1])))
+    return (2 * ceil_whole(ry) + 2 + parity[0], 2 * ceil_whole(rx) + 2 + parity[1])
 
 
 def smooth_canvas(chip: Mask, margin_px: int, parity: tuple[int, int]) -> tuple[int, int]:
@@ -172,10 +172,10 @@ class ChipRotator:
     @functools.cached_property
     def _turn_shape(self) -> tuple[int, int]:
         """The canvas of a full turn (a chip image is resampled on it: see __init__)."""
-        rad = max(_chip_reach_px(self.chip, True))
-        return tuple(
-            max(2 * ceil_whole(rad) + 2 + p, n)
-            for p, n in zip(self._parity, self.shape, strict=True)
+        turn = 2 * ceil_whole(max(_chip_reach_px(self.chip, True))) + 2
+        return (
+            max(turn + self._parity[0], self.shape[0]),
+            max(turn + self._parity[1], self.shape[1]),
         )
 
     def _smooth_chip(self) -> None:

@@ -99,6 +99,7 @@ def path_boxes(scene: Scene, method: str, cost):
                 ls = pe.box(run, (cx, cy), half)
                 template = ls
                 planes.update({j: ls.energy[i] for i, j in enumerate(run)})
+            assert template is not None  # want is never empty: one box at least
             g = template.grid
             grid = PoseGrid(
                 (len(want),) + g.shape[1:],
