@@ -29,6 +29,7 @@ SUBPACKAGES = (
     "motion",
     "batch",
     "sweep",
+    "design",
     "render",
     "testing",
     "commands",

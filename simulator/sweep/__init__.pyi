@@ -31,6 +31,7 @@ from ._spec import (
     DEFAULT_MAX_POINTS as DEFAULT_MAX_POINTS,
     SweepSpec as SweepSpec,
     load_sweep as load_sweep,
+    read_toml_file as read_toml_file,
 )
 from ._store import (
     kept_points as kept_points,

@@ -37,7 +37,7 @@ from simulator.sweep._axes import (
     axis_kinds,
 )
 
-__all__ = ["DEFAULT_MAX_POINTS", "SweepSpec", "load_sweep"]
+__all__ = ["DEFAULT_MAX_POINTS", "SweepSpec", "load_sweep", "read_toml_file"]
 
 #: Version of the point plan: part of the hash, so a plan drawn differently is another sweep.
 SPEC_VERSION = 1
@@ -60,31 +60,30 @@ ID_COLUMNS = ("point", "realization", "point_seed")
 
 
 # ----------------------------------------------------------------------- the spec
-def _read_toml(path: Path) -> dict:
-    """A sweep file parsed safely: a regular file, at most MAX_SWEEP_BYTES, UTF-8 TOML."""
+def read_toml_file(path: Path, what: str = "sweep file") -> dict:
+    """A TOML file (a sweep or design file, named ``what`` in errors) parsed safely: a regular
+    file, at most MAX_SWEEP_BYTES, UTF-8, nested no deeper than a scene file may be."""
     from simulator.scene import MAX_ARRAY_ITEMS, MAX_DEPTH
 
-    require_regular_file(path, "sweep")
+    require_regular_file(path, what.removesuffix(" file"))
     size = path.stat().st_size
     require(
-        size <= MAX_SWEEP_BYTES, f"sweep file {path} is {size:,} bytes; at most {MAX_SWEEP_BYTES:,}"
+        size <= MAX_SWEEP_BYTES, f"{what} {path} is {size:,} bytes; at most {MAX_SWEEP_BYTES:,}"
     )
     try:
         text = path.read_bytes().decode("utf-8").removeprefix("\ufeff")
         doc = tomllib.loads(text)
     except UnicodeDecodeError:
-        raise InputError(f"sweep file {path} is not UTF-8 text; save it as UTF-8") from None
+        raise InputError(f"{what} {path} is not UTF-8 text; save it as UTF-8") from None
     except tomllib.TOMLDecodeError as err:
-        raise InputError(
-            f"sweep file {path} is not valid TOML: {' '.join(str(err).split())}"
-        ) from None
+        raise InputError(f"{what} {path} is not valid TOML: {' '.join(str(err).split())}") from None
     except (RecursionError, ValueError) as err:
         raise InputError(
-            f"sweep file {path} is not a usable TOML file: {' '.join(str(err).split())[:200]}"
+            f"{what} {path} is not a usable TOML file: {' '.join(str(err).split())[:200]}"
         ) from None
     hit = check_nesting(doc, MAX_DEPTH, MAX_ARRAY_ITEMS)
     if hit:
-        raise InputError(f"sweep file {path}: {hit[0]} {hit[1]}")
+        raise InputError(f"{what} {path}: {hit[0]} {hit[1]}")
     return doc
 
 
@@ -272,7 +271,7 @@ def load_sweep(spec: str | os.PathLike | dict, base: str | os.PathLike | None = 
         base_dir = Path(base or ".").resolve()
     else:
         path = Path(spec)
-        doc, src = _read_toml(path), str(path)
+        doc, src = read_toml_file(path), str(path)
         base_dir = Path(base).resolve() if base is not None else path.resolve().parent
     require(isinstance(doc, dict), f"{src}: a sweep must be a table of sections")
     unknown = [k for k in doc if k not in SECTIONS]
