@@ -59,13 +59,16 @@ def _values(im: Image.Image, path: Path) -> tuple[np.ndarray, np.ndarray | None]
     """Image -> (grey value in [0, 1], alpha in [0, 1] or None)."""
     mode, trns = im.mode, im.info.get("transparency")
     if mode in _SIXTEEN_BIT:
-        raw = np.asarray(im).astype(np.int64)
+        raw = np.asarray(im)  # uint16 or int32 as decoded: no wider copy
         if raw.min() < 0 or raw.max() > 65535:
             raise InputError(
                 f"{path}: 32-bit integer image with values outside 0..65535; save it as 8- or 16-bit grey"
             )
         alpha = None if trns is None else (raw != trns).astype(np.float64)
-        return raw / 65535.0, alpha
+        value = raw.astype(np.float64)
+        del raw
+        value /= 65535.0
+        return value, alpha
     if mode == "F":
         return np.asarray(im, dtype=np.float64), None
     if mode == "1" and trns is None:

@@ -89,12 +89,16 @@ def _coverage(geom_px: BaseGeometry, shape: tuple[int, int]) -> np.ndarray:
     """
     h, w = shape
     r, c, here, dy = _pieces(geom_px, shape)
-    acc = np.zeros((h, w + 1))
-    np.add.at(acc, (r, c), here)
-    np.add.at(acc, (r, c + 1), dy - here)
-    cov = np.cumsum(acc[:, :w], axis=1)
+    # One canvas, summed in place: what a piece adds beyond the last column is never read.
+    cov = np.zeros((h, w))
+    np.add.at(cov, (r, c), here)
+    right = c + 1 < w
+    np.add.at(cov, (r[right], c[right] + 1), (dy - here)[right])
+    np.cumsum(cov, axis=1, out=cov)
     # Orientation in the y-down pixel frame decides the overall sign.
-    return np.clip(np.abs(cov) if cov.sum() < 0 else cov, 0.0, 1.0)
+    if cov.sum() < 0:
+        np.abs(cov, out=cov)
+    return np.clip(cov, 0.0, 1.0, out=cov)
 
 
 def _pieces(

@@ -246,3 +246,19 @@ def test_energy_reads_its_scene_file_once(tmp_path, count_toml_reads, capsys):
     assert main(["energy", scene, "--at", "10,0,0", "--json", str(tmp_path / "e.json")]) == 0
     capsys.readouterr()
     assert len(count_toml_reads) == 1
+
+
+def test_the_smallest_feature_of_a_pattern_image_is_measured_once(monkeypatch):
+    """A pattern image's smallest feature (outlining the whole image) is measured once per
+    mask, whether the preset, the warning or the pattern's own check asks."""
+    from simulator.scene import _accuracy, smallest_feature_um
+
+    calls = []
+    measure = _accuracy._smallest_feature_um
+    monkeypatch.setattr(
+        _accuracy, "_smallest_feature_um", lambda *a: calls.append(1) or measure(*a)
+    )
+    mask = read_mask(library_path("four_pad_730_50"))
+    first = smallest_feature_um(mask)
+    assert smallest_feature_um(mask) == first and len(calls) == 1
+    assert first == pytest.approx(50, abs=2 * mask.um_per_px)  # the gap

@@ -25,6 +25,7 @@ import pytest
 from patterns.geometry import four_pad
 from patterns.io import write_mask
 from patterns.library import library_path
+from patterns.mask import Mask
 from patterns.raster import mask_from_geometry
 from simulator import liquid
 from simulator.cli import main
@@ -827,3 +828,12 @@ def test_volume_with_a_dynamic_method_gives_no_note(capsys):
         == 0
     )
     assert "not used" not in capsys.readouterr().err
+
+
+def test_pad_count_beyond_sixteen_bits():
+    """Pads are numbered in 16 bits when they fit and in 32 when not: 360 x 360 separate
+    dots are 129,600 pads, more than 16 bits can number."""
+    data = np.zeros((720, 720))
+    data[::2, ::2] = 1.0
+    assert liquid.pad_count(Mask(data, 1.0)) == 360 * 360
+    assert liquid.pad_count(Mask(data[:40, :40], 1.0)) == 400

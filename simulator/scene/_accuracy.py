@@ -35,6 +35,7 @@ Presets never override a knob the user sets explicitly (:func:`apply_preset`).
 from __future__ import annotations
 
 import math
+import weakref
 from dataclasses import dataclass
 from typing import Any
 
@@ -89,13 +90,17 @@ def _mask_outline(mask: Mask) -> BaseGeometry:
     mask.require_nonempty("pattern")
     h, w = mask.shape
     s = mask.um_per_px
-    data = np.pad(mask.data, 1)  # every contour closes
+    d = mask.data
+    # Every contour closes: pad with a dry border unless the image's own border is dry
+    # (the usual case; a padded copy of a 16-megapixel pattern costs 128 MB).
+    border_wet = max(d[0].max(), d[-1].max(), d[:, 0].max(), d[:, -1].max()) >= 0.5
+    data, o = (np.pad(d, 1), 1) if border_wet else (d, 0)
     polys = []
     for c in measure.find_contours(data, 0.5):
         if len(c) < 4:
             continue
-        x = (c[:, 1] - 1 + 0.5 - w / 2) * s
-        y = (h / 2 - (c[:, 0] - 1) - 0.5) * s
+        x = (c[:, 1] - o + 0.5 - w / 2) * s
+        y = (h / 2 - (c[:, 0] - o) - 0.5) * s
         p = shapely.make_valid(Polygon(np.column_stack([x, y])))
         if p.area > 0:
             polys.append(p)
@@ -134,6 +139,11 @@ def _stretches(ring_xy: np.ndarray, corner_deg: float, merge: float) -> np.ndarr
     return long if long.size else np.array([perimeter / math.pi])
 
 
+#: Smallest features of the masks measured (by ``id``, dropped with the mask): a scene
+#: asks for its pattern's up to three times (the preset, the warning, the pattern's check).
+_FEATURE_OF_MASK: dict[int, float | str] = {}
+
+
 def smallest_feature_um(pattern: Mask | BaseGeometry, corner_deg: float = CORNER_DEG) -> float:
     """The smallest feature of a pattern (um): its narrowest gap, pad, defect or tooth.
 
@@ -156,6 +166,22 @@ def smallest_feature_um(pattern: Mask | BaseGeometry, corner_deg: float = CORNER
             simplified by half a pixel (features below about a pixel cannot be seen).
         corner_deg: turning angle above which an outline vertex is a corner.
     """
+    if isinstance(pattern, Mask) and corner_deg == CORNER_DEG:
+        key = id(pattern)
+        if key not in _FEATURE_OF_MASK:
+            try:
+                _FEATURE_OF_MASK[key] = _smallest_feature_um(pattern, corner_deg)
+            except InputError as err:
+                _FEATURE_OF_MASK[key] = str(err)
+            weakref.finalize(pattern, _FEATURE_OF_MASK.pop, key, None)
+        got = _FEATURE_OF_MASK[key]
+        if isinstance(got, str):
+            raise InputError(got)
+        return got
+    return _smallest_feature_um(pattern, corner_deg)
+
+
+def _smallest_feature_um(pattern: Mask | BaseGeometry, corner_deg: float) -> float:
     geom, tol, merge = _geometry_of(pattern)
     # Islands and holes smaller than merge^2 are noise (a mask's stray pixels).
     parts = [
