@@ -369,3 +369,48 @@ def test_trials_on_two_dask_workers_are_the_same_evaluations(run, tmp_path):
         ref = here[(here["gap_um"] == row["gap_um"]) & here["same_as"].isna()].iloc[0]
         assert row["yield_fraction"] == ref["yield_fraction"], row["gap_um"]
         assert row["capture_fraction"] == ref["capture_fraction"], row["gap_um"]
+
+
+def test_realizations_are_averaged_and_min_takes_the_worst(tmp_path):
+    # Random-jagged edges: each realization another draw of the edges (seed, seed + 1).
+    doc = {
+        "scene": {"resolution_um": 5, "effects": {"twist": False}},
+        "design": {"name": "random-jagged", "size": 200, "sigma": 2, "seed": 4},
+        "axes": {"sigma": [2, 8], "placement_sigma_um": 40},
+        "sweep": {"seed": 1, "realizations": 2, "yield_starts": 200, "capture_grid": 9},
+        "search": {"trials": 10, "seed": 0, "maximize": "min(max_bias_plus_x_um)"},
+    }
+    table = search(doc, tmp_path / "out", workers=0)
+    assert set(table[table["kind"] == "search"]["sigma_um"]) == {2, 8}
+    seeds, spread = set(), False
+    for _, row in table[table["same_as"].isna()].iterrows():
+        trial = json.loads((tmp_path / "out" / "trials" / f"{row['trial']:05d}.json").read_text())
+        reps = trial["realizations"]
+        # Each realization its own placement draws, the same for every design (as a sweep's).
+        seeds.add(tuple(r["summary"]["yield"]["seed"] for r in reps))
+        bias = [r["summary"]["max_bias_um"]["+x"] for r in reps]
+        assert row["objective_1"] == min(bias)
+        assert row["max_bias_plus_x_um"] == pytest.approx(np.mean(bias))
+        assert row["realizations"] == 2 and row["seed"] == 4
+        spread |= bias[0] != bias[1]  # another draw of the edges, another bias
+    ((a, b),) = seeds
+    assert a != b and spread
+
+
+def test_cmaes_searches_a_continuous_range(tmp_path):
+    doc = copy.deepcopy(SPEC)
+    doc["axes"]["gap"] = {"from": 10, "to": 80}
+    doc["search"] = {
+        "trials": 6,
+        "sampler": "cmaes",
+        "seed": 2,
+        "maximize": "gap_um",
+        "constraints": ["yield_fraction >= 0.9"],
+    }
+    table = search(doc, tmp_path / "out", workers=0)
+    gaps = table[table["kind"] == "search"]["gap_um"]
+    assert len(gaps) == 6 and gaps.between(10, 80).all() and gaps.nunique() == 6
+    best = table[table["best"]]
+    assert len(best) == 1 and bool(best["feasible"].iloc[0])
+    feasible = table[(table["kind"] == "search") & table["feasible"]]
+    assert best["gap_um"].iloc[0] == feasible["gap_um"].max()

@@ -216,16 +216,14 @@ class _Run:
         if params is None or row.get("state") != "complete":
             return
         k = len(self.spec.objectives)
+        cons = len(self.spec.constraints) if self.spec.sampler != "cmaes" else 0
         with _quiet_optuna():
             self.study.add_trial(
                 self._create(
                     values=[row[f"objective_{j + 1}"] for j in range(k)],
                     params=params,
                     distributions={n: self.dists[n] for n in params},
-                    constraints={
-                        str(j): row[f"constraint_{j + 1}"]
-                        for j in range(len(self.spec.constraints))
-                    },
+                    constraints={str(j): row[f"constraint_{j + 1}"] for j in range(cons)},
                 )
             )
 
@@ -235,7 +233,9 @@ class _Run:
             if row["state"] != "complete":
                 self.study.tell(ot, state=self._state.FAIL)
                 return
-            for j in range(len(self.spec.constraints)):
+            # CMA-ES does not use constraints (and warns when given them): feasibility, and so
+            # the best, is decided from the rows (best_trials) whatever the sampler.
+            for j in range(len(self.spec.constraints) if self.spec.sampler != "cmaes" else 0):
                 ot.set_constraint(str(j), row[f"constraint_{j + 1}"])
             self.study.tell(ot, [row[f"objective_{j + 1}"] for j in range(k)])
 
@@ -260,8 +260,9 @@ class _Run:
             key = _key(values)
             src = self.by_key.get(key) if self.dedupe else None
             if src is not None:
-                if src in self.pending:
+                if src in self.pending:  # in flight: told with it; no new design until a result
                     self.waiting.setdefault(src, []).append((i, ot))
+                    yield None
                 else:
                     self._copy(i, ot, src)
                 continue

@@ -49,8 +49,8 @@ def _fmt(v) -> str:
     if isinstance(v, bool | np.bool_):
         return "yes" if v else "no"
     if isinstance(v, float | np.floating):
-        a = abs(float(v))
-        return f"{v:.4g}" if a < 1e5 else f"{v:.4e}"
+        v = float(v) + 0.0  # no -0
+        return f"{v:.4g}" if abs(v) < 1e5 else f"{v:.4e}"
     return html.escape(str(v))
 
 
@@ -113,7 +113,7 @@ def plot_history(table, spec, path: Path) -> None:
         ax.set_ylabel(f"objective {j + 1}")
         ax.set_title(f"{o.direction} {o.expression.text}", fontsize=9)
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=7, loc="best")
+        ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     axes[-1, 0].set_xlabel("trial")
     save_figure(fig, path)
 
@@ -465,10 +465,10 @@ def write_search_report(out: Path, spec, table, stats: dict) -> list[str]:
         for p in [*pics, *(["best.png"] if "best.png" in files else [])]
     )
     rate = (
-        f"{stats['evaluated_now']} trials evaluated now in {stats['run_s']:.1f} s"
+        f"{stats['evaluated_now']} designs evaluated now in {stats['run_s']:.1f} s"
         + (f" on {stats['workers']} Dask workers" if stats.get("workers") else " in one process")
         if stats.get("evaluated_now")
-        else "no trial evaluated now"
+        else "no design evaluated now"
     )
     page = f"""<!doctype html>
 <html lang="en"><head><meta charset="utf-8"><title>selfalign design search {e(spec.digest[:12])}</title>
@@ -483,7 +483,7 @@ img {{ max-width: 100%; border: 1px solid #ddd; }} figure {{ margin: 0; }} .note
 <h1>selfalign design search <code>{e(spec.digest[:12])}</code></h1>
 <p class="note">From {e(spec.source)}: {stats["trials"]} trials of Optuna's {e(spec.sampler)} sampler (seed {spec.seed}) over
 {e(", ".join(a.name for a in spec.searched))}; each trial is the assessment of <code>selfalign evaluate</code> as a sweep point
-({spec.sweep.realizations} realization{"s" if spec.sweep.realizations > 1 else ""} averaged, {spec.sweep.yield_starts} yield starts,
+({f"the mean of {spec.sweep.realizations} realizations, " if spec.sweep.realizations > 1 else ""}{spec.sweep.yield_starts} yield starts,
 a capture grid of {spec.sweep.capture_grid} per side). Trial 0 is the baseline: the file's [design] and [scene] values.</p>
 <h2>Objectives and constraints</h2>
 <ul>{objectives}</ul><p>Constraints (a trial that misses one is recorded, never best):</p><ul>{constraints}</ul>

@@ -29,6 +29,9 @@ CONNECT_TIMEOUT_S = 3.0
 #: landscape, which a point keeps under 320 MB by coarsening, with their temporaries.
 WORKER_MEMORY_MB = 1024
 
+#: The end of a task iterator (None there means "nothing now").
+_END = object()
+
 #: Why spawned workers fail to start from a script, and the fix.
 MAIN_GUARD = (
     "worker processes are spawned and import the main script, so a script that calls simulator.sweep must do so "
@@ -288,10 +291,11 @@ def run_tasks(
     ``handle(task, result)`` as it comes, in this thread.
 
     On ``client``'s cluster (None: one after another in this process), at most ``per_thread``
-    tasks per worker thread in flight. ``tasks`` is read lazily, one task each time a slot
-    frees, after the result before it was handled: it may be a generator that decides the
-    next point from the results so far (a search's ask and tell). Returns the run's seconds,
-    workers and threads.
+    tasks per worker thread in flight. ``tasks`` is read lazily, when a slot frees, after the
+    result before it was handled: it may be a generator that decides the next point from the
+    results so far (a search's ask and tell). Such a generator may yield None for "nothing
+    to run until a running task finishes" (only while one runs): the slot waits for the next
+    result. Returns the run's seconds, workers and threads.
     """
     if client is None:
         return _run_here(tasks, handle)
@@ -306,19 +310,27 @@ def _run_dask(
 
     t0 = time.perf_counter()
     threads = max(1, sum(client.nthreads().values()))
+    capacity = max(1, per_thread) * threads
     pending = iter(tasks)
-    by_key: dict[str, dict] = {}
+    by_key: dict[str, dict] = {}  # the tasks in flight
     ac = as_completed(loop=client.loop)
+    ended = False
 
-    def submit() -> None:
-        t = next(pending, None)
-        if t is not None:
-            f = client.submit(run_point, t, pure=False)  # impure: no two points are merged
-            by_key[f.key] = t
-            ac.add(f)
+    def fill() -> None:
+        """Submit tasks until ``capacity`` are in flight, the tasks end, or one is None (nothing now)."""
+        nonlocal ended
+        while not ended and len(by_key) < capacity:
+            t = next(pending, _END)
+            if t is _END:
+                ended = True
+            elif t is None:
+                return
+            else:
+                f = client.submit(run_point, t, pure=False)  # impure: no two points are merged
+                by_key[f.key] = t
+                ac.add(f)
 
-    for _ in range(max(1, per_thread) * threads):
-        submit()
+    fill()
     for f in ac:
         t = by_key.pop(f.key)
         try:
@@ -333,7 +345,7 @@ def _run_dask(
             }
         f.release()
         handle(t, result)
-        submit()
+        fill()
     return {
         "run_s": time.perf_counter() - t0,
         "workers": len(client.nthreads()),
@@ -344,5 +356,6 @@ def _run_dask(
 def _run_here(tasks: Iterable[dict], handle: Callable[[dict, dict], None]) -> dict:
     t0 = time.perf_counter()
     for t in tasks:
-        handle(t, run_point(t))
+        if t is not None:  # None: nothing to run now (nothing is in flight here: ask again)
+            handle(t, run_point(t))
     return {"run_s": time.perf_counter() - t0, "workers": 0, "threads": 1}
