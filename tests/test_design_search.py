@@ -181,20 +181,21 @@ def test_a_rerun_resumes_and_runs_nothing_new(run, run_cli, capsys):
         search(other, out, workers=0)
 
 
-def test_an_interrupted_search_resumes(tmp_path, monkeypatch):
+def test_an_interrupted_search_resumes(tmp_path, monkeypatch, run_cli):
     import simulator.sweep._store as store
 
     arrivals = []
 
-    def stop_at_third(point):
+    def ctrl_c_at_third(point):  # Ctrl-C once the third trial is in the journal
         arrivals.append(point)
         if len(arrivals) == 3:
             raise KeyboardInterrupt
 
-    monkeypatch.setattr(store, "hold", stop_at_third)
-    out = tmp_path / "out"
-    with pytest.raises(KeyboardInterrupt):
-        search(SPEC, out, workers=0)
+    monkeypatch.setattr(store, "hold", ctrl_c_at_third)
+    path, out = tmp_path / "gap.toml", tmp_path / "out"
+    path.write_text(_toml(SPEC))
+    rc, _, err = run_cli(["design", path, "--out", out, "--workers", "0", "--quiet"])
+    assert rc == 130 and "interrupted; 3 finished trials are kept" in err, err
     kept = [json.loads(line) for line in (out / "trials.jsonl").read_text().splitlines()]
     assert [r["trial"] for r in kept] == [0, 1, 2]
     monkeypatch.undo()
@@ -414,3 +415,15 @@ def test_cmaes_searches_a_continuous_range(tmp_path):
     assert len(best) == 1 and bool(best["feasible"].iloc[0])
     feasible = table[(table["kind"] == "search") & table["feasible"]]
     assert best["gap_um"].iloc[0] == feasible["gap_um"].max()
+
+
+def test_a_failing_trial_is_its_error_row_and_the_search_goes_on(tmp_path):
+    doc = copy.deepcopy(SPEC)
+    doc["axes"]["gap"] = [20, 250]  # 250 um: wider than the 200 um pattern
+    doc["search"]["trials"] = 6
+    table = search(doc, tmp_path / "out", workers=0)
+    bad = table[table["gap_um"] == 250]
+    assert len(bad) >= 1 and (bad["state"] == "fail").all() and not bad["best"].any()
+    assert all("gap=250 um must be smaller than size=200 um" in e for e in bad["error"])
+    assert bad["objective_1"].isna().all() and not bad["feasible"].any()
+    assert table[table["best"]]["gap_um"].tolist() == [20]
