@@ -17,7 +17,8 @@ Points (each named where it is called):
 * ``startup``: the CLI's signal handlers are installed, no command module is imported;
 * ``output``: a command's temporary output directory exists (:mod:`patterns.outputs`);
 * ``batch``: a Monte Carlo batch has run its first chunk of starts;
-* ``sweep-point``: a sweep point's row is in the journal (flushed).
+* ``sweep-point``: a sweep point's row is in the journal (flushed);
+* ``search-trial``: a design search's trial row is in its journal (flushed).
 """
 
 from __future__ import annotations

@@ -18,6 +18,7 @@ def test_every_example_is_covered():
         "evaluate_defect.toml",
         "energy_fourpad.toml",
         "sweep_fourpad.toml",
+        "design_fourpad_gap.toml",
     }
 
 
@@ -66,3 +67,20 @@ def test_energy_example(tmp_path, flags):
     out = tmp_path / "e.json"
     assert main(["energy", str(EX / "energy_fourpad.toml"), *flags, "--json", str(out)]) == 0
     assert json.loads(out.read_text())["poses"][0]["overlap_um2"] == pytest.approx(419200, abs=1)
+
+
+def test_design_example_is_the_guides_search():
+    # Its run (about a minute on 2 cores) is in docs/guide/design.md; here its plan.
+    from simulator.design import load_search
+
+    spec = load_search(EX / "design_fourpad_gap.toml")
+    (gap,) = spec.searched
+    assert (gap.name, gap.values, gap.lo, gap.hi) == ("gap", None, 20.0, 300.0)
+    assert spec.trials == 24 and spec.sampler == "tpe"
+    assert [o.text for o in spec.objectives] == ["maximize gap_um"]
+    assert [c.text for c in spec.constraints] == [
+        "yield_fraction >= 0.99",
+        "volume_nl >= critical_volume_nl",
+    ]
+    assert spec.sweep.design["params"] == {"size": 730, "gap": 50}
+    assert spec.baseline_values() == {"placement_sigma_um": 150, "placement_sigma_deg": 2}

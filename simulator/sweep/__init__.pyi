@@ -10,19 +10,29 @@ from ._axes import (
 from ._cluster import (
     CONNECT_TIMEOUT_S as CONNECT_TIMEOUT_S,
     WORKER_MEMORY_MB as WORKER_MEMORY_MB,
+    check_where as check_where,
     dask_client as dask_client,
     release_semaphores as release_semaphores,
+    run_tasks as run_tasks,
     worker_cap as worker_cap,
 )
 from ._columns import (
     STATUS_COLUMNS as STATUS_COLUMNS,
     UNITS as UNITS,
+    expected_columns as expected_columns,
     flatten as flatten,
 )
 from ._point import (
     assess_point as assess_point,
+    critical_volume_nl as critical_volume_nl,
+    design_params as design_params,
+    point_geometry as point_geometry,
     point_scene as point_scene,
+    price_point as price_point,
     run_point as run_point,
+)
+from ._report import (
+    column_label as column_label,
 )
 from ._run import (
     sweep as sweep,
@@ -34,5 +44,6 @@ from ._spec import (
     read_toml_file as read_toml_file,
 )
 from ._store import (
+    ResultStore as ResultStore,
     kept_points as kept_points,
 )

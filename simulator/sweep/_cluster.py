@@ -14,13 +14,13 @@ from __future__ import annotations
 import contextlib
 import os
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from typing import Any
 
-from patterns.errors import InputError
+from patterns.errors import InputError, require
 from simulator.sweep._point import XLA_ONE_THREAD, _one_line, run_point
 
-__all__ = ["CONNECT_TIMEOUT_S", "dask_client"]
+__all__ = ["CONNECT_TIMEOUT_S", "check_where", "dask_client", "run_tasks"]
 
 #: Seconds to wait for a Dask scheduler given with ``scheduler``.
 CONNECT_TIMEOUT_S = 3.0
@@ -28,6 +28,9 @@ CONNECT_TIMEOUT_S = 3.0
 #: Memory one local worker process is given (MiB): the imports (about 0.4 GB) and one point's
 #: landscape, which a point keeps under 320 MB by coarsening, with their temporaries.
 WORKER_MEMORY_MB = 1024
+
+#: The end of a task iterator (None there means "nothing now").
+_END = object()
 
 #: Why spawned workers fail to start from a script, and the fix.
 MAIN_GUARD = (
@@ -265,25 +268,69 @@ def dask_client(workers: int | None = None, scheduler: str | None = None) -> Ite
                     cluster.close(timeout=10)
 
 
-def _run_dask(client: Any, tasks: list[dict], handle: Callable[[dict, dict], None]) -> dict:
-    """Every task on ``client``'s cluster, at most two per worker thread in flight, results handled as they come."""
+def check_where(workers: int | None, scheduler: str | None) -> None:
+    """``workers`` a whole number from 0 and not given with ``scheduler`` (InputError otherwise)."""
+    if workers is not None:
+        require(
+            isinstance(workers, int) and not isinstance(workers, bool) and 0 <= workers <= 4096,
+            f"--workers must be a whole number >= 0, got {workers!r}",
+        )
+        require(
+            not scheduler,
+            "give --workers or --scheduler, not both (the cluster at --scheduler has its own workers)",
+        )
+
+
+def run_tasks(
+    client: Any,
+    tasks: Iterable[dict],
+    handle: Callable[[dict, dict], None],
+    per_thread: int = 2,
+) -> dict:
+    """Run every task of ``tasks`` (:func:`run_point`'s, one point each) and hand each result to
+    ``handle(task, result)`` as it comes, in this thread.
+
+    On ``client``'s cluster (None: one after another in this process), at most ``per_thread``
+    tasks per worker thread in flight. ``tasks`` is read lazily, when a slot frees, after the
+    result before it was handled: it may be a generator that decides the next point from the
+    results so far (a search's ask and tell). Such a generator may yield None for "nothing
+    to run until a running task finishes" (only while one runs): the slot waits for the next
+    result. Returns the run's seconds, workers and threads.
+    """
+    if client is None:
+        return _run_here(tasks, handle)
+    return _run_dask(client, tasks, handle, per_thread)
+
+
+def _run_dask(
+    client: Any, tasks: Iterable[dict], handle: Callable[[dict, dict], None], per_thread: int = 2
+) -> dict:
+    """Every task on ``client``'s cluster, at most ``per_thread`` per worker thread in flight, results handled as they come."""
     from distributed import as_completed
 
     t0 = time.perf_counter()
     threads = max(1, sum(client.nthreads().values()))
+    capacity = max(1, per_thread) * threads
     pending = iter(tasks)
-    by_key: dict[str, dict] = {}
+    by_key: dict[str, dict] = {}  # the tasks in flight
     ac = as_completed(loop=client.loop)
+    ended = False
 
-    def submit() -> None:
-        t = next(pending, None)
-        if t is not None:
-            f = client.submit(run_point, t, pure=False)  # impure: no two points are merged
-            by_key[f.key] = t
-            ac.add(f)
+    def fill() -> None:
+        """Submit tasks until ``capacity`` are in flight, the tasks end, or one is None (nothing now)."""
+        nonlocal ended
+        while not ended and len(by_key) < capacity:
+            t = next(pending, _END)
+            if t is _END:
+                ended = True
+            elif t is None:
+                return
+            else:
+                f = client.submit(run_point, t, pure=False)  # impure: no two points are merged
+                by_key[f.key] = t
+                ac.add(f)
 
-    for _ in range(2 * threads):
-        submit()
+    fill()
     for f in ac:
         t = by_key.pop(f.key)
         try:
@@ -298,7 +345,7 @@ def _run_dask(client: Any, tasks: list[dict], handle: Callable[[dict, dict], Non
             }
         f.release()
         handle(t, result)
-        submit()
+        fill()
     return {
         "run_s": time.perf_counter() - t0,
         "workers": len(client.nthreads()),
@@ -306,8 +353,9 @@ def _run_dask(client: Any, tasks: list[dict], handle: Callable[[dict, dict], Non
     }
 
 
-def _run_here(tasks: list[dict], handle: Callable[[dict, dict], None]) -> dict:
+def _run_here(tasks: Iterable[dict], handle: Callable[[dict, dict], None]) -> dict:
     t0 = time.perf_counter()
     for t in tasks:
-        handle(t, run_point(t))
+        if t is not None:  # None: nothing to run now (nothing is in flight here: ask again)
+            handle(t, run_point(t))
     return {"run_s": time.perf_counter() - t0, "workers": 0, "threads": 1}

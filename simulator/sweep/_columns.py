@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["STATUS_COLUMNS", "UNITS", "flatten"]
+__all__ = ["STATUS_COLUMNS", "UNITS", "expected_columns", "flatten"]
 
 STATUS_COLUMNS = ("status", "error", "seconds")
 
@@ -54,8 +54,8 @@ def _split_unit(key: str) -> tuple[str, str | None]:
 
 def _name(key: str) -> str:
     key = str(key)
-    if key[:1] in "+-" and len(key) > 1:
-        key = ("plus_" if key[0] == "+" else "minus_") + key[1:]
+    if key[:1] in ("+", "-"):  # "+x" -> plus_x; a sign alone ("+" of a torque) -> plus
+        key = ("plus" if key[0] == "+" else "minus") + (f"_{key[1:]}" if len(key) > 1 else "")
     return key.replace(" ", "_")
 
 
@@ -112,3 +112,83 @@ def flatten(summary: dict) -> dict[str, Any]:
             max(fl["x_to_um"] - fl["x_from_um"], fl["y_to_um"] - fl["y_from_um"]) / 2
         )
     return out
+
+
+# ----------------------------------------------------------------------- the columns to expect
+def _product(*parts: tuple[str, ...]) -> list[str]:
+    import itertools
+
+    return ["_".join(p for p in combo if p) for combo in itertools.product(*parts)]
+
+
+def _metric_columns(twist: bool, meniscus: bool, free: bool, dynamics: bool) -> list[str]:
+    """The columns :func:`flatten` makes of :func:`simulator.batch.assess`'s summary for a
+    scene of these effects (kept equal to a real row's by the tests)."""
+    outcomes = ("aligned", "plateau", "local_minimum", "no_contact", "max_steps")
+    cols = [f"global_minimum_{k}" for k in ("x_um", "y_um", "twist_deg", "energy_J")]
+    cols += ["global_minimum_overlap_um2", "global_minimum_refined", "restoring_force_bias_um"]
+    cols += _product(
+        ("restoring_force",), ("plus_x", "minus_x", "plus_y", "minus_y"), ("x_N", "y_N")
+    )
+    cols += _product(("max_bias",), ("plus_x_um", "minus_x_um", "plus_y_um", "minus_y_um"))
+    cols += ["capture_fraction", "capture_n", *_product(("capture_outcomes",), outcomes)]
+    cols += ["capture_grid_from_um", "capture_grid_to_um", "capture_grid_step_um"]
+    cols += ["capture_center_x_um", "capture_center_y_um", "capture_twist_deg"]
+    cols += ["yield_fraction", "yield_n", *_product(("yield_outcomes",), outcomes)]
+    cols += ["yield_placement_sigma_x_um", "yield_placement_sigma_y_um"]
+    cols += ["yield_placement_sigma_twist_deg", "yield_seed"]
+    stats = ("mean", "mean_abs", "std", "max_abs")
+    cols += _product(("yield_error",), ("x", "y"), stats, ("um",))
+    cols += _product(("yield_error_twist",), stats, ("deg",))
+    cols += ["settings_um_per_px", "settings_pattern_rows_px", "settings_pattern_cols_px"]
+    cols += ["settings_chip_width_um", "settings_chip_height_um", "settings_twists"]
+    cols += ["settings_surface_tension_N_m", "settings_pad_angle_deg"]
+    cols += ["settings_substrate_angle_deg", "settings_delta_gamma_N_m", "settings_landscape_MB"]
+    cols += ["settings_landscape_s", "settings_source_um_per_px", "settings_resolution_auto"]
+    cols += ["settings_volume_nl", "max_bias_x_um", "max_bias_y_um", "global_minimum_offset_um"]
+    if twist:
+        cols += ["restoring_torque_twist_deg", "restoring_torque_plus_Nm"]
+        cols += ["restoring_torque_minus_Nm", "settings_twist_step_deg"]
+    if meniscus:
+        cols += ["meniscus_height_um", "pinned", "stiffness_x_N_per_m", "stiffness_y_N_per_m"]
+        cols += ["stiffness_twist_Nm_per_rad"] if twist else []
+        cols += _product(("offset_from_centre",), ("x_um", "y_um", "twist_deg", "distance_um"))
+    if meniscus and free:
+        cols += ["contact_line_reach_substrate_um", "contact_line_reach_pad_um"]
+        cols += _product(("floating_range",), ("x", "y"), ("from_um", "to_um"))
+        cols += ["floating_range_twist_from_deg", "floating_range_twist_to_deg"]
+        cols += ["floating_half_width_um"]
+    if dynamics:
+        cols += _product(
+            ("capture", "yield"),
+            ("time_to_align",),
+            ("median", "p90", "mean", "min", "max", "n"),
+            ("s",),
+        )
+    return cols
+
+
+def expected_columns(spec) -> list[str]:
+    """The columns a row of the sweep ``spec`` (:class:`simulator.sweep.SweepSpec`) may have:
+    the point's identity and settings, the status, and the assessment's numbers for the
+    scene's effects (twist, a finite meniscus with free or pinned lines, dynamics among the
+    methods; ``critical_volume_nl`` when the pattern may be a four-pad). A column here may
+    still be missing from a row whose assessment did not reach it (no start aligned, a
+    well without a flat floor)."""
+    from simulator.core import DYNAMIC_METHODS
+
+    values = {a.name: a.values[0] if a.values is not None else a.lo for a in spec.axes}
+    ident = list(spec.columns(spec.point(values, 0, 0)))
+    scene = spec.scene
+    effects = scene.get("effects") or {}
+    liquid = scene.get("liquid") or {}
+    methods = next((a.values or () for a in spec.axes if a.name == "method"), ())
+    cols = _metric_columns(
+        twist=bool(effects.get("twist", True)),
+        meniscus=bool(effects.get("meniscus", False)),
+        free=not liquid.get("pinned", False),
+        dynamics=any(m in DYNAMIC_METHODS for m in methods),
+    )
+    if spec.design is None or spec.design["name"] == "four-pad":
+        cols.append("critical_volume_nl")
+    return list(dict.fromkeys([*ident, *STATUS_COLUMNS, *cols]))

@@ -12,6 +12,7 @@ and JAX are imported only when a point runs.
 from __future__ import annotations
 
 import copy
+import functools
 import os
 import sys
 import time
@@ -22,7 +23,15 @@ from simulator.core import THREADS_ENV
 from simulator.sweep._axes import AXES, _design_axes
 from simulator.sweep._spec import _design_seed
 
-__all__ = ["assess_point", "point_scene", "run_point"]
+__all__ = [
+    "assess_point",
+    "critical_volume_nl",
+    "design_params",
+    "point_geometry",
+    "point_scene",
+    "price_point",
+    "run_point",
+]
 
 #: XLA flag that keeps a worker's JAX on one thread (set before JAX is imported there).
 XLA_ONE_THREAD = "--xla_cpu_multi_thread_eigen=false"
@@ -43,9 +52,32 @@ def _cap_threads() -> None:
     os.environ[THREADS_ENV] = "1"
 
 
+def design_params(task: dict) -> dict:
+    """The generated design's parameters at one point: the sweep's ``[design]`` values with
+    the point's design axes on top and, for a seeded design, the realization's seed."""
+    design = task["design"]
+    params = dict(design["params"])
+    params.update({k: x for k, x in task["values"].items() if k not in AXES})
+    if "seed" in _design_axes(design["name"]):
+        params["seed"] = _design_seed(design, task)
+    return params
+
+
+def point_geometry(task: dict):
+    """The exact geometry (um, shapely) of a point's generated design and its record (the
+    parameters a pattern file keeps), as :func:`point_scene` rasterizes it."""
+    from patterns.geometry import build, design_record
+
+    design = task["design"]
+    params = design_params(task)
+    geometry = build(design["name"], **params)
+    record = design_record(design["name"], **params)
+    record.update(margin_um=design["margin_um"], area_um2=geometry.area)
+    return geometry, record
+
+
 def point_scene(task: dict):
     """The scene of one point, built as ``selfalign evaluate`` builds it; also whether to coarsen automatically."""
-    from patterns.geometry import build, design_record
     from patterns.raster import mask_from_geometry
     from simulator.scene import Scene
 
@@ -70,13 +102,7 @@ def point_scene(task: dict):
     if "pattern" in v:
         doc["pattern"] = str((Path(task["base"]) / v["pattern"]).resolve())
     if design is not None:
-        params = dict(design["params"])
-        params.update({k: x for k, x in v.items() if k not in AXES})
-        if "seed" in {p for p in _design_axes(design["name"])}:
-            params["seed"] = _design_seed(design, task)
-        geometry = build(design["name"], **params)
-        record = design_record(design["name"], **params)
-        record.update(margin_um=design["margin_um"], area_um2=geometry.area)
+        geometry, record = point_geometry(task)
         um = doc.get("resolution_um") or doc.get("um_per_px") or 1.0
         doc["pattern"] = mask_from_geometry(
             geometry,
@@ -101,11 +127,44 @@ def point_scene(task: dict):
     return Scene.from_dict(doc, base=Path(task["base"])), auto
 
 
+@functools.lru_cache(maxsize=256)
+def _critical_volume_nl(size_um: float, gap_um: float, pad_deg: float, sub_deg: float):
+    from simulator.liquid import critical_volume
+
+    try:
+        return critical_volume(size_um, gap_um, pad_deg, sub_deg).critical_volume_nl
+    except InputError:  # no crossing found: the angles give no critical volume
+        return None
+
+
+def critical_volume_nl(scene, task: dict) -> float | None:
+    """The critical droplet volume (nl) of the point's pattern when it is a four-pad
+    (docs/physics.md §8): from the generated design's exact size and gap, else from the four
+    pads recognised in the raster; None for other patterns, or pads that do not wet better
+    than the substrate (no drop prefers them)."""
+    from simulator.liquid import four_pad_geometry
+
+    m = scene.materials
+    if m.pad_angle_deg >= m.substrate_angle_deg:
+        return None
+    design = task.get("design")
+    if design is not None and design["name"] == "four-pad":
+        params = design_params(task)
+        fp = (float(params["size"]), float(params["gap"]))
+    else:
+        fp = four_pad_geometry(scene.pattern)
+    if fp is None:
+        return None
+    return _critical_volume_nl(fp[0], fp[1], float(m.pad_angle_deg), float(m.substrate_angle_deg))
+
+
 def assess_point(task: dict) -> dict:
     """The summary of one point: :func:`simulator.batch.assess` on its scene, as ``evaluate`` runs it.
 
     The yield's placement noise is drawn with the point's ``point_seed``; ``settings`` also
-    records ``source_um_per_px``, ``resolution_auto`` (as evaluate) and ``volume_nl``.
+    records ``source_um_per_px``, ``resolution_auto`` (as evaluate) and ``volume_nl``; a
+    four-pad pattern's ``critical_volume_nl`` (:func:`critical_volume_nl`) is added, to set
+    beside the droplet's volume.
     """
     from simulator.batch import NOISE_FRACTION, NOISE_TWIST_DEG, assess, auto_resolution, chip_size
     from simulator.core import require_finite
@@ -138,9 +197,24 @@ def assess_point(task: dict) -> dict:
         "resolution_auto": bool(auto and scene.um_per_px != native),
         "volume_nl": scene.liquid.volume_nl,
     }
+    cv = critical_volume_nl(scene, task)
+    if cv is not None:
+        summary["critical_volume_nl"] = cv
     if "layout" in scene.pattern.params:
         summary["layout"] = scene.pattern.params["layout"]
     return require_finite(summary, f"point {task['point']}")
+
+
+def price_point(task: dict) -> None:
+    """Refuse (InputError, one line) a point whose landscape would not fit the memory budget:
+    its scene built as :func:`assess_point` builds it (the pattern rasterized, coarsened as
+    evaluate coarsens) and priced by :func:`simulator.landscape.require_landscape_fits`,
+    without allocating the landscape: what a command checks before it starts any work."""
+    from simulator.batch import auto_resolution
+    from simulator.landscape import require_landscape_fits
+
+    scene, auto = point_scene(task)
+    require_landscape_fits(auto_resolution(scene) if auto else scene)
 
 
 def _one_line(err: BaseException) -> str:

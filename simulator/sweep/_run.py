@@ -87,9 +87,9 @@ from pathlib import Path
 from patterns.errors import require
 from simulator.sweep._axes import HARD_MAX_POINTS
 from simulator.sweep._cluster import (
-    _run_dask,
-    _run_here,
+    check_where,
     dask_client,
+    run_tasks,
     worker_cap,
 )
 from simulator.sweep._spec import (
@@ -161,15 +161,7 @@ def sweep(
         f"the sweep has {n:,} points ({spec.shape_text()}), more than the cap of {max_points:,}; "
         f"pass --max-points {n} to run it, or use fewer values or [sweep] samples = N",
     )
-    if workers is not None:
-        require(
-            isinstance(workers, int) and not isinstance(workers, bool) and 0 <= workers <= 4096,
-            f"--workers must be a whole number >= 0, got {workers!r}",
-        )
-        require(
-            not scheduler,
-            "give --workers or --scheduler, not both (the cluster at --scheduler has its own workers)",
-        )
+    check_where(workers, scheduler)
     inputs = [Path(p) for p in spec.files] + ([Path(spec.source)] if spec.source != "sweep" else [])
     store = _Store(
         spec, out, inputs, flush_s
@@ -216,10 +208,8 @@ def sweep(
 
                 if not todo:
                     stats = {"run_s": 0.0, "workers": 0, "threads": 0}
-                elif client is None:
-                    stats = _run_here(todo, handle)
                 else:
-                    stats = _run_dask(client, todo, handle)
+                    stats = run_tasks(client, todo, handle)
                 stats["cluster_s"] = t_cluster
     finally:
         if store.out is not None and store._journal is not None:

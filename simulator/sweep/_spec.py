@@ -189,20 +189,22 @@ class SweepSpec:
         for i in range(n):
             yield {k: v[i] for k, v in cols.items()}
 
+    def point(self, values: dict, index: int, realization: int) -> dict:
+        """The point of axis ``values`` (by axis name) as the ``index``-th point, realization
+        ``realization``: its explicit ``point_seed`` drawn as :meth:`points` draws it."""
+        return {
+            "point": index,
+            "realization": realization,
+            "point_seed": _point_seed(self.seed, realization, index, self.independent_noise),
+            "values": values,
+        }
+
     def points(self) -> list[dict]:
         """Every point, in order: ``point`` (index), ``realization``, ``point_seed``, ``values`` by axis."""
         out = []
         for values in self._design_values():
             for r in range(self.realizations):
-                i = len(out)
-                out.append(
-                    {
-                        "point": i,
-                        "realization": r,
-                        "point_seed": _point_seed(self.seed, r, i, self.independent_noise),
-                        "values": values,
-                    }
-                )
+                out.append(self.point(values, len(out), r))
         return out
 
     def task(self, point: dict) -> dict:
@@ -257,17 +259,27 @@ def _design_seed(design: dict, point: dict) -> int:
     )
 
 
-def load_sweep(spec: str | os.PathLike | dict, base: str | os.PathLike | None = None) -> SweepSpec:
+def load_sweep(
+    spec: str | os.PathLike | dict,
+    base: str | os.PathLike | None = None,
+    *,
+    source: str | None = None,
+    continuous: bool = False,
+) -> SweepSpec:
     """A :class:`SweepSpec` from a sweep file (TOML) or the same structure as a dict.
 
     ``base``: the directory relative paths are read from (default: the file's, or the
-    working directory for a dict). Every problem is one :class:`InputError` line.
+    working directory for a dict). ``source``: the name errors give a dict (default
+    "sweep"). ``continuous``: a range ``{from, to}`` stays a continuous range (as for
+    ``samples``) and no grid is required: the axes of a search (:mod:`simulator.design`),
+    whose points are drawn by its optimiser, not by :meth:`SweepSpec.points`. Every problem
+    is one :class:`InputError` line.
     """
     from patterns.geometry import DESIGNS
     from simulator.scene import validate_scene
 
     if isinstance(spec, dict):
-        doc, src = copy.deepcopy(spec), "sweep"
+        doc, src = copy.deepcopy(spec), source or "sweep"
         base_dir = Path(base or ".").resolve()
     else:
         path = Path(spec)
@@ -359,7 +371,7 @@ def load_sweep(spec: str | os.PathLike | dict, base: str | os.PathLike | None = 
                 f"{src}: [axes] {name}: not a parameter of this sweep: {has}the other axes are {', '.join(AXES)}"
             )
         require(all(a.name != key for a in axes), f"{src}: [axes] gives {key} twice")
-        axes.append(_parse_axis(key, raw, kinds[key], samples is not None, src))
+        axes.append(_parse_axis(key, raw, kinds[key], continuous or samples is not None, src))
     names = [a.name for a in axes]
     # where the pattern comes from: exactly one of [design], a pattern axis, [scene] pattern
     sources = [
@@ -376,7 +388,7 @@ def load_sweep(spec: str | os.PathLike | dict, base: str | os.PathLike | None = 
         f'{src}: give the pattern once: a [design], a pattern axis or [scene] pattern = "file"; '
         + (f"got {' and '.join(sources)}" if sources else "got none"),
     )
-    if samples is None:
+    if samples is None and not continuous:
         require(
             all(a.values is not None for a in axes),
             f"{src}: a grid needs every range with num or step",

@@ -1,6 +1,7 @@
 """The results of a sweep: rows in memory and the resumable results directory.
 
-Owns ``_Store``: the directory's checks (a non-empty directory is resumed only when its
+Owns :class:`ResultStore` (a resumable directory of rows, also a search's) and
+``_Store``, the sweep's: the directory's checks (a non-empty directory is resumed only when its
 ``sweep.json`` holds this very sweep's hash; never the working directory or one that
 holds an input), its lock, the journal ``points.jsonl`` (appended and flushed as each
 point finishes, read back on a rerun), each point's ``points/NNNNN.json``, the tables
@@ -32,6 +33,9 @@ LOCK = ".sweep.lock"
 TABLES = ("results.parquet", "results.csv")
 
 
+__all__ = ["ResultStore", "kept_points"]
+
+
 # ----------------------------------------------------------------------- the store
 def _write_text(path: Path, text: str) -> None:
     from patterns.outputs import atomic_output
@@ -50,20 +54,41 @@ def _version() -> str:
         return "unknown"
 
 
-class _Store:
-    """The rows of a sweep, in memory and (with ``out``) in a resumable directory."""
+class ResultStore:
+    """A resumable results directory of rows, one per key (a sweep's point, a search's trial).
+
+    Owns the directory's checks (a non-empty directory is resumed only when its manifest
+    holds this very run's hash; never the working directory or one that holds an input),
+    its lock, the journal (one JSON row per line, appended and flushed as each finishes,
+    read back on a rerun), each row's ``ROWS_DIR/NNNNN.json``, the tables (rewritten
+    atomically every ``flush_s`` seconds and at the end) and the ownership marker. The
+    class attributes name the files and the words of its messages; :class:`_Store` is the
+    sweep's, :mod:`simulator.design` has the search's.
+    """
+
+    COMMAND = "sweep"  # the command, in the manifest, the marker and the messages
+    KEY = "point"  # the column that numbers the rows
+    MANIFEST, JOURNAL, ROWS_DIR, LOCK, TABLES = MANIFEST, JOURNAL, POINTS_DIR, LOCK, TABLES
+    HOLD = "sweep-point"  # the hold point after each row (patterns.hold)
 
     def __init__(
         self,
-        spec: SweepSpec,
         out: str | os.PathLike | None,
+        digest: str,
+        describe: dict,
+        *,
+        n: int | None = None,
         inputs: Iterable[Path] = (),
         flush_s: float = FLUSH_S,
     ):
-        """Check ``out`` (and, for a sweep already there, take its lock and read its rows); create nothing."""
+        """Check ``out`` (and, for a run already there, take its lock and read its rows); create nothing.
+
+        ``digest``: the run's hash (what a rerun must match); ``describe``: what the manifest
+        records beside it; ``n``: rows are numbered below it (None: any number from 0).
+        """
         from patterns.outputs import check_output_dir
 
-        self.spec, self.flush_s = spec, flush_s
+        self.digest, self.describe, self.n, self.flush_s = digest, describe, n, flush_s
         self.out = Path(out) if out is not None else None
         self.inputs = list(inputs)
         self.rows: dict[int, dict] = {}
@@ -93,29 +118,33 @@ class _Store:
             check_output_dir(out, "--out", False, self.inputs)  # nothing changed meanwhile
             out.mkdir(exist_ok=True)
             self._take_lock()
-        (out / POINTS_DIR).mkdir(exist_ok=True)
-        if not (out / MANIFEST).exists():
+        (out / self.ROWS_DIR).mkdir(exist_ok=True)
+        if not (out / self.MANIFEST).exists():
             _write_text(
-                out / MANIFEST,
+                out / self.MANIFEST,
                 json.dumps(
                     {
                         "tool": "selfalign",
                         "version": _version(),
-                        "command": "sweep",
-                        "hash": self.spec.digest,
-                        **self.spec.describe(),
+                        "command": self.COMMAND,
+                        "hash": self.digest,
+                        **self.describe,
                     },
                     indent=1,
                     default=str,
                 )
                 + "\n",
             )
-        self._journal = open(out / JOURNAL, "a", encoding="utf-8")  # noqa: SIM115 (closed in close())
+        self._journal = open(out / self.JOURNAL, "a", encoding="utf-8")  # noqa: SIM115 (closed in close())
+
+    def _other(self, doc: dict) -> str:
+        """How a refusal names the run another manifest holds."""
+        return f"{doc.get('source', '?')}, {doc.get('points', '?')} points"
 
     def _check_same(self, out: Path, inputs: list[Path]) -> None:
-        """A non-empty ``out`` is resumed only when it holds this very sweep."""
-        flag = "--out"
-        man = out / MANIFEST
+        """A non-empty ``out`` is resumed only when it holds this very run."""
+        flag, what = "--out", self.COMMAND
+        man = out / self.MANIFEST
         r = out.resolve()
         cwd = Path.cwd().resolve()
         require(
@@ -126,41 +155,41 @@ class _Store:
             ri = inp.resolve()
             require(
                 not (r == ri or r in ri.parents),
-                f"{flag} {out}: holds an input of this sweep ({inp.name}); give a new directory name",
+                f"{flag} {out}: holds an input of this {what} ({inp.name}); give a new directory name",
             )
         if not man.is_file():
             raise InputError(
-                f"{flag} {out}: holds files that are not a selfalign sweep; choose a new or empty directory"
+                f"{flag} {out}: holds files that are not a selfalign {what}; choose a new or empty directory"
             )
         try:
             doc = json.loads(man.read_text())
             theirs = doc["hash"]
         except (OSError, ValueError, KeyError, TypeError):
             raise InputError(
-                f"{flag} {out}: its {MANIFEST} cannot be read; choose a new or empty directory"
+                f"{flag} {out}: its {self.MANIFEST} cannot be read; choose a new or empty directory"
             ) from None
-        if theirs != self.spec.digest:
+        if theirs != self.digest:
             raise InputError(
-                f"{flag} {out}: holds a different sweep ({doc.get('source', '?')}, {doc.get('points', '?')} points, hash {str(theirs)[:12]}; "
-                f"this one is {self.spec.digest[:12]}); choose another --out (sweeps are never mixed)"
+                f"{flag} {out}: holds a different {what} ({self._other(doc)}, hash {str(theirs)[:12]}; "
+                f"this one is {self.digest[:12]}); choose another --out (the results of two runs are never mixed)"
             )
         require(os.access(out, os.W_OK), f"{flag} {out}: directory is not writable")
 
     def _take_lock(self) -> None:
         import fcntl
 
-        f = open(self.out / LOCK, "a+")  # noqa: SIM115 (held until close())
+        f = open(self.out / self.LOCK, "a+")  # noqa: SIM115 (held until close())
         try:
             fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:
             f.close()
             raise InputError(
-                f"--out {self.out}: another selfalign sweep is writing into it; wait for it to end or choose another --out"
+                f"--out {self.out}: another selfalign {self.COMMAND} is writing into it; wait for it to end or choose another --out"
             ) from None
         self._lock = f
 
     def _read_journal(self) -> None:
-        path = self.out / JOURNAL
+        path = self.out / self.JOURNAL
         if not path.exists():
             return
         data = path.read_bytes()
@@ -168,47 +197,36 @@ class _Store:
         if end < len(data):  # a line cut short by a kill: dropped, so the next line starts clean
             with open(path, "rb+") as f:
                 f.truncate(end)
-        n = self.spec.n_points
         for line in data[:end].splitlines():
             try:
                 row = json.loads(line)
-                i = int(row["point"])
+                i = int(row[self.KEY])
             except (ValueError, KeyError, TypeError):
                 continue
-            if 0 <= i < n:
+            if 0 <= i and (self.n is None or i < self.n):
                 self.rows[i] = row
 
     # .................................................................. rows
-    def done(self, retry_failed: bool) -> set[int]:
-        return {i for i, r in self.rows.items() if r.get("status") == "ok" or not retry_failed}
-
-    def add(self, point: dict, result: dict) -> dict:
-        row = self.spec.columns(point) | {k: result.get(k) for k in STATUS_COLUMNS}
-        if result.get("summary") is not None:
-            row |= flatten(result["summary"])
-        i = point["point"]
+    def record(self, i: int, row: dict, doc: dict) -> dict:
+        """Keep ``row`` as row ``i``; with a directory, write ``doc`` (the row's full numbers) as
+        ``ROWS_DIR/NNNNN.json``, append the row to the journal and flush it, and rewrite the
+        tables when they are due."""
         self.rows[i] = row
         if self.out is not None:
-            width = max(5, len(str(self.spec.n_points - 1)))
-            doc = {
-                "point": i,
-                "settings": point["values"],
-                "row": row,
-                "summary": result.get("summary"),
-            }
+            width = max(5, len(str((self.n or 1) - 1)))
             _write_text(
-                self.out / POINTS_DIR / f"{i:0{width}d}.json",
+                self.out / self.ROWS_DIR / f"{i:0{width}d}.json",
                 json.dumps(doc, indent=1, allow_nan=False) + "\n",
             )
             self._journal.write(json.dumps(row, allow_nan=False) + "\n")
             self._journal.flush()
-            hold("sweep-point")
+            hold(self.HOLD)
             if time.monotonic() >= self._next_flush:
                 self.write_tables()
         return row
 
     def table(self):
-        """All rows, by point, as a pandas DataFrame (columns: identity, settings, status, metrics)."""
+        """All rows, by key, as a pandas DataFrame (the columns in the order the rows give them)."""
         import pandas as pd
 
         rows = [self.rows[i] for i in sorted(self.rows)]
@@ -219,19 +237,20 @@ class _Store:
             cols.update(dict.fromkeys(r))
         return pd.DataFrame(rows, columns=list(cols)) if rows else pd.DataFrame(columns=list(cols))
 
-    def write_tables(self) -> None:
+    def write_tables(self, df=None) -> None:
+        """Rewrite the tables atomically: the rows, or the DataFrame ``df`` made of them."""
         if self.out is None:
             return
         import pyarrow as pa
         import pyarrow.parquet as pq
 
         t0 = time.monotonic()
-        df = self.table()
+        df = self.table() if df is None else df
         from patterns.outputs import atomic_output
 
-        with atomic_output(self.out / TABLES[0]) as tmp:
+        with atomic_output(self.out / self.TABLES[0]) as tmp:
             pq.write_table(pa.Table.from_pandas(df, preserve_index=False), tmp)
-        with atomic_output(self.out / TABLES[1]) as tmp:
+        with atomic_output(self.out / self.TABLES[1]) as tmp:
             df.to_csv(tmp, index=False)
         now = time.monotonic()
         self._next_flush = now + max(
@@ -249,7 +268,12 @@ class _Store:
         _write_text(
             self.out / MARKER,
             json.dumps(
-                {"tool": "selfalign", "command": "sweep", "files": sorted(files + [LOCK])}, indent=1
+                {
+                    "tool": "selfalign",
+                    "command": self.COMMAND,
+                    "files": sorted(files + [self.LOCK]),
+                },
+                indent=1,
             )
             + "\n",
         )
@@ -266,17 +290,50 @@ class _Store:
             self._lock = None
 
 
-def kept_points(out: str | os.PathLike) -> int:
-    """How many points the journal of the results directory ``out`` holds (finished, ok or
-    failed; a line cut short does not count): what a rerun resumes from."""
+class _Store(ResultStore):
+    """The rows of a sweep, in memory and (with ``out``) in a resumable directory."""
+
+    def __init__(
+        self,
+        spec: SweepSpec,
+        out: str | os.PathLike | None,
+        inputs: Iterable[Path] = (),
+        flush_s: float = FLUSH_S,
+    ):
+        self.spec = spec
+        super().__init__(
+            out, spec.digest, spec.describe(), n=spec.n_points, inputs=inputs, flush_s=flush_s
+        )
+
+    def done(self, retry_failed: bool) -> set[int]:
+        return {i for i, r in self.rows.items() if r.get("status") == "ok" or not retry_failed}
+
+    def add(self, point: dict, result: dict) -> dict:
+        row = self.spec.columns(point) | {k: result.get(k) for k in STATUS_COLUMNS}
+        if result.get("summary") is not None:
+            row |= flatten(result["summary"])
+        i = point["point"]
+        doc = {
+            "point": i,
+            "settings": point["values"],
+            "row": row,
+            "summary": result.get("summary"),
+        }
+        return self.record(i, row, doc)
+
+
+def kept_points(out: str | os.PathLike, journal: str = JOURNAL, key: str = "point") -> int:
+    """How many rows the journal of the results directory ``out`` holds (a sweep's finished
+    points, ok or failed; with ``journal`` "trials.jsonl" and ``key`` "trial", a search's
+    trials; a line cut short does not count): what a rerun resumes from."""
     try:
-        data = (Path(out) / JOURNAL).read_bytes()
+        data = (Path(out) / journal).read_bytes()
     except OSError:
         return 0
     seen = set()
     for line in data[: data.rfind(b"\n") + 1].splitlines():
         try:
-            seen.add(int(json.loads(line)["point"]))
+            seen.add(int(json.loads(line)[key]))
         except (ValueError, KeyError, TypeError):
             continue
     return len(seen)
