@@ -18,6 +18,7 @@ def test_every_example_is_covered():
         "evaluate_defect.toml",
         "energy_fourpad.toml",
         "sweep_fourpad.toml",
+        "design_freeform_rfid.toml",
     }
 
 
@@ -66,3 +67,19 @@ def test_energy_example(tmp_path, flags):
     out = tmp_path / "e.json"
     assert main(["energy", str(EX / "energy_fourpad.toml"), *flags, "--json", str(out)]) == 0
     assert json.loads(out.read_text())["poses"][0]["overlap_um2"] == pytest.approx(419200, abs=1)
+
+
+def test_freeform_design_example_loads():
+    """The free-form example is checked whole (running it takes minutes: docs/guide/design.md):
+    its chip has an index mark, so no turn repeats it and the orientation term is allowed; the
+    baseline is the four contact pads it keeps."""
+    import numpy as np
+
+    from simulator.design import load_freeform
+    from simulator.scene import chip_symmetry
+
+    spec = load_freeform(EX / "design_freeform_rfid.toml")
+    assert chip_symmetry(spec.scene.chip)[0] == 360.0
+    assert spec.twists_deg() == (0.0, 90.0, 180.0, 270.0) and spec.shape == (180, 180)
+    assert spec.keep_in.sum() * 16 == 4 * 120 * 120  # the four 120 um pads at 4 um/px
+    assert np.array_equal(spec.baseline.data >= 0.5, spec.keep_in)

@@ -3,10 +3,12 @@ evaluator's check beside the baseline's, ``result.json`` and ``report.html``.
 
 The GDSII polygons are the written raster's pixels merged (exact, in um, the pattern frame
 of :mod:`patterns.mask`) and simplified by half a pixel, well below the minimum feature
-(at least two pixels). :func:`feature_check` measures what an opening and a closing by a
-disk of the minimum feature (less one pixel of slack) change on them: a polygon or a gap
-narrower than the feature would move by its length, a raster opened and closed by that
-disk moves by about a pixel. Nothing heavy is imported until a picture is drawn.
+(at least two pixels). :func:`feature_check` measures, on the polygons read back from the
+file, what an opening and a closing by a disk of the minimum feature (less one pixel of
+slack) change: a wettable part or a dry gap narrower than the feature would move by its
+length, a raster opened and closed by that disk moves by a pixel or two. The keep-in pads
+and keep-out areas are the user's shapes, written as given (sharp corners and all), and
+not counted. Nothing heavy is imported until a picture is drawn.
 """
 
 from __future__ import annotations
@@ -213,6 +215,10 @@ def _plot_patterns(result, path: Path) -> None:
     ext = (-w / 2 * s, w / 2 * s, -h / 2 * s, h / 2 * s)
     x = (np.arange(w) + 0.5 - w / 2) * s
     y = (h / 2 - np.arange(h) - 0.5) * s
+    chip = spec.scene.chip
+    ch, cw = chip.shape
+    cx = (np.arange(cw) + 0.5 - cw / 2) * chip.um_per_px
+    cy = (ch / 2 - np.arange(ch) - 0.5) * chip.um_per_px
     fig, axes = plt.subplots(1, 2, figsize=(10, 4.8), constrained_layout=True)
     for ax, data, title in (
         (axes[0], spec.baseline.data, "baseline"),
@@ -223,10 +229,13 @@ def _plot_patterns(result, path: Path) -> None:
             ax.contour(x, y, spec.keep_in.astype(float), [0.5], colors="C0", linewidths=1.2)
         if spec.keep_out.any():
             ax.contour(x, y, spec.keep_out.astype(float), [0.5], colors="C3", linewidths=1.2)
+        ax.contour(cx, cy, chip.data, [0.5], colors="C1", linewidths=1.0, linestyles="--")
         ax.plot([0], [0], "+", color="C1", ms=10, mew=1.5)
         ax.set(xlabel="x (µm)", ylabel="y (µm)", title=f"{title}, {s:g} µm/px")
+        ax.set(xlim=ext[:2], ylim=ext[2:])
     axes[1].plot([], [], color="C0", label="keep-in (wettable)")
     axes[1].plot([], [], color="C3", label="keep-out (dry)")
+    axes[1].plot([], [], color="C1", ls="--", label="chip's wettable area at the target")
     axes[1].legend(loc="upper right", fontsize=8, framealpha=0.8)
     fig.suptitle(
         f"free-form pattern: white = wettable pad; minimum feature {spec.min_feature_um:g} µm",
