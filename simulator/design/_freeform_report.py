@@ -4,8 +4,8 @@ evaluator's check beside the baseline's, ``result.json`` and ``report.html``.
 The GDSII polygons are the written raster's pixels merged (exact, in um, the pattern frame
 of :mod:`patterns.mask`) and simplified by half a pixel, well below the minimum feature
 (at least two pixels). :func:`feature_check` measures, on the polygons read back from the
-file, what an opening and a closing by a disk of the minimum feature (less one pixel of
-slack) change: a wettable part or a dry gap narrower than the feature would move by its
+file, what an opening and a closing by a disk of the minimum feature (its radius less one
+pixel of slack) change: a wettable part or a dry gap narrower than the feature would move by its
 length, a raster opened and closed by that disk moves by a pixel or two. The keep-in pads
 and keep-out areas are the user's shapes, written as given (sharp corners and all), and
 not counted. Nothing heavy is imported until a picture is drawn.
@@ -37,7 +37,7 @@ __all__ = [
 
 #: The command recorded in the output's marker: such a directory may be replaced by a rerun.
 COMMAND = "design freeform"
-#: How far (px) an opening or closing by the minimum feature (less one pixel) may move the
+#: How far (px) an opening or closing by the minimum feature (its radius less a pixel) may move the
 #: written polygons: pixel stairs and the half-pixel simplification.
 FEATURE_TOL_PX = 2.0
 
@@ -100,10 +100,10 @@ def _directed(a, b, step: float) -> float:
 def feature_check(
     geometry, min_feature_um: float, um_per_px: float, keep_in=None, keep_out=None
 ) -> dict:
-    """How far an opening and a closing by a disk of diameter ``min_feature_um`` less one pixel
-    move ``geometry`` (um): the largest distance from what the opening removes to the wettable
-    area left (a wettable part narrower than the feature moves by its length), and from what the
-    closing fills to the dry area left (a dry gap narrower than the feature). What lies on the
+    """How far an opening and a closing by a disk of diameter ``min_feature_um`` (its radius
+    less one pixel) move ``geometry`` (um): the largest distance from what the opening removes
+    to the wettable area left (a wettable part narrower than the feature moves by its length),
+    and from what the closing fills to the dry area left (a dry gap narrower than the feature). What lies on the
     keep-in pads (``keep_in``, geometry in um: the user's own shapes, kept as given, sharp
     corners and all) is not counted for the opening, nor what lies on ``keep_out`` for the
     closing. ``ok`` when both stay within :data:`FEATURE_TOL_PX` pixels."""
@@ -384,6 +384,14 @@ def _rows(doc: dict) -> str:
                 "({x_um:.4g}, {y_um:.4g}, {twist_deg:.4g})".format(**a["global_minimum"]),
             ),
         ]
+        if "stiffness" in a and "stiffness" in b:
+            rows.append(
+                (
+                    "stiffness at alignment, x / y (N/m)",
+                    f"{b['stiffness']['x_N_per_m']:.3g} / {b['stiffness']['y_N_per_m']:.3g}",
+                    f"{a['stiffness']['x_N_per_m']:.3g} / {a['stiffness']['y_N_per_m']:.3g}",
+                )
+            )
         if "orientation_min_gap_J" in a:
             rows.append(
                 (
@@ -407,7 +415,7 @@ def _html(doc: dict) -> str:
     c, lay = doc["cleanup"], doc["layout"]
     check = (
         f"every polygon survives an opening, and every gap a closing, by a {lay['disk_diameter_um']:.3g} µm disk "
-        f"(the minimum feature less a pixel) within {lay['tolerance_um']:.3g} µm, the keep-in pads and keep-out areas as given: "
+        f"(the minimum feature's, its radius less a pixel) within {lay['tolerance_um']:.3g} µm, the keep-in pads and keep-out areas as given: "
         f"opening moves them by at most {_fmt(lay['opening_moves_um'], 'µm')}, closing by {_fmt(lay['closing_moves_um'], 'µm')}"
         f" — <b>{'respected' if lay['ok'] else 'NOT respected'}</b>"
     )
