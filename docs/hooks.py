@@ -3,7 +3,7 @@
 * Benchmark tables. A page holds a marker ``<!-- table: NAME -->`` on a line of its own;
   the build replaces it by the table that :data:`TABLES` renders from the files in
   ``benchmarks/results/`` (``landscape.json``, ``sweep.json``, ``accuracy.json``,
-  ``accuracy.md``), so the site shows what the last recorded run measured and no number
+  ``accuracy.md``, ``design_freeform.json``), so the site shows what the last recorded run measured and no number
   of those tables is copied by hand. ``python docs/hooks.py NAME`` prints one.
 * Files outside ``docs/``. A page may link a file of the repository outside ``docs/``
   by its relative path (``../../patterns/library/overview.png``), which is right on
@@ -222,11 +222,35 @@ def accuracy_details() -> str:
     return "\n".join(out).strip()
 
 
+def design_freeform_table() -> str:
+    """benchmarks/results/design_freeform.json: seconds per gradient iteration of a free-form design."""
+    doc = _load("design_freeform.json")
+    m = doc["machine"]
+    lines = [
+        "| canvas | pixel | twist planes x perturbation samples | ms per iteration (best) | every run (ms) | compilation | load average |",
+        "|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for r in doc["rows"]:
+        runs = ", ".join(_g(v * 1e3) for v in r["seconds_per_iteration_all"])
+        lines.append(
+            f"| {r['N']} x {r['N']} px | {r['um_per_px']:.3g} µm | {r['twists']} x {r['samples']} "
+            f"| {_g(r['seconds_per_iteration'] * 1e3)} | {runs} | {r['compile_s']:.1f} s | {r['load_average']:.2f} |"
+        )
+    lines += [
+        "",
+        f"Recorded with `python benchmarks/design_freeform.py` (the problem of `{doc['example']}` on a "
+        f"{doc['canvas_um']:g} µm canvas): {m['cpus']} CPUs ({m['processor']}), Python {m['python']}, "
+        f"numpy {m['numpy']}, JAX {m['jax']} ({m['backend']}).",
+    ]
+    return "\n".join(lines)
+
+
 TABLES = {
     "landscape": landscape_table,
     "sweep": sweep_table,
     "accuracy": accuracy_table,
     "accuracy-details": accuracy_details,
+    "design-freeform": design_freeform_table,
 }
 
 

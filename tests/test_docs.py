@@ -325,6 +325,11 @@ def test_benchmark_tables_come_from_the_results_files():
         in hooks.render("accuracy")
     )
     assert "| knob | value | energy RMS %" in hooks.render("accuracy-details")
+    design = json.loads((ROOT / "benchmarks/results/design_freeform.json").read_text())
+    for r in design["rows"]:
+        assert f"| {hooks._g(r['seconds_per_iteration'] * 1e3)} |" in hooks.render(
+            "design-freeform"
+        )
 
 
 def test_every_package_has_its_api_page():

@@ -19,6 +19,7 @@ def test_every_example_is_covered():
         "energy_fourpad.toml",
         "sweep_fourpad.toml",
         "design_fourpad_gap.toml",
+        "design_freeform_rfid.toml",
     }
 
 
@@ -84,3 +85,19 @@ def test_design_example_is_the_guides_search():
     ]
     assert spec.sweep.design["params"] == {"size": 730, "gap": 50}
     assert spec.baseline_values() == {"placement_sigma_um": 150, "placement_sigma_deg": 2}
+
+
+def test_freeform_design_example_loads():
+    """The free-form example is checked whole (running it takes minutes: docs/guide/design.md):
+    its chip has an index mark, so no turn repeats it and the orientation term is allowed; the
+    baseline is the four contact pads it keeps."""
+    import numpy as np
+
+    from simulator.design import load_freeform
+    from simulator.scene import chip_symmetry
+
+    spec = load_freeform(EX / "design_freeform_rfid.toml")
+    assert chip_symmetry(spec.scene.chip)[0] == 360.0
+    assert spec.twists_deg() == (0.0, 90.0, 180.0, 270.0) and spec.shape == (180, 180)
+    assert spec.keep_in.sum() * 16 == 4 * 120 * 120  # the four 120 um pads at 4 um/px
+    assert np.array_equal(spec.baseline.data >= 0.5, spec.keep_in)

@@ -1,5 +1,39 @@
 """Types of ``simulator.design``'s names, loaded on first use (SPEC 1 lazy loading)."""
 
+from ._freeform import (
+    FreeformResult as FreeformResult,
+    Problem as Problem,
+    clean_pattern as clean_pattern,
+    freeform as freeform,
+    make_problem as make_problem,
+    orientation_gaps as orientation_gaps,
+)
+from ._freeform_density import (
+    DensityMap as DensityMap,
+    density_map as density_map,
+    pattern_of as pattern_of,
+    project as project,
+)
+from ._freeform_energy import (
+    ChipSide as ChipSide,
+    chip_side as chip_side,
+    overlap_planes as overlap_planes,
+)
+from ._freeform_objectives import (
+    Objective as Objective,
+    make_objective as make_objective,
+    softmin as softmin,
+)
+from ._freeform_report import (
+    feature_check as feature_check,
+    pattern_polygons as pattern_polygons,
+    read_gds_polygons as read_gds_polygons,
+)
+from ._freeform_spec import (
+    FreeformSpec as FreeformSpec,
+    load_freeform as load_freeform,
+    price_freeform as price_freeform,
+)
 from ._mode import (
     design_mode as design_mode,
 )
