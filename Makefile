@@ -42,6 +42,7 @@ library: $(BIN)/selfalign
 
 bench: $(BIN)/selfalign
 	$(BIN)/python benchmarks/landscape.py --json benchmarks/results/landscape.json
+	$(BIN)/python benchmarks/design_freeform.py --repeat 3 --json benchmarks/results/design_freeform.json
 
 # Surface Evolver reference numbers (validation/README.md; hours on one core: pinned single pad
 # ~20 min, pinned defects ~20 min, four-pad paths with free contact lines ~2 h).

@@ -281,7 +281,8 @@ def test_the_readme_is_short_and_starts_with_the_two_commands():
     assert len(text.splitlines()) < 200
     commands = re.findall(r"^(make \w+)", text, re.M)
     assert commands[:2] == ["make demo", "make test"]
-    assert len(re.findall(r"!\[[^\]]*\]\(", text)) == 1  # one picture
+    # the demo, and the design example's capture maps
+    assert len(re.findall(r"!\[[^\]]*\]\(", text)) == 2
     links = re.findall(r"\]\(([^)#\s]+)(?:#[^)]*)?\)", text)
     assert "docs/physics.md" in links and "docs/benchmarks.md" in links
     missing = [link for link in links if "://" not in link and not (ROOT / link).exists()]
