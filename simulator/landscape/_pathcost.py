@@ -62,6 +62,19 @@ def path_engine_supported(scene: Scene) -> tuple[bool, str]:
     return True, ""
 
 
+#: Share of the memory budget the outlines a run keeps may take (:meth:`PathEnergy.drop_outlines`).
+OUTLINE_BUDGET_SHARE = 1 / 8
+
+
+def _outline_bytes(o) -> int:
+    """Bytes one twist's outline holds (its steps and, for a meniscus footprint, its band)."""
+    n = o.rows.nbytes + o.cols.nbytes + o.vals.nbytes
+    b = o.band
+    if b is not None:
+        n += b.flat.nbytes + 4 * b.seg_a.nbytes + 4 * b.row_count.nbytes
+    return int(n)
+
+
 #: Columns a row computes beyond the box on each side when it starts (twice that when it
 #: is extended), and the gap beyond which a row's computed run is dropped and started anew.
 ROW_AHEAD, ROW_GAP = 8, 64
@@ -131,6 +144,7 @@ class PathEnergy:
     def outline(self, k: int) -> _Outline:
         o = self._outlines.get(k)
         if o is not None:
+            self._outlines[k] = self._outlines.pop(k)  # most recently used last
             return o
         tw = float(self.axis.values_at(np.asarray([k]))[0])
         rot = ChipRotator(
@@ -195,10 +209,16 @@ class PathEnergy:
         return o
 
     def drop_outlines(self, keep: set[int]) -> None:
-        """Forget the outlines of twists not in ``keep`` (memory: a run keeps its band's)."""
-        for k in list(self._outlines):
+        """Forget the outlines of twists not in ``keep``, the least recently used first, while
+        they take more than :data:`OUTLINE_BUDGET_SHARE` of the memory budget (a meniscus
+        footprint's are megabytes each; a run that turns back reuses those it kept)."""
+        cap = self.scene.memory_budget_mb * 2**20 * OUTLINE_BUDGET_SHARE
+        total = sum(_outline_bytes(o) for o in self._outlines.values())
+        for k in list(self._outlines):  # least recently used first
+            if total <= cap:
+                break
             if k not in keep:
-                del self._outlines[k]
+                total -= _outline_bytes(self._outlines.pop(k))
 
     # -- energies
     def _rows(self, o: _Outline, ys: np.ndarray, x0: int, n: int) -> np.ndarray:
