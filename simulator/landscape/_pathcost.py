@@ -63,7 +63,7 @@ def path_engine_supported(scene: Scene) -> tuple[bool, str]:
 
 
 #: Share of the memory budget the outlines a run keeps may take (:meth:`PathEnergy.drop_outlines`).
-OUTLINE_BUDGET_SHARE = 1 / 8
+OUTLINE_BUDGET_SHARE = 1 / 32
 
 
 def _outline_bytes(o) -> int:
