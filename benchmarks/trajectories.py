@@ -10,7 +10,17 @@
    gradient, each in a fresh process (its own peak RSS): the FFT boxes against the
    path-cost engine (small boxes that follow the chip, pose by pose).
 
-Usage: ``python benchmarks/trajectories.py [--out docs] [--only-4k] [--engines fft,path]``
+4. Meniscus runs against overlap runs of the same scene (GitHub issue 28 item 2): the
+   730/50 um four-pad at 1 um/px (730 um chip, 20 nl, from (300, 200 um, 10 deg)) and the
+   4000 um four-pad (gap 200 um) at 1 um/px (4000 um chip, 500 nl, from (1200, -800 um,
+   10 deg)), greedy and gradient, engine "auto"; the overlap run and the meniscus run
+   alternated, each in a fresh process (the simulate call's wall time, the whole process's,
+   and its peak RSS), best of the repeats and every value; the ratio meniscus / overlap.
+   Written to ``benchmarks/results/trajectories.json``.
+
+Usage: ``python benchmarks/trajectories.py [--out docs] [--only-4k] [--engines fft,path]``;
+``python benchmarks/trajectories.py --meniscus [--repeats 3] [--scenes 730,4k]
+[--methods greedy,gradient]`` (item 4 alone: prints its table).
 """
 
 from __future__ import annotations
@@ -164,12 +174,130 @@ def large_run(engines=("fft", "path"), methods=("greedy", "gradient")) -> list[s
     return lines
 
 
+MENISCUS_RUN = r"""
+import json, sys, time
+t_start = time.perf_counter()
+from simulator.motion import simulate
+from simulator.physics import Liquid
+from simulator.scene import Effects, Scene
+which, method, model = sys.argv[1], sys.argv[2], sys.argv[3]
+if which == "730":
+    from patterns.library import library_path
+    volume, start = 20.0, (300.0, 200.0, 10.0)
+    kw = {"effects": Effects(meniscus=True), "liquid": Liquid(volume_nl=volume)} if model == "meniscus" else {}
+    scene = Scene.from_inputs(library_path("four_pad_730_50"), chip_size_um=730, **kw)
+else:
+    from patterns.geometry import four_pad, square
+    from patterns.raster import mask_from_geometry
+    volume, start = 500.0, (1200.0, -800.0, 10.0)
+    kw = {"effects": Effects(meniscus=True), "liquid": Liquid(volume_nl=volume)} if model == "meniscus" else {}
+    scene = Scene(pattern=mask_from_geometry(four_pad(4000, 200), 1.0),
+                  chip=mask_from_geometry(square(4000), 1.0), **kw)
+t0 = time.perf_counter()
+t = simulate(scene, start, method=method)
+wall = time.perf_counter() - t0
+peak = [int(line.split()[1]) for line in open("/proc/self/status") if line.startswith("VmHWM:")][0] / 1024
+c = t.cost
+print(json.dumps({"simulate_s": wall, "process_s": time.perf_counter() - t_start, "peak_mb": peak,
+                  "outcome": t.outcome, "steps": t.steps, "final": list(t.final), "engine": c["engine"],
+                  "poses": c["poses_computed"], "planes": c["planes"], "landscape_s": c["landscape_s"],
+                  "minimum_how": c["minimum_how"], "minimum_s": c["minimum_s"],
+                  "meniscus_height_um": scene.meniscus_height_um}))
+"""
+MENISCUS_SCENES = {
+    "730": "730/50 um four-pad, 1 um/px, 730 um chip, (300, 200 um, 10 deg), 20 nl",
+    "4k": "4000 um four-pad (gap 200 um), 1 um/px, 4000 um chip, (1200, -800 um, 10 deg), 500 nl",
+}
+
+
+def meniscus_runs(scenes=("730", "4k"), methods=("greedy", "gradient"), repeats=3) -> dict:
+    """Overlap and meniscus runs of the same scene, alternated (A B A B ...), each in a fresh
+    process: every value, the best of each, and the ratios meniscus / overlap."""
+    out = {"scenes": {}, "repeats": repeats, "cpus": os.cpu_count()}
+    with tempfile.TemporaryDirectory() as tmp:
+        script = Path(tmp) / "run.py"
+        script.write_text(MENISCUS_RUN)
+        for which in scenes:
+            for method in methods:
+                runs = {"overlap": [], "meniscus": []}
+                for _ in range(repeats):
+                    for model in ("overlap", "meniscus"):
+                        p = subprocess.run(
+                            [sys.executable, str(script), which, method, model],
+                            capture_output=True,
+                            text=True,
+                            env=os.environ | {"PYTHONPATH": str(ROOT)},
+                        )
+                        if p.returncode:
+                            raise RuntimeError(p.stderr.strip().splitlines()[-1])
+                        r = json.loads(p.stdout.strip().splitlines()[-1])
+                        runs[model].append(r)
+                        print(
+                            f"{which} {method} {model}: {r['simulate_s']:.1f} s "
+                            f"(process {r['process_s']:.1f} s), {r['peak_mb']:,.0f} MB, "
+                            f"{r['outcome']}, engine {r['engine']}",
+                            file=sys.stderr,
+                        )
+                best = {
+                    m: {
+                        k: min(r[k] for r in v)
+                        for k in ("simulate_s", "process_s", "peak_mb", "landscape_s")
+                    }
+                    for m, v in runs.items()
+                }
+                out["scenes"][f"{which} {method}"] = {
+                    "scene": MENISCUS_SCENES[which],
+                    "method": method,
+                    "runs": runs,
+                    "best": best,
+                    "ratio_simulate": best["meniscus"]["simulate_s"]
+                    / best["overlap"]["simulate_s"],
+                    "ratio_process": best["meniscus"]["process_s"] / best["overlap"]["process_s"],
+                    "ratio_peak": best["meniscus"]["peak_mb"] / best["overlap"]["peak_mb"],
+                }
+    return out
+
+
+def meniscus_table(res: dict) -> list[str]:
+    lines = [
+        "| scene | method | model | engine | outcome | steps | simulate (s) | whole process (s) | peak RSS (MB) |",
+        "|---|---|---|---|---|---:|---:|---:|---:|",
+    ]
+    for key, r in res["scenes"].items():
+        which, method = key.split()
+        for model in ("overlap", "meniscus"):
+            last, b = r["runs"][model][-1], r["best"][model]
+            allv = ", ".join(f"{x['simulate_s']:.1f}" for x in r["runs"][model])
+            lines.append(
+                f"| {which} | {method} | {model} | {last['engine']} | {last['outcome']} | "
+                f"{last['steps']} | {b['simulate_s']:.1f} ({allv}) | {b['process_s']:.1f} | "
+                f"{b['peak_mb']:,.0f} |"
+            )
+        lines.append(
+            f"| {which} | {method} | **meniscus / overlap** | | | | "
+            f"**{r['ratio_simulate']:.2f}** | **{r['ratio_process']:.2f}** | {r['ratio_peak']:.2f} |"
+        )
+    return lines
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, default=ROOT / "docs")
     ap.add_argument("--only-4k", action="store_true", help="only the large single runs (item 3)")
     ap.add_argument("--engines", default="fft,path", help="engines of item 3, comma-separated")
+    ap.add_argument("--meniscus", action="store_true", help="only the meniscus runs (item 4)")
+    ap.add_argument("--repeats", type=int, default=3, help="alternated repeats of item 4")
+    ap.add_argument("--scenes", default="730,4k", help="scenes of item 4, comma-separated")
+    ap.add_argument("--methods", default="greedy,gradient", help="methods of item 4")
     args = ap.parse_args(argv)
+    if args.meniscus:
+        res = meniscus_runs(
+            tuple(args.scenes.split(",")), tuple(args.methods.split(",")), args.repeats
+        )
+        dest = ROOT / "benchmarks" / "results" / "trajectories.json"
+        dest.write_text(json.dumps(res, indent=1) + "\n")
+        print("\n".join(meniscus_table(res)))
+        return 0
     if args.only_4k:
         print("\n".join(large_run(tuple(args.engines.split(",")))))
         return 0

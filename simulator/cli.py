@@ -28,7 +28,17 @@ from patterns.errors import InputError
 from patterns.hold import hold
 
 #: Subcommands, in the order ``selfalign --help`` lists them.
-COMMANDS = ("pattern", "energy", "simulate", "montecarlo", "evaluate", "sweep", "design", "liquid", "demo")
+COMMANDS = (
+    "pattern",
+    "energy",
+    "simulate",
+    "montecarlo",
+    "evaluate",
+    "sweep",
+    "design",
+    "liquid",
+    "demo",
+)
 
 
 #: A value that begins with a minus sign and is made of numbers: a number, or a list of them

@@ -119,7 +119,7 @@ def _chip(fp: Path) -> list:
 #: name: (arguments after the pattern and chip, the words the one-line refusal holds).
 CASES = {
     "simulate greedy: the first box with its transforms": (
-        ["simulate", "--start=300,-200,10", "--memory-budget", "64"],
+        ["simulate", "--start=300,-200,10", "--engine", "fft", "--memory-budget", "64"],
         [
             "the landscape needs about",
             "7 twists x",
@@ -138,12 +138,12 @@ CASES = {
             "--meniscus-height",
             "31",
             "--memory-budget",
-            "200",
+            "60",
         ],
         [
             "meniscus footprint of the 1,000 x 1,000 um chip",
             "distance transform",
-            "memory budget is 200 MB",
+            "memory budget is 60 MB",
             "--resolution",
             "--meniscus-height",
             "--memory-budget",
@@ -168,12 +168,21 @@ CASES = {
             "--memory-budget",
         ],
     ),
-    "simulate greedy with the meniscus: the first box and its footprint": (
-        ["simulate", "--start=300,-200,10", "--meniscus-height", "31", "--memory-budget", "330"],
+    "simulate greedy with the meniscus on FFT boxes: the first box and its footprint": (
+        [
+            "simulate",
+            "--start=300,-200,10",
+            "--meniscus-height",
+            "31",
+            "--engine",
+            "fft",
+            "--memory-budget",
+            "200",
+        ],
         [
             "the landscape needs about",
             "meniscus footprint",
-            "memory budget is 330 MB",
+            "memory budget is 200 MB",
             "--memory-budget",
         ],
     ),
@@ -186,7 +195,7 @@ CASES = {
         ["the landscape needs about", "memory budget is 1,000 MB", "--memory-budget"],
     ),
     "energy with the meniscus: the footprint": (
-        ["energy", "--at", "0,0,0", "--meniscus-height", "31", "--memory-budget", "200"],
+        ["energy", "--at", "0,0,0", "--meniscus-height", "31", "--memory-budget", "80"],
         ["meniscus footprint", "distance transform", "--memory-budget"],
     ),
     "montecarlo: the landscape with its transforms": (
@@ -351,6 +360,8 @@ MENISCUS_RUN = [
     "--method",
     "gradient",
     "--start=60,-40,4",
+    "--engine",
+    "fft",
     "--max-steps",
     "200",
 ]

@@ -107,14 +107,18 @@ def run(args: argparse.Namespace) -> int:
         from simulator.motion import DynamicsParams
 
         DynamicsParams.from_scene(scene)  # a liquid the model cannot take fails before compiling
-    require_run_fits(
-        scene, start, method
-    )  # the first landscape (and footprint) priced before any work
-    compiling(method, args.quiet)
     if args.engine == "path" and method in ("overdamped", "inertial"):
         raise InputError(
             f"--engine path runs greedy and gradient; {method} builds the whole landscape (leave --engine out)"
         )
+    engine = args.engine
+    if method not in ("overdamped", "inertial"):
+        from simulator.motion import choose_engine
+
+        engine = choose_engine(scene, start, method, args.engine, 3, 48)
+    # the first landscape (and footprint), or what the path engine needs, priced before any work
+    require_run_fits(scene, start, method, engine=engine)
+    compiling(method, args.quiet)
     traj = simulate(scene, start, method=method, max_steps=max_steps, engine=args.engine)
     print(end_line(scene, traj))
     if traj.refined is not None:

@@ -22,6 +22,7 @@ from ._landscape import (
 from ._optimum import (
     GlobalMinimum as GlobalMinimum,
     global_minimum as global_minimum,
+    minimum_box as minimum_box,
     require_minimum_fits as require_minimum_fits,
 )
 from ._pathcost import (

@@ -369,7 +369,11 @@ def _layout(
     rotating = hc * wc * (SMOOTH_ROTATE_BYTES_PER_PX if kept else RASTER_BYTES_PER_PX)
     out["rotator_bytes"] = kept + rotating
     if make:
-        _refuse_footprint(scene, make, smooth_canvas(scene.chip, rot_margin, parity))
+        _refuse_footprint(
+            scene,
+            make,
+            smooth_canvas(scene.chip, rot_margin, parity, scene.wall_profile is not None),
+        )
     if check_budget:
         need = _build_bytes(scene, out, 1)
         if need > scene.memory_budget_mb * 2**20:

@@ -54,10 +54,14 @@ from simulator.landscape._landscape import (
     nominal_order,
 )
 from simulator.landscape._overlap_bound import _Bounds, _delta_gamma
+from simulator.landscape._pathcost import PathEnergy
 from simulator.scene import Scene
 
 #: Target number of cells per axis of the first (coarsest) cell bound.
 CELLS_PER_AXIS = 128
+#: Boxes of the search at most this many px from their centre are computed pose by pose when
+#: the run has a path-cost engine (the nominal box, a floor's box); wider ones by FFT.
+PATH_BOX_PX = 64
 #: Cells left whose box (times its twists) holds at most this many poses are computed
 #: exactly at once; larger sets are refined first (k / 4: 1/16 of the work per level).
 EXACT_POSES = 20_000
@@ -95,6 +99,7 @@ def global_minimum(
     landscape: Landscape | None = None,
     evaluated: tuple | list = (),
     backend: str = "auto",
+    engine: PathEnergy | None = None,
 ) -> GlobalMinimum:
     """The global minimum of ``scene``'s energy over its whole pose grid.
 
@@ -103,11 +108,14 @@ def global_minimum(
         landscape: a landscape to read it off (its grid decides; pass the full landscape).
         evaluated: boxes of the scene's landscape already built (e.g. a trajectory's), reused.
         backend: as :func:`simulator.landscape.build_landscape`.
+        engine: the run's :class:`~simulator.landscape.PathEnergy`, when it has one: small
+            boxes are then computed pose by pose, and a meniscus footprint's mass and block
+            maxima come from its sparse form, never from a rotation of the whole canvas.
     """
     if landscape is not None:
         return landscape_minimum(landscape)
     t0 = time.perf_counter()
-    search = _Search(scene, backend)
+    search = _Search(scene, backend, engine)
     for ls in evaluated:
         search.add(ls, counted=False)
     how = search.run()
@@ -115,19 +123,81 @@ def global_minimum(
     return GlobalMinimum(x, y, t, e, how=how, poses=search.poses, seconds=time.perf_counter() - t0)
 
 
-def require_minimum_fits(scene: Scene) -> None:
+def require_minimum_fits(scene: Scene, path_engine: bool = False) -> None:
     """Refuse (InputError), before a run that will need it, a global minimum that
     :func:`global_minimum` could not find within the memory budget: the bound's chip canvas
-    and, with a meniscus, the chip's footprint; for a scene the bound does not cover (a
-    repulsive pad, a meniscus below a pixel) one twist of the whole landscape, which the
-    search then builds twist by twist. Sizes only: nothing rotated or transformed."""
+    and, with a meniscus, the chip's footprint (``path_engine``: the free contact lines'
+    footprint comes from the run's :class:`PathEnergy`, never rotated onto the whole canvas);
+    for a scene the bound does not cover (a repulsive pad, a meniscus below a pixel) one
+    twist of the whole landscape, which the search then builds twist by twist. Sizes only:
+    nothing rotated or transformed."""
     from simulator.landscape._build import _layout, require_landscape_fits
 
     if _full_search(scene):
         require_landscape_fits(scene, twists=scene.twist_axis.values()[:1])
         return
     lay = _layout(scene, None, (0, 0), None, check_budget=False)  # the footprint priced here
-    _Bounds.require_fits(scene, lay["canvas"], bool(lay["chip_blur"]))
+    rotated = bool(lay["chip_blur"]) and not (path_engine and scene.wall_profile is not None)
+    _Bounds.require_fits(scene, lay["canvas"], rotated)
+
+
+def minimum_box(
+    scene: Scene,
+    minimum: GlobalMinimum,
+    engine: PathEnergy | None = None,
+    backend: str = "auto",
+) -> Landscape:
+    """A box of the landscape around the global minimum that holds its floor: the poses within
+    the noise floor of its energy, connected to it (:meth:`Landscape.floor_extent`, labelled as
+    on the full landscape: across the twist axis's ends only where the box holds the whole
+    axis). Grown (twice the half-width, or twice the band of twists) until the floor touches
+    no side where the box stops short of the scene's grid, so its floor and its curvature at the
+    minimum are the full landscape's. The first box holds the free contact lines' floor
+    (``d_s`` beyond alignment, :class:`simulator.physics.WallProfile`). For the outcome of a
+    run that did not build the whole landscape (:func:`simulator.motion.simulate`)."""
+    from simulator.landscape._build import build_landscape
+    from simulator.landscape._rotation import _chip_reach_px
+
+    ta = scene.twist_axis
+    n, s = ta.count, scene.um_per_px
+    cx, cy = int(round(minimum.x_um / s)), int(round(minimum.y_um / s))
+    k = 0
+    if n > 1:
+        k = int(round((minimum.twist_deg - float(ta.values_at(0))) / ta.step_deg))
+        k = k % n if ta.periodic else min(max(k, 0), n - 1)
+    reach = max(scene.wall_profile.substrate_reach_px, 0.0) if scene.wall_profile else 0.0
+    half = int(math.ceil(reach)) + 4
+    # The twist that moves the chip's corners by that reach.
+    corner = math.hypot(*_chip_reach_px(scene.chip, False))
+    steps = math.degrees(reach / max(corner, 1.0)) / ta.grid_step_deg if n > 1 else 0
+    band = int(math.ceil(steps)) + 1
+    while True:
+        lo, hi = (max(k - band, 0), min(k + band, n - 1)) if n > 1 else (0, 0)
+        twists = list(range(lo, hi + 1))
+        if engine is not None and half <= PATH_BOX_PX:
+            ls = engine.box(twists, (cx, cy), half)
+        else:
+            ls = build_landscape(
+                scene,
+                twists=ta.values_at(np.asarray(twists)),
+                center_px=(cx, cy),
+                half_px=half,
+                backend=backend,
+                label="the global minimum's floor",
+            )
+        (t0, t1), (y0, y1), (x0, x1) = ls.floor_extent()
+        nt, ny, nx = ls.energy.shape
+        twist_open = (t0 == 0 and lo > 0) or (t1 == nt - 1 and hi < n - 1)
+        (ylo, yhi), (xlo, xhi) = ls.cut[1], ls.cut[2]
+        xy_open = (
+            (y0 == 0 and ylo)
+            or (y1 == ny - 1 and yhi)
+            or (x0 == 0 and xlo)
+            or (x1 == nx - 1 and xhi)
+        )
+        if not (twist_open or xy_open):
+            return ls
+        band, half = band * (2 if twist_open else 1), half * (2 if xy_open else 1)
 
 
 def _full_search(scene: Scene) -> bool:
@@ -159,10 +229,10 @@ class _Piece:
 
 
 class _Search:
-    def __init__(self, scene: Scene, backend: str):
+    def __init__(self, scene: Scene, backend: str, engine: PathEnergy | None = None):
         from simulator.landscape._build import energy_scale_J
 
-        self.scene, self.backend = scene, backend
+        self.scene, self.backend, self.engine = scene, backend, engine
         ta = scene.twist_axis
         self.axis, self.wrap, self.period = ta.values(), ta.periodic, ta.period_deg
         self.step = ta.grid_step_deg
@@ -197,6 +267,10 @@ class _Search:
             }
         )
         if not twist_idx:
+            return
+        if self.engine is not None and half_px is not None and half_px <= PATH_BOX_PX:
+            for run in consecutive_runs(twist_idx):  # pose by pose
+                self.add(self.engine.box(run, center_px, half_px))
             return
         one = _box(self.scene, self.axis[twist_idx[:1]], center_px, half_px)["landscape_bytes"]
         chunk = max(1, int(self.scene.memory_budget_mb * 2**20 / 4 // max(one, 1)))
@@ -257,7 +331,7 @@ class _Search:
             if self.wrap or 0 <= j < n
         ):
             self.build(near, (0, 0), h)  # the nominal box
-        bounds = _Bounds(scene)
+        bounds = _Bounds(scene, self.engine)
         x, y, t, e = self.best()
         r, _ = nominal_distance(x, y, t, self.s, self.step, self.period)
         # An axis longer than one symmetry period holds poses equivalent to those near 0

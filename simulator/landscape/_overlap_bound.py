@@ -44,11 +44,14 @@ class _Bounds:
     rotated as the engine rotates it and max-pooled.
     """
 
-    def __init__(self, scene: Scene):
+    def __init__(self, scene: Scene, engine=None):
         from simulator.landscape._build import plan
 
         p = plan(scene, check_budget=False)  # prices the footprint before it is made
         self.scene = scene
+        # A run's path-cost engine (simulator.landscape.PathEnergy): a footprint's mass and
+        # rasters from its sparse form (the free contact lines': the band's pixels only).
+        self.engine = engine if scene.wall_profile is not None else None
         self.pat = np.asarray(p.pattern_up, float)
         self.rot = p.rotator
         self.twists = p.twists
@@ -57,7 +60,7 @@ class _Bounds:
         hc, wc = self.rot.shape
         self._fine_bytes = hc * wc * 8
         budget = scene.memory_budget_mb * 2**20
-        self.require_fits(scene, (hc, wc), self.footprint)
+        self.require_fits(scene, (hc, wc), self.footprint and self.engine is None)
         self._fine_keep = max(1, int(budget / 4 // self._fine_bytes))
         self._mass: dict[int, float] = {}
         w = p.window
@@ -126,7 +129,10 @@ class _Bounds:
     def mass(self, j: int) -> float:
         """The footprint's (or the chip raster's) sum at twist j, px^2."""
         if j not in self._mass:
-            self._mass[j] = float(self.fine(j).sum())
+            if self.engine is not None:
+                self._mass[j] = self.engine.mass(j)
+            else:
+                self._mass[j] = float(self.fine(j).sum())
         return self._mass[j]
 
     def perimeter_px(self) -> float:
@@ -143,7 +149,14 @@ class _Bounds:
         if j in self._fine:
             self._fine[j] = self._fine.pop(j)  # most recently used last
             return self._fine[j]
-        img = self.rot(float(self.twists[j]))
+        if self.engine is not None:  # the engine's canvas of this twist, centred on this one
+            small, _ = self.engine.raster(j)
+            img = np.zeros(self.rot.shape)
+            (hc, wc), (h, w) = self.rot.shape, small.shape
+            r0, c0 = (hc - h) // 2, (wc - w) // 2
+            img[r0 : r0 + h, c0 : c0 + w] = small
+        else:
+            img = self.rot(float(self.twists[j]))
         while len(self._fine) >= self._fine_keep:
             self._fine.pop(next(iter(self._fine)))
         self._fine[j] = img

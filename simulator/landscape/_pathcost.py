@@ -38,6 +38,7 @@ from shapely import affinity
 from patterns.raster import coverage_steps
 from simulator.core import UM2
 from simulator.landscape._build import _box, _check_energy_range, _extent, _grid_of, energy_scale_J
+from simulator.landscape._pathband import SEGMENT_PAD, Band, footprint_band, pattern_outline
 from simulator.landscape._posegrid import PoseGrid
 from simulator.landscape._rotation import ChipRotator
 from simulator.physics import CHIP_BLUR_MIN_PX
@@ -61,6 +62,19 @@ def path_engine_supported(scene: Scene) -> tuple[bool, str]:
     return True, ""
 
 
+#: Share of the memory budget the outlines a run keeps may take (:meth:`PathEnergy.drop_outlines`).
+OUTLINE_BUDGET_SHARE = 1 / 32
+
+
+def _outline_bytes(o) -> int:
+    """Bytes one twist's outline holds (its steps and, for a meniscus footprint, its band)."""
+    n = o.rows.nbytes + o.cols.nbytes + o.vals.nbytes
+    b = o.band
+    if b is not None:
+        n += b.flat.nbytes + 4 * b.seg_a.nbytes + 4 * b.row_count.nbytes
+    return int(n)
+
+
 #: Columns a row computes beyond the box on each side when it starts (twice that when it
 #: is extended), and the gap beyond which a row's computed run is dropped and started anew.
 ROW_AHEAD, ROW_GAP = 8, 64
@@ -68,13 +82,15 @@ ROW_AHEAD, ROW_GAP = 8, 64
 
 class _Outline:
     """The non-zeros of one twist's row differences, sorted by row: rows and columns
-    (pattern coordinates at pose 0) and values."""
+    (pattern coordinates at pose 0) and values; with the free contact lines' footprint, those
+    of its part G and its part B with the canvas's place at pose 0 (:mod:`._pathband`)."""
 
-    __slots__ = ("rows", "cols", "vals", "nnz")
+    __slots__ = ("rows", "cols", "vals", "nnz", "band", "offset", "shape")
 
-    def __init__(self, rows: np.ndarray, cols: np.ndarray, vals: np.ndarray):
+    def __init__(self, rows, cols, vals, offset, shape, band: Band | None = None):
         self.rows, self.cols, self.vals = rows, cols, vals
         self.nnz = len(vals)
+        self.offset, self.shape, self.band = offset, shape, band
 
 
 class PathEnergy:
@@ -106,6 +122,8 @@ class PathEnergy:
             :, wp
         ].copy()  # row totals (what a step beyond the right end reads), contiguous
         self.hp, self.wp = hp, wp
+        # The free contact lines' footprint: its part B is summed on the pattern's side.
+        self._pattern_steps = pattern_outline(pat) if scene.wall_profile is not None else None
         self.parity = (int((2 * self.origin[1]) % 2), int((2 * self.origin[0]) % 2))
         self.scale = scene.delta_gamma_N_m * scene.um_per_px**2 * UM2
         self.dtype = np.dtype(scene.dtype)
@@ -126,6 +144,7 @@ class PathEnergy:
     def outline(self, k: int) -> _Outline:
         o = self._outlines.get(k)
         if o is not None:
+            self._outlines[k] = self._outlines.pop(k)  # most recently used last
             return o
         tw = float(self.axis.values_at(np.asarray([k]))[0])
         rot = ChipRotator(
@@ -141,6 +160,21 @@ class PathEnergy:
         oy, ox = self.origin[1] - hc / 2, self.origin[0] - wc / 2
         assert oy == int(oy) and ox == int(ox), "pixel grids of chip and pattern must coincide"
         chip = self.scene.chip
+        if self.scene.wall_profile is not None:
+            # The free contact lines' footprint at the band's pixels only, split in G and B.
+            r, c, v, band = footprint_band(rot, tw, self.dtype)
+            order = np.argsort(r, kind="stable")
+            o = _Outline(
+                r[order].astype(np.int64) + int(oy),
+                c[order].astype(np.int64) + int(ox),
+                v[order],
+                (int(oy), int(ox)),
+                rot.shape,
+                band,
+            )
+            self._outlines[k] = o
+            self.nnz_max = max(self.nnz_max, o.nnz)
+            return o
         if chip.geometry is not None and not self.chip_blur and self.scene.wall_profile is None:
             # Exact geometry: the raster's steps straight from the outline's pieces (the
             # rotator's raster, y down; never the whole canvas).
@@ -164,17 +198,27 @@ class PathEnergy:
         r, c, v = (np.concatenate(a) for a in (rows, cols, vals))
         order = np.argsort(r, kind="stable")  # by row (_rows slices the rows on the pattern)
         o = _Outline(
-            r[order].astype(np.int64) + int(oy), c[order].astype(np.int64) + int(ox), v[order]
+            r[order].astype(np.int64) + int(oy),
+            c[order].astype(np.int64) + int(ox),
+            v[order],
+            (int(oy), int(ox)),
+            rot.shape,
         )
         self._outlines[k] = o
         self.nnz_max = max(self.nnz_max, o.nnz)
         return o
 
     def drop_outlines(self, keep: set[int]) -> None:
-        """Forget the outlines of twists not in ``keep`` (memory: a run keeps its band's)."""
-        for k in list(self._outlines):
+        """Forget the outlines of twists not in ``keep``, the least recently used first, while
+        they take more than :data:`OUTLINE_BUDGET_SHARE` of the memory budget (a meniscus
+        footprint's are megabytes each; a run that turns back reuses those it kept)."""
+        cap = self.scene.memory_budget_mb * 2**20 * OUTLINE_BUDGET_SHARE
+        total = sum(_outline_bytes(o) for o in self._outlines.values())
+        for k in list(self._outlines):  # least recently used first
+            if total <= cap:
+                break
             if k not in keep:
-                del self._outlines[k]
+                total -= _outline_bytes(self._outlines.pop(k))
 
     # -- energies
     def _rows(self, o: _Outline, ys: np.ndarray, x0: int, n: int) -> np.ndarray:
@@ -187,6 +231,8 @@ class PathEnergy:
         milliseconds for a few thousand products): einsum sums in float64. Long runs of
         columns are cut so that one gather (steps x columns) stays near 2 M values."""
         cols = max(16, 2_000_000 // max(o.nnz, 1))
+        if o.band is not None:
+            cols = min(cols, SEGMENT_PAD)
         if n > cols:
             return np.concatenate(
                 [self._rows(o, ys, x0 + i, min(cols, n - i)) for i in range(0, n, cols)], axis=1
@@ -226,7 +272,31 @@ class PathEnergy:
                     cc = np.clip(c[a:b, None] + cn, 0, wp)
                     acc = acc + np.einsum("sn,s->n", flat[rr[:, None] + cc], v[a:b])
             out[j] -= acc
+            if o.band is not None:  # the footprint's part B, on the pattern's side
+                out[j] += o.band.correlate(
+                    self._pattern_steps, y + o.offset[0], x0 + o.offset[1], n
+                )
         return out
+
+    def mass(self, k: int) -> float:
+        """The sum of the chip raster (or its footprint) at twist index k, px^2: from its row
+        differences, ``-sum D[k, l] l`` per row (each row's differences sum to 0)."""
+        o = self.outline(k)
+        m = -float(np.dot(o.vals, o.cols.astype(np.float64)))
+        return m + (o.band.sum_B if o.band is not None else 0.0)
+
+    def raster(self, k: int) -> tuple[np.ndarray, tuple[int, int]]:
+        """(the chip raster or its footprint at twist index k on its own canvas, y up; the
+        canvas's place at pose 0 in pattern coordinates (row, column)), from its row
+        differences (for the global minimum's cell bound)."""
+        o = self.outline(k)
+        (oy, ox), (hc, wc) = o.offset, o.shape
+        d = np.zeros((hc, wc + 1))
+        np.add.at(d, (o.rows - oy, o.cols - ox), o.vals)
+        img = np.cumsum(d, axis=1)[:, :wc]
+        if o.band is not None:
+            img += o.band.dense()
+        return img, (oy, ox)
 
     def plane(self, k: int, y0: int, ny: int, x0: int, nx: int) -> np.ndarray:
         """Energies (J, the scene's dtype), shape (ny, nx), at twist index k, rows

@@ -35,6 +35,10 @@ SMOOTH_ROTATE_BYTES_PER_PX = 112
 #: waiting line (:func:`simulator.core.wait_line`).
 SMOOTH_PX_PER_S = 2.5e6
 
+#: Zeros kept around the free contact lines' footprint on its own canvas: the quadratic spline
+#: prefilter's response decays by 0.17 a pixel, so the canvas's edge is 0.17^24 (4e-19) away.
+SPLINE_PAD_PX = 24
+
 #: The last smooth chip made (:meth:`ChipRotator._smooth_chip`): its key, a weak reference to
 #: the chip it was made from (a chip freed and another made at its address is not it), and
 #: the arrays. One entry: a run works on one chip.
@@ -93,9 +97,22 @@ def canvas_shape(
     return (2 * ceil_whole(ry) + 2 + parity[0], 2 * ceil_whole(rx) + 2 + parity[1])
 
 
-def smooth_canvas(chip: Mask, margin_px: int, parity: tuple[int, int]) -> tuple[int, int]:
-    """(H, W) of the smooth chip's own canvas (:meth:`ChipRotator._blur`): the chip and its
-    margin at every twist, whatever the rotator's canvas (one for every build of a scene)."""
+def smooth_canvas(
+    chip: Mask, margin_px: int, parity: tuple[int, int], profile: bool = False
+) -> tuple[int, int]:
+    """(H, W) of the smooth chip's own canvas (:meth:`ChipRotator._blur`), one for every build
+    of a scene, whatever the rotator's canvas. The ``K_h`` blur: the chip and its margin at
+    every twist (the blur's long tail must not wrap around its FFT). The free contact lines'
+    footprint (``profile``): the unrotated chip, its margin and :data:`SPLINE_PAD_PX` of zeros,
+    a quarter of the area for a square chip (its distance transforms and spline prefilter are
+    local: a wider canvas changes the footprint by 0.17^24 of its kinks, nothing)."""
+    if profile:
+        rx, ry = _chip_reach_px(chip, False)
+        ho = 2 * ceil_whole(ry + margin_px + SPLINE_PAD_PX) + 2 + parity[0] % 2
+        wo = 2 * ceil_whole(rx + margin_px + SPLINE_PAD_PX) + 2 + parity[1] % 2
+        # A chip image is placed whole (not resampled) when it fits: as wide as its array.
+        h, w = chip.shape
+        return max(ho, h + (ho - h) % 2), max(wo, w + (wo - w) % 2)
     rad = max(_chip_reach_px(chip, True)) + margin_px
     side = int(2 * math.ceil(rad * math.sqrt(2)) + 4)
     return side + parity[0] % 2, side + parity[1] % 2
@@ -117,7 +134,7 @@ def smooth_bytes(
     of a rotator with a meniscus footprint (both 0 without one): sizes only."""
     if not (blur_px > 0 or profile is not None):
         return 0, 0
-    ho, wo = smooth_canvas(chip, margin_px, parity)
+    ho, wo = smooth_canvas(chip, margin_px, parity, profile is not None)
     kind = "blur" if profile is None else "profile"
     kept = ho * wo * SMOOTH_KEPT_BYTES_PER_PX[kind]
     make = (
@@ -198,7 +215,7 @@ class ChipRotator:
         self._sdf = None
         from simulator.core import wait_line
 
-        ho, wo = smooth_canvas(self.chip, self.margin_px, self.shape)
+        ho, wo = smooth_canvas(self.chip, self.margin_px, self.shape, self.profile is not None)
         w_um, h_um = (v * self.chip.um_per_px for v in self.chip.shape[::-1])
         how = "distance transform" if self.profile is not None else "K_h blur"
         wait_line(
@@ -226,7 +243,7 @@ class ChipRotator:
         # One canvas for every build of the scene (a band of twists, a box, the whole axis):
         # the K_h kernel's tail is long, and what of it wraps around a smaller FFT canvas
         # would make boxes differ from the landscape (by 3e-5 of the energy, measured).
-        ho, wo = smooth_canvas(c, self.margin_px, self.shape)
+        ho, wo = smooth_canvas(c, self.margin_px, self.shape, self.profile is not None)
         if c.geometry is not None:
             img = rasterize(c.geometry, c.um_per_px, shape=(ho, wo))
         else:
@@ -267,11 +284,7 @@ class ChipRotator:
 
     def __call__(self, twist_deg: float) -> np.ndarray:
         c = self.chip
-        if self._blurred is not None:
-            if self.profile is not None:
-                # The splines overshoot the wall profile's kinks by ~1e-4: clipped, the floor
-                # where the footprint is 1 stays exactly 1 at every twist (no spurious minima).
-                return np.clip(self._spline_rotate(twist_deg), 0.0, 1.0)[::-1]
+        if self._blurred is not None:  # the footprint of free lines comes clipped (profile_at)
             return self._spline_rotate(twist_deg)[::-1]
         if c.geometry is not None:
             g = (
@@ -310,38 +323,74 @@ class ChipRotator:
             return self._coarse_rotate(ca, sa, f)
         x, y = self._xy
         xi, yi = x * ca + y * sa, -x * sa + y * ca  # inverse rotation
+        if self.profile is not None:
+            return self.profile_at(xi, yi)
         # Only where the blurred chip is (its box, a margin beyond the chip): zero elsewhere.
         inside = (np.abs(xi) <= self._half[0]) & (np.abs(yi) <= self._half[1])
         out = np.zeros(self.shape)
         rows, cols = -yi[inside] + (h / 2 - 0.5), xi[inside] + (w / 2 - 0.5)
-        if self.profile is not None:
-            # The wall profile is 1 deep inside the chip and 0 beyond the pad reach: splines
-            # only in the band between (with 3 px for the splines' support and the nearest-pixel
-            # lookup), exactly 1 and 0 elsewhere; the band is a few per cent of the canvas.
-            assert self._sdf is not None  # made with the footprint (_blur)
-            s = self._sdf[
-                np.clip(np.rint(rows), 0, h - 1).astype(np.intp),
-                np.clip(np.rint(cols), 0, w - 1).astype(np.intp),
-            ]
-            prof = self.profile
-            lo, hi = min(prof.substrate_reach_px, 0.0) - 3.0, prof.pad_reach_px + 3.0
-            band = (s >= lo) & (s <= hi)
-            vals = (s < lo).astype(float)
-            vals[band] = ndimage.map_coordinates(
-                self._coeffs,
-                np.array([rows[band], cols[band]]),
-                order=SPLINE_ORDER,
-                mode="constant",
-                cval=0.0,
-                prefilter=False,
-            )
-            out[inside] = vals
-            return out
         coords = np.array([rows, cols])
         out[inside] = ndimage.map_coordinates(
             self._coeffs, coords, order=SPLINE_ORDER, mode="constant", cval=0.0, prefilter=False
         )
         return out
+
+    @property
+    def band_px(self) -> tuple[float, float]:
+        """(lo, hi): the signed distances (px) between which the free contact lines' footprint
+        is interpolated by splines; it is exactly 1 below ``lo`` and 0 above ``hi``: the
+        profile's ramp (``d_s`` to ``d_p``) and 4 px (3 from the chip's edge, or from ``d_s``
+        when that lies further out) for the splines' ringing about its kinks, which decays by
+        0.17 a pixel (1e-5 of the footprint, at most, is left 4 px from ``d_s``: together 0.5 %
+        of the noise floor on the 730 um chip at 1 um/px)."""
+        prof = self.profile
+        assert prof is not None  # the free contact lines' footprint
+        d_s = prof.substrate_reach_px
+        return max(min(d_s, 0.0) - 3.0, d_s - 4.0), prof.pad_reach_px + 3.0
+
+    def distance_at(self, xi: np.ndarray, yi: np.ndarray, box: bool = True) -> np.ndarray:
+        """The signed distance (px) from the chip's outline that the footprint of the free
+        contact lines looks up for points (xi, yi) px of the unrotated chip (about its centre,
+        y up): the nearest pixel's, and (``box``) +inf outside the footprint's box, where the
+        footprint is 0."""
+        assert self._sdf is not None  # made with the footprint (_blur)
+        h, w = self._sdf.shape
+        s = self._sdf[
+            np.clip(np.rint(-yi + (h / 2 - 0.5)), 0, h - 1).astype(np.intp),
+            np.clip(np.rint(xi + (w / 2 - 0.5)), 0, w - 1).astype(np.intp),
+        ]
+        if not box:
+            return s
+        inside = (np.abs(xi) <= self._half[0]) & (np.abs(yi) <= self._half[1])
+        return np.where(inside, s, np.inf)
+
+    def profile_at(self, xi: np.ndarray, yi: np.ndarray, s: np.ndarray | None = None) -> np.ndarray:
+        """The free contact lines' footprint at points (xi, yi) px of the unrotated chip
+        (about its centre, y up), in [0, 1]: what a rotation puts on the canvas pixels that
+        map there (``s``: their :meth:`distance_at`, when known)."""
+        from scipy import ndimage
+
+        assert self._coeffs is not None  # made by _smooth_chip
+        h, w = self._coeffs.shape
+        if s is None:
+            s = self.distance_at(xi, yi)
+        # The wall profile is 1 deep inside the chip and 0 beyond the pad reach: splines
+        # only in the band between (band_px), exactly 1 and 0 elsewhere; the band is a few
+        # per cent of the canvas.
+        lo, hi = self.band_px
+        band = (s >= lo) & (s <= hi)
+        out = (s < lo).astype(float)
+        out[band] = ndimage.map_coordinates(
+            self._coeffs,
+            np.array([-yi[band] + (h / 2 - 0.5), xi[band] + (w / 2 - 0.5)]),
+            order=SPLINE_ORDER,
+            mode="constant",
+            cval=0.0,
+            prefilter=False,
+        )
+        # The splines overshoot the wall profile's kinks by ~1e-4: clipped, the floor where
+        # the footprint is 1 stays exactly 1 at every twist (no spurious minima).
+        return np.clip(out, 0.0, 1.0)
 
     def _coarse_rotate(self, ca: float, sa: float, f: int) -> np.ndarray:
         """The rotation sampled every ``f`` px (where the blurred chip is smooth on the scale

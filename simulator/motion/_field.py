@@ -108,16 +108,20 @@ def make_field(
     best,
     pin: tuple[float, float, float] = (0.0, 0.0, 0.0),
     align_tol: tuple[float, float] = (1.0, 1.0),
+    scale: float | None = None,
 ) -> Field:
-    """A :class:`Field` from a (T, Ny, Nx) energy array (J) on ``grid``."""
+    """A :class:`Field` from a (T, Ny, Nx) energy array (J) on ``grid``; ``scale``: its
+    max |E| (default: the array's own; a box of a larger landscape passes the landscape's)."""
     enable_float64()
     energy = np.asarray(energy)
     dt = energy.dtype
+    if scale is None:
+        scale = np.abs(energy).max() if energy.size else 0.0
     return Field(
         padded=jnp.asarray(pad_energy(energy, grid.wrap, grid.cut)),
         floor=jnp.asarray(floor, dt),
         best=jnp.asarray(best, dt),
-        scale=jnp.asarray(np.abs(energy).max() if energy.size else 0.0, dt),
+        scale=jnp.asarray(scale, dt),
         pin=(float(pin[0]), float(pin[1]), float(pin[2])),
         align_tol=(float(align_tol[0]), float(align_tol[1])),
     )
@@ -129,17 +133,20 @@ def field_and_grid(
     dtype=None,
     pin: tuple[float, float, float] = (0.0, 0.0, 0.0),
     align_tol: tuple[float, float] = (1.0, 1.0),
+    scale: float | None = None,
 ) -> tuple[Field, PoseGrid]:
     """The stepper view of a landscape: its arrays and its pose grid. ``rg_px``: a radius of
     gyration in px other than the grid's own (a landscape's grid carries its scene's,
     :attr:`simulator.scene.Scene.chip_rg_px`); ``pin``: the pinning work per grid step (J,
-    twist/y/x) of contact-angle hysteresis."""
+    twist/y/x) of contact-angle hysteresis; ``scale``: the max |E| the force references
+    use (:func:`make_field`; a small box passes its landscape's, so that a gradient run
+    takes the steps it takes on the whole landscape)."""
     e = ls.energy if dtype is None else ls.energy.astype(dtype)
     it, iy, ix = (
         ls.minimum_index()
     )  # the global minimum: ties decided by position (Landscape.minimum_index)
     grid = ls.grid if rg_px is None else replace(ls.grid, rg_px=float(rg_px))
-    return make_field(e, grid, ls.noise_floor_J, [it, iy, ix], pin, align_tol), grid
+    return make_field(e, grid, ls.noise_floor_J, [it, iy, ix], pin, align_tol, scale), grid
 
 
 # ----------------------------------------------------------------- look-ups

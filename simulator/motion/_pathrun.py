@@ -34,6 +34,10 @@ FOLLOW_BOX = {"greedy": (4, 1), "gradient": (6, 3)}
 #: 17.0 s. The thresholds sit above those crossovers with a margin (the engines' costs
 #: also depend on the path and the pattern), so smaller chips keep the FFT engine.
 AUTO_MIN_CHIP_PX = {"greedy": 1000 * 1000, "gradient": 2000 * 2000}
+#: The same for the free contact lines' footprint (the default meniscus), whose FFT boxes
+#: cost more (the footprint rotated onto the whole canvas at every twist, a wider canvas)
+#: while the path engine reads the band's pixels once per twist: measured below.
+AUTO_MIN_CHIP_PX_MENISCUS = {"greedy": 0, "gradient": 0}
 
 
 def _chip_px(scene: Scene) -> int:
@@ -53,10 +57,6 @@ def choose_engine(
     if engine not in ENGINES:
         raise ValueError(f"engine must be one of {', '.join(ENGINES)}, got {engine!r}")
     ok, why = path_engine_supported(scene)
-    if ok and scene.wall_profile is not None:
-        # The energies agree (tested), but the outcome of a run that ends on the floor the
-        # free lines float the chip on is classified on its last box, whose width decides it.
-        ok, why = False, "a run on the free contact lines' floor is not classified the same yet"
     if engine == "path" and not ok:
         from patterns.errors import InputError
 
@@ -65,7 +65,8 @@ def choose_engine(
         return engine
     if not ok or method not in AUTO_MIN_CHIP_PX:
         return "fft"
-    return "path" if _chip_px(scene) >= AUTO_MIN_CHIP_PX[method] else "fft"
+    least = AUTO_MIN_CHIP_PX_MENISCUS if scene.wall_profile is not None else AUTO_MIN_CHIP_PX
+    return "path" if _chip_px(scene) >= least[method] else "fft"
 
 
 def path_boxes(scene: Scene, method: str, cost):
@@ -93,6 +94,8 @@ def path_boxes(scene: Scene, method: str, cost):
                 continue
             last = (lo, hi, cx, cy)
             want = list(range(lo, hi + 1))
+            # Only the band's outlines are kept (a meniscus footprint's are megabytes each).
+            pe.drop_outlines({j % n for j in want})
             planes: dict[int, np.ndarray] = {}
             template = None
             for run in consecutive_runs({j % n for j in want}):

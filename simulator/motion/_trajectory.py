@@ -193,10 +193,14 @@ def simulate(
             f"start pose {tuple(start)} is out of range: |x| and |y| must be at most {reach_um:g} um "
             f"({MAX_START_PX} px) and |twist| at most {MAX_START_TWIST_DEG:g} deg"
         )
+    dynamic = method in ("overdamped", "inertial")
+    if landscape is None and not dynamic:
+        from simulator.motion._pathrun import choose_engine
+
+        engine = choose_engine(scene, start, method, engine, band_steps, band_px)
     if landscape is None:
         require_start_in_window(scene, start)
-        require_run_fits(scene, start, method, band_steps, band_px)
-    dynamic = method in ("overdamped", "inertial")
+        require_run_fits(scene, start, method, band_steps, band_px, engine)
     if dynamic and dynamics is None:
         from simulator.motion._dynamics_params import DynamicsParams
 
@@ -222,15 +226,25 @@ def simulate(
     boxes = _BoxCost()
     path_engine = None
     if landscape is None and not dynamic:
-        from simulator.motion._pathrun import choose_engine, path_boxes
+        from simulator.motion._pathrun import path_boxes
 
-        engine = choose_engine(scene, start, method, engine, band_steps, band_px)
         if engine == "path":
             around, path_engine = path_boxes(scene, method, boxes)
     else:
         engine = "landscape" if landscape is not None else "fft"
     if path_engine is None:
         around = _box_landscapes(scene, band_steps, band_px, backend, boxes)
+    scale, opt = None, None
+    if path_engine is not None:
+        from simulator.motion._pathrun import nominal_box
+
+        # The global minimum first (its proof reads the nominal box, pose by pose): its energy
+        # is the whole landscape's largest |E|, the force scale of a gradient step, which the
+        # small boxes that follow the chip do not hold.
+        opt = global_minimum(
+            scene, evaluated=nominal_box(scene, path_engine), backend=backend, engine=path_engine
+        )
+        scale = -opt.energy_J if opt.energy_J < 0 else None
     next(around)
     pieces = []
     while True:
@@ -244,9 +258,12 @@ def simulate(
             if ls is None:  # moving the box would not move the chip: stop here
                 break
         pin = pin_per_index(scene, ls.um_per_px, ls.twist_step_deg)
-        field, grid = field_and_grid(
-            ls, pin=pin, align_tol=align_tolerance(ls, pin, floats=scene.wall_profile is not None)
-        )
+        # The tolerance of "aligned" only classifies the end (below), and is static in the
+        # field: the boxes of a run step with one, so that the stepper compiles once.
+        tol = (1.0, 1.0)
+        if landscape is not None or dynamic:
+            tol = align_tolerance(ls, pin, floats=scene.wall_profile is not None)
+        field, grid = field_and_grid(ls, pin=pin, align_tol=tol, scale=scale)
         run = jitted(method, is_stiff(method, field, grid, dynamics))
         state = run(field, grid, dynamics, jnp.asarray(grid.to_index(pose)), max_steps)
         pieces.append(_to_trajectory(method, state, grid))
@@ -272,18 +289,21 @@ def simulate(
     # (simulator.landscape: the same pose every command uses, found without the full landscape).
     q_end = grid.to_index(np.asarray(traj.final))
     flat = bool(flat_at(field, grid, state.flat, q_end))
-    if path_engine is not None:
-        from simulator.motion._pathrun import nominal_box
+    if opt is None:
+        opt = global_minimum(
+            scene,
+            landscape=landscape if landscape is not None else (ls if dynamic else None),
+            evaluated=boxes.built,
+            backend=backend,
+        )
+    if landscape is None and not dynamic and (scene.wall_profile is not None or any(pin)):
+        # Aligned anywhere on the floor the chip floats on, or within the hysteresis window:
+        # measured around the global minimum as on the full landscape (a box that holds the
+        # floor), not on the run's last box.
+        from simulator.landscape import minimum_box
 
-        boxes.built[:] = nominal_box(
-            scene, path_engine
-        )  # the global minimum's first look, pose by pose
-    opt = global_minimum(
-        scene,
-        landscape=landscape if landscape is not None else (ls if dynamic else None),
-        evaluated=boxes.built,
-        backend=backend,
-    )
+        near = minimum_box(scene, opt, engine=path_engine, backend=backend)
+        tol = align_tolerance(near, pin, floats=scene.wall_profile is not None)
     if path_engine is not None:
         boxes.poses, boxes.planes, boxes.seconds = (
             path_engine.poses,
@@ -293,7 +313,13 @@ def simulate(
     best = jnp.asarray(grid.to_index(np.asarray(opt.pose)), field.dtype)
     timed_out = dynamic and traj.steps < max_steps  # the simulated time ran out, not the steps
     out = classify(
-        field._replace(best=best), grid, q_end, float(traj.energy_J[-1]), status, flat, timed_out
+        field._replace(best=best, align_tol=tol),
+        grid,
+        q_end,
+        float(traj.energy_J[-1]),
+        status,
+        flat,
+        timed_out,
     )
     full = full_landscape_poses(scene) if landscape is None else landscape.energy.size
     cost = {
@@ -477,18 +503,28 @@ def _twist_band(ta, twist_deg: float, band_steps: int) -> tuple[int, int]:
 
 
 def require_run_fits(
-    scene: Scene, start, method: str, band_steps: int = BAND_STEPS, band_px: int = BAND_PX
+    scene: Scene,
+    start,
+    method: str,
+    band_steps: int = BAND_STEPS,
+    band_px: int = BAND_PX,
+    engine: str = "fft",
 ) -> None:
     """Refuse (InputError), before anything is compiled, rotated or transformed, a run whose
     first landscape does not fit the memory budget: the first box and band of twists of a
     greedy or gradient run (:func:`simulate`), the whole landscape of the dynamics, each with
     the chip's meniscus footprint, and what the global minimum's proof after a greedy or
     gradient run needs at least. Boxes built later are priced as they come (in chunks of
-    twists that fit)."""
+    twists that fit). ``engine`` "path" (:func:`simulator.motion.choose_engine`): no FFT box;
+    the chip's footprint and the global minimum's bound, which then takes the footprint from
+    the engine."""
     from simulator.landscape import require_landscape_fits, require_minimum_fits
 
     if method in DYNAMIC:
         require_landscape_fits(scene)
+        return
+    if engine == "path":
+        require_minimum_fits(scene, path_engine=True)  # the footprint priced there first
         return
     ta = scene.twist_axis
     (cx, cy), half = _fit_box(

@@ -209,14 +209,38 @@ def signed_distance_px(img: np.ndarray) -> np.ndarray:
     """Signed distance (px, negative inside) of every pixel centre from the outline of the
     region ``img >= 0.5``: a Euclidean distance transform, the outline half a pixel beyond
     the last pixel centre inside."""
-    from scipy.ndimage import distance_transform_edt
-
     inside = np.asarray(img) >= 0.5
     if not inside.any():
         return np.full(inside.shape, np.inf)
-    out = distance_transform_edt(~inside) - 0.5
-    inn = distance_transform_edt(inside) - 0.5
+    out = _edt(~inside)
+    out -= 0.5
+    inn = _edt(inside)
+    inn -= 0.5
     return np.where(inside, -inn, out)
+
+
+#: Distances (px) below which :func:`_edt` is exact: their squares, whole numbers, are told apart
+#: in float32 (beyond, the footprint is flat: 1 inside the chip, 0 far outside).
+EDT_EXACT_PX = 2048.0
+
+
+def _edt(mask: np.ndarray) -> np.ndarray:
+    """Euclidean distance (px, float64) of every pixel of ``mask`` to the nearest pixel outside
+    it: SciPy's ``distance_transform_edt``, by OpenCV's exact transform (Felzenszwalb's, about
+    8x faster and a fifth of the memory). OpenCV returns float32; a squared distance between
+    pixel centres is a whole number, so rounding the square gives SciPy's value exactly up to
+    :data:`EDT_EXACT_PX`."""
+    if mask.all():
+        from scipy.ndimage import distance_transform_edt
+
+        return distance_transform_edt(mask)
+    import cv2
+
+    d = cv2.distanceTransform(mask.astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    d = d.astype(np.float64)
+    near = d < EDT_EXACT_PX
+    d[near] = np.sqrt(np.rint(d[near] * d[near]))
+    return d
 
 
 def kernel_spectrum(ny: int, nx: int, h_px: float, dtype=np.float64) -> np.ndarray:
