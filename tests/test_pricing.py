@@ -426,3 +426,37 @@ def test_the_global_minimums_proof_shows_its_progress(monkeypatch, capsys):
     with quiet_waits():
         global_minimum(sc)
     assert capsys.readouterr().err == ""
+
+
+@pytest.mark.parametrize(
+    "extra",
+    [
+        ["--engine", "fft", "--memory-budget", "64"],  # the first box
+        [
+            "--method",
+            "gradient",
+            "--meniscus-height",
+            "31",
+            "--memory-budget",
+            "60",
+        ],  # the footprint (path engine)
+    ],
+)
+def test_a_refused_run_has_not_imported_jax(extra, fp1k, tmp_path):
+    """``simulate`` prices its run before it imports JAX: a refusal costs neither JAX's
+    import time nor its memory."""
+    script = (
+        "import sys\nfrom simulator.cli import main\n"
+        "code = main(sys.argv[1:])\nprint('jax' in sys.modules)\nsys.exit(code)\n"
+    )
+    args = ["simulate", *_chip(fp1k), "--start=300,-200,10", *extra]
+    out = subprocess.run(
+        [sys.executable, "-c", script, *[str(a) for a in args]],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=tmp_path,
+        env=os.environ | {"PYTHONWARNINGS": "ignore"},
+    )
+    one_line_error(out.returncode, out.stderr, "error:", "memory budget")
+    assert out.stdout.strip() == "False"

@@ -81,8 +81,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    # JAX: imported when a run needs it (selfalign --help starts without it).
-    from simulator.motion import price_run, require_run_fits, require_start_in_window, simulate
+    # Priced before JAX is imported: a refusal costs neither its import time nor its memory.
+    from simulator.motion import price_run, require_run_fits, require_start_in_window
 
     doc = scene_document(args)  # the scene file, read and validated once for the whole command
     sim = doc.get("simulate", {})
@@ -118,6 +118,8 @@ def run(args: argparse.Namespace) -> int:
         engine = choose_engine(scene, start, method, args.engine, 3, 48)
     # the first landscape (and footprint), or what the path engine needs, priced before any work
     require_run_fits(scene, start, method, engine=engine)
+    from simulator.motion import simulate  # JAX, imported when the run goes ahead
+
     compiling(method, args.quiet)
     traj = simulate(scene, start, method=method, max_steps=max_steps, engine=args.engine)
     print(end_line(scene, traj))

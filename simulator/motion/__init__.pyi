@@ -31,6 +31,11 @@ from ._potential import (
     potential as potential,
     potential_and_gradient as potential_and_gradient,
 )
+from ._pricing import (
+    price_run as price_run,
+    require_run_fits as require_run_fits,
+    require_start_in_window as require_start_in_window,
+)
 from ._steppers import (
     dynamics_jitted as dynamics_jitted,
     finish as finish,
@@ -55,9 +60,6 @@ from ._trajectory import (
     MAX_START_TWIST_DEG as MAX_START_TWIST_DEG,
     Trajectory as Trajectory,
     is_stiff as is_stiff,
-    price_run as price_run,
     radius_of_gyration_px as radius_of_gyration_px,
-    require_run_fits as require_run_fits,
-    require_start_in_window as require_start_in_window,
     simulate as simulate,
 )

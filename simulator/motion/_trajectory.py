@@ -18,8 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from patterns.errors import InputError
-from patterns.resources import require_fits
-from simulator.core import DEFAULT_MAX_STEPS, DEG_TOL, MAX_STEPS_LIMIT, METHODS, tiny
+from simulator.core import DEFAULT_MAX_STEPS, DEG_TOL, METHODS, tiny
 from simulator.landscape import (
     Landscape,
     PoseGrid,
@@ -28,6 +27,15 @@ from simulator.landscape import (
     global_minimum,
 )
 from simulator.motion._field import field_and_grid
+from simulator.motion._pricing import (
+    BAND_PX,
+    BAND_STEPS,
+    _fit_box,
+    _twist_band,
+    price_run,
+    require_run_fits,
+    require_start_in_window,
+)
 from simulator.motion._steppers import DYNAMIC, RunState, flat_at, jitted
 from simulator.motion._stepping import (
     CONVERGED,
@@ -43,12 +51,6 @@ from simulator.scene import Scene
 #: Largest |x|, |y| of a start in pixels (float32 holds every whole pixel up to 2**24, and
 #: int32 grid indices have room) and largest |twist| in degrees (as TwistGrid's range).
 MAX_START_PX, MAX_START_TWIST_DEG = 2**24, 3600.0
-#: Peak bytes per recorded step of one run (device buffers, their host copies and the
-#: Trajectory's float64 path and energies): stepping and dynamics.
-PATH_BYTES_PER_STEP = {"stepping": 96, "dynamics": 320}
-#: The boxes of a greedy or gradient run (:func:`simulate`): twists within this many steps
-#: of the chip's, translations this many px beyond the start and the aligned pose.
-BAND_STEPS, BAND_PX = 3, 48
 
 
 @dataclass(frozen=True)
@@ -127,26 +129,6 @@ def is_stiff(method: str, field, grid, params) -> bool:
     tau_m = params.mass_kg / params.damping_N_s_m
     tau_c = params.damping_N_s_m * grid.um_per_px * 1e-6 / max(f_ref, tiny())
     return tau_m < 0.1 * tau_c
-
-
-def price_run(scene: Scene, method: str, max_steps: int) -> None:
-    """Refuse, before anything is compiled or allocated, a ``max_steps`` that overflows the
-    step counter or whose recorded path would not fit the scene's memory budget."""
-    if isinstance(max_steps, bool) or not isinstance(max_steps, int | np.integer) or max_steps < 1:
-        raise InputError(f"max steps must be a whole number >= 1, got {max_steps!r}")
-    if max_steps > MAX_STEPS_LIMIT:
-        raise InputError(
-            f"max steps must be at most {MAX_STEPS_LIMIT:,} (the step counter is 32-bit), got {max_steps:,}"
-        )
-    per_step = PATH_BYTES_PER_STEP[
-        "dynamics" if method in ("overdamped", "inertial") else "stepping"
-    ]
-    require_fits(
-        f"the path of up to {max_steps:,} steps",
-        float(max_steps + 1) * per_step,
-        "use a smaller --max-steps",
-        scene.memory_budget_mb,
-    )
 
 
 def simulate(
@@ -376,19 +358,6 @@ class _BoxCost:
         self.seconds += ls.stats["seconds"]
 
 
-def _fit_box(box, pose_px: np.ndarray, margin: int) -> tuple[tuple[int, int], int]:
-    """The square box (centre px, half-width px) holding the start, the aligned pose (0, 0),
-    the old box and a margin."""
-    pts = [(0, 0), tuple(pose_px)]
-    if box is not None:
-        (cx, cy), h = box
-        pts += [(cx - h, cy - h), (cx + h, cy + h)]
-    pts = np.array(pts, float)
-    lo, hi = pts.min(axis=0) - margin, pts.max(axis=0) + margin
-    center = np.round((lo + hi) / 2).astype(int)
-    return (int(center[0]), int(center[1])), int(np.ceil(((hi - lo) / 2).max()))
-
-
 def _outside(t: Landscape, pose_px: np.ndarray) -> bool:
     """The pose lies on or next to a cut side of the box ``t``: the box must grow."""
     s = t.um_per_px
@@ -400,17 +369,6 @@ def _outside(t: Landscape, pose_px: np.ndarray) -> bool:
         or (ylo and y <= t.y_um[0] + s)
         or (yhi and y >= t.y_um[-1] - s)
     )
-
-
-def require_start_in_window(scene: Scene, start) -> None:
-    """InputError for a start beyond the scene's translation window (``window_um``): the pose grid
-    ends there, so there is no landscape to step on (the run would grow its box forever)."""
-    w = scene.window_um
-    if w is not None and max(abs(start[0]), abs(start[1])) > w:
-        raise InputError(
-            f"start pose ({start[0]:g}, {start[1]:g}) um lies outside the translation window of +-{w:g} um "
-            f"(--window / window_um); widen the window to at least {max(abs(start[0]), abs(start[1])):g} um, or leave it out"
-        )
 
 
 def _extent(t: Landscape) -> tuple[float, float, float, float]:
@@ -487,57 +445,6 @@ def _box_landscapes(scene: Scene, band_steps: int, band_px: int, backend: str, c
             energy_scale_J=template.energy_scale_J,
             stats=template.stats,
         )
-
-
-def _twist_band(ta, twist_deg: float, band_steps: int) -> tuple[int, int]:
-    """(first, last) axis index of the band of +-``band_steps`` twists around ``twist_deg`` (may
-    run past the ends of a periodic axis; the whole axis when the band covers it)."""
-    n = ta.count
-    k = int(round((twist_deg - float(ta.values_at(0))) / ta.step_deg)) if n > 1 else 0
-    lo, hi = k - band_steps, k + band_steps
-    if n == 1 or (ta.periodic and hi - lo + 1 >= n):
-        lo, hi = 0, n - 1
-    elif not ta.periodic:
-        lo, hi = max(lo, 0), min(hi, n - 1)
-    return lo, hi
-
-
-def require_run_fits(
-    scene: Scene,
-    start,
-    method: str,
-    band_steps: int = BAND_STEPS,
-    band_px: int = BAND_PX,
-    engine: str = "fft",
-) -> None:
-    """Refuse (InputError), before anything is compiled, rotated or transformed, a run whose
-    first landscape does not fit the memory budget: the first box and band of twists of a
-    greedy or gradient run (:func:`simulate`), the whole landscape of the dynamics, each with
-    the chip's meniscus footprint, and what the global minimum's proof after a greedy or
-    gradient run needs at least. Boxes built later are priced as they come (in chunks of
-    twists that fit). ``engine`` "path" (:func:`simulator.motion.choose_engine`): no FFT box;
-    the chip's footprint and the global minimum's bound, which then takes the footprint from
-    the engine."""
-    from simulator.landscape import require_landscape_fits, require_minimum_fits
-
-    if method in DYNAMIC:
-        require_landscape_fits(scene)
-        return
-    if engine == "path":
-        require_minimum_fits(scene, path_engine=True)  # the footprint priced there first
-        return
-    ta = scene.twist_axis
-    (cx, cy), half = _fit_box(
-        None, np.round(np.asarray(start[:2], float) / scene.um_per_px), band_px
-    )
-    lo, hi = _twist_band(ta, float(start[2]), band_steps)
-    runs = consecutive_runs({j % ta.count for j in range(lo, hi + 1)})
-    if runs:  # else a start twist beyond the axis: refused by simulate with its own message
-        longest = max(runs, key=len)
-        require_landscape_fits(
-            scene, twists=ta.values_at(np.asarray(longest)), center_px=(cx, cy), half_px=half
-        )
-    require_minimum_fits(scene)
 
 
 def reference_landscape(
