@@ -4,13 +4,17 @@ save transforms (:func:`chip_relations`, :func:`correlate_stack`).
 
 The transform runs in SciPy's pocketfft on a CPU (measured faster than XLA's FFT on
 a 2-core machine, see docs/benchmarks.md) and in JAX when JAX sees a GPU; ``backend=`` overrides.
-Forward chip transforms skip the rows that are zero, and only the translation window
-asked for is transformed back along x.
+On the CPU each twist goes through its own pipeline, one twist per thread, in a
+transposed layout in which every 1-D transform runs along contiguous memory: forward
+chip transforms skip the rows that are zero, and only the translation window asked
+for is transformed back along x.
 """
 
 from __future__ import annotations
 
 import functools
+import threading
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -18,7 +22,6 @@ import numpy as np
 import scipy.fft as sfft
 
 from patterns.errors import InputError
-from patterns.mask import nonzero_box
 from simulator.core import threads
 
 BACKENDS = ("auto", "scipy", "jax")
@@ -62,27 +65,64 @@ def fft_shape(
     return sfft.next_fast_len(need_y, real=False), sfft.next_fast_len(need_x, real=True)
 
 
+def _padded(n: int, dtype) -> int:
+    """Row length (elements) of a work array whose rows hold ``n``: 64 bytes more, so that
+    the row stride is never a multiple of 4 KiB (a column walk over rows 4 KiB apart
+    thrashes the cache: the transposes measured 4.6x slower at 1024 x 513)."""
+    return n + 64 // np.dtype(dtype).itemsize
+
+
 def kernel_bytes(fft: tuple[int, int], dtype, chunks: int) -> int:
     """Bytes of the stored pattern spectrum and its mirror-image copy."""
     ny, nx = fft
     return ny * (nx // 2 + 1) * 2 * np.dtype(dtype).itemsize * 2
 
 
+def _slot_bytes(fft: tuple[int, int], out_rows: int, chip_rows: int, dtype) -> int:
+    """Bytes one thread's pipeline holds: its spectrum and its mirror image's (transposed),
+    the window rows transposed back, and SciPy's results of the forward row pass and of
+    the last inverse pass."""
+    ny, nx = fft
+    nh, item = nx // 2 + 1, np.dtype(dtype).itemsize
+    cbytes = 2 * item
+    return (
+        2 * nh * _padded(ny, dtype) * cbytes
+        + out_rows * _padded(nh, dtype) * cbytes
+        + chip_rows * nh * cbytes
+        + out_rows * nx * item
+    )
+
+
 def work_bytes(fft: tuple[int, int], out_rows: int, dtype, chunk: int, chunks: int) -> int:
     """Working memory of a correlation in ``chunks`` chunks of ``chunk`` twists (bytes):
-    the kernels, and per twist two complex spectra and the real window rows."""
-    ny, nx = fft
-    item = np.dtype(dtype).itemsize
-    per_twist = ny * (nx // 2 + 1) * 2 * item * 2 + out_rows * nx * item
-    return kernel_bytes(fft, dtype, chunks) + chunk * per_twist
+    the kernels, and one pipeline (:func:`_slot_bytes`) per thread that runs at once
+    (at most one per twist of a chunk)."""
+    slots = max(1, min(threads(), chunk))
+    return kernel_bytes(fft, dtype, chunks) + slots * _slot_bytes(fft, out_rows, fft[0], dtype)
+
+
+class Slot(NamedTuple):
+    """One thread's work arrays: the spectrum ``spec`` and its mirror image's ``mspec``,
+    (nx / 2 + 1, ny) transposed (x frequency, y), and ``rows`` (window rows, nx / 2 + 1),
+    all views of arrays with padded rows (:func:`_padded`)."""
+
+    spec: np.ndarray
+    mspec: np.ndarray | None
+    rows: np.ndarray
 
 
 class Workspace(NamedTuple):
-    """Complex work arrays of a correlation, (chunk, ny, nx / 2 + 1), owned by the caller."""
+    """Work arrays of a correlation, owned by the caller: one :class:`Slot` per thread, and
+    the mirror images' kernel (None without mirror outputs)."""
 
-    spec: np.ndarray
-    mspec: np.ndarray | None  # for the chips' mirror images
-    mkernel: np.ndarray | None  # the mirror images' kernel
+    slots: tuple[Slot, ...]
+    mkernel: np.ndarray | None
+
+
+@functools.cache
+def _pool(n: int) -> ThreadPoolExecutor:
+    """The process's threads that run twists side by side (made once per count)."""
+    return ThreadPoolExecutor(n, thread_name_prefix="selfalign-fft")
 
 
 class Correlator:
@@ -91,12 +131,15 @@ class Correlator:
     ``corr[b, Y + ry, X + rx] = sum_{k,l} chip[b, k, l] * pattern[k + Y + dy, l + X + dx]``
     for the arrays as given (both in the same row orientation).
 
-    How the passes are kept few (the transforms are memory-bound): the chip is
-    flipped before its forward transform, so its spectrum already is the conjugate
-    the correlation needs; the phase ramps of that flip, and the roll that puts the
-    window at index 0 (so the window is a plain slice, not a gather), are folded
-    once into the stored pattern spectrum ``kernel``. Zero rows around each chunk of
-    chips are not transformed. One multiply per twist remains.
+    How the passes are kept few and fast (the transforms are memory-bound; measured in
+    docs/benchmarks.md). On the CPU each twist runs its own pipeline on one thread, the
+    threads taking twists in turn: the chip's rows that hold pixels go through a real
+    transform along x; the result is written transposed (x frequency, y) and conjugated
+    in the same pass, so the transform along y runs along contiguous memory and gives
+    the conjugate spectrum the correlation needs; one multiply by the stored kernel
+    ``kernel_t``, the inverse along y, the window's rows transposed back, and the
+    inverse along x straight into the output. The roll that puts the window at index 0
+    (so the window is a plain slice, not a gather) is folded once into the kernel.
     """
 
     def __init__(
@@ -118,11 +161,6 @@ class Correlator:
         self.chip_shape = (hc, wc)
         self.out_shape = (2 * window.ry + 1, 2 * window.rx + 1)
         self.workers = threads()
-        # corr[m] = sum_k c[k] p[k + m]. With the flipped chip f[k] = c[hc - 1 - k],
-        # F(f) = e^{-i w (hc - 1)} conj(C); the window starts at m0 = dy - ry.
-        # kernel = P * e^{+i w (hc - 1)} * e^{+i w m0} so that corr[m0 + j] = IFFT(kernel F(f))[j].
-        ky = np.exp(2j * np.pi * np.fft.fftfreq(self.ny) * (hc - 1 + window.dy - window.ry))
-        kx = np.exp(2j * np.pi * np.fft.rfftfreq(self.nx) * (wc - 1 + window.dx - window.rx))
         spec = sfft.fft(
             sfft.rfft(np.asarray(pattern, self.dtype), n=self.nx, axis=1, workers=self.workers),
             n=self.ny,
@@ -134,30 +172,50 @@ class Correlator:
             from simulator.physics import kernel_spectrum
 
             spec *= kernel_spectrum(self.ny, self.nx, meniscus_px)
-        self.kernel = (spec * ky[:, None] * kx[None, :]).astype(cdt)
+        # corr[m] = sum_k c[k] p[k + m]: CORR = conj(C) P. The window starts at
+        # m0 = dy - ry: corr[m0 + j] = IFFT(P e^{+i w m0} conj(C))[j].
+        fy, fx = np.fft.fftfreq(self.ny), np.fft.rfftfreq(self.nx)
+        m0y, m0x = window.dy - window.ry, window.dx - window.rx
+        ky, kx = np.exp(2j * np.pi * fy * m0y), np.exp(2j * np.pi * fx * m0x)
         if self.backend == "jax":
+            # The JAX pipeline transforms the flipped chip f[k] = c[hc - 1 - k], whose
+            # spectrum is e^{-i w (hc - 1)} conj(C): the kernel takes e^{+i w (hc - 1)} too.
+            ky = ky * np.exp(2j * np.pi * fy * (hc - 1))
+            kx = kx * np.exp(2j * np.pi * fx * (wc - 1))
+            self.kernel = (spec * ky[:, None] * kx[None, :]).astype(cdt)
             self._jax_fn = self._make_jax()
+        else:
+            # Stored transposed, (nx / 2 + 1, ny), as the pipeline's spectra are.
+            self.kernel_t = np.ascontiguousarray((spec * ky[:, None] * kx[None, :]).T, cdt)
 
     def bytes_per_twist(self) -> int:
-        return work_bytes((self.ny, self.nx), self.out_shape[0], self.dtype, 1, 1) - kernel_bytes(
-            (self.ny, self.nx), self.dtype, 1
-        )
+        """Work bytes of one pipeline (one thread's twist at a time)."""
+        return _slot_bytes((self.ny, self.nx), self.out_shape[0], self.chip_shape[0], self.dtype)
 
     def workspace(self, chunk: int, mirror: bool = False) -> Workspace:
-        """Work arrays for calls of up to ``chunk`` chips (with mirror images if ``mirror``).
+        """Work arrays for calls of up to ``chunk`` chips (with mirror images if ``mirror``):
+        one pipeline per thread that runs at once (at most ``chunk``).
 
         The caller owns them and passes them to every call of a build, so that no chunk
         allocates fresh pages; nothing is cached on the correlator.
         """
+        if self.backend == "jax":
+            return Workspace((), None)
         cdt = np.result_type(self.dtype, np.complex64)
-        shape = (int(chunk), self.ny, self.nx // 2 + 1)
+        ny, nh = self.ny, self.nx // 2 + 1
+        rows = self.out_shape[0]
+
+        def slot() -> Slot:
+            spec = np.empty((nh, _padded(ny, cdt)), cdt)[:, :ny]
+            mspec = np.empty((nh, _padded(ny, cdt)), cdt)[:, :ny] if mirror else None
+            return Slot(spec, mspec, np.empty((rows, _padded(nh, cdt)), cdt)[:, :nh])
+
+        slots = tuple(slot() for _ in range(max(1, min(self.workers, int(chunk)))))
         if not mirror:
-            return Workspace(np.empty(shape, cdt), None, None)
-        # The mirror images' kernel: kernel * exp(-2 pi i ky (hc - 1) / ny).
-        ramp = np.exp(-2j * np.pi * np.fft.fftfreq(self.ny) * (self.chip_shape[0] - 1)).astype(
-            self.kernel.dtype
-        )
-        return Workspace(np.empty(shape, cdt), np.empty(shape, cdt), self.kernel * ramp[:, None])
+            return Workspace(slots, None)
+        # The mirror images' kernel: kernel * exp(+2 pi i ky (hc - 1) / ny), per y frequency.
+        ramp = np.exp(2j * np.pi * np.fft.fftfreq(ny) * (self.chip_shape[0] - 1))
+        return Workspace(slots, self.kernel_t * ramp.astype(self.kernel_t.dtype)[None, :])
 
     def __call__(
         self,
@@ -177,12 +235,6 @@ class Correlator:
         work: the :meth:`workspace` to compute in (default: one made for this call).
         """
         chips = np.asarray(chips, dtype=self.dtype)
-        if (
-            work is None
-            or work.spec.shape[0] < len(chips)
-            or (mirror_out is not None and work.mspec is None)
-        ):
-            work = self.workspace(len(chips), mirror_out is not None)
         if out is None:
             out = np.empty((len(chips),) + self.out_shape, self.dtype)
         if self.backend == "jax":
@@ -190,46 +242,78 @@ class Correlator:
             if mirror_out is not None:
                 mirror_out[...] = np.asarray(self._jax_fn(chips[:, ::-1])) * scale
             return out
-        flipped = chips[:, ::-1, ::-1]
-        nz = np.asarray(flipped.any(axis=0))  # (hc, wc): which chip pixels any chip covers
-        if not nz.any():
+        if work is None or not work.slots or (mirror_out is not None and work.mkernel is None):
+            work = self.workspace(len(chips), mirror_out is not None)
+        slots = work.slots[: max(1, min(len(work.slots), len(chips)))]
+        # Threads share the cores: one twist per thread; a lone twist gets them all.
+        workers = max(1, self.workers // len(slots))
+        todo, lock = iter(range(len(chips))), threading.Lock()
+
+        def run(slot: Slot) -> None:
+            while True:
+                with lock:
+                    k = next(todo, None)
+                if k is None:
+                    return
+                mk = None if mirror_out is None else mirror_out[k]
+                self._one(chips[k], out[k], scale, slot, workers, mk, work.mkernel)
+
+        if len(slots) == 1:
+            run(slots[0])
+        else:
+            for f in [_pool(len(slots)).submit(run, s) for s in slots]:
+                f.result()
+        return out
+
+    def _one(
+        self,
+        chip: np.ndarray,
+        out: np.ndarray,
+        scale: float,
+        slot: Slot,
+        workers: int,
+        mirror_out: np.ndarray | None,
+        mkernel: np.ndarray | None,
+    ) -> None:
+        """One chip's pipeline (module docstring): its window into ``out``, and its mirror
+        image's into ``mirror_out`` from the same forward transform."""
+        rows = np.flatnonzero(chip.any(axis=1))
+        if rows.size == 0:
             out[...] = 0
             if mirror_out is not None:
                 mirror_out[...] = 0
-            return out
-        # Zero rows around the chips are not transformed (the row pass is cut to the
-        # rows that hold chip pixels, placed where they are, so no phase shift is due);
-        # trailing zero columns are the transform's own padding.
-        r0, r1, _, c1 = nonzero_box(nz)
-        spec = work.spec[: len(chips)]
+            return
+        # Zero rows around the chip are not transformed (the rows that hold pixels keep
+        # their place, so no phase shift is due); trailing zero columns are the
+        # transform's own padding.
+        r0, r1 = int(rows[0]), int(rows[-1]) + 1
+        c1 = int(np.flatnonzero(chip[r0:r1].any(axis=0))[-1]) + 1
+        spec = slot.spec
+        part = sfft.rfft(chip[r0:r1, :c1], n=self.nx, axis=1, workers=workers)
         spec[:, :r0] = 0
         spec[:, r1:] = 0
-        spec[:, r0:r1] = sfft.rfft(flipped[:, r0:r1, :c1], n=self.nx, axis=2, workers=self.workers)
-        spec = sfft.fft(spec, axis=1, workers=self.workers, overwrite_x=True)
+        np.conjugate(part.T, out=spec[:, r0:r1])
+        # conj(FFT_y(R)) = unnormalized backward transform of conj(R): conj(C), in place.
+        sfft.ifft(spec, axis=1, norm="forward", workers=workers, overwrite_x=True)
         if mirror_out is not None:
-            # The mirror image's flipped rows are f[hc - 1 - k]:
-            # F'(ky) = exp(-2 pi i ky (hc - 1) / ny) F(-ky), the ramp folded into a kernel.
-            mk, mspec = work.mkernel, work.mspec
-            assert (
-                mk is not None and mspec is not None
-            )  # a mirror workspace (made above if not given)
-            mspec = mspec[: len(chips)]
-            np.multiply(spec[:, :1], mk[:1], out=mspec[:, :1])
-            np.multiply(spec[:, :0:-1], mk[1:], out=mspec[:, 1:])  # rows ky -> -ky mod ny
-            self._inverse(mspec, mirror_out, scale)
-        spec *= self.kernel
-        self._inverse(spec, out, scale)
-        return out
+            # The mirror image c'[k] = c[hc - 1 - k]: conj(C')(ky) = e^{+i w (hc - 1)}
+            # conj(C)(-ky), the ramp folded into ``mkernel``.
+            assert mkernel is not None and slot.mspec is not None
+            np.multiply(spec[:, :1], mkernel[:, :1], out=slot.mspec[:, :1])
+            np.multiply(spec[:, :0:-1], mkernel[:, 1:], out=slot.mspec[:, 1:])
+            self._inverse(slot.mspec, slot.rows, mirror_out, scale, workers)
+        np.multiply(spec, self.kernel_t, out=spec)
+        self._inverse(spec, slot.rows, out, scale, workers)
 
-    def _inverse(self, spec: np.ndarray, out: np.ndarray, scale: float) -> None:
-        """out = scale * window of the inverse transform of spec (overwritten)."""
-        spec = sfft.ifft(spec, axis=1, workers=self.workers, overwrite_x=True)
-        rows, cols = self.out_shape
-        # The last pass one twist at a time, straight into ``out``: measured 1.3-2x faster
-        # than one batched call and a batch-sized temporary.
-        for k in range(len(spec)):
-            res = sfft.irfft(spec[k, :rows], n=self.nx, axis=1, workers=self.workers)
-            np.multiply(res[:, :cols], scale, out=out[k], casting="unsafe")
+    def _inverse(
+        self, spec: np.ndarray, rows: np.ndarray, out: np.ndarray, scale: float, workers: int
+    ) -> None:
+        """out = scale * window of the inverse transform of the transposed ``spec``
+        (overwritten; ``rows`` is the window rows' work array)."""
+        sfft.ifft(spec, axis=1, workers=workers, overwrite_x=True)
+        np.copyto(rows, spec[:, : len(rows)].T)
+        res = sfft.irfft(rows, n=self.nx, axis=1, workers=workers)
+        np.multiply(res[:, : out.shape[1]], scale, out=out, casting="unsafe")
 
     def _make_jax(self):
         import jax
@@ -280,30 +364,35 @@ def chip_relations(chips: np.ndarray, tol: float = SAME_CHIP_TOL) -> list[tuple[
     t, h, w = chips.shape
     if t == 0:
         return []
-    cols = np.unique(np.linspace(0, w - 1, min(w, 16)).round().astype(int))
+    # Both profiles over one mirror-symmetric set of rows, a quarter of the stack (a row
+    # profile over every row read all of it: 0.12 s for 181 chips of 512 x 512 px).
     rows = np.unique(np.r_[np.arange(0, h, 8), h - 1 - np.arange(0, h, 8)])
-    row_prof = np.round(chips[:, :, cols].sum(axis=2, dtype=np.float64), 6)
-    col_prof = np.round(chips[:, rows, :].sum(axis=1, dtype=np.float64), 6)
+    sub = chips[:, rows, :]
+    row_prof = np.round(sub.sum(axis=2, dtype=np.float64), 6)
+    col_prof = np.round(sub.sum(axis=1, dtype=np.float64), 6)
     tmp = np.empty((h, w), chips.dtype)
 
-    def close(a: np.ndarray, b: np.ndarray) -> bool:
-        np.subtract(a, b, out=tmp)
+    def close(i: int, j: int, mirrored: bool) -> bool:
+        """chips[i] == chips[j] (upside down if mirrored) within tol: the sampled rows first."""
+        if np.abs(sub[i] - (sub[j, ::-1] if mirrored else sub[j])).max() > tol:
+            return False
+        np.subtract(chips[i], chips[j, ::-1] if mirrored else chips[j], out=tmp)
         return max(-float(tmp.min()), float(tmp.max())) <= tol
 
-    seen: dict[tuple[bytes, bytes], int] = {}
+    # Every first chip under its profiles' key; a key can hold more than one (profiles
+    # that agree on the sampled rows only), each then checked in turn.
+    seen: dict[tuple[bytes, bytes], list[int]] = {}
     out: list[tuple[int, bool]] = []
     for i in range(t):
         cp = col_prof[i].tobytes()
-        rel = (i, False)
-        j = seen.get((row_prof[i].tobytes(), cp))
-        if j is not None and close(chips[i], chips[j]):
-            rel = (j, False)
-        else:
-            j = seen.get((row_prof[i, ::-1].tobytes(), cp))
-            if j is not None and close(chips[i], chips[j, ::-1]):
-                rel = (j, True)
-        if rel[0] == i:
-            seen.setdefault((row_prof[i].tobytes(), cp), i)
+        key = (row_prof[i].tobytes(), cp)
+        twin_key = (row_prof[i, ::-1].tobytes(), cp)
+        rel = next(((j, False) for j in seen.get(key, ()) if close(i, j, False)), None)
+        if rel is None:
+            rel = next(((j, True) for j in seen.get(twin_key, ()) if close(i, j, True)), None)
+        if rel is None:
+            seen.setdefault(key, []).append(i)
+            rel = (i, False)
         out.append(rel)
     return out
 
