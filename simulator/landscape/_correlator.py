@@ -24,19 +24,31 @@ import scipy.fft as sfft
 from patterns.errors import InputError
 from simulator.core import threads
 
-BACKENDS = ("auto", "scipy", "jax")
+BACKENDS = ("auto", "scipy", "opencv", "jax")
 #: Noise floor = NOISE_FACTOR * eps(dtype) * max|E|: a bound on FFT round-off
 #: (measured worst case about 3 eps * max|E| in float32 on library patterns).
 NOISE_FACTOR = 32.0
 
 
-def _default_backend() -> str:
+def _default_backend(dtype) -> str:
+    """JAX where it sees a GPU; else OpenCV's transforms for float32 where OpenCV runs them
+    in Intel's IPP (measured faster than pocketfft: docs/benchmarks.md), else SciPy's."""
     try:
         import jax
 
-        return "jax" if jax.default_backend() != "cpu" else "scipy"
+        if jax.default_backend() != "cpu":
+            return "jax"
     except Exception:  # pragma: no cover - jax is a dependency
-        return "scipy"
+        pass
+    return "opencv" if np.dtype(dtype) == np.float32 and _ipp() else "scipy"
+
+
+@functools.cache
+def _ipp() -> bool:
+    """Whether OpenCV's transforms run in Intel's IPP (its x86-64 wheels)."""
+    import cv2
+
+    return bool(cv2.ipp.useIPP())
 
 
 @dataclass(frozen=True)
@@ -50,9 +62,13 @@ class Window:
 
 
 def fft_shape(
-    pattern_shape: tuple[int, int], chip_shape: tuple[int, int], window: Window
+    pattern_shape: tuple[int, int],
+    chip_shape: tuple[int, int],
+    window: Window,
+    backend: str = "scipy",
 ) -> tuple[int, int]:
-    """(ny, nx) of the transforms for a correlation window: sizes only, nothing allocated."""
+    """(ny, nx) of the transforms for a correlation window: sizes only, nothing allocated
+    (for OpenCV's transforms, ``backend="opencv"``, even sizes of its own fast lengths)."""
     (hp, wp), (hc, wc) = pattern_shape, chip_shape
     # Alias-free: the partners m +- N of every wanted shift m lie outside the linear
     # support [-(hc - 1), hp - 1], and the window does not wrap onto itself.
@@ -62,7 +78,52 @@ def fft_shape(
     need_x = max(
         wp, wc, 2 * window.rx + 1, wp - (window.dx - window.rx), window.dx + window.rx + wc
     )
+    if backend == "opencv":
+        return _even_dft_size(need_y), _even_dft_size(need_x)
     return sfft.next_fast_len(need_y, real=False), sfft.next_fast_len(need_x, real=True)
+
+
+def _even_dft_size(need: int) -> int:
+    """OpenCV's fast size (2^a 3^b 5^c) >= need, even (its packed spectra, :func:`_ccs`)."""
+    import cv2
+
+    n = cv2.getOptimalDFTSize(need)
+    while n % 2:
+        n = cv2.getOptimalDFTSize(n + 1)
+    return n
+
+
+def _ccs(half: np.ndarray, nx: int) -> np.ndarray:
+    """The (ny, nx / 2 + 1) half spectrum of a real 2-D transform in OpenCV's packed real
+    layout (CCS, ny and nx even): columns 1 .. nx - 2 hold (Re, Im) of x frequencies
+    1 .. nx / 2 - 1 for every row; columns 0 and nx - 1 hold x frequencies 0 and nx / 2,
+    whose spectra are Hermitian along y, packed as Re Y0, Re Y1, Im Y1, ..., Re Y(ny / 2)."""
+    ny = half.shape[0]
+    out = np.empty((ny, nx), half.real.dtype)
+    out[:, 1 : nx - 1 : 2] = half[:, 1 : nx // 2].real
+    out[:, 2 : nx - 1 : 2] = half[:, 1 : nx // 2].imag
+    for c, k in ((0, 0), (nx - 1, nx // 2)):
+        _pack_column(out[:, c], half[: ny // 2 + 1, k])
+    return out
+
+
+def _pack_column(dst: np.ndarray, z: np.ndarray) -> None:
+    """A Hermitian column's frequencies 0 .. ny / 2 (``z``) into its CCS column ``dst``."""
+    ny = len(dst)
+    dst[0] = z[0].real
+    dst[1 : ny - 1 : 2] = z[1 : ny // 2].real
+    dst[2 : ny - 1 : 2] = z[1 : ny // 2].imag
+    dst[ny - 1] = z[ny // 2].real
+
+
+def _unpack_column(src: np.ndarray) -> np.ndarray:
+    """A CCS column's frequencies 0 .. ny / 2, complex (inverse of :func:`_pack_column`)."""
+    ny = len(src)
+    z = np.zeros(ny // 2 + 1, np.result_type(src.dtype, np.complex64))
+    z[0] = src[0]
+    z[1 : ny // 2] = src[1 : ny - 1 : 2] + 1j * src[2 : ny - 1 : 2]
+    z[ny // 2] = src[ny - 1]
+    return z
 
 
 def _padded(n: int, dtype) -> int:
@@ -102,18 +163,22 @@ def work_bytes(fft: tuple[int, int], out_rows: int, dtype, chunk: int, chunks: i
 
 
 class Slot(NamedTuple):
-    """One thread's work arrays: the spectrum ``spec`` and its mirror image's ``mspec``,
-    (nx / 2 + 1, ny) transposed (x frequency, y), and ``rows`` (window rows, nx / 2 + 1),
-    all views of arrays with padded rows (:func:`_padded`)."""
+    """One thread's work arrays. SciPy: the spectrum ``spec`` and its mirror image's
+    ``mspec``, (nx / 2 + 1, ny) transposed (x frequency, y), and ``rows`` (window rows,
+    nx / 2 + 1), all views of arrays with padded rows (:func:`_padded`). OpenCV: the
+    packed spectra (ny, nx) (:func:`_ccs`), ``rows`` the inverse's (ny, nx) result and
+    ``canvas`` the (ny, nx) zeros the chip is written into."""
 
     spec: np.ndarray
     mspec: np.ndarray | None
     rows: np.ndarray
+    canvas: np.ndarray | None = None
 
 
 class Workspace(NamedTuple):
     """Work arrays of a correlation, owned by the caller: one :class:`Slot` per thread, and
-    the mirror images' kernel (None without mirror outputs)."""
+    for mirror outputs the mirror images' kernel (SciPy) or phase ramp over the y
+    frequencies (OpenCV); None without mirror outputs."""
 
     slots: tuple[Slot, ...]
     mkernel: np.ndarray | None
@@ -131,15 +196,21 @@ class Correlator:
     ``corr[b, Y + ry, X + rx] = sum_{k,l} chip[b, k, l] * pattern[k + Y + dy, l + X + dx]``
     for the arrays as given (both in the same row orientation).
 
-    How the passes are kept few and fast (the transforms are memory-bound; measured in
-    docs/benchmarks.md). On the CPU each twist runs its own pipeline on one thread, the
-    threads taking twists in turn: the chip's rows that hold pixels go through a real
-    transform along x; the result is written transposed (x frequency, y) and conjugated
-    in the same pass, so the transform along y runs along contiguous memory and gives
-    the conjugate spectrum the correlation needs; one multiply by the stored kernel
-    ``kernel_t``, the inverse along y, the window's rows transposed back, and the
-    inverse along x straight into the output. The roll that puts the window at index 0
-    (so the window is a plain slice, not a gather) is folded once into the kernel.
+    How the passes are kept few and fast (measured in docs/benchmarks.md). On the CPU
+    each twist runs its own pipeline on one thread, the threads taking twists in turn.
+    The roll that puts the window at index 0 (so the window is a plain slice, not a
+    gather) and the transforms' normalisation are folded once into the stored kernel.
+
+    * ``backend="opencv"`` (float32 on x86-64 by default): OpenCV's 2-D real transform
+      of the chip written into a canvas of zeros, one multiply by the packed kernel
+      ``kernel_ccs`` (conjugating the chip's spectrum), the inverse, the window copied
+      out. OpenCV runs these transforms in Intel's IPP.
+    * ``backend="scipy"`` (pocketfft): the chip's rows that hold pixels go through a
+      real transform along x; the result is written transposed (x frequency, y) and
+      conjugated in the same pass, so the transform along y runs along contiguous
+      memory and gives the conjugate spectrum the correlation needs; one multiply by
+      the stored kernel ``kernel_t``, the inverse along y, the window's rows transposed
+      back, and the inverse along x.
     """
 
     def __init__(
@@ -153,11 +224,11 @@ class Correlator:
     ):
         if backend not in BACKENDS:
             raise InputError(f"backend must be one of {BACKENDS}, got {backend!r}")
-        self.backend = _default_backend() if backend == "auto" else backend
         self.dtype = np.dtype(dtype)
+        self.backend = _default_backend(self.dtype) if backend == "auto" else backend
         self.window = window
         hc, wc = chip_shape
-        self.ny, self.nx = fft_shape(pattern.shape, chip_shape, window)
+        self.ny, self.nx = fft_shape(pattern.shape, chip_shape, window, self.backend)
         self.chip_shape = (hc, wc)
         self.out_shape = (2 * window.ry + 1, 2 * window.rx + 1)
         self.workers = threads()
@@ -184,6 +255,11 @@ class Correlator:
             kx = kx * np.exp(2j * np.pi * fx * (wc - 1))
             self.kernel = (spec * ky[:, None] * kx[None, :]).astype(cdt)
             self._jax_fn = self._make_jax()
+        elif self.backend == "opencv":
+            # OpenCV's inverse is not normalised: 1 / (ny nx) goes into the kernel.
+            norm = 1.0 / (self.ny * self.nx)
+            half = spec * (ky[:, None] * norm) * kx[None, :]
+            self.kernel_ccs = _ccs(half, self.nx).astype(self.dtype)
         else:
             # Stored transposed, (nx / 2 + 1, ny), as the pipeline's spectra are.
             self.kernel_t = np.ascontiguousarray((spec * ky[:, None] * kx[None, :]).T, cdt)
@@ -201,8 +277,24 @@ class Correlator:
         """
         if self.backend == "jax":
             return Workspace((), None)
-        cdt = np.result_type(self.dtype, np.complex64)
+        n_slots = max(1, min(self.workers, int(chunk)))
         ny, nh = self.ny, self.nx // 2 + 1
+        if self.backend == "opencv":
+            nx, padded = self.nx, (ny, _padded(self.nx, self.dtype))
+
+            def packed() -> Slot:
+                # Padded rows here too: measured 4-7 % faster transforms at 1024 x 1024.
+                return Slot(
+                    np.empty(padded, self.dtype)[:, :nx],
+                    np.empty(padded, self.dtype)[:, :nx] if mirror else None,
+                    np.empty(padded, self.dtype)[:, :nx],
+                    np.zeros(padded, self.dtype)[:, :nx],
+                )
+
+            # The mirror image's spectrum: e^{-i w (hc - 1)} C(-ky) (see __call__).
+            ramp = np.exp(-2j * np.pi * np.fft.fftfreq(ny) * (self.chip_shape[0] - 1))
+            return Workspace(tuple(packed() for _ in range(n_slots)), ramp if mirror else None)
+        cdt = np.result_type(self.dtype, np.complex64)
         rows = self.out_shape[0]
 
         def slot() -> Slot:
@@ -210,7 +302,7 @@ class Correlator:
             mspec = np.empty((nh, _padded(ny, cdt)), cdt)[:, :ny] if mirror else None
             return Slot(spec, mspec, np.empty((rows, _padded(nh, cdt)), cdt)[:, :nh])
 
-        slots = tuple(slot() for _ in range(max(1, min(self.workers, int(chunk)))))
+        slots = tuple(slot() for _ in range(n_slots))
         if not mirror:
             return Workspace(slots, None)
         # The mirror images' kernel: kernel * exp(+2 pi i ky (hc - 1) / ny), per y frequency.
@@ -248,6 +340,7 @@ class Correlator:
         # Threads share the cores: one twist per thread; a lone twist gets them all.
         workers = max(1, self.workers // len(slots))
         todo, lock = iter(range(len(chips))), threading.Lock()
+        one = self._one_cv if self.backend == "opencv" else self._one
 
         def run(slot: Slot) -> None:
             while True:
@@ -256,7 +349,7 @@ class Correlator:
                 if k is None:
                     return
                 mk = None if mirror_out is None else mirror_out[k]
-                self._one(chips[k], out[k], scale, slot, workers, mk, work.mkernel)
+                one(chips[k], out[k], scale, slot, workers, mk, work.mkernel)
 
         if len(slots) == 1:
             run(slots[0])
@@ -264,6 +357,47 @@ class Correlator:
             for f in [_pool(len(slots)).submit(run, s) for s in slots]:
                 f.result()
         return out
+
+    def _one_cv(
+        self,
+        chip: np.ndarray,
+        out: np.ndarray,
+        scale: float,
+        slot: Slot,
+        workers: int,
+        mirror_out: np.ndarray | None,
+        ramp: np.ndarray | None,
+    ) -> None:
+        """One chip's pipeline in OpenCV (IPP): its window into ``out``, and its mirror
+        image's into ``mirror_out`` from the same forward transform."""
+        import cv2
+
+        hc, wc = self.chip_shape
+        canvas, spec = slot.canvas, slot.spec
+        assert canvas is not None
+        canvas[:hc, :wc] = chip  # the rest of the canvas stays zero
+        cv2.dft(canvas, spec)
+        if mirror_out is not None:
+            assert ramp is not None and slot.mspec is not None
+            self._mirror_ccs(spec, slot.mspec, ramp)
+            cv2.mulSpectrums(self.kernel_ccs, slot.mspec, 0, slot.mspec, conjB=True)
+            cv2.idft(slot.mspec, slot.rows, flags=cv2.DFT_REAL_OUTPUT)
+            np.multiply(slot.rows[: out.shape[0], : out.shape[1]], scale, out=mirror_out)
+        cv2.mulSpectrums(self.kernel_ccs, spec, 0, spec, conjB=True)  # kernel * conj(C)
+        cv2.idft(spec, slot.rows, flags=cv2.DFT_REAL_OUTPUT)
+        np.multiply(slot.rows[: out.shape[0], : out.shape[1]], scale, out=out)
+
+    def _mirror_ccs(self, spec: np.ndarray, mspec: np.ndarray, ramp: np.ndarray) -> None:
+        """The packed spectrum of the chip upside down, c'[k] = c[hc - 1 - k], from the
+        chip's: C'(ky) = e^{-i w (hc - 1)} C(-ky) (``ramp`` over the y frequencies)."""
+        ny, nx = spec.shape
+        cdt = np.result_type(spec.dtype, np.complex64)
+        pairs, mpairs = spec[:, 1 : nx - 1].view(cdt), mspec[:, 1 : nx - 1].view(cdt)
+        mpairs[0] = pairs[0]
+        np.multiply(pairs[:0:-1], ramp[1:, None].astype(cdt), out=mpairs[1:])
+        for c in (0, nx - 1):  # Hermitian columns: C(-ky) = conj(C(ky))
+            z = _unpack_column(spec[:, c])
+            _pack_column(mspec[:, c], ramp[: ny // 2 + 1] * np.conj(z))
 
     def _one(
         self,
@@ -442,6 +576,7 @@ def correlate_planes(
     flip_rows: int | None = None,
     verify=None,
     progress=None,
+    self_twins: tuple[int, ...] = (),
 ) -> tuple[int, int]:
     """Planes ``out[0:count]`` of a stack of chips, saving every transform their symmetry
     allows: the one symmetry-saving path of :func:`simulator.landscape.build_landscape` and
@@ -454,6 +589,10 @@ def correlate_planes(
             upside down over its first ``flip_rows`` rows (the pattern is mirror-symmetric
             too and the window centred on y = 0): no transform at all.
         repeats: {j: i}: plane j equals plane i (a chip seen before), copied.
+        self_twins: planes whose chip is its own mirror image (a mirror-symmetric chip at
+            twist 0): with ``flip_rows`` they are mirror-symmetric too, and are made so
+            exactly (the mean of the plane and its flip), so that a start on the mirror
+            line stays on it (the transforms' round-off alone breaks the symmetry).
         verify: for chips whose twin relation is not exact by construction,
             ``verify(j, chip_i)`` -> the chip of plane j when it is *not* chip i upside
             down (that plane is then transformed directly), else None.
@@ -494,6 +633,11 @@ def correlate_planes(
                         n_copied -= 1
         if progress:
             progress(2 * len(sel))
+    if flip_rows is not None:
+        for i in self_twins:
+            plane = out[i, :flip_rows]
+            plane += plane[::-1].copy()
+            plane *= 0.5
     for j, i in repeats.items():
         out[j] = out[i]
     return n_mirror, n_copied
