@@ -45,7 +45,8 @@ so that a shared machine's load falls on every method alike and the ratios of on
 hold (the best and every timed call are kept):
 
 * total seconds for the whole stack (pattern transforms and padding included,
-  chip rotation not), and ms per twist;
+  chip rotation not), and ms per twist; the process's CPU seconds (all its threads) of
+  its least-CPU call, which a shared machine's load moves less than the wall time;
 * peak memory: the rise of the process's peak RSS over its RSS just before the
   call (Linux VmHWM, reset through /proc/self/clear_refs when allowed, else the
   ``ru_maxrss`` delta). It includes the output stack, listed separately;
@@ -349,12 +350,13 @@ def _serve(
     if "skipped" in row:
         return
     before = mark()
-    times, out = [], None
+    times, cpu, out = [], [], None
     while conn.recv() == "time":
         out = None
-        t0 = time.perf_counter()
+        c0, t0 = time.process_time(), time.perf_counter()
         out = fn(pattern, chips)
         times.append(time.perf_counter() - t0)
+        cpu.append(time.process_time() - c0)
         conn.send(times[-1])
     if out is None:
         conn.send({**row, "skipped": "no timed call"})
@@ -363,6 +365,7 @@ def _serve(
     row.update(
         seconds=min(times),
         times_s=[round(x, 4) for x in times],
+        cpu_s=min(cpu),
         extrapolated=False,
         out_mb=out.nbytes / 2**20,
         dtype=str(out.dtype),
@@ -520,6 +523,8 @@ def table(rows: list[dict], full_twists: int) -> str:
         mem = f"{r['peak_mb']:.0f} ({r['out_mb']:.0f})"
         times = r.get("times_s")
         notes = r["notes"] + ([f"calls {', '.join(f'{x:.3g}' for x in times)} s"] if times else [])
+        if "cpu_s" in r:
+            notes.append(f"CPU {r['cpu_s']:.3g} s")
         lines.append(
             f"| {r['N']} | {chips} | {r['method']} | {r['twists']} | {_fmt(r['seconds'], '.3g')}{extrap} | "
             f"{_fmt(per * 1e3, '.3g')} | {scaled_s} | {mem} | {_fmt(r['max_err_per_area'], '.2e')} | "
@@ -552,6 +557,12 @@ def speedups(rows: list[dict]) -> list[str]:
             f"N = {n}, {kind} chips: selfalign {me['seconds']:.3g} s against the fastest peer, {best['method']}, "
             f"{best['seconds']:.3g} s: {best['seconds'] / me['seconds']:.2f}x, error "
             f"{me['max_err_per_area']:.2e} against {best['max_err_per_area']:.2e} of the chip area"
+            + (
+                f"; CPU {me['cpu_s']:.3g} s against {best['cpu_s']:.3g} s "
+                f"({best['cpu_s'] / me['cpu_s']:.2f}x)"
+                if "cpu_s" in me and "cpu_s" in best
+                else ""
+            )
         )
     return out
 
