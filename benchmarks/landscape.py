@@ -39,10 +39,14 @@ Peers (each a function ``(pattern, chips) -> (T, N+h-1, N+w-1)`` stack):
 * ``selfalign`` / ``selfalign-jax``: the hook :func:`selfalign_method`, which calls
   ``simulator.landscape.correlate_stack`` (auto backend, and the JAX backend).
 
-Measured per method, each in a fresh ``multiprocessing`` "spawn" subprocess:
+Measured per method, each in its own fresh ``multiprocessing`` "spawn" subprocess, all
+of them alive at once: the timed calls go round the methods in turn (A B C, A B C, ...),
+so that a shared machine's load falls on every method alike and the ratios of one run
+hold (the best and every timed call are kept):
 
 * total seconds for the whole stack (pattern transforms and padding included,
-  chip rotation not), and ms per twist;
+  chip rotation not), and ms per twist; the process's CPU seconds (all its threads) of
+  its least-CPU call, which a shared machine's load moves less than the wall time;
 * peak memory: the rise of the process's peak RSS over its RSS just before the
   call (Linux VmHWM, reset through /proc/self/clear_refs when allowed, else the
   ``ru_maxrss`` delta). It includes the output stack, listed separately;
@@ -50,16 +54,19 @@ Measured per method, each in a fresh ``multiprocessing`` "spawn" subprocess:
   float64 reference, i.e. the error in units of "whole chip overlaps".
 
 Every method (but the sampled naive one) is called once to warm up (JIT compiling
-on the JAX backend, FFT plans, first touch of memory; its time is in the notes),
-then timed on the best of ``--repeats`` calls (default 3): the machine is shared and
-single timings move by up to 2x. Thread counts: OpenCV uses its default pool (all cores),
+on the JAX backend, FFT plans, first touch of memory; its time is in the notes), the
+warm-ups one after another, then timed on the best of ``--repeats`` rounds (default 3):
+the machine is shared and single timings move by up to 2x. Thread counts: OpenCV uses its default pool (all cores),
 scipy-rfft2 ``workers=2``, fftconvolve and the naive loop one thread.
 
 Usage::
 
     python benchmarks/landscape.py [--sizes 512 1024] [--twists 181]
-        [--large-twists 46] [--methods NAME ...] [--chips exact|opencv]
+        [--large-twists 46] [--methods NAME ...] [--chips exact opencv]
         [--pattern four-pad|four-pad-notch] [--repeats 3] [--json OUT]
+
+``--chips`` takes one kind or both (the default): each kind is its own run of every
+method, with its own ratios.
 
 At sizes above 512 the twist count is capped at ``--large-twists`` (default 46,
 every 4 degrees) to keep the default run within a few minutes on a 2-core machine
@@ -309,18 +316,17 @@ def _reference_at(pattern: np.ndarray, chips: np.ndarray, idx: np.ndarray) -> np
     return scipy_rfft2_f64(pattern, chips[idx])
 
 
-def _child(
+def _serve(
+    conn,
     name: str,
     n: int,
     twists: list[float],
     err_twists: int,
-    samples: int,
-    seed: int,
     chips_kind: str = "exact",
     pattern_kind: str = "four-pad",
-    repeats: int = 3,
-) -> dict:
-    """Run one method in this (fresh) process and return its measurements."""
+) -> None:
+    """One method in this (fresh) process: warm up, then one timed call per "time" request,
+    and on "finish" the row (seconds = the best call, every call in ``times_s``)."""
     import cv2  # noqa: F401  (import cost outside the timed region)
     import scipy.fft  # noqa: F401
     import scipy.signal  # noqa: F401
@@ -329,82 +335,163 @@ def _child(
     pattern = make_pattern(n, pattern_kind)
     chips = make_chips(n, tw, chips_kind)
     t, H, W = full_shape(pattern, chips)
-    area = float(chips[0].sum(dtype=np.float64))
-    eidx = _error_twists(t, err_twists)
-    row = {"N": n, "method": name, "twists": t, "notes": []}
-
-    if name == "naive-per-pose":
-        rng = np.random.default_rng(seed)
-        poses = np.column_stack(
-            [rng.choice(eidx, samples), rng.integers(0, H, samples), rng.integers(0, W, samples)]
-        )
-        before = mark()
-        t0 = time.perf_counter()
-        vals = naive_poses(pattern, chips, poses)
-        dt = time.perf_counter() - t0
-        row["peak_mb"] = peak_mb(before)
-        total = dt / samples * t * H * W
-        row.update(seconds=total, extrapolated=True, out_mb=0.0)
-        row["notes"].append(f"{samples} poses in {dt:.2f} s, extrapolated to {t * H * W:.3g} poses")
-        ref = _reference_at(pattern, chips, eidx)
-        pos = {int(k): i for i, k in enumerate(eidx)}
-        exact = ref[[pos[int(k)] for k in poses[:, 0]], poses[:, 1], poses[:, 2]]
-        row["max_err_per_area"] = float(np.max(np.abs(vals - exact)) / area)
-        return row
-
+    row = {"N": n, "method": name, "twists": t, "chips": chips_kind, "notes": []}
     fn = METHODS[name]
     try:
-        # Every method: one warm-up call (JIT compiling, FFT plans, first-touch of
-        # pages), then the best of ``repeats`` timed calls.
+        # One warm-up call (JIT compiling, FFT plans, first touch of pages).
         t0 = time.perf_counter()
         fn(pattern, chips)
         row["notes"].append(f"warm-up call {time.perf_counter() - t0:.2f} s")
-        before = mark()
-        dt = math.inf
-        for _ in range(repeats):
-            out = None
-            t0 = time.perf_counter()
-            out = fn(pattern, chips)
-            dt = min(dt, time.perf_counter() - t0)
     except ImportError as err:
-        return {**row, "skipped": f"not available: {err}"}
+        row["skipped"] = f"not available: {err}"
     except TypeError as err:
-        return {**row, "skipped": f"signature mismatch: {err}"}
+        row["skipped"] = f"signature mismatch: {err}"
+    conn.send(row.get("skipped"))
+    if "skipped" in row:
+        return
+    before = mark()
+    times, cpu, out = [], [], None
+    while conn.recv() == "time":
+        out = None
+        c0, t0 = time.process_time(), time.perf_counter()
+        out = fn(pattern, chips)
+        times.append(time.perf_counter() - t0)
+        cpu.append(time.process_time() - c0)
+        conn.send(times[-1])
+    if out is None:
+        conn.send({**row, "skipped": "no timed call"})
+        return
     row["peak_mb"] = peak_mb(before)
-    row.update(seconds=dt, extrapolated=False, out_mb=out.nbytes / 2**20, dtype=str(out.dtype))
+    row.update(
+        seconds=min(times),
+        times_s=[round(x, 4) for x in times],
+        cpu_s=min(cpu),
+        extrapolated=False,
+        out_mb=out.nbytes / 2**20,
+        dtype=str(out.dtype),
+    )
     if out.shape != (t, H, W):
         row["notes"].append(f"wrong shape {out.shape}, expected {(t, H, W)}")
         row["max_err_per_area"] = math.nan
-        return row
+    else:
+        area = float(chips[0].sum(dtype=np.float64))
+        eidx = _error_twists(t, err_twists)
+        ref = _reference_at(pattern, chips, eidx)
+        err = np.max(np.abs(out[eidx].astype(np.float64) - ref))
+        row["max_err_per_area"] = float(err / area)
+    conn.send(row)
+
+
+def _naive(
+    n: int,
+    twists: list[float],
+    err_twists: int,
+    samples: int,
+    seed: int,
+    chips_kind: str = "exact",
+    pattern_kind: str = "four-pad",
+) -> dict:
+    """The naive per-pose loop on a sample of poses in this (fresh) process, extrapolated."""
+    tw = np.asarray(twists, np.float64)
+    pattern = make_pattern(n, pattern_kind)
+    chips = make_chips(n, tw, chips_kind)
+    t, H, W = full_shape(pattern, chips)
+    area = float(chips[0].sum(dtype=np.float64))
+    eidx = _error_twists(t, err_twists)
+    row = {"N": n, "method": "naive-per-pose", "twists": t, "chips": chips_kind, "notes": []}
+    rng = np.random.default_rng(seed)
+    poses = np.column_stack(
+        [rng.choice(eidx, samples), rng.integers(0, H, samples), rng.integers(0, W, samples)]
+    )
+    before = mark()
+    t0 = time.perf_counter()
+    vals = naive_poses(pattern, chips, poses)
+    dt = time.perf_counter() - t0
+    row["peak_mb"] = peak_mb(before)
+    total = dt / samples * t * H * W
+    row.update(seconds=total, extrapolated=True, out_mb=0.0)
+    row["notes"].append(f"{samples} poses in {dt:.2f} s, extrapolated to {t * H * W:.3g} poses")
     ref = _reference_at(pattern, chips, eidx)
-    row["max_err_per_area"] = float(np.max(np.abs(out[eidx].astype(np.float64) - ref)) / area)
+    pos = {int(k): i for i, k in enumerate(eidx)}
+    exact = ref[[pos[int(k)] for k in poses[:, 0]], poses[:, 1], poses[:, 2]]
+    row["max_err_per_area"] = float(np.max(np.abs(vals - exact)) / area)
     return row
 
 
-def run_one(name: str, n: int, twists: np.ndarray, args: argparse.Namespace) -> dict:
+def run_naive(n: int, twists: np.ndarray, chips_kind: str, args: argparse.Namespace) -> dict:
     ctx = mp.get_context("spawn")
     with cf.ProcessPoolExecutor(max_workers=1, mp_context=ctx) as pool:
         fut = pool.submit(
-            _child,
-            name,
+            _naive,
             n,
             list(map(float, twists)),
             args.error_twists,
             args.samples,
             args.seed,
-            args.chips,
+            chips_kind,
             args.pattern,
-            args.repeats,
         )
-        try:
-            return fut.result()
-        except cf.process.BrokenProcessPool:
-            return {
-                "N": n,
-                "method": name,
-                "twists": len(twists),
-                "skipped": "subprocess died (out of memory?)",
-            }
+        return fut.result()
+
+
+def run_interleaved(
+    names: list[str], n: int, twists: np.ndarray, chips_kind: str, args: argparse.Namespace
+) -> list[dict]:
+    """Every method in its own fresh process, warmed up one after another, then timed in
+    rounds: one call of each method per round, ``args.repeats`` rounds."""
+    ctx = mp.get_context("spawn")
+    procs, rows = {}, {}
+    try:
+        for name in names:
+            print(f"[N={n}, {chips_kind} chips] {name}: warm-up ...", file=sys.stderr, flush=True)
+            mine, theirs = ctx.Pipe()
+            p = ctx.Process(
+                target=_serve,
+                args=(
+                    theirs,
+                    name,
+                    n,
+                    list(map(float, twists)),
+                    args.error_twists,
+                    chips_kind,
+                    args.pattern,
+                ),
+            )
+            p.start()
+            try:
+                skipped = mine.recv()
+            except EOFError:
+                skipped = "subprocess died (out of memory?)"
+            if skipped:
+                print(f"  skipped: {skipped}", file=sys.stderr)
+                p.join()
+                rows[name] = {"N": n, "method": name, "twists": len(twists), "skipped": skipped}
+                continue
+            procs[name] = (p, mine)
+        for k in range(args.repeats):
+            for name, (_, conn) in list(procs.items()):
+                try:
+                    conn.send("time")
+                    dt = conn.recv()
+                except (EOFError, BrokenPipeError):
+                    rows[name] = {
+                        "N": n,
+                        "method": name,
+                        "twists": len(twists),
+                        "skipped": "subprocess died (out of memory?)",
+                    }
+                    del procs[name]
+                    continue
+                print(f"  round {k + 1}: {name} {dt:.3f} s", file=sys.stderr, flush=True)
+        for name, (p, conn) in procs.items():
+            conn.send("finish")
+            rows[name] = conn.recv()
+            p.join()
+    finally:
+        for p, _ in procs.values():
+            if p.is_alive():
+                p.terminate()
+    return [rows[name] for name in names if name in rows]
 
 
 # ------------------------------------------------------------------------ report
@@ -416,14 +503,15 @@ def _fmt(x: float, spec: str) -> str:
 
 def table(rows: list[dict], full_twists: int) -> str:
     head = (
-        f"| N | method | twists | total s | ms/twist | s for {full_twists} twists | "
+        f"| N | chips | method | twists | total s | ms/twist | s for {full_twists} twists | "
         "peak MB (out MB) | max err / chip area | notes |"
     )
-    lines = [head, "|---|---|---:|---:|---:|---:|---:|---:|---|"]
+    lines = [head, "|---|---|---|---:|---:|---:|---:|---:|---:|---|"]
     for r in rows:
+        chips = r.get("chips", "-")
         if "skipped" in r:
             lines.append(
-                f"| {r['N']} | {r['method']} | {r['twists']} | - | - | - | - | - | skipped: {r['skipped']} |"
+                f"| {r['N']} | {chips} | {r['method']} | {r['twists']} | - | - | - | - | - | skipped: {r['skipped']} |"
             )
             continue
         per = r["seconds"] / r["twists"]
@@ -433,34 +521,48 @@ def table(rows: list[dict], full_twists: int) -> str:
             " (extrap.)" if r["extrapolated"] or r["twists"] != full_twists else ""
         )
         mem = f"{r['peak_mb']:.0f} ({r['out_mb']:.0f})"
+        times = r.get("times_s")
+        notes = r["notes"] + ([f"calls {', '.join(f'{x:.3g}' for x in times)} s"] if times else [])
+        if "cpu_s" in r:
+            notes.append(f"CPU {r['cpu_s']:.3g} s")
         lines.append(
-            f"| {r['N']} | {r['method']} | {r['twists']} | {_fmt(r['seconds'], '.3g')}{extrap} | "
+            f"| {r['N']} | {chips} | {r['method']} | {r['twists']} | {_fmt(r['seconds'], '.3g')}{extrap} | "
             f"{_fmt(per * 1e3, '.3g')} | {scaled_s} | {mem} | {_fmt(r['max_err_per_area'], '.2e')} | "
-            f"{'; '.join(r['notes'])} |"
+            f"{'; '.join(notes)} |"
         )
     return "\n".join(lines)
 
 
 PEERS = ("opencv-matchTemplate", "opencv-dft", "scipy-fftconvolve", "scipy-rfft2")
+CHIP_KINDS = ("exact", "opencv")
 
 
 def speedups(rows: list[dict]) -> list[str]:
-    """Per size: selfalign against the fastest peer measured (time and error)."""
+    """Per size and chip kind: selfalign against the fastest peer measured (time and error)."""
     out = []
-    for n in sorted({r["N"] for r in rows}):
+    for n, kind in sorted({(r["N"], r.get("chips", "")) for r in rows}):
         done = {
             r["method"]: r
             for r in rows
-            if r["N"] == n and "skipped" not in r and not r.get("extrapolated")
+            if r["N"] == n
+            and r.get("chips", "") == kind
+            and "skipped" not in r
+            and not r.get("extrapolated")
         }
         peers = [done[m] for m in PEERS if m in done]
         if "selfalign" not in done or not peers:
             continue
         best, me = min(peers, key=lambda r: r["seconds"]), done["selfalign"]
         out.append(
-            f"N = {n}: selfalign {me['seconds']:.3g} s against the fastest peer, {best['method']}, "
+            f"N = {n}, {kind} chips: selfalign {me['seconds']:.3g} s against the fastest peer, {best['method']}, "
             f"{best['seconds']:.3g} s: {best['seconds'] / me['seconds']:.2f}x, error "
             f"{me['max_err_per_area']:.2e} against {best['max_err_per_area']:.2e} of the chip area"
+            + (
+                f"; CPU {me['cpu_s']:.3g} s against {best['cpu_s']:.3g} s "
+                f"({best['cpu_s'] / me['cpu_s']:.2f}x)"
+                if "cpu_s" in me and "cpu_s" in best
+                else ""
+            )
         )
     return out
 
@@ -511,9 +613,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument(
         "--chips",
-        choices=("exact", "opencv"),
-        default="exact",
-        help="rotated chip rasters: exact area coverage (default) or cv2.warpAffine bilinear",
+        choices=CHIP_KINDS,
+        nargs="+",
+        default=list(CHIP_KINDS),
+        help="rotated chip rasters, one kind or both (default): exact area coverage "
+        "(selfalign's own; symmetric chips repeat) and cv2.warpAffine bilinear (none alike)",
     )
     ap.add_argument(
         "--pattern",
@@ -547,17 +651,17 @@ def main(argv: list[str] | None = None) -> int:
                 f"N = {n}: {t} twists instead of {args.twists} (--large-twists); 'extrap.' totals scale ms/twist"
             )
         twists = np.linspace(-90.0, 90.0, t)
-        for name in args.methods:
-            print(f"[N={n}] {name} ({t} twists) ...", file=sys.stderr, flush=True)
-            row = run_one(name, n, twists, args)
-            if "skipped" in row:
-                print(f"  skipped: {row['skipped']}", file=sys.stderr)
-            rows.append(row)
+        for kind in args.chips:
+            timed = [m for m in args.methods if m != "naive-per-pose"]
+            rows += run_interleaved(timed, n, twists, kind, args)
+            if "naive-per-pose" in args.methods:
+                print(f"[N={n}, {kind} chips] naive-per-pose ...", file=sys.stderr, flush=True)
+                rows.append(run_naive(n, twists, kind, args))
 
     info = machine()
     print(
         f"\nLandscape benchmark: full linear correlation, {args.pattern} pattern N x N float32, "
-        f"{args.chips} chip rasters, chip side 0.7 N, "
+        f"{' and '.join(args.chips)} chip rasters, chip side 0.7 N, "
         f"twists -90..90 deg. Machine: {info['cpus']} CPUs, numpy {info['numpy']}, scipy {info['scipy']}, "
         f"opencv {info['opencv']}{', jax ' + info['jax'] if 'jax' in info else ''}.\n"
     )

@@ -51,7 +51,7 @@ def _g(v: float, digits: int = 3) -> str:
 
 
 LANDSCAPE_METHODS = {
-    "selfalign": "**selfalign** (pocketfft)",
+    "selfalign": "**selfalign** (CPU: OpenCV's IPP transforms)",
     "selfalign-jax": "selfalign, JAX backend (XLA FFT)",
     "scipy-rfft2": "scipy.fft rfft2, precomputed pattern spectrum, all cores",
     "opencv-dft": "OpenCV dft + mulSpectrums",
@@ -60,42 +60,61 @@ LANDSCAPE_METHODS = {
     "naive-per-pose": "naive per-pose loop (2014 MATLAB style)",
     "scipy-rfft2-f64": "scipy.fft rfft2 in float64 (the error reference)",
 }
+#: The kinds of chip raster (benchmarks/landscape.py: --chips).
+LANDSCAPE_CHIPS = {
+    "exact": "Exact chips: area-coverage rasters, as selfalign makes them (a square repeats every 90°)",
+    "opencv": "OpenCV-rotated chips: cv2.warpAffine bilinear rasters (hardly two alike)",
+}
 #: The peers a user would otherwise use (benchmarks/landscape.py: PEERS).
 LANDSCAPE_PEERS = ("opencv-matchTemplate", "opencv-dft", "scipy-fftconvolve", "scipy-rfft2")
 
 
 def landscape_table() -> str:
-    """benchmarks/results/landscape.json: seconds, ms per twist, memory and error per method."""
+    """benchmarks/results/landscape.json: seconds, ms per twist, memory and error per method,
+    one table per kind of chip raster (rows without a kind are the run's ``--chips``)."""
     doc = _load("landscape.json")
     full = doc["args"]["twists"]
     m = doc["machine"]
+    kinds = doc["args"]["chips"]
+    kinds = [kinds] if isinstance(kinds, str) else list(kinds)
     order = ["selfalign"] + [k for k in LANDSCAPE_METHODS if k != "selfalign"]
-    rows = sorted(
-        (r for r in doc["rows"] if "skipped" not in r),
-        key=lambda r: (r["N"], order.index(r["method"]) if r["method"] in order else len(order)),
-    )
-    lines = [
-        f"| N | method | twists | total s | ms/twist | s for {full} twists | peak MB (output MB) | max error / chip area |",
-        "|---|---|---:|---:|---:|---:|---:|---:|",
-    ]
-    for r in rows:
-        per = r["seconds"] / r["twists"]
-        extrap = r["extrapolated"] or r["twists"] != full
-        lines.append(
-            f"| {r['N']} | {LANDSCAPE_METHODS.get(r['method'], r['method'])} | {r['twists']} "
-            f"| {_g(r['seconds'])}{' (extrapolated)' if r['extrapolated'] else ''} | {_g(per * 1e3)} "
-            f"| {_g(per * full)}{' (extrap.)' if extrap else ''} | {r['peak_mb']:.0f} ({r['out_mb']:.0f}) "
-            f"| {r['max_err_per_area']:.1e} |"
+    lines = []
+    for kind in kinds:
+        mine = [r for r in doc["rows"] if r.get("chips", kinds[0]) == kind]
+        rows = sorted(
+            (r for r in mine if "skipped" not in r),
+            key=lambda r: (
+                r["N"],
+                order.index(r["method"]) if r["method"] in order else len(order),
+            ),
         )
-    lines += [
-        "",
-        _landscape_ratios(doc["rows"]),
-        "",
+        lines += [
+            f"**{LANDSCAPE_CHIPS.get(kind, kind)}** (`--chips {kind}`):",
+            "",
+            f"| N | method | twists | total s | ms/twist | s for {full} twists | peak MB (output MB) | max error / chip area |",
+            "|---|---|---:|---:|---:|---:|---:|---:|",
+        ]
+        for r in rows:
+            per = r["seconds"] / r["twists"]
+            extrap = r["extrapolated"] or r["twists"] != full
+            lines.append(
+                f"| {r['N']} | {LANDSCAPE_METHODS.get(r['method'], r['method'])} | {r['twists']} "
+                f"| {_g(r['seconds'])}{' (extrapolated)' if r['extrapolated'] else ''} | {_g(per * 1e3)} "
+                f"| {_g(per * full)}{' (extrap.)' if extrap else ''} | {r['peak_mb']:.0f} ({r['out_mb']:.0f}) "
+                f"| {r['max_err_per_area']:.1e} |"
+            )
+        lines += ["", _landscape_ratios(mine), ""]
+    lines.append(
         f"Recorded with `python benchmarks/landscape.py --json benchmarks/results/landscape.json` "
-        f"(sizes {', '.join(map(str, doc['args']['sizes']))} px, chips `{doc['args']['chips']}`): "
-        f"{m['cpus']} CPUs ({m['processor']}), Python {m['python']}, numpy {m['numpy']}, scipy {m['scipy']}, "
-        f"OpenCV {m['opencv']}" + (f", JAX {m['jax']}" if "jax" in m else "") + ".",
-    ]
+        f"(sizes {', '.join(map(str, doc['args']['sizes']))} px, chips {' and '.join(f'`{k}`' for k in kinds)}"
+        + (
+            f"; the timed calls of all methods taken in turn, best of {doc['args'].get('repeats', 3)} each): "
+            if any("times_s" in r for r in doc["rows"])
+            else "): "
+        )
+        + f"{m['cpus']} CPUs ({m['processor']}), Python {m['python']}, numpy {m['numpy']}, scipy {m['scipy']}, "
+        f"OpenCV {m['opencv']}" + (f", JAX {m['jax']}" if "jax" in m else "") + "."
+    )
     return "\n".join(lines)
 
 

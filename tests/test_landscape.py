@@ -348,16 +348,21 @@ def test_twist_axis_defaults_to_one_period():
     assert wrap and period == 90 and t[0] == -44 and t[-1] == 44 and len(t) == 45 and 0.0 in t
 
 
-def test_correlate_stack_is_linear_correlation():
+@pytest.mark.parametrize("backend", ["scipy", "opencv"])
+def test_correlate_stack_is_linear_correlation(backend):
     from scipy.signal import correlate
 
     rng = np.random.default_rng(3)
     pat = rng.random((31, 40))
     chips = rng.random((4, 12, 9))
     chips[2] = chips[0]  # a repeated chip is transformed once, still answered
-    out = correlate_stack(pat, chips, dtype="float64")
+    out = correlate_stack(pat, chips, dtype="float64", backend=backend)
     ref = np.stack([correlate(pat, c, mode="full", method="direct") for c in chips])
     np.testing.assert_allclose(out, ref, atol=1e-10)
+    # float32 within its round-off (eps times the largest value, times a few)
+    out32 = correlate_stack(pat, chips, dtype="float32", backend=backend)
+    assert out32.dtype == np.float32
+    np.testing.assert_allclose(out32, ref, atol=8 * np.finfo(np.float32).eps * ref.max())
     # binary masks as bool arrays: the same as their 0/1 floats
     np.testing.assert_allclose(
         correlate_stack(pat > 0.5, chips > 0.5, dtype="float64"),
@@ -366,7 +371,7 @@ def test_correlate_stack_is_linear_correlation():
     )
 
 
-@pytest.mark.parametrize("backend", ["scipy", "jax"])
+@pytest.mark.parametrize("backend", ["scipy", "opencv", "jax"])
 @pytest.mark.parametrize("symmetric_pattern", [True, False])
 def test_correlate_stack_mirror_twins_and_repeats_match_direct_correlation(
     symmetric_pattern, backend
@@ -389,17 +394,31 @@ def test_correlate_stack_mirror_twins_and_repeats_match_direct_correlation(
     np.testing.assert_allclose(out, ref, atol=1e-9)
 
 
-def test_correlator_mirror_output_is_the_mirror_images_correlation():
+@pytest.mark.parametrize("backend", ["scipy", "opencv"])
+def test_correlator_mirror_output_is_the_mirror_images_correlation(backend):
     rng = np.random.default_rng(5)
     pat = rng.random((50, 44))
     chips = rng.random((3, 20, 16))
     chips[:, :3] = 0  # zero rows: the cut row pass and the mirror relation together
     win = Window(rx=20, ry=25, dx=14, dy=15)
-    cor = Correlator(pat, chips.shape[1:], win, "float64", "scipy")
+    cor = Correlator(pat, chips.shape[1:], win, "float64", backend)
     mirror = np.empty((3, 51, 41))
     direct = cor(chips, scale=2.0, mirror_out=mirror)
     np.testing.assert_allclose(mirror, cor(chips[:, ::-1], scale=2.0), atol=1e-10)
     np.testing.assert_allclose(direct, cor(chips, scale=2.0), atol=0)
+
+
+@pytest.mark.parametrize("ny, nx", [(8, 10), (12, 6), (30, 40)])
+def test_packed_spectrum_is_opencvs(ny, nx):
+    # The kernel of the OpenCV backend: SciPy's half spectrum packed as cv2.dft packs it.
+    import cv2
+    import scipy.fft as sfft
+
+    from simulator.landscape._correlator import _ccs
+
+    x = np.random.default_rng(ny).random((ny, nx))
+    half = sfft.fft(sfft.rfft(x, axis=1), axis=0)
+    np.testing.assert_allclose(_ccs(half, nx), cv2.dft(x), atol=1e-12)
 
 
 @pytest.mark.parametrize(
@@ -435,6 +454,21 @@ def test_landscape_symmetry_savings_change_nothing(pattern_geom, chip_geom, kind
     for k in (0, 1, len(t) - 1):
         alone = build_landscape(sc, twists=t[k : k + 1])
         np.testing.assert_allclose(ls.energy[k], alone.energy[0], rtol=0, atol=ls.noise_floor_J)
+
+
+def test_a_mirror_symmetric_scene_has_an_exactly_symmetric_plane_at_twist_zero():
+    # Pattern and chip mirror-symmetric: E(x, y, 0) = E(x, -y, 0) exactly (the transforms'
+    # round-off alone breaks it, which drifted a start on the mirror line off it), and
+    # the twins' planes are each other's flips.
+    sc = scene(
+        four_pad(120, 20),
+        square(100),
+        um_per_px=2.0,
+        twist=TwistGrid(step_deg=10.0, min_deg=-40, max_deg=40),
+    )
+    e = build_landscape(sc).energy
+    np.testing.assert_array_equal(e, e[::-1, ::-1])  # (twist, y) -> (-twist, -y)
+    assert np.abs(e).max() > 0
 
 
 def test_memory_budget_error_names_the_knobs():

@@ -503,6 +503,9 @@ def build_landscape(
             flip_rows=energy.shape[1] if copy else None,
             verify=None if exact else verify,
             progress=bar.update,
+            self_twins=tuple(int(i) for i in np.flatnonzero(np.round(twists_deg, 9) == 0))
+            if copy
+            else (),
         )
     from simulator.landscape._landscape import Landscape
 
