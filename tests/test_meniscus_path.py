@@ -69,7 +69,9 @@ def same_run(scene: Scene, start, method: str, full) -> None:
         # from the full landscape's runs on these cases too), at the same energy.
         tol = 0.2 * np.array([scene.um_per_px, scene.um_per_px, scene.twist_axis.step_deg])
         assert np.all(np.abs(np.subtract(t.final, ref.final)) <= tol), (t.final, ref.final)
-        assert abs(t.energy_J[-1] - ref.energy_J[-1]) <= full.noise_floor_J
+        # Each run's last energy lies within a noise floor of the floor's (the float32
+        # landscapes and the float64 path sums round differently), so the two within two.
+        assert abs(t.energy_J[-1] - ref.energy_J[-1]) <= 2 * full.noise_floor_J
     assert t.outcome == ref.outcome
     np.testing.assert_allclose(t.optimum, ref.optimum, atol=1e-9)
 

@@ -41,7 +41,10 @@ from simulator.scene import (
 
 ROOT = Path(__file__).resolve().parent.parent
 # Scene files; the sweep file (a scene inside a [scene] table) is checked by tests/test_sweep.py.
-EXAMPLES = sorted(p for p in (ROOT / "examples").glob("*.toml") if not p.name.startswith("sweep_"))
+#: The scene files of examples/ (sweep and design files are not scenes: their tests load them).
+EXAMPLES = sorted(
+    p for p in (ROOT / "examples").glob("*.toml") if not p.name.startswith(("sweep_", "design_"))
+)
 LIBRARY_PNGS = sorted((ROOT / "patterns" / "library").glob("*.png"))
 
 
