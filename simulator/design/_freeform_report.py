@@ -141,13 +141,12 @@ def feature_check(
 
 
 def read_gds_polygons(path):
-    """The polygons of a GDSII file (every cell, layer 1/0) as one shapely geometry, um."""
-    import gdstk
-    import shapely
+    """The written pattern read back (layer 1/0 of its one cell) as one shapely geometry, um:
+    the project's layout reader (:func:`patterns.layout.read_layout`), as a user's GDSII is read."""
+    from patterns.layout import read_layout
 
-    lib = gdstk.read_gds(str(path), unit=1e-6)
-    polys = [shapely.Polygon(p.points) for c in lib.cells for p in c.polygons]
-    return shapely.make_valid(shapely.union_all(polys)) if polys else shapely.MultiPolygon()
+    lay = read_layout(path)
+    return lay.geometry(lay.key("1/0"))
 
 
 # ------------------------------------------------------------------------------ outputs
