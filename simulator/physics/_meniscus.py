@@ -199,10 +199,15 @@ class WallProfile:
         """``f(s)`` at signed distances ``s`` (px, negative inside the chip)."""
         s = np.asarray(s_px, float)
         h = self.h_px
+        out = np.array(s <= self.substrate_reach_px, dtype=float)
+        # The ramp only between the reaches (a band along the outline: a few per cent of a
+        # footprint's canvas of tens of megapixels), 1 before it and 0 beyond.
+        ramp = np.asarray((s > self.substrate_reach_px) & (s < self.pad_reach_px))
+        v = s[ramp]
         with np.errstate(invalid="ignore", divide="ignore"):
-            ramp = (self.cos_pad - s / np.sqrt(s * s + h * h)) / (self.cos_pad - self.cos_substrate)
-        f = np.clip(ramp, 0.0, 1.0)
-        return np.where(s >= self.pad_reach_px, 0.0, np.where(s <= self.substrate_reach_px, 1.0, f))
+            f = (self.cos_pad - v / np.sqrt(v * v + h * h)) / (self.cos_pad - self.cos_substrate)
+        out[ramp] = np.clip(f, 0.0, 1.0)
+        return out
 
 
 def signed_distance_px(img: np.ndarray) -> np.ndarray:
@@ -236,10 +241,11 @@ def _edt(mask: np.ndarray) -> np.ndarray:
         return distance_transform_edt(mask)
     import cv2
 
-    d = cv2.distanceTransform(mask.astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    d = cv2.distanceTransform(mask.view(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
     d = d.astype(np.float64)
-    near = d < EDT_EXACT_PX
-    d[near] = np.sqrt(np.rint(d[near] * d[near]))
+    sq = np.multiply(d, d)  # whole-canvas passes in place: this runs on tens of megapixels
+    np.sqrt(np.rint(sq, out=sq), out=sq)
+    np.copyto(d, sq, where=d < EDT_EXACT_PX)
     return d
 
 
