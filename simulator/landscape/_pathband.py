@@ -27,7 +27,9 @@ scene's dtype as the FFT engine correlates them.
 
 from __future__ import annotations
 
+import functools
 import math
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
@@ -40,6 +42,20 @@ TILE_PX = 16
 TILE_SLACK_PX = 4.0
 #: Zeros kept around each segment's prefix sums: the longest run of columns one read takes.
 SEGMENT_PAD = 64
+
+
+def windows(a: np.ndarray, n: int) -> np.ndarray:
+    """The read-only view ``w[i] = a[i : i + n]`` of a contiguous 1-D array (NumPy's
+    ``sliding_window_view``, without its checks: this is made at every row of poses)."""
+    return np.lib.stride_tricks.as_strided(
+        a, (a.size - n + 1, n), (a.itemsize, a.itemsize), writeable=False
+    )
+
+
+@functools.cache
+def _pool(n: int) -> ThreadPoolExecutor:
+    """The process's threads that find and evaluate a band's pixels (made once per count)."""
+    return ThreadPoolExecutor(n, thread_name_prefix="selfalign-band")
 
 
 class Band:
@@ -83,7 +99,7 @@ class Band:
             return out
         k, m_lo, m_hi, v = k[hit], m_lo[hit], m_hi[hit], pv[a:b][hit]
         first, count = self.row_first[k], self.row_count[k]
-        win = np.lib.stride_tricks.sliding_window_view(self.flat, n)
+        win = windows(self.flat, n)
         acc = np.zeros(n)
         for j in range(int(count.max())):
             s = first + np.minimum(j, count - 1)
@@ -108,10 +124,36 @@ class Band:
         return out
 
 
+#: Candidate pixels (about) one task of :func:`footprint_band` takes: enough for NumPy and
+#: SciPy to release the GIL for most of it, few enough to stay in the cache.
+TASK_PX = 1 << 17
+
+
+def _band_pixels(rot, inverse, lo: float, hi: float, cand: np.ndarray, tile_rows, hc: int, wc: int):
+    """(rows, columns, footprint) of the band's pixels in the candidate tiles (``cand``) of
+    the tile rows ``tile_rows``, row-major."""
+    t = TILE_PX
+    rows, cols = [], []
+    for r in tile_rows:
+        c = (np.flatnonzero(cand[r])[:, None] * t + np.arange(t)).ravel()
+        c = c[c < wc]
+        k = np.arange(r * t, min(r * t + t, hc))
+        rows.append(np.repeat(k, len(c)))
+        cols.append(np.tile(c, len(k)))
+    kk = np.concatenate(rows) if rows else np.zeros(0, np.int64)
+    ll = np.concatenate(cols) if cols else np.zeros(0, np.int64)
+    xi, yi = inverse(kk.astype(float), ll.astype(float))
+    s = rot.distance_at(xi, yi)
+    band = np.flatnonzero((s >= lo) & (s <= hi))
+    return kk[band], ll[band], rot.profile_at(xi[band], yi[band], s[band])
+
+
 def footprint_band(rot, twist_deg: float, dtype) -> tuple:
     """One twist of the free contact lines' footprint on the rotator's canvas, split (module
     docstring): (rows, cols, values) of G's row differences (canvas coordinates, y up; columns
-    0 .. W, one beyond the last) and the :class:`Band` of B."""
+    0 .. W, one beyond the last) and the :class:`Band` of B. The band's pixels are found
+    and evaluated by tiles, tasks of about :data:`TASK_PX` candidate pixels on
+    :func:`simulator.core.threads` threads (the same values whatever the count)."""
     hc, wc = rot.shape
     lo, hi = rot.band_px
     a = math.radians(twist_deg)
@@ -131,20 +173,27 @@ def footprint_band(rot, twist_deg: float, dtype) -> tuple:
     s = rot.distance_at(*inverse(kt[:, None], lt[None, :]), box=False)
     reach = (t - 1) / 2 * math.sqrt(2) + TILE_SLACK_PX
     cand = (s + reach >= lo) & (s - reach <= hi)
-    rows, cols = [], []
-    for r in np.flatnonzero(cand.any(axis=1)):
-        c = (np.flatnonzero(cand[r])[:, None] * t + np.arange(t)).ravel()
-        c = c[c < wc]
-        k = np.arange(r * t, min(r * t + t, hc))
-        rows.append(np.repeat(k, len(c)))
-        cols.append(np.tile(c, len(k)))
-    kk = np.concatenate(rows) if rows else np.zeros(0, np.int64)
-    ll = np.concatenate(cols) if cols else np.zeros(0, np.int64)
-    xi, yi = inverse(kk.astype(float), ll.astype(float))
-    s = rot.distance_at(xi, yi)
-    band = np.flatnonzero((s >= lo) & (s <= hi))
-    bk, bl = kk[band], ll[band]  # row-major
-    f = rot.profile_at(xi[band], yi[band], s[band])
+    # Tasks: runs of tile rows of about TASK_PX candidate pixels each.
+    per_row = cand.sum(axis=1) * t * t
+    tile_rows = np.flatnonzero(per_row)
+    edges = np.searchsorted(
+        np.cumsum(per_row[tile_rows]), np.arange(1, 1 + per_row.sum() // TASK_PX) * TASK_PX
+    )
+    tasks = [r for r in np.split(tile_rows, np.unique(edges)) if len(r)]
+    from simulator.core import threads
+
+    n = min(threads(), len(tasks))
+    if n > 1:
+        parts = list(
+            _pool(n).map(lambda rs: _band_pixels(rot, inverse, lo, hi, cand, rs, hc, wc), tasks)
+        )
+    else:
+        parts = [_band_pixels(rot, inverse, lo, hi, cand, rs, hc, wc) for rs in tasks]
+    if parts:
+        bk, bl, f = (np.concatenate(v) for v in zip(*parts, strict=True))
+    else:
+        bk = bl = np.zeros(0, np.int64)
+        f = np.zeros(0)
     f = np.asarray(f.astype(dtype), np.float64)  # the FFT engine correlates the scene's dtype
     # Segments: runs of consecutive band columns in a row.
     nb = len(bk)
