@@ -184,3 +184,91 @@ def test_auto_takes_the_path_engine_for_free_contact_lines():
     s = library_scene("four_pad_730_50", 730, 10.0, 20.0)
     assert choose_engine(s, (300, 200, 8), "greedy", "auto", 3, 48) == "path"
     assert choose_engine(s, (300, 200, 8), "gradient", "auto", 3, 48) == "path"
+
+
+def _footprint_scene(chip) -> Scene:
+    return Scene.from_inputs(
+        mask_from_geometry(four_pad(200, 20), 1.0, margin_um=2),
+        chip=mask_from_geometry(chip, 1.0),
+        effects=Effects(meniscus=True),
+        liquid=Liquid(volume_nl=0.9),
+    )
+
+
+@pytest.mark.parametrize(
+    "chip", [box(-100, -100, 100, 100), box(-100, -60, 100, 60)], ids=["square", "rectangle"]
+)
+def test_a_mirror_twins_footprint_is_the_one_made(chip):
+    """A chip mirror-symmetric about x: the footprint at -t is the one at +t upside down
+    (taken, not made), and gives the energies and the mass of the one made, bit for bit."""
+    s = _footprint_scene(chip)
+    assert s.twist_axis.mirror and s.chip.geometry is not None
+    ax = s.twist_axis
+    index = {round(float(v), 9): j for j, v in enumerate(ax.values())}
+    mirrored, made = PathEnergy(s), PathEnergy(s)
+    made._mirrored = lambda tw: None
+    for t in (3.0, 17.0, 44.0):
+        plus, minus = index[t], index[-t]
+        mirrored.plane(plus, -3, 2, 4, 3)  # the twin, kept
+        got = mirrored.plane(minus, -25, 50, -30, 61)
+        want = made.plane(minus, -25, 50, -30, 61)
+        np.testing.assert_array_equal(got, want)
+        assert mirrored.mass(minus) == made.mass(minus)
+    assert mirrored.mirrored == 3 and made.mirrored == 0
+    assert mirrored.rotations == 3 and made.rotations == 3  # the +t made, the -t taken
+
+
+def test_a_footprint_made_ahead_is_the_one_made_now():
+    s = _footprint_scene(box(-100, -70, 100, 70))  # its twins at -t: made ahead, not taken
+    ahead, now = PathEnergy(s), PathEnergy(s)
+    k = s.twist_axis.count // 3
+    ahead.prefetch(k)
+    ahead.prefetch(k)  # once
+    assert list(ahead._pending) == [k]
+    np.testing.assert_array_equal(ahead.plane(k, -5, 9, 7, 12), now.plane(k, -5, 9, 7, 12))
+    assert not ahead._pending and ahead.rotations == 1
+    ahead.prefetch(k)  # kept: nothing to make
+    ahead.prefetch(k + 1)
+    ahead.close()
+    assert not ahead._pending
+
+
+def test_the_bands_threads_do_not_change_it(monkeypatch):
+    """The band's pixels found and evaluated in tasks on several threads: the same footprint
+    as on one."""
+    from simulator.landscape import _pathband
+
+    s = _footprint_scene(box(-100, -100, 100, 100))
+    rot = ChipRotator(
+        s.chip,
+        np.asarray([21.0]),
+        (0, 0),
+        blur_px=s.meniscus_height_px,
+        margin_px=s.meniscus_margin_px,
+        profile=s.wall_profile,
+    )
+    monkeypatch.setattr(_pathband, "TASK_PX", 2048)  # many tasks on this small chip
+    got = {}
+    for n in ("1", "2"):
+        monkeypatch.setenv("SELFALIGN_THREADS", n)
+        got[n] = footprint_band(rot, 21.0, np.float32)
+    one, two = got["1"], got["2"]
+    for a, b in zip(one[:3], two[:3], strict=True):
+        np.testing.assert_array_equal(a, b)
+    for f in ("seg_row", "seg_a", "seg_len", "seg_off", "flat", "row_first", "row_count"):
+        np.testing.assert_array_equal(getattr(one[3], f), getattr(two[3], f))
+
+
+def test_a_long_path_run_shows_its_boxes(monkeypatch, capsys):
+    """A counter of the boxes with the chip's pose, on stderr, once the run has taken the
+    waiting threshold (0 here); nothing with the waits silenced (``--quiet``)."""
+    from simulator.core import WAIT_ENV, quiet_waits
+
+    s = library_scene("square_200", 200, 5.0, 0.9)
+    monkeypatch.setenv(WAIT_ENV, "0")
+    simulate(s, (60.0, -40.0, 6.0), method="greedy", engine="path")
+    err = capsys.readouterr().err
+    assert "greedy run (path engine): " in err and " box" in err and "chip at (" in err, err
+    with quiet_waits():
+        simulate(s, (60.0, -40.0, 6.0), method="greedy", engine="path")
+    assert "path engine" not in capsys.readouterr().err

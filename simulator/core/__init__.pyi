@@ -32,6 +32,7 @@ from ._progress import (
     announce as announce,
     announce_once as announce_once,
     compiling as compiling,
+    counter_bar as counter_bar,
     progress_bar as progress_bar,
     quiet_waits as quiet_waits,
     shows_wait as shows_wait,

@@ -114,3 +114,15 @@ def progress_bar(show: bool, total: int, desc: str, unit: str):
     from tqdm import tqdm
 
     return tqdm(total=total, desc=desc, unit=unit, unit_scale=True)
+
+
+def counter_bar(desc: str, unit: str):
+    """A tqdm counter on stderr for work of unknown length (the boxes of a long run): it
+    appears once the work has taken :func:`wait_threshold_s` seconds, and not at all when
+    waits are quiet (``--quiet``). Use as a context manager; ``update(k)`` and
+    ``set_postfix_str`` as the work goes."""
+    if _quiet_waits[0]:
+        return NoBar()
+    from tqdm import tqdm
+
+    return tqdm(desc=desc, unit=f" {unit}", delay=wait_threshold_s())

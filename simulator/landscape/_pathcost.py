@@ -20,6 +20,9 @@ and a meniscus below one pixel blurs the pattern: those stay with the FFT engine
 
 :class:`PathEnergy` computes poses on demand, row by row (one read per outline step and
 row, whatever the row's length), and keeps one run of computed columns per row and twist,
+and the outlines of the twists it has used (a meniscus footprint at ``-t`` is taken from
+the one at ``+t`` when the chip is mirror-symmetric, and a run has the next twist's made
+ahead on a background thread: :meth:`PathEnergy.prefetch`),
 so boxes that overlap pay for their shared poses once; :meth:`PathEnergy.box`
 returns a :class:`~simulator.landscape.Landscape` on the same grid as
 :func:`~simulator.landscape.build_landscape` gives for the same twists, centre and
@@ -30,7 +33,9 @@ engine sums in float64 and rounds once.
 
 from __future__ import annotations
 
+import functools
 import time
+from concurrent.futures import Future, ThreadPoolExecutor
 
 import numpy as np
 from shapely import affinity
@@ -38,9 +43,15 @@ from shapely import affinity
 from patterns.raster import coverage_steps
 from simulator.core import UM2
 from simulator.landscape._build import _box, _check_energy_range, _extent, _grid_of, energy_scale_J
-from simulator.landscape._pathband import SEGMENT_PAD, Band, footprint_band, pattern_outline
+from simulator.landscape._pathband import (
+    SEGMENT_PAD,
+    Band,
+    footprint_band,
+    pattern_outline,
+    windows,
+)
 from simulator.landscape._posegrid import PoseGrid
-from simulator.landscape._rotation import ChipRotator
+from simulator.landscape._rotation import ChipRotator, canvas_shape
 from simulator.physics import CHIP_BLUR_MIN_PX
 from simulator.scene import Scene
 
@@ -62,16 +73,25 @@ def path_engine_supported(scene: Scene) -> tuple[bool, str]:
     return True, ""
 
 
-#: Share of the memory budget the outlines a run keeps may take (:meth:`PathEnergy.drop_outlines`).
-OUTLINE_BUDGET_SHARE = 1 / 32
+@functools.cache
+def _background() -> ThreadPoolExecutor:
+    """The thread that makes footprints ahead of a run (:meth:`PathEnergy.prefetch`)."""
+    return ThreadPoolExecutor(1, thread_name_prefix="selfalign-prefetch")
+
+
+#: Share of the memory budget the outlines a run keeps may take (:meth:`PathEnergy.drop_outlines`):
+#: a 4000 px chip's meniscus footprint takes about 12 MB, so the default budget keeps about 40,
+#: enough for a run that turns through 45 degrees to find most twists' mirror twins kept.
+OUTLINE_BUDGET_SHARE = 1 / 16
 
 
 def _outline_bytes(o) -> int:
-    """Bytes one twist's outline holds (its steps and, for a meniscus footprint, its band)."""
+    """Bytes one twist's outline holds (its steps and, for a meniscus footprint, its band)
+    besides its band's prefix sums (``band.flat``, which a mirror twin shares)."""
     n = o.rows.nbytes + o.cols.nbytes + o.vals.nbytes
     b = o.band
     if b is not None:
-        n += b.flat.nbytes + 4 * b.seg_a.nbytes + 4 * b.row_count.nbytes
+        n += 4 * b.seg_a.nbytes + 4 * b.row_count.nbytes
     return int(n)
 
 
@@ -137,16 +157,65 @@ class PathEnergy:
         self.rg_px = scene.chip_rg_px
         self.poses = 0  # poses computed
         self.rotations = 0
+        self.mirrored = 0  # footprints taken from their mirror twin's (_mirrored)
+        self._twin_index: dict[float, int] | None = None
+        self._pending: dict[int, Future] = {}  # twist index -> its outline, being made (prefetch)
         self.seconds = 0.0
         self.nnz_max = 0
 
     # -- the chip's outline at one twist
     def outline(self, k: int) -> _Outline:
+        """The outline of twist index k: kept, made in the background (:meth:`prefetch`),
+        from its mirror twin's, or made now."""
         o = self._outlines.get(k)
         if o is not None:
             self._outlines[k] = self._outlines.pop(k)  # most recently used last
             return o
+        pending = self._pending.pop(k, None)
+        if pending is not None:
+            o = pending.result()
+            self.rotations += 1
+        else:
+            tw = float(self.axis.values_at(np.asarray([k]))[0])
+            o = self._mirrored(tw) if self.scene.wall_profile is not None else None
+            if o is not None:
+                self.mirrored += 1
+            else:
+                o = self._make_outline(tw)
+                self.rotations += 1
+        self._outlines[k] = o
+        self.nnz_max = max(self.nnz_max, o.nnz)
+        return o
+
+    def prefetch(self, k: int) -> None:
+        """Start making the free contact lines' footprint at twist index k in the background
+        (the costly outline: a run calls this for the twist it is likely to need next, and
+        works on the boxes it has meanwhile); nothing when it is kept, on its way, or its
+        mirror twin's is kept (then it is made now, cheaply). The same values as made now."""
+        if self.scene.wall_profile is None or k in self._outlines or k in self._pending:
+            return
         tw = float(self.axis.values_at(np.asarray([k]))[0])
+        o = self._mirrored(tw)
+        if o is not None:
+            self.mirrored += 1
+            self._outlines[k] = o
+            self.nnz_max = max(self.nnz_max, o.nnz)
+            return
+        self._pending[k] = _background().submit(self._make_outline, tw)
+
+    def close(self) -> None:
+        """Cancel the footprints not yet started in the background and wait for the one
+        under way (a run calls this when it ends)."""
+        for f in self._pending.values():
+            f.cancel()
+        for f in self._pending.values():
+            if not f.cancelled():
+                f.exception()
+        self._pending.clear()
+
+    def _make_outline(self, tw: float) -> _Outline:
+        """The outline at twist ``tw`` (degrees), made: reads the scene, changes nothing here
+        (it may run on a background thread, :meth:`prefetch`)."""
         rot = ChipRotator(
             self.scene.chip,
             np.asarray([tw]),
@@ -155,7 +224,6 @@ class PathEnergy:
             margin_px=self.margin if self.chip_blur else 0,
             profile=self.scene.wall_profile,
         )
-        self.rotations += 1
         hc, wc = rot.shape
         oy, ox = self.origin[1] - hc / 2, self.origin[0] - wc / 2
         assert oy == int(oy) and ox == int(ox), "pixel grids of chip and pattern must coincide"
@@ -172,8 +240,6 @@ class PathEnergy:
                 rot.shape,
                 band,
             )
-            self._outlines[k] = o
-            self.nnz_max = max(self.nnz_max, o.nnz)
             return o
         if chip.geometry is not None and not self.chip_blur and self.scene.wall_profile is None:
             # Exact geometry: the raster's steps straight from the outline's pieces (the
@@ -204,7 +270,47 @@ class PathEnergy:
             (int(oy), int(ox)),
             rot.shape,
         )
-        self._outlines[k] = o
+        return o
+
+    def _mirrored(self, tw: float) -> _Outline | None:
+        """The free contact lines' footprint at ``tw`` from the one at ``-tw`` when that is
+        kept: for a chip mirror-symmetric about the x axis (exactly, from its polygon, as
+        the FFT engine takes it) the footprint at ``-tw`` is the one at ``+tw`` upside down
+        on the same canvas (the canvas's row ``k`` maps to the chip's ``(x, y)`` at one twist
+        and to ``(x, -y)``, bit for bit, from row ``H - 1 - k`` at the other), as the FFT
+        engine's mirror twins (:func:`simulator.landscape.mirror_twins`). None otherwise."""
+        if not (self.axis.mirror and self.scene.chip.geometry is not None) or tw == 0:
+            return None
+        if self._twin_index is None:
+            self._twin_index = {round(float(v), 9): j for j, v in enumerate(self.axis.values())}
+        j = self._twin_index.get(round(-tw, 9))
+        src = self._outlines.get(j) if j is not None else None
+        if src is None or src.band is None:
+            return None
+        hc, wc = src.shape
+        margin = self.margin if self.chip_blur else 0  # as outline() makes the rotator
+        if canvas_shape(self.scene.chip, np.asarray([tw]), self.parity, margin) != (hc, wc):
+            return None
+        oy, ox = src.offset
+        rows = (hc - 1 + 2 * oy) - src.rows  # canvas row k -> H - 1 - k, in pattern rows
+        order = np.argsort(rows, kind="stable")  # rows ascending, each row's order kept
+        b = src.band
+        m = Band()
+        m.shape = b.shape
+        seg_row = hc - 1 - b.seg_row
+        so = np.argsort(seg_row, kind="stable")
+        m.seg_row, m.seg_a, m.seg_len, m.seg_off = (
+            seg_row[so],
+            b.seg_a[so],
+            b.seg_len[so],
+            b.seg_off[so],
+        )
+        m.flat = b.flat  # the segments' prefix sums, shared
+        m.row_count = b.row_count[::-1].copy()
+        m.row_first = np.concatenate([[0], np.cumsum(m.row_count)[:-1]])
+        m.row_lo, m.row_hi = b.row_lo[::-1].copy(), b.row_hi[::-1].copy()
+        m.sum_B = b.sum_B
+        o = _Outline(rows[order], src.cols[order], src.vals[order], src.offset, src.shape, m)
         self.nnz_max = max(self.nnz_max, o.nnz)
         return o
 
@@ -213,12 +319,23 @@ class PathEnergy:
         they take more than :data:`OUTLINE_BUDGET_SHARE` of the memory budget (a meniscus
         footprint's are megabytes each; a run that turns back reuses those it kept)."""
         cap = self.scene.memory_budget_mb * 2**20 * OUTLINE_BUDGET_SHARE
-        total = sum(_outline_bytes(o) for o in self._outlines.values())
+        users: dict[int, int] = {}  # id of a band's prefix sums -> outlines that hold them
+        total = 0
+        for o in self._outlines.values():
+            total += _outline_bytes(o)
+            if o.band is not None:
+                i = id(o.band.flat)
+                users[i] = users.get(i, 0) + 1
+                total += o.band.flat.nbytes if users[i] == 1 else 0
         for k in list(self._outlines):  # least recently used first
             if total <= cap:
                 break
             if k not in keep:
-                total -= _outline_bytes(self._outlines.pop(k))
+                o = self._outlines.pop(k)
+                total -= _outline_bytes(o)
+                if o.band is not None:
+                    users[id(o.band.flat)] -= 1
+                    total -= o.band.flat.nbytes if users[id(o.band.flat)] == 0 else 0
 
     # -- energies
     def _rows(self, o: _Outline, ys: np.ndarray, x0: int, n: int) -> np.ndarray:
@@ -252,7 +369,7 @@ class PathEnergy:
         for m in (inside, right, mixed):
             i = np.flatnonzero(m)
             parts.append((o.rows[i], o.cols[i] + x0, o.vals[i]) if len(i) else None)
-        win = np.lib.stride_tricks.sliding_window_view(flat, n)
+        win = windows(flat, n)
         cn = np.arange(n)
         for j, y in enumerate(ys.tolist()):
             acc = 0.0

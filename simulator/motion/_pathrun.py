@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from simulator.core import counter_bar
 from simulator.landscape import (
     Landscape,
     PathEnergy,
@@ -77,13 +78,23 @@ def path_boxes(scene: Scene, method: str, cost):
     half, band = FOLLOW_BOX.get(method, FOLLOW_BOX["gradient"])
 
     def gen():
+        # A counter of the boxes, shown once the run has taken a few seconds (a 4000 px
+        # chip's meniscus run takes tens): where the chip is and how far the run has come.
+        with counter_bar(f"{method} run (path engine)", "box") as bar:
+            yield from boxes(bar)
+
+    def boxes(bar):
         ta = scene.twist_axis
         n, s = ta.count, scene.um_per_px
         last = None
+        k_last, turn = None, 0  # the last box's twist index and the way the twist last moved
         pose = yield
         while True:
             cx, cy = (int(v) for v in np.round(pose[:2] / s))
             k = int(round((pose[2] - float(ta.values_at(0))) / ta.step_deg)) if n > 1 else 0
+            if k_last is not None and k != k_last:
+                turn = 1 if k > k_last else -1
+            k_last = k
             lo, hi = k - band, k + band
             if n == 1 or (ta.periodic and hi - lo + 1 >= n):
                 lo, hi = 0, n - 1
@@ -103,6 +114,10 @@ def path_boxes(scene: Scene, method: str, cost):
                 template = ls
                 planes.update({j: ls.energy[i] for i, j in enumerate(run)})
             assert template is not None  # want is never empty: one box at least
+            # The twist the run turns to next, made meanwhile (a meniscus footprint: costly).
+            ahead = hi + 1 if turn > 0 else lo - 1
+            if turn and (ta.periodic or 0 <= ahead < n) and hi - lo + 1 < n:
+                pe.prefetch(ahead % n)
             g = template.grid
             grid = PoseGrid(
                 (len(want),) + g.shape[1:],
@@ -114,6 +129,10 @@ def path_boxes(scene: Scene, method: str, cost):
                 g.x_first_px,
                 g.y_first_px,
                 lo,
+            )
+            bar.update(1)
+            bar.set_postfix_str(
+                f"chip at ({pose[0]:.0f}, {pose[1]:.0f}) um, {pose[2]:.1f} deg", refresh=False
             )
             pose = yield Landscape(
                 energy=np.stack([planes[j % n] for j in want]),

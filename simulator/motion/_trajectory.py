@@ -254,6 +254,9 @@ def simulate(
         if sum(p.steps for p in pieces) >= max_steps:
             break
         pose = np.asarray(pieces[-1].final)
+    if path_engine is not None:
+        around.close()  # its counter of boxes
+        path_engine.close()  # footprints made ahead for twists the run did not reach
     traj = _join(method, pieces)
     status = int(state.status)
     if traj.steps >= max_steps and (status != CONVERGED or traj.steps > max_steps):
