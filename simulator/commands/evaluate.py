@@ -77,9 +77,6 @@ def run(args: argparse.Namespace) -> int:
     if not (args.chip or args.chip_size or args.chip_layer or args.scene):
         args.chip_size = _bbox_chip(args)
     scene = scene_from_args(args, note_frame=False, doc=doc)
-    liquid_warnings = liquid_checks(
-        args, scene, args.method, _noise_biases(scene), "the placement-noise starts", doc=doc
-    )
     layout = scene.pattern.params.get("layout")
     if layout:
         from patterns.layout import frame_note
@@ -98,6 +95,10 @@ def run(args: argparse.Namespace) -> int:
 
         DynamicsParams.from_scene(scene)  # a liquid the model cannot take fails before compiling
 
+    # The droplet's warnings once a given pixel size is priced: a refusal does not wait for them.
+    liquid_warnings = liquid_checks(
+        args, scene, args.method, _noise_biases(scene), "the placement-noise starts", doc=doc
+    )
     # JAX, the engine, matplotlib: imported when a run needs them.
     from simulator.batch import evaluate
 

@@ -324,11 +324,6 @@ def run(args: argparse.Namespace) -> int:
     grid = starts if isinstance(starts, StartGrid) else None
     _check_outputs(args, grid is not None, opt["method"], scene_doc)
     scene = scene_from_args(args, doc=scene_doc)
-    from simulator.liquid import placement_biases
-
-    liquid_warnings = liquid_checks(
-        args, scene, opt["method"], lambda: placement_biases(starts), "the starts", doc=scene_doc
-    )
     from simulator.core import compiling
     from simulator.landscape import require_landscape_fits
 
@@ -342,6 +337,12 @@ def run(args: argparse.Namespace) -> int:
             scene.memory_budget_mb,
         )
         DynamicsParams.from_scene(scene)  # a liquid the model cannot take fails before compiling
+    # The droplet's warnings once the run is priced: a refusal does not wait for them.
+    from simulator.liquid import placement_biases
+
+    liquid_warnings = liquid_checks(
+        args, scene, opt["method"], lambda: placement_biases(starts), "the starts", doc=scene_doc
+    )
 
     compiling(opt["method"], args.quiet)
     result = run_batch(

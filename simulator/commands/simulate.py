@@ -96,11 +96,6 @@ def run(args: argparse.Namespace) -> int:
     )
     _check_outputs(args, doc)
     scene = scene_from_args(args, doc=doc)
-    from simulator.liquid import placement_biases
-
-    liquid_warnings = liquid_checks(
-        args, scene, method, placement_biases(start), "the start", doc=doc
-    )
     price_run(scene, method, max_steps)
     require_start_in_window(scene, start)
     if method in ("overdamped", "inertial"):
@@ -118,6 +113,12 @@ def run(args: argparse.Namespace) -> int:
         engine = choose_engine(scene, start, method, args.engine, 3, 48)
     # the first landscape (and footprint), or what the path engine needs, priced before any work
     require_run_fits(scene, start, method, engine=engine)
+    # The droplet's warnings once the run is priced: a refusal does not wait for them.
+    from simulator.liquid import placement_biases
+
+    liquid_warnings = liquid_checks(
+        args, scene, method, placement_biases(start), "the start", doc=doc
+    )
     from simulator.motion import simulate  # JAX, imported when the run goes ahead
 
     compiling(method, args.quiet)
