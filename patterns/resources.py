@@ -93,12 +93,14 @@ def budget_bytes(budget_mb: float | None) -> float:
 
 
 def fmt_bytes(n: float) -> str:
-    """'1.2 GB', '340 MB', '12 kB' (powers of 1024; 'an unbounded amount' for inf/nan)."""
+    """'1.2 GB', '340 MB', '1,000 MB', '12 kB' (powers of 1024, three significant digits
+    below 1,000 and whole units above; 'an unbounded amount' for inf/nan)."""
     if not math.isfinite(n):
         return "an unbounded amount of memory"
     for unit, k in (("TB", 2**40), ("GB", 2**30), ("MB", 2**20), ("kB", 2**10)):
         if n >= k:
-            return f"{n / k:,.3g} {unit}"
+            v = n / k
+            return f"{v:,.0f} {unit}" if v >= 999.5 else f"{v:.3g} {unit}"
     return f"{n:.0f} B"
 
 

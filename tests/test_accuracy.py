@@ -18,6 +18,7 @@ from simulator.scene import (
     Scene,
     TwistGrid,
     apply_preset,
+    feature_sets_pixel,
     feature_warning,
     smallest_feature_um,
 )
@@ -166,6 +167,47 @@ def test_presets_order_and_default():
     assert px[0] > px[1] > px[2]
     assert apply_preset(None, {}) == apply_preset("balanced", {})
     assert apply_preset("precise", {}, feature_um=1000.0, native_um_per_px=2.0)["um_per_px"] == 2.0
+
+
+@pytest.mark.parametrize("name", [*PRESETS, None])
+def test_the_feature_sets_the_pixel_only_of_an_image_finer_than_the_presets_largest(name):
+    """An image whose pixels are at least the preset's largest keeps them whatever its
+    smallest feature; a finer image, or exact geometry, takes the pixel from the feature."""
+    largest = PRESETS[name or "balanced"].max_um_per_px
+    for native in (largest, 2 * largest):
+        assert not feature_sets_pixel(name, native)
+        pixels = {
+            apply_preset(name, {}, feature_um=f, native_um_per_px=native)["um_per_px"]
+            for f in (0.1, 5.0, 1e4)
+        }
+        assert pixels == {native} == {apply_preset(name, {}, native_um_per_px=native)["um_per_px"]}
+    assert feature_sets_pixel(name, largest / 2) and feature_sets_pixel(name, None)
+    with pytest.raises(InputError, match="unknown accuracy preset 'exact'"):
+        feature_sets_pixel("exact")
+
+
+def test_a_scene_measures_the_feature_only_when_it_sets_the_pixel(monkeypatch, tmp_path):
+    """Outlining a pattern image is measured work: the scene of a 1 um/px image under the
+    balanced or precise preset never outlines it (its pixel is 1 um/px whatever the
+    feature); under the fast preset it does, and takes the pixel from its 50 um gap."""
+    from patterns.io import write_mask
+    from simulator.scene import Scene, _accuracy
+
+    calls = []
+    measure = _accuracy._smallest_feature_um
+    monkeypatch.setattr(
+        _accuracy, "_smallest_feature_um", lambda *a: calls.append(1) or measure(*a)
+    )
+    png = write_mask(tmp_path / "fp.png", mask_from_geometry(four_pad(400, 50), 1.0))
+    doc = {"pattern": str(png), "chip_size_um": [400, 400]}
+    assert Scene.from_dict(doc).um_per_px == 1.0 and calls == []
+    assert Scene.from_dict(doc | {"accuracy": "precise"}).um_per_px == 1.0 and calls == []
+    # 50 um / 2 px per feature = 25 um, kept to the fast preset's largest pixel, 4 um
+    assert Scene.from_dict(doc | {"accuracy": "fast"}).um_per_px == 4.0 and len(calls) == 1
+    calls.clear()
+    fine = write_mask(tmp_path / "fine.png", mask_from_geometry(four_pad(400, 50), 0.25))
+    assert Scene.from_dict({"pattern": str(fine), "chip_size_um": [400, 400]}).um_per_px == 1.0
+    assert len(calls) == 1  # 50 um / 4 px per feature, rounded down: 10 um, kept to 1 um/px
 
 
 def test_apply_preset_rejects_unknowns():

@@ -456,35 +456,86 @@ def test_the_global_minimums_proof_shows_its_progress(monkeypatch, capsys):
     assert capsys.readouterr().err == ""
 
 
-@pytest.mark.parametrize(
-    "extra",
-    [
-        ["--engine", "fft", "--memory-budget", "64"],  # the first box
-        [
-            "--method",
-            "gradient",
-            "--meniscus-height",
-            "31",
-            "--memory-budget",
-            "60",
-        ],  # the footprint (path engine)
-    ],
-)
-def test_a_refused_run_has_not_imported_jax(extra, fp1k, tmp_path):
-    """``simulate`` prices its run before it imports JAX: a refusal costs neither JAX's
-    import time nor its memory."""
+#: Modules a refused run has not imported: JAX (the steppers, 1.8 s), SciPy's FFT (the
+#: transforms; pricing needs their sizes only) and scikit-image's outlines (the pattern's
+#: smallest feature, measured for the accuracy warning once a run is priced).
+NOT_BEFORE_REFUSAL = ("jax", "scipy.fft", "skimage.measure")
+
+#: Refused runs of every command that prices one: (arguments after the pattern and chip,
+#: a word of the refusal).
+REFUSED_RUNS = {
+    "simulate: the first box": (
+        ["simulate", "--start=300,-200,10", "--engine", "fft", "--memory-budget", "64"],
+        "the landscape needs about",
+    ),
+    "simulate: the footprint (path engine)": (
+        ["simulate", "--start=300,-200,10", "--method", "gradient", "--meniscus-height", "31"]
+        + ["--memory-budget", "60"],
+        "meniscus footprint",
+    ),
+    "simulate overdamped: the whole landscape": (
+        ["simulate", "--start=300,-200,10", "--method", "overdamped", "--memory-budget", "1000"],
+        "the landscape needs about",
+    ),
+    "montecarlo: the landscape": (
+        ["montecarlo", "--random", "100", "--spread", "10,10,1", "--memory-budget", "1000"],
+        "the landscape needs about",
+    ),
+    "montecarlo overdamped: the solver states of its lanes": (
+        ["montecarlo", "--random", "100000", "--spread", "10,10,1", "--method", "overdamped"]
+        + ["--chunk", "100000", "--resolution", "8", "--memory-budget", "1000"],
+        "the solver states of 100,000 dynamics runs at once would need about 1.53 GB but the "
+        "memory budget is 1,000 MB; use a smaller --chunk",
+    ),
+}
+
+
+@pytest.mark.parametrize("case", list(REFUSED_RUNS))
+def test_a_refused_run_has_not_imported_the_engine(case, fp1k, tmp_path):
+    """``simulate`` and ``montecarlo`` price their run before they import JAX or SciPy's FFT
+    and before they outline the pattern: a refusal costs none of their time or memory."""
+    args, needle = REFUSED_RUNS[case]
     script = (
-        "import sys\nfrom simulator.cli import main\n"
-        "code = main(sys.argv[1:])\nprint('jax' in sys.modules)\nsys.exit(code)\n"
+        "import sys\nfrom simulator.cli import main\ncode = main(sys.argv[1:])\n"
+        f"print([m for m in {NOT_BEFORE_REFUSAL!r} if m in sys.modules])\nsys.exit(code)\n"
     )
-    args = ["simulate", *_chip(fp1k), "--start=300,-200,10", *extra]
+    argv = [args[0], *_chip(fp1k), *args[1:]]
     out = subprocess.run(
-        [sys.executable, "-c", script, *[str(a) for a in args]],
+        [sys.executable, "-c", script, *[str(a) for a in argv]],
         capture_output=True,
         text=True,
         timeout=300,
         cwd=tmp_path,
         env=os.environ | {"PYTHONWARNINGS": "ignore"},
     )
-    one_line_error(out.returncode, out.stderr, "error:", "memory budget")
-    assert out.stdout.strip() == "False"
+    one_line_error(out.returncode, out.stderr, "error:", needle, "memory budget")
+    assert out.stdout.strip() == "[]"
+
+
+def test_the_transform_sizes_are_scipys_without_importing_it():
+    """The correlator's transform lengths (:func:`next_fast_len`, which pricing reads without
+    importing SciPy's FFT) are SciPy's: 11-smooth, 5-smooth for real transforms."""
+    import scipy.fft
+
+    from simulator.landscape._correlator import next_fast_len
+
+    for real in (False, True):
+        assert [next_fast_len(n, real) for n in range(1, 20_001)] == [
+            scipy.fft.next_fast_len(n, real=real) for n in range(1, 20_001)
+        ]
+
+
+def test_memory_figures_read_as_numbers():
+    """A refusal's figures: three significant digits below 1,000 of a unit, whole units with
+    thousands separators above (a 1,000 MB budget is not '1e+03 MB')."""
+    from patterns.resources import fmt_bytes
+
+    mb = 2**20
+    assert [fmt_bytes(v * mb) for v in (1000, 999.4, 340, 1023.9)] == [
+        "1,000 MB",
+        "999 MB",
+        "340 MB",
+        "1,024 MB",
+    ]
+    assert fmt_bytes(1.53 * 2**30) == "1.53 GB" and fmt_bytes(12 * 2**10) == "12 kB"
+    assert fmt_bytes(float("inf")) == "an unbounded amount of memory"

@@ -10,9 +10,12 @@ from ._evaluate import (
     evaluate as evaluate,
 )
 from ._montecarlo import (
-    price_dynamics_lanes as price_dynamics_lanes,
     run_batch as run_batch,
     run_realizations as run_realizations,
+)
+from ._pricing import (
+    DYNAMICS_BYTES_PER_LANE as DYNAMICS_BYTES_PER_LANE,
+    price_dynamics_lanes as price_dynamics_lanes,
 )
 from ._starts import (
     DISTRIBUTIONS as DISTRIBUTIONS,

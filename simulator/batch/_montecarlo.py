@@ -68,7 +68,7 @@ import numpy as np
 from patterns.errors import InputError, require
 from patterns.hold import hold
 from patterns.mask import Mask
-from patterns.resources import require_fits
+from simulator.batch._pricing import price_dynamics_lanes
 from simulator.batch._starts import (
     BATCH_BYTES_PER_START,
     StartGrid,
@@ -104,10 +104,6 @@ from simulator.scene import Scene
 
 #: Peak bytes per start of a dynamics batch beyond :data:`BATCH_BYTES_PER_START`: its time.
 TIME_BYTES_PER_START = 16
-#: Peak bytes per lane of a vmapped dynamics chunk (the solver's state, stages, controller
-#: and event; XLA's temporaries): measured with JAX's compiled memory analysis at 0.6-1.5 KB
-#: (explicit solver) and 3-6 KB (the implicit one of stiff inertial runs), float32-float64.
-DYNAMICS_BYTES_PER_LANE = 16384
 
 
 # --------------------------------------------------------------------- batch
@@ -365,17 +361,6 @@ def run_batch(
             "stiff": stiff,  # dynamics: the implicit solver, starts mapped one after the other (_run_chunk)
         },
         time_s=time_s,
-    )
-
-
-def price_dynamics_lanes(lanes: int, budget_mb: float | None) -> None:
-    """Refuse a dynamics batch whose solver states (``lanes`` = chunk x threads in flight,
-    :data:`DYNAMICS_BYTES_PER_LANE` each) would not fit the memory budget."""
-    require_fits(
-        f"the solver states of {lanes:,} dynamics runs at once",
-        float(lanes) * DYNAMICS_BYTES_PER_LANE,
-        "use a smaller --chunk",
-        budget_mb,
     )
 
 

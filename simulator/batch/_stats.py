@@ -19,7 +19,7 @@ import numpy as np
 
 from patterns.errors import require
 from simulator.batch._starts import StartGrid
-from simulator.motion import OUTCOMES
+from simulator.core import OUTCOMES
 
 
 @dataclass(frozen=True)

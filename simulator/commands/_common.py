@@ -274,7 +274,10 @@ def scene_document(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def scene_from_args(
-    args: argparse.Namespace, note_frame: bool = True, doc: dict[str, Any] | None = None
+    args: argparse.Namespace,
+    note_frame: bool = True,
+    doc: dict[str, Any] | None = None,
+    warn: bool = True,
 ) -> Scene:
     """Build the scene from an optional TOML file and the flags (flags win).
 
@@ -283,6 +286,8 @@ def scene_from_args(
     ``doc``: the scene file's document when the command has read it
     (:func:`scene_document`; it is not changed), else it is read here.
     For a layout pattern, ``note_frame`` prints on stderr where the poses' origin is.
+    ``warn=False`` leaves the accuracy warning (:func:`accuracy_check`) to the command, which
+    prints it once its run is priced.
     """
     doc = copy.deepcopy(scene_document(args) if doc is None else doc)
     base = Path(args.scene).parent if args.scene else Path(".")
@@ -363,14 +368,23 @@ def scene_from_args(
         from simulator.liquid import check_scene_volume
 
         check_scene_volume(scene)
-    warning = scene.accuracy_warning()
-    if warning:
-        print(f"warning: {warning}", file=sys.stderr)
+    if warn:
+        accuracy_check(scene)
     if note_frame and "layout" in scene.pattern.params:
         from patterns.layout import frame_note
 
         print(frame_note(scene.pattern.params["layout"]), file=sys.stderr)
     return scene
+
+
+def accuracy_check(scene: Scene) -> None:
+    """The scene's accuracy warning on stderr, when its pixel size leaves the pattern's
+    smallest feature under 3 px (:meth:`Scene.accuracy_warning`). Measuring the feature
+    outlines the whole pattern (0.3 s for a 16-megapixel image), so commands that price
+    their run call this once the run is priced: a refusal does not wait for it."""
+    warning = scene.accuracy_warning()
+    if warning:
+        print(f"warning: {warning}", file=sys.stderr)
 
 
 def liquid_checks(

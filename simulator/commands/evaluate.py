@@ -8,6 +8,7 @@ from pathlib import Path
 from patterns.errors import InputError
 from patterns.outputs import check_output_dir
 from simulator.commands._common import (
+    accuracy_check,
     add_scene_args,
     input_paths,
     liquid_checks,
@@ -76,7 +77,7 @@ def run(args: argparse.Namespace) -> int:
     check_output_dir(args.out, "--out", args.force, inputs)  # before any work
     if not (args.chip or args.chip_size or args.chip_layer or args.scene):
         args.chip_size = _bbox_chip(args)
-    scene = scene_from_args(args, note_frame=False, doc=doc)
+    scene = scene_from_args(args, note_frame=False, doc=doc, warn=False)
     layout = scene.pattern.params.get("layout")
     if layout:
         from patterns.layout import frame_note
@@ -95,7 +96,8 @@ def run(args: argparse.Namespace) -> int:
 
         DynamicsParams.from_scene(scene)  # a liquid the model cannot take fails before compiling
 
-    # The droplet's warnings once a given pixel size is priced: a refusal does not wait for them.
+    # The accuracy and droplet warnings once a given pixel size is priced: a refusal does not wait for them.
+    accuracy_check(scene)
     liquid_warnings = liquid_checks(
         args, scene, args.method, _noise_biases(scene), "the placement-noise starts", doc=doc
     )

@@ -14,6 +14,7 @@ from patterns.errors import InputError
 from patterns.outputs import atomic_output
 from simulator.batch import DISTRIBUTIONS, MAX_STARTS, StartGrid
 from simulator.commands._common import (
+    accuracy_check,
     add_scene_args,
     check_outputs,
     liquid_checks,
@@ -305,16 +306,10 @@ def _check_outputs(
 
 # --------------------------------------------------------------------- run
 def run(args: argparse.Namespace) -> int:
-    # JAX, the engine, matplotlib: imported when a run needs them (selfalign --help starts without).
-    from simulator.batch import (
-        capture_map,
-        price_dynamics_lanes,
-        run_batch,
-        summarize,
-        time_histogram,
-    )
-    from simulator.core import threads
-    from simulator.motion import OUTCOMES
+    # JAX, the engine, matplotlib: imported when a run needs them, after its pricing (a
+    # refusal, and selfalign --help, start without).
+    from simulator.batch import capture_map, price_dynamics_lanes, summarize, time_histogram
+    from simulator.core import OUTCOMES, threads
 
     scene_doc = scene_document(
         args
@@ -323,26 +318,29 @@ def run(args: argparse.Namespace) -> int:
     starts, desc, seed = _starts(opt)
     grid = starts if isinstance(starts, StartGrid) else None
     _check_outputs(args, grid is not None, opt["method"], scene_doc)
-    scene = scene_from_args(args, doc=scene_doc)
+    scene = scene_from_args(args, doc=scene_doc, warn=False)
     from simulator.core import compiling
     from simulator.landscape import require_landscape_fits
 
     require_landscape_fits(scene)
     if opt["method"] in DYNAMIC_METHODS:
-        from simulator.motion import DynamicsParams
-
         n = starts.size if grid is not None else len(starts)
         price_dynamics_lanes(
             min(opt["chunk"], n) * max(1, min(threads(), -(-n // opt["chunk"]))),
             scene.memory_budget_mb,
         )
+        from simulator.motion import DynamicsParams  # JAX: once the batch is priced
+
         DynamicsParams.from_scene(scene)  # a liquid the model cannot take fails before compiling
-    # The droplet's warnings once the run is priced: a refusal does not wait for them.
+    # The accuracy and droplet warnings once the run is priced: a refusal does not wait for them.
+    accuracy_check(scene)
     from simulator.liquid import placement_biases
 
     liquid_warnings = liquid_checks(
         args, scene, opt["method"], lambda: placement_biases(starts), "the starts", doc=scene_doc
     )
+
+    from simulator.batch import run_batch
 
     compiling(opt["method"], args.quiet)
     result = run_batch(

@@ -8,6 +8,7 @@ import numpy as np
 
 from patterns.errors import InputError
 from simulator.commands._common import (
+    accuracy_check,
     add_scene_args,
     check_outputs,
     liquid_checks,
@@ -95,13 +96,9 @@ def run(args: argparse.Namespace) -> int:
         args.max_steps if args.max_steps is not None else sim.get("max_steps", DEFAULT_MAX_STEPS)
     )
     _check_outputs(args, doc)
-    scene = scene_from_args(args, doc=doc)
+    scene = scene_from_args(args, doc=doc, warn=False)
     price_run(scene, method, max_steps)
     require_start_in_window(scene, start)
-    if method in ("overdamped", "inertial"):
-        from simulator.motion import DynamicsParams
-
-        DynamicsParams.from_scene(scene)  # a liquid the model cannot take fails before compiling
     if args.engine == "path" and method in ("overdamped", "inertial"):
         raise InputError(
             f"--engine path runs greedy and gradient; {method} builds the whole landscape (leave --engine out)"
@@ -113,7 +110,12 @@ def run(args: argparse.Namespace) -> int:
         engine = choose_engine(scene, start, method, args.engine, 3, 48)
     # the first landscape (and footprint), or what the path engine needs, priced before any work
     require_run_fits(scene, start, method, engine=engine)
-    # The droplet's warnings once the run is priced: a refusal does not wait for them.
+    if method in ("overdamped", "inertial"):
+        from simulator.motion import DynamicsParams  # JAX: once the run is priced
+
+        DynamicsParams.from_scene(scene)  # a liquid the model cannot take fails before compiling
+    # The accuracy and droplet warnings once the run is priced: a refusal does not wait for them.
+    accuracy_check(scene)
     from simulator.liquid import placement_biases
 
     liquid_warnings = liquid_checks(

@@ -19,6 +19,7 @@ from ._defaults import (
     MAX_CHUNK as MAX_CHUNK,
     MAX_STEPS_LIMIT as MAX_STEPS_LIMIT,
     METHODS as METHODS,
+    OUTCOMES as OUTCOMES,
     THREADS_ENV as THREADS_ENV,
     threads as threads,
 )

@@ -38,6 +38,9 @@ MAX_STEPS_LIMIT = 2**31 - 2
 #: The methods a Monte Carlo batch runs (:func:`simulator.batch.run_batch`): every
 #: trajectory method, the dynamics (overdamped, inertial) included.
 BATCH_METHODS = METHODS
+#: The outcomes a trajectory reports (:class:`simulator.motion.Trajectory`), in the order of
+#: the outcome codes batches store (:class:`simulator.batch.BatchResult`).
+OUTCOMES = ("aligned", "plateau", "local_minimum", "no_contact", "max_steps")
 #: The time-resolved methods (they need :class:`simulator.motion.DynamicsParams`).
 DYNAMIC_METHODS = ("overdamped", "inertial")
 #: Starts per compiled batch of the steppers (measured best on a 2-core CPU, see docs/benchmarks.md).

@@ -19,7 +19,6 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
-import scipy.fft as sfft
 
 from patterns.errors import InputError
 from simulator.core import threads
@@ -80,7 +79,23 @@ def fft_shape(
     )
     if backend == "opencv":
         return _even_dft_size(need_y), _even_dft_size(need_x)
-    return sfft.next_fast_len(need_y, real=False), sfft.next_fast_len(need_x, real=True)
+    return next_fast_len(need_y, real=False), next_fast_len(need_x, real=True)
+
+
+def next_fast_len(n: int, real: bool = False) -> int:
+    """The smallest length >= ``n`` pocketfft transforms fastest: :func:`scipy.fft.next_fast_len`
+    (lengths whose prime factors are at most 11, at most 5 for real transforms), without
+    importing SciPy's FFT package: a run's pricing needs the sizes, not the transforms."""
+    primes = (2, 3, 5) if real else (2, 3, 5, 7, 11)
+    m = max(int(n), 1)
+    while True:
+        rest = m
+        for p in primes:
+            while rest % p == 0:
+                rest //= p
+        if rest == 1:
+            return m
+        m += 1
 
 
 def _even_dft_size(need: int) -> int:
@@ -231,6 +246,8 @@ class Correlator:
         self.chip_shape = (hc, wc)
         self.out_shape = (2 * window.ry + 1, 2 * window.rx + 1)
         self.workers = threads()
+        import scipy.fft as sfft  # here, not at the top: pricing a run needs no transform
+
         spec = sfft.fft(
             sfft.rfft(np.asarray(pattern, self.dtype), n=self.nx, axis=1, workers=self.workers),
             n=self.ny,
@@ -427,6 +444,8 @@ class Correlator:
         c1 = int(np.flatnonzero(chip[r0:r1].any(axis=0))[-1]) + 1
         spec, rows_work = slot.spec, slot.rows
         assert rows_work is not None
+        import scipy.fft as sfft
+
         part = sfft.rfft(chip[r0:r1, :c1], n=self.nx, axis=1, workers=workers)
         spec[:, :r0] = 0
         spec[:, r1:] = 0
@@ -448,6 +467,8 @@ class Correlator:
     ) -> None:
         """out = scale * window of the inverse transform of the transposed ``spec``
         (overwritten; ``rows`` is the window rows' work array)."""
+        import scipy.fft as sfft
+
         sfft.ifft(spec, axis=1, workers=workers, overwrite_x=True)
         np.copyto(rows, spec[:, : len(rows)].T)
         res = sfft.irfft(rows, n=self.nx, axis=1, workers=workers)

@@ -36,6 +36,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from simulator.core import OUTCOMES  # noqa: F401 - simulator.motion.OUTCOMES, as before
 from simulator.motion._field import (
     Field,
     Grid,
@@ -49,7 +50,6 @@ from simulator.motion._field import (
 
 # Stop codes of a run (``status``), and the outcomes a trajectory reports.
 RUNNING, CONVERGED, MAX_STEPS, EDGE = 0, 1, 2, 3
-OUTCOMES = ("aligned", "plateau", "local_minimum", "no_contact", "max_steps")
 
 
 def _move_order() -> np.ndarray:

@@ -6,6 +6,7 @@ from ._accuracy import (
     PRESETS as PRESETS,
     Preset as Preset,
     apply_preset as apply_preset,
+    feature_sets_pixel as feature_sets_pixel,
     feature_warning as feature_warning,
     smallest_feature_um as smallest_feature_um,
 )

@@ -54,6 +54,7 @@ __all__ = [
     "PRESETS",
     "Preset",
     "apply_preset",
+    "feature_sets_pixel",
     "feature_warning",
     "smallest_feature_um",
 ]
@@ -280,6 +281,13 @@ class Preset:
             s = max(s, positive("native_um_per_px", native_um_per_px, "um per px"))
         return {"um_per_px": s, "twist_step_deg": self.twist_step_deg, "dtype": self.dtype}
 
+    def uses_feature(self, native_um_per_px: float | None = None) -> bool:
+        """Whether the pixel size :meth:`knobs` gives depends on the smallest feature: not
+        for an image whose own pixels are at least the preset's largest
+        (``native_um_per_px >= max_um_per_px``), which :meth:`knobs` keeps whatever the
+        feature."""
+        return native_um_per_px is None or native_um_per_px < self.max_um_per_px
+
     def _cost_text(self) -> str:
         lo, hi = self.cost
         return f"{lo:.2g}" if lo == hi else f"{lo:.2g}-{hi:.2g}"
@@ -335,6 +343,24 @@ PRESETS: dict[str, Preset] = {
 }
 
 
+def feature_sets_pixel(name: str | None, native_um_per_px: float | None = None) -> bool:
+    """Whether preset ``name`` (None: :data:`DEFAULT_PRESET`) needs the pattern's smallest
+    feature to choose the pixel size (:meth:`Preset.uses_feature`): a scene measures it
+    (outlining the whole pattern image, 0.3 s for 16 megapixels) only then.
+
+    Raises:
+        InputError: unknown preset name.
+    """
+    return _preset(name).uses_feature(native_um_per_px)
+
+
+def _preset(name: str | None) -> Preset:
+    name = DEFAULT_PRESET if name is None else name
+    if name not in PRESETS:
+        raise InputError(f"unknown accuracy preset {name!r}; choose one of {', '.join(PRESETS)}")
+    return PRESETS[name]
+
+
 def apply_preset(
     name: str | None,
     explicit: dict[str, Any] | None = None,
@@ -361,15 +387,13 @@ def apply_preset(
     Raises:
         InputError: unknown preset name or knob.
     """
-    name = DEFAULT_PRESET if name is None else name
-    if name not in PRESETS:
-        raise InputError(f"unknown accuracy preset {name!r}; choose one of {', '.join(PRESETS)}")
+    preset = _preset(name)
     explicit = dict(explicit or {})
     unknown = sorted(set(explicit) - set(KNOBS))
     if unknown:
         raise InputError(
             f"unknown accuracy knob(s) {', '.join(unknown)}; presets set {', '.join(KNOBS)}"
         )
-    knobs = PRESETS[name].knobs(feature_um, native_um_per_px)
+    knobs = preset.knobs(feature_um, native_um_per_px)
     knobs.update({k: v for k, v in explicit.items() if v is not None})
     return knobs

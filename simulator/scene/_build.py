@@ -13,7 +13,6 @@ layout patterns and images (:data:`LAYOUT_KEYS`, :data:`IMAGE_KEYS`); and
 
 from __future__ import annotations
 
-import contextlib
 import math
 import os
 from pathlib import Path
@@ -28,7 +27,6 @@ from patterns.raster import mask_from_geometry
 from patterns.resources import check_budget_mb, price_raster
 from simulator.liquid import Topography, check_surface_tension_mN_m
 from simulator.physics import Liquid, Materials
-from simulator.scene._accuracy import smallest_feature_um
 from simulator.scene._parts import Effects, TwistGrid
 
 #: Scene keys that choose what to read from a layout pattern (:class:`patterns.layout.LayoutSelection`).
@@ -151,11 +149,6 @@ class SceneBuilders:
                 pattern, positive("resolution", resolution_um, "um per px"), budget
             )
         s = pattern.um_per_px
-        # The pattern's smallest feature (kept for the accuracy preset) is measured before
-        # the chip is rasterized: its outlining holds a copy of the pattern, and the two
-        # at once would set the peak memory of a large scene.
-        with contextlib.suppress(InputError):
-            smallest_feature_um(pattern)
         if chip_size_um is not None:
             w, h = (chip_size_um, chip_size_um) if np.isscalar(chip_size_um) else chip_size_um
             w, h = positive("chip width", w, "um"), positive("chip height", h, "um")

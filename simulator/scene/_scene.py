@@ -283,13 +283,19 @@ class Scene(SceneBuilders):
     def with_preset(self, name: str | None = None, explicit: dict | None = None) -> Scene:
         """The scene with the knobs of an accuracy preset (pixel size, twist step, dtype)
         that ``explicit`` does not set (:func:`simulator.scene.apply_preset`; None =
-        the default preset). A pattern image is never refined past its own pixels."""
-        from simulator.scene._accuracy import apply_preset
+        the default preset). A pattern image is never refined past its own pixels, and its
+        smallest feature (outlining the whole image) is measured only when it can change
+        the pixel size (:func:`simulator.scene.feature_sets_pixel`)."""
+        from simulator.scene._accuracy import apply_preset, feature_sets_pixel
 
         native = None if self.pattern.geometry is not None else self.pattern.um_per_px
-        knobs = apply_preset(
-            name, explicit, feature_um=self.smallest_feature_um(), native_um_per_px=native
+        pixel_given = (explicit or {}).get("um_per_px") is not None
+        feature = (
+            self.smallest_feature_um()
+            if not pixel_given and feature_sets_pixel(name, native)
+            else None
         )
+        knobs = apply_preset(name, explicit, feature_um=feature, native_um_per_px=native)
         scene = self.at_resolution(knobs["um_per_px"])
         if knobs["twist_step_deg"] != scene.twist.step_deg:
             scene = scene.replace(
