@@ -60,17 +60,22 @@ def _values(im: Image.Image, path: Path) -> tuple[np.ndarray, np.ndarray | None]
     mode, trns = im.mode, im.info.get("transparency")
     if mode in _SIXTEEN_BIT:
         raw = np.asarray(im)  # uint16 or int32 as decoded: no wider copy
-        if raw.min() < 0 or raw.max() > 65535:
+        wide = not (raw.dtype.kind == "u" and raw.dtype.itemsize <= 2)  # 16 bits hold 0..65535
+        if wide and (raw.min() < 0 or raw.max() > 65535):
             raise InputError(
                 f"{path}: 32-bit integer image with values outside 0..65535; save it as 8- or 16-bit grey"
             )
         alpha = None if trns is None else (raw != trns).astype(np.float64)
-        value = raw.astype(np.float64)
+        value = np.divide(raw, 65535.0, dtype=np.float64)  # one pass: float64(v) / 65535
         del raw
-        value /= 65535.0
         return value, alpha
-    if mode == "F":
-        return np.asarray(im, dtype=np.float64), None
+    if mode == "F":  # the only mode whose values can leave [0, 1]
+        value = np.asarray(im, dtype=np.float64)
+        if value.min() < 0 or value.max() > 1 or not np.all(np.isfinite(value)):
+            raise InputError(
+                f"{path}: float image with values outside [0, 1]; save it as 8- or 16-bit grey"
+            )
+        return value, None
     if mode == "1" and trns is None:
         return np.asarray(im, dtype=np.float64), None
     if mode == "L" and trns is None:
@@ -204,10 +209,6 @@ def read_mask(
         value = 1.0 - value
     if alpha is not None:
         value = value * alpha
-    if value.min() < 0 or value.max() > 1 or not np.all(np.isfinite(value)):
-        raise InputError(
-            f"{path}: float image with values outside [0, 1]; save it as 8- or 16-bit grey"
-        )
     return Mask(data=value, um_per_px=scale, params=params)
 
 

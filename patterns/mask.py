@@ -15,6 +15,7 @@ Conventions (used everywhere in selfalign):
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -43,14 +44,14 @@ class Mask:
         data = np.asarray(self.data, dtype=np.float64)
         if data.ndim != 2 or min(data.shape) < 1:
             raise InputError(f"mask must be a 2-D image, got shape {data.shape}")
-        if not np.all(np.isfinite(data)):
+        # Two passes over the pixels: a NaN makes min and max NaN, an infinity one of them.
+        lo, hi = float(data.min()), float(data.max())
+        if not (math.isfinite(lo) and math.isfinite(hi)):
             raise InputError(
                 "mask contains NaN or infinite values; give an image with finite values in [0, 1]"
             )
-        if data.min() < 0 or data.max() > 1:
-            raise InputError(
-                f"mask values must lie in [0, 1], got [{data.min():g}, {data.max():g}]"
-            )
+        if lo < 0 or hi > 1:
+            raise InputError(f"mask values must lie in [0, 1], got [{lo:g}, {hi:g}]")
         object.__setattr__(self, "data", data)
         object.__setattr__(self, "um_per_px", positive("um_per_px", self.um_per_px, "um per px"))
 

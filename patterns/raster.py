@@ -217,7 +217,34 @@ def rasterize(
     price_raster((h, w), s, what, budget_mb)
     if geometry.is_empty:
         return np.zeros((h, w), dtype=np.float64)
-    return _coverage(to_pixel_frame(geometry, s, (h, w)), (h, w))
+    geom_px = to_pixel_frame(geometry, s, (h, w))
+    rect = _rectangle(geom_px)
+    if rect is not None:
+        return _rectangle_coverage(rect, (h, w))
+    return _coverage(geom_px, (h, w))
+
+
+def _rectangle(geom: BaseGeometry) -> tuple[float, float, float, float] | None:
+    """The bounds of ``geom`` when it is an axis-aligned rectangle (a polygon without holes
+    whose vertices are all corners of its bounding box and whose area is the box's), else None."""
+    if geom.geom_type != "Polygon" or len(geom.interiors):
+        return None
+    x0, y0, x1, y1 = geom.bounds
+    xy = shapely.get_coordinates(geom.exterior)
+    corners = np.isin(xy[:, 0], (x0, x1)).all() and np.isin(xy[:, 1], (y0, y1)).all()
+    return (x0, y0, x1, y1) if corners and geom.area == (x1 - x0) * (y1 - y0) > 0 else None
+
+
+def _rectangle_coverage(bounds: tuple[float, float, float, float], shape: tuple[int, int]):
+    """Exact area coverage of pixels [c, c+1] x [r, r+1] by the rectangle ``bounds`` (pixel
+    units): the product of the row's and the column's covered lengths, one pass over the
+    canvas (:func:`_coverage` takes four for the same values, to round-off)."""
+    x0, y0, x1, y1 = bounds
+    h, w = shape
+    cols, rows = np.arange(w + 1.0), np.arange(h + 1.0)
+    cx = np.clip(np.minimum(x1, cols[1:]) - np.maximum(x0, cols[:-1]), 0.0, 1.0)
+    cy = np.clip(np.minimum(y1, rows[1:]) - np.maximum(y0, rows[:-1]), 0.0, 1.0)
+    return np.multiply.outer(cy, cx)
 
 
 def mask_from_geometry(

@@ -16,12 +16,6 @@ float64 landscape stays float64; float32 landscapes still compute in float32.
 from __future__ import annotations
 
 import importlib
-from importlib.metadata import PackageNotFoundError, version
-
-try:
-    __version__ = version("selfalign")
-except PackageNotFoundError:  # a source tree that was never installed
-    __version__ = "0+unknown"
 
 #: Public name -> the module that defines it ("module:name" where the name differs).
 _EXPORTS = {
@@ -73,7 +67,21 @@ _EXPORTS = {
 __all__ = sorted(_EXPORTS)
 
 
+def _version() -> str:
+    """The installed distribution's version, read on first use of ``__version__`` (reading
+    the package metadata costs 0.05 s that every command would pay at start-up)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("selfalign")
+    except PackageNotFoundError:  # a source tree that was never installed
+        return "0+unknown"
+
+
 def __getattr__(name: str):
+    if name == "__version__":
+        value = globals()[name] = _version()
+        return value
     where = _EXPORTS.get(name)
     if where is None:
         raise AttributeError(f"module 'simulator' has no attribute {name!r}")
@@ -84,4 +92,4 @@ def __getattr__(name: str):
 
 
 def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_EXPORTS))
+    return sorted(set(globals()) | set(_EXPORTS) | {"__version__"})

@@ -65,14 +65,16 @@ class OneLineParser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The parser of every subcommand, or of ``command`` alone when it names one: a command
+    then imports its own module only (the others' imports cost 0.1 s before every run)."""
     parser = OneLineParser(
         prog="selfalign",
         description="Capillary self-alignment of microchips: patterns, energy landscapes, trajectories.",
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
-    for name in COMMANDS:
+    for name in (command,) if command in COMMANDS else COMMANDS:
         importlib.import_module(f"simulator.commands.{name}").register(sub)
     return parser
 
@@ -152,7 +154,8 @@ def main(argv: list[str] | None = None) -> int:
         name = "command"
         try:
             hold("startup")
-            parser = build_parser()
+            argv = sys.argv[1:] if argv is None else list(argv)
+            parser = build_parser(argv[0] if argv else None)
             args = parser.parse_args(argv)
             name = args.command
             from simulator.core import quiet_waits

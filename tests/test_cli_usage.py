@@ -570,6 +570,22 @@ print(json.dumps(sorted(m for m in sys.modules if m in json.loads(sys.argv[2]) o
 """
 
 
+def test_a_command_registers_its_own_parser_only():
+    """``selfalign simulate ...`` imports and registers the simulate command alone (the others'
+    modules cost 0.1 s at every start); no command, or a misspelt one, gets them all (the
+    listing of ``--help`` and of argparse's "invalid choice")."""
+    from simulator.cli import COMMANDS
+
+    def commands(parser):
+        sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+        return list(sub.choices)
+
+    assert commands(build_parser()) == list(COMMANDS) == commands(build_parser("simulat"))
+    assert all(commands(build_parser(name)) == [name] for name in COMMANDS)
+    with pytest.raises(SystemExit):
+        build_parser("simulat").parse_args(["simulat"])
+
+
 @pytest.mark.parametrize(
     "argv",
     [

@@ -334,3 +334,20 @@ def test_a_16_bit_image_is_read_without_a_64_bit_copy(tmp_path):
     assert got.data.dtype == np.float64
     assert np.array_equal(got.data, np.round(levels * 65535) / 65535)
     assert peak < 1.5 * got.data.nbytes
+
+
+def test_a_float_image_is_read_in_0_to_1_and_refused_outside(tmp_path):
+    """A 32-bit float image (a TIFF: PNG stores none) is the one kind whose values can leave
+    [0, 1]: read as stored inside, refused with the fix outside or when not finite."""
+    good = np.array([[0.0, 0.25], [0.5, 1.0]], np.float32)
+    Image.fromarray(good, mode="F").save(tmp_path / "good.tif")
+    assert np.array_equal(read_mask(tmp_path / "good.tif", um_per_px=1.0).data, good)
+    for name, bad in {"high": 1.5, "negative": -0.1, "nan": np.nan, "inf": np.inf}.items():
+        values = good.copy()
+        values[0, 0] = bad
+        Image.fromarray(values, mode="F").save(tmp_path / f"{name}.tif")
+        with pytest.raises(
+            InputError,
+            match=r"float image with values outside \[0, 1\]; save it as 8- or 16-bit grey",
+        ):
+            read_mask(tmp_path / f"{name}.tif", um_per_px=1.0)

@@ -109,3 +109,44 @@ def test_a_raster_costs_one_canvas():
     assert peak < 1.25 * raster.nbytes
     # the fractional edges of the inset square: area exact
     assert raster.sum() == pytest.approx((n - 0.6) ** 2, rel=1e-12)
+
+
+@pytest.mark.parametrize("um_per_px", [0.3, 1.0, 2.5])
+def test_a_rectangle_is_the_product_of_its_covered_rows_and_columns(um_per_px):
+    """An axis-aligned rectangle (every ``--chip-size`` chip) is rasterized as the product of
+    the lengths each row and column covers: the edge accumulation's values to round-off,
+    shapely's per-pixel areas, and exactly 0 and 1 when its edges lie on the pixel grid."""
+    from patterns.raster import _coverage, _rectangle
+
+    rng = np.random.default_rng(7)
+    for _ in range(20):
+        x0, y0 = rng.uniform(-30, 0, 2)
+        x1, y1 = rng.uniform(0.01, 30, 2)
+        g = box(x0, y0, x1, y1)
+        shape = (2 * int(rng.integers(1, 40)), 2 * int(rng.integers(1, 40)))
+        m = rasterize(g, um_per_px, shape=shape)
+        assert _rectangle(to_pixel_frame(g, um_per_px, shape)) is not None
+        np.testing.assert_allclose(
+            m, _coverage(to_pixel_frame(g, um_per_px, shape), shape), atol=1e-12
+        )
+        np.testing.assert_allclose(m, shapely_coverage(g, um_per_px, shape), atol=1e-12)
+    on_grid = box(-10, -7, 12, 9)
+    m = rasterize(on_grid, 1.0, shape=(40, 40))
+    assert np.array_equal(m, _coverage(to_pixel_frame(on_grid, 1.0, (40, 40)), (40, 40)))
+    assert set(np.unique(m)) == {0.0, 1.0} and m.sum() == 22 * 16
+
+
+def test_only_a_rectangle_takes_the_product():
+    """A rotated box, a box with a hole, two boxes, an L and a triangle on three corners of
+    its bounding box are not rectangles: they go through the edge accumulation."""
+    from patterns.raster import _rectangle
+
+    not_rectangles = [
+        affinity.rotate(box(0, 0, 4, 4), 10),
+        box(0, 0, 4, 4).difference(box(1, 1, 2, 2)),
+        box(0, 0, 4, 4).union(box(5, 0, 8, 2)),
+        box(0, 0, 4, 4).union(box(4, 0, 8, 2)),
+        Polygon([(0, 0), (4, 0), (4, 4)]),
+    ]
+    assert all(_rectangle(g) is None for g in not_rectangles)
+    assert _rectangle(box(1, 2, 3, 5)) == (1, 2, 3, 5)
