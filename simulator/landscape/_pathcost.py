@@ -390,6 +390,7 @@ class PathEnergy:
                     acc = acc + np.einsum("sn,s->n", flat[rr[:, None] + cc], v[a:b])
             out[j] -= acc
             if o.band is not None:  # the footprint's part B, on the pattern's side
+                assert self._pattern_steps is not None  # a band comes with free lines only
                 out[j] += o.band.correlate(
                     self._pattern_steps, y + o.offset[0], x0 + o.offset[1], n
                 )
