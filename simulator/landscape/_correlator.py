@@ -246,8 +246,10 @@ class Correlator:
         self.chip_shape = (hc, wc)
         self.out_shape = (2 * window.ry + 1, 2 * window.rx + 1)
         self.workers = threads()
-        import scipy.fft as sfft  # here, not at the top: pricing a run needs no transform
+        # SciPy's FFT imported here, once, not at the top: pricing a run needs no transform.
+        import scipy.fft as sfft
 
+        self._sfft = sfft
         spec = sfft.fft(
             sfft.rfft(np.asarray(pattern, self.dtype), n=self.nx, axis=1, workers=self.workers),
             n=self.ny,
@@ -444,8 +446,7 @@ class Correlator:
         c1 = int(np.flatnonzero(chip[r0:r1].any(axis=0))[-1]) + 1
         spec, rows_work = slot.spec, slot.rows
         assert rows_work is not None
-        import scipy.fft as sfft
-
+        sfft = self._sfft
         part = sfft.rfft(chip[r0:r1, :c1], n=self.nx, axis=1, workers=workers)
         spec[:, :r0] = 0
         spec[:, r1:] = 0
@@ -467,8 +468,7 @@ class Correlator:
     ) -> None:
         """out = scale * window of the inverse transform of the transposed ``spec``
         (overwritten; ``rows`` is the window rows' work array)."""
-        import scipy.fft as sfft
-
+        sfft = self._sfft
         sfft.ifft(spec, axis=1, workers=workers, overwrite_x=True)
         np.copyto(rows, spec[:, : len(rows)].T)
         res = sfft.irfft(rows, n=self.nx, axis=1, workers=workers)
