@@ -235,6 +235,13 @@ def _run(
     else:
         final = jax.tree_util.tree_map(lambda a: a[0], ys)
         t_final = ts[0]
+    # Times in seconds: the nondimensional end s_end = t_max / tau times tau, both rounded to
+    # the field's dtype, can land one ulp past t_max (float32: 1.00000012 s for 1 s). A run
+    # never reports a time past its own limit: times are clamped to the largest value of the
+    # dtype at or below t_max.
+    t_max_w = jnp.asarray(params.t_max_s, wide)
+    t_cap = t_max_w.astype(dt)
+    t_cap = jnp.where(t_cap.astype(wide) > t_max_w, jnp.nextafter(t_cap, jnp.zeros((), dt)), t_cap)
     q = final["q"]
     _, grad = potential_and_gradient(field, grid, q)
     converged, edge = _stop_flags(field, grid, co, q, grad, final["kinetic"])
@@ -249,7 +256,7 @@ def _run(
             return jnp.where(mask, a, jnp.nan)
 
         path, pe, pp, pk = buf(ys["q"]), buf(ys["energy"]), buf(ys["potential"]), buf(ys["kinetic"])
-        pt = buf(ts * tau)
+        pt = buf(jnp.minimum(ts * tau, t_cap))
     else:
         phi0, _ = potential_and_gradient(field, grid, q0)
         path, pe, pp = q0[None], _energy(field, grid, q0)[None], phi0[None]
@@ -260,7 +267,7 @@ def _run(
         energy=final["energy"],
         potential=final["potential"],
         kinetic=final["kinetic"],
-        time_s=t_final * tau,
+        time_s=jnp.minimum(t_final * tau, t_cap),
         step=step,
         status=status,
         path=path,

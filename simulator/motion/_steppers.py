@@ -54,6 +54,7 @@ class RunState(NamedTuple):
     path_energy: jax.Array  # (max_steps + 1,) J, or (1,)
     path_t: jax.Array  # (max_steps + 1,) s, or (1,); NaN for the steppers
     time_s: jax.Array  # s; NaN for the steppers
+    kinetic: jax.Array  # kinetic energy at the end, J (0 for the steppers)
 
 
 def _greedy(field, grid, params, start, max_steps: int, record: bool = True) -> RunState:
@@ -70,6 +71,7 @@ def _greedy(field, grid, params, start, max_steps: int, record: bool = True) -> 
         s.path_energy,
         nan,
         jnp.asarray(jnp.nan, dt),
+        jnp.zeros((), dt),
     )
 
 
@@ -87,6 +89,7 @@ def _gradient(field, grid, params, start, max_steps: int, record: bool = True) -
         s.path_energy,
         nan,
         jnp.asarray(jnp.nan, dt),
+        jnp.zeros((), dt),
     )
 
 
@@ -107,6 +110,7 @@ def _dynamic(
         s.path_energy,
         s.path_t,
         s.time_s,
+        s.kinetic,
     )
 
 
@@ -162,9 +166,13 @@ def flat_at(field, grid, flat, q) -> jax.Array:
 def finish(field, grid, state: RunState, max_steps: int) -> tuple[jax.Array, jax.Array]:
     """(status, outcome index into OUTCOMES) of a run, on the landscape it ran on."""
     status = ran_out(state.step, state.status, max_steps)
-    timed_out = jnp.isfinite(state.time_s) & (
-        state.step < max_steps
-    )  # a dynamic run out of time, not steps
+    # a dynamic run out of time, not steps, and creeping: a chip still carrying more kinetic
+    # energy than the landscape resolves is passing through, not stopped (classify)
+    timed_out = (
+        jnp.isfinite(state.time_s)
+        & (state.step < max_steps)
+        & (jnp.asarray(state.kinetic, field.dtype) <= field.floor)
+    )
     return status, classify(
         field,
         grid,

@@ -257,8 +257,11 @@ def classify(
     dynamics, of time), except where the tolerance is wider than a step (the floor a chip
     floats on, a hysteresis window) and the run ended inside it: there it is aligned, as
     a chip that creeps about on the floor is. ``timed_out``: a dynamic run whose simulated
-    time ran out (not its steps); ending on a plateau it is a plateau (the chip creeps on
-    it), not max_steps.
+    time ran out (not its steps) while it creeps, its kinetic energy at or below the
+    landscape's noise floor (the callers' rule); ending on a plateau it is a plateau (the
+    chip creeps on it), not max_steps. A chip that still carries more kinetic energy than
+    that when its time runs out is passing over whatever it is on: max_steps, decided by
+    that rule and not by whether the pose it was caught at happens to be flat.
     """
     q = jnp.asarray(q, field.dtype)
     period = grid.period_deg / grid.twist_step_deg

@@ -296,7 +296,12 @@ def simulate(
             path_engine.seconds,
         )
     best = jnp.asarray(grid.to_index(np.asarray(opt.pose)), field.dtype)
-    timed_out = dynamic and traj.steps < max_steps  # the simulated time ran out, not the steps
+    # the simulated time ran out, not the steps, with the chip creeping (classify)
+    timed_out = (
+        dynamic
+        and traj.steps < max_steps
+        and float(getattr(state, "kinetic", 0.0)) <= float(field.floor)
+    )
     out = classify(
         field._replace(best=best, align_tol=tol),
         grid,
