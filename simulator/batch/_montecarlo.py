@@ -243,6 +243,11 @@ def run_batch(
         for the dynamics ``time_s`` holds each start's simulated time at its end
         (:attr:`BatchResult.time_to_align_s`: that time for the aligned starts).
     """
+    if scene.liquid.dispense is not None:
+        raise InputError(
+            "--dispense: batch runs do not carry the footprint state yet (simulate does, start by start); "
+            "give a scene without dispense"
+        )
     require(method in METHODS, f"method must be one of {', '.join(METHODS)}, got {method!r}")
     dynamic = method in DYNAMIC_METHODS
     if chunk is None:

@@ -228,6 +228,21 @@ def add_scene_args(p: argparse.ArgumentParser) -> None:
         "gamma (cos theta_r - cos theta_a) per unit length (default off)",
     )
     q.add_argument(
+        "--dispense",
+        choices=("pattern", "chip"),
+        help="make the wetted footprint a state of the run, starting from where the process puts "
+        "the liquid: 'pattern' (the droplet dispensed on the pattern before the chip is released "
+        "onto it: every pad it covers starts wet) or 'chip' (the liquid comes in under the chip and "
+        "wets what it reaches); pads then wet when the liquid's foot reaches them and dry beyond "
+        "the reach of the chip's wall (docs/physics.md §3.5; needs --meniscus, free contact lines; "
+        "default: no state, every pad counted by its distance from the chip)",
+    )
+    q.add_argument(
+        "--dispense-at",
+        metavar="X,Y",
+        help="where a --dispense pattern droplet is dispensed, in um (default: the pattern's centre)",
+    )
+    q.add_argument(
         "--pinned",
         action="store_true",
         help="contact lines held at the pad edges (liquid confined by a "
@@ -323,6 +338,8 @@ def scene_from_args(
         else None,
         ("liquid", "meniscus_height_um"): getattr(args, "meniscus_height", None),
         ("liquid", "pinned"): True if getattr(args, "pinned", False) else None,
+        ("liquid", "dispense"): getattr(args, "dispense", None),
+        ("liquid", "dispense_at_um"): getattr(args, "dispense_at", None),
         ("effects", "hysteresis"): True if getattr(args, "hysteresis", None) else None,
         (None, "um_per_px"): args.um_per_px,
         (None, "pattern_um_per_px"): getattr(args, "pattern_um_per_px", None),
@@ -368,6 +385,12 @@ def scene_from_args(
         from simulator.liquid import check_scene_volume
 
         check_scene_volume(scene)
+    if scene.liquid.dispense is not None and getattr(args, "command", None) != "simulate":
+        raise InputError(
+            f"--dispense {scene.liquid.dispense}: the footprint state is carried by simulate only so far; "
+            f"selfalign {getattr(args, 'command', 'this command')} runs the stateless footprint: leave --dispense "
+            "(or [liquid] dispense) out, or run selfalign simulate per start"
+        )
     if warn:
         accuracy_check(scene)
     if note_frame and "layout" in scene.pattern.params:

@@ -110,6 +110,10 @@ def run(args: argparse.Namespace) -> int:
         engine = choose_engine(scene, start, method, args.engine, 3, 48)
     # the first landscape (and footprint), or what the path engine needs, priced before any work
     require_run_fits(scene, start, method, engine=engine)
+    if scene.liquid.dispense is not None:
+        from simulator.motion._footprint_run import require_footprint_fits
+
+        require_footprint_fits(scene)
     if method in ("overdamped", "inertial"):
         from simulator.motion import DynamicsParams  # JAX: once the run is priced
 
@@ -126,6 +130,10 @@ def run(args: argparse.Namespace) -> int:
     compiling(method, args.quiet)
     traj = simulate(scene, start, method=method, max_steps=max_steps, engine=args.engine)
     print(end_line(scene, traj))
+    if traj.footprint is not None:
+        from simulator.motion._footprint_run import footprint_words
+
+        print(footprint_words(traj.footprint))
     if traj.refined is not None:
         r = [round(v, 1) + 0.0 for v in traj.refined]
         print(

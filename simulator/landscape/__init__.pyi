@@ -5,12 +5,18 @@ from ._build import (
     estimate_bytes as estimate_bytes,
     plan as plan,
     require_landscape_fits as require_landscape_fits,
+    scene_extent as scene_extent,
 )
 from ._correlator import (
     Correlator as Correlator,
     Window as Window,
     chip_relations as chip_relations,
     correlate_stack as correlate_stack,
+)
+from ._footprint import (
+    FootprintPlanes as FootprintPlanes,
+    build_footprint_planes as build_footprint_planes,
+    pad_labels as pad_labels,
 )
 from ._landscape import (
     MAX_CURVE_SAMPLES as MAX_CURVE_SAMPLES,

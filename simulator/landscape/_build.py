@@ -230,6 +230,12 @@ def _extent(scene: Scene, um_per_px: float | None = None) -> dict:
     }
 
 
+def scene_extent(scene: Scene) -> dict:
+    """The translation reach of ``scene``'s pose grid (:func:`_extent`), for
+    :func:`build_landscape`'s ``extent``."""
+    return _extent(scene)
+
+
 def require_landscape_fits(
     scene: Scene,
     twists: np.ndarray | None = None,
@@ -320,11 +326,17 @@ def _plan_of(scene: Scene, lay: dict) -> Plan:
 
 
 def _layout(
-    scene: Scene, twists, center_px: tuple[int, int], half_px: int | None, check_budget: bool
+    scene: Scene,
+    twists,
+    center_px: tuple[int, int],
+    half_px: int | None,
+    check_budget: bool,
+    extent: dict | None = None,
 ) -> dict:
     """The plan's sizes (grid, window, cropped pattern, the rotator's canvas), priced against
-    the budget (see :func:`plan`): nothing rotated, rasterized or transformed."""
-    b = _box(scene, twists, center_px, half_px)
+    the budget (see :func:`plan`): nothing rotated, rasterized or transformed (``extent``: a
+    scene's :func:`_extent` to lay the grid out by instead of this scene's own)."""
+    b = _box(scene, twists, center_px, half_px, extent)
     origin, (r0, r1, c0, c1) = b["origin"], b["crop"]
     n_twists, ny, nx = b["shape"]
     if check_budget:  # the energy array alone, before anything else is sized
@@ -424,6 +436,7 @@ def build_landscape(
     chunk: int = 8,
     progress: bool = False,
     label: str = "landscape",
+    extent: dict | None = None,
 ) -> Landscape:
     """Compute E[twist, y, x] (J) for the scene, or for a subset of its twists.
 
@@ -439,6 +452,9 @@ def build_landscape(
         progress: show a progress bar over twist chunks.
         label: what the waiting line calls this build when no progress bar is shown and it
             takes long enough (:func:`simulator.core.wait_line`), e.g. "landscape box 3".
+        extent: lay the pose grid out by another scene's reach (:func:`scene_extent`) instead
+            of this scene's: one pattern's pads, built one by one, on one grid
+            (:mod:`simulator.landscape` footprint planes).
 
     Raises:
         InputError: the landscape would exceed ``scene.memory_budget_mb``.
@@ -447,7 +463,7 @@ def build_landscape(
     _check_energy_range(scene)
     # Sizes first, allocation after: an over-budget request fails before any rotation or
     # transform, and the chunk of twists shrinks until the build fits the budget.
-    lay = _layout(scene, twists, center_px, half_px, check_budget=True)
+    lay = _layout(scene, twists, center_px, half_px, check_budget=True, extent=extent)
     chunk = max(1, min(chunk, lay["grid"].shape[0]))
     while chunk > 1 and _build_bytes(scene, lay, chunk) > scene.memory_budget_mb * 2**20:
         chunk = max(1, chunk // 2)

@@ -76,6 +76,9 @@ class Trajectory:
     #: With a finite meniscus, the final pose of a gradient or dynamic run refined below the
     #: grid (the minimum of the interpolated landscape next to it, :mod:`simulator.landscape`).
     refined: tuple[float, float, float] | None = None
+    #: With ``--dispense``, the wetted footprint as the run's state: its ``initial`` wet pads
+    #: and its ``events`` (docs/physics.md §3.5; :mod:`simulator.motion`).
+    footprint: dict | None = None
 
     @property
     def start(self) -> tuple[float, float, float]:
@@ -108,7 +111,7 @@ class Trajectory:
             "cost": self.cost,
             "optimum": None if self.optimum is None else pose(self.optimum),
             "final_refined": None if self.refined is None else pose(self.refined),
-        }
+        } | ({} if self.footprint is None else {"footprint": self.footprint})
 
 
 def radius_of_gyration_px(scene: Scene) -> float:
@@ -142,6 +145,7 @@ def simulate(
     dynamics=None,
     backend: str = "auto",
     engine: str = "auto",
+    reference: Landscape | None = None,
 ) -> Trajectory:
     """Run one trajectory from ``start`` = (x_um, y_um, twist_deg).
 
@@ -163,6 +167,9 @@ def simulate(
             outline, :class:`simulator.landscape.PathEnergy`) or "auto" (the path engine for
             chips large enough for it to be the faster, else the FFT engine,
             :func:`simulator.motion.choose_engine`). ``cost["engine"]`` says which ran.
+        reference: with ``landscape``, the landscape whose global minimum and floor "aligned"
+            is measured against, when that is not ``landscape`` itself (a footprint state's
+            landscape, whose own minimum need not be the aligned pose).
     """
     if method not in METHODS:
         raise InputError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
@@ -176,6 +183,11 @@ def simulate(
             f"({MAX_START_PX} px) and |twist| at most {MAX_START_TWIST_DEG:g} deg"
         )
     dynamic = method in ("overdamped", "inertial")
+    if scene.liquid.dispense is not None and landscape is None:
+        # The footprint as the run's state (docs/physics.md §3.5): on the pads' planes.
+        from simulator.motion._footprint_run import simulate_footprint
+
+        return simulate_footprint(scene, start, method, max_steps, dynamics, backend)
     if landscape is None and not dynamic:
         from simulator.motion._pathrun import choose_engine
 
@@ -244,7 +256,9 @@ def simulate(
         # field: the boxes of a run step with one, so that the stepper compiles once.
         tol = (1.0, 1.0)
         if landscape is not None or dynamic:
-            tol = align_tolerance(ls, pin, floats=scene.wall_profile is not None)
+            tol = align_tolerance(
+                ls if reference is None else reference, pin, floats=scene.wall_profile is not None
+            )
         field, grid = field_and_grid(ls, pin=pin, align_tol=tol, scale=scale)
         run = jitted(method, is_stiff(method, field, grid, dynamics))
         state = run(field, grid, dynamics, jnp.asarray(grid.to_index(pose)), max_steps)
@@ -277,7 +291,11 @@ def simulate(
     if opt is None:
         opt = global_minimum(
             scene,
-            landscape=landscape if landscape is not None else (ls if dynamic else None),
+            landscape=reference
+            if reference is not None
+            else landscape
+            if landscape is not None
+            else (ls if dynamic else None),
             evaluated=boxes.built,
             backend=backend,
         )

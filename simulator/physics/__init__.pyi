@@ -1,5 +1,12 @@
 """Types of ``simulator.physics``'s names, loaded on first use (SPEC 1 lazy loading)."""
 
+from ._footprint import (
+    DISPENSE as DISPENSE,
+    FootprintRules as FootprintRules,
+    StepProfile as StepProfile,
+    cap_radius_um as cap_radius_um,
+    relay as relay,
+)
 from ._hysteresis import (
     align_tolerance as align_tolerance,
     contact_line_integrals_um as contact_line_integrals_um,

@@ -122,6 +122,13 @@ class Liquid:
             dynamics' damping alike; None = ``volume_nl`` over the chip's area.
         pinned: contact lines held at the pad edges (liquid confined by a superhydrophobic
             substrate): only liquid-air area changes, ``Delta_gamma = -2 gamma_LA``.
+        dispense: where the process puts the liquid (``--dispense``, TOML ``dispense``), which
+            makes the wetted footprint a state of the run (docs/physics.md §3.5):
+            ``"pattern"`` (the droplet on the pattern before the chip arrives) or ``"chip"``
+            (the liquid comes in under the chip); None: the stateless footprint (every pad
+            counted by its distance from the chip, as before the state existed).
+        dispense_at_um: (x, y) um where a ``pattern`` droplet is dispensed (default the
+            pattern's centre; ``--dispense-at X,Y``).
     """
 
     name: str = "water"
@@ -131,10 +138,31 @@ class Liquid:
     volume_nl: float = 20.0
     height_um: float | None = None
     pinned: bool = False
+    dispense: str | None = None
+    dispense_at_um: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
         set_(self, "name", str(self.name))
+        if self.dispense is not None and self.dispense not in ("pattern", "chip"):
+            raise InputError(
+                f"dispense (--dispense) must be 'pattern' or 'chip', got {self.dispense!r}"
+            )
+        if self.dispense_at_um is not None:
+            at = self.dispense_at_um
+            try:
+                xy = tuple(float(v) for v in at)
+            except (TypeError, ValueError):
+                xy = ()
+            if len(xy) != 2 or not all(math.isfinite(v) for v in xy):
+                raise InputError(
+                    f"dispense point (--dispense-at X,Y) must be two finite numbers of um, got {at!r}"
+                )
+            if self.dispense != "pattern":
+                raise InputError(
+                    "--dispense-at places a droplet dispensed on the pattern: give it with --dispense pattern"
+                )
+            set_(self, "dispense_at_um", xy)
         if not isinstance(self.pinned, bool | np.bool_):
             raise InputError(f"liquid pinned must be true or false, got {self.pinned!r}")
         set_(self, "pinned", bool(self.pinned))

@@ -246,6 +246,14 @@ class SceneBuilders:
                 liq["viscosity_Pa_s"] = float(liq.pop("viscosity_mPa_s")) / 1000
             if "meniscus_height_um" in liq:
                 liq["height_um"] = liq.pop("meniscus_height_um")
+            if isinstance(liq.get("dispense_at_um"), str):  # "X,Y" as the flag takes it
+                text = liq["dispense_at_um"]
+                try:
+                    liq["dispense_at_um"] = tuple(float(v) for v in text.split(","))
+                except ValueError:
+                    raise InputError(
+                        f"dispense point (--dispense-at X,Y) must be two numbers of um separated by a comma, got {text!r}"
+                    ) from None
             kw["liquid"] = Liquid(**liq)
         if "topography" in doc:
             require(

@@ -156,6 +156,16 @@ class Scene(SceneBuilders):
             )
         if self.effects.meniscus:
             _ = self.meniscus_height_um  # validated here: positive, finite, not above the chip
+        if self.liquid.dispense is not None and self.wall_profile is None:
+            raise InputError(
+                f"--dispense {self.liquid.dispense} makes the wetted footprint a state of the run, which needs the "
+                "finite meniscus with free contact lines: give --meniscus (not --pinned)"
+                + (
+                    f", with a height of at least a pixel (a finer --resolution than {self.um_per_px:g} um)"
+                    if self.effects.meniscus and not self.liquid.pinned
+                    else ""
+                )
+            )
         if self.effects.hysteresis:
             require(
                 self.materials.pad_receding_deg is not None,

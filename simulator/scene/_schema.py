@@ -49,6 +49,7 @@ __all__ = ["SCHEMA", "read_scene_file", "validate_scene"]
 
 from simulator.scene._schema_kinds import (
     ACCURACY_PRESETS,
+    DISPENSE,
     DISTRIBUTIONS,
     DTYPES,
     DXF_UNITS,
@@ -155,6 +156,8 @@ SCHEMA: dict[str | None, dict[str, Kind]] = {
         "volume_nl": number("(0, 1e9]", "nl"),  # 1e9 nl = 1 litre
         "meniscus_height_um": LENGTH_UM,
         "pinned": BOOL,
+        "dispense": Choice(DISPENSE),
+        "dispense_at_um": Pose((("x", POSITION_UM), ("y", POSITION_UM)), text_ok=True),
     },
     "topography": {  # a protruding pad (simulator.liquid.Topography): the overflow check
         "edge_angle_deg": number("(0, 180]", "deg"),  # a solid wedge: 0 is no solid

@@ -1,0 +1,196 @@
+"""The landscape of every footprint state: one energy plane set per pad, summed by state.
+
+The energy is linear in the pattern, so the pattern's pads (its connected regions) are
+correlated one at a time, each on the same pose grid, with the chip footprints the
+footprint state needs (:mod:`simulator.physics`, ``FootprintRules``): the wall profile (a
+wet pad the chip covers), and five counts of the pad's area within a distance of the chip
+(covered, reached at ``d_s``, within the reach ``d_r``, and two either side of a band just
+beyond it, which give the bridged pad's term and the line length there). The energy of a state is then the sum of
+the wet pads' planes (:meth:`FootprintPlanes.landscape`), and the state at a pose the
+relay of each pad (:meth:`FootprintPlanes.next_state`): no transform per event.
+
+Cost: six correlations per pad and twist, against one for the stateless landscape
+(docs/physics.md §3.5).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from patterns.errors import InputError
+from patterns.mask import Mask
+from simulator.scene import Scene
+
+from ._build import build_landscape, scene_extent
+from ._landscape import Landscape
+
+
+def pad_labels(pattern: Mask) -> tuple[np.ndarray, int]:
+    """The pattern's pads: its connected wettable regions (every pixel above 0, so that the
+    pads' masks add up to the pattern exactly), labelled 1..n."""
+    from scipy import ndimage
+
+    labels, n = ndimage.label(pattern.data > 0)
+    return labels, int(n)
+
+
+def _variant(scene: Scene, pattern: Mask, profile) -> Scene:
+    """``scene`` with another pattern and another chip footprint (the wall profile the builder
+    correlates): a scene's ``wall_profile`` is derived once and cached on it, and here it is
+    set before the builder first reads it."""
+    s = scene.replace(pattern=pattern)
+    s.__dict__["wall_profile"] = profile
+    return s
+
+
+@dataclass(frozen=True, eq=False)
+class FootprintPlanes:
+    """Per-pad planes of one scene on one pose grid (module docstring).
+
+    rules: the relay's reaches (:class:`simulator.physics.FootprintRules`). wet_energy:
+    (pads, T, Ny, Nx) J, each pad's energy while it is wet (the wall profile's term where the
+    chip covers some of it, the bridged term elsewhere; a pad whose smaller side is below the
+    bridged term's band, ``FootprintRules.band_px`` and two steps, keeps the wall term
+    everywhere: its far edge would lie inside the band). reached, within_reach: (pads, T, Ny,
+    Nx) booleans, the relay's inputs. template: a landscape of the grid (its metadata).
+    pad_area_um2, pad_centre_um: each pad's area and centroid (x, y um, y up).
+    """
+
+    rules: object
+    wet_energy: np.ndarray
+    reached: np.ndarray
+    within_reach: np.ndarray
+    template: Landscape
+    pad_area_um2: np.ndarray
+    pad_centre_um: np.ndarray
+    labels: np.ndarray
+    seconds: float
+
+    @property
+    def n_pads(self) -> int:
+        return int(self.wet_energy.shape[0])
+
+    def landscape(self, wet) -> Landscape:
+        """The landscape of the footprint state ``wet`` ((pads,) booleans)."""
+        w = np.asarray(wet, bool)
+        t = self.template
+        e = np.zeros(t.energy.shape, t.energy.dtype)
+        for k in np.flatnonzero(w):
+            e += self.wet_energy[k]
+        return Landscape(
+            energy=e,
+            grid=t.grid,
+            delta_gamma=t.delta_gamma,
+            energy_scale_J=t.energy_scale_J,
+            meniscus_height_um=t.meniscus_height_um,
+            stats=dict(t.stats),
+        )
+
+    def node(self, pose) -> tuple[int, int, int]:
+        """The grid node nearest ``pose`` (x_um, y_um, twist_deg), clipped to the grid."""
+        g = self.template.grid
+        it, iy, ix = (int(round(float(v))) for v in g.to_index(np.asarray(pose, float)))
+        n_t, ny, nx = g.shape
+        it = it % n_t if g.wrap else min(max(it, 0), n_t - 1)
+        return it, min(max(iy, 0), ny - 1), min(max(ix, 0), nx - 1)
+
+    def next_state(self, wet, pose) -> np.ndarray:
+        """The pads' state once the chip, with the footprint ``wet``, is at ``pose``."""
+        from simulator.physics import relay
+
+        n = self.node(pose)
+        return relay(wet, self.reached[(slice(None), *n)], self.within_reach[(slice(None), *n)])
+
+
+def build_footprint_planes(
+    scene: Scene, backend: str = "auto", progress: bool = False
+) -> FootprintPlanes:
+    """The per-pad planes of ``scene`` over its whole pose grid (module docstring).
+
+    Needs the finite meniscus with free contact lines of a pixel or more
+    (``scene.wall_profile``); the pads' receding angle is the hysteresis window's when the
+    scene declares one, else their Young angle.
+    """
+    from simulator.physics import FootprintRules
+    from simulator.physics._footprint import STEP_PX, TOUCH_PX2
+
+    t0 = time.perf_counter()
+    prof = scene.wall_profile
+    if prof is None:
+        raise InputError(
+            "--dispense needs the finite meniscus with free contact lines (--meniscus, not --pinned) "
+            f"of at least a pixel of height; give --meniscus, or a finer --resolution than {scene.um_per_px:g} um"
+        )
+    m = scene.materials
+    rules = FootprintRules.of(prof, m.pad_receding_deg if scene.effects.hysteresis else None)
+    labels, n = pad_labels(scene.pattern)
+    counts = rules.count_profiles()
+    extent = scene_extent(_variant(scene, scene.pattern, counts["band_out"]))
+    data = scene.pattern.data
+    s = scene.um_per_px
+    h, w = data.shape
+    pads, areas, centres, deep = [], [], [], []
+    from scipy import ndimage
+
+    for k, box in enumerate(ndimage.find_objects(labels), start=1):
+        # deep enough for the bridged term: the pad's smaller side beyond the band and its steps
+        deep.append(
+            min(box[0].stop - box[0].start, box[1].stop - box[1].start)
+            >= rules.band_px + 2 * STEP_PX
+        )
+        mk = np.where(labels == k, data, 0.0)
+        pads.append(Mask(mk, s))
+        rr, cc = np.nonzero(labels == k)
+        wk = data[rr, cc]
+        areas.append(float(wk.sum()) * s * s)
+        centres.append(
+            (
+                float(((cc + 0.5 - w / 2) * wk).sum() / wk.sum()) * s,
+                float(((h / 2 - rr - 0.5) * wk).sum() / wk.sum()) * s,
+            )
+        )
+    # Pad by pad, each reduced to its wet energy and two flags as soon as its five planes are
+    # made: the peak holds the pads' results and one pad's planes.
+    template = None
+    wet_energy, reached, within = [], [], []
+    for k, mk in enumerate(pads):
+        got = {}
+        for name, p in (("wall", prof), *counts.items()):
+            ls = build_landscape(
+                _variant(scene, mk, p),
+                backend=backend,
+                extent=extent,
+                label=f"footprint plane {name}, pad {k + 1} of {n}",
+            )
+            template = ls if template is None else template
+            got[name] = ls.energy if name == "wall" else ls.energy / ls.joules_per_px2  # J, px^2
+        assert template is not None  # made just above
+        n_b = 0.5 * (got["band_in"] + got["band_out"])
+        line = (got["band_out"] - got["band_in"]) / STEP_PX
+        bridged = (n_b - (rules.band_px - rules.f_inf) * line) * template.joules_per_px2
+        if deep[k]:
+            wet_energy.append(
+                np.where(
+                    got["covered"] >= TOUCH_PX2, got["wall"], bridged.astype(got["wall"].dtype)
+                )
+            )
+        else:  # a pad narrower than the band: its far edge would take from the bridged term
+            wet_energy.append(got["wall"])
+        reached.append(got["reached"] >= TOUCH_PX2)
+        within.append(got["within"] >= TOUCH_PX2)
+        del got, n_b, line, bridged
+    assert template is not None  # a pattern has a pad (Scene checks it is not empty)
+    return FootprintPlanes(
+        rules=rules,
+        wet_energy=np.stack(wet_energy),
+        reached=np.stack(reached),
+        within_reach=np.stack(within),
+        template=template,
+        pad_area_um2=np.asarray(areas),
+        pad_centre_um=np.asarray(centres),
+        labels=labels,
+        seconds=time.perf_counter() - t0,
+    )

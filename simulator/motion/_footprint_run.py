@@ -1,0 +1,202 @@
+"""A trajectory whose state is the pose and the liquid's footprint (``--dispense``).
+
+The run starts from the footprint the process leaves (:mod:`simulator.liquid`,
+``dispensed_wet``, or nothing for ``chip``), passed through the relay at the start pose
+(the chip is released there). It then runs the method on the landscape of the current
+state (:class:`simulator.landscape.FootprintPlanes`), and follows the path it takes pose
+by pose: at the first pose where a pad's state changes (a dry pad reached by the
+liquid's foot, a wet pad left beyond the reach of the chip's wall), the path is cut, the
+state changes, and the run goes on from that pose on the new state's landscape. The
+events are few (a pad wets or dries a few times a run), each costing one more run of
+the stepper on a landscape summed from the pads' planes, no transform.
+
+A dynamic run restarts from rest at each event: the film's damping makes the motion
+overdamped near alignment (docs/physics.md §4), and the chip's speed at an event is
+what it gains over about a pixel; the events are listed with their times.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+
+from patterns.errors import InputError
+
+#: Events a run may take before it stops (a pad's state changes a few times a run; many
+#: more means the chip is chattering on a relay's threshold).
+MAX_EVENTS = 64
+
+
+def _cut(tr, j: int):
+    """The trajectory ``tr`` up to (not including) its pose ``j``."""
+    from simulator.motion._trajectory import Trajectory
+
+    t_s = None if tr.t_s is None else tr.t_s[:j]
+    return Trajectory(tr.method, "", tr.path[:j], tr.energy_J[:j], j, None, t_s)
+
+
+def footprint_budget_bytes(scene, n_pads: int) -> int:
+    """What the footprint state's planes hold at their peak: per pose, each pad's wet energy
+    and two relay flags, and the six planes of the pad being built."""
+    from simulator.landscape import estimate_bytes
+
+    poses = estimate_bytes(scene) // np.dtype(scene.dtype).itemsize
+    item = np.dtype(scene.dtype).itemsize
+    return int(poses * (n_pads * (item + 2) + 6 * item) * 1.1)
+
+
+def require_footprint_fits(scene) -> None:
+    """Refuse (InputError) a ``--dispense`` run whose pads' planes exceed the memory budget,
+    before any of them is made (no JAX, no transform)."""
+    from simulator.landscape import pad_labels
+
+    _, n = pad_labels(scene.pattern)
+    need = footprint_budget_bytes(scene, n)
+    if need > scene.memory_budget_mb * 2**20:
+        raise InputError(
+            f"--dispense {scene.liquid.dispense}: the footprint state's planes for {n} pads would hold "
+            f"{need / 2**20:,.0f} MB, over the memory budget of {scene.memory_budget_mb:,.0f} MB; give a coarser "
+            "--resolution, a smaller --window or a larger --twist-step, or raise --memory-budget"
+        )
+
+
+def footprint_words(fp: dict) -> str:
+    """One line on where the liquid was: wet at release, the events, wet at the end."""
+
+    def pads(ids):
+        return "none" if not ids else "pads " + ", ".join(str(i) for i in ids)
+
+    ev = fp["events"]
+    said = "; ".join(
+        f"pad {e['pad']} {e['state']} at step {e['step']}"
+        + (f" (t = {e['t_s'] * 1e3:.3g} ms)" if "t_s" in e else "")
+        for e in ev[:6]
+    ) + ("; ..." if len(ev) > 6 else "")
+    return (
+        f"footprint (--dispense {fp['dispense']}): {fp['why']}; wet at release: {pads(fp['initial'])}; "
+        f"{len(ev)} event{'s' if len(ev) != 1 else ''}{': ' + said if ev else ''}; wet at the end: {pads(fp['final'])} "
+        f"(reached within {fp['substrate_reach_um']:.3g} um, dries beyond {fp['wet_reach_um']:.3g} um at {fp['receding_deg']:.3g} deg receding)"
+    )
+
+
+def simulate_footprint(scene, start, method: str, max_steps: int, dynamics, backend: str):
+    """:func:`simulator.motion.simulate` with the footprint as the run's state (module
+    docstring); the returned trajectory's ``footprint`` says where the liquid was."""
+    from simulator.landscape import build_footprint_planes, pad_labels
+    from simulator.liquid import dispensed_wet
+    from simulator.motion._trajectory import Trajectory, simulate
+
+    t0 = time.perf_counter()
+    proto = scene.liquid.dispense
+    require_footprint_fits(scene)
+    _, n = pad_labels(scene.pattern)
+    planes = build_footprint_planes(scene, backend=backend)
+    if proto == "pattern":
+        dispensed, why = dispensed_wet(scene, planes.labels, n, scene.liquid.dispense_at_um)
+    else:
+        dispensed = np.zeros(n, bool)
+        why = "the liquid comes in under the chip: it wets the pads the chip's liquid reaches"
+    # "aligned": against the minimum with every pad wet (the aligned pose on the whole
+    # pattern), not the current state's (a state with only some pads wet has its own).
+    reference = planes.landscape(np.ones(n, bool))
+    wet = planes.next_state(dispensed, start)
+    initial = wet.copy()
+    inner = scene.replace(
+        liquid=dataclasses.replace(scene.liquid, dispense=None, dispense_at_um=None)
+    )
+    pose = tuple(float(v) for v in start)
+    pieces, events, done = [], [], 0
+    t_off = 0.0
+    last = None
+    for _ in range(MAX_EVENTS + 1):
+        tr = simulate(
+            inner,
+            pose,
+            method=method,
+            max_steps=max_steps - done,
+            landscape=planes.landscape(wet),
+            dynamics=dynamics,
+            backend=backend,
+            reference=reference,
+        )
+        last = tr
+        j, new = None, wet
+        for i in range(1, len(tr.path)):
+            new = planes.next_state(wet, tr.path[i])
+            if (new != wet).any():
+                j = i
+                break
+        if j is None:
+            pieces.append((tr, t_off))
+            break
+        pieces.append((_cut(tr, j), t_off))
+        t_ev = None if tr.t_s is None else t_off + float(tr.t_s[j])
+        for k in np.flatnonzero(new != wet):
+            x, y, a = (float(v) for v in tr.path[j])
+            events.append(
+                {
+                    "step": done + j,
+                    **({} if t_ev is None else {"t_s": t_ev}),
+                    "pad": int(k + 1),
+                    "state": "wet" if new[k] else "dry",
+                    "x_um": x,
+                    "y_um": y,
+                    "twist_deg": a,
+                }
+            )
+        done += j
+        if t_ev is not None:
+            t_off = t_ev
+        wet = new
+        pose = tuple(float(v) for v in tr.path[j])
+        if done >= max_steps:
+            last = None
+            break
+    assert pieces  # the loop runs at least once
+    path = np.concatenate([p.path for p, _ in pieces])
+    energy = np.concatenate([p.energy_J for p, _ in pieces])
+    steps = sum(p.steps for p, _ in pieces)
+    t_s = None
+    if pieces[0][0].t_s is not None:
+        t_s = np.concatenate([p.t_s + off for p, off in pieces])
+    time_s = None if t_s is None else float(t_s[-1])
+    outcome = "max_steps" if last is None or len(events) > MAX_EVENTS else last.outcome
+    s = scene.um_per_px
+    rules = planes.rules
+    footprint = {
+        "dispense": proto,
+        "dispensed": [int(k + 1) for k in np.flatnonzero(dispensed)],
+        "why": why,
+        "initial": [int(k + 1) for k in np.flatnonzero(initial)],
+        "events": events,
+        "final": [int(k + 1) for k in np.flatnonzero(wet)],
+        "pads": [
+            {"pad": k + 1, "x_um": float(c[0]), "y_um": float(c[1]), "area_um2": float(a)}
+            for k, (c, a) in enumerate(zip(planes.pad_centre_um, planes.pad_area_um2, strict=True))
+        ],
+        "substrate_reach_um": rules.d_s * s,
+        "wet_reach_um": rules.d_r * s,
+        "receding_deg": rules.receding_deg,
+    }
+    ref = pieces[-1][0] if last is None else last
+    cost = dict(ref.cost) | {
+        "engine": "footprint planes",
+        "footprint_planes_s": planes.seconds,
+        "footprint_pieces": len(pieces),
+        "total_s": time.perf_counter() - t0,
+    }
+    return Trajectory(
+        method,
+        outcome,
+        path,
+        energy,
+        steps,
+        time_s,
+        t_s,
+        cost,
+        optimum=None if last is None else last.optimum,
+        refined=None if last is None else last.refined,
+        footprint=footprint,
+    )

@@ -1,0 +1,349 @@
+"""The wetted footprint as the run's state (docs/physics.md §3.5): the initial states of
+both protocols, the pads' planes against the stateless landscape, the relay, the bridged
+term's force, runs that keep and lose their far pads, and the Surface Evolver branches."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from patterns.errors import InputError
+from patterns.mask import Mask
+from simulator.landscape import build_footprint_planes, build_landscape, pad_labels
+from simulator.liquid import dispensed_wet
+from simulator.motion import simulate
+from simulator.physics import FootprintRules, Liquid, Materials, WallProfile, cap_radius_um, relay
+from simulator.scene import Effects, Scene
+from tests.cli_helpers import one_line_error
+
+ROOT = Path(__file__).resolve().parents[1]
+LIB = ROOT / "patterns" / "library"
+VALIDATION = ROOT / "validation"
+
+
+def fourpad(gap: int, res: float = 5.0, dtype: str = "float32", **liquid) -> Scene:
+    return Scene.from_inputs(
+        LIB / f"four_pad_730_{gap}.png",
+        chip_size_um=730,
+        resolution_um=res,
+        dtype=dtype,
+        effects=Effects(twist=False, meniscus=True, hysteresis="receding" in liquid),
+        materials=Materials(pad_receding_deg=liquid.pop("receding"), pad_advancing_deg=35.0)
+        if "receding" in liquid
+        else Materials(),
+        liquid=Liquid(**({"volume_nl": 20.0} | liquid)),
+    )
+
+
+@pytest.fixture(scope="module")
+def planes100():
+    s = fourpad(100, dispense="chip")
+    return s, build_footprint_planes(s)
+
+
+# ------------------------------------------------------------------ initial states
+def test_cap_radius_is_a_hemisphere_at_90_degrees():
+    # V = 2/3 pi R^3 for a hemisphere: 1 nl = 1e6 um^3
+    assert cap_radius_um(1.0, 90.0) == pytest.approx((3e6 / (2 * math.pi)) ** (1 / 3), rel=1e-12)
+    # flatter caps spread further for the same volume
+    assert cap_radius_um(1.0, 30.0) > cap_radius_um(1.0, 60.0) > cap_radius_um(1.0, 90.0)
+
+
+def test_pattern_dispense_above_the_critical_volume_wets_all_four_pads():
+    s = fourpad(100, dispense="pattern")
+    labels, n = pad_labels(s.pattern)
+    wet, why = dispensed_wet(s, labels, n)
+    assert n == 4 and wet.all() and "critical volume" in why and "all four" in why
+
+
+def test_pattern_dispense_below_the_critical_volume_wets_the_split_drops_nearest_pads():
+    from simulator.liquid import critical_volume
+
+    # (a 2 nl film is below a pixel of height at 5 um/px: the initial state needs no meniscus)
+    s = fourpad(100, volume_nl=2.0)
+    labels, n = pad_labels(s.pattern)
+    drops = len(critical_volume(730, 100, 30, 60).split_drops())
+    assert 2.0 < critical_volume(730, 100, 30, 60).critical_volume_nl
+    # dispensed over the lower right pad (x > 0, y < 0): that pad is among the wet ones
+    wet, why = dispensed_wet(s, labels, n, (200.0, -200.0))
+    assert int(wet.sum()) == max(drops, 1) and "below the critical volume" in why
+    lower_right = labels[labels.shape[0] * 3 // 4, labels.shape[1] * 3 // 4] - 1
+    assert wet[lower_right]
+
+
+def test_pattern_dispense_on_a_single_pad_and_on_an_arbitrary_png():
+    s = Scene.from_inputs(
+        LIB / "square_200.png",
+        chip_size_um=200,
+        effects=Effects(twist=False, meniscus=True),
+        liquid=Liquid(volume_nl=0.9, dispense="pattern"),
+    )
+    labels, n = pad_labels(s.pattern)
+    wet, _ = dispensed_wet(s, labels, n)
+    assert n == 1 and wet.all()
+    # two 100 x 200 um pads whose inner edges are 80 um from the image's centre (400 um wide at
+    # 2 um/px): a 0.1 nl cap (R = 61 um at 30 deg) at the centre reaches neither, and one at
+    # the left pad's centre that pad alone (the right pad's nearest pixel is 210 um away)
+    a = np.zeros((200, 200))
+    a[50:150, 10:60] = 1.0  # x in [-180, -80] um
+    a[50:150, 140:190] = 1.0  # x in [80, 180] um
+    m = Mask(a, 2.0)
+    s2 = Scene.from_inputs(
+        m,
+        chip_size_um=100,
+        effects=Effects(twist=False, meniscus=True),
+        liquid=Liquid(volume_nl=0.1, dispense="pattern"),
+    )
+    labels, n = pad_labels(s2.pattern)
+    r = cap_radius_um(0.1, 30.0)
+    assert n == 2 and 40 < r < 80
+    with pytest.raises(InputError, match="touches no pad"):
+        dispensed_wet(s2, labels, n)
+    wet, why = dispensed_wet(s2, labels, n, (-130.0, 0.0))
+    assert wet.tolist() == [True, False] and "1 of 2 pads" in why
+
+
+def test_dispense_needs_the_free_line_meniscus():
+    with pytest.raises(InputError, match="--meniscus"):
+        Scene.from_inputs(LIB / "square_200.png", chip_size_um=200, liquid=Liquid(dispense="chip"))
+    with pytest.raises(InputError, match="'pattern' or 'chip'"):
+        Liquid(dispense="sideways")
+    with pytest.raises(InputError, match="--dispense pattern"):
+        Liquid(dispense="chip", dispense_at_um=(0, 0))
+
+
+# ------------------------------------------------------------------ the relay
+def test_relay_wets_what_is_reached_and_keeps_what_is_within_reach():
+    wet = np.array([True, True, False, False])
+    reached = np.array([False, True, True, False])
+    within = np.array([True, False, True, True])
+    # wet & within -> stays; reached -> wet; wet & not within & not reached -> dry; dry & not reached -> dry
+    assert relay(wet, reached, within).tolist() == [True, True, True, False]
+
+
+def test_rules_reaches_are_h_cot_theta():
+    p = WallProfile.from_angles(10.0, 30.0, 60.0)
+    r = FootprintRules.of(p)  # no hysteresis: the pad's own angle recedes
+    assert r.d_s == pytest.approx(10.0 / math.tan(math.radians(60)), rel=1e-12)
+    assert r.d_r == pytest.approx(10.0 / math.tan(math.radians(30)), rel=1e-12)
+    assert FootprintRules.of(p, 10.0).d_r == pytest.approx(10.0 / math.tan(math.radians(10)))
+    # F_inf = d_s + the integral of the Gibbs ramp: between d_s and d_p
+    assert r.d_s < r.f_inf < r.d_r
+
+
+# ------------------------------------------------------------------ planes
+def test_pads_planes_add_up_to_the_stateless_landscape_where_the_chip_covers_every_pad():
+    # float64: the sum of the wet pads' wall terms is the stateless landscape to round-off
+    s = fourpad(100, dtype="float64", dispense="chip")
+    fp = build_footprint_planes(s)
+    plain = build_landscape(s.replace(liquid=Liquid(volume_nl=20.0)))
+    allwet = fp.landscape(np.ones(4, bool))
+    g1, g2 = plain.grid, allwet.grid
+    dx, dy = g1.x_first_px - g2.x_first_px, g1.y_first_px - g2.y_first_px
+    sub = allwet.energy[:, dy : dy + g1.shape[1], dx : dx + g1.shape[2]]
+    # where the chip covers part of every pad (|x|, |y| below the pads' inner edges at 50 um
+    # less a pixel, from the far side: L/2 - g/2 = 315 um), every pad is on the wall branch
+    xs = (g1.x_first_px + np.arange(g1.shape[2])) * s.um_per_px
+    ys = (g1.y_first_px + np.arange(g1.shape[1])) * s.um_per_px
+    inside = (np.abs(ys)[:, None] <= 300) & (np.abs(xs)[None, :] <= 300)
+    assert (
+        inside.sum() > 1000
+        and fp.reached.all(axis=0)[0, dy:, dx:][: g1.shape[1], : g1.shape[2]][inside].all()
+    )
+    scale = float(np.abs(plain.energy).max())
+    # float64 correlations: round-off of order 1e-15 of the scale per transform, 24 transforms
+    assert np.abs(sub - plain.energy)[0][inside].max() <= 1e-12 * scale
+
+
+def test_a_wet_pad_across_a_gap_pulls_with_the_overlap_force(planes100):
+    # the far (left) pads wet, the chip past the cross: along y = 0 the force is the interior
+    # overlap force |dgamma| (L - g) while the pads lie within d_r = h cot(theta_r) of the chip
+    s, fp = planes100
+    ls = fp.landscape(np.ones(4, bool))
+    dg = abs(s.delta_gamma_N_m)
+    interior = dg * (730 - 100) * 1e-6
+    d_r_um = fp.rules.d_r * s.um_per_px
+    for x in (330.0, 340.0, 350.0, 360.0):  # gaps of 15-45 um to the left pads' inner edge
+        assert 315 + d_r_um > x
+        fx, _ = ls.force_at(x, 0.0, 0.0)
+        assert float(np.asarray(fx)) == pytest.approx(-interior, rel=0.03)
+
+
+# ------------------------------------------------------------------ runs
+def test_far_pads_that_stay_wet_align_the_bench_start_and_pads_that_dry_stop_it():
+    # 730/100, 20 nl, pattern-dispensed, from (500, 5): with the pads' Young angle as receding
+    # angle the far pads lie beyond h cot(30 deg) = 65 um and dry at release: the chip stops on
+    # the cross; with a receding angle of 10 deg (reach 213 um) they stay wet and it aligns
+    wet = simulate(fourpad(100, dispense="pattern", receding=10.0), (500, 5, 0), method="gradient")
+    assert wet.outcome == "aligned" and wet.footprint["initial"] == [1, 2, 3, 4]
+    assert abs(wet.final[0]) < 25 and wet.footprint["events"] == []
+    dry = simulate(fourpad(100, dispense="pattern"), (500, 5, 0), method="gradient")
+    assert dry.footprint["dispensed"] == [1, 2, 3, 4] and dry.footprint["initial"] == [2, 4]
+    assert dry.outcome == "plateau" and dry.final[0] > 400
+
+
+def two_pads(dispense: str) -> Scene:
+    """A 200 um pad A (x, y in [-100, 100] um) and a 70 x 60 um pad B at x in [160, 230],
+    under a 200 um chip with 0.9 nl (h = 22.5 um: d_s = 13 um, d_r = d_p = 39 um)."""
+    a = np.zeros((240, 300))  # 480 x 600 um at 2 um/px
+    a[70:170, 100:200] = 1.0
+    a[105:135, 230:265] = 1.0
+    return Scene.from_inputs(
+        Mask(a, 2.0),
+        chip_size_um=200,
+        effects=Effects(twist=False, meniscus=True),
+        liquid=Liquid(volume_nl=0.9, dispense=dispense),
+    )
+
+
+@pytest.mark.parametrize("method", ["greedy", "overdamped"])
+def test_a_wet_pad_the_chip_leaves_dries_during_the_run(method):
+    # From x = 80 um the chip covers part of B and most of A: both wet. A (200 um of edge)
+    # pulls harder than B (60 um), so the chip moves left; B's bridge holds it back with the
+    # full force while B lies within d_r and dries beyond: one event, pad B dry, then the
+    # chip aligns on A.
+    t = simulate(two_pads("pattern"), (80, 0, 0), method=method)
+    fp = t.footprint
+    assert fp["initial"] == [1, 2] and fp["final"] == [1], fp
+    assert [(e["pad"], e["state"]) for e in fp["events"]] == [(2, "dry")], fp
+    ev = fp["events"][0]
+    assert 0 < ev["step"] < t.steps and ("t_s" in ev) == (method == "overdamped")
+    # B dries once its near edge (160 um) lies beyond d_r of the chip's right edge, a pixel or so
+    gap = 160 - (ev["x_um"] + 100)
+    assert fp["wet_reach_um"] - 2 <= gap <= fp["wet_reach_um"] + 4, (gap, fp["wet_reach_um"])
+    assert t.outcome == "aligned" and abs(t.final[0]) <= 15
+    # the path is continuous across the event: the next pose is a step or less away
+    k = ev["step"]
+    assert np.abs(t.path[k] - t.path[k - 1])[:2].max() <= 2.0 + 1e-9
+
+
+def test_batch_and_other_commands_refuse_dispense_in_one_line(run_cli):
+    args = ["--pattern", LIB / "four_pad_730_100.png", "--chip-size", "730", "--meniscus"]
+    args += ["--resolution", "10", "--no-twist", "--dispense", "chip"]
+    rc, _, err = run_cli(["montecarlo", *args, "--random", "4", "--spread", "10,10,0"])
+    one_line_error(rc, err, "--dispense chip", "selfalign montecarlo")
+    rc, _, err = run_cli(["energy", *args, "--at", "0,0,0"])
+    one_line_error(rc, err, "--dispense chip", "selfalign energy")
+    s = fourpad(100, dispense="chip")
+    from simulator.batch import run_batch
+
+    with pytest.raises(InputError, match="--dispense"):
+        run_batch(s, np.zeros((2, 3)), "greedy")
+    rc, _, err = run_cli(
+        ["simulate", *args[:-1], "pattern", "--dispense-at", "abc", "--start=0,0,0"]
+    )
+    one_line_error(rc, err, "--dispense-at X,Y", "'abc'")
+
+
+def test_simulate_cli_reports_and_writes_the_footprint(run_cli, tmp_path):
+    out = tmp_path / "t.json"
+    rc, stdout, err = run_cli(
+        [
+            "simulate",
+            "--pattern",
+            LIB / "four_pad_730_100.png",
+            "--chip-size",
+            "730",
+            "--meniscus",
+            "--resolution",
+            "5",
+            "--no-twist",
+            "--dispense",
+            "pattern",
+            "--hysteresis",
+            "10:35",
+            "--start=500,5,0",
+            "--method",
+            "gradient",
+            "--json",
+            out,
+            "--quiet",
+        ]
+    )
+    assert rc == 0, err
+    assert (
+        "footprint (--dispense pattern)" in stdout and "wet at release: pads 1, 2, 3, 4" in stdout
+    )
+    d = json.loads(out.read_text())
+    fp = d["footprint"]
+    assert fp["initial"] == [1, 2, 3, 4] and fp["events"] == [] and d["outcome"] == "aligned"
+    assert fp["wet_reach_um"] == pytest.approx(37.53 / math.tan(math.radians(10)), rel=0.01)
+
+
+# ------------------------------------------------------------------ Surface Evolver
+def _evolver_rows(name: str, path: str, level: str | None = None) -> dict[float, dict]:
+    """The stored Surface Evolver poses of one path, at ``level`` or each pose's finest."""
+    out: dict[float, dict] = {}
+    with open(VALIDATION / name) as f:
+        for r in csv.DictReader(f):
+            if r["path"] != path or (level is not None and r["level"] != level):
+                continue
+            x = float(r["x_um"])
+            if x not in out or int(r["level"]) > int(out[x]["level"]):
+                out[x] = r
+    return out
+
+
+def _branch_forces(fp, xs, start_wet):
+    """The force F_x (N) along y = 0 with the state following the chip pose by pose."""
+    wet = fp.next_state(start_wet, (xs[0], 0, 0))
+    f, states = [], []
+    for x in xs:
+        wet = fp.next_state(wet, (x, 0, 0))
+        fx, _ = fp.landscape(wet).force_at(x, 0.0, 0.0)
+        f.append(float(np.asarray(fx)))
+        states.append(wet.copy())
+    return np.array(f), states
+
+
+@pytest.mark.parametrize("gap", [50, 100])
+def test_chip_dispense_follows_the_evolver_inward_branch(gap):
+    # Coming inward from 500 um with the far pads dry (Surface Evolver's inward path, level 1:
+    # validation/FOURPAD_INWARD.md), the far pads wet where Surface Evolver's do: the model's
+    # snap at d_s puts the flat part's inner end within 10 um of Surface Evolver's (the
+    # stateless footprint pulled them from d_p: 36 um early on 730/50)
+    s = fourpad(gap, res=2.0, dispense="chip")
+    fp = build_footprint_planes(s)
+    xs = np.arange(500.0, 298.0, -2.0)
+    f, states = _branch_forces(fp, xs, np.zeros(4, bool))
+    se = _evolver_rows("evolver_fourpad_inward.csv", f"x_730_{gap}_inward", level="1")
+    # Surface Evolver: the left pads wet at the first x (going in) where left_pads_wetted
+    se_wet = max(x for x, r in se.items() if r["left_pads_wetted"] == "True" and x < 400)
+    se_dry = min(x for x, r in se.items() if r["left_pads_wetted"] == "False")
+    left = [k for k in range(4) if fp.pad_centre_um[k][0] < 0]
+    model_wet = max(x for x, st in zip(xs, states, strict=True) if st[left].all())
+    assert se_wet <= model_wet + 10 and model_wet <= se_dry + 10, (model_wet, se_wet, se_dry)
+    # between the cross's onset and the snap the force is zero, and outside it the interior force
+    assert np.all(np.abs(f[(xs < model_wet + 40) & (xs > model_wet + 2)]) < 1e-3 * np.abs(f).max())
+
+
+@pytest.mark.parametrize("gap", [50, 100])
+def test_pattern_dispense_follows_the_evolver_outward_branch(gap):
+    # Outward from alignment with all four pads wet (Surface Evolver's outward path,
+    # validation/FOURPAD.md): the force while the far pads stay wet is the interior force, as
+    # Surface Evolver's within 10 % up to 40 um before they dry; they dry (at d_r = d_p without
+    # hysteresis) up to 25 um before Surface Evolver's do (its curved walls reach further than
+    # the flat walls' h cot(theta_p))
+    s = fourpad(gap, res=2.0, dispense="pattern")
+    fp = build_footprint_planes(s)
+    xs = np.arange(0.0, 502.0, 2.0)
+    f, states = _branch_forces(fp, xs, np.ones(4, bool))
+    se = _evolver_rows("evolver_fourpad.csv", f"x_730_{gap}")
+    left = [k for k in range(4) if fp.pad_centre_um[k][0] < 0]
+    model_dry = min(x for x, st in zip(xs, states, strict=True) if not st[left].any())
+    se_dry = min(x for x, r in se.items() if r["left_pads_wetted"] == "False")
+    se_last_wet = max(x for x, r in se.items() if r["left_pads_wetted"] == "True")
+    assert se_last_wet - 25 <= model_dry <= se_dry, (model_dry, se_last_wet, se_dry)
+    checked = 0
+    for x, r in se.items():
+        hit = np.flatnonzero(np.isclose(xs, x))
+        if 100 <= x <= model_dry - 40 and hit.size:
+            i = int(hit[0])
+            assert f[i] == pytest.approx(float(r["force_x_N"]), rel=0.10), x
+            checked += 1
+    assert checked >= 8
