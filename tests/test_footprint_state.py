@@ -220,6 +220,21 @@ def test_a_wet_pad_the_chip_leaves_dries_during_the_run(method):
     # the path is continuous across the event: the next pose is a step or less away
     k = ev["step"]
     assert np.abs(t.path[k] - t.path[k - 1])[:2].max() <= 2.0 + 1e-9
+    if method == "greedy":  # the GIF tints the wet pads: B before the event, not after
+        from simulator.render._animation import WET_RGBA, TrajectoryAnimation
+
+        anim = TrajectoryAnimation(two_pads("pattern"), t)
+        try:
+            assert anim.wet_pads(k - 1) == (1, 2) and anim.wet_pads(k) == (1,)
+            col, row = (int(v) for v in anim.pixel_of(195.0, 0.0)[0])  # B's centre
+            before, after = anim.frame(k - 1)[row, col], anim.frame(k)[row, col]
+            assert tuple(after) == (255, 255, 255)  # a dry pad: white
+            # a wet pad: white under the tint, alpha-blended (8-bit rounding)
+            tint = 255 * (1 - WET_RGBA[3]) + 255 * WET_RGBA[3] * np.asarray(WET_RGBA[:3])
+            assert np.abs(before.astype(float) - tint).max() <= 2.0
+            assert "wet: 1, 2" in anim.title_of(k - 1) and "wet: 1" in anim.title_of(k)
+        finally:
+            anim.close()
 
 
 def test_batch_and_other_commands_refuse_dispense_in_one_line(run_cli):

@@ -111,7 +111,7 @@ def run(args: argparse.Namespace) -> int:
     # the first landscape (and footprint), or what the path engine needs, priced before any work
     require_run_fits(scene, start, method, engine=engine)
     if scene.liquid.dispense is not None:
-        from simulator.motion._footprint_run import require_footprint_fits
+        from simulator.motion import require_footprint_fits
 
         require_footprint_fits(scene)
     if method in ("overdamped", "inertial"):
@@ -131,7 +131,7 @@ def run(args: argparse.Namespace) -> int:
     traj = simulate(scene, start, method=method, max_steps=max_steps, engine=args.engine)
     print(end_line(scene, traj))
     if traj.footprint is not None:
-        from simulator.motion._footprint_run import footprint_words
+        from simulator.motion import footprint_words
 
         print(footprint_words(traj.footprint))
     if traj.refined is not None:

@@ -114,8 +114,7 @@ def build_footprint_planes(
     (``scene.wall_profile``); the pads' receding angle is the hysteresis window's when the
     scene declares one, else their Young angle.
     """
-    from simulator.physics import FootprintRules
-    from simulator.physics._footprint import STEP_PX, TOUCH_PX2
+    from simulator.physics import STEP_PX, TOUCH_PX2, FootprintRules
 
     t0 = time.perf_counter()
     prof = scene.wall_profile

@@ -23,6 +23,11 @@ from ._field import (
     make_field as make_field,
     neighbourhood as neighbourhood,
 )
+from ._footprint_run import (
+    MAX_EVENTS as MAX_EVENTS,
+    footprint_words as footprint_words,
+    require_footprint_fits as require_footprint_fits,
+)
 from ._pathrun import (
     ENGINES as ENGINES,
     choose_engine as choose_engine,

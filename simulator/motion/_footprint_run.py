@@ -31,10 +31,10 @@ MAX_EVENTS = 64
 
 def _cut(tr, j: int):
     """The trajectory ``tr`` up to (not including) its pose ``j``."""
-    from simulator.motion._trajectory import Trajectory
-
     t_s = None if tr.t_s is None else tr.t_s[:j]
-    return Trajectory(tr.method, "", tr.path[:j], tr.energy_J[:j], j, None, t_s)
+    return dataclasses.replace(
+        tr, outcome="", path=tr.path[:j], energy_J=tr.energy_J[:j], steps=j, time_s=None, t_s=t_s
+    )
 
 
 def footprint_budget_bytes(scene, n_pads: int) -> int:
@@ -81,12 +81,15 @@ def footprint_words(fp: dict) -> str:
     )
 
 
-def simulate_footprint(scene, start, method: str, max_steps: int, dynamics, backend: str):
+def simulate_footprint(
+    scene, start, method: str, max_steps: int, dynamics, backend: str, simulate
+) -> dict:
     """:func:`simulator.motion.simulate` with the footprint as the run's state (module
-    docstring); the returned trajectory's ``footprint`` says where the liquid was."""
+    docstring): the fields of the joined trajectory, ``footprint`` among them (where the
+    liquid was), for the caller to make the trajectory of. ``simulate`` runs each piece
+    on a given landscape (the caller's own function, passed in)."""
     from simulator.landscape import build_footprint_planes, pad_labels
     from simulator.liquid import dispensed_wet
-    from simulator.motion._trajectory import Trajectory, simulate
 
     t0 = time.perf_counter()
     proto = scene.liquid.dispense
@@ -187,16 +190,16 @@ def simulate_footprint(scene, start, method: str, max_steps: int, dynamics, back
         "footprint_pieces": len(pieces),
         "total_s": time.perf_counter() - t0,
     }
-    return Trajectory(
-        method,
-        outcome,
-        path,
-        energy,
-        steps,
-        time_s,
-        t_s,
-        cost,
-        optimum=None if last is None else last.optimum,
-        refined=None if last is None else last.refined,
-        footprint=footprint,
-    )
+    return {
+        "method": method,
+        "outcome": outcome,
+        "path": path,
+        "energy_J": energy,
+        "steps": steps,
+        "time_s": time_s,
+        "t_s": t_s,
+        "cost": cost,
+        "optimum": None if last is None else last.optimum,
+        "refined": None if last is None else last.refined,
+        "footprint": footprint,
+    }

@@ -187,7 +187,9 @@ def simulate(
         # The footprint as the run's state (docs/physics.md §3.5): on the pads' planes.
         from simulator.motion._footprint_run import simulate_footprint
 
-        return simulate_footprint(scene, start, method, max_steps, dynamics, backend)
+        return Trajectory(
+            **simulate_footprint(scene, start, method, max_steps, dynamics, backend, simulate)
+        )
     if landscape is None and not dynamic:
         from simulator.motion._pathrun import choose_engine
 

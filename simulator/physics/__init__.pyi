@@ -2,6 +2,8 @@
 
 from ._footprint import (
     DISPENSE as DISPENSE,
+    STEP_PX as STEP_PX,
+    TOUCH_PX2 as TOUCH_PX2,
     FootprintRules as FootprintRules,
     StepProfile as StepProfile,
     cap_radius_um as cap_radius_um,

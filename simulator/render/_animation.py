@@ -106,12 +106,17 @@ def frame_indices(traj, max_frames: int = 120) -> np.ndarray:
     return np.unique(np.concatenate([[0], np.clip(idx, 0, n - 1), [n - 1]]))
 
 
+#: The tint of a wet pad in a trajectory's frames (the footprint as the run's state).
+WET_RGBA = (0.30, 0.62, 1.0, 0.42)
+
+
 class TrajectoryAnimation:
     """Frames of a trajectory: the chip over the pattern, and its energy and twist so far.
 
     Left: the pattern (white = wettable, grey = substrate; anything outside the image
     is substrate), the chip outline at the current pose (red), its start pose
-    (dashed), and the path of its centre so far (blue). Right: energy (nJ) and twist
+    (dashed), and the path of its centre so far (blue); with the footprint as the run's
+    state (``--dispense``), the pads wet at that frame tinted blue. Right: energy (nJ) and twist
     (deg) against step, or time (ms) for dynamics, with a marker at the current
     frame. The static parts are drawn once; each frame redraws only the moving
     artists (blitting), so a frame costs a few milliseconds.
@@ -135,6 +140,24 @@ class TrajectoryAnimation:
         self.fig = Figure(figsize=(size_px[0] / dpi, size_px[1] / dpi), dpi=dpi)
         self.canvas = FigureCanvasAgg(self.fig)
         self._draw_static(scene)
+        self._wet_now = None
+        self.wet = None
+        if traj.footprint is not None:
+            from simulator.landscape import pad_labels
+
+            self._labels = pad_labels(scene.pattern)[0]
+            pat = scene.pattern
+            self.wet = self.ax.imshow(
+                np.zeros(pat.shape + (4,)),
+                extent=pat.extent_um,
+                origin="upper",
+                interpolation="nearest",
+                zorder=2,
+                animated=True,
+            )
+            self.ax.set_title(
+                "red: chip now · dashed: at start · blue: path · tinted: wet pads", fontsize=9
+            )
         self.canvas.draw()
         self._background = self.canvas.copy_from_bbox(self.fig.bbox)
 
@@ -255,18 +278,42 @@ class TrajectoryAnimation:
 
     # -- frames
     def title_of(self, i: int) -> str:
-        """The frame title at path index ``i``: step (or time), pose, and the outcome at the end."""
+        """The frame title at path index ``i``: step (or time), pose, the wet pads with the
+        footprint state, and the outcome at the end."""
         x, y, t = (round(float(v), 1) + 0.0 for v in self.path[i])
         n = len(self.path) - 1
         when = f"t = {self.xs[i]:.2f} ms" if self.traj.t_s is not None else f"step {i}/{n}"
         text = f"{self.traj.method}: {when}   chip at x {x:g} µm, y {y:g} µm, twist {t:g}°"
+        if self.traj.footprint is not None:
+            wet = self.wet_pads(i)
+            text += "   wet: " + (", ".join(str(k) for k in wet) if wet else "none")
         return text + (f"   → {self.traj.outcome}" if i == n else "")
+
+    def wet_pads(self, i: int) -> tuple[int, ...]:
+        """The pads wet at path index ``i`` (the footprint's initial pads and its events up to
+        ``i``), or () without the footprint state."""
+        fp = self.traj.footprint
+        if fp is None:
+            return ()
+        wet = set(fp["initial"])
+        for e in fp["events"]:
+            if e["step"] <= i:
+                (wet.add if e["state"] == "wet" else wet.discard)(e["pad"])
+        return tuple(sorted(wet))
 
     def frame(self, i: int) -> np.ndarray:
         """The (H, W, 3) uint8 RGB picture at path index ``i``."""
         from matplotlib.path import Path
 
         self.canvas.restore_region(self._background)
+        if self.wet is not None:
+            now = self.wet_pads(i)
+            if now != self._wet_now:
+                rgba = np.zeros(self._labels.shape + (4,))
+                rgba[np.isin(self._labels, now)] = WET_RGBA
+                self.wet.set_data(rgba)
+                self._wet_now = now
+            self.fig.draw_artist(self.wet)
         self.chip.set_path(Path(_place(self._verts, self.path[i]), self._codes))
         self.trail.set_data(self.path[: i + 1, 0], self.path[: i + 1, 1])
         self.centre.set_data(self.path[i : i + 1, 0], self.path[i : i + 1, 1])
