@@ -242,8 +242,8 @@ def test_batch_and_other_commands_refuse_dispense_in_one_line(run_cli):
     args += ["--resolution", "10", "--no-twist", "--dispense", "chip"]
     rc, _, err = run_cli(["montecarlo", *args, "--random", "4", "--spread", "10,10,0"])
     one_line_error(rc, err, "--dispense chip", "selfalign montecarlo")
-    rc, _, err = run_cli(["energy", *args, "--at", "0,0,0"])
-    one_line_error(rc, err, "--dispense chip", "selfalign energy")
+    rc, _, err = run_cli(["evaluate", LIB / "four_pad_730_100.png", *args[2:], "--out", "r0"])
+    one_line_error(rc, err, "--dispense chip", "selfalign evaluate")
     s = fourpad(100, dispense="chip")
     from simulator.batch import run_batch
 
@@ -362,3 +362,30 @@ def test_pattern_dispense_follows_the_evolver_outward_branch(gap):
             assert f[i] == pytest.approx(float(r["force_x_N"]), rel=0.10), x
             checked += 1
     assert checked >= 8
+
+
+def test_energy_samples_are_chips_released_at_each_pose(run_cli, tmp_path):
+    # --dispense chip on 730/100 at 5 um/px: released at 400 um the far pads are 85 um away
+    # (dry: the zero-force part), at 330 um 15 um away (reached: wet, the interior force);
+    # the curve's plateau is the chip protocol's flat part, each sample released anew
+    out = tmp_path / "e.json"
+    rc, stdout, err = run_cli(
+        ["energy", "--pattern", LIB / "four_pad_730_100.png", "--chip-size", "730", "--meniscus"]
+        + ["--resolution", "5", "--no-twist", "--dispense", "chip", "--at", "400,0,0"]
+        + ["--at", "330,0,0", "--curve", "x", "--from", "300", "--to", "460", "--json", out]
+    )
+    assert rc == 0, err
+    d = json.loads(out.read_text())
+    far, near = d["poses"]
+    assert far["wet_pads"] == [2, 4] and far["force_N"][0] == 0.0
+    assert near["wet_pads"] == [1, 2, 3, 4]
+    s = fourpad(100)
+    assert near["force_N"][0] == pytest.approx(
+        s.delta_gamma_N_m * -(730 - 100) * 1e-6 * -1, rel=0.03
+    )
+    c = d["curve"]
+    assert len(c["wet_pads"]) == len(c["values_um"])
+    ((lo, hi),) = c["plateaus_um"]
+    # the plateau: from the snap (the far pads' edge at 315 um + d_s = 21.7 um) to where the
+    # trailing line leaves the near pads (the stateless model's onset, 434 um): within a sample
+    assert 336.7 - 5 <= lo <= 336.7 + 5 and 430 <= hi <= 440

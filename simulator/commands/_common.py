@@ -385,9 +385,12 @@ def scene_from_args(
         from simulator.liquid import check_scene_volume
 
         check_scene_volume(scene)
-    if scene.liquid.dispense is not None and getattr(args, "command", None) != "simulate":
+    if scene.liquid.dispense is not None and getattr(args, "command", None) not in (
+        "simulate",
+        "energy",
+    ):
         raise InputError(
-            f"--dispense {scene.liquid.dispense}: the footprint state is carried by simulate only so far; "
+            f"--dispense {scene.liquid.dispense}: the footprint state is carried by simulate and energy only so far; "
             f"selfalign {getattr(args, 'command', 'this command')} runs the stateless footprint: leave --dispense "
             "(or [liquid] dispense) out, or run selfalign simulate per start"
         )

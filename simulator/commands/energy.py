@@ -70,11 +70,34 @@ def run(args: argparse.Namespace) -> int:
     twists = [p[2] for p in poses]
     if args.curve == "twist":
         twists += [args.start, args.stop]
-    ls = build_landscape(scene, twists=twists_around(scene, twists))
     x, y, t = (np.array(v) for v in zip(*poses, strict=True))
-    energy = ls.energy_at(x, y, t)
-    fx, fy = ls.force_at(x, y, t)
-    torque = ls.torque_at(x, y, t)
+    planes = dispensed = None
+    if scene.liquid.dispense is not None:
+        # Each pose is a chip released there onto the footprint the process left (docs/physics.md §3.5).
+        from simulator.landscape import build_footprint_planes
+        from simulator.liquid import dispensed_footprint
+        from simulator.motion import require_footprint_fits
+
+        require_footprint_fits(scene)
+        planes = build_footprint_planes(scene, twists=twists_around(scene, twists))
+        dispensed, why = dispensed_footprint(scene, planes.labels, planes.n_pads)
+        print(
+            f"footprint (--dispense {scene.liquid.dispense}): {why}; each pose is a chip released there"
+        )
+        ls = planes.template
+        wet_at = [planes.next_state(dispensed, p) for p in poses]
+        energy, fx, fy, torque = (np.empty(len(poses)) for _ in range(4))
+        for i, w in enumerate(wet_at):
+            lw = planes.landscape(w)
+            energy[i] = lw.energy_at(x[i], y[i], t[i])
+            fxi, fyi = lw.force_at(x[i], y[i], t[i])
+            fx[i], fy[i], torque[i] = fxi, fyi, lw.torque_at(x[i], y[i], t[i])
+    else:
+        ls = build_landscape(scene, twists=twists_around(scene, twists))
+        wet_at = None
+        energy = ls.energy_at(x, y, t)
+        fx, fy = ls.force_at(x, y, t)
+        torque = ls.torque_at(x, y, t)
     area = ls.overlap_um2(energy)
     fx, fy, torque = fx + 0.0, fy + 0.0, torque + 0.0  # no "-0" in the output
     rows = []
@@ -89,10 +112,21 @@ def run(args: argparse.Namespace) -> int:
                 "force_N": [float(fx[i]), float(fy[i])],
                 "torque_Nm": float(torque[i]),
             }
+            | (
+                {}
+                if wet_at is None
+                else {"wet_pads": [int(k) + 1 for k in np.flatnonzero(wet_at[i])]}
+            )
         )
         print(
             f"pose ({px:g} um, {py:g} um, {pt:g} deg): overlap {area[i]:,.1f} um^2, energy {energy[i]:.6e} J, "
             f"force ({fx[i]:.4e}, {fy[i]:.4e}) N, torque {torque[i]:.4e} N m"
+            + (
+                ""
+                if wet_at is None
+                else "; wet pads: "
+                + (", ".join(str(k + 1) for k in np.flatnonzero(wet_at[i])) or "none")
+            )
         )
     result = {
         "poses": rows,
@@ -105,7 +139,11 @@ def run(args: argparse.Namespace) -> int:
     }
     cur = None
     if args.curve:
-        cur = ls.curve(args.curve, poses[0], args.start, args.stop)
+        cur = (
+            ls.curve(args.curve, poses[0], args.start, args.stop)
+            if planes is None
+            else planes.released_curve(dispensed, args.curve, poses[0], args.start, args.stop)
+        )
         unit = "deg" if args.curve == "twist" else "um"
         funit = "Nm" if args.curve == "twist" else "N"
         result["curve"] = {
@@ -116,7 +154,7 @@ def run(args: argparse.Namespace) -> int:
             f"force_{funit}": cur["force"].tolist(),
             f"plateaus_{unit}": cur["plateaus"],
             f"no_contact_{unit}": cur["no_contact"],
-        }
+        } | ({"wet_pads": cur["wet"]} if "wet" in cur else {})
         print(
             f"curve along {args.curve} through the first pose, {cur['values'][0]:g} to {cur['values'][-1]:g} {unit}, {len(cur['values'])} samples"
         )

@@ -97,6 +97,38 @@ class FootprintPlanes:
         it = it % n_t if g.wrap else min(max(it, 0), n_t - 1)
         return it, min(max(iy, 0), ny - 1), min(max(ix, 0), nx - 1)
 
+    def released_curve(self, dispensed, axis: str, through, start: float, stop: float) -> dict:
+        """:meth:`Landscape.curve` where each sample is a chip released at that pose onto the
+        footprint ``dispensed`` (its state: :meth:`next_state` there), not a continuation
+        along the curve; ``wet`` holds each sample's wet pads (1..n)."""
+        from ._landscape import runs
+
+        ref = self.template.curve(axis, through, start, stop)  # the samples, checked
+        v = ref["values"]
+        poses = np.tile(np.asarray(through, float), (len(v), 1))
+        poses[:, {"x": 0, "y": 1, "twist": 2}[axis]] = v
+        states = [tuple(np.flatnonzero(self.next_state(dispensed, p)) + 1) for p in poses]
+        e, force = np.empty(len(v)), np.empty(len(v))
+        floor = 0.0
+        for st in set(states):
+            wet = np.zeros(self.n_pads, bool)
+            wet[np.asarray(st, int) - 1] = True
+            ls = self.landscape(wet)
+            c = ls.curve(axis, through, start, stop)
+            sel = np.array([s == st for s in states])
+            e[sel], force[sel] = c["energy_J"][sel], c["force"][sel]
+            floor = ls.noise_floor_J
+        detached = np.abs(e) <= floor
+        return {
+            "axis": axis,
+            "values": v,
+            "energy_J": e,
+            "force": force,
+            "plateaus": runs(v, (force == 0) & ~detached),
+            "no_contact": runs(v, detached),
+            "wet": [list(map(int, s)) for s in states],
+        }
+
     def next_state(self, wet, pose) -> np.ndarray:
         """The pads' state once the chip, with the footprint ``wet``, is at ``pose``."""
         from simulator.physics import relay
@@ -106,13 +138,14 @@ class FootprintPlanes:
 
 
 def build_footprint_planes(
-    scene: Scene, backend: str = "auto", progress: bool = False
+    scene: Scene, backend: str = "auto", progress: bool = False, twists=None
 ) -> FootprintPlanes:
     """The per-pad planes of ``scene`` over its whole pose grid (module docstring).
 
     Needs the finite meniscus with free contact lines of a pixel or more
     (``scene.wall_profile``); the pads' receding angle is the hysteresis window's when the
-    scene declares one, else their Young angle.
+    scene declares one, else their Young angle. ``twists``: only these (as
+    :func:`build_landscape`'s), default the scene's whole twist axis.
     """
     from simulator.physics import STEP_PX, TOUCH_PX2, FootprintRules
 
@@ -160,6 +193,7 @@ def build_footprint_planes(
         for name, p in (("wall", prof), *counts.items()):
             ls = build_landscape(
                 _variant(scene, mk, p),
+                twists=twists,
                 backend=backend,
                 extent=extent,
                 label=f"footprint plane {name}, pad {k + 1} of {n}",

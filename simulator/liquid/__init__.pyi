@@ -29,7 +29,10 @@ from ._critical_volume import (
     min_plus as min_plus,
     minimise_footprint as minimise_footprint,
 )
-from ._dispense import dispensed_wet as dispensed_wet
+from ._dispense import (
+    dispensed_footprint as dispensed_footprint,
+    dispensed_wet as dispensed_wet,
+)
 from ._warnings import (
     check_scene_volume as check_scene_volume,
     four_pad_geometry as four_pad_geometry,

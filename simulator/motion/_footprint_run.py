@@ -89,18 +89,14 @@ def simulate_footprint(
     liquid was), for the caller to make the trajectory of. ``simulate`` runs each piece
     on a given landscape (the caller's own function, passed in)."""
     from simulator.landscape import build_footprint_planes, pad_labels
-    from simulator.liquid import dispensed_wet
+    from simulator.liquid import dispensed_footprint
 
     t0 = time.perf_counter()
     proto = scene.liquid.dispense
     require_footprint_fits(scene)
     _, n = pad_labels(scene.pattern)
     planes = build_footprint_planes(scene, backend=backend)
-    if proto == "pattern":
-        dispensed, why = dispensed_wet(scene, planes.labels, n, scene.liquid.dispense_at_um)
-    else:
-        dispensed = np.zeros(n, bool)
-        why = "the liquid comes in under the chip: it wets the pads the chip's liquid reaches"
+    dispensed, why = dispensed_footprint(scene, planes.labels, n)
     # "aligned": against the minimum with every pad wet (the aligned pose on the whole
     # pattern), not the current state's (a state with only some pads wet has its own).
     reference = planes.landscape(np.ones(n, bool))
