@@ -380,9 +380,7 @@ def test_energy_samples_are_chips_released_at_each_pose(run_cli, tmp_path):
     assert far["wet_pads"] == [2, 4] and far["force_N"][0] == 0.0
     assert near["wet_pads"] == [1, 2, 3, 4]
     s = fourpad(100)
-    assert near["force_N"][0] == pytest.approx(
-        s.delta_gamma_N_m * -(730 - 100) * 1e-6 * -1, rel=0.03
-    )
+    assert near["force_N"][0] == pytest.approx(s.delta_gamma_N_m * (730 - 100) * 1e-6, rel=0.03)
     c = d["curve"]
     assert len(c["wet_pads"]) == len(c["values_um"])
     ((lo, hi),) = c["plateaus_um"]

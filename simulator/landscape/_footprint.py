@@ -46,6 +46,23 @@ def _variant(scene: Scene, pattern: Mask, profile) -> Scene:
     return s
 
 
+def footprint_poses(scene: Scene) -> int:
+    """Poses of the grid the pads' planes share (:func:`build_footprint_planes`): the scene's
+    reach widened to the furthest count footprint (a band just beyond ``d_r``), so larger
+    than the stateless landscape's when the receding angle is small. No rotation, no build."""
+    from simulator.physics import FootprintRules
+
+    from ._build import estimate_bytes
+
+    prof = scene.wall_profile
+    if prof is None:
+        return estimate_bytes(scene) // np.dtype(scene.dtype).itemsize
+    m = scene.materials
+    rules = FootprintRules.of(prof, m.pad_receding_deg if scene.effects.hysteresis else None)
+    wide = _variant(scene, scene.pattern, rules.count_profiles()["band_out"])
+    return estimate_bytes(wide) // np.dtype(scene.dtype).itemsize
+
+
 @dataclass(frozen=True, eq=False)
 class FootprintPlanes:
     """Per-pad planes of one scene on one pose grid (module docstring).
@@ -184,43 +201,57 @@ def build_footprint_planes(
                 float(((h / 2 - rr - 0.5) * wk).sum() / wk.sum()) * s,
             )
         )
-    # Pad by pad, each reduced to its wet energy and two flags as soon as its five planes are
-    # made: the peak holds the pads' results and one pad's planes.
+    # Pad by pad, each plane reduced to what the state needs as soon as it is made (the wet
+    # energy in place, the counts to flags): the peak holds the pads' results, two planes
+    # and a build.
     template = None
-    wet_energy, reached, within = [], [], []
-    for k, mk in enumerate(pads):
-        got = {}
-        for name, p in (("wall", prof), *counts.items()):
-            ls = build_landscape(
-                _variant(scene, mk, p),
-                twists=twists,
-                backend=backend,
-                extent=extent,
-                label=f"footprint plane {name}, pad {k + 1} of {n}",
-            )
-            template = ls if template is None else template
-            got[name] = ls.energy if name == "wall" else ls.energy / ls.joules_per_px2  # J, px^2
-        assert template is not None  # made just above
-        n_b = 0.5 * (got["band_in"] + got["band_out"])
-        line = (got["band_out"] - got["band_in"]) / STEP_PX
-        bridged = (n_b - (rules.band_px - rules.f_inf) * line) * template.joules_per_px2
-        if deep[k]:
-            wet_energy.append(
-                np.where(
-                    got["covered"] >= TOUCH_PX2, got["wall"], bridged.astype(got["wall"].dtype)
-                )
-            )
-        else:  # a pad narrower than the band: its far edge would take from the bridged term
-            wet_energy.append(got["wall"])
-        reached.append(got["reached"] >= TOUCH_PX2)
-        within.append(got["within"] >= TOUCH_PX2)
-        del got, n_b, line, bridged
-    assert template is not None  # a pattern has a pad (Scene checks it is not empty)
+    wet_energy = reached = within = None
+
+    def plane(k: int, name: str, profile) -> Landscape:
+        return build_landscape(
+            _variant(scene, pads[k], profile),
+            twists=twists,
+            backend=backend,
+            extent=extent,
+            label=f"footprint plane {name}, pad {k + 1} of {n}",
+        )
+
+    for k in range(n):
+        ls = plane(k, "wall", prof)
+        if template is None:
+            template = ls
+            shape = (n, *ls.energy.shape)
+            wet_energy = np.empty(shape, ls.energy.dtype)
+            reached, within = np.empty(shape, bool), np.empty(shape, bool)
+        assert wet_energy is not None and reached is not None and within is not None
+        jp = ls.joules_per_px2
+        wet_energy[k] = ls.energy
+        del ls
+        reached[k] = plane(k, "reached", counts["reached"]).energy / jp >= TOUCH_PX2
+        within[k] = plane(k, "within", counts["within"]).energy / jp >= TOUCH_PX2
+        if not deep[
+            k
+        ]:  # a pad narrower than the band: its far edge would take from the bridged term
+            continue
+        bare = plane(k, "covered", counts["covered"]).energy / jp < TOUCH_PX2
+        # bridged = jp [N(b) - (b - F_inf) l(b)], N(b) the mean of the band's two counts and
+        # l(b) their difference over the step: a weighted sum of the two, made in place
+        c = (rules.band_px - rules.f_inf) / STEP_PX
+        bridged = plane(k, "band_in", counts["band_in"]).energy / jp
+        bridged *= 0.5 + c
+        outer = plane(k, "band_out", counts["band_out"]).energy / jp
+        outer *= 0.5 - c
+        bridged += outer
+        del outer
+        bridged *= jp
+        np.copyto(wet_energy[k], bridged, where=bare)
+        del bridged, bare
+    assert template is not None and wet_energy is not None  # a pattern has a pad
     return FootprintPlanes(
         rules=rules,
-        wet_energy=np.stack(wet_energy),
-        reached=np.stack(reached),
-        within_reach=np.stack(within),
+        wet_energy=wet_energy,
+        reached=reached,
+        within_reach=within,
         template=template,
         pad_area_um2=np.asarray(areas),
         pad_centre_um=np.asarray(centres),
