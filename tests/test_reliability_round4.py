@@ -1,0 +1,94 @@
+"""Issue 36, round 4: inputs that crashed or were refused without naming themselves, the Python
+API's argument checks, messages in the command line's own spelling, all-or-nothing outputs on a
+full disk, and outputs that never replace a file the user did not ask to replace."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import ezdxf
+import pytest
+from cli_helpers import one_line_error  # tests/cli_helpers.py
+
+from patterns.errors import InputError
+
+ROOT = Path(__file__).resolve().parents[1]
+SEARCH_EXAMPLE = ROOT / "examples" / "design_fourpad_gap.toml"
+
+
+# ------------------------------------------------------------------ item 2: crashes
+def _search_file(tmp_path: Path, objective: str) -> Path:
+    text = SEARCH_EXAMPLE.read_text()
+    assert 'maximize = "gap_um"' in text
+    p = tmp_path / "search.toml"
+    p.write_text(text.replace('maximize = "gap_um"', f'maximize = "{objective}"'))
+    return p
+
+
+@pytest.mark.parametrize(
+    "objective, needle",
+    [
+        ("gap_um + " + "9" * 400, "is not a finite number"),  # OverflowError in math.isfinite
+        ("-" * 490 + "gap_um", "nests more than 100 levels deep"),  # named neither file nor key
+    ],
+)
+def test_search_objective_refusals_name_the_file_and_the_key(tmp_path, run_cli, objective, needle):
+    spec = _search_file(tmp_path, objective)
+    out = tmp_path / "out"
+    rc, _, err = run_cli(["design", spec, "--out", out])
+    one_line_error(rc, err, f"{spec}: [search] maximize", needle)
+    assert not out.exists()
+
+
+def test_search_objective_nesting_counts_the_tree_not_the_parentheses(tmp_path):
+    from simulator.design import load_search
+
+    spec = _search_file(tmp_path, "(" * 120 + "gap_um" + ")" * 120 + " + " + "-" * 90 + "1")
+    assert load_search(spec).objectives[0].expression.columns == ("gap_um",)
+
+
+def test_search_constraint_with_a_huge_integer_names_its_index(tmp_path):
+    from simulator.design import load_search
+
+    text = SEARCH_EXAMPLE.read_text().replace(
+        '"volume_nl >= critical_volume_nl"', '"volume_nl >= ' + "1" * 400 + '"'
+    )
+    spec = tmp_path / "s.toml"
+    spec.write_text(text)
+    with pytest.raises(InputError, match=r"\[search\] constraints\[1\]: .*not a finite number"):
+        load_search(spec)
+
+
+def _dxf_with_scaled_insert(tmp_path: Path, xscale: str) -> Path:
+    """A DXF whose model space inserts block PAD (a 10 um square) with the x-scale ``xscale``
+    as written in the file (ezdxf itself would never write a zero scale)."""
+    doc = ezdxf.new("R2010")
+    doc.header["$INSUNITS"] = 13
+    pad = doc.blocks.new("PAD")
+    pad.add_lwpolyline([(0, 0), (10, 0), (10, 10), (0, 10)], close=True, dxfattribs={"layer": "0"})
+    doc.layers.add("PADS")
+    doc.modelspace().add_blockref("PAD", (0, 0), dxfattribs={"layer": "PADS", "xscale": 2})
+    good = tmp_path / "good.dxf"
+    doc.saveas(good)
+    text = good.read_text()
+    assert text.count(" 41\n2.0\n") == 1
+    p = tmp_path / f"scale_{xscale}.dxf"
+    p.write_text(text.replace(" 41\n2.0\n", f" 41\n{xscale}\n"))
+    return p
+
+
+@pytest.mark.parametrize("xscale", ["0.0", "1e-320", "nan"])
+def test_dxf_insert_with_a_degenerate_scale_is_one_line(tmp_path, run_cli, xscale):
+    p = _dxf_with_scaled_insert(tmp_path, xscale)
+    rc, out, err = run_cli(
+        ["energy", "--pattern", p, "--chip-size", "10", "--resolution", "1", "--at", "0,0,0"]
+    )
+    one_line_error(rc, err, f"{p}: modelspace", "block PAD", "non-zero scale")
+    assert out == ""
+
+
+def test_dxf_insert_with_a_normal_scale_still_reads(tmp_path):
+    from patterns.layout import read_layout
+
+    p = _dxf_with_scaled_insert(tmp_path, "3.0")
+    assert read_layout(p).geometry("PADS").area == pytest.approx(300)
