@@ -4,9 +4,11 @@ full disk, and outputs that never replace a file the user did not ask to replace
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import ezdxf
+import numpy as np
 import pytest
 from cli_helpers import one_line_error  # tests/cli_helpers.py
 
@@ -92,3 +94,82 @@ def test_dxf_insert_with_a_normal_scale_still_reads(tmp_path):
 
     p = _dxf_with_scaled_insert(tmp_path, "3.0")
     assert read_layout(p).geometry("PADS").area == pytest.approx(300)
+
+
+# ------------------------------------------------------------------ item 3: the Python API's checks
+@pytest.fixture(scope="module")
+def small_scene():
+    from patterns.geometry import square
+    from patterns.raster import mask_from_geometry
+    from simulator.scene import Scene
+
+    return Scene(
+        pattern=mask_from_geometry(square(100), 5), chip=mask_from_geometry(square(100), 5)
+    )
+
+
+@pytest.mark.parametrize(
+    "kwargs, needle",
+    [
+        ({"twists": [math.nan]}, "twists must be a non-empty list of finite twists"),
+        ({"twists": [math.inf, 0.0]}, "twists must be a non-empty list of finite twists"),
+        ({"twists": [[1.0, 2.0]]}, "twists must be a non-empty list of finite twists"),
+        ({"half_px": -5}, "half_px must be a whole number of pixels >= 0"),
+        ({"half_px": 2.5}, "half_px must be a whole number of pixels >= 0"),
+        ({"center_px": (math.nan, 0)}, "center_px must be two finite numbers"),
+        ({"center_px": (1, 2, 3)}, "center_px must be two finite numbers"),
+    ],
+)
+def test_build_landscape_refuses_bad_arguments_with_input_error(small_scene, kwargs, needle):
+    from simulator.landscape import build_landscape
+
+    with pytest.raises(InputError, match=needle):
+        build_landscape(small_scene, **kwargs)
+
+
+def test_build_landscape_still_takes_whole_numbers_of_any_type(small_scene):
+    from simulator.landscape import build_landscape
+
+    ls = build_landscape(
+        small_scene, twists=[0.0], center_px=(np.int64(1), 2.0), half_px=np.int64(3)
+    )
+    assert ls.energy.shape == (1, 7, 7)
+    assert build_landscape(small_scene, twists=[0.0], half_px=0).energy.shape == (1, 1, 1)
+
+
+@pytest.mark.parametrize("size", [(1, 2, 3), (100,), [[1, 2]], True, "100x50", (100, None)])
+def test_scene_chip_size_of_the_wrong_shape_is_an_input_error(size):
+    from patterns.geometry import square
+    from patterns.raster import mask_from_geometry
+    from simulator.scene import Scene
+
+    with pytest.raises(InputError, match="chip"):
+        Scene.from_inputs(pattern=mask_from_geometry(square(100), 5), chip_size_um=size)
+
+
+def test_scene_chip_size_of_one_or_two_numbers_still_makes_the_chip():
+    from patterns.geometry import square
+    from patterns.raster import mask_from_geometry
+    from simulator.scene import Scene
+
+    pattern = mask_from_geometry(square(100), 5)
+    assert Scene.from_inputs(pattern=pattern, chip_size_um=50).chip.area_um2 == pytest.approx(2500)
+    rect = Scene.from_inputs(pattern=pattern, chip_size_um=np.array([100, 50.0])).chip
+    assert rect.area_um2 == pytest.approx(5000)
+
+
+@pytest.mark.parametrize("data", [np.full((4, 4), 0.5 + 0.5j), [[0.5 + 0j, 1.0]]])
+def test_mask_refuses_complex_values(data, recwarn):
+    from patterns.mask import Mask
+
+    with pytest.raises(InputError, match="real-valued image, got complex values"):
+        Mask(data, 1.0)
+    assert not [w for w in recwarn if "ComplexWarning" in str(w.category)]
+
+
+def test_mask_refuses_text_and_takes_real_numbers():
+    from patterns.mask import Mask
+
+    with pytest.raises(InputError, match="image of numbers"):
+        Mask(np.array([["a", "b"]]), 1.0)
+    assert Mask(np.array([[0, 1]], dtype=np.uint8), 2.0).area_um2 == 4.0
