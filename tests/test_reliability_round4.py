@@ -173,3 +173,53 @@ def test_mask_refuses_text_and_takes_real_numbers():
     with pytest.raises(InputError, match="image of numbers"):
         Mask(np.array([["a", "b"]]), 1.0)
     assert Mask(np.array([[0, 1]], dtype=np.uint8), 2.0).area_um2 == 4.0
+
+
+# ------------------------------------------------------------------ item 4: messages
+SQUARE_ARGS = ["--chip-size", "100", "--resolution", "5", "--at", "0,0,0"]
+
+
+def _square_png(tmp_path: Path) -> Path:
+    from patterns.geometry import square
+    from patterns.io import write_mask
+    from patterns.raster import mask_from_geometry
+
+    return write_mask(tmp_path / "square.png", mask_from_geometry(square(100), 5))
+
+
+def test_repulsive_refusal_names_the_command_line_flag(tmp_path, run_cli):
+    png = _square_png(tmp_path)
+    rc, _, err = run_cli(
+        ["energy", "--pattern", png, *SQUARE_ARGS, "--pad-angle", "70", "--substrate-angle", "40"]
+    )
+    one_line_error(rc, err, "Delta_gamma", "pass --allow-repulsive to study")
+    assert "allow_repulsive" not in err
+
+
+def test_repulsive_refusal_from_a_scene_file_names_its_key_too(tmp_path, run_cli):
+    png = _square_png(tmp_path)
+    scene = tmp_path / "scene.toml"
+    scene.write_text("[materials]\npad_angle_deg = 70\nsubstrate_angle_deg = 40\n")
+    rc, _, err = run_cli(["energy", scene, "--pattern", png, *SQUARE_ARGS])
+    one_line_error(rc, err, "pass --allow-repulsive", "allow_repulsive = true under [materials]")
+    assert "allow_repulsive=True" not in err
+    rc, out, err = run_cli(["energy", scene, "--pattern", png, *SQUARE_ARGS, "--allow-repulsive"])
+    assert rc == 0, err
+
+
+def test_simulate_help_says_the_path_engine_covers_free_contact_lines(tmp_path, run_cli):
+    rc, out, _ = run_cli(["simulate", "--help"])
+    assert rc == 0
+    text = " ".join(out.split())
+    assert "no free contact lines" not in text
+    assert "free contact lines' footprint" in text and "not the K_h-blurred meniscus" in text
+    # ... as the engine itself says: a free-contact-line scene is covered, the K_h one is not.
+    from simulator.landscape import path_engine_supported
+    from simulator.scene import Scene
+
+    base = {"pattern": str(_square_png(tmp_path)), "chip_size_um": 100, "resolution_um": 5}
+    wet = {"effects": {"meniscus": True}, "liquid": {"volume_nl": 0.2}}  # 20 um high: 4 px
+    free = Scene.from_dict(base | wet)
+    assert free.wall_profile is not None and path_engine_supported(free) == (True, "")
+    pinned = Scene.from_dict(base | wet | {"liquid": {"volume_nl": 0.2, "pinned": True}})
+    assert not path_engine_supported(pinned)[0]  # the K_h-blurred chip

@@ -359,9 +359,12 @@ def scene_from_args(
             (doc.setdefault(table, {}) if table else doc)[key] = value
     if getattr(args, "accuracy", None):
         doc["accuracy"] = args.accuracy
-    scene = Scene.from_dict(
-        doc, base=base
-    )  # the accuracy preset applies here, as for Scene.from_toml
+    try:
+        scene = Scene.from_dict(
+            doc, base=base
+        )  # the accuracy preset applies here, as for Scene.from_toml
+    except InputError as err:
+        raise InputError(_cli_spelling(str(err), bool(args.scene))) from None
     if "volume_nl" in (
         doc.get("liquid") or {}
     ):  # a volume as typed: a film thicker than the chip is refused
@@ -375,6 +378,26 @@ def scene_from_args(
 
         print(frame_note(scene.pattern.params["layout"]), file=sys.stderr)
     return scene
+
+
+#: Python keyword spellings in the scene's messages: the command-line flag and the scene file's key.
+_PY_TO_CLI = {
+    "pass allow_repulsive=True": (
+        "pass --allow-repulsive",
+        "allow_repulsive = true under [materials]",
+    )
+}
+
+
+def _cli_spelling(message: str, scene_file: bool) -> str:
+    """``message`` with a Python keyword the fix names replaced by the command-line flag (and the
+    scene file's key too when the scene comes from a file)."""
+    for py, (flag, key) in _PY_TO_CLI.items():
+        if py in message:
+            message = message.replace(
+                py, flag + (f" (or {key} in the scene file)" if scene_file else "")
+            )
+    return message
 
 
 def accuracy_check(scene: Scene) -> None:

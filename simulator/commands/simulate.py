@@ -48,8 +48,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="how greedy and gradient compute the energies they step on: fft (boxes of the landscape "
         "holding the start and the centre, by FFT correlation), path (small boxes that follow the chip, "
         "pose by pose at the cost of the chip's outline: seconds instead of minutes for chips of "
-        "thousands of px; exact geometry or chip images, no K_h meniscus, no free contact lines) or "
-        "auto (path for chips of at least 1000 x 1000 px greedy, 2000 x 2000 px gradient; default). "
+        "thousands of px; exact geometry, chip images and the free contact lines' footprint, not the "
+        "K_h-blurred meniscus or a meniscus below one pixel) or auto (path where it covers the scene: "
+        "for chips of at least 1000 x 1000 px greedy, 2000 x 2000 px gradient, and for every chip "
+        "with free contact lines; default). "
         "The JSON's cost.engine says which ran",
     )
     d = p.add_argument_group("liquid and chip body (dynamic methods)")
