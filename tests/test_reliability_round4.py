@@ -5,12 +5,14 @@ full disk, and outputs that never replace a file the user did not ask to replace
 from __future__ import annotations
 
 import math
+import subprocess
+import sys
 from pathlib import Path
 
 import ezdxf
 import numpy as np
 import pytest
-from cli_helpers import one_line_error  # tests/cli_helpers.py
+from cli_helpers import listing, one_line_error  # tests/cli_helpers.py
 
 from patterns.errors import InputError
 
@@ -223,3 +225,48 @@ def test_simulate_help_says_the_path_engine_covers_free_contact_lines(tmp_path, 
     assert free.wall_profile is not None and path_engine_supported(free) == (True, "")
     pinned = Scene.from_dict(base | wet | {"liquid": {"volume_nl": 0.2, "pinned": True}})
     assert not path_engine_supported(pinned)[0]  # the K_h-blurred chip
+
+
+# ------------------------------------------------------------------ item 5: all or nothing on a full disk
+SQUARE_200 = str(ROOT / "patterns" / "library" / "square_200.png")  # 200 um square at 1 um/px
+#: A file-size limit the small outputs fit under and the GIF (about 90 kB) does not: every
+#: write past it fails in the kernel (EFBIG), as on a full disk (ENOSPC), as in
+#: tests/test_bad_input_and_safe_outputs.py::test_full_disk_during_output.
+LIMITED = (
+    "import resource, signal, sys; signal.signal(signal.SIGXFSZ, signal.SIG_IGN); "
+    "resource.setrlimit(resource.RLIMIT_FSIZE, (65536, 65536)); "
+    "from simulator.cli import main; sys.exit(main(sys.argv[1:]))"
+)
+
+
+def test_simulate_outputs_are_all_or_nothing_on_a_full_disk(tmp_path):
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            LIMITED,
+            "simulate",
+            "--pattern",
+            SQUARE_200,
+            "--chip-size",
+            "200",
+            "--start",
+            "20,10,0",
+            "--json",
+            "a.json",
+            "--csv",
+            "a.csv",
+            "--plot",
+            "a.png",
+            "--gif",
+            "a.gif",
+            "--quiet",
+        ],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        timeout=300,
+    )
+    one_line_error(proc.returncode, proc.stderr, "cannot write a.gif", "no partial output was kept")
+    assert "wrote" not in proc.stdout  # nothing announced ...
+    assert listing(tmp_path) == []  # ... and nothing kept: not the JSON, CSV or plot written before

@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 
 import numpy as np
 
 from patterns.errors import InputError
+from patterns.outputs import atomic_output
 from simulator.commands._common import (
     accuracy_check,
     add_scene_args,
@@ -139,26 +141,35 @@ def run(args: argparse.Namespace) -> int:
             f"landscape computed: {c['poses_computed']:,} of {c['poses_full']:,} poses ({100 * c['fraction_of_full']:.3g} %), {c['landscape_s']:.2f} s"
             + (" (path engine)" if c.get("engine") == "path" else "")
         )
-    if args.json:
-        write_json(
-            args.json,
-            traj.to_json()
-            | {"liquid_warnings": liquid_warnings, "meniscus_height_um": scene.meniscus_height_um},
-        )
-        print(f"wrote {args.json}")
-    if args.csv:
-        write_path_csv(args.csv, traj)
-        print(f"wrote {args.csv}")
-    if args.plot:
-        from simulator.render import plot_energy_curve
+    written = []
+    with contextlib.ExitStack() as stack:  # every output, or none: each is moved into place
+        # only when all are complete (a full disk on the GIF keeps no JSON either)
+        def into(path):
+            written.append(path)
+            return stack.enter_context(atomic_output(path))
 
-        plot_energy_curve(traj, args.plot)
-        print(f"wrote {args.plot}")
-    if args.gif:
-        from simulator.render import write_trajectory_gif
+        if args.json:
+            write_json(
+                into(args.json),
+                traj.to_json()
+                | {
+                    "liquid_warnings": liquid_warnings,
+                    "meniscus_height_um": scene.meniscus_height_um,
+                },
+            )
+        if args.csv:
+            write_path_csv(into(args.csv), traj)
+        if args.plot:
+            from simulator.render import plot_energy_curve
 
-        n = write_trajectory_gif(scene, traj, args.gif, quiet=args.quiet)
-        print(f"wrote {args.gif} ({n} frames)")
+            plot_energy_curve(traj, into(args.plot))
+        frames = None
+        if args.gif:
+            from simulator.render import write_trajectory_gif
+
+            frames = write_trajectory_gif(scene, traj, into(args.gif), quiet=args.quiet)
+    for path in written:
+        print(f"wrote {path}" + (f" ({frames} frames)" if path == args.gif else ""))
     return 0
 
 
