@@ -270,3 +270,21 @@ def test_simulate_outputs_are_all_or_nothing_on_a_full_disk(tmp_path):
     one_line_error(proc.returncode, proc.stderr, "cannot write a.gif", "no partial output was kept")
     assert "wrote" not in proc.stdout  # nothing announced ...
     assert listing(tmp_path) == []  # ... and nothing kept: not the JSON, CSV or plot written before
+
+
+def test_energy_outputs_are_all_or_nothing(tmp_path, run_cli, monkeypatch):
+    import errno
+
+    import simulator.commands.energy as energy
+
+    def full(path, *args):
+        raise OSError(errno.ENOSPC, "No space left on device", str(path))
+
+    monkeypatch.setattr(energy, "_write_csv", full)  # the CSV, written after the JSON, fails
+    monkeypatch.chdir(tmp_path)
+    rc, out, err = run_cli(
+        ["energy", "--pattern", SQUARE_200, "--chip-size", "200", "--at", "0,0,0"]
+        + ["--json", "e.json", "--csv", "e.csv"]
+    )
+    one_line_error(rc, err, "cannot write e.csv", "no partial output was kept")
+    assert "wrote" not in out and listing(tmp_path) == []
