@@ -288,3 +288,64 @@ def test_energy_outputs_are_all_or_nothing(tmp_path, run_cli, monkeypatch):
     )
     one_line_error(rc, err, "cannot write e.csv", "no partial output was kept")
     assert "wrote" not in out and listing(tmp_path) == []
+
+
+# ------------------------------------------------------------------ item 6: no silent overwrites
+def test_pattern_refuses_an_existing_output_unless_forced(tmp_path, run_cli):
+    for name in ("s.png", "s.gds"):
+        out = tmp_path / name
+        out.write_bytes(b"the user's file")
+        args = ["pattern", "square", "--size", "20", "-o", out]
+        rc, _, err = run_cli(args)
+        one_line_error(rc, err, f"-o {out}: exists", "pass --force to replace it")
+        assert out.read_bytes() == b"the user's file"
+        rc, stdout, err = run_cli([*args, "--force"])
+        assert rc == 0 and stdout.startswith(f"wrote {out}"), err
+        assert out.read_bytes() != b"the user's file"
+    assert listing(tmp_path) == ["s.gds", "s.png"]
+
+
+def test_simulate_refuses_an_existing_gif_before_any_work(tmp_path, run_cli, monkeypatch):
+    import simulator.motion
+
+    def no_run(*args, **kwargs):
+        raise AssertionError("the run started before the output was checked")
+
+    monkeypatch.setattr(simulator.motion, "simulate", no_run)
+    gif = tmp_path / "a.gif"
+    gif.write_bytes(b"GIF89a mine")
+    args = ["simulate", "--pattern", SQUARE_200, "--chip-size", "200", "--start", "20,10,0"]
+    rc, out, err = run_cli([*args, "--json", tmp_path / "a.json", "--gif", gif])
+    one_line_error(rc, err, f"--gif {gif}: exists", "--force")
+    assert out == "" and gif.read_bytes() == b"GIF89a mine" and listing(tmp_path) == ["a.gif"]
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["energy", "--pattern", SQUARE_200, "--chip-size", "200", "--at", "0,0,0", "--csv"],
+        ["montecarlo", "--pattern", SQUARE_200, "--chip-size", "200", "--grid", "0,0", "--json"],
+        ["liquid", "height", "--volume", "1", "--chip-size", "200", "--json"],
+    ],
+)
+def test_every_file_output_refuses_an_existing_file_unless_forced(tmp_path, run_cli, args):
+    out = tmp_path / "old.txt"
+    out.write_text("mine")
+    rc, _, err = run_cli([*args, out])
+    one_line_error(rc, err, f"{out}: exists", "--force")
+    assert out.read_text() == "mine"
+    rc, _, err = run_cli([*args, out, "--force", *(["--quiet"] if args[0] == "montecarlo" else [])])
+    assert rc == 0, err
+    assert out.read_text() != "mine"
+
+
+def test_force_never_replaces_an_input_or_a_link(tmp_path, run_cli):
+    pat = tmp_path / "pad.png"
+    pat.write_bytes(Path(SQUARE_200).read_bytes())
+    args = ["energy", "--pattern", pat, "--chip-size", "200", "--at", "0,0,0", "--force"]
+    rc, _, err = run_cli([*args, "--json", pat])
+    one_line_error(rc, err, "is an input")
+    (tmp_path / "l.json").symlink_to(tmp_path / "t.json")
+    rc, _, err = run_cli([*args, "--json", tmp_path / "l.json"])
+    one_line_error(rc, err, "symbolic link")
+    assert pat.read_bytes() == Path(SQUARE_200).read_bytes()

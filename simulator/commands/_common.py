@@ -477,17 +477,29 @@ def check_outputs(
     """Fail before any work when an output file cannot or must not be written.
 
     ``flags`` are attribute names (``json`` for ``--json``). An output may not be an
-    input, a link, a device or a directory, and two outputs may not name one file.
+    input, a link, a device or a directory, and two outputs may not name one file; one that
+    exists is refused unless ``args.force`` (:func:`add_force_arg`).
     ``doc``: the scene file's document (:func:`scene_document`; default: read here).
     """
-    from patterns.outputs import check_distinct, check_output_file
+    from patterns.outputs import check_distinct, check_output_file, require_new_file
 
     inputs = input_paths(args, doc)
     named = {f"--{f.replace('_', '-')}": getattr(args, f, None) for f in flags}
     for flag, path in named.items():
         if path:
             check_output_file(path, flag, inputs)
+            require_new_file(path, flag, bool(getattr(args, "force", False)))
     check_distinct(named)
+
+
+def add_force_arg(p: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
+    """``--force``: replace output files that exist (refused without it, before any work)."""
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="replace output files that already exist (without it an existing one is refused "
+        "before any work; an input of the run is never replaced)",
+    )
 
 
 def write_json(path: str | os.PathLike, obj: Any) -> None:

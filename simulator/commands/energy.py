@@ -10,6 +10,7 @@ import numpy as np
 from patterns.errors import InputError
 from patterns.outputs import atomic_output
 from simulator.commands._common import (
+    add_force_arg,
     add_scene_args,
     check_outputs,
     parse_pose,
@@ -52,6 +53,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="write the poses (kind 'pose') and the curve samples (kind 'curve') as CSV: kind, x_um, "
         "y_um, twist_deg, overlap_um2, energy_J, force_x_N, force_y_N, torque_Nm",
     )
+    add_force_arg(p)
     p.set_defaults(func=run)
 
 

@@ -11,6 +11,7 @@ from patterns.errors import InputError
 from patterns.outputs import atomic_output
 from simulator.commands._common import (
     accuracy_check,
+    add_force_arg,
     add_scene_args,
     check_outputs,
     liquid_checks,
@@ -82,6 +83,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help="print only the results (no progress bars or waiting messages)",
     )
+    add_force_arg(o)
     p.set_defaults(func=run)
 
 
