@@ -63,7 +63,10 @@ Usage::
     python benchmarks/accuracy.py [--quick] [--out DIR]
 
 writes ``accuracy.json``, ``accuracy.md`` and ``accuracy_pareto.png`` into ``--out``
-(default ``benchmarks/results/``). ``--quick`` runs a reduced sweep (about 3 minutes). The full sweep took 10.5 minutes
+(default ``benchmarks/results/``). ``--quick`` runs a reduced sweep (about 3 minutes);
+``--smoke OUT`` one point (the random jagged case at 8 um/px and 10 degree twists, 8
+poses, one start, 64 Monte Carlo starts, no presets), its markdown to OUT and the JSON and
+figure beside it (OUT with .json and .png), nothing into benchmarks/results/. The full sweep took 10.5 minutes
 on a 2-core AMD EPYC.
 """
 
@@ -83,6 +86,7 @@ from pathlib import Path
 
 import numpy as np
 from _memory import mark, peak_mb  # noqa: E402  (benchmarks/ is on sys.path)
+from _smoke import add_smoke_arg, smoke_out  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
@@ -145,6 +149,9 @@ QUICK_SWEEP = {
 }
 FULL = {"poses": 200, "starts": 12, "mc": 10_000}
 QUICK = {"poses": 50, "starts": 3, "mc": 2_000}
+#: The smoke run (``--smoke OUT``): one coarse point, a handful of poses and starts.
+SMOKE = {"poses": 8, "starts": 1, "mc": 64}
+SMOKE_BASELINE = Knobs(um_per_px=8.0, twist_step_deg=10.0)
 SEED = 2024
 MARGIN_UM = 10.0
 WINDOW_EXTRA_UM = 50.0
@@ -434,10 +441,12 @@ def preset_library_check(n_poses: int, presets: list[str] | None = None) -> list
 # ------------------------------------------------------------------ driver
 
 
-def _points(case: str, sweep: dict, presets: bool) -> list[tuple[str, object, Knobs]]:
-    pts = [("baseline", None, BASELINE)]
+def _points(
+    case: str, sweep: dict, presets: bool, baseline: Knobs = BASELINE
+) -> list[tuple[str, object, Knobs]]:
+    pts = [("baseline", None, baseline)]
     for knob, values in sweep.items():
-        pts += [(knob, v, replace(BASELINE, **{knob: v})) for v in values]
+        pts += [(knob, v, replace(baseline, **{knob: v})) for v in values]
     if presets:
         from simulator.scene import PRESETS, apply_preset, smallest_feature_um
 
@@ -485,14 +494,19 @@ def machine() -> dict:
     }
 
 
-def run(quick: bool, out: Path, cases: list[str], presets: bool = True) -> dict:
-    settings = QUICK if quick else FULL
-    sweep = QUICK_SWEEP if quick else SWEEP
+def run(
+    quick: bool, out: Path, cases: list[str], presets: bool = True, smoke: Path | None = None
+) -> dict:
+    """The sweep; its files go into the folder ``out``, or for a smoke run (``smoke``: the
+    markdown's path) beside ``smoke``."""
+    settings = SMOKE if smoke else QUICK if quick else FULL
+    sweep = {} if smoke else QUICK_SWEEP if quick else SWEEP
+    baseline = SMOKE_BASELINE if smoke else BASELINE
     t_start = time.perf_counter()
     rows = []
     ctx = mp.get_context("spawn")
     for case in cases:
-        for knob, value, k in _points(case, sweep, presets):
+        for knob, value, k in _points(case, sweep, presets, baseline):
             t0 = time.perf_counter()
             with cf.ProcessPoolExecutor(max_workers=1, mp_context=ctx) as pool:
                 raw = pool.submit(measure_point, case, asdict(k), settings).result()
@@ -527,15 +541,19 @@ def run(quick: bool, out: Path, cases: list[str], presets: bool = True) -> dict:
             "margin_um": MARGIN_UM,
         },
         "cases": {c: CASES[c] for c in cases},
-        "baseline": asdict(BASELINE),
+        "baseline": asdict(baseline),
         "rows": rows,
         "preset_library": library,
         "sweep_seconds": time.perf_counter() - t_start,
     }
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "accuracy.json").write_text(json.dumps(result, indent=1, default=float))
-    (out / "accuracy.md").write_text(markdown(result))
-    plot(result, out / "accuracy_pareto.png")
+    if smoke:
+        md, js, png = smoke, smoke.with_suffix(".json"), smoke.with_suffix(".png")
+    else:
+        out.mkdir(parents=True, exist_ok=True)
+        md, js, png = out / "accuracy.md", out / "accuracy.json", out / "accuracy_pareto.png"
+    js.write_text(json.dumps(result, indent=1, default=float))
+    md.write_text(markdown(result))
+    plot(result, png)
     return result
 
 
@@ -558,7 +576,8 @@ def markdown(result: dict) -> str:
         f"Sweep: {len(result['rows'])} points in {result['sweep_seconds'] / 60:.1f} min"
         f"{' (--quick)' if st['quick'] else ''}; {st['poses']} poses for energy/force errors, "
         f"{st['starts']} starts for final-pose errors, {st['mc']:,} Monte Carlo starts.",
-        "Baseline: 1 um/px, 1 degree, float32, exact coverage, exact chip rotation, greedy. "
+        f"Baseline: {result['baseline']['um_per_px']:g} um/px, {result['baseline']['twist_step_deg']:g} degree, "
+        "float32, exact coverage, exact chip rotation, greedy. "
         "Errors against exact polygon overlap (simulator.testing). Energy: % of chip area; force: % of "
         "chip side (p50/p90: median / 90th percentile over the poses; a few poses next to a kink of "
         "A(x), where the one-grid-step difference straddles the kink, dominate the max); torque: % of A_chip/2; pose: max over starts. Times: seconds, best of up to 5 runs "
@@ -743,7 +762,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--no-presets", action="store_true", help="skip measuring the presets of simulator.scene"
     )
+    add_smoke_arg(ap, "the markdown (the JSON and figure beside it)")
     args = ap.parse_args(argv)
+    smoke = smoke_out(ap, args.smoke)
+    if smoke:
+        result = run(False, args.out, ["jagged_s2"], False, smoke)
+        print(
+            f"smoke run took {result['sweep_seconds']:.0f} s; wrote {smoke} and "
+            f"{smoke.with_suffix('.json')}, {smoke.with_suffix('.png')}"
+        )
+        return 0
     result = run(args.quick, args.out, args.cases, not args.no_presets)
     print(
         f"sweep took {result['sweep_seconds']:.0f} s; wrote {args.out}/accuracy.json, accuracy.md, accuracy_pareto.png"

@@ -16,6 +16,7 @@ and the best run of each is reported, with every run's time and the load average
 ``benchmarks/results/design_freeform.json``.
 
 Usage: ``.venv/bin/python benchmarks/design_freeform.py [--sizes 256 512] [--iterations 20] [--repeat 2]``.
+``--smoke OUT``: one 80 px canvas (9 um pixels, the smallest the minimum feature allows), one timed iteration, once; the JSON goes to OUT only.
 """
 
 from __future__ import annotations
@@ -30,6 +31,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+from _smoke import add_smoke_arg, smoke_out  # noqa: E402
 
 EXAMPLE = ROOT / "examples" / "design_freeform_rfid.toml"
 CANVAS_UM = 720.0
@@ -59,13 +62,16 @@ def one_size(n: int, iterations: int) -> dict:
     }
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", type=int, nargs="+", default=[256, 512])
     ap.add_argument("--iterations", type=int, default=20)
     ap.add_argument("--repeat", type=int, default=2)
     ap.add_argument("--json", default=str(ROOT / "benchmarks" / "results" / "design_freeform.json"))
-    a = ap.parse_args()
+    add_smoke_arg(ap, "the JSON")
+    a = ap.parse_args(argv)
+    if smoke_out(ap, a.smoke):
+        a.sizes, a.iterations, a.repeat, a.json = [80], 1, 1, str(a.smoke)
     import jax
     import numpy as np
 

@@ -8,7 +8,11 @@ contact lines), 2 um/px, 1 deg twist steps, the default damping calibration
 that reach alignment, with the video's frame times (135, 290 and about 326 ms), and
 prints the table of the dynamics section of docs/guide/trajectories.md.
 
-Usage: ``python benchmarks/dynamics_calibration.py [--out docs/images] [--no-inertial]``
+Usage: ``python benchmarks/dynamics_calibration.py [--out docs/images] [--no-inertial] [--smoke OUT]``
+
+``--smoke OUT``: 20 um/px and 15 degree twists, the first start only, overdamped, at most
+200 steps; the table goes to OUT and the figure beside it (OUT with .png), nothing into
+docs/images.
 """
 
 from __future__ import annotations
@@ -21,6 +25,8 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+from _smoke import add_smoke_arg, smoke_out  # noqa: E402
 
 from patterns.library import library_path  # noqa: E402
 from simulator import pyplot, save_figure
@@ -30,6 +36,7 @@ from simulator.physics import Liquid
 from simulator.scene import (
     Effects,
     Scene,
+    TwistGrid,
 )
 
 FRAMES_MS = (135.0, 290.0, 326.0)  # the source's video frames; aligned at about 326 ms
@@ -55,17 +62,23 @@ def align_time_s(traj, floor) -> float:
     )
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--out", default=str(ROOT / "docs" / "images"))
     ap.add_argument("--no-inertial", action="store_true", help="overdamped runs only (faster)")
-    args = ap.parse_args()
+    add_smoke_arg(ap, "the table (and the figure beside it)")
+    args = ap.parse_args(argv)
+    smoke = smoke_out(ap, args.smoke)
+    starts, max_steps = (STARTS[:1], 200) if smoke else (STARTS, 20000)
+    if smoke:
+        args.no_inertial = True
     scene = Scene.from_inputs(
         library_path("four_pad_730_100"),
         chip_size_um=730,
-        resolution_um=2.0,
+        resolution_um=20.0 if smoke else 2.0,
         effects=Effects(meniscus=True),
         liquid=Liquid(volume_nl=20.0),
+        **({"twist": TwistGrid(15.0)} if smoke else {}),
     )
     ls = build_landscape(scene)
     floor = ls.floor_range()
@@ -74,28 +87,29 @@ def main() -> None:
     )
     methods = ("overdamped",) if args.no_inertial else ("overdamped", "inertial")
     runs = {}
-    print(
-        "| start (um, um, deg) | model | outcome | final (um, um, deg) | on the floor after (ms) | largest twist (deg, at ms, at x um) |"
-    )
-    print("|---|---|---|---|---:|---|")
-    for start in STARTS:
+    table = [
+        "| start (um, um, deg) | model | outcome | final (um, um, deg) | on the floor after (ms) | largest twist (deg, at ms, at x um) |",
+        "|---|---|---|---|---:|---|",
+    ]
+    print("\n".join(table))
+    for start in starts:
         for method in methods:
-            t = simulate(scene, start, method=method, landscape=ls, max_steps=20000)
+            t = simulate(scene, start, method=method, landscape=ls, max_steps=max_steps)
             runs[start, method] = t
             ta = align_time_s(t, floor)
             k = int(np.argmax(np.abs(t.path[:, 2])))
             f = ", ".join(f"{v:.1f}" for v in t.final)
             ta_txt = "never" if not np.isfinite(ta) else f"{ta * 1e3:.0f}"
-            print(
+            table.append(
                 f"| ({start[0]:g}, {start[1]:g}, {start[2]:g}) | {method} | {t.outcome} | ({f}) | {ta_txt} | "
-                f"{t.path[k, 2]:.2f} at {t.t_s[k] * 1e3:.0f} ms, x {t.path[k, 0]:.0f} |",
-                flush=True,
+                f"{t.path[k, 2]:.2f} at {t.t_s[k] * 1e3:.0f} ms, x {t.path[k, 0]:.0f} |"
             )
+            print(table[-1], flush=True)
 
     plt = pyplot()
     fig, axes = plt.subplots(3, 1, figsize=(9, 9), sharex=True)
     colours = dict(zip(STARTS, ("0.55", "0.3", "C7", "C0", "C3", "C2"), strict=True))
-    for start in STARTS:
+    for start in starts:
         t = runs[start, "overdamped"]
         label = f"({start[0]:g}, {start[1]:g} um, {start[2]:g} deg)"
         style = "--" if start[0] == 500.0 else "-"
@@ -125,6 +139,11 @@ def main() -> None:
         fontsize=10,
     )
     fig.tight_layout()
+    if smoke:
+        smoke.write_text("\n".join(table) + "\n")
+        save_figure(fig, smoke.with_suffix(".png"), dpi=40)
+        print(f"wrote {smoke} and {smoke.with_suffix('.png')} (smoke run)")
+        return
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     save_figure(fig, out / "dynamics_fourpad_730_100.png", dpi=80)

@@ -31,10 +31,18 @@ trajectory steps of all starts per second (each step reads a pose's 26 neighbour
 suite runs it): a 10 um/px check scene, a 64 px cube at 19 twists, a 128 px cube at 10
 twists and 2000 starts.
 
+``--smoke OUT`` needs no GPU and runs nothing: it checks the arguments, imports the
+hooks the steps use (``benchmarks/landscape.py``, ``benchmarks/montecarlo.py``), builds
+the check's scene and writes the plan of the GPU run to OUT as JSON: each step with its
+sizes and the bytes of its output, what JAX sees, and whether the run would start here
+(``gpu_visible``). ``benchmarks/gpu.sh --smoke OUT`` does the same through the wrapper
+(which runs from the repository root: give OUT, as ``--json OUT``, as an absolute path).
+
 Usage::
 
     benchmarks/gpu.sh [--json OUT]
     python benchmarks/gpu.py [--cpu-smoke] [--chips opencv|exact] [--repeats 2] [--json OUT]
+    python benchmarks/gpu.py --smoke PLAN.json    (no GPU needed: the plan only)
 """
 
 from __future__ import annotations
@@ -200,6 +208,48 @@ def machine() -> dict:
     }
 
 
+def plan(size: dict, chunk: int, args: argparse.Namespace) -> dict:
+    """The GPU run's steps and sizes, without running them: the check's scene is built (its
+    landscape's shape and bytes from the pose grid's size), the cubes' and the batch's outputs
+    counted (float32 cubes, as correlate_stack returns them)."""
+    from landscape import make_pattern  # the hooks the steps import, checked here
+    from montecarlo import make_scene
+
+    scene = make_scene(size["um_per_px"])
+    t, (ny, nx) = scene.twist_axis.count, scene.pattern.shape
+    steps = [
+        {
+            "step": "landscape (check)",
+            "backends": ["scipy", "jax"],
+            "scene_px": [nx, ny],
+            "twists": t,
+            "um_per_px": size["um_per_px"],
+        }
+    ]
+    for key, backends in (("cube", ["jax", "scipy"]), ("large", ["jax"])):
+        n, twists = size[key]
+        h, w = make_pattern(8).shape  # the pattern hook runs (its N x N image)
+        assert (h, w) == (8, 8)
+        out = (twists, 2 * n - 1, 2 * n - 1)
+        steps.append(
+            {
+                "step": f"cube {n} px",
+                "backends": backends,
+                "output_shape": list(out),
+                "output_MB": math.prod(out) * 4 / 2**20,
+            }
+        )
+    steps.append(
+        {
+            "step": "Monte Carlo greedy",
+            "backends": ["jax"],
+            "starts": size["starts"],
+            "chunk": min(chunk, size["starts"]),
+        }
+    )
+    return {"steps": steps, "chips": args.chips, "repeats": args.repeats}
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument(
@@ -228,9 +278,36 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--json", type=Path, default=None, metavar="OUT", help="also write the rows as JSON"
     )
+    ap.add_argument(
+        "--smoke",
+        type=Path,
+        default=None,
+        metavar="OUT",
+        help="no GPU needed, nothing run: check the arguments and the hooks, write the plan of the GPU run to OUT (JSON)",
+    )
     args = ap.parse_args(argv)
     if args.repeats < 1:
         ap.error("--repeats must be >= 1")
+    if args.smoke is not None:
+        from _smoke import smoke_out
+
+        smoke_out(ap, args.smoke)
+        if args.cpu_smoke:
+            ap.error("--smoke writes the plan only; --cpu-smoke runs the steps: give one")
+        import jax
+
+        import simulator  # noqa: F401
+
+        doc = {"machine": machine(), "gpu_visible": jax.default_backend() == "gpu"}
+        doc |= plan(SIZES["gpu"], args.chunk or SIZES["gpu"]["chunk"], args)
+        args.smoke.write_text(json.dumps(doc, indent=2) + "\n")
+        for st in doc["steps"]:
+            print(f"{st['step']}: {', '.join(st['backends'])}")
+        print(
+            f"wrote the plan to {args.smoke}; JAX backend {doc['machine']['jax_backend']}"
+            f"{'' if doc['gpu_visible'] else ' (no GPU visible: the run itself would refuse here)'}"
+        )
+        return 0
     if args.cpu_smoke:
         os.environ["JAX_PLATFORMS"] = "cpu"
     import jax

@@ -2,7 +2,9 @@
 # The GPU benchmark (docs/benchmarks.md, "On a GPU"): the JAX backend checked against SciPy,
 # then the 512 px and 4096 px cubes and 10^6 greedy Monte Carlo starts timed, in one table.
 # Needs JAX's CUDA build: pip install -e '.[gpu]'. Arguments go to benchmarks/gpu.py
-# (--json OUT, --chips exact, --repeats N; --cpu-smoke runs it small on the CPU).
+# (--json OUT, --chips exact, --repeats N; --cpu-smoke runs it small on the CPU; --smoke PLAN
+# writes the plan without a GPU, running nothing). Give output paths as absolute paths: the
+# script runs from the repository root.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 py="${PYTHON:-}"

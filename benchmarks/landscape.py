@@ -65,6 +65,10 @@ Usage::
         [--large-twists 46] [--methods NAME ...] [--chips exact opencv]
         [--pattern four-pad|four-pad-notch] [--repeats 3] [--json OUT]
 
+``--smoke OUT``: N = 64 at 5 twists, one timed round of scipy-rfft2, selfalign and the
+naive loop (on 50 poses), exact chips, the meniscus row at 20 um/px; the table goes to OUT
+and the rows as JSON beside it (OUT with .json).
+
 ``--chips`` takes one kind or both (the default): each kind is its own run of every
 method, with its own ratios.
 
@@ -90,6 +94,7 @@ from pathlib import Path
 
 import numpy as np
 from _memory import mark, peak_mb  # noqa: E402  (benchmarks/ is on sys.path)
+from _smoke import add_smoke_arg, smoke_out, tee_stdout  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
@@ -635,12 +640,24 @@ def main(argv: list[str] | None = None) -> int:
         "--json", type=Path, default=None, metavar="OUT", help="also write the rows as JSON"
     )
     ap.add_argument("--meniscus-only", action="store_true", help="run only the finite-meniscus row")
+    add_smoke_arg(ap, "the table (and the rows as JSON beside it)")
     args = ap.parse_args(argv)
+    smoke = smoke_out(ap, args.smoke)
+    if smoke:
+        args.sizes, args.twists, args.samples, args.error_twists, args.repeats = [64], 5, 50, 2, 1
+        args.chips, args.json = ["exact"], smoke.with_suffix(".json")
+        if args.methods == list(METHODS):
+            args.methods = ["scipy-rfft2", "selfalign", "naive-per-pose"]
+    with tee_stdout(smoke):
+        return _main(args, 20.0 if smoke else 2.0)
+
+
+def _main(args: argparse.Namespace, meniscus_um_per_px: float) -> int:
     if args.meniscus_only:
-        print(meniscus_row(args.repeats))
+        print(meniscus_row(args.repeats, meniscus_um_per_px))
         return 0
     if min(args.twists, args.samples, args.error_twists, args.repeats) < 1:
-        ap.error("--twists, --samples, --error-twists and --repeats must be >= 1")
+        raise SystemExit("--twists, --samples, --error-twists and --repeats must be >= 1")
 
     rows, notes = [], []
     for n in args.sizes:
@@ -677,12 +694,18 @@ def main(argv: list[str] | None = None) -> int:
         f"* errors: max over {args.error_twists} evenly spaced twists vs {REFERENCE}, divided by the chip area (px^2)."
     )
     print("* peak MB: rise of peak RSS during the call, output stack included (in brackets).")
-    mrow = meniscus_row(args.repeats)
+    mrow = meniscus_row(args.repeats, meniscus_um_per_px)
     print(f"\n{mrow}")
     if args.json:
         args.json.write_text(
             json.dumps(
-                {"machine": info, "args": vars(args) | {"json": str(args.json)}, "rows": rows},
+                {
+                    "machine": info,
+                    "args": {
+                        k: str(v) if isinstance(v, Path) else v for k, v in vars(args).items()
+                    },
+                    "rows": rows,
+                },
                 indent=2,
             )
         )
@@ -690,7 +713,7 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def meniscus_row(repeats: int = 3) -> str:
+def meniscus_row(repeats: int = 3, um_per_px: float = 2.0) -> str:
     """The finite meniscus's cost as a ratio to the overlap-only landscape, in one run:
     ``build_landscape`` of the 730/50 um four-pad at 2 um/px, 730 um chip, 1 degree twists
     over the chip's period, 20 nl (h = 37.5 um), overlap only and with ``meniscus``,
@@ -701,7 +724,7 @@ def meniscus_row(repeats: int = 3) -> str:
     from simulator.scene import Scene
 
     base = Scene.from_inputs(
-        ROOT / "patterns/library/four_pad_730_50.png", chip_size_um=730, resolution_um=2.0
+        ROOT / "patterns/library/four_pad_730_50.png", chip_size_um=730, resolution_um=um_per_px
     )
     men = base.replace(effects=replace(base.effects, meniscus=True))
     build_landscape(base), build_landscape(men)  # warm-up
@@ -713,7 +736,7 @@ def meniscus_row(repeats: int = 3) -> str:
             t[name].append(time.perf_counter() - t0)
     a, b = min(t["overlap"]), min(t["meniscus"])
     return (
-        f"meniscus row: four_pad_730_50 at 2 um/px, {base.twist_axis.count} twists, h = {men.meniscus_height_um:.1f} um: "
+        f"meniscus row: four_pad_730_50 at {um_per_px:g} um/px, {base.twist_axis.count} twists, h = {men.meniscus_height_um:.1f} um: "
         f"overlap {a:.2f} s, meniscus {b:.2f} s, ratio {b / a:.2f} (best of {max(1, repeats)}, interleaved)"
     )
 

@@ -13,7 +13,11 @@
   0.25 degree twists within +-3 degrees: the refined global minimum (a markdown table
   on stdout).
 
-Usage: ``python benchmarks/meniscus_tables.py [--skip-figure] [--evolver-only]``
+Usage: ``python benchmarks/meniscus_tables.py [--skip-figure] [--evolver-only] [--smoke OUT]``
+
+``--smoke OUT``: the Evolver comparison at 10 um/px every 50 um, the first two defect
+patterns at 5 um/px and 1 degree twists, no x-curve figure; the tables go to OUT and the
+figure beside it (OUT with .png), nothing into docs/images.
 """
 
 from __future__ import annotations
@@ -26,6 +30,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+from _smoke import add_smoke_arg, smoke_out, tee_stdout  # noqa: E402
 
 from simulator.landscape import (  # noqa: E402
     build_landscape,
@@ -104,7 +110,7 @@ def evolver_inward(level: str = "1") -> dict[int, list[dict]]:
     return rows
 
 
-def evolver_figure(out: Path) -> None:
+def evolver_figure(out: Path, um_per_px: float = 2.0, x_step_um: float = 2.0) -> None:
     """Force along x on the 730/50 and 730/100 four-pads with 20 nl: overlap model,
     meniscus model (h = V / A) and Surface Evolver (free contact lines, 30/60 degrees)."""
     import numpy as np
@@ -121,7 +127,7 @@ def evolver_figure(out: Path) -> None:
         base = Scene.from_inputs(
             LIB / f"four_pad_730_{gap}.png",
             chip_size_um=730,
-            resolution_um=2.0,
+            resolution_um=um_per_px,
             effects=Effects(twist=False),
             liquid=Liquid(volume_nl=20.0),
             window_um=520,
@@ -129,7 +135,7 @@ def evolver_figure(out: Path) -> None:
         )
         men = base.replace(effects=replace(base.effects, meniscus=True))
         over, mls = build_landscape(base), build_landscape(men)
-        xs = np.arange(0.0, 510.0, 2.0)
+        xs = np.arange(0.0, 510.0, x_step_um)
         f_over = np.array([float(over.force_at(x, 0.0, 0.0)[0]) for x in xs]) * 1e6
         f_men = np.array([float(mls.force_at(x, 0.0, 0.0)[0]) for x in xs]) * 1e6
         se = sorted(paths.get(gap, []), key=lambda r: float(r["x_um"]))
@@ -210,21 +216,24 @@ def evolver_defects(volume_nl: float = 0.9) -> dict[str, tuple[float, float, flo
     return out
 
 
-def table() -> None:
+def table(
+    names: list[str] = DEFECTS, um_per_px: float | None = None, step_deg: float = 0.25
+) -> None:
     se = evolver_defects(0.9)
     print(
         "| pattern | global minimum x (um) | y (um) | twist (deg) | Surface Evolver x, y (um), twist (deg) | stiffness x (N/m) | y (N/m) | twist (N m/rad) |"
     )
     print("|---|---:|---:|---:|---:|---:|---:|---:|")
-    for name in DEFECTS:
+    for name in names:
         t0 = time.perf_counter()
         sc = Scene.from_inputs(
             LIB / f"{name}.png",
             chip_size_um=200,
             effects=Effects(meniscus=True),
             liquid=Liquid(volume_nl=0.9, pinned=True),
-            twist=TwistGrid(0.25, -3, 3),
+            twist=TwistGrid(step_deg, -3, 3),
             window_um=30,
+            resolution_um=um_per_px,
             dtype="float64",
         )
         ls = build_landscape(sc)
@@ -247,7 +256,15 @@ def main(argv=None) -> int:
         action="store_true",
         help="only the four-pad figure and table against Surface Evolver",
     )
+    add_smoke_arg(ap, "the tables (and the Evolver figure beside them)")
     args = ap.parse_args(argv)
+    smoke = smoke_out(ap, args.smoke)
+    if smoke:
+        with tee_stdout(smoke):
+            evolver_figure(smoke.with_suffix(".png"), um_per_px=10.0, x_step_um=50.0)
+            table(DEFECTS[:2], um_per_px=5.0, step_deg=1.0)
+        print(f"wrote {smoke} and {smoke.with_suffix('.png')} (smoke run)")
+        return 0
     evolver_figure(ROOT / "docs" / "images" / "meniscus_fourpad_evolver.png")
     if args.evolver_only:
         return 0

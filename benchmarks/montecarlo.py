@@ -23,6 +23,11 @@ Usage::
 
     python benchmarks/montecarlo.py [--n 1000 10000 100000] [--methods greedy gradient]
         [--chunk 2048] [--loop-starts 300] [--page docs/benchmarks.md] [--no-page]
+        [--smoke OUT]
+
+``--smoke OUT``: the scene at 20 um/px and 15 degree twists, 64 starts (greedy unless
+``--methods`` says otherwise), the loop timed on 4, one timing each; the text goes to OUT
+only (never into the page).
 
 The markdown table is printed and written between the markers
 ``<!-- bench:montecarlo -->`` and ``<!-- /bench:montecarlo -->`` of the benchmarks page.
@@ -42,6 +47,7 @@ from pathlib import Path
 import jax
 import jax.numpy as jnp
 import numpy as np
+from _smoke import add_smoke_arg, smoke_out  # noqa: E402  (benchmarks/ is on sys.path)
 
 import simulator  # noqa: F401  (x64 on)
 from patterns.geometry import four_pad, square
@@ -57,19 +63,20 @@ ROOT = Path(__file__).resolve().parents[1]
 MARK_OPEN, MARK_CLOSE = "<!-- bench:montecarlo -->", "<!-- /bench:montecarlo -->"
 
 
-def make_scene(s: float = 2.0) -> Scene:
+def make_scene(s: float = 2.0, twist_step_deg: float = 1.5) -> Scene:
     """The benchmark's scene at ``s`` um/px (2 by default; coarser for a quick run)."""
     return Scene(
         pattern=mask_from_geometry(four_pad(730, 50), s, margin_um=10),
         chip=mask_from_geometry(square(730), s),
-        twist=TwistGrid(step_deg=1.5),
+        twist=TwistGrid(step_deg=twist_step_deg),
     )
 
 
 @functools.partial(jax.jit, static_argnames=("grid", "method", "max_steps"))
 def _single(field, start, grid, method, max_steps):
-    """One start, jit'ed alone: the loop baseline (same code as one vmap lane)."""
-    return _one(field, grid, start, method, max_steps)
+    """One start, jit'ed alone: the loop baseline (same code as one vmap lane: no dynamics
+    parameters, the explicit stepper)."""
+    return _one(field, grid, None, start, method, max_steps, False)
 
 
 def time_loop(fld, grid, q0: np.ndarray, method: str, n: int, repeats: int) -> tuple[float, int]:
@@ -84,7 +91,7 @@ def time_loop(fld, grid, q0: np.ndarray, method: str, n: int, repeats: int) -> t
         steps = 0
         t = time.perf_counter()
         for i in range(n):
-            q, st, status, o, e = _single(
+            q, st, status, o, e, _time_s = _single(
                 fld, conv(q0[i]), grid=grid, method=method, max_steps=DEFAULT_MAX_STEPS
             )
             steps += int(st)  # pulls the result to the host, as a user's loop would
@@ -98,7 +105,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--n", type=int, nargs="+", default=[1000, 10000, 100000], help="numbers of starts"
     )
-    ap.add_argument("--methods", nargs="+", default=["greedy", "gradient"], choices=METHODS)
+    ap.add_argument("--methods", nargs="+", default=None, choices=METHODS)
     ap.add_argument("--chunk", type=int, default=DEFAULT_CHUNK)
     ap.add_argument(
         "--loop-starts", type=int, default=300, help="starts the Python loop is timed on"
@@ -110,10 +117,15 @@ def main(argv: list[str] | None = None) -> int:
         "--page", "--readme", dest="readme", type=Path, default=ROOT / "docs" / "benchmarks.md"
     )
     ap.add_argument("--no-page", "--no-readme", dest="no_readme", action="store_true")
+    add_smoke_arg(ap, "the table and notes")
     args = ap.parse_args(argv)
+    smoke = smoke_out(ap, args.smoke)
+    if smoke:
+        args.n, args.loop_starts, args.repeats, args.chunk = [64], 4, 1, 64
+    args.methods = args.methods or (["greedy"] if smoke else ["greedy", "gradient"])
 
     load = os.getloadavg()[0]
-    scene = make_scene()
+    scene = make_scene(20.0, 15.0) if smoke else make_scene()
     t = time.perf_counter()
     ls = build_landscape(scene)
     t_land = time.perf_counter() - t
@@ -166,7 +178,10 @@ def main(argv: list[str] | None = None) -> int:
     )
     text = "\n".join([table, "", info, ""] + [f"* {n}" for n in notes])
     print(text)
-    if not args.no_readme:
+    if smoke:
+        smoke.write_text(text)
+        print(f"\nwrote {smoke} (smoke run)")
+    elif not args.no_readme:
         write_readme(args.readme, text)
         print(f"\nwrote the table into {args.readme}")
     return 0

@@ -25,6 +25,11 @@ The phases alternate ``--repeat`` times (default 2) and the best run of each is 
 a shared machine that is the least disturbed one.
 
 Usage: ``.venv/bin/python benchmarks/sweep.py [--points-per-axis 8] [--repeat 2]``.
+
+``--smoke OUT``: 2 x 1 points at 20 um/px and 15 degree twists with 32 yield starts and a
+3 x 3 capture grid, once, and only the phases 1 (the loop in this process) and 2 (one
+Dask worker): the one-core children and the second worker would each import and compile
+the engine again. The JSON goes to OUT, never into benchmarks/results/.
 """
 
 from __future__ import annotations
@@ -39,11 +44,24 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import numpy as np  # noqa: E402
 
 
-def spec(n: int) -> dict:
+def spec(n: int, smoke: bool = False) -> dict:
+    if smoke:  # the smoke run's sweep: 2 x 1 points, coarse, few starts
+        return {
+            "scene": {"chip_size_um": 730, "resolution_um": 20, "twist": {"step_deg": 15}},
+            "design": {"name": "four-pad", "size": 730, "gap": 50},
+            "axes": {
+                "gap": {"from": 20, "to": 250, "num": 2},
+                "volume_nl": 20,
+                "placement_sigma_um": 150,
+                "placement_sigma_deg": 2,
+            },
+            "sweep": {"seed": 1, "yield_starts": 32, "capture_grid": 3},
+        }
     return {
         "scene": {"chip_size_um": 730, "resolution_um": 5, "twist": {"step_deg": 3}},
         "design": {"name": "four-pad", "size": 730, "gap": 50},
@@ -57,11 +75,11 @@ def spec(n: int) -> dict:
     }
 
 
-def loop(n: int) -> dict:
+def loop(n: int, smoke: bool = False) -> dict:
     """The plain loop: :func:`simulator.sweep.assess_point` on every point's task, in this process."""
     from simulator.sweep import assess_point, load_sweep
 
-    plan = load_sweep(spec(n))
+    plan = load_sweep(spec(n, smoke))
     t0 = time.perf_counter()
     per = []
     for p in plan.points():
@@ -73,11 +91,13 @@ def loop(n: int) -> dict:
         "seconds": s,
         "points_per_s": len(per) / s,
         "first_point_s": per[0],
-        "median_point_s": float(np.median(per[1:])),
+        "median_point_s": float(np.median(per[1:] or per)),
     }
 
 
-def main() -> int:
+def main(argv: list[str] | None = None) -> int:
+    from _smoke import add_smoke_arg, smoke_out
+
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--points-per-axis", type=int, default=8)
     parser.add_argument(
@@ -89,7 +109,11 @@ def main() -> int:
     parser.add_argument(
         "--loop-one-core", action="store_true", help=argparse.SUPPRESS
     )  # the child run of item 1b
-    args = parser.parse_args()
+    add_smoke_arg(parser, "the JSON")
+    args = parser.parse_args(argv)
+    smoke = smoke_out(parser, args.smoke)
+    if smoke:
+        args.repeat = 1
     n_axis = args.points_per_axis
     if (
         args.loop_one_core
@@ -100,10 +124,9 @@ def main() -> int:
         os.environ["SELFALIGN_THREADS"] = "1"
         print(json.dumps(loop(n_axis)))
         return 0
-    from simulator.sweep import sweep
 
-    sp = spec(n_axis)
-    n = n_axis**2
+    sp = spec(n_axis, bool(smoke))
+    n = 2 if smoke else n_axis**2
     out: dict = {
         "points": n,
         "cpus": os.cpu_count(),
@@ -121,7 +144,17 @@ def main() -> int:
         args.repeat
     ):  # the phases alternate, so that a burst of load elsewhere hits all of them alike
         # 1. plain loops: every core for one point (this process; cold only the first time), and one core (a fresh child, as a worker)
-        runs["loop"].append(loop(n_axis) | {"load": os.getloadavg()[0]})
+        runs["loop"].append(loop(n_axis, bool(smoke)) | {"load": os.getloadavg()[0]})
+        if smoke:
+            r = runs["loop"][-1]
+            print(
+                f"[{rep + 1}] plain loop, all cores: {n} points in {r['seconds']:.1f} s = {r['points_per_s']:.2f} points/s",
+                flush=True,
+            )
+        for workers in (1,) if smoke else ():
+            runs["workers_1"].append(_dask_run(sp, n, workers, rep))
+        if smoke:
+            continue
         cmd = [sys.executable, __file__, "--loop-one-core", "--points-per-axis", str(n_axis)]
         child = subprocess.run(
             cmd,
@@ -163,30 +196,47 @@ def main() -> int:
             )
         # 2, 3. Dask, each on a fresh LocalCluster (cold workers)
         for workers in (1, 2):
-            with tempfile.TemporaryDirectory() as d:
-                t = time.perf_counter()
-                table = sweep(sp, Path(d) / "out", workers=workers, pictures=False)
-                wall = time.perf_counter() - t
-            st = table.attrs["sweep"]
-            assert st["run_now"] == n and st["failed"] == 0, st
-            busy = float(table["seconds"].sum())  # inside the assessments, compilation included
-            r = {
-                "cluster_s": st["cluster_s"],
-                "seconds": st["run_s"],
-                "wall_s": wall,
-                "points_per_s": n / st["run_s"],
-                "median_point_s": float(table["seconds"].iloc[workers:].median()),
-                "load": os.getloadavg()[0],
-                "outside_per_point_s": (workers * st["run_s"] - busy) / n,
-            }
-            runs[f"workers_{workers}"].append(r)
-            print(
-                f"[{rep + 1}] {workers} worker(s): cluster start {st['cluster_s']:.1f} s, {n} points in {st['run_s']:.1f} s = "
-                f"{r['points_per_s']:.2f} points/s (wall {wall:.1f} s; median point {r['median_point_s']:.2f} s inside the worker; "
-                f"{1000 * r['outside_per_point_s']:.0f} ms per point outside the assessment; load {r['load']:.1f})",
-                flush=True,
-            )
+            runs[f"workers_{workers}"].append(_dask_run(sp, n, workers, rep))
     out["runs"] = runs
+    if smoke:
+        out |= {"loop": runs["loop"][0], "workers_1": runs["workers_1"][0], "smoke": True}
+        smoke.write_text(json.dumps(out, indent=1) + "\n")
+        print(f"wrote {smoke} (smoke run: phases 1 and 2 only)")
+        return 0
+    return _report(out, runs, n)
+
+
+def _dask_run(sp: dict, n: int, workers: int, rep: int) -> dict:
+    """A sweep of ``sp`` on a fresh LocalCluster of ``workers`` (cold workers), timed."""
+    from simulator.sweep import sweep
+
+    with tempfile.TemporaryDirectory() as d:
+        t = time.perf_counter()
+        table = sweep(sp, Path(d) / "out", workers=workers, pictures=False)
+        wall = time.perf_counter() - t
+    st = table.attrs["sweep"]
+    assert st["run_now"] == n and st["failed"] == 0, st
+    busy = float(table["seconds"].sum())  # inside the assessments, compilation included
+    r = {
+        "cluster_s": st["cluster_s"],
+        "seconds": st["run_s"],
+        "wall_s": wall,
+        "points_per_s": n / st["run_s"],
+        "median_point_s": float(table["seconds"].iloc[workers:].median()),
+        "load": os.getloadavg()[0],
+        "outside_per_point_s": (workers * st["run_s"] - busy) / n,
+    }
+    print(
+        f"[{rep + 1}] {workers} worker(s): cluster start {st['cluster_s']:.1f} s, {n} points in {st['run_s']:.1f} s = "
+        f"{r['points_per_s']:.2f} points/s (wall {wall:.1f} s; median point {r['median_point_s']:.2f} s inside the worker; "
+        f"{1000 * r['outside_per_point_s']:.0f} ms per point outside the assessment; load {r['load']:.1f})",
+        flush=True,
+    )
+    return r
+
+
+def _report(out: dict, runs: dict, n: int) -> int:
+    """The best of the repeats, the speed-ups and overheads, written to benchmarks/results/sweep.json."""
     for k, v in runs.items():  # best of the repeats: the least disturbed run
         out[k] = min(v, key=lambda r: r["seconds"])
     out["workers_1"]["run_s"], out["workers_2"]["run_s"] = (

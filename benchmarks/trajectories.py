@@ -21,6 +21,14 @@
 Usage: ``python benchmarks/trajectories.py [--out docs] [--only-4k] [--engines fft,path]``;
 ``python benchmarks/trajectories.py --meniscus [--repeats 3] [--scenes 730,4k]
 [--methods greedy,gradient]`` (item 4 alone: prints its table).
+
+``--smoke OUT``: every item small and once: item 1 greedy at 20 um/px (the other methods'
+code runs in tests/test_montecarlo.py and in the smoke run of
+``benchmarks/dynamics_calibration.py``), item 2 at 10 um/px, item 3 greedy on a 400 um
+four-pad (gap 40 um) by both engines, item 4 the 730 um scene at 20 um/px, greedy, once;
+items 3 and 4 run their scripts in this process (not a fresh one each: their peak RSS is
+then this process's). The tables go to OUT, the figure and the JSON beside it (OUT with
+.png and .json), nothing into docs/ or benchmarks/results/.
 """
 
 from __future__ import annotations
@@ -38,6 +46,9 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from _smoke import add_smoke_arg, smoke_out, tee_stdout  # noqa: E402
 
 from patterns.library import library_path  # noqa: E402
 from simulator import pyplot, save_figure  # noqa: E402
@@ -48,13 +59,23 @@ from simulator.scene import Scene  # noqa: E402
 METHODS = ("greedy", "gradient", "overdamped", "inertial")
 
 
-def methods_figure(out: Path, start=(380.0, 120.0, 8.0)) -> list[str]:
-    scene = Scene.from_inputs(library_path("four_pad_730_50"), chip_size_um=730, resolution_um=2.0)
+def methods_figure(
+    out: Path, start=(380.0, 120.0, 8.0), um_per_px: float = 2.0, methods=METHODS
+) -> list[str]:
+    scene = Scene.from_inputs(
+        library_path("four_pad_730_50"), chip_size_um=730, resolution_um=um_per_px
+    )
     ls = build_landscape(scene)
     plt = pyplot()
-    fig, axes = plt.subplots(2, 4, figsize=(16, 7.4), gridspec_kw={"height_ratios": [1.25, 1]})
+    fig, axes = plt.subplots(
+        2,
+        len(methods),
+        figsize=(4 * len(methods), 7.4),
+        gridspec_kw={"height_ratios": [1.25, 1]},
+        squeeze=False,
+    )
     lines = []
-    for k, method in enumerate(METHODS):
+    for k, method in enumerate(methods):
         t0 = time.perf_counter()
         t = simulate(scene, start, method=method, landscape=ls)
         dt = time.perf_counter() - t0
@@ -88,15 +109,17 @@ def methods_figure(out: Path, start=(380.0, 120.0, 8.0)) -> list[str]:
             f"| {method} | {t.outcome} | ({f[0]:g}, {f[1]:g}, {f[2]:g}) | {t.steps}{time_txt} | {dt:.2f} |"
         )
     fig.suptitle(
-        f"730 um chip on the 730/50 um four-pad, 2 um/px, from ({start[0]:g}, {start[1]:g} um, {start[2]:g} deg)"
+        f"730 um chip on the 730/50 um four-pad, {um_per_px:g} um/px, from ({start[0]:g}, {start[1]:g} um, {start[2]:g} deg)"
     )
     fig.tight_layout()
-    save_figure(fig, out / "methods.png", dpi=80)
+    save_figure(fig, out, dpi=80)
     return lines
 
 
-def cost_table() -> list[str]:
-    scene = Scene.from_inputs(library_path("four_pad_730_50"), chip_size_um=730)
+def cost_table(um_per_px: float | None = None) -> list[str]:
+    scene = Scene.from_inputs(
+        library_path("four_pad_730_50"), chip_size_um=730, resolution_um=um_per_px
+    )
     simulate(scene, (30.0, 20.0, 1.0))  # compile once, outside the timing
     t0 = time.perf_counter()
     t = simulate(scene, (300.0, 200.0, 10.0))
@@ -123,9 +146,10 @@ from patterns.raster import mask_from_geometry
 from simulator.motion import simulate
 from simulator.scene import Scene
 method, engine = sys.argv[1], sys.argv[2]
-scene = Scene(pattern=mask_from_geometry(four_pad(4000, 200), 1.0), chip=mask_from_geometry(square(4000), 1.0))
+size, gap = (float(v) for v in sys.argv[3:5]) if len(sys.argv) > 3 else (4000.0, 200.0)
+scene = Scene(pattern=mask_from_geometry(four_pad(size, gap), 1.0), chip=mask_from_geometry(square(size), 1.0))
 t0 = time.perf_counter()
-t = simulate(scene, (1200.0, -800.0, 10.0), method=method, engine=engine)
+t = simulate(scene, (0.3 * size, -0.2 * size, 10.0), method=method, engine=engine)
 wall = time.perf_counter() - t0
 peak = [int(line.split()[1]) for line in open("/proc/self/status") if line.startswith("VmHWM:")][0] / 1024
 print(json.dumps({"wall_s": wall, "peak_mb": peak, "outcome": t.outcome, "steps": t.steps, "final": t.final,
@@ -133,7 +157,39 @@ print(json.dumps({"wall_s": wall, "peak_mb": peak, "outcome": t.outcome, "steps"
 """
 
 
-def large_run(engines=("fft", "path"), methods=("greedy", "gradient")) -> list[str]:
+def _run_script(script: Path, args: list[str], in_process: bool) -> tuple[int, str, str]:
+    """(exit code, stdout, stderr) of ``python script ARGS``: a fresh process, or, for a smoke
+    run, this process (no second import and compilation of the engine; its peak RSS is then
+    this process's)."""
+    if not in_process:
+        p = subprocess.run(
+            [sys.executable, str(script), *args],
+            capture_output=True,
+            text=True,
+            env=os.environ | {"PYTHONPATH": str(ROOT)},
+        )
+        return p.returncode, p.stdout, p.stderr
+    import contextlib
+    import io
+
+    buf, argv = io.StringIO(), sys.argv
+    sys.argv = [str(script), *args]
+    try:
+        with contextlib.redirect_stdout(buf):
+            exec(compile(script.read_text(), str(script), "exec"), {"__name__": "__main__"})
+    except Exception as err:  # noqa: BLE001 - reported as the fresh process's failure would be
+        return 1, buf.getvalue(), f"{type(err).__name__}: {err}"
+    finally:
+        sys.argv = argv
+    return 0, buf.getvalue(), ""
+
+
+def large_run(
+    engines=("fft", "path"),
+    methods=("greedy", "gradient"),
+    size_gap=(4000, 200),
+    in_process: bool = False,
+) -> list[str]:
     lines = [
         "| method | engine | outcome | steps | final (um, um, deg) | poses computed | wall (s) | peak RSS (MB) |",
         "|---|---|---|---:|---|---:|---:|---:|",
@@ -144,18 +200,15 @@ def large_run(engines=("fft", "path"), methods=("greedy", "gradient")) -> list[s
         script.write_text(LARGE_RUN)
         for method in methods:
             for engine in engines:
-                out = subprocess.run(
-                    [sys.executable, str(script), method, engine],
-                    capture_output=True,
-                    text=True,
-                    env=os.environ | {"PYTHONPATH": str(ROOT)},
+                rc, stdout, stderr = _run_script(
+                    script, [method, engine, *map(str, size_gap)], in_process
                 )
-                if out.returncode:
+                if rc:
                     lines.append(
-                        f"| {method} | {engine} | failed: {out.stderr.strip().splitlines()[-1]} |"
+                        f"| {method} | {engine} | failed: {stderr.strip().splitlines()[-1]} |"
                     )
                     continue
-                r = json.loads(out.stdout.strip().splitlines()[-1])
+                r = json.loads(stdout.strip().splitlines()[-1])
                 runs[method, engine] = r
                 f = ", ".join(f"{v:.3g}" for v in r["final"])
                 lines.append(
@@ -181,11 +234,12 @@ from simulator.motion import simulate
 from simulator.physics import Liquid
 from simulator.scene import Effects, Scene
 which, method, model = sys.argv[1], sys.argv[2], sys.argv[3]
+res = float(sys.argv[4]) if len(sys.argv) > 4 else None
 if which == "730":
     from patterns.library import library_path
     volume, start = 20.0, (300.0, 200.0, 10.0)
     kw = {"effects": Effects(meniscus=True), "liquid": Liquid(volume_nl=volume)} if model == "meniscus" else {}
-    scene = Scene.from_inputs(library_path("four_pad_730_50"), chip_size_um=730, **kw)
+    scene = Scene.from_inputs(library_path("four_pad_730_50"), chip_size_um=730, resolution_um=res, **kw)
 else:
     from patterns.geometry import four_pad, square
     from patterns.raster import mask_from_geometry
@@ -210,7 +264,13 @@ MENISCUS_SCENES = {
 }
 
 
-def meniscus_runs(scenes=("730", "4k"), methods=("greedy", "gradient"), repeats=3) -> dict:
+def meniscus_runs(
+    scenes=("730", "4k"),
+    methods=("greedy", "gradient"),
+    repeats=3,
+    um_per_px=None,
+    in_process: bool = False,
+) -> dict:
     """Overlap and meniscus runs of the same scene, alternated (A B A B ...), each in a fresh
     process: every value, the best of each, and the ratios meniscus / overlap."""
     out = {"scenes": {}, "repeats": repeats, "cpus": os.cpu_count()}
@@ -222,15 +282,13 @@ def meniscus_runs(scenes=("730", "4k"), methods=("greedy", "gradient"), repeats=
                 runs = {"overlap": [], "meniscus": []}
                 for _ in range(repeats):
                     for model in ("overlap", "meniscus"):
-                        p = subprocess.run(
-                            [sys.executable, str(script), which, method, model],
-                            capture_output=True,
-                            text=True,
-                            env=os.environ | {"PYTHONPATH": str(ROOT)},
+                        res = [] if um_per_px is None else [str(um_per_px)]
+                        rc, stdout, stderr = _run_script(
+                            script, [which, method, model, *res], in_process
                         )
-                        if p.returncode:
-                            raise RuntimeError(p.stderr.strip().splitlines()[-1])
-                        r = json.loads(p.stdout.strip().splitlines()[-1])
+                        if rc:
+                            raise RuntimeError(stderr.strip().splitlines()[-1])
+                        r = json.loads(stdout.strip().splitlines()[-1])
                         runs[model].append(r)
                         print(
                             f"{which} {method} {model}: {r['simulate_s']:.1f} s "
@@ -289,7 +347,28 @@ def main(argv=None) -> int:
     ap.add_argument("--repeats", type=int, default=3, help="alternated repeats of item 4")
     ap.add_argument("--scenes", default="730,4k", help="scenes of item 4, comma-separated")
     ap.add_argument("--methods", default="greedy,gradient", help="methods of item 4")
+    add_smoke_arg(ap, "the tables (the figure and JSON beside them)")
     args = ap.parse_args(argv)
+    smoke = smoke_out(ap, args.smoke)
+    if smoke:
+        with tee_stdout(smoke):
+            print(
+                "| method | outcome | final (um, um, deg) | steps | wall s |\n|---|---|---|---|---:|"
+            )
+            fig = smoke.with_suffix(".png")
+            print("\n".join(methods_figure(fig, um_per_px=20.0, methods=("greedy",))))
+            print()
+            print("\n".join(cost_table(10.0)))
+            print()
+            print("\n".join(large_run(("fft", "path"), ("greedy",), (400, 40), in_process=True)))
+            print()
+            res = meniscus_runs(("730",), ("greedy",), 1, 20.0, in_process=True)
+            smoke.with_suffix(".json").write_text(json.dumps(res, indent=1) + "\n")
+            print("\n".join(meniscus_table(res)))
+        print(
+            f"wrote {smoke}, {smoke.with_suffix('.png')} and {smoke.with_suffix('.json')} (smoke run)"
+        )
+        return 0
     if args.meniscus:
         res = meniscus_runs(
             tuple(args.scenes.split(",")), tuple(args.methods.split(",")), args.repeats
@@ -303,7 +382,7 @@ def main(argv=None) -> int:
         return 0
     args.out.mkdir(parents=True, exist_ok=True)
     print("| method | outcome | final (um, um, deg) | steps | wall s |\n|---|---|---|---|---:|")
-    print("\n".join(methods_figure(args.out)))
+    print("\n".join(methods_figure(args.out / "methods.png")))
     print()
     print("\n".join(cost_table()))
     print()

@@ -9,7 +9,13 @@ with the pad's contact-angle hysteresis (receding 25, advancing 35 degrees aroun
 degree pad). Each column's landscape is built once and every bias runs on it; the time
 of a column is its landscape plus its batches (compilation included, once per column).
 
-Usage: ``python benchmarks/yield_table.py [--starts N] [--resolution UM]``
+Usage: ``python benchmarks/yield_table.py [--starts N] [--resolution UM] [--smoke OUT]``
+
+``--smoke OUT``: the 730/50 um four-pad only, at 20 um/px and 15 degree twists, 8
+placements at the first two biases, and two columns: the overlap model with greedy steps
+and the meniscus with gradient steps (each further column compiles its method again: an
+overdamped column nearly doubles the smoke run's CPU time; overdamped batches run in
+tests/test_montecarlo_dynamics.py). The table goes to OUT.
 """
 
 from __future__ import annotations
@@ -21,6 +27,9 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from _smoke import add_smoke_arg, smoke_out, tee_stdout  # noqa: E402
 
 from simulator.batch import (  # noqa: E402
     random_starts,
@@ -51,7 +60,9 @@ COLUMNS = [
 ]
 
 
-def scene(gap: int, meniscus: bool, hysteresis: bool, resolution: float) -> Scene:
+def scene(
+    gap: int, meniscus: bool, hysteresis: bool, resolution: float, twist_step_deg: float = 2.0
+) -> Scene:
     mat = Materials(pad_receding_deg=25.0, pad_advancing_deg=35.0) if hysteresis else Materials()
     return Scene.from_inputs(
         ROOT / "patterns" / "library" / f"four_pad_730_{gap}.png",
@@ -60,7 +71,7 @@ def scene(gap: int, meniscus: bool, hysteresis: bool, resolution: float) -> Scen
         effects=Effects(meniscus=meniscus, hysteresis=hysteresis),
         liquid=Liquid(volume_nl=20.0),
         materials=mat,
-        twist=TwistGrid(2.0, -45.0, 45.0),
+        twist=TwistGrid(twist_step_deg, -45.0, 45.0),
     )
 
 
@@ -68,16 +79,28 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--starts", type=int, default=200, help="placements per bias (default 200)")
     ap.add_argument("--resolution", type=float, default=4.0, help="um per pixel (default 4)")
+    add_smoke_arg(ap)
     args = ap.parse_args(argv)
-    for gap in (50, 100):
+    smoke = smoke_out(ap, args.smoke)
+    with tee_stdout(smoke):
+        _main(args, bool(smoke))
+    return 0
+
+
+def _main(args: argparse.Namespace, smoke: bool) -> None:
+    gaps, biases, columns, step = (50, 100), BIASES, COLUMNS, 2.0
+    if smoke:
+        gaps, biases, columns, step = (50,), BIASES[:2], COLUMNS[:2], 15.0
+        args.starts, args.resolution = 8, 20.0
+    for gap in gaps:
         yields: dict[str, list[float]] = {}
         seconds: dict[str, float] = {}
-        for name, eff, method in COLUMNS:
+        for name, eff, method in columns:
             t0 = time.perf_counter()
-            sc = scene(gap, eff["meniscus"], eff["hysteresis"], args.resolution)
+            sc = scene(gap, eff["meniscus"], eff["hysteresis"], args.resolution, step)
             ls = build_landscape(sc)
             ys = []
-            for bx, by in BIASES:
+            for bx, by in biases:
                 starts = random_starts(
                     args.starts, (10.0, 10.0, 2.0), seed=0, around=(float(bx), float(by), 0.0)
                 )
@@ -87,21 +110,20 @@ def main(argv=None) -> int:
             yields[name] = ys
             print(f"  730/{gap} {name}: {seconds[name]:.1f} s", file=sys.stderr, flush=True)
         print(
-            f"\n730/{gap} um four-pad, 20 nl, {args.starts} placements per bias (sigma 10 um, 10 um, 2 deg), {args.resolution:g} um/px, 2 deg twists\n"
+            f"\n730/{gap} um four-pad, 20 nl, {args.starts} placements per bias (sigma 10 um, 10 um, 2 deg), {args.resolution:g} um/px, {step:g} deg twists\n"
         )
-        print("| nominal bias (um) | " + " | ".join(n for n, _, _ in COLUMNS) + " |")
-        print("|---|" + "---:|" * len(COLUMNS))
-        for i, (bx, by) in enumerate(BIASES):
+        print("| nominal bias (um) | " + " | ".join(n for n, _, _ in columns) + " |")
+        print("|---|" + "---:|" * len(columns))
+        for i, (bx, by) in enumerate(biases):
             print(
                 f"| ({bx}, {by}) | "
-                + " | ".join(f"{100 * yields[n][i]:.1f} %" for n, _, _ in COLUMNS)
+                + " | ".join(f"{100 * yields[n][i]:.1f} %" for n, _, _ in columns)
                 + " |"
             )
         print(
-            "| time (s) | " + " | ".join(f"{seconds[n]:.0f}" for n, _, _ in COLUMNS) + " |",
+            "| time (s) | " + " | ".join(f"{seconds[n]:.0f}" for n, _, _ in columns) + " |",
             flush=True,
         )
-    return 0
 
 
 if __name__ == "__main__":

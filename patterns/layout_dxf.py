@@ -101,7 +101,7 @@ def _read_dxf(
     }
     problems: dict[str, str] = {}
     try:
-        for layer, entity in _dxf_entities(space, None, 0):
+        for layer, entity in _dxf_entities(space, None, 0, f"{path}: {cell_name}"):
             ring, problem = _dxf_ring(entity, factor, budget_mb)
             if problem:
                 problems.setdefault(layer, problem)
@@ -133,19 +133,41 @@ def _dxf_size(space: Any, doc: Any, memo: dict, stack: tuple) -> int:
     return total
 
 
-def _dxf_entities(entities: Any, layer0: str | None, depth: int) -> Iterator[tuple[str, Any]]:
-    """(layer, entity) of every entity, INSERTs expanded; a block's layer-0 entities take the INSERT's layer."""
+def _dxf_entities(
+    entities: Any, layer0: str | None, depth: int, where: str = "the drawing"
+) -> Iterator[tuple[str, Any]]:
+    """(layer, entity) of every entity, INSERTs expanded; a block's layer-0 entities take the INSERT's layer.
+
+    An INSERT whose scale is zero or not a number, or whose transform cannot be applied (a
+    scale so small its inverse overflows), is refused naming ``where`` (the layout and the
+    space read) and the block."""
     for e in entities:
         layer = e.dxf.get("layer", "0")
         if layer0 is not None and layer == "0":
             layer = layer0
         if e.dxftype() == "INSERT":
+            name = e.dxf.name
             if depth > MAX_DEPTH:
                 raise InputError(
-                    f"block {e.dxf.name} nests deeper than {MAX_DEPTH} levels; fix the drawing"
+                    f"block {name} nests deeper than {MAX_DEPTH} levels; fix the drawing"
                 )
-            for one in e.multi_insert():
-                yield from _dxf_entities(one.virtual_entities(), layer, depth + 1)
+            scale = tuple(float(e.dxf.get(k, 1.0)) for k in ("xscale", "yscale", "zscale"))
+            fix = "give the block reference a non-zero scale in the drawing program (or delete it)"
+            if not all(math.isfinite(v) and v != 0 for v in scale):
+                shown = ", ".join(f"{v:g}" for v in scale)
+                raise InputError(
+                    f"{where}: the INSERT of block {name} on layer {layer} has scale ({shown}), "
+                    f"which flattens or breaks the block; {fix}"
+                )
+            try:
+                for one in e.multi_insert():
+                    yield from _dxf_entities(one.virtual_entities(), layer, depth + 1, where)
+            except ArithmeticError:  # ZeroDivisionError, OverflowError of a degenerate transform
+                shown = ", ".join(f"{v:g}" for v in scale)
+                raise InputError(
+                    f"{where}: the INSERT of block {name} on layer {layer} (scale {shown}) cannot be "
+                    f"expanded: its transform is degenerate; {fix}"
+                ) from None
         else:
             yield layer, e
 

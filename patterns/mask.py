@@ -41,7 +41,18 @@ class Mask:
     params: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        data = np.asarray(self.data, dtype=np.float64)
+        raw = np.asarray(self.data)
+        if np.iscomplexobj(raw):  # float64 would keep the real part and drop the rest
+            raise InputError(
+                f"mask must be a real-valued image, got complex values ({raw.dtype}); "
+                "give the coverage in [0, 1] as real numbers (e.g. the array's .real or abs())"
+            )
+        try:
+            data = np.asarray(raw, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise InputError(
+                f"mask must be an image of numbers in [0, 1], got an array of {raw.dtype}"
+            ) from None
         if data.ndim != 2 or min(data.shape) < 1:
             raise InputError(f"mask must be a 2-D image, got shape {data.shape}")
         # Two passes over the pixels: a NaN makes min and max NaN, an infinity one of them.

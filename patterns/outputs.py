@@ -11,6 +11,9 @@ Rules, for every file and directory selfalign writes:
   directory (for a file); an output directory is never ``.``, ``..`` (or any directory
   holding the working directory), an input's directory or one above it, a symbolic
   link, or read-only.
+* **Files are replaced only when asked.** An output file the user names that exists
+  already is refused before any work (:func:`require_new_file`) unless ``--force`` is
+  given; an input of the run is never replaced, even with ``--force``.
 * **Directories are replaced only when asked and only when ours.** An existing empty
   directory is filled; a non-empty one is refused, or with ``force=True`` replaced only
   if it holds nothing but a previous selfalign output: its marker file
@@ -112,6 +115,23 @@ def check_output_file(
         raise InputError(f"{flag} {path}: directory {parent} is not writable; choose another path")
     probe_writable(parent, f"{flag} {path}")
     return p
+
+
+def require_new_file(path: str | os.PathLike, flag: str, force: bool = False) -> None:
+    """Refuse, before any work, an output file that exists unless ``force`` (``--force``) is
+    given: a command replaces only the files it is asked to replace. Checked with ``lstat``,
+    so a dangling link counts as existing too (:func:`check_output_file` refuses links)."""
+    if force:
+        return
+    try:
+        os.lstat(path)
+    except (FileNotFoundError, NotADirectoryError):
+        return
+    except OSError:
+        return  # check_output_file says why it cannot be checked
+    raise InputError(
+        f"{flag} {path}: exists; choose a new file name, or pass --force to replace it"
+    )
 
 
 def probe_writable(directory: Path, what: str, kind: str = "file") -> None:

@@ -926,6 +926,7 @@ def test_all_black_masks_name_the_invert_flags_and_invert_works(tmp_path, run_cl
             "0,0,0",
             "--json",
             out,
+            "--force",  # replaces the first run's JSON, as asked
         ]
     )
     assert rc == 0, err
@@ -945,8 +946,8 @@ def test_a_grid_flag_replaces_the_scenes_random_starts(tmp_path, run_cli):
     doc = json.loads(out.read_text())
     assert doc["starts"]["kind"] == "grid" and doc["n"] == 25 and doc["seed"] is None
     rc, _, err = run_cli(
-        ["montecarlo", toml, "--json", out, "--quiet"]
-    )  # the scene's own random starts
+        ["montecarlo", toml, "--json", out, "--quiet", "--force"]
+    )  # the scene's own random starts (replacing the first run's JSON, as asked)
     assert rc == 0, err
     assert json.loads(out.read_text())["starts"]["kind"] == "random"
 

@@ -647,6 +647,7 @@ def test_simulate_warns_below_the_critical_volume(fourpad, tmp_path, capsys):
                 f"{2 * v_crit:.6g}",
                 "--json",
                 str(out),
+                "--force",
             ]
         )
         == 0
@@ -654,7 +655,9 @@ def test_simulate_warns_below_the_critical_volume(fourpad, tmp_path, capsys):
     assert json.loads(out.read_text())["liquid_warnings"] == []
     capsys.readouterr()
     # Without --volume nothing is checked and the key is still there.
-    assert main(["simulate", *fast(fourpad), "--start", "20,0,0", "--json", str(out)]) == 0
+    assert (
+        main(["simulate", *fast(fourpad), "--start", "20,0,0", "--json", str(out), "--force"]) == 0
+    )
     assert json.loads(out.read_text())["liquid_warnings"] == []
 
 
@@ -680,10 +683,10 @@ def test_simulate_warns_of_a_thick_film_and_an_overflowing_placement(tmp_path, c
     assert "26.8 um" in o and "the start is placed" in o and "chip angle not given" in o
     capsys.readouterr()
     # A chip that de-wets first (condition 2: 90 < 50 + 60) rules overflow out.
-    assert main(argv + ["--start", "40,10,0", "--chip-angle", "60"]) == 0
+    assert main(argv + ["--start", "40,10,0", "--chip-angle", "60", "--force"]) == 0
     assert not any(w.startswith("overflow") for w in json.loads(out.read_text())["liquid_warnings"])
     # A start below the overflow bias: no overflow warning.
-    assert main(argv + ["--start", "20,10,0"]) == 0
+    assert main(argv + ["--start", "20,10,0", "--force"]) == 0
     assert not any(w.startswith("overflow") for w in json.loads(out.read_text())["liquid_warnings"])
 
 

@@ -376,9 +376,12 @@ def scene_from_args(
             (doc.setdefault(table, {}) if table else doc)[key] = value
     if getattr(args, "accuracy", None):
         doc["accuracy"] = args.accuracy
-    scene = Scene.from_dict(
-        doc, base=base
-    )  # the accuracy preset applies here, as for Scene.from_toml
+    try:
+        scene = Scene.from_dict(
+            doc, base=base
+        )  # the accuracy preset applies here, as for Scene.from_toml
+    except InputError as err:
+        raise InputError(_cli_spelling(str(err), bool(args.scene))) from None
     if "volume_nl" in (
         doc.get("liquid") or {}
     ):  # a volume as typed: a film thicker than the chip is refused
@@ -401,6 +404,26 @@ def scene_from_args(
 
         print(frame_note(scene.pattern.params["layout"]), file=sys.stderr)
     return scene
+
+
+#: Python keyword spellings in the scene's messages: the command-line flag and the scene file's key.
+_PY_TO_CLI = {
+    "pass allow_repulsive=True": (
+        "pass --allow-repulsive",
+        "allow_repulsive = true under [materials]",
+    )
+}
+
+
+def _cli_spelling(message: str, scene_file: bool) -> str:
+    """``message`` with a Python keyword the fix names replaced by the command-line flag (and the
+    scene file's key too when the scene comes from a file)."""
+    for py, (flag, key) in _PY_TO_CLI.items():
+        if py in message:
+            message = message.replace(
+                py, flag + (f" (or {key} in the scene file)" if scene_file else "")
+            )
+    return message
 
 
 def accuracy_check(scene: Scene) -> None:
@@ -480,17 +503,29 @@ def check_outputs(
     """Fail before any work when an output file cannot or must not be written.
 
     ``flags`` are attribute names (``json`` for ``--json``). An output may not be an
-    input, a link, a device or a directory, and two outputs may not name one file.
+    input, a link, a device or a directory, and two outputs may not name one file; one that
+    exists is refused unless ``args.force`` (:func:`add_force_arg`).
     ``doc``: the scene file's document (:func:`scene_document`; default: read here).
     """
-    from patterns.outputs import check_distinct, check_output_file
+    from patterns.outputs import check_distinct, check_output_file, require_new_file
 
     inputs = input_paths(args, doc)
     named = {f"--{f.replace('_', '-')}": getattr(args, f, None) for f in flags}
     for flag, path in named.items():
         if path:
             check_output_file(path, flag, inputs)
+            require_new_file(path, flag, bool(getattr(args, "force", False)))
     check_distinct(named)
+
+
+def add_force_arg(p: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
+    """``--force``: replace output files that exist (refused without it, before any work)."""
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="replace output files that already exist (without it an existing one is refused "
+        "before any work; an input of the run is never replaced)",
+    )
 
 
 def write_json(path: str | os.PathLike, obj: Any) -> None:

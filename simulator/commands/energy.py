@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 
 import numpy as np
 
 from patterns.errors import InputError
+from patterns.outputs import atomic_output
 from simulator.commands._common import (
+    add_force_arg,
     add_scene_args,
     check_outputs,
     parse_pose,
@@ -50,6 +53,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="write the poses (kind 'pose') and the curve samples (kind 'curve') as CSV: kind, x_um, "
         "y_um, twist_deg, overlap_um2, energy_J, force_x_N, force_y_N, torque_Nm",
     )
+    add_force_arg(p)
     p.set_defaults(func=run)
 
 
@@ -176,12 +180,14 @@ def run(args: argparse.Namespace) -> int:
                 "no contact (chip off the pattern): "
                 + ", ".join(f"[{a:g}, {b:g}] {unit}" for a, b in cur["no_contact"])
             )
-    if args.json:
-        write_json(args.json, result)
-        print(f"wrote {args.json}")
-    if args.csv:
-        _write_csv(args.csv, ls, poses, cur)
-        print(f"wrote {args.csv}")
+    with contextlib.ExitStack() as stack:  # both outputs, or none (moved into place together)
+        if args.json:
+            write_json(stack.enter_context(atomic_output(args.json)), result)
+        if args.csv:
+            _write_csv(stack.enter_context(atomic_output(args.csv)), ls, poses, cur)
+    for path in (args.json, args.csv):
+        if path:
+            print(f"wrote {path}")
     return 0
 
 

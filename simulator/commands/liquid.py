@@ -58,6 +58,11 @@ def _common(p: argparse.ArgumentParser) -> None:
         help="the answer as JSON: alone, on standard output instead of "
         "the text; with FILE, written there",
     )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="replace the --json FILE if it exists (refused without it)",
+    )
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -237,9 +242,10 @@ def _emit(args: argparse.Namespace, doc: dict, lines: list[str]) -> int:
         sys.stdout.write(text)
         return 0
     if args.json:
-        from patterns.outputs import atomic_output, check_output_file
+        from patterns.outputs import atomic_output, check_output_file, require_new_file
 
         check_output_file(args.json, "--json", [])
+        require_new_file(args.json, "--json", args.force)
         with atomic_output(args.json) as tmp:
             tmp.write_text(text)
     print("\n".join(lines))

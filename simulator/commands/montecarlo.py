@@ -15,6 +15,7 @@ from patterns.outputs import atomic_output
 from simulator.batch import DISTRIBUTIONS, MAX_STARTS, StartGrid
 from simulator.commands._common import (
     accuracy_check,
+    add_force_arg,
     add_scene_args,
     check_outputs,
     liquid_checks,
@@ -108,6 +109,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="PICTURE",
         help="histogram of the time to align of the aligned starts (.png, .svg or .pdf; needs --method overdamped or inertial)",
     )
+    add_force_arg(o)
     p.set_defaults(func=run)
 
 

@@ -77,6 +77,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             help="output file (required): a PNG, or a layout .gds, .oas or .dxf "
             "(exact polygon, 1 nm database unit, layer 1/0; DXF layer PATTERN)",
         )
+        sub.add_argument(
+            "--force",
+            action="store_true",
+            help="replace the -o file if it exists (refused without it)",
+        )
         sub.set_defaults(func=run)
     parser.set_defaults(func=run, design=None)
 
@@ -132,6 +137,11 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(
             "-o OUT.png is required (the PNG file to write; or OUT.gds, OUT.oas, OUT.dxf for a layout)"
         )
+    if not Path(args.output).is_dir():  # a directory: write_mask and write_layout say so
+        from patterns.outputs import check_output_file, require_new_file
+
+        check_output_file(args.output, "-o")  # a link, a device: said as such, before "exists"
+        require_new_file(args.output, "-o", args.force)
     geometry = build(design.name, **values)
     from patterns.layout import SUFFIXES
 

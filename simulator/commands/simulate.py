@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 
 import numpy as np
 
 from patterns.errors import InputError
+from patterns.outputs import atomic_output
 from simulator.commands._common import (
     accuracy_check,
+    add_force_arg,
     add_scene_args,
     check_outputs,
     liquid_checks,
@@ -48,8 +51,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="how greedy and gradient compute the energies they step on: fft (boxes of the landscape "
         "holding the start and the centre, by FFT correlation), path (small boxes that follow the chip, "
         "pose by pose at the cost of the chip's outline: seconds instead of minutes for chips of "
-        "thousands of px; exact geometry or chip images, no K_h meniscus, no free contact lines) or "
-        "auto (path for chips of at least 1000 x 1000 px greedy, 2000 x 2000 px gradient; default). "
+        "thousands of px; exact geometry, chip images and the free contact lines' footprint, not the "
+        "K_h-blurred meniscus or a meniscus below one pixel) or auto (path where it covers the scene: "
+        "for chips of at least 1000 x 1000 px greedy, 2000 x 2000 px gradient, and for every chip "
+        "with free contact lines; default). "
         "The JSON's cost.engine says which ran",
     )
     d = p.add_argument_group("liquid and chip body (dynamic methods)")
@@ -78,6 +83,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         action="store_true",
         help="print only the results (no progress bars or waiting messages)",
     )
+    add_force_arg(o)
     p.set_defaults(func=run)
 
 
@@ -145,26 +151,35 @@ def run(args: argparse.Namespace) -> int:
             f"landscape computed: {c['poses_computed']:,} of {c['poses_full']:,} poses ({100 * c['fraction_of_full']:.3g} %), {c['landscape_s']:.2f} s"
             + (" (path engine)" if c.get("engine") == "path" else "")
         )
-    if args.json:
-        write_json(
-            args.json,
-            traj.to_json()
-            | {"liquid_warnings": liquid_warnings, "meniscus_height_um": scene.meniscus_height_um},
-        )
-        print(f"wrote {args.json}")
-    if args.csv:
-        write_path_csv(args.csv, traj)
-        print(f"wrote {args.csv}")
-    if args.plot:
-        from simulator.render import plot_energy_curve
+    written = []
+    with contextlib.ExitStack() as stack:  # every output, or none: each is moved into place
+        # only when all are complete (a full disk on the GIF keeps no JSON either)
+        def into(path):
+            written.append(path)
+            return stack.enter_context(atomic_output(path))
 
-        plot_energy_curve(traj, args.plot)
-        print(f"wrote {args.plot}")
-    if args.gif:
-        from simulator.render import write_trajectory_gif
+        if args.json:
+            write_json(
+                into(args.json),
+                traj.to_json()
+                | {
+                    "liquid_warnings": liquid_warnings,
+                    "meniscus_height_um": scene.meniscus_height_um,
+                },
+            )
+        if args.csv:
+            write_path_csv(into(args.csv), traj)
+        if args.plot:
+            from simulator.render import plot_energy_curve
 
-        n = write_trajectory_gif(scene, traj, args.gif, quiet=args.quiet)
-        print(f"wrote {args.gif} ({n} frames)")
+            plot_energy_curve(traj, into(args.plot))
+        frames = None
+        if args.gif:
+            from simulator.render import write_trajectory_gif
+
+            frames = write_trajectory_gif(scene, traj, into(args.gif), quiet=args.quiet)
+    for path in written:
+        print(f"wrote {path}" + (f" ({frames} frames)" if path == args.gif else ""))
     return 0
 
 

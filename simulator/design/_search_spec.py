@@ -60,6 +60,8 @@ SEARCH_KEYS = ("trials", "sampler", "seed", "maximize", "minimize", "constraints
 MAX_TRIALS = 100_000
 #: The longest expression (characters).
 MAX_EXPRESSION = 500
+#: The deepest an expression may nest (operators, calls and signs inside each other).
+MAX_DEPTH = 100
 #: The functions an expression may call.
 FUNCTIONS = ("abs", "min", "max", "mean")
 #: Version of the search plan: part of the hash.
@@ -78,7 +80,11 @@ def _walk_check(node: ast.AST, where: str, known: tuple[str, ...]) -> None:
     if isinstance(node, ast.Constant):
         ok = isinstance(node.value, int | float) and not isinstance(node.value, bool)
         require(ok, f"{where}: {show_value(node.value)} is not a number")
-        require(math.isfinite(node.value), f"{where}: {node.value} is not a finite number")
+        try:
+            finite = math.isfinite(node.value)
+        except OverflowError:  # an integer literal beyond a float's range
+            finite = False
+        require(finite, f"{where}: {show_value(node.value)} is not a finite number")
     elif isinstance(node, ast.Name):
         if node.id not in known:
             raise InputError(
@@ -163,10 +169,26 @@ def _parse(text: Any, where: str) -> ast.expr:
     )
     require(len(text) <= MAX_EXPRESSION, f"{where}: longer than {MAX_EXPRESSION} characters")
     try:
-        return ast.parse(text.strip(), mode="eval").body
+        tree = ast.parse(text.strip(), mode="eval").body
     except (SyntaxError, ValueError, RecursionError, MemoryError) as err:
         msg = getattr(err, "msg", None) or type(err).__name__
         raise InputError(f"{where}: {show_value(text, 80)} is not an expression ({msg})") from None
+    _check_depth(tree, where)
+    return tree
+
+
+def _check_depth(tree: ast.AST, where: str) -> None:
+    """InputError (naming ``where``) when ``tree`` nests deeper than :data:`MAX_DEPTH`; iterative,
+    so the check itself never recurses (everything after it walks the tree recursively)."""
+    stack = [(tree, 1)]
+    while stack:
+        node, depth = stack.pop()
+        require(
+            depth <= MAX_DEPTH,
+            f"{where}: the expression nests more than {MAX_DEPTH} levels deep (signs, operators "
+            "and calls inside each other); simplify it",
+        )
+        stack.extend((child, depth + 1) for child in ast.iter_child_nodes(node))
 
 
 def _names(node: ast.AST) -> tuple[str, ...]:

@@ -427,6 +427,43 @@ def _build_bytes(scene: Scene, lay: dict, chunk: int) -> int:
     )
 
 
+def _whole(v) -> bool:
+    """``v`` is a whole number (an int, or an integral finite float), not a bool."""
+    if isinstance(v, bool | np.bool_):
+        return False
+    if isinstance(v, int | np.integer):
+        return True
+    return isinstance(v, float | np.floating) and math.isfinite(v) and float(v).is_integer()
+
+
+def _check_build_arguments(twists, center_px, half_px) -> None:
+    """InputError (one line naming the argument) for twists that are not a list of finite
+    degrees, a centre that is not two finite pixel numbers, or a negative or fractional half-width."""
+    if twists is not None:
+        try:
+            tw = np.asarray(twists, dtype=float)
+        except (TypeError, ValueError):
+            tw = None
+        if tw is None or tw.ndim != 1 or tw.size == 0 or not np.all(np.isfinite(tw)):
+            raise InputError(
+                f"twists must be a non-empty list of finite twists in degrees, got {twists!r}"
+            )
+    try:
+        ok = len(center_px) == 2 and all(
+            not isinstance(c, bool | np.bool_) and math.isfinite(c) for c in center_px
+        )
+    except TypeError:
+        ok = False
+    if not ok:
+        raise InputError(
+            f"center_px must be two finite numbers of pixels (x, y) from the pattern centre, got {center_px!r}"
+        )
+    if half_px is not None and not (_whole(half_px) and half_px >= 0):
+        raise InputError(
+            f"half_px must be a whole number of pixels >= 0 (or None for the scene's whole window), got {half_px!r}"
+        )
+
+
 def build_landscape(
     scene: Scene,
     twists: np.ndarray | None = None,
@@ -460,6 +497,7 @@ def build_landscape(
         InputError: the landscape would exceed ``scene.memory_budget_mb``.
     """
     t_start = time.perf_counter()
+    _check_build_arguments(twists, center_px, half_px)
     _check_energy_range(scene)
     # Sizes first, allocation after: an over-budget request fails before any rotation or
     # transform, and the chunk of twists shrinks until the build fits the budget.

@@ -150,7 +150,7 @@ class SceneBuilders:
             )
         s = pattern.um_per_px
         if chip_size_um is not None:
-            w, h = (chip_size_um, chip_size_um) if np.isscalar(chip_size_um) else chip_size_um
+            w, h = _chip_size(chip_size_um)
             w, h = positive("chip width", w, "um"), positive("chip height", h, "um")
             chip = mask_from_geometry(
                 box(-w / 2, -h / 2, w / 2, h / 2),
@@ -390,3 +390,25 @@ def resample_to_scale(mask: Mask, um_per_px: float, budget_mb: float | None = No
         interpolation=cv2.INTER_AREA if f < 1 else cv2.INTER_NEAREST,
     )
     return Mask(np.clip(out, 0, 1), um_per_px, None, mask.params)
+
+
+def _chip_size(size: Any) -> tuple[Any, Any]:
+    """(width, height) of ``chip_size_um``: one number (a square) or two (a rectangle); InputError
+    for anything else (each side is then checked by :func:`~patterns.errors.positive`)."""
+    if isinstance(size, bool | np.bool_):
+        raise InputError(f"chip_size_um must be a size in um, not {size!r}")
+    if np.isscalar(size):
+        return size, size
+    try:
+        sides = list(size)
+    except TypeError:
+        sides = None
+    if (
+        sides is None
+        or len(sides) != 2
+        or any(not np.isscalar(v) or isinstance(v, bool) for v in sides)
+    ):
+        raise InputError(
+            f"chip_size_um must be one number (a square chip) or two (width, height) in um, got {size!r}"
+        )
+    return sides[0], sides[1]
