@@ -26,6 +26,7 @@ SMOKE = {
     "accuracy.py": ("accuracy.md", [], "| baseline | - |"),
     "design_freeform.py": ("design_freeform.json", [], '"seconds_per_iteration"'),
     "dynamics_calibration.py": ("dynamics.md", [], "| (500, 0, 0) | overdamped |"),
+    "footprint.py": ("footprint.json", [], '"ratio"'),
     "landscape.py": ("landscape.md", [], "| 64 | exact | selfalign |"),
     "meniscus_tables.py": ("meniscus.md", [], "| square_200 |"),
     "montecarlo.py": ("montecarlo.md", [], "| greedy | 64 |"),

@@ -1,0 +1,99 @@
+"""What the footprint state costs: a ``--dispense pattern`` run against the same run without
+the state (speed and memory targets; not a test).
+
+Target (the footprint-state issue): a pattern-dispensed run within 2x of today's meniscus
+run. Each run is a whole ``selfalign simulate`` process, the two alternated, each timed
+with its own peak memory (``ru_maxrss``, printed by the process as it exits):
+
+* the source's bench case: 730/100 four-pad, 730 um chip, 20 nl, 2 um/px, 90 twists,
+  inertial from (500, 5, 1), pads 10:35 deg hysteresis (the far pads stay wet);
+* ``--smoke OUT``: the same at 10 um/px without twist, greedy, one repeat, its JSON to
+  OUT only (a check that the script runs: tests/test_benchmarks_smoke.py).
+
+Usage: ``python benchmarks/footprint.py [--repeats N] [--json PATH] [--smoke OUT]``
+(default ``--json benchmarks/results/footprint.json``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _smoke import add_smoke_arg, smoke_out  # noqa: E402  (benchmarks/ is on sys.path)
+
+sys.path.insert(0, str(ROOT))
+
+PATTERN = ROOT / "patterns" / "library" / "four_pad_730_100.png"
+
+
+def case(smoke: bool) -> list[str]:
+    args = ["simulate", "--pattern", str(PATTERN), "--chip-size", "730", "--meniscus"]
+    args += ["--volume", "20", "--hysteresis", "10:35", "--quiet"]
+    if smoke:
+        return args + ["--resolution", "10", "--no-twist", "--method", "greedy", "--start=500,5,0"]
+    return args + ["--resolution", "2", "--method", "inertial", "--start=500,5,1"]
+
+
+#: ``python -m simulator.cli`` that prints its own peak memory (kB) on stderr as it exits.
+PEAK = (
+    "import atexit, resource, runpy, sys; atexit.register(lambda: print('PEAK_KB', "
+    "resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, file=sys.stderr)); "
+    "sys.argv = ['selfalign'] + sys.argv[1:]; runpy.run_module('simulator.cli', run_name='__main__')"
+)
+
+
+def run(args: list[str]) -> dict:
+    """One whole process: wall seconds, its peak memory (MB) and its first output line."""
+    t0 = time.perf_counter()
+    p = subprocess.run(
+        [sys.executable, "-c", PEAK, *args], capture_output=True, text=True, cwd=ROOT, check=False
+    )
+    wall = time.perf_counter() - t0
+    if p.returncode != 0:
+        raise SystemExit(f"benchmarks/footprint.py: {' '.join(args)} failed: {p.stderr.strip()}")
+    kb = [int(line.split()[1]) for line in p.stderr.splitlines() if line.startswith("PEAK_KB")]
+    return {
+        "wall_s": wall,
+        "peak_mb": kb[-1] / 1024 if kb else float("nan"),
+        "result": p.stdout.splitlines()[0] if p.stdout else "",
+    }
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeats", type=int, default=2)
+    ap.add_argument("--json", type=Path, default=ROOT / "benchmarks" / "results" / "footprint.json")
+    add_smoke_arg(ap, "its JSON")
+    a = ap.parse_args(argv)
+    smoke = smoke_out(ap, a.smoke)
+    out = a.json if smoke is None else smoke
+    repeats = 1 if smoke is not None else a.repeats
+    base = case(smoke is not None)
+    rows = []
+    for i in range(repeats):
+        for name, extra in (("stateless", []), ("dispense pattern", ["--dispense", "pattern"])):
+            r = run(base + extra) | {"run": name, "repeat": i}
+            rows.append(r)
+            print(f"{name:18s} {r['wall_s']:8.1f} s  {r['peak_mb']:8.0f} MB  {r['result']}")
+    best = {
+        n: min(r["wall_s"] for r in rows if r["run"] == n)
+        for n in ("stateless", "dispense pattern")
+    }
+    ratio = best["dispense pattern"] / best["stateless"]
+    print(f"best of {repeats}: ratio {ratio:.2f}x (target 2x)")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(
+        json.dumps({"case": base, "rows": rows, "best_s": best, "ratio": ratio}, indent=1) + "\n"
+    )
+    print(f"wrote {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
