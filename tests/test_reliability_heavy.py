@@ -9,12 +9,19 @@ its hold line is read from the pipe, so nothing waits on a clock.
 
 from __future__ import annotations
 
+import json
+import os
+import signal
+import subprocess
+import sys
 import time
+import tomllib
+from pathlib import Path
 
 import numpy as np
 import pytest
 import shapely
-from cli_helpers import one_line_error  # noqa: F401  (tests/cli_helpers.py)
+from cli_helpers import one_line_error, python_m  # tests/cli_helpers.py
 from shapely.geometry import Polygon
 
 from patterns.errors import InputError
@@ -143,3 +150,262 @@ def test_outline_is_priced_before_it_is_made():
     assert price_outline(m, 1000.0) == 40_000  # four vertices per one-pixel pad
     with pytest.raises(InputError, match=r"outline of the pattern \(300 x 300 px, 40,000"):
         price_outline(m, 40_000 * OUTLINE_BYTES_PER_VERTEX / 2**20 / 2)
+
+
+# ============================================================== 1. free-form design's memory
+ROOT = Path(__file__).resolve().parents[1]
+RFID = ROOT / "examples" / "design_freeform_rfid.toml"
+
+
+def _freeform_doc(size_px: int, **scene) -> dict:
+    """The worked free-form example on a canvas of ``size_px`` a side (4 um/px)."""
+    doc = tomllib.loads(RFID.read_text())
+    doc["scene"]["chip"] = str(ROOT / "examples" / doc["scene"]["chip"])
+    doc["scene"].update(scene)
+    doc["freeform"]["size_um"] = [4 * size_px, 4 * size_px]
+    return doc
+
+
+def _write_toml(path: Path, size_px: int, budget_mb: float, quick: bool = False) -> Path:
+    """The worked example as a file, on a canvas of ``size_px`` with this memory budget
+    (``quick``: a few iterations, checked with few starts)."""
+    text = RFID.read_text()
+    chip = ROOT / "examples" / "design_freeform_rfid_chip.png"
+    edits = [
+        (
+            'chip = "design_freeform_rfid_chip.png"',
+            f'chip = "{chip}"\nmemory_budget_mb = {budget_mb}',
+        ),
+        ("size_um = [720, 720]", f"size_um = [{4 * size_px}, {4 * size_px}]"),
+    ]
+    if quick:
+        edits += [
+            ("iterations = 200", "iterations = 2"),
+            ("yield_starts = 2000", "yield_starts = 20"),
+            ("capture_grid = 25", "capture_grid = 3"),
+            ("step_deg = 2", "step_deg = 30"),
+        ]
+    for old, new in edits:
+        assert old in text
+        text = text.replace(old, new)
+    path.write_text(text)
+    return path
+
+
+def test_freeform_canvas_over_the_budget_is_refused_in_one_line_at_once(tmp_path):
+    # 4000 x 4000 px with a 1,000 MB budget: priced 785 MB before (the FFT canvases alone),
+    # it then peaked at 4,459 MB; now refused from the file's numbers, before any raster.
+    spec = _write_toml(tmp_path / "big.toml", 4000, 1000)
+    t0 = time.perf_counter()
+    r = subprocess.run(
+        [sys.executable, "-m", "simulator", "design", spec, "--out", tmp_path / "out"],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+    )
+    assert time.perf_counter() - t0 < 30  # an import and a refusal (0.65 s here)
+    one_line_error(r.returncode, r.stderr, "4000 x 4000 px canvas", "memory budget is 1,000 MB")
+    assert "--memory-budget" in r.stderr
+    assert not (tmp_path / "out").exists()
+
+
+def test_design_memory_budget_flag_overrides_the_file(tmp_path, run_cli):
+    small = _write_toml(tmp_path / "small.toml", 256, 4000)
+    rc, out, err = run_cli(["design", small, "--out", tmp_path / "o", "--memory-budget", "50"])
+    one_line_error(rc, err, "memory budget is 50 MB")
+    # raised by the flag past the file's 50 MB: priced through, refused later for its --out
+    tight = _write_toml(tmp_path / "tight.toml", 256, 50)
+    rc, out, err = run_cli(["design", tight, "--out", tmp_path / "o"])
+    one_line_error(rc, err, "memory budget is 50 MB")
+    busy = tmp_path / "busy"
+    busy.mkdir()
+    (busy / "mine.txt").write_text("not a design output")
+    rc, out, err = run_cli(["design", tight, "--out", busy, "--memory-budget", "4000"])
+    assert rc == 2 and "memory budget" not in err and str(busy) in err, err
+
+
+#: Runs a short free-form design (no verification) in a fresh process: the priced bytes and
+#: the peak resident memory above the process's before the run.
+PEAK_RUNNER = """
+import json, sys
+import jax, optax, scipy.ndimage, skimage.measure  # the imports, before the base
+from simulator.design import freeform, load_freeform, price_freeform
+
+def status(key):
+    for line in open("/proc/self/status"):
+        if line.startswith(key):
+            return int(line.split()[1]) * 1024
+
+doc = json.loads(sys.argv[1])
+spec = load_freeform(doc, source="peak")
+base = status("VmRSS:")
+freeform(spec, None, iterations=2, verify=False)
+print(json.dumps({"priced": price_freeform(spec), "peak": status("VmHWM:") - base}))
+"""
+
+
+def test_freeform_price_follows_what_the_run_holds():
+    """The priced bytes against the peak resident memory a run adds (VmHWM less the RSS before
+    it) on a 768 px canvas with one twist and no samples: measured 1.0 to 1.24 x from 128 to
+    2048 px on this worked example (the price is an upper bound fitted at 2048 px, and XLA's
+    fixed 200 MB weigh more on small canvases). The old price, the FFT canvases alone, was
+    0.25 x the peak; the bounds 0.8 and 2 catch both an unpriced array and a price so high
+    it refuses runs that fit."""
+    doc = _freeform_doc(768)
+    doc["freeform"]["perturbation"]["samples"] = 0
+    doc["freeform"]["objective"]["orientation"]["weight"] = 0.0
+    r = subprocess.run(
+        [sys.executable, "-c", PEAK_RUNNER, json.dumps(doc)], capture_output=True, text=True
+    )
+    assert r.returncode == 0, r.stderr[-3000:]
+    got = json.loads(r.stdout.strip().splitlines()[-1])
+    assert 0.8 <= got["priced"] / got["peak"] <= 2.0, got
+
+
+# ============================================================== 4. design's messages and leftovers
+#: A small search: the 200 um four-pad's gap, 5 um pixels, no twist, few starts (as
+#: tests/test_design_search.py's).
+SEARCH_TOML = """
+[scene]
+resolution_um = 5
+[scene.effects]
+twist = false
+[design]
+name = "four-pad"
+size = 200
+gap = 20
+[axes]
+gap = [10, 20, 40, 60, 80]
+placement_sigma_um = 40
+[sweep]
+seed = 1
+yield_starts = 100
+capture_grid = 5
+[search]
+trials = TRIALS
+seed = 3
+maximize = "gap_um"
+constraints = ["yield_fraction >= 0.9"]
+"""
+
+
+def _search_file(tmp_path: Path, trials: int) -> Path:
+    p = tmp_path / f"gap{trials}.toml"
+    p.write_text(SEARCH_TOML.replace("TRIALS", str(trials)))
+    return p
+
+
+def test_sigterm_on_design_says_how_many_trials_were_kept(tmp_path):
+    """SIGTERM while the search holds after its second trial is journalled: it said
+    "terminated (no partial output was kept)" with 14 trials kept, then two leaked-semaphore
+    warnings; now the count of the journal, and nothing else."""
+    from simulator.sweep import kept_points
+
+    out = tmp_path / "out"
+    proc = subprocess.Popen(
+        python_m("simulator", "design", _search_file(tmp_path, 20), "--out", out, "--workers", "1"),
+        cwd=tmp_path,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        start_new_session=True,
+        env=os.environ | {"SELFALIGN_HOLD_AT": "search-trial:2", "PYTHONPATH": str(ROOT)},
+    )
+    seen = b""
+    try:
+        while b"selfalign: holding at search-trial" not in seen:
+            chunk = os.read(proc.stderr.fileno(), 4096)
+            assert chunk, (
+                f"the search ended before two trials: {seen.decode(errors='replace')[-2000:]}"
+            )
+            seen += chunk
+        proc.send_signal(signal.SIGTERM)
+        rest = proc.stderr.read().decode(errors="replace")
+        proc.wait(timeout=120)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+        proc.stderr.close()
+    kept = kept_points(out, "trials.jsonl", "trial")
+    lines = [
+        ln
+        for ln in rest.replace("\r", "\n").split("\n")
+        if ln.strip() and not ln.startswith("search")
+    ]
+    assert proc.returncode == 143, rest
+    assert kept == 2
+    assert lines == [
+        f"selfalign design: terminated; 2 finished trials are kept in {out} (rerun the same command to resume)"
+    ], rest
+    assert "semaphore" not in rest and "no partial output" not in rest
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temporaries
+
+
+def test_design_refusals_name_only_flags_design_has(tmp_path, run_cli):
+    busy = tmp_path / "busy"
+    busy.mkdir()
+    (busy / "notes.txt").write_text("mine")
+    for spec in (_search_file(tmp_path, 3), _write_toml(tmp_path / "ff.toml", 128, 4000)):
+        rc, _, err = run_cli(
+            ["design", spec, "--out", busy, "--workers", "0"]
+            if "gap" in spec.name
+            else ["design", spec, "--out", busy]
+        )
+        one_line_error(rc, err, str(busy), "choose a new")
+        assert "--force" not in err
+    rc, _, err = run_cli(
+        ["design", _search_file(tmp_path, 3), "--out", tmp_path / "o", "--memory-budget", "100"]
+    )
+    one_line_error(rc, err, "[scene] memory_budget_mb")
+
+
+def test_search_leaves_no_lock_and_a_resume_removes_a_killed_runs_temporaries(tmp_path, run_cli):
+    spec, out = _search_file(tmp_path, 2), tmp_path / "out"
+    rc, _, err = run_cli(["design", spec, "--out", out, "--workers", "0", "--quiet"])
+    assert rc == 0, err
+    assert not (out / ".search.lock").exists()  # it was left behind, empty
+    # what a search killed in its report phase (SIGKILL: no handler runs) leaves: the atomic
+    # writes' temporaries, named as patterns.outputs names them
+    dead = [
+        out / ".history.png.k2j4_x9q.png",
+        out / ".report.html.a1b2c3d4.html",
+        out / "trials" / ".00001.json.zz00aa11.json",
+    ]
+    for p in dead:
+        p.write_bytes(b"half a file")
+    mine = out / ".history.png.keep"  # not a temporary's name: left alone
+    mine.write_text("x")
+    rc, _, err = run_cli(
+        [
+            "design",
+            spec,
+            "--out",
+            out,
+            "--workers",
+            "0",
+            "--quiet",
+            "--trials",
+            "3",
+        ]
+    )
+    assert rc == 0, err
+    assert not [p for p in dead if p.exists()]
+    assert mine.exists() and not (out / ".search.lock").exists()
+
+
+def test_freeform_run_removes_dead_temporaries_beside_its_target(tmp_path, run_cli):
+    from simulator.design._leftovers import hold_directory
+
+    spec, out = _write_toml(tmp_path / "ff.toml", 128, 4000, quick=True), tmp_path / "out"
+    dead = tmp_path / ".out.abcd1234.selfalign-tmp"  # a run killed while it wrote
+    (dead / "before").mkdir(parents=True)
+    (dead / "pattern.png").write_bytes(b"half")
+    live = tmp_path / ".out.live0000.selfalign-tmp"  # a run still writing: held
+    live.mkdir()
+    other = tmp_path / ".elsewhere.abcd1234.selfalign-tmp"  # another target's
+    other.mkdir()
+    with hold_directory(live):
+        rc, _, err = run_cli(["design", spec, "--out", out, "--quiet"])
+    assert rc == 0, err
+    assert not dead.exists() and live.exists() and other.exists()
+    assert (out / "report.html").exists()
