@@ -409,3 +409,72 @@ def test_freeform_run_removes_dead_temporaries_beside_its_target(tmp_path, run_c
     assert rc == 0, err
     assert not dead.exists() and live.exists() and other.exists()
     assert (out / "report.html").exists()
+
+
+# ============================================================== 5. sweep workers priced together
+SWEEP_TOML = """
+[scene]
+resolution_um = 5
+memory_budget_mb = BUDGET
+[scene.effects]
+twist = false
+[design]
+name = "four-pad"
+size = 200
+gap = 20
+[axes]
+gap = [20, 40]
+[sweep]
+seed = 1
+yield_starts = 100
+capture_grid = 5
+"""
+
+
+def test_workers_are_capped_by_their_priced_peaks_together(monkeypatch):
+    from patterns.resources import MB
+    from simulator.sweep import worker_cap
+
+    monkeypatch.setattr(os, "cpu_count", lambda: 8)
+    n, note = worker_cap(4, 10, 600 * MB, 1300 * MB)  # 2 x 600 MB fit 1,300 MB, 3 do not
+    assert n == 2 and "memory budget of 1.27 GB for all the workers together" in note
+    assert "600 MB" in note and "--workers 4 capped at 2" in note
+    assert worker_cap(4, 10, 600 * MB, 10_000 * MB) == (4, None)
+    assert worker_cap(4, 10, 2000 * MB, 1000 * MB)[0] == 1  # one runs: each point fits its own
+
+
+def test_sweep_runs_fewer_workers_when_two_do_not_fit_the_budget(tmp_path):
+    """Two workers on a 600 um chip reached 6.2 GB together, each priced alone. Here a point
+    is priced at about 0.6 GB (a worker's imports and four times its 30 MB landscape build),
+    so a budget of 900 MB holds one worker, and the sweep says so in one note line."""
+    from simulator.sweep import load_sweep
+    from simulator.sweep._point import point_bytes
+
+    spec_path = tmp_path / "sw.toml"
+    spec_path.write_text(SWEEP_TOML.replace("BUDGET", "900"))
+    spec = load_sweep(spec_path)
+    each = max(point_bytes(spec.task(p)) for p in spec.points())
+    assert 450 * 2**20 < each < 900 * 2**20 < 2 * each
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "simulator",
+            "sweep",
+            spec_path,
+            "--out",
+            tmp_path / "out",
+            "--workers",
+            "2",
+            "--quiet",
+        ],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        env=os.environ | {"PYTHONPATH": str(ROOT)},
+        timeout=600,
+    )
+    assert r.returncode == 0, r.stderr
+    notes = [ln for ln in r.stderr.splitlines() if ln.startswith("note:")]
+    assert len(notes) == 1 and "--workers 2 capped at 1" in notes[0], r.stderr
+    assert "on 1 Dask workers" in r.stdout or "1 Dask worker" in r.stdout, r.stdout

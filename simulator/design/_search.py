@@ -161,18 +161,22 @@ def _corners(spec: SearchSpec) -> list[dict]:
     return [spec.fixed | dict(zip(names, c, strict=True)) for c in combos]
 
 
-def _price(spec: SearchSpec) -> None:
+def _price(spec: SearchSpec) -> int | None:
     """Refuse (one line) a search one of whose trials would not fit the memory budget: the
     baseline and the corners of the space, each built and priced as a point is; a corner
-    that cannot be built (a gap wider than the pattern) is a trial's error row, not a refusal."""
-    from simulator.sweep import price_point
+    that cannot be built (a gap wider than the pattern) is a trial's error row, not a refusal.
+    Returns the largest point's priced peak with a worker's imports (None: none priced), for
+    the local workers to fit the budget together (:func:`simulator.sweep.worker_cap`)."""
+    from simulator.sweep._point import point_bytes
 
     sw = spec.sweep
     candidates = [spec.baseline_values()] if spec.baseline_values() is not None else []
+    peak = None
     for values in candidates + _corners(spec):
         task = sw.task(sw.point(values, 0, 0))
         try:
-            price_point(task)
+            b = point_bytes(task)
+            peak = b if peak is None else max(peak, b)
         except InputError as err:
             if "memory budget" not in str(err):
                 continue
@@ -185,6 +189,7 @@ def _price(spec: SearchSpec) -> None:
             raise InputError(
                 f"{spec.source}: a trial at {at or 'the baseline'} would not fit: {err}"
             ) from None
+    return peak
 
 
 # ----------------------------------------------------------------------- rows
@@ -494,6 +499,7 @@ def search(
     realizations). ``table.attrs["search"]`` holds the hash, the counts, the best trials
     and the times.
     """
+    from patterns.resources import budget_bytes
     from simulator.sweep import check_where, dask_client, run_tasks, worker_cap
 
     spec = spec if isinstance(spec, SearchSpec) else load_search(spec, base)
@@ -504,7 +510,7 @@ def search(
     )
     check_where(workers, scheduler)
     _study(spec, n)  # the sampler's package, before any work
-    _price(spec)
+    peak = _price(spec)
     sw = spec.sweep
     inputs = [Path(p) for p in sw.files] + (
         [Path(spec.source)] if Path(spec.source).is_file() else []
@@ -520,7 +526,14 @@ def search(
         points = todo * sw.realizations
         with contextlib.ExitStack() as stack:
             n_workers, capped = (
-                (None, None) if scheduler else worker_cap(workers or os.cpu_count() or 1, points)
+                (None, None)
+                if scheduler
+                else worker_cap(
+                    workers or os.cpu_count() or 1,
+                    points,
+                    peak,
+                    budget_bytes(sw.scene.get("memory_budget_mb")),
+                )
             )
             if capped and workers and todo:
                 print(f"note: {capped}", file=sys.stderr, flush=True)
