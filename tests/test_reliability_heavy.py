@@ -445,7 +445,7 @@ def test_workers_are_capped_by_their_priced_peaks_together(monkeypatch):
 
 def test_sweep_runs_fewer_workers_when_two_do_not_fit_the_budget(tmp_path):
     """Two workers on a 600 um chip reached 6.2 GB together, each priced alone. Here a point
-    is priced at about 0.6 GB (a worker's imports and four times its 30 MB landscape build),
+    is priced at about 0.55 GB (a worker's imports and five times its 16 MB landscape),
     so a budget of 900 MB holds one worker, and the sweep says so in one note line."""
     from simulator.sweep import load_sweep
     from simulator.sweep._point import point_bytes

@@ -637,11 +637,11 @@ def freeform_cost(spec: FreeformSpec) -> dict:
     ``spectra`` (the chips' spectra and per-twist minima), ``noise`` (the perturbation
     fields), ``canvas`` (the arrays of the
     design canvas, :data:`CANVAS_BYTES_PER_PX`) and ``xla`` (:data:`XLA_FIXED_BYTES`)."""
-    from simulator.landscape._correlator import next_fast_len as fft_len
+    import scipy.fft as sfft
 
     H, W = spec.shape
     hc, wc = chip_canvas_px(spec)
-    ny, nx = fft_len(H + hc), fft_len(W + wc, real=True)
+    ny, nx = sfft.next_fast_len(H + hc), sfft.next_fast_len(W + wc, real=True)
     twists = len(spec.twists_deg())
     samples = max(1, spec.perturbation["samples"])
     item = 2 if spec.scene.dtype == "float64" else 1

@@ -167,7 +167,7 @@ def _price(spec: SearchSpec) -> int | None:
     that cannot be built (a gap wider than the pattern) is a trial's error row, not a refusal.
     Returns the largest point's priced peak with a worker's imports (None: none priced), for
     the local workers to fit the budget together (:func:`simulator.sweep.worker_cap`)."""
-    from simulator.sweep._point import point_bytes
+    from simulator.sweep import point_bytes
 
     sw = spec.sweep
     candidates = [spec.baseline_values()] if spec.baseline_values() is not None else []

@@ -218,10 +218,13 @@ def price_point(task: dict) -> None:
     require_landscape_fits(auto_resolution(scene) if auto else scene)
 
 
-#: A point's assessment holds this many times its landscape build's priced peak (the
-#: landscape kept while the global minimum is proven, the restoring forces and biases are
-#: measured and the yield's starts run, each with its own buffers); see :func:`point_bytes`.
-ASSESS_LANDSCAPES = 4.0
+#: A point's assessment holds this many times its landscape array (the array and the
+#: transforms' work space while it is built, the landscape kept while the global minimum is
+#: proven, the restoring forces and biases are measured and the yield's starts run, each
+#: with its own buffers); see :func:`point_bytes`. Measured: a 600 um chip's four-pad at
+#: 2 um/px (a 264 MB landscape) peaked at 1.64 GB resident in one process, 4.5 x its
+#: landscape above the imports.
+ASSESS_LANDSCAPES = 5.0
 #: What a process holds before its first point: the imports of the engine, JAX and Dask's
 #: worker (about 0.4 GB measured; 0.45 GB priced).
 WORKER_BASE_BYTES = 460 * 2**20
@@ -229,18 +232,17 @@ WORKER_BASE_BYTES = 460 * 2**20
 
 def point_bytes(task: dict) -> int:
     """The peak bytes one point's run holds in its process (priced, nothing allocated): the
-    imports (:data:`WORKER_BASE_BYTES`) and :data:`ASSESS_LANDSCAPES` times its landscape's
-    build as :func:`price_point` prices it (the smallest chunk of twists). InputError when
-    the point's own landscape is over its budget (:func:`price_point`'s line)."""
+    imports (:data:`WORKER_BASE_BYTES`) and :data:`ASSESS_LANDSCAPES` times its landscape
+    array (:func:`simulator.landscape.estimate_bytes` of the scene :func:`price_point`
+    prices). InputError when the point's own landscape is over its budget
+    (:func:`price_point`'s line)."""
     from simulator.batch import auto_resolution
-    from simulator.landscape import require_landscape_fits
-    from simulator.landscape._build import _build_bytes, _layout
+    from simulator.landscape import estimate_bytes, require_landscape_fits
 
     scene, auto = point_scene(task)
     scene = auto_resolution(scene) if auto else scene
     require_landscape_fits(scene)
-    build = _build_bytes(scene, _layout(scene, None, (0, 0), None, False), 1)
-    return int(WORKER_BASE_BYTES + ASSESS_LANDSCAPES * build)
+    return int(WORKER_BASE_BYTES + ASSESS_LANDSCAPES * estimate_bytes(scene))
 
 
 def _one_line(err: BaseException) -> str:
