@@ -478,3 +478,66 @@ def test_sweep_runs_fewer_workers_when_two_do_not_fit_the_budget(tmp_path):
     notes = [ln for ln in r.stderr.splitlines() if ln.startswith("note:")]
     assert len(notes) == 1 and "--workers 2 capped at 1" in notes[0], r.stderr
     assert "on 1 Dask workers" in r.stdout or "1 Dask worker" in r.stdout, r.stdout
+
+
+# ============================================================== 3. a large AREF says what it does
+def _aref(path: Path, n: int) -> Path:
+    """A GDSII whose top cell is an n x n AREF of 0.5 um squares on a 1 um pitch."""
+    import gdstk
+
+    lib = gdstk.Library(unit=1e-6, precision=1e-9)
+    sq = lib.new_cell("SQ")
+    sq.add(gdstk.rectangle((0, 0), (0.5, 0.5)))
+    top = lib.new_cell("TOP")
+    top.add(gdstk.Reference(sq, (-n / 2, -n / 2), columns=n, rows=n, spacing=(1, 1)))
+    lib.write_gds(str(path))
+    return path
+
+
+def test_a_large_aref_shows_its_waiting_lines_and_completes(tmp_path):
+    """The 1000 x 1000 AREF ran silently past 120 s after --max-polygons; its 300 x 300
+    sibling (90,000 polygons) now says it reads, merges and rasterizes them and measures
+    their smallest feature (the threshold set to 0 s, so the lines appear whatever the
+    machine's speed), and completes: 20 s here, mostly the outline measure, which took
+    minutes before (one Python call per ring and a nearest-part query per part)."""
+    gds = _aref(tmp_path / "aref.gds", 300)
+    r = subprocess.run(
+        [sys.executable, "-m", "simulator", "energy", "--pattern", gds, "--max-polygons", "1000000"]
+        + ["--chip-size", "100", "--at", "0,0,0"],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        env=os.environ | {"SELFALIGN_WAIT_S": "0", "PYTHONPATH": str(ROOT)},
+        timeout=600,
+    )
+    assert r.returncode == 0, r.stderr
+    lines = r.stderr.splitlines()
+    assert lines[0] == (
+        "reading, merging and rasterizing the 90,000 polygons of cell TOP of aref.gds (about 18 s)..."
+    )
+    assert sum(ln.startswith("measuring the smallest feature") for ln in lines) == 1  # once
+    assert "overlap 2,500.0 um^2" in r.stdout
+
+
+def test_the_smallest_feature_of_many_polygons_is_vectorised(monkeypatch):
+    """The per-ring stretches and the part gaps of 10,000 squares: the same number of calls
+    into shapely as for 100 (the measure made one call per ring, and asked for every part's
+    nearest neighbour)."""
+    import simulator.scene._accuracy as acc
+
+    def grid(n: int):
+        xs = np.arange(n) * 3.0
+        return shapely.MultiPolygon(
+            list(
+                shapely.box(*np.meshgrid(xs, xs), *(np.meshgrid(xs, xs) + np.float64(2.0))).ravel()
+            )
+        )
+
+    def calls(g) -> int:
+        counter = _CountingShapely()
+        with monkeypatch.context() as m:
+            m.setattr(acc, "shapely", counter)
+            assert acc._measure(g, acc.CORNER_DEG) == pytest.approx(1.0)  # the 1 um gaps
+        return counter.calls
+
+    assert calls(grid(10)) == calls(grid(100))
