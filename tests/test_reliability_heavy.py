@@ -357,6 +357,12 @@ def test_design_refusals_name_only_flags_design_has(tmp_path, run_cli):
         ["design", _search_file(tmp_path, 3), "--out", tmp_path / "o", "--memory-budget", "100"]
     )
     one_line_error(rc, err, "[scene] memory_budget_mb")
+    tight = tmp_path / "tight.toml"  # a trial over its budget: the advice names the file's key
+    text = SEARCH_TOML.replace("TRIALS", "3").replace("size = 200", "size = 4000")
+    tight.write_text(text.replace("resolution_um = 5", "resolution_um = 1\nmemory_budget_mb = 200"))
+    rc, _, err = run_cli(["design", tight, "--out", tmp_path / "o2", "--workers", "0"])
+    one_line_error(rc, err, "would not fit", "memory budget", "[scene] memory_budget_mb")
+    assert "--memory-budget" not in err
 
 
 def test_search_leaves_no_lock_and_a_resume_removes_a_killed_runs_temporaries(tmp_path, run_cli):

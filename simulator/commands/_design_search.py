@@ -43,8 +43,31 @@ def _sigterm_says_what_was_kept(out: str) -> Iterator[None]:
         signal.signal(signal.SIGTERM, previous)
 
 
+#: The memory advice of the checks shared with other commands, and a search's own: its
+#: trials' budget is the file's (part of the search), not a flag.
+_BUDGET_ADVICE = (
+    ("(or raise --memory-budget)", "(or raise [scene] memory_budget_mb)"),
+    ("raise memory_budget_mb (--memory-budget)", "raise [scene] memory_budget_mb"),
+    ("or raise --memory-budget", "or raise [scene] memory_budget_mb"),
+    ("MB (--memory-budget)", "MB ([scene] memory_budget_mb)"),
+)
+
+
 def run_search(args: argparse.Namespace, path: Path, doc: dict) -> int:
-    """Run the search of the design file ``path`` (already read into ``doc``); print what it found."""
+    """Run the search of the design file ``path`` (already read into ``doc``); print what it
+    found. A refusal's memory advice names the file's budget, the one a search has."""
+    from patterns.errors import InputError
+
+    try:
+        return _run_search(args, path, doc)
+    except InputError as err:
+        text = str(err)
+        for theirs, ours in _BUDGET_ADVICE:
+            text = text.replace(theirs, ours)
+        raise InputError(text) from None
+
+
+def _run_search(args: argparse.Namespace, path: Path, doc: dict) -> int:
     from simulator.design import load_search, search
 
     if getattr(args, "memory_budget", None) is not None:
