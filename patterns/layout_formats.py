@@ -165,6 +165,28 @@ class LayoutSelection:
             )
 
 
+#: Seconds of reading, merging and rasterizing per flattened polygon (20 s per 100,000),
+#: for the waiting line of :func:`layout_wait_line`.
+S_PER_POLYGON = 2e-4
+
+
+def layout_wait_line(n: int, what: str) -> bool:
+    """Say on stderr that ``n`` flattened polygons of ``what`` are being read, merged and
+    rasterized, when that takes long: the command line's waiting line (its threshold,
+    ``SELFALIGN_WAIT_S``, and ``--quiet``), through the simulator's progress module when the
+    process has loaded it; silent for a library caller without it. Returns whether shown."""
+    import sys
+
+    progress = sys.modules.get("simulator.core._progress")
+    if progress is None:
+        return False
+    seconds = n * S_PER_POLYGON
+    return progress.wait_line(
+        f"reading, merging and rasterizing the {n:,} polygons of {what} (about {seconds:,.0f} s)",
+        seconds,
+    )
+
+
 def require_polygon_count(n: int, what: str, limit: int | None) -> None:
     """InputError unless ``n`` flattened polygons (counted from the hierarchy, before flattening) are within ``limit``."""
     limit = DEFAULT_MAX_POLYGONS if limit is None else int(limit)

@@ -31,6 +31,7 @@ from patterns.layout_formats import (
     NAMES,
     _count,
     _fmt_len,
+    layout_wait_line,
     require_polygon_count,
 )
 from patterns.resources import require_fits
@@ -188,6 +189,7 @@ def _read_gdstk(
         "choose a smaller --cell",
         budget_mb,
     )
+    layout_wait_line(polygons, f"cell {top.name} of {path.name}")
     for name, v in (("database unit", lib.precision), ("user unit", lib.unit)):
         if not (math.isfinite(v) and v > 0):  # a zero unit would divide by zero below
             raise InputError(

@@ -20,6 +20,8 @@ def run_freeform(args: argparse.Namespace, path: Path, doc: dict) -> int:
                 f"{flag} sets where the trials of a [search] run; a [freeform] design runs its gradient "
                 f"iterations in this process: drop {flag}"
             )
+    if args.memory_budget is not None:  # over the file's, as every command's --memory-budget
+        doc = {**doc, "scene": {**doc.get("scene", {}), "memory_budget_mb": args.memory_budget}}
     spec = load_freeform(doc, base=path.resolve().parent, source=str(path))
     spec = spec.with_iterations(args.trials)
     with quiet_waits(args.quiet):

@@ -3,25 +3,92 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
+import signal
 import sys
+import threading
+from collections.abc import Iterator
 from pathlib import Path
 
 
+@contextlib.contextmanager
+def _sigterm_says_what_was_kept(out: str) -> Iterator[None]:
+    """While the search runs, SIGTERM ends it as the CLI's handler does (temporaries removed,
+    at once), but says how many finished trials ``out`` keeps (a rerun resumes them), and
+    leaves no semaphore of the Dask cluster behind (the resource tracker's warnings)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def terminate(signum, frame):
+        from patterns.outputs import remove_pending
+        from simulator.sweep import kept_points, release_semaphores
+
+        remove_pending()
+        n = kept_points(out, "trials.jsonl", "trial") if os.path.isdir(out) else 0
+        release_semaphores()
+        said = (
+            f"{n} finished trial{'s are' if n != 1 else ' is'} kept in {out} (rerun the same command to resume)"
+            if n
+            else "no trial had finished, none was kept"
+        )
+        os.write(2, f"selfalign design: terminated; {said}\n".encode())
+        os._exit(143)
+
+    previous = signal.signal(signal.SIGTERM, terminate)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+#: The memory advice of the checks shared with other commands, and a search's own: its
+#: trials' budget is the file's (part of the search), not a flag.
+_BUDGET_ADVICE = (
+    ("(or raise --memory-budget)", "(or raise [scene] memory_budget_mb)"),
+    ("raise memory_budget_mb (--memory-budget)", "raise [scene] memory_budget_mb"),
+    ("or raise --memory-budget", "or raise [scene] memory_budget_mb"),
+    ("MB (--memory-budget)", "MB ([scene] memory_budget_mb)"),
+)
+
+
 def run_search(args: argparse.Namespace, path: Path, doc: dict) -> int:
-    """Run the search of the design file ``path`` (already read into ``doc``); print what it found."""
+    """Run the search of the design file ``path`` (already read into ``doc``); print what it
+    found. A refusal's memory advice names the file's budget, the one a search has."""
+    from patterns.errors import InputError
+
+    try:
+        return _run_search(args, path, doc)
+    except InputError as err:
+        text = str(err)
+        for theirs, ours in _BUDGET_ADVICE:
+            text = text.replace(theirs, ours)
+        raise InputError(text) from None
+
+
+def _run_search(args: argparse.Namespace, path: Path, doc: dict) -> int:
     from simulator.design import load_search, search
 
+    if getattr(args, "memory_budget", None) is not None:
+        from patterns.errors import InputError
+
+        raise InputError(
+            "--memory-budget sets the budget of a [freeform] design; the trials of a [search] take theirs "
+            "from the file's [scene] memory_budget_mb (part of the search, so a rerun resumes it): set it there "
+            "and drop --memory-budget"
+        )
     spec = load_search(doc, path.resolve().parent, source=str(path))
     try:
-        table = search(
-            spec,
-            args.out,
-            workers=args.workers,
-            scheduler=args.scheduler,
-            trials=args.trials,
-            quiet=args.quiet,
-        )
+        with _sigterm_says_what_was_kept(args.out):
+            table = search(
+                spec,
+                args.out,
+                workers=args.workers,
+                scheduler=args.scheduler,
+                trials=args.trials,
+                quiet=args.quiet,
+            )
     except KeyboardInterrupt:
         from simulator.sweep import kept_points
 

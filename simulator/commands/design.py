@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from simulator.commands._common import finite_limit
 from simulator.sweep import CONNECT_TIMEOUT_S
 
 
@@ -51,11 +52,48 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="N",
         help="trials of a search, or iterations of a free-form optimisation (default: the file's)",
     )
+    p.add_argument(
+        "--memory-budget",
+        type=finite_limit("--memory-budget", "MB"),
+        help="memory budget in MB of a [freeform] run, over the file's [scene] memory_budget_mb "
+        "(default: half the available memory, at most 8192; never more than the machine has)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    from patterns.errors import InputError
+
+    try:
+        return _run(args)
+    except InputError as err:
+        raise InputError(without_force(str(err))) from None
+
+
+#: What the output checks shared with other commands advise, and what design has instead of
+#: their --force: a rerun resumes a search or replaces a previous free-form output itself.
+_FORCE_ADVICE = (
+    (
+        "choose a new directory, or pass --force to replace a previous selfalign output",
+        "choose a new directory (a rerun of the same design resumes its search, or replaces its "
+        "previous free-form output)",
+    ),
+    (
+        "holds files selfalign did not write; not replaced even with --force (choose another directory)",
+        "holds files selfalign did not write; choose another directory",
+    ),
+)
+
+
+def without_force(message: str) -> str:
+    """A refusal's advice with the flags design has: it has no --force."""
+    for theirs, ours in _FORCE_ADVICE:
+        message = message.replace(theirs, ours)
+    return message
+
+
+def _run(args: argparse.Namespace) -> int:
     from simulator.design import design_mode
     from simulator.sweep import read_toml_file
 

@@ -241,11 +241,19 @@ def _run(spec, pictures: Path | None, quiet: bool, verify: bool) -> FreeformResu
     import jax
     import optax
 
+    from simulator.core import wait_line
+    from simulator.design._freeform_spec import SETUP_S_PER_PX
+
+    h, w = spec.shape
+    wait_line(
+        f"preparing the free-form design's {w} x {h} px canvas and the chip at "
+        f"{len(spec.twists_deg())} twist{'s' if len(spec.twists_deg()) != 1 else ''}",
+        SETUP_S_PER_PX * h * w * (1 + len(spec.twists_deg())) / 2,
+    )
     problem = make_problem(spec)
     arrays = problem.arrays()
     loss = _loss_fn(problem)
     opt = optax.adam(spec.learning_rate)
-    h, w = spec.shape
     free_init = math.log(spec.init / (1 - spec.init))
     z = jax.numpy.full((h, w), free_init, dtype=problem.dtype)
     state = opt.init(z)
@@ -282,6 +290,10 @@ def _run(spec, pictures: Path | None, quiet: bool, verify: bool) -> FreeformResu
     from simulator.design._freeform_density import pattern_of
 
     dm = problem.density
+    wait_line(
+        "making the pattern binary and evaluating it and the baseline without perturbations",
+        SETUP_S_PER_PX * h * w * (1 + len(spec.twists_deg())),
+    )
     final = jax.jit(lambda z, b, a: pattern_of(z, b, a, dm.shape, dm.fft))
     density = np.asarray(final(z, bs[-1], arrays), np.float64)
     binary, cleanup = clean_pattern(density, spec.keep_in, spec.keep_out, spec.min_feature_px)

@@ -13,6 +13,7 @@ not counted. Nothing heavy is imported until a picture is drawn.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import html
 import json
@@ -55,10 +56,19 @@ def check_out(out, spec) -> None:
     check_output_dir(out, "--out", _previous(out), spec.files)
 
 
+@contextlib.contextmanager
 def output_context(out, spec):
-    """The atomic output directory (a previous free-form output in ``out`` is replaced)."""
+    """The atomic output directory (a previous free-form output in ``out`` is replaced).
+
+    The temporary directories that killed runs into ``out`` left beside it are removed first,
+    and this run's own is locked while it is written (:mod:`simulator.design._leftovers`)."""
+    from simulator.design._leftovers import hold_directory, remove_dead_directories
+
     out = Path(out)
-    return output_directory(out, "--out", _previous(out), spec.files, command=COMMAND)
+    remove_dead_directories(out)
+    with output_directory(out, "--out", _previous(out), spec.files, command=COMMAND) as tmp:
+        with hold_directory(tmp):
+            yield tmp
 
 
 # ------------------------------------------------------------------------------ geometry

@@ -107,13 +107,40 @@ MAX_SAMPLES = 64
 MIN_FEATURE_PX = 2.0
 #: Largest design canvas side (px).
 MAX_CANVAS_PX = 8192
-#: Peak bytes per FFT canvas pixel, twist and perturbation sample of one gradient iteration
-#: (float32; float64 doubles it): the product of the pattern's spectrum with each chip's, its
-#: inverse and the window, kept for the backward pass, and their cotangents. Measured on the
-#: worked example (4 twists x 2 samples, float32), the peak resident memory of a run above
-#: the process's: 241 MB at 256 px (priced 89 MB) and 350 MB at 512 px (priced 355 MB); the
-#: excess at small sizes is XLA's compilation and the chip's footprint, which are not priced.
-FFT_BYTES_PER_PX = 32
+#: What a free-form run holds at its peak (:func:`freeform_cost`), float32 (float64 doubles
+#: it), fitted to the peak resident memory of runs of the worked example above the process's
+#: before them (2048 x 2048 px canvas, 2187 x 2178 px FFT canvases; twists T and perturbation
+#: samples S): 887 MB (T 1, S 0), 1,003 MB (T 1, S 2), 1,172 MB (T 4, S 0), 1,448 MB (T 4,
+#: S 2); the differences give the per-twist and per-sample terms, the first the canvas term.
+#: The priced bytes are 1.0 to 1.2 x the measured peaks from 128 to 2048 px (before, only the
+#: twist terms were priced, at 32 + 16 B: 0.25 x the peak with one twist).
+#:
+#: Bytes per FFT canvas pixel, twist and perturbation sample of one gradient iteration: the
+#: product of the pattern's spectrum with each chip's, its inverse and the window, kept for
+#: the backward pass, and their cotangents (complex64 half spectra, float32 planes). Fitted:
+#: 11.7 B.
+FFT_BYTES_PER_PX = 16
+#: Bytes per FFT canvas pixel and twist: the chip's spectrum (made in complex128 by numpy,
+#: then held in JAX) and the planes' soft and hard minima of the final evaluation. Fitted: 9.2 B.
+TWIST_BYTES_PER_PX = 12
+#: Bytes per design-canvas pixel and perturbation sample: the white noise, its spectrum and
+#: the smoothed field kept for the backward pass. Fitted: 7.9 B.
+NOISE_BYTES_PER_PX = 8
+#: Bytes per design-canvas pixel whatever the twists and samples: the spec's keep-in,
+#: keep-out and baseline rasters and the chip side's probe (float64, 8 B each), the density
+#: map's cone and noise spectra and its normalisation made in float64 by numpy (with their
+#: temporaries, about 64 B) and held again in JAX (12 B), the design variables with Adam's
+#: two moments and their gradient (16 B), the filter's forward and inverse transforms and
+#: the projection kept for the backward pass (about 24 B), and the result: the last density
+#: (float64), its binary pattern, the written mask (float64) and the opening's padded copies
+#: (about 24 B). Fitted: 148 B.
+CANVAS_BYTES_PER_PX = 160
+#: What XLA's compilation of the gradient step and the first buffers hold whatever the canvas
+#: (measured: 220 MB above the process at 128 px, where the arrays are a few MB).
+XLA_FIXED_BYTES = 200 * 2**20
+#: Seconds per design-canvas pixel to make the problem's arrays (the chip side and the density
+#: map, numpy FFTs on one core; 5 s at 2048 x 2048 px), for the waiting line.
+SETUP_S_PER_PX = 1.2e-6
 
 
 @dataclass(frozen=True, eq=False)
@@ -379,6 +406,7 @@ def load_freeform(
     require(b1 >= b0, f"{w} beta = {show_value(ff.get('beta'))}: the last must be >= the first")
     init = _number(f"{w} init", ff.get("init", 0.5), 0.01, 0.99)
     budget = scene_doc.get("memory_budget_mb")
+    _price_canvas(src, (H, W), scene_doc.get("dtype", "float32"), budget)  # before any raster
     files: list[str] = []
     shape = (H, W)
     zero = np.zeros(shape)
@@ -602,13 +630,14 @@ def chip_canvas_px(spec: FreeformSpec) -> tuple[int, int]:
     return n, n
 
 
-def price_freeform(spec: FreeformSpec) -> int:
-    """Bytes of one gradient iteration's FFT canvases (InputError above the scene's memory
-    budget): every twist's correlation for every perturbation sample, forward and backward,
-    and the chips' spectra."""
+def freeform_cost(spec: FreeformSpec) -> dict:
+    """What one free-form run holds at its peak, without refusing anything: ``bytes`` (the
+    sum of the terms below), ``fft`` (nx, ny), ``twists``, ``samples`` and each term's bytes:
+    ``planes`` (every twist's correlation for every perturbation sample, forward and backward),
+    ``spectra`` (the chips' spectra and per-twist minima), ``noise`` (the perturbation
+    fields), ``canvas`` (the arrays of the
+    design canvas, :data:`CANVAS_BYTES_PER_PX`) and ``xla`` (:data:`XLA_FIXED_BYTES`)."""
     import scipy.fft as sfft
-
-    from patterns.resources import fmt_bytes
 
     H, W = spec.shape
     hc, wc = chip_canvas_px(spec)
@@ -616,13 +645,58 @@ def price_freeform(spec: FreeformSpec) -> int:
     twists = len(spec.twists_deg())
     samples = max(1, spec.perturbation["samples"])
     item = 2 if spec.scene.dtype == "float64" else 1
-    need = item * (FFT_BYTES_PER_PX * ny * nx * twists * samples + 16 * ny * nx * twists)
-    budget = spec.scene.memory_budget_mb * 2**20
+    terms = {
+        "planes": item * FFT_BYTES_PER_PX * ny * nx * twists * samples,
+        "spectra": item * TWIST_BYTES_PER_PX * ny * nx * twists,
+        "noise": item * NOISE_BYTES_PER_PX * H * W * spec.perturbation["samples"],
+        "canvas": item * CANVAS_BYTES_PER_PX * H * W,
+        "xla": XLA_FIXED_BYTES,
+    }
+    return {
+        "bytes": int(sum(terms.values())),
+        "fft": (nx, ny),
+        "twists": twists,
+        "samples": samples,
+        **terms,
+    }
+
+
+def _price_canvas(src: str, shape: tuple[int, int], dtype: str, budget_mb: float | None) -> None:
+    """InputError when the design canvas's own arrays (:data:`CANVAS_BYTES_PER_PX`, with
+    :data:`XLA_FIXED_BYTES`) are over the memory budget: checked from the file's numbers,
+    before the masks or the chip are rasterized (:func:`price_freeform` prices the whole run)."""
+    from patterns.resources import budget_bytes, fmt_bytes
+
+    H, W = shape
+    item = 2 if dtype == "float64" else 1
+    need = item * CANVAS_BYTES_PER_PX * H * W + XLA_FIXED_BYTES
+    budget = budget_bytes(budget_mb)
     if need > budget:
         raise InputError(
-            f"{spec.source}: one gradient iteration needs about {fmt_bytes(need)} ({twists} twist planes x "
-            f"{samples} sample{'s' if samples != 1 else ''} on {nx} x {ny} px FFT canvases, {spec.scene.dtype}) "
-            f"but the memory budget is {fmt_bytes(budget)}; use a coarser um_per_px, a smaller size_um, fewer "
-            "perturbation samples or orientation twists, or raise [scene] memory_budget_mb"
+            f"{src}: one gradient iteration needs about {fmt_bytes(need)} or more (the arrays of the {W} x {H} px "
+            f"canvas, {dtype}, before its FFT canvases) but the memory budget is {fmt_bytes(budget)}; use a coarser um_per_px "
+            "or a smaller size_um, or raise --memory-budget ([scene] memory_budget_mb)"
+        )
+
+
+def price_freeform(spec: FreeformSpec, budget_mb: float | None = None) -> int:
+    """Bytes a free-form run holds at its peak (:func:`freeform_cost`); InputError above the
+    memory budget (``budget_mb``, else the scene's ``memory_budget_mb``), before any work."""
+    from patterns.resources import fmt_bytes
+
+    c = freeform_cost(spec)
+    need = c["bytes"]
+    mb = spec.scene.memory_budget_mb if budget_mb is None else float(budget_mb)
+    budget = mb * 2**20
+    if need > budget:
+        H, W = spec.shape
+        nx, ny = c["fft"]
+        twists, samples = c["twists"], c["samples"]
+        raise InputError(
+            f"{spec.source}: one gradient iteration needs about {fmt_bytes(need)} with what the run holds ({W} x {H} px canvas, "
+            f"{twists} twist plane{'s' if twists != 1 else ''} x {samples} sample{'s' if samples != 1 else ''} "
+            f"on {nx} x {ny} px FFT canvases, {spec.scene.dtype}) but the memory budget is {fmt_bytes(budget)}; "
+            "use a coarser um_per_px, a smaller size_um, fewer perturbation samples or orientation twists, "
+            "or raise --memory-budget ([scene] memory_budget_mb)"
         )
     return int(need)

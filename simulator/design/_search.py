@@ -57,6 +57,38 @@ class _TrialStore(ResultStore):
     LOCK, TABLES = ".search.lock", ("trials.parquet", "trials.csv")
     HOLD = "search-trial"
 
+    def _take_lock(self) -> None:
+        """The lock, then what a killed run left in the directory (its atomic writes'
+        temporaries, :func:`simulator.design._leftovers.remove_dead_files`) removed. The lock
+        file is removed when the search ends (:meth:`close`), so the lock taken is checked to
+        be the file's that the path names now (a run that ended meanwhile removed it)."""
+        from simulator.design._leftovers import remove_dead_files
+
+        for _ in range(10):
+            super()._take_lock()
+            try:
+                same = os.path.samestat(
+                    os.fstat(self._lock.fileno()), os.stat(self.out / self.LOCK)
+                )
+            except OSError:
+                same = False
+            if same:
+                break
+            self._lock.close()
+            self._lock = None
+        else:
+            raise InputError(
+                f"--out {self.out}: another selfalign design keeps taking its lock; wait for it to end"
+            )
+        remove_dead_files(self.out, (self.ROWS_DIR,))
+
+    def close(self) -> None:
+        """Close the journal and release the lock, its file removed (no empty lock is left)."""
+        if self._lock is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(self.out / self.LOCK)  # while held: no other run holds this file
+        super().close()
+
     def _other(self, doc: dict) -> str:
         objs = "; ".join(f"{o['direction']} {o['expression']}" for o in doc.get("objectives", []))
         return f"{doc.get('source', '?')}: {objs or '?'}"
@@ -129,18 +161,22 @@ def _corners(spec: SearchSpec) -> list[dict]:
     return [spec.fixed | dict(zip(names, c, strict=True)) for c in combos]
 
 
-def _price(spec: SearchSpec) -> None:
+def _price(spec: SearchSpec) -> int | None:
     """Refuse (one line) a search one of whose trials would not fit the memory budget: the
     baseline and the corners of the space, each built and priced as a point is; a corner
-    that cannot be built (a gap wider than the pattern) is a trial's error row, not a refusal."""
-    from simulator.sweep import price_point
+    that cannot be built (a gap wider than the pattern) is a trial's error row, not a refusal.
+    Returns the largest point's priced peak with a worker's imports (None: none priced), for
+    the local workers to fit the budget together (:func:`simulator.sweep.worker_cap`)."""
+    from simulator.sweep import point_bytes
 
     sw = spec.sweep
     candidates = [spec.baseline_values()] if spec.baseline_values() is not None else []
+    peak = None
     for values in candidates + _corners(spec):
         task = sw.task(sw.point(values, 0, 0))
         try:
-            price_point(task)
+            b = point_bytes(task)
+            peak = b if peak is None else max(peak, b)
         except InputError as err:
             if "memory budget" not in str(err):
                 continue
@@ -153,6 +189,7 @@ def _price(spec: SearchSpec) -> None:
             raise InputError(
                 f"{spec.source}: a trial at {at or 'the baseline'} would not fit: {err}"
             ) from None
+    return peak
 
 
 # ----------------------------------------------------------------------- rows
@@ -462,6 +499,7 @@ def search(
     realizations). ``table.attrs["search"]`` holds the hash, the counts, the best trials
     and the times.
     """
+    from patterns.resources import budget_bytes
     from simulator.sweep import check_where, dask_client, run_tasks, worker_cap
 
     spec = spec if isinstance(spec, SearchSpec) else load_search(spec, base)
@@ -472,7 +510,7 @@ def search(
     )
     check_where(workers, scheduler)
     _study(spec, n)  # the sampler's package, before any work
-    _price(spec)
+    peak = _price(spec)
     sw = spec.sweep
     inputs = [Path(p) for p in sw.files] + (
         [Path(spec.source)] if Path(spec.source).is_file() else []
@@ -488,7 +526,14 @@ def search(
         points = todo * sw.realizations
         with contextlib.ExitStack() as stack:
             n_workers, capped = (
-                (None, None) if scheduler else worker_cap(workers or os.cpu_count() or 1, points)
+                (None, None)
+                if scheduler
+                else worker_cap(
+                    workers or os.cpu_count() or 1,
+                    points,
+                    peak,
+                    budget_bytes(sw.scene.get("memory_budget_mb")),
+                )
             )
             if capped and workers and todo:
                 print(f"note: {capped}", file=sys.stderr, flush=True)

@@ -84,11 +84,67 @@ def _geometry_of(pattern: Mask | BaseGeometry) -> tuple[BaseGeometry, float, flo
     return _mask_outline(pattern), 0.5 * pattern.um_per_px, 1.5 * pattern.um_per_px
 
 
-def _mask_outline(mask: Mask) -> BaseGeometry:
-    """Polygons along the 0.5 level of the mask (marching squares on pixel centres), in um."""
+#: Peak bytes per outline vertex while a mask is outlined: the contour's float64 (row, col)
+#: and (x, y) arrays, its shapely polygon (coordinates and GEOS's copy) and the parts and
+#: simplified copy :func:`smallest_feature_um` makes of it.
+OUTLINE_BYTES_PER_VERTEX = 160
+#: Seconds per outline vertex (marching squares, one polygon each, their nesting and the
+#: feature's measure), measured on a 2-core AMD EPYC (0.17 s for the 10,000 pads of a
+#: 300 x 300 px image, 40,000 vertices), for the waiting line.
+OUTLINE_S_PER_VERTEX = 5e-6
+
+
+def _outline_vertices(data: np.ndarray) -> int:
+    """The vertices the 0.5-level contours of ``data`` will have (one per pixel edge that
+    crosses the level, the image's own border counted as dry), counted a row at a time."""
+    n = 0
+    step = max(1, 2**22 // max(1, data.shape[1]))
+    prev = np.zeros(data.shape[1], bool)
+    for r0 in range(0, data.shape[0], step):
+        b = data[r0 : r0 + step] >= 0.5
+        n += int(np.count_nonzero(b[:, 1:] != b[:, :-1]))
+        n += int(np.count_nonzero(b[:, 0])) + int(np.count_nonzero(b[:, -1]))
+        n += int(np.count_nonzero(b[0] != prev)) + int(np.count_nonzero(b[1:] != b[:-1]))
+        prev = b[-1]
+    return n + int(np.count_nonzero(prev))
+
+
+def price_outline(mask: Mask, budget_mb: float | None = None) -> int:
+    """The outline's vertices (:func:`_outline_vertices`); InputError when their polygons
+    would not fit the memory budget (None: the default budget), and a waiting line on stderr
+    when outlining them takes long (:func:`simulator.core.wait_line`)."""
+    from patterns.resources import require_fits
+    from simulator.core import wait_line
+
+    n = _outline_vertices(mask.data)
+    h, w = mask.shape
+    require_fits(
+        f"the outline of the pattern ({w} x {h} px, {n:,} outline vertices) for its smallest feature",
+        n * OUTLINE_BYTES_PER_VERTEX,
+        "use a coarser --resolution or a pattern with fewer pads",
+        budget_mb,
+    )
+    wait_line(
+        f"outlining the pattern's {n:,} edge vertices for its smallest feature",
+        n * OUTLINE_S_PER_VERTEX,
+    )
+    return n
+
+
+def _mask_outline(mask: Mask, budget_mb: float | None = None) -> BaseGeometry:
+    """Polygons along the 0.5 level of the mask (marching squares on pixel centres), in um.
+
+    Nested outlines are holes and holes in holes are pads (the even-odd rule). The contours
+    of the 0.5 level never cross nor touch (each crossing of a pixel edge belongs to one
+    contour), so a contour's nesting depth is the number of contours around one of its
+    vertices: one query of a tree of them, not a symmetric difference per contour (which
+    grew with the square of the contours: 10,000 one-pixel pads took minutes). Each
+    even-depth contour is a pad, with the contours one level deeper inside it as its holes.
+    """
     from skimage import measure
 
     mask.require_nonempty("pattern")
+    price_outline(mask, budget_mb)
     h, w = mask.shape
     s = mask.um_per_px
     d = mask.data
@@ -96,21 +152,39 @@ def _mask_outline(mask: Mask) -> BaseGeometry:
     # (the usual case; a padded copy of a 16-megapixel pattern costs 128 MB).
     border_wet = max(d[0].max(), d[-1].max(), d[:, 0].max(), d[:, -1].max()) >= 0.5
     data, o = (np.pad(d, 1), 1) if border_wet else (d, 0)
-    polys = []
-    for c in measure.find_contours(data, 0.5):
-        if len(c) < 4:
-            continue
-        x = (c[:, 1] - o + 0.5 - w / 2) * s
-        y = (h / 2 - (c[:, 0] - o) - 0.5) * s
-        p = shapely.make_valid(Polygon(np.column_stack([x, y])))
-        if p.area > 0:
-            polys.append(p)
-    if not polys:
+    contours = [c for c in measure.find_contours(data, 0.5) if len(c) >= 4]
+    if not contours:
         raise InputError("pattern: no outline at the 0.5 level; the mask has no pad a pixel wide")
-    geom = polys[0]
-    for p in polys[1:]:  # even-odd rule: nested outlines are holes, holes in holes are pads
-        geom = geom.symmetric_difference(p)
-    return geom
+    rc = np.concatenate(contours)
+    xy = np.column_stack([(rc[:, 1] - o + 0.5 - w / 2) * s, (h / 2 - (rc[:, 0] - o) - 0.5) * s])
+    ring_of = np.repeat(np.arange(len(contours)), [len(c) for c in contours])
+    first = np.concatenate([[0], np.cumsum([len(c) for c in contours])[:-1]])
+    # all contours at once (shapely's vectorised calls): one per contour took 0.2 ms each
+    valid = shapely.make_valid(shapely.polygons(shapely.linearrings(xy, indices=ring_of)))
+    parts, of = shapely.get_parts(valid, return_index=True)
+    ok = (shapely.get_type_id(parts) == 3) & (shapely.area(parts) > 0)
+    parts, of = parts[ok], of[ok]
+    if not len(parts):
+        raise InputError("pattern: no outline at the 0.5 level; the mask has no pad a pixel wide")
+    if len(parts) == 1:
+        return parts[0]
+    # (point i, contour j): contour i's first vertex lies inside contour j (never its own)
+    shells = shapely.polygons(shapely.get_exterior_ring(parts))
+    tree = shapely.STRtree(shells)
+    pi, pj = tree.query(shapely.points(xy[first[of]]), predicate="within")
+    keep = pi != pj
+    pi, pj = pi[keep], pj[keep]
+    depth = np.bincount(pi, minlength=len(parts))
+    direct = depth[pj] == depth[pi] - 1
+    holes: dict[int, list] = {}
+    for c, par in zip(pi[direct].tolist(), pj[direct].tolist(), strict=True):
+        if depth[c] % 2 == 1:
+            holes.setdefault(par, []).append(shapely.get_exterior_ring(parts[c]))
+    pads = [
+        Polygon(parts[i].exterior, [*parts[i].interiors, *holes[i]]) if i in holes else parts[i]
+        for i in np.flatnonzero(depth % 2 == 0).tolist()
+    ]
+    return pads[0] if len(pads) == 1 else shapely.MultiPolygon(pads)
 
 
 def _stretches(ring_xy: np.ndarray, corner_deg: float, merge: float) -> np.ndarray:
@@ -182,29 +256,164 @@ def smallest_feature_um(pattern: Mask | BaseGeometry, corner_deg: float = CORNER
     return _smallest_feature_um(pattern, corner_deg)
 
 
+def _simplified_parts(geom: BaseGeometry, tol: float) -> np.ndarray:
+    """The polygons of ``geom``, each simplified by ``tol`` keeping its topology.
+
+    One part at a time (vectorised): simplifying a geometry of 10,000 parts as one grew with
+    the square of the parts (2 s for 10,000, 30 s for 40,000). Parts that simplified apart
+    would touch or cross are simplified again together, as one geometry keeps them apart.
+    """
+    parts = shapely.get_parts(geom)
+    simple = shapely.simplify(parts, tol, preserve_topology=True)
+    if len(simple) < 2:
+        return simple
+    pi, pj = shapely.STRtree(simple).query(simple, predicate="intersects")
+    clash = np.unique(np.concatenate([pi[pi != pj], pj[pi != pj]]))
+    if clash.size:
+        together = shapely.simplify(
+            shapely.MultiPolygon(list(parts[clash])), tol, preserve_topology=True
+        )
+        keep = np.ones(len(simple), bool)
+        keep[clash] = False
+        simple = np.concatenate([simple[keep], shapely.get_parts(together)])
+    return simple
+
+
+#: Peak bytes per outline vertex of an exact geometry while its smallest feature is
+#: measured: the simplified parts, their rings' coordinates and the per-vertex arrays of
+#: :func:`_all_stretches` (float64 segments, lengths, turns, positions).
+FEATURE_BYTES_PER_VERTEX = 200
+#: Seconds per outline vertex of that measure (1 s per 100,000 polygons of four vertices, on
+#: a 2-core AMD EPYC), for the waiting line.
+FEATURE_S_PER_VERTEX = 2.5e-6
+
+
+def _all_stretches(rings: np.ndarray, corner_deg: float, merge: float) -> np.ndarray:
+    """:func:`_stretches` of every ring of ``rings`` (closed linear rings) at once, vectorised
+    over their vertices (one Python call per ring took 0.3 ms: minutes for a million pads);
+    the stretches of all rings, in no particular order."""
+    xy = shapely.get_coordinates(rings)
+    n = shapely.get_num_coordinates(rings) - 1  # closed: the last repeats the first
+    ring_end = np.cumsum(n + 1)
+    drop = ring_end - 1  # the repeated vertices
+    keepv = np.ones(len(xy), bool)
+    keepv[drop] = False
+    p = xy[keepv]
+    rid = np.repeat(np.arange(len(n)), n)
+    start = np.concatenate([[0], np.cumsum(n)[:-1]])
+    idx = np.arange(len(p))
+    nxt = np.where(idx + 1 < (start + n)[rid], idx + 1, start[rid])
+    seg = p[nxt] - p
+    length = np.hypot(seg[:, 0], seg[:, 1])
+    keep = length > 0
+    seg, length, rid = seg[keep], length[keep], rid[keep]
+    m = np.bincount(rid, minlength=len(n))
+    start = np.concatenate([[0], np.cumsum(m)[:-1]])
+    idx = np.arange(len(seg))
+    prv = np.where(idx > start[rid], idx - 1, (start + m - 1)[rid])
+    prev = seg[prv]
+    cross = prev[:, 0] * seg[:, 1] - prev[:, 1] * seg[:, 0]
+    turn = np.degrees(np.abs(np.arctan2(cross, (prev * seg).sum(axis=1))))
+    perimeter = np.bincount(rid, weights=length, minlength=len(n))
+    cum = np.cumsum(length) - length  # position of each vertex along all the rings before
+    ring_at = np.zeros(len(n))
+    ring_at[m > 0] = cum[start[m > 0]]
+    at_all = cum - ring_at[rid]  # along its own ring
+    corner = np.flatnonzero(turn > corner_deg)
+    crid = rid[corner]
+    at = at_all[corner]
+    ncorner = np.bincount(crid, minlength=len(n))
+    # the gap from each corner to the next of its ring (the last wraps to the first)
+    first = np.concatenate([[0], np.cumsum(ncorner)[:-1]])
+    nxt_c = np.arange(len(corner)) + 1
+    last = nxt_c == (first + ncorner)[crid]
+    nxt_c[last] = first[crid[last]]
+    gaps = at[nxt_c] - at
+    gaps[last] += perimeter[crid[last]]
+    many = ncorner[crid] >= 2
+    longg = many & (gaps >= merge)
+    has_long = np.bincount(crid[longg], minlength=len(n)) > 0
+    round_ = perimeter[(ncorner < 2) | ~has_long] / math.pi  # no corners, or none apart: round
+    return np.concatenate([gaps[longg], round_])
+
+
+#: The last exact geometries measured, with their features: a scene asks for its pattern's
+#: feature more than once (the preset, the warning).
+_FEATURE_OF_GEOMETRY: list[tuple[BaseGeometry, float, float | str]] = []
+
+
 def _smallest_feature_um(pattern: Mask | BaseGeometry, corner_deg: float) -> float:
+    if isinstance(pattern, Mask) and pattern.geometry is not None:
+        pattern = pattern.geometry  # measured as its exact geometry (_geometry_of)
+    if isinstance(pattern, BaseGeometry):
+        for g, deg, got in _FEATURE_OF_GEOMETRY:
+            # the same object, or an equal copy (a scene's pattern is rebuilt between the
+            # preset and the warning): compared vertex by vertex, in C
+            if deg == corner_deg and (
+                g is pattern
+                or (
+                    g.bounds == pattern.bounds
+                    and shapely.get_num_coordinates(g) == shapely.get_num_coordinates(pattern)
+                    and shapely.equals_exact(g, pattern, 0.0)
+                )
+            ):
+                if isinstance(got, str):
+                    raise InputError(got)
+                return got
+        try:
+            got = _measure(pattern, corner_deg)
+        except InputError as err:
+            got = str(err)
+        _FEATURE_OF_GEOMETRY[:] = [*_FEATURE_OF_GEOMETRY[-3:], (pattern, corner_deg, got)]
+        if isinstance(got, str):
+            raise InputError(got)
+        return got
+    return _measure(pattern, corner_deg)
+
+
+def _measure(pattern: Mask | BaseGeometry, corner_deg: float) -> float:
+    from patterns.resources import require_fits
+    from simulator.core import wait_line
+
     geom, tol, merge = _geometry_of(pattern)
+    vertices = int(shapely.get_num_coordinates(geom))
+    require_fits(
+        f"measuring the pattern's smallest feature ({vertices:,} outline vertices)",
+        vertices * FEATURE_BYTES_PER_VERTEX,
+        "use a coarser --resolution or a pattern with fewer pads",
+    )
+    wait_line(
+        f"measuring the smallest feature of the pattern's {vertices:,} outline vertices",
+        vertices * FEATURE_S_PER_VERTEX,
+    )
     # Islands and holes smaller than merge^2 are noise (a mask's stray pixels).
-    parts = [
-        g
-        for g in shapely.get_parts(shapely.simplify(geom, tol, preserve_topology=True))
-        if g.area > merge**2
-    ]
-    if not parts:
+    parts = _simplified_parts(geom, tol)
+    parts = parts[shapely.area(parts) > merge**2]
+    if not len(parts):
         raise InputError("pattern has no area to measure")
-    sizes, gaps = [], []
-    for part in parts:
+    rings = [shapely.get_exterior_ring(parts)]
+    gaps: list[float] = []
+    for i in np.flatnonzero(shapely.get_num_interior_rings(parts) > 0).tolist():
+        part = parts[i]
         holes = [h for h in part.interiors if Polygon(h).area > merge**2]
-        for ring in (part.exterior, *holes):
-            sizes.append(_stretches(shapely.get_coordinates(ring), corner_deg, merge))
+        rings.append(np.array(holes, dtype=object))
         gaps += [part.exterior.distance(h) for h in holes]
+    sizes = _all_stretches(np.concatenate(rings), corner_deg, merge)
+    s = np.sort(sizes)
+    feature = min([float(s[int(math.floor(QUANTILE * (len(s) - 1)))]), *gaps])
     if len(parts) > 1:
-        tree = shapely.STRtree(parts)
-        _, dist = tree.query_nearest(parts, exclusive=True, return_distance=True)
-        gaps += dist.tolist()
-    s = np.sort(np.concatenate(sizes))
-    feature = float(s[int(math.floor(QUANTILE * (len(s) - 1)))])
-    return min([feature, *gaps])
+        # The gaps between parts: only those narrower than the feature so far can lower it, so
+        # only the pairs within that distance are measured (a nearest-part query for every
+        # part took 8 s for 90,000 pads on a grid, whose ties it could not prune).
+        b = shapely.bounds(parts)
+        near = shapely.box(
+            b[:, 0] - feature, b[:, 1] - feature, b[:, 2] + feature, b[:, 3] + feature
+        )
+        i, j = shapely.STRtree(parts).query(near)  # boxes: candidates, measured below
+        apart = i < j
+        if apart.any():
+            feature = min(feature, float(shapely.distance(parts[i[apart]], parts[j[apart]]).min()))
+    return feature
 
 
 def feature_warning(

@@ -40,29 +40,50 @@ MAIN_GUARD = (
 
 
 # ----------------------------------------------------------------------- running
-def worker_cap(requested: int, points: int) -> tuple[int, str | None]:
+def worker_cap(
+    requested: int,
+    points: int,
+    point_bytes: float | None = None,
+    budget_bytes: float | None = None,
+) -> tuple[int, str | None]:
     """(local workers to start, a note when fewer than ``requested``): at most one per core
-    (each is single-threaded), one per :data:`WORKER_MEMORY_MB` of the memory available now,
-    and one per point to run."""
-    from patterns.resources import MB, available_memory_bytes
+    (each is single-threaded), one per point to run, and as many as the memory holds
+    together: each worker priced at ``point_bytes`` (the largest point's peak with the
+    worker's imports, :func:`simulator.sweep.point_bytes`; None: :data:`WORKER_MEMORY_MB`),
+    their sum within the memory available now and within ``budget_bytes`` (the sweep's
+    memory budget, for all its workers together). At least one: a point that fits its own
+    budget runs, one at a time."""
+    from patterns.resources import MB, available_memory_bytes, fmt_bytes
 
     cores = os.cpu_count() or 1
-    by_memory = max(1, int(available_memory_bytes() // (WORKER_MEMORY_MB * MB)))
+    each = float(point_bytes) if point_bytes else WORKER_MEMORY_MB * MB
+    avail = available_memory_bytes()
+    room = min(avail, budget_bytes) if budget_bytes else avail
+    by_memory = max(1, int(room // each))
     n = max(1, min(requested, cores, by_memory, max(points, 1)))
     if n >= requested or requested <= min(
         cores, by_memory
     ):  # only the points bound it: nothing to say
         return n, None
-    why = (
-        f"{cores} core{'s' if cores != 1 else ''}"
-        if cores <= by_memory
-        else (
-            f"the memory available ({available_memory_bytes() / 2**30:.1f} GB) holds {by_memory} workers of {WORKER_MEMORY_MB / 1024:g} GB"
+    if cores <= by_memory:
+        why = f"{cores} core{'s' if cores != 1 else ''}"
+    elif point_bytes:
+        where = (
+            f"the memory budget of {fmt_bytes(budget_bytes)}"
+            if budget_bytes and budget_bytes <= avail
+            else f"the memory available ({fmt_bytes(avail)})"
         )
-    )
+        why = (
+            f"{where} for all the workers together, and a point may hold about {fmt_bytes(each)} "
+            f"(its landscape and assessment, with a worker's imports), so it holds {by_memory}"
+        )
+    else:
+        why = f"the memory available ({avail / 2**30:.1f} GB) holds {by_memory} workers of {WORKER_MEMORY_MB / 1024:g} GB"
     return (
         n,
-        f"--workers {requested} capped at {n}: this machine has {why}; more workers would only wait for each other",
+        f"--workers {requested} capped at {n}: this machine has {why}; more workers would only wait for each other"
+        if not point_bytes or cores <= by_memory
+        else f"--workers {requested} capped at {n}: {why}; raise [scene] memory_budget_mb or use a coarser resolution_um to run more at once",
     )
 
 

@@ -28,6 +28,7 @@ __all__ = [
     "critical_volume_nl",
     "design_params",
     "point_geometry",
+    "point_bytes",
     "point_scene",
     "price_point",
     "run_point",
@@ -215,6 +216,33 @@ def price_point(task: dict) -> None:
 
     scene, auto = point_scene(task)
     require_landscape_fits(auto_resolution(scene) if auto else scene)
+
+
+#: A point's assessment holds this many times its landscape array (the array and the
+#: transforms' work space while it is built, the landscape kept while the global minimum is
+#: proven, the restoring forces and biases are measured and the yield's starts run, each
+#: with its own buffers); see :func:`point_bytes`. Measured: a 600 um chip's four-pad at
+#: 2 um/px (a 264 MB landscape) peaked at 1.64 GB resident in one process, 4.5 x its
+#: landscape above the imports.
+ASSESS_LANDSCAPES = 5.0
+#: What a process holds before its first point: the imports of the engine, JAX and Dask's
+#: worker (about 0.4 GB measured; 0.45 GB priced).
+WORKER_BASE_BYTES = 460 * 2**20
+
+
+def point_bytes(task: dict) -> int:
+    """The peak bytes one point's run holds in its process (priced, nothing allocated): the
+    imports (:data:`WORKER_BASE_BYTES`) and :data:`ASSESS_LANDSCAPES` times its landscape
+    array (:func:`simulator.landscape.estimate_bytes` of the scene :func:`price_point`
+    prices). InputError when the point's own landscape is over its budget
+    (:func:`price_point`'s line)."""
+    from simulator.batch import auto_resolution
+    from simulator.landscape import estimate_bytes, require_landscape_fits
+
+    scene, auto = point_scene(task)
+    scene = auto_resolution(scene) if auto else scene
+    require_landscape_fits(scene)
+    return int(WORKER_BASE_BYTES + ASSESS_LANDSCAPES * estimate_bytes(scene))
 
 
 def _one_line(err: BaseException) -> str:

@@ -116,6 +116,43 @@ def _bar(show: bool, total: int):
     return tqdm(total=total, desc="sweep", unit="point", postfix="failed 0", dynamic_ncols=True)
 
 
+#: Points priced before local workers start (the first, the last and each axis's extremes).
+MAX_PRICED = 16
+
+
+def _priced_points(tasks: list[dict]) -> list[dict]:
+    """The tasks whose memory bounds the sweep's: the first and the last, and for each axis
+    the points of its smallest and largest value (numbers; others by their first and last)."""
+    picks = {0, len(tasks) - 1}
+    names = dict.fromkeys(k for t in tasks for k in t["values"])
+    for name in names:
+        vals = [t["values"].get(name) for t in tasks]
+        nums = [
+            i for i, v in enumerate(vals) if isinstance(v, int | float) and not isinstance(v, bool)
+        ]
+        if nums:
+            picks |= {min(nums, key=lambda i: vals[i]), max(nums, key=lambda i: vals[i])}
+    return [tasks[i] for i in sorted(picks)[:MAX_PRICED]]
+
+
+def _price_workers(spec: SweepSpec, tasks: list[dict]) -> tuple[float | None, float]:
+    """(the largest priced peak of one point with a worker's imports, the sweep's memory
+    budget in bytes) for :func:`worker_cap`: its workers together must fit the budget. A
+    point that cannot be built or priced here is left to its run (its error row)."""
+    from patterns.errors import InputError
+    from patterns.resources import budget_bytes
+    from simulator.sweep._point import point_bytes
+
+    peak = None
+    for task in _priced_points(tasks):
+        try:
+            b = point_bytes(task)
+        except (InputError, ValueError):
+            continue
+        peak = b if peak is None else max(peak, b)
+    return peak, budget_bytes(spec.scene.get("memory_budget_mb"))
+
+
 def sweep(
     spec: str | os.PathLike | dict,
     out: str | os.PathLike | None = None,
@@ -172,7 +209,13 @@ def sweep(
         done = store.done(retry_failed)
         todo = [spec.task(p) for p in spec.points() if p["point"] not in done]
         n_workers, capped = (
-            (None, None) if scheduler else worker_cap(workers or os.cpu_count() or 1, len(todo))
+            (None, None)
+            if scheduler
+            else worker_cap(
+                workers or os.cpu_count() or 1,
+                len(todo),
+                *(_price_workers(spec, todo) if todo and workers != 0 else (None, None)),
+            )
         )
         if capped and workers and todo:
             print(f"note: {capped}", file=sys.stderr, flush=True)
