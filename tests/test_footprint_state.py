@@ -387,3 +387,21 @@ def test_energy_samples_are_chips_released_at_each_pose(run_cli, tmp_path):
     # the plateau: from the snap (the far pads' edge at 315 um + d_s = 21.7 um) to where the
     # trailing line leaves the near pads (the stateless model's onset, 434 um): within a sample
     assert 336.7 - 5 <= lo <= 336.7 + 5 and 430 <= hi <= 440
+
+
+def test_a_dispense_run_over_its_budget_is_refused_before_any_plane(run_cli, monkeypatch):
+    # the 730/100 bench case at 2 um/px with a 10 deg receding angle: 4 pads' planes on
+    # 1,225 x 1,225 poses x 90 twists, priced at 7.3 GB; a 1,000 MB budget refuses it before
+    # any plane is built (build_landscape must not be called)
+    import simulator.landscape._footprint as fpmod
+
+    def no_build(*a, **k):
+        raise AssertionError("a plane was built before the refusal")
+
+    monkeypatch.setattr(fpmod, "build_landscape", no_build)
+    rc, _, err = run_cli(
+        ["simulate", "--pattern", LIB / "four_pad_730_100.png", "--chip-size", "730"]
+        + ["--meniscus", "--resolution", "2", "--dispense", "pattern", "--hysteresis", "10:35"]
+        + ["--start=500,5,1", "--method", "inertial", "--memory-budget", "1000"]
+    )
+    one_line_error(rc, err, "--dispense pattern", "footprint state's planes", "--memory-budget")

@@ -24,6 +24,9 @@ import numpy as np
 
 from patterns.errors import InputError
 
+#: The process itself, with NumPy, SciPy and JAX loaded (what a run holds besides its arrays).
+PROCESS_BYTES = 512 * 2**20
+
 #: Events a run may take before it stops (a pad's state changes a few times a run; many
 #: more means the chip is chattering on a relay's threshold).
 MAX_EVENTS = 64
@@ -40,13 +43,14 @@ def _cut(tr, j: int):
 def footprint_budget_bytes(scene, n_pads: int) -> int:
     """What the footprint state's planes hold at their peak: per pose, each pad's wet energy
     and two relay flags, two planes being combined and the plane being built with its
-    transforms' work space (about two planes more; measured: 730/100 at 2 um/px, 90 twists,
-    1,225 x 1,225 poses, 4 pads), and a state's summed landscape during the run."""
+    transforms' work space, a state's summed landscape during the run, and the process with
+    its engines (measured: the source's bench case, 730/100 at 2 um/px, 90 twists, 1,225 x
+    1,225 poses, 4 pads, peaks at 7,063 MB; priced 7,313 MB)."""
     from simulator.landscape import footprint_poses
 
     poses = footprint_poses(scene)
     item = np.dtype(scene.dtype).itemsize
-    return int(poses * (n_pads * (item + 2) + 5 * item) * 1.1)
+    return int(poses * (n_pads * (item + 2) + 6 * item) * 1.1) + PROCESS_BYTES
 
 
 def require_footprint_fits(scene) -> None:
