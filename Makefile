@@ -19,8 +19,15 @@ demo: $(BIN)/selfalign
 # cannot resolve fails the tests (no --quiet: it would hide the warnings strict mode counts).
 MKDOCS = NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict
 
+# The tests run in parallel (pytest-xdist, from the `test` extra): PYTEST_WORKERS processes
+# (2, CI's cores; `make test PYTEST_WORKERS=auto` takes one per core, `=0` runs serially),
+# the 25 slowest tests listed at the end. Hypothesis draws the `ci` profile's examples
+# (tests/conftest.py; HYPOTHESIS_PROFILE=dev for random ones).
+PYTEST_WORKERS ?= 2
+HYPOTHESIS_PROFILE ?= ci
+
 test: $(BIN)/selfalign
-	$(BIN)/python -m pytest -q tests
+	SELFALIGN_HYPOTHESIS_PROFILE=$(HYPOTHESIS_PROFILE) $(BIN)/python -m pytest -q -n $(PYTEST_WORKERS) --durations=25 tests
 	$(BIN)/python -m pytest -q --nbmake notebooks
 	d="$$(mktemp -d)" && $(MKDOCS) --site-dir "$$d" && rm -rf "$$d"
 

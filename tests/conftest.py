@@ -1,15 +1,35 @@
-"""Fixtures the test files share.
+"""Fixtures and settings the test files share.
 
 ``run_cli`` runs the command line in this process: the CLI tests ask for it instead of
 keeping a runner of their own. What is not a fixture (the one-line refusal check,
 directory listings, ``python -m`` with Ctrl-C restored) is in ``tests/cli_helpers.py``.
+
+Hypothesis profiles (``SELFALIGN_HYPOTHESIS_PROFILE``, ``ci`` when unset):
+
+- ``ci`` (``make test``, CI): derandomized, so every run draws the same examples and a
+  failure reproduces; no example database (nothing written into the checkout); no deadline
+  (a shared 2-core runner's timings say nothing). Example counts: each test's own.
+- ``dev``: random examples, the database in ``.hypothesis/`` (a failing example is
+  replayed first on the next run), no deadline.
+
+Each property test states its own number of examples (``max_examples``), the same in both.
+
+The suite runs in parallel (``pytest -n 2``, pytest-xdist; ``make test`` does) and
+serially (``pytest -p no:xdist``): every test writes only under its own ``tmp_path`` (or a
+``tempfile`` directory), never into the checkout, and depends on no other test.
 """
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable, Sequence
 
 import pytest
+from hypothesis import settings
+
+settings.register_profile("ci", deadline=None, derandomize=True, database=None, print_blob=True)
+settings.register_profile("dev", deadline=None, print_blob=True)
+settings.load_profile(os.environ.get("SELFALIGN_HYPOTHESIS_PROFILE", "ci"))
 
 
 @pytest.fixture
