@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import copy
 import json
 import math
 import os
+import signal
 import sys
+import threading
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -560,3 +564,36 @@ def write_csv(path: str | os.PathLike, columns: list[str], values: list) -> None
         for i in range(0, n, 65536):
             rows = zip(*(c[i : i + 65536].tolist() for c in cols), strict=True)
             f.write("".join(",".join(cell(v) for v in row) + "\n" for row in rows))
+
+
+@contextlib.contextmanager
+def sigterm_says_what_was_kept(out: str, command: str, noun: str, *kept: str) -> Iterator[None]:
+    """While a resumable run (``sweep``, ``design``'s search) works into ``out``, SIGTERM ends it
+    as the CLI's handler does (temporaries removed, at once), but says how many finished
+    ``noun``s ``out`` keeps (a rerun resumes them), and leaves no semaphore of the Dask cluster
+    behind (the resource tracker's warnings). ``kept``: the journal's name and its record's
+    noun for :func:`simulator.sweep.kept_points`, when they are not the sweep's."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def terminate(signum, frame):
+        from patterns.outputs import remove_pending
+        from simulator.sweep import kept_points, release_semaphores
+
+        remove_pending()
+        n = kept_points(out, *kept) if os.path.isdir(out) else 0
+        release_semaphores()
+        said = (
+            f"{n} finished {noun}{'s are' if n != 1 else ' is'} kept in {out} (rerun the same command to resume)"
+            if n
+            else f"no {noun} had finished, none was kept"
+        )
+        os.write(2, f"selfalign {command}: terminated; {said}\n".encode())
+        os._exit(143)
+
+    previous = signal.signal(signal.SIGTERM, terminate)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)

@@ -3,45 +3,11 @@
 from __future__ import annotations
 
 import argparse
-import contextlib
 import os
-import signal
 import sys
-import threading
-from collections.abc import Iterator
 from pathlib import Path
 
-
-@contextlib.contextmanager
-def _sigterm_says_what_was_kept(out: str) -> Iterator[None]:
-    """While the search runs, SIGTERM ends it as the CLI's handler does (temporaries removed,
-    at once), but says how many finished trials ``out`` keeps (a rerun resumes them), and
-    leaves no semaphore of the Dask cluster behind (the resource tracker's warnings)."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-
-    def terminate(signum, frame):
-        from patterns.outputs import remove_pending
-        from simulator.sweep import kept_points, release_semaphores
-
-        remove_pending()
-        n = kept_points(out, "trials.jsonl", "trial") if os.path.isdir(out) else 0
-        release_semaphores()
-        said = (
-            f"{n} finished trial{'s are' if n != 1 else ' is'} kept in {out} (rerun the same command to resume)"
-            if n
-            else "no trial had finished, none was kept"
-        )
-        os.write(2, f"selfalign design: terminated; {said}\n".encode())
-        os._exit(143)
-
-    previous = signal.signal(signal.SIGTERM, terminate)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, previous)
-
+from simulator.commands._common import sigterm_says_what_was_kept
 
 #: The memory advice of the checks shared with other commands, and a search's own: its
 #: trials' budget is the file's (part of the search), not a flag.
@@ -80,7 +46,7 @@ def _run_search(args: argparse.Namespace, path: Path, doc: dict) -> int:
         )
     spec = load_search(doc, path.resolve().parent, source=str(path))
     try:
-        with _sigterm_says_what_was_kept(args.out):
+        with sigterm_says_what_was_kept(args.out, "design", "trial", "trials.jsonl", "trial"):
             table = search(
                 spec,
                 args.out,

@@ -3,14 +3,11 @@
 from __future__ import annotations
 
 import argparse
-import contextlib
 import os
-import signal
 import sys
-import threading
-from collections.abc import Iterator
 from pathlib import Path
 
+from simulator.commands._common import sigterm_says_what_was_kept
 from simulator.sweep import CONNECT_TIMEOUT_S, DEFAULT_MAX_POINTS
 
 
@@ -67,42 +64,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-@contextlib.contextmanager
-def _sigterm_says_what_was_kept(out: str) -> Iterator[None]:
-    """While the sweep runs, SIGTERM ends it as the CLI's handler does (temporaries removed, at
-    once), but says how many finished points ``out`` keeps, and leaves no semaphore behind."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-
-    def terminate(signum, frame):
-        from patterns.outputs import remove_pending
-        from simulator.sweep import kept_points, release_semaphores
-
-        remove_pending()
-        n = kept_points(out) if os.path.isdir(out) else 0
-        release_semaphores()
-        said = (
-            f"{n} finished point{'s are' if n != 1 else ' is'} kept in {out} (rerun the same command to resume)"
-            if n
-            else "no point had finished, none was kept"
-        )
-        os.write(2, f"selfalign sweep: terminated; {said}\n".encode())
-        os._exit(143)
-
-    previous = signal.signal(signal.SIGTERM, terminate)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, previous)
-
-
 def run(args: argparse.Namespace) -> int:
     from simulator.sweep import kept_points, load_sweep, sweep
 
     spec = load_sweep(args.sweep_file)
     try:
-        with _sigterm_says_what_was_kept(args.out):
+        with sigterm_says_what_was_kept(args.out, "sweep", "point"):
             table = sweep(
                 spec,
                 args.out,
