@@ -118,7 +118,7 @@ class FootprintPlanes:
         """:meth:`Landscape.curve` where each sample is a chip released at that pose onto the
         footprint ``dispensed`` (its state: :meth:`next_state` there), not a continuation
         along the curve; ``wet`` holds each sample's wet pads (1..n)."""
-        from ._landscape import runs
+        from ._landscape import curve_of
 
         ref = self.template.curve(axis, through, start, stop)  # the samples, checked
         v = ref["values"]
@@ -135,16 +135,7 @@ class FootprintPlanes:
             sel = np.array([s == st for s in states])
             e[sel], force[sel] = c["energy_J"][sel], c["force"][sel]
             floor = ls.noise_floor_J
-        detached = np.abs(e) <= floor
-        return {
-            "axis": axis,
-            "values": v,
-            "energy_J": e,
-            "force": force,
-            "plateaus": runs(v, (force == 0) & ~detached),
-            "no_contact": runs(v, detached),
-            "wet": [list(map(int, s)) for s in states],
-        }
+        return curve_of(axis, v, e, force, floor) | {"wet": [list(map(int, s)) for s in states]}
 
     def next_state(self, wet, pose) -> np.ndarray:
         """The pads' state once the chip, with the footprint ``wet``, is at ``pose``."""

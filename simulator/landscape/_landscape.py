@@ -302,15 +302,7 @@ class Landscape:
         e = self.energy_at(x, y, t)
         gx, gy, gt = self.gradient_at(x, y, t)
         force = -{"x": gx, "y": gy, "twist": gt}[axis]
-        detached = np.abs(e) <= self.noise_floor_J  # the chip no longer touches the pattern
-        return {
-            "axis": axis,
-            "values": v,
-            "energy_J": e,
-            "force": force,
-            "plateaus": runs(v, (force == 0) & ~detached),
-            "no_contact": runs(v, detached),
-        }
+        return curve_of(axis, v, e, force, self.noise_floor_J)
 
 
 #: The nominal ball of :func:`nominal_order`: poses within NOMINAL_BALL_PX px in x and y
@@ -344,6 +336,20 @@ def nominal_order(
     r, ts = nominal_distance(x, y, t, um_per_px, twist_step_deg, period_deg)
     d2 = np.round((x / um_per_px) ** 2 + (y / um_per_px) ** 2, 6)
     return np.lexsort((x, y, t, np.abs(t), d2, ts, r))
+
+
+def curve_of(axis: str, values, energy_J, force, floor_J: float) -> dict:
+    """A curve's samples with their plateaus (zero force in contact) and the stretches out of
+    contact (``|E|`` at or below the noise floor ``floor_J``), as :meth:`Landscape.curve`."""
+    detached = np.abs(energy_J) <= floor_J  # the chip no longer touches the pattern
+    return {
+        "axis": axis,
+        "values": values,
+        "energy_J": energy_J,
+        "force": force,
+        "plateaus": runs(values, (force == 0) & ~detached),
+        "no_contact": runs(values, detached),
+    }
 
 
 def runs(values: np.ndarray, flat: np.ndarray, min_points: int = 3) -> list[list[float]]:
