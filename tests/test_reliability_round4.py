@@ -349,3 +349,24 @@ def test_force_never_replaces_an_input_or_a_link(tmp_path, run_cli):
     rc, _, err = run_cli([*args, "--json", tmp_path / "l.json"])
     one_line_error(rc, err, "symbolic link")
     assert pat.read_bytes() == Path(SQUARE_200).read_bytes()
+
+
+def test_a_local_cluster_starts_while_port_8787_is_taken():
+    # The scheduler's HTTP server took port 8787 unless told otherwise: a second cluster on the
+    # machine (two sweeps, the suite's parallel workers) then warned that the port was taken,
+    # and the suite turns warnings into errors. It binds a free loopback port now.
+    import socket
+
+    from simulator.sweep._cluster import dask_client
+
+    holder = socket.socket()
+    try:
+        holder.bind(("127.0.0.1", 8787))
+        holder.listen()
+    except OSError:  # taken already: the case under test all the same
+        pass
+    try:
+        with dask_client(1, None) as client:
+            assert list(client.run(lambda: 1).values()) == [1]
+    finally:
+        holder.close()

@@ -10,6 +10,7 @@ import numpy as np
 from patterns.errors import InputError
 from patterns.outputs import atomic_output
 from simulator.commands._common import (
+    accuracy_check,
     add_force_arg,
     add_scene_args,
     check_outputs,
@@ -70,19 +71,27 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("--curve needs --from A --to B (um for x/y, degrees for twist)")
     doc = scene_document(args)  # the scene file, read and validated once for the whole command
     check_outputs(args, ("json", "csv"), doc)
-    scene = scene_from_args(args, doc=doc)
+    scene = scene_from_args(args, doc=doc, warn=False)
     twists = [p[2] for p in poses]
     if args.curve == "twist":
         twists += [args.start, args.stop]
+    # Priced before any work (the accuracy warning's pattern outline among it), then warned.
+    from simulator.landscape import require_landscape_fits
+
+    if scene.liquid.dispense is not None:
+        from simulator.motion import require_footprint_fits
+
+        require_footprint_fits(scene)
+    else:
+        require_landscape_fits(scene, twists=twists_around(scene, twists))
+    accuracy_check(scene)
     x, y, t = (np.array(v) for v in zip(*poses, strict=True))
     planes = dispensed = None
     if scene.liquid.dispense is not None:
         # Each pose is a chip released there onto the footprint the process left (docs/physics.md §3.5).
         from simulator.landscape import build_footprint_planes
         from simulator.liquid import dispensed_footprint
-        from simulator.motion import require_footprint_fits
 
-        require_footprint_fits(scene)
         planes = build_footprint_planes(scene, twists=twists_around(scene, twists))
         dispensed, why = dispensed_footprint(scene, planes.labels, planes.n_pads)
         print(

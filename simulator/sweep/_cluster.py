@@ -271,6 +271,11 @@ def dask_client(workers: int | None = None, scheduler: str | None = None) -> Ite
                             threads_per_worker=1,
                             processes=True,
                             dashboard_address=None,
+                            # The scheduler's HTTP server (health routes) starts even without a
+                            # dashboard, on port 8787 unless told: a second cluster on the machine
+                            # (two sweeps, parallel tests) then warns that the port is taken. A
+                            # free port of the loopback interface, chosen by the system, instead.
+                            scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
                             silence_logs=logging.ERROR,
                             env=_worker_env(),
                         )
