@@ -100,8 +100,11 @@ def run(args: argparse.Namespace) -> int:
         ls = planes.template
         wet_at = [planes.next_state(dispensed, p) for p in poses]
         energy, fx, fy, torque = (np.empty(len(poses)) for _ in range(4))
+        summed = {}  # one summed landscape per state the poses share, not one per pose
         for i, w in enumerate(wet_at):
-            lw = planes.landscape(w)
+            lw = summed.get(key := tuple(w.tolist()))
+            if lw is None:
+                lw = summed[key] = planes.landscape(w)
             energy[i] = lw.energy_at(x[i], y[i], t[i])
             fxi, fyi = lw.force_at(x[i], y[i], t[i])
             fx[i], fy[i], torque[i] = fxi, fyi, lw.torque_at(x[i], y[i], t[i])

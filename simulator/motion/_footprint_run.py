@@ -94,14 +94,14 @@ def simulate_footprint(
     docstring): the fields of the joined trajectory, ``footprint`` among them (where the
     liquid was), for the caller to make the trajectory of. ``simulate`` runs each piece
     on a given landscape (the caller's own function, passed in)."""
-    from simulator.landscape import build_footprint_planes, pad_labels
+    from simulator.landscape import build_footprint_planes
     from simulator.liquid import dispensed_footprint
 
     t0 = time.perf_counter()
     proto = scene.liquid.dispense
     require_footprint_fits(scene)
-    _, n = pad_labels(scene.pattern)
     planes = build_footprint_planes(scene, backend=backend)
+    n = planes.n_pads  # the planes' own labelling: the pattern is not labelled again
     dispensed, why = dispensed_footprint(scene, planes.labels, n)
     # "aligned": against the minimum with every pad wet (the aligned pose on the whole
     # pattern), not the current state's (a state with only some pads wet has its own).
