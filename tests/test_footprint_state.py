@@ -237,21 +237,10 @@ def test_a_wet_pad_the_chip_leaves_dries_during_the_run(method):
             anim.close()
 
 
-def test_batch_and_other_commands_refuse_dispense_in_one_line(run_cli):
+def test_dispense_at_must_be_two_numbers(run_cli):
     args = ["--pattern", LIB / "four_pad_730_100.png", "--chip-size", "730", "--meniscus"]
-    args += ["--resolution", "10", "--no-twist", "--dispense", "chip"]
-    rc, _, err = run_cli(["montecarlo", *args, "--random", "4", "--spread", "10,10,0"])
-    one_line_error(rc, err, "--dispense chip", "selfalign montecarlo")
-    rc, _, err = run_cli(["evaluate", LIB / "four_pad_730_100.png", *args[2:], "--out", "r0"])
-    one_line_error(rc, err, "--dispense chip", "selfalign evaluate")
-    s = fourpad(100, dispense="chip")
-    from simulator.batch import run_batch
-
-    with pytest.raises(InputError, match="--dispense"):
-        run_batch(s, np.zeros((2, 3)), "greedy")
-    rc, _, err = run_cli(
-        ["simulate", *args[:-1], "pattern", "--dispense-at", "abc", "--start=0,0,0"]
-    )
+    args += ["--resolution", "10", "--no-twist", "--dispense", "pattern"]
+    rc, _, err = run_cli(["simulate", *args, "--dispense-at", "abc", "--start=0,0,0"])
     one_line_error(rc, err, "--dispense-at X,Y", "'abc'")
 
 

@@ -43,7 +43,7 @@ GUARDED = textwrap.dedent("""
         setattr(owner, name, stop)
 
     import scipy.ndimage
-    from simulator.batch import _montecarlo
+    from simulator.batch import _lanes
     from simulator.landscape import _correlator, _overlap_bound, _rotation
     from simulator.motion import _trajectory
 
@@ -53,7 +53,7 @@ GUARDED = textwrap.dedent("""
     forbid(_correlator.Correlator, "__init__")
     forbid(_overlap_bound._Bounds, "__init__")
     forbid(_trajectory, "jitted")
-    forbid(_montecarlo, "_run_chunk")
+    forbid(_lanes, "_run_chunk")
     from simulator.cli import main
     code = main(sys.argv[1:])
     # VmHWM: this process's own peak (ru_maxrss can carry the forking parent's over exec)

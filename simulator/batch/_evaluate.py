@@ -156,6 +156,10 @@ def evaluate(
     if auto:
         scene = auto_resolution(scene)
     require_landscape_fits(scene)  # the landscape and the chip's footprint priced before any work
+    if scene.liquid.dispense is not None:  # and the pads' planes of the two protocols
+        from simulator.motion import require_footprint_fits
+
+        require_footprint_fits(scene)
     with output_directory(out_dir, "--out", force, inputs, command="evaluate") as tmp:
         summary = assess(scene, quiet=quiet, pictures=tmp, method=method)
         summary["settings"] |= {
@@ -229,7 +233,10 @@ def assess(
         meniscus = {
             "stiffness": stiffness(ls, xm, ym, tm),
             "overlap": build_landscape(
-                scene.replace(effects=replace(scene.effects, meniscus=False)),
+                scene.replace(
+                    effects=replace(scene.effects, meniscus=False),
+                    liquid=replace(scene.liquid, dispense=None, dispense_at_um=None),
+                ),
                 twists=np.array([ls.twist_deg[int(np.argmin(np.abs(ls.twist_deg - tm)))]]),
             ),
         }
@@ -276,7 +283,10 @@ def assess(
     grid = StartGrid.from_ranges(
         (gx - n * step, gx + n * step, step), (gy - n * step, gy + n * step, step), gt
     )
-    cap = run_batch(scene, grid, method, landscape=ls, progress=not quiet)
+    # the stateless footprint (every pad counted by its distance from the chip) on the landscape;
+    # a scene with --dispense adds each protocol's numbers below (footprint_protocols)
+    stateless = scene.replace(liquid=replace(scene.liquid, dispense=None, dispense_at_um=None))
+    cap = run_batch(stateless, grid, method, landscape=ls, progress=not quiet)
     cap_sum = summarize(cap, grid)
     noise = (
         (NOISE_FRACTION * w, NOISE_FRACTION * h, NOISE_TWIST_DEG)
@@ -288,8 +298,23 @@ def assess(
     starts = random_starts(yield_starts, noise, seed=seed, around=(gx, gy, gt))
     if len(ls.twist_deg) == 1:
         starts[:, 2] = 0.0
-    yl = run_batch(scene, starts, method, landscape=ls, progress=not quiet)
+    yl = run_batch(stateless, starts, method, landscape=ls, progress=not quiet)
     yl_sum = summarize(yl)
+    protocols = None
+    if scene.liquid.dispense is not None:
+        protocols = footprint_protocols(
+            scene,
+            (xm, ym, tm),
+            {
+                a: (lo, hi)
+                for a, (lo, hi) in (("x", (-reach_x, reach_x)), ("y", (-reach_y, reach_y)))
+            },
+            floating,
+            grid,
+            starts,
+            method,
+            quiet,
+        )
     if pictures is not None:
         out = pictures
         plot_pattern(scene.pattern, out / "pattern.png")
@@ -350,6 +375,7 @@ def assess(
         "restoring_torque_Nm": {"twist_deg": near_deg, **torques} if torques else None,
         "plateaus_um": {a: curves[a]["plateaus"] for a in ("x", "y")},
         "max_bias_um": biases,
+        **({"protocols": protocols} if protocols is not None else {}),
         "capture": {
             "fraction": cap_sum["yield"],
             "n": cap_sum["n"],
@@ -385,6 +411,56 @@ def assess(
             "landscape_s": round(ls.stats["seconds"], 2),
         },
     }
+
+
+def footprint_protocols(
+    scene: Scene, through, spans: dict, floating, grid, starts, method: str, quiet: bool
+) -> dict:
+    """The maximum bias, the capture fraction and the yield of ``scene`` under each protocol
+    of ``--dispense`` (docs/physics.md §3.5), from one build of the pads' planes: ``pattern``
+    (the droplet on the pattern first) and ``chip`` (the liquid comes in under the chip).
+
+    Each sample of a bias curve is a chip released at that pose onto the protocol's
+    footprint (:meth:`simulator.landscape.FootprintPlanes.released_curve`), not a
+    continuation along the curve; capture and yield run the same starts as the stateless
+    ones (``grid``, ``starts``), each carrying its own footprint state."""
+    from simulator.landscape import build_footprint_planes
+    from simulator.liquid import dispensed_footprint
+    from simulator.motion import require_footprint_fits
+    from simulator.physics import DISPENSE
+
+    require_footprint_fits(scene)
+    planes = build_footprint_planes(scene, progress=not quiet)
+    out = {}
+    for proto in DISPENSE:
+        sc = scene.replace(liquid=replace(scene.liquid, dispense=proto))
+        dispensed, why = dispensed_footprint(sc, planes.labels, planes.n_pads)
+        biases = {}
+        for axis, (lo, hi) in spans.items():
+            c = planes.released_curve(dispensed, axis, through, lo, hi)
+            x0 = through[0] if axis == "x" else through[1]
+            floor = [floating[f"{axis}_from_um"], floating[f"{axis}_to_um"]] if floating else None
+            biases[f"+{axis}"], biases[f"-{axis}"] = max_bias_along(
+                c["values"], c["force"], x0, floor=floor
+            )
+        cap = summarize(run_batch(sc, grid, method, progress=not quiet, planes=planes), grid)
+        yl = summarize(run_batch(sc, starts, method, progress=not quiet, planes=planes))
+        out[proto] = {
+            "why": why,
+            "wet_at_dispense": [int(k + 1) for k in np.flatnonzero(dispensed)],
+            "max_bias_um": biases,
+            "capture_fraction": cap["yield"],
+            "capture_outcomes": cap["outcomes"],
+            "yield_fraction": yl["yield"],
+            "yield_outcomes": yl["outcomes"],
+        } | ({"time_to_align_s": yl["time_to_align_s"]} if "time_to_align_s" in yl else {})
+    return {
+        "dispense": scene.liquid.dispense,
+        "substrate_reach_um": planes.rules.d_s * scene.um_per_px,
+        "wet_reach_um": planes.rules.d_r * scene.um_per_px,
+        "receding_deg": planes.rules.receding_deg,
+        "planes_s": planes.seconds,
+    } | out
 
 
 def _fmt(v, unit: str, digits: int = 4) -> str:
@@ -487,6 +563,29 @@ def _time_rows(cap: dict, yl: dict) -> str:
     )
 
 
+def _protocol_rows(p: dict | None) -> str:
+    """The report's table of the two dispense protocols (``--dispense``), or nothing."""
+    if not p:
+        return ""
+    e = html.escape
+    rows = "".join(
+        f"<tr><th>{e(name)}{' (this scene)' if name == p['dispense'] else ''}</th>"
+        f"<td>{', '.join(str(k) for k in r['wet_at_dispense']) or 'none'}</td>"
+        f"<td>+x {r['max_bias_um']['+x']:g}, &minus;x {r['max_bias_um']['-x']:g}, +y {r['max_bias_um']['+y']:g}, &minus;y {r['max_bias_um']['-y']:g} um</td>"
+        f"<td>{100 * r['capture_fraction']:.1f} %</td><td>{100 * r['yield_fraction']:.1f} %</td></tr>"
+        for name, r in p.items()
+        if isinstance(r, dict)
+    )
+    return f"""
+<h2>By dispense protocol (the footprint as the run's state)</h2>
+<p>Where the process puts the liquid decides which pads are wet when the chip is released
+(<code>pattern</code>: the droplet on the pattern first; <code>chip</code>: the liquid comes in under the
+chip). A dry pad wets when the liquid's foot reaches it (within {p["substrate_reach_um"]:.3g} um of the chip),
+a wet pad dries beyond the reach of the chip's wall ({p["wet_reach_um"]:.3g} um, {p["receding_deg"]:.3g} deg receding).
+Each bias sample is a chip released there; capture and yield run the starts above, each carrying its own wet pads.</p>
+<table><tr><th>protocol</th><th>wet at release</th><th>maximum bias</th><th>capture</th><th>yield</th></tr>{rows}</table>"""
+
+
 def _html(summary: dict, source: str) -> str:
     """The one-page report: inputs, numbers with units, the four pictures."""
     s, g = summary["settings"], summary["global_minimum"]
@@ -559,7 +658,7 @@ Plateaus (zero force): {e(plateaus)}.</p>
 in steps of {cap["grid_um"]["step"]:g} um in x and y around the global minimum, twist {cap["twist_deg"]:g} deg ({e(cap_out)}).</p>
 <p>Yield under placement noise: <b>{100 * yl["fraction"]:.1f} %</b> of {yl["n"]} starts drawn normally around the aligned pose (the global minimum) with
 &sigma; = {ps["x_um"]:.3g} um, {ps["y_um"]:.3g} um, {ps["twist_deg"]:g} deg (seed {yl["seed"]}): {e(outcomes)}; aligned runs, final-pose error from the global minimum: {e(err_txt)}.</p>
-<img src="capture.png" alt="capture map">{_time_rows(cap, yl)}
+<img src="capture.png" alt="capture map">{_time_rows(cap, yl)}{_protocol_rows(summary.get("protocols"))}
 <p class="note">Written by selfalign. The numbers are in summary.json (units in the key names).</p>
 </body></html>
 """

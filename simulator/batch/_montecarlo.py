@@ -55,19 +55,21 @@ Every name is importable from here.
 
 from __future__ import annotations
 
-import functools
 import math
 import time
 from collections.abc import Sequence
-from concurrent.futures import ThreadPoolExecutor
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 
 from patterns.errors import InputError, require
-from patterns.hold import hold
 from patterns.mask import Mask
+from simulator.batch._lanes import (  # noqa: F401 - _one, _run_chunk: the benchmarks' and tests' handles
+    _check_starts_fit,
+    _one,
+    _run_chunk,
+    _run_order,
+    run_lanes,
+)
 from simulator.batch._pricing import price_dynamics_lanes
 from simulator.batch._starts import (
     BATCH_BYTES_PER_START,
@@ -92,118 +94,14 @@ from simulator.core import (
 )
 from simulator.landscape import Landscape, build_landscape, global_minimum
 from simulator.motion import (
-    Field,
-    Grid,
     field_and_grid,
-    finish,
     is_stiff,
-    stepper,
 )
 from simulator.physics import align_tolerance, pin_per_index
 from simulator.scene import Scene
 
 #: Peak bytes per start of a dynamics batch beyond :data:`BATCH_BYTES_PER_START`: its time.
 TIME_BYTES_PER_START = 16
-
-
-# --------------------------------------------------------------------- batch
-def _one(field: Field, grid: Grid, params, start, method: str, max_steps: int, stiff: bool):
-    """One start -> (final q, steps, status, outcome, energy, time_s); the single run vmap maps.
-
-    ``params``: the :class:`~simulator.motion.DynamicsParams` of a dynamic method
-    (None for greedy and gradient); ``time_s`` is the simulated time at the end of a
-    dynamic run (NaN for the steppers)."""
-    s = stepper(method, stiff)(field, grid, params, start, max_steps, record=False)
-    status, out = finish(field, grid, s, max_steps)
-    return s.q, s.step, status, out, s.energy, s.time_s
-
-
-@functools.partial(jax.jit, static_argnames=("grid", "method", "max_steps", "stiff"))
-def _run_chunk(
-    field: Field,
-    params,
-    starts: jax.Array,
-    grid: Grid,
-    method: str,
-    max_steps: int,
-    stiff: bool = False,
-):
-    """The jit boundary: vmap of :func:`_one` over a (chunk, 3) array of start indices
-    (``params`` traced and shared by every lane).
-
-    A stiff inertial run (the implicit solver, diffrax Kvaerno5) is mapped one start after
-    the other (``jax.lax.map``) instead: under vmap diffrax re-evaluates the first stage
-    of every lane while any lane is still on its first step
-    (``eqxi.unvmap_any(first_step | made_jump)`` in its Runge-Kutta step), and for an
-    implicit solver that fresh value differs from the carried first-same-as-last one by
-    the root finder's tolerance, so a lane's path would depend on its neighbours
-    (measured: up to 4e-4 um and 3x the steps after 1 s). Explicit solvers carry the
-    same value either way, so their lanes are independent and equal single runs."""
-
-    def one(s):
-        return _one(field, grid, params, s, method, max_steps, stiff)
-
-    return jax.lax.map(one, starts) if stiff else jax.vmap(one)(starts)
-
-
-def _check_starts_fit(ls: Landscape, poses: np.ndarray) -> None:
-    """Starts the landscape cannot hold: twist outside a bounded axis, pose outside a cut window."""
-    t = ls.twist_deg
-    if len(t) == 1:
-        require(
-            bool(np.all(np.abs(poses[:, 2] - t[0]) <= 1e-9)),
-            f"the landscape has one twist ({t[0]:g} deg, no twisting); every start twist must be {t[0]:g} degrees",
-        )
-    elif not ls.wrap:
-        half = ls.twist_step_deg / 2
-        lo, hi = poses[:, 2].min(), poses[:, 2].max()
-        require(
-            t[0] - half <= lo and hi <= t[-1] + half,
-            f"start twists {lo:g}..{hi:g} deg are outside the twist range {t[0]:g}..{t[-1]:g} deg; widen the twist range",
-        )
-    s = ls.um_per_px
-    for k, (axis, (cut_lo, cut_hi)) in enumerate(((ls.x_um, ls.cut[2]), (ls.y_um, ls.cut[1]))):
-        v = poses[:, k]
-        bad = (cut_lo and v.min() < axis[0] - s / 2) or (cut_hi and v.max() > axis[-1] + s / 2)
-        require(
-            not bad,
-            f"start {'xy'[k]} values {v.min():g}..{v.max():g} um leave the translation window {axis[0]:g}..{axis[-1]:g} um; widen the window (--window / window_um)",
-        )
-
-
-def _distance_in_steps(q: np.ndarray, best: np.ndarray, grid: Grid) -> np.ndarray:
-    """max over axes of |q - best| in grid steps (twist modulo the period): a lower bound
-    on greedy's step count from q (docs/physics.md C10), a rough one for gradient."""
-    d = np.abs(np.asarray(q, float) - best)
-    period = grid.period_deg / grid.twist_step_deg
-    d[:, 0] = np.abs(d[:, 0] - period * np.round(d[:, 0] / period))
-    return d.max(axis=1)
-
-
-def _z_order(q: np.ndarray) -> np.ndarray:
-    """Morton (Z-order) codes of integer grid indices (N, 3): sorting by them puts starts
-    that lie close together in the pose grid next to each other."""
-    q = np.asarray(q, np.int64)
-    q = np.clip(q - q.min(axis=0), 0, 2**21 - 1)
-    code = np.zeros(len(q), np.int64)
-    for b in range(21):
-        for k in range(3):
-            code |= ((q[:, k] >> b) & 1) << (3 * b + k)
-    return code
-
-
-#: Width (grid steps) of the distance classes that :func:`_run_order` groups starts by.
-ORDER_BAND_STEPS = 8
-
-
-def _run_order(q: np.ndarray, best: np.ndarray, grid: Grid) -> np.ndarray:
-    """The order starts are run in: by distance from the global minimum in bands of
-    :data:`ORDER_BAND_STEPS` grid steps (a lower bound on greedy's step count, so a chunk
-    holds runs of similar length and few lanes idle in the vmapped while loop), and
-    within a band in Z-order (a chunk's lanes then read nearby landscape cells, which
-    share cache lines: 25 % faster on the benchmark than distance order alone)."""
-    band = np.floor(_distance_in_steps(q, best, grid) / ORDER_BAND_STEPS)
-    return np.lexsort((_z_order(np.floor(q)), band))
 
 
 def run_batch(
@@ -217,6 +115,7 @@ def run_batch(
     progress: bool = True,
     workers: int | None = None,
     dynamics=None,
+    planes=None,
 ) -> BatchResult:
     """Run every start to its end on one landscape.
 
@@ -237,17 +136,16 @@ def run_batch(
         dynamics: :class:`simulator.motion.DynamicsParams` of the dynamic
             methods (default: ``DynamicsParams.from_scene(scene)``, as
             :func:`simulator.motion.simulate` takes them); ignored by the steppers.
+        planes: for a scene with ``dispense`` (the footprint as each start's state,
+            docs/physics.md §3.5), its pads' planes
+            (:func:`simulator.landscape.build_footprint_planes`) when several batches share
+            them; default: built here.
 
     Returns:
         A :class:`BatchResult`; ``stats`` holds seconds, starts and steps per second;
         for the dynamics ``time_s`` holds each start's simulated time at its end
         (:attr:`BatchResult.time_to_align_s`: that time for the aligned starts).
     """
-    if scene.liquid.dispense is not None:
-        raise InputError(
-            "--dispense: batch runs do not carry the footprint state yet (simulate does, start by start); "
-            "give a scene without dispense"
-        )
     require(method in METHODS, f"method must be one of {', '.join(METHODS)}, got {method!r}")
     dynamic = method in DYNAMIC_METHODS
     if chunk is None:
@@ -281,6 +179,26 @@ def run_batch(
             dynamics = DynamicsParams.from_scene(scene)
     else:
         dynamics = None
+    if scene.liquid.dispense is not None:
+        # the footprint as each lane's state (docs/physics.md §3.5), on the pads' planes
+        require(
+            landscape is None,
+            "--dispense: a batch on a given landscape cannot carry the footprint state (it is built "
+            "from the pads' planes); leave the landscape out",
+        )
+        from simulator.batch._footprint_batch import run_footprint_batch
+
+        return run_footprint_batch(
+            scene,
+            poses,
+            method,
+            chunk=chunk,
+            max_steps=max_steps,
+            progress=progress,
+            workers=workers,
+            dynamics=dynamics,
+            planes=planes,
+        )
     t0 = time.perf_counter()
     ls = build_landscape(scene, progress=progress) if landscape is None else landscape
     t_land = time.perf_counter() - t0
@@ -298,53 +216,16 @@ def run_batch(
     # length and position (_run_order) and are scattered back. Lanes are independent, so
     # the order changes no result.
     order = _run_order(q0, np.asarray(fld.best), grid)
-    q0 = q0[order]
-    final_q = np.empty((n, 3), np.float64)
-    steps = np.empty(n, np.int32)
-    outcome = np.empty(n, np.int8)
-    energy = np.empty(n, np.float64)
-    time_s = np.empty(n, np.float64) if dynamic else None
-
-    def run(i: int) -> int:
-        """Chunk starting at i: run, then scatter its results (disjoint rows per chunk)."""
-        block = q0[i : i + chunk]
-        m = len(block)
-        if m < chunk:  # pad with the block's first start: one compiled shape
-            block = np.concatenate([block, np.repeat(block[:1], chunk - m, axis=0)])
-        q, st, _, out, e, ts = _run_chunk(
-            fld,
-            dynamics,
-            jnp.asarray(block),
-            grid=grid,
-            method=method,
-            max_steps=int(max_steps),
-            stiff=stiff,
-        )
-        dest = order[i : i + m]
-        final_q[dest] = np.asarray(q)[:m]
-        steps[dest] = np.asarray(st)[:m]
-        outcome[dest] = np.asarray(out)[:m]
-        energy[dest] = np.asarray(e)[:m]
-        if time_s is not None:
-            time_s[dest] = np.asarray(ts)[:m]
-        return m
-
     t1 = time.perf_counter()
-    chunks = range(0, n, chunk)
     with progress_bar(progress, n, method, "start") as bar:
-        if workers == 1:
-            for i in chunks:
-                bar.update(run(i))
-                hold("batch")
-        else:
-            # XLA runs one vmapped loop on one core: a thread per core keeps each busy.
-            ex = ThreadPoolExecutor(workers)
-            try:
-                for m in ex.map(run, chunks):
-                    bar.update(m)
-                    hold("batch")
-            finally:
-                ex.shutdown(wait=True, cancel_futures=True)
+        got = run_lanes(
+            fld, grid, dynamics, q0[order], method, max_steps, stiff, chunk, workers, bar.update
+        )
+    # back to the caller's order: lanes are independent, so the order changes no result
+    final_q, steps, outcome, energy, time_s = (np.empty_like(a) for a in got[:2] + got[3:])
+    for dst, src in zip((final_q, steps, outcome, energy, time_s), got[:2] + got[3:], strict=True):
+        dst[order] = src
+    time_s = time_s if dynamic else None
     dt = time.perf_counter() - t1
     x, y, t = global_minimum(scene, landscape=ls).pose  # the pose every command calls "aligned"
     return BatchResult(

@@ -392,15 +392,6 @@ def scene_from_args(
         from simulator.liquid import check_scene_volume
 
         check_scene_volume(scene)
-    if scene.liquid.dispense is not None and getattr(args, "command", None) not in (
-        "simulate",
-        "energy",
-    ):
-        raise InputError(
-            f"--dispense {scene.liquid.dispense}: the footprint state is carried by simulate and energy only so far; "
-            f"selfalign {getattr(args, 'command', 'this command')} runs the stateless footprint: leave --dispense "
-            "(or [liquid] dispense) out, or run selfalign simulate per start"
-        )
     if warn:
         accuracy_check(scene)
     if note_frame and "layout" in scene.pattern.params:

@@ -141,6 +141,14 @@ def run(args: argparse.Namespace) -> int:
     print(
         f"capture fraction {100 * cap['fraction']:.1f} % of {cap['n']} grid starts; yield {100 * yl['fraction']:.1f} % under placement noise ({args.method})"
     )
+    for name, r in (summary.get("protocols") or {}).items():
+        if isinstance(r, dict):
+            pb = r["max_bias_um"]
+            print(
+                f"--dispense {name}{' (this scene)' if name == scene.liquid.dispense else ''}: max bias +x {pb['+x']:g} um, "
+                f"-x {pb['-x']:g} um, +y {pb['+y']:g} um, -y {pb['-y']:g} um; capture {100 * r['capture_fraction']:.1f} %, "
+                f"yield {100 * r['yield_fraction']:.1f} % (each start released onto that protocol's footprint)"
+            )
     pics = "landscape.png, force.png, capture.png, pattern.png"
     if "time_to_align_s" in yl:
         from simulator.commands.montecarlo import time_line

@@ -367,6 +367,7 @@ def run(args: argparse.Namespace) -> int:
             "dtype": scene.dtype,
             "meniscus_height_um": scene.meniscus_height_um,
             "pinned": scene.liquid.pinned,
+            "dispense": scene.liquid.dispense,
             "hysteresis_deg": (
                 {
                     "receding": scene.materials.pad_receding_deg,
@@ -384,9 +385,22 @@ def run(args: argparse.Namespace) -> int:
     }
     if result.time_s is not None:
         doc["time_to_align_histogram"] = time_histogram(result.time_to_align_s)
+    if "footprint_events" in st:  # the footprint as each start's state (--dispense)
+        doc["footprint"] = {
+            "dispense": scene.liquid.dispense,
+            "events": st["footprint_events"],
+            "rounds": st["footprint_rounds"],
+            "planes_s": st["footprint_planes_s"],
+        }
     require_finite(doc, "montecarlo summary")
     require_finite({"start": result.start, "final": result.final}, "montecarlo starts")
     _print_summary(summary | {"seed": seed}, result, desc, st)
+    if "footprint" in doc:
+        fp = doc["footprint"]
+        print(
+            f"footprint (--dispense {fp['dispense']}): each start carries its own wet pads; "
+            f"{fp['events']:,} state changes over {fp['rounds']} rounds; pads' planes built in {fp['planes_s']:.1f} s"
+        )
     with contextlib.ExitStack() as stack:  # every output, or none
         if args.csv:
             write_csv(stack.enter_context(atomic_output(args.csv)), result, OUTCOMES)

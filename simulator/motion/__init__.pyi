@@ -15,6 +15,7 @@ from ._field import (
     PAD as PAD,
     Field as Field,
     Grid as Grid,
+    Relay as Relay,
     block as block,
     field_and_grid as field_and_grid,
     gradient as gradient,
@@ -22,11 +23,16 @@ from ._field import (
     lookup as lookup,
     make_field as make_field,
     neighbourhood as neighbourhood,
+    relay_changes as relay_changes,
 )
 from ._footprint_run import (
     MAX_EVENTS as MAX_EVENTS,
+    footprint_budget_bytes as footprint_budget_bytes,
+    footprint_relay as footprint_relay,
     footprint_words as footprint_words,
+    remaining_params as remaining_params,
     require_footprint_fits as require_footprint_fits,
+    wet_bits as wet_bits,
 )
 from ._pathrun import (
     ENGINES as ENGINES,
@@ -50,6 +56,7 @@ from ._stepping import (
     BLOCK_MOVES as BLOCK_MOVES,
     CONVERGED as CONVERGED,
     EDGE as EDGE,
+    EVENT as EVENT,
     GREEDY_MOVES as GREEDY_MOVES,
     MAX_STEPS as MAX_STEPS,
     OUTCOMES as OUTCOMES,

@@ -100,9 +100,9 @@ from simulator.motion._dynamics_ode import (
 
 # Parameters (simulator.motion) and the potential Phi (simulator.motion), re-exported.
 from simulator.motion._dynamics_params import MIN_FILM_UM, DynamicsParams, default_tolerances  # noqa: E402, F401
-from simulator.motion._field import Field, Grid, clamp_start
+from simulator.motion._field import Field, Grid, clamp_start, relay_changes
 from simulator.motion._potential import potential, potential_and_gradient  # noqa: E402, F401
-from simulator.motion._stepping import CONVERGED, EDGE, MAX_STEPS, on_plateau
+from simulator.motion._stepping import CONVERGED, EDGE, EVENT, MAX_STEPS, on_plateau
 
 
 # ----------------------------------------------------------------- state
@@ -245,7 +245,12 @@ def _run(
     q = final["q"]
     _, grad = potential_and_gradient(field, grid, q)
     converged, edge = _stop_flags(field, grid, co, q, grad, final["kinetic"])
-    status = jnp.where(edge, EDGE, jnp.where(converged, CONVERGED, MAX_STEPS)).astype(jnp.int32)
+    # the footprint state changing here (a field with a relay) outranks rest: the run goes on
+    status = jnp.where(
+        edge,
+        EDGE,
+        jnp.where(relay_changes(field, grid, q), EVENT, jnp.where(converged, CONVERGED, MAX_STEPS)),
+    ).astype(jnp.int32)
     flat = converged & ~edge & on_plateau(field, grid, jnp.round(q).astype(jnp.int32))
     if record:
         filled = jnp.arange(max_steps + 1) <= step

@@ -23,7 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from simulator.motion._field import Field, Grid, at_cut_edge, interpolate
+from simulator.motion._field import Field, Grid, at_cut_edge, interpolate, relay_changes
 from simulator.motion._potential import _OFFSETS, _kernel, _node_energy, potential_and_gradient
 from simulator.motion._stepping import reference_gradient
 
@@ -281,7 +281,7 @@ def _stop(y, args, inertial: bool):
     q = co.q0 + d
     _, grad = potential_and_gradient(field, grid, q)
     converged, edge = _stop_flags(field, grid, co, q, grad, jnp.sum(co.ke * u * u))
-    return converged | edge
+    return converged | edge | relay_changes(field, grid, q)
 
 
 # Module-level functions (not closures made per call), so that eager calls hit

@@ -38,8 +38,29 @@ PAD = 4
 
 
 @functools.partial(
+    jax.tree_util.register_dataclass, data_fields=["reached", "within", "wet"], meta_fields=[]
+)
+@dataclass(frozen=True)
+class Relay:
+    """The liquid's footprint relay a stepper reads (docs/physics.md §3.5): one bit per pad.
+
+    reached, within: (T, Ny, Nx, W) uint8, the pads reached by the liquid's foot and the
+        pads within the reach of the chip's wall at each node, bit ``k % 8`` of byte
+        ``k // 8`` for pad ``k`` (:func:`simulator.motion.footprint_relay`).
+    wet: (W,) uint8, the state the run is on (the landscape it steps on is that state's).
+
+    A run on a field with a relay stops (status EVENT) at the first pose whose node would
+    change the state: ``reached | (wet & within) != wet`` (:func:`relay_changes`).
+    """
+
+    reached: jax.Array
+    within: jax.Array
+    wet: jax.Array
+
+
+@functools.partial(
     jax.tree_util.register_dataclass,
-    data_fields=["padded", "floor", "best", "scale"],
+    data_fields=["padded", "floor", "best", "scale", "relay"],
     meta_fields=["pin", "align_tol"],
 )
 @dataclass(frozen=True)
@@ -57,12 +78,16 @@ class Field:
         x) in J (:mod:`simulator.physics`); zeros = none, today's stopping rules
         exactly. Static (part of the pytree's structure): jit compiles the rule in or out.
     align_tol: (twist steps, px) within which a final pose counts as aligned (static).
+    relay: the footprint state's :class:`Relay` (``--dispense``), or None: a run then never
+        stops for an event (None is part of the pytree's structure: jit compiles the test
+        in or out).
     """
 
     padded: jax.Array
     floor: jax.Array
     best: jax.Array
     scale: jax.Array
+    relay: Relay | None = None
     pin: tuple[float, float, float] = (0.0, 0.0, 0.0)
     align_tol: tuple[float, float] = (1.0, 1.0)
 
@@ -147,6 +172,21 @@ def field_and_grid(
     )  # the global minimum: ties decided by position (Landscape.minimum_index)
     grid = ls.grid if rg_px is None else replace(ls.grid, rg_px=float(rg_px))
     return make_field(e, grid, ls.noise_floor_J, [it, iy, ix], pin, align_tol, scale), grid
+
+
+def relay_changes(field: Field, grid: Grid, q) -> jax.Array:
+    """True where the footprint state would change at fractional indices q (the node
+    round(q), the twist wrapped on a periodic axis, every index clipped to the grid):
+    some pad reached that is dry, or some wet pad out of reach. False without a relay."""
+    r = field.relay
+    if r is None:
+        return jnp.asarray(False)
+    n_t, ny, nx = grid.shape
+    i = jnp.round(jnp.asarray(q)).astype(jnp.int32)
+    it = jnp.mod(i[0], n_t) if grid.wrap else jnp.clip(i[0], 0, n_t - 1)
+    iy, ix = jnp.clip(i[1], 0, ny - 1), jnp.clip(i[2], 0, nx - 1)
+    new = r.reached[it, iy, ix] | (r.wet & r.within[it, iy, ix])
+    return jnp.any(new != r.wet)
 
 
 # ----------------------------------------------------------------- look-ups

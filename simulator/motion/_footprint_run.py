@@ -87,25 +87,61 @@ def footprint_words(fp: dict) -> str:
     )
 
 
+def footprint_relay(planes) -> tuple:
+    """The pads' relay flags of ``planes`` (:class:`simulator.landscape.FootprintPlanes`)
+    packed for the steppers: (reached, within) as (T, Ny, Nx, W) uint8 device arrays, pad
+    ``k`` in bit ``k % 8`` of byte ``k // 8`` (:class:`simulator.motion.Relay`)."""
+    import jax.numpy as jnp
+
+    def pack(flags):
+        return jnp.asarray(np.moveaxis(np.packbits(flags, axis=0, bitorder="little"), 0, -1))
+
+    return pack(planes.reached), pack(planes.within_reach)
+
+
+def wet_bits(wet) -> np.ndarray:
+    """A footprint state ((pads,) booleans) as the relay's (W,) uint8 bits."""
+    return np.packbits(np.asarray(wet, bool), bitorder="little")
+
+
+def remaining_params(dynamics, t_off: float):
+    """The dynamics of a run's stretch that starts at ``t_off`` s: the time left to its
+    ``t_max_s`` (a footprint run's time limit is the whole run's); None once none is left."""
+    if dynamics is None or t_off == 0.0:
+        return dynamics
+    left = float(dynamics.t_max_s) - t_off
+    return None if left <= 0.0 else dataclasses.replace(dynamics, t_max_s=left)
+
+
 def simulate_footprint(
-    scene, start, method: str, max_steps: int, dynamics, backend: str, simulate
+    scene, start, method: str, max_steps: int, dynamics, backend: str, simulate, planes=None
 ) -> dict:
     """:func:`simulator.motion.simulate` with the footprint as the run's state (module
     docstring): the fields of the joined trajectory, ``footprint`` among them (where the
-    liquid was), for the caller to make the trajectory of. ``simulate`` runs each piece
-    on a given landscape (the caller's own function, passed in)."""
+    liquid was), for the caller to make the trajectory of. ``simulate`` runs each stretch
+    on a given landscape (the caller's own function, passed in), stopping where the state
+    changes (its ``relay``); ``max_steps`` bounds each stretch between events, the dynamics'
+    ``t_max_s`` the whole run. ``planes``: the scene's pads' planes, when given (built
+    here otherwise)."""
     from simulator.landscape import build_footprint_planes
     from simulator.liquid import dispensed_footprint
+    from simulator.motion._field import Relay
 
     t0 = time.perf_counter()
     proto = scene.liquid.dispense
-    require_footprint_fits(scene)
-    planes = build_footprint_planes(scene, backend=backend)
+    if planes is None:
+        require_footprint_fits(scene)
+        planes = build_footprint_planes(scene, backend=backend)
     n = planes.n_pads  # the planes' own labelling: the pattern is not labelled again
     dispensed, why = dispensed_footprint(scene, planes.labels, n)
+    if method in ("overdamped", "inertial") and dynamics is None:
+        from simulator.motion._dynamics_params import DynamicsParams
+
+        dynamics = DynamicsParams.from_scene(scene)
     # "aligned": against the minimum with every pad wet (the aligned pose on the whole
     # pattern), not the current state's (a state with only some pads wet has its own).
     reference = planes.landscape(np.ones(n, bool))
+    reached, within = footprint_relay(planes)
     wet = planes.next_state(dispensed, start)
     initial = wet.copy()
     inner = scene.replace(
@@ -120,22 +156,20 @@ def simulate_footprint(
             inner,
             pose,
             method=method,
-            max_steps=max_steps - done,
+            max_steps=max_steps,
             landscape=planes.landscape(wet),
-            dynamics=dynamics,
+            dynamics=remaining_params(dynamics, t_off),
             backend=backend,
             reference=reference,
+            relay=Relay(reached, within, np.asarray(wet_bits(wet))),
         )
         last = tr
-        j, new = None, wet
-        for i in range(1, len(tr.path)):
-            new = planes.next_state(wet, tr.path[i])
-            if (new != wet).any():
-                j = i
-                break
-        if j is None:
+        if tr.outcome != "event":
             pieces.append((tr, t_off))
             break
+        # the stretch stopped at its last pose, where the state changes: the next starts there
+        j = len(tr.path) - 1
+        new = planes.next_state(wet, tr.path[j])
         pieces.append((_cut(tr, j), t_off))
         t_ev = None if tr.t_s is None else t_off + float(tr.t_s[j])
         for k in np.flatnonzero(new != wet):
@@ -156,18 +190,25 @@ def simulate_footprint(
             t_off = t_ev
         wet = new
         pose = tuple(float(v) for v in tr.path[j])
-        if done >= max_steps:
+        if dynamics is not None and remaining_params(dynamics, t_off) is None:  # time is up
+            pieces[-1] = (
+                dataclasses.replace(_cut(tr, j + 1), steps=j),
+                pieces[-1][1],
+            )  # ends there
             last = None
             break
+    else:
+        last = None  # more events than MAX_EVENTS: chattering on a relay's threshold
     assert pieces  # the loop runs at least once
     path = np.concatenate([p.path for p, _ in pieces])
     energy = np.concatenate([p.energy_J for p, _ in pieces])
     steps = sum(p.steps for p, _ in pieces)
     t_s = None
     if pieces[0][0].t_s is not None:
-        t_s = np.concatenate([p.t_s + off for p, off in pieces])
+        # each stretch's times are clamped to its own limit; their sum to the run's
+        t_s = np.minimum(np.concatenate([p.t_s + off for p, off in pieces]), dynamics.t_max_s)
     time_s = None if t_s is None else float(t_s[-1])
-    outcome = "max_steps" if last is None or len(events) > MAX_EVENTS else last.outcome
+    outcome = "max_steps" if last is None else last.outcome
     s = scene.um_per_px
     rules = planes.rules
     footprint = {

@@ -46,10 +46,13 @@ from simulator.motion._field import (
     interpolate,
     lookup,
     neighbourhood,
+    relay_changes,
 )
 
-# Stop codes of a run (``status``), and the outcomes a trajectory reports.
-RUNNING, CONVERGED, MAX_STEPS, EDGE = 0, 1, 2, 3
+# Stop codes of a run (``status``), and the outcomes a trajectory reports. EVENT: the
+# footprint state changes at the pose the run stopped at (a field with a relay,
+# docs/physics.md §3.5): the run goes on from there on the new state's landscape.
+RUNNING, CONVERGED, MAX_STEPS, EDGE, EVENT = 0, 1, 2, 3, 4
 
 
 def _move_order() -> np.ndarray:
@@ -126,6 +129,10 @@ def greedy(field: Field, grid: Grid, start, max_steps: int, record: bool = True)
         new_idx = jnp.where(at_edge, s.idx, new_idx)
         step = jnp.where(at_edge, s.step, step)
         energy = jnp.where(at_edge, s.energy, e_true[choice])
+        if field.relay is not None:  # static: the footprint state changes where the chip moved
+            status = jnp.where(
+                moved & ~at_edge & relay_changes(field, grid, new_idx), EVENT, status
+            )
         if record:
             p = s.path.at[step].set(new_idx)
             pe = s.path_energy.at[step].set(energy)
@@ -223,6 +230,8 @@ def gradient_descent(
             EDGE,
             jnp.where(~accept, CONVERGED, jnp.where(step >= max_steps, MAX_STEPS, RUNNING)),
         )
+        if field.relay is not None:  # static: the footprint state changes where the chip moved
+            status = jnp.where(accept & relay_changes(field, grid, q), EVENT, status)
         if record:
             p, pe = s.path.at[step].set(q), s.path_energy.at[step].set(energy)
         else:

@@ -40,6 +40,7 @@ from simulator.motion._steppers import DYNAMIC, RunState, flat_at, jitted
 from simulator.motion._stepping import (
     CONVERGED,
     EDGE,
+    EVENT,
     MAX_STEPS,
     OUTCOMES,
     classify,
@@ -146,6 +147,8 @@ def simulate(
     backend: str = "auto",
     engine: str = "auto",
     reference: Landscape | None = None,
+    relay=None,
+    planes=None,
 ) -> Trajectory:
     """Run one trajectory from ``start`` = (x_um, y_um, twist_deg).
 
@@ -188,7 +191,9 @@ def simulate(
         from simulator.motion._footprint_run import simulate_footprint
 
         return Trajectory(
-            **simulate_footprint(scene, start, method, max_steps, dynamics, backend, simulate)
+            **simulate_footprint(
+                scene, start, method, max_steps, dynamics, backend, simulate, planes=planes
+            )
         )
     if landscape is None and not dynamic:
         from simulator.motion._pathrun import choose_engine
@@ -262,6 +267,8 @@ def simulate(
                 ls if reference is None else reference, pin, floats=scene.wall_profile is not None
             )
         field, grid = field_and_grid(ls, pin=pin, align_tol=tol, scale=scale)
+        if relay is not None:
+            field = field._replace(relay=relay)
         run = jitted(method, is_stiff(method, field, grid, dynamics))
         state = run(field, grid, dynamics, jnp.asarray(grid.to_index(pose)), max_steps)
         pieces.append(_to_trajectory(method, state, grid))
@@ -346,6 +353,8 @@ def simulate(
     }
     refined = None
     outcome = OUTCOMES[int(out)]
+    if relay is not None and status == EVENT:
+        outcome = "event"  # not an end: the footprint run goes on (simulate_footprint)
     if (
         scene.meniscus_height_um is not None
         and not any(pin)

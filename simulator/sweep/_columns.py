@@ -98,11 +98,19 @@ def flatten(summary: dict) -> dict[str, Any]:
                 emit((*parts, name), u, v)
 
     walk(summary, (), None)
-    b = summary.get("max_bias_um") or {}
-    for axis in ("x", "y"):
-        ends = [b.get(f"+{axis}"), b.get(f"-{axis}")]
-        if all(isinstance(e, int | float) for e in ends):
-            out[f"max_bias_{axis}_um"] = float(min(ends))
+    protocols = summary.get("protocols") or {}
+    for prefix, b in (
+        ("max_bias", summary.get("max_bias_um") or {}),
+        *(
+            (f"protocols_{k}_max_bias", v.get("max_bias_um") or {})
+            for k, v in protocols.items()
+            if isinstance(v, dict)
+        ),
+    ):  # the smaller end along each axis: the bias from which both sides still align
+        for axis in ("x", "y"):
+            ends = [b.get(f"+{axis}"), b.get(f"-{axis}")]
+            if all(isinstance(e, int | float) for e in ends):
+                out[f"{prefix}_{axis}_um"] = float(min(ends))
     g = summary.get("global_minimum") or {}
     if isinstance(g.get("x_um"), int | float) and isinstance(g.get("y_um"), int | float):
         out["global_minimum_offset_um"] = float(math.hypot(g["x_um"], g["y_um"]))
@@ -121,7 +129,9 @@ def _product(*parts: tuple[str, ...]) -> list[str]:
     return ["_".join(p for p in combo if p) for combo in itertools.product(*parts)]
 
 
-def _metric_columns(twist: bool, meniscus: bool, free: bool, dynamics: bool) -> list[str]:
+def _metric_columns(
+    twist: bool, meniscus: bool, free: bool, dynamics: bool, dispense: bool = False
+) -> list[str]:
     """The columns :func:`flatten` makes of :func:`simulator.batch.assess`'s summary for a
     scene of these effects (kept equal to a real row's by the tests)."""
     outcomes = ("aligned", "plateau", "local_minimum", "no_contact", "max_steps")
@@ -165,6 +175,21 @@ def _metric_columns(twist: bool, meniscus: bool, free: bool, dynamics: bool) -> 
             ("median", "p90", "mean", "min", "max", "n"),
             ("s",),
         )
+    if dispense:  # each protocol's numbers (simulator.batch footprint_protocols)
+        cols += ["protocols_substrate_reach_um", "protocols_wet_reach_um"]
+        cols += ["protocols_receding_deg", "protocols_planes_s"]
+        for name in ("pattern", "chip"):
+            pre = f"protocols_{name}"
+            cols += _product(
+                (f"{pre}_max_bias",), ("plus_x_um", "minus_x_um", "plus_y_um", "minus_y_um")
+            )
+            cols += [f"{pre}_capture_fraction", f"{pre}_yield_fraction"]
+            cols += _product((f"{pre}_capture_outcomes", f"{pre}_yield_outcomes"), outcomes)
+            cols += [f"{pre}_max_bias_x_um", f"{pre}_max_bias_y_um"]
+            if dynamics:
+                cols += _product(
+                    (f"{pre}_time_to_align",), ("median", "p90", "mean", "min", "max", "n"), ("s",)
+                )
     return cols
 
 
@@ -188,6 +213,7 @@ def expected_columns(spec) -> list[str]:
         meniscus=bool(effects.get("meniscus", False)),
         free=not liquid.get("pinned", False),
         dynamics=any(m in DYNAMIC_METHODS for m in methods),
+        dispense=liquid.get("dispense") is not None,
     )
     if spec.design is None or spec.design["name"] == "four-pad":
         cols.append("critical_volume_nl")

@@ -215,7 +215,12 @@ def price_point(task: dict) -> None:
     from simulator.landscape import require_landscape_fits
 
     scene, auto = point_scene(task)
-    require_landscape_fits(auto_resolution(scene) if auto else scene)
+    scene = auto_resolution(scene) if auto else scene
+    require_landscape_fits(scene)
+    if scene.liquid.dispense is not None:  # the pads' planes of the two protocols
+        from simulator.motion import require_footprint_fits
+
+        require_footprint_fits(scene)
 
 
 #: A point's assessment holds this many times its landscape array (the array and the
@@ -242,6 +247,13 @@ def point_bytes(task: dict) -> int:
     scene, auto = point_scene(task)
     scene = auto_resolution(scene) if auto else scene
     require_landscape_fits(scene)
+    if scene.liquid.dispense is not None:  # the pads' planes, built after the landscape is freed
+        from simulator.landscape import pad_labels
+        from simulator.motion import footprint_budget_bytes, require_footprint_fits
+
+        require_footprint_fits(scene)
+        planes = footprint_budget_bytes(scene, pad_labels(scene.pattern)[1])  # with its process
+        return int(max(WORKER_BASE_BYTES + ASSESS_LANDSCAPES * estimate_bytes(scene), planes))
     return int(WORKER_BASE_BYTES + ASSESS_LANDSCAPES * estimate_bytes(scene))
 
 

@@ -1,0 +1,228 @@
+"""Many starts at once with the liquid's footprint as each start's state (``--dispense``).
+
+Every lane carries its own footprint state (which pads are wet), as a single run does
+(:mod:`simulator.motion`, the footprint run; docs/physics.md §3.5): the lanes start from
+the state the process leaves, passed through the relay at their start pose, and run in
+rounds. In a round, the lanes that share a state run together, vmapped, on that state's
+landscape (summed from the pads' planes, :class:`simulator.landscape.FootprintPlanes`)
+with the state's relay in the field: a lane stops at the first pose where its state
+changes (status EVENT), takes the new state, and goes on from that pose, from rest, in
+the next round; every other lane has ended. The steppers, the relay test, the stretch's
+step budget and the time left to a dynamic run are those of the single run, so each
+lane's end equals ``simulate(scene, start, method)``'s start by start (tested).
+
+States are few (a pad wets or dries a few times a run), so a round runs a handful of
+compiled batches, each on a landscape summed once; rounds end when no lane changed
+state, or after :data:`simulator.motion.MAX_EVENTS` (a lane still changing then ran out
+of steps: chattering on a relay's threshold).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+
+from simulator.core import progress_bar
+
+
+def _nodes(grid, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The grid nodes of fractional indices q (N, 3), as the steppers' relay test takes them
+    (:func:`simulator.motion.relay_changes`): rounded, the twist wrapped on a periodic axis,
+    every index clipped to the grid."""
+    n_t, ny, nx = grid.shape
+    i = np.round(np.asarray(q, float)).astype(np.int64)
+    it = np.mod(i[:, 0], n_t) if grid.wrap else np.clip(i[:, 0], 0, n_t - 1)
+    return it, np.clip(i[:, 1], 0, ny - 1), np.clip(i[:, 2], 0, nx - 1)
+
+
+def _next_states(planes, wet: np.ndarray, q: np.ndarray, grid) -> np.ndarray:
+    """Each lane's state ((N, pads) booleans) after arriving at q (N, 3) with ``wet``."""
+    it, iy, ix = _nodes(grid, q)
+    reached = planes.reached[:, it, iy, ix].T
+    within = planes.within_reach[:, it, iy, ix].T
+    return reached | (wet & within)
+
+
+def run_footprint_batch(
+    scene,
+    poses: np.ndarray,
+    method: str,
+    *,
+    chunk: int,
+    max_steps: int,
+    progress: bool,
+    workers: int,
+    dynamics,
+    planes=None,
+    dispense: str | None = None,
+):
+    """:func:`simulator.batch.run_batch` with the footprint as each lane's state (module
+    docstring). The checks and the pricing of the starts are the caller's; the pads'
+    planes are priced here before any is made, or given (``planes``, of this scene: one
+    build serves both protocols). ``dispense``: the protocol, default the scene's. Returns a :class:`BatchResult` whose
+    ``stats`` add ``footprint_events`` (events per lane, summed), ``footprint_rounds``
+    and ``footprint_planes_s``."""
+    import jax.numpy as jnp
+
+    from simulator.batch._lanes import _check_starts_fit, _run_order, run_lanes
+    from simulator.batch._stats import BatchResult
+    from simulator.landscape import build_footprint_planes, global_minimum
+    from simulator.liquid import dispensed_footprint
+    from simulator.motion import (
+        EVENT,
+        MAX_EVENTS,
+        Relay,
+        field_and_grid,
+        footprint_relay,
+        is_stiff,
+        remaining_params,
+        require_footprint_fits,
+        wet_bits,
+    )
+    from simulator.physics import align_tolerance, pin_per_index
+
+    dynamic = dynamics is not None
+    t0 = time.perf_counter()
+    if planes is None:
+        require_footprint_fits(scene)
+        planes = build_footprint_planes(scene, progress=progress)
+    n_pads = planes.n_pads
+    if dispense is not None and dispense != scene.liquid.dispense:
+        scene = scene.replace(liquid=dataclasses.replace(scene.liquid, dispense=dispense))
+    dispensed, _ = dispensed_footprint(scene, planes.labels, n_pads)
+    reference = planes.landscape(np.ones(n_pads, bool))
+    t_land = time.perf_counter() - t0
+    _check_starts_fit(reference, poses)
+    reached, within = footprint_relay(planes)
+    pin = pin_per_index(scene, reference.um_per_px, reference.twist_step_deg)
+    tol = align_tolerance(reference, pin, floats=scene.wall_profile is not None)
+    opt = global_minimum(scene, landscape=reference)  # "aligned": every pad wet
+    grid = reference.grid
+    best = grid.to_index(np.asarray(opt.pose))
+
+    n = len(poses)
+    q = grid.to_index(poses)
+    q = np.round(q) if method == "greedy" else q  # as simulate()
+    wet = _next_states(planes, np.broadcast_to(dispensed, (n, n_pads)), q, grid)
+    t_off = np.zeros(n)
+    steps = np.zeros(n, np.int64)
+    events = np.zeros(n, np.int64)
+    final_q = np.empty((n, 3))
+    outcome = np.empty(n, np.int8)
+    energy = np.empty(n)
+    time_s = np.full(n, np.nan)
+    active = np.ones(n, bool)
+    rounds = 0
+    t1 = time.perf_counter()
+    with progress_bar(progress, n, f"{method} (footprint)", "start") as bar:
+        for _ in range(MAX_EVENTS + 1):
+            lanes = np.flatnonzero(active)
+            if not lanes.size:
+                break
+            rounds += 1
+            keys = np.packbits(wet[lanes], axis=1, bitorder="little")
+            states, group = np.unique(keys, axis=0, return_inverse=True)
+            for g in range(len(states)):
+                members = lanes[group.ravel() == g]
+                state = wet[members[0]]
+                fld, _ = field_and_grid(planes.landscape(state), pin=pin, align_tol=tol)
+                fld = fld._replace(
+                    best=jnp.asarray(best, fld.dtype),
+                    relay=Relay(reached, within, jnp.asarray(wet_bits(state))),
+                )
+                stiff = bool(is_stiff(method, fld, grid, dynamics)) if dynamic else False
+                params, per_lane = None, False
+                if dynamic:
+                    # each lane has the time left to its own run (its stretches' sum)
+                    left = [remaining_params(dynamics, float(t)) for t in t_off[members]]
+                    params = type(dynamics)(
+                        *(
+                            np.asarray([getattr(p, f) for p in left], np.float64)
+                            for f in (
+                                "mass_kg",
+                                "inertia_kg_m2",
+                                "damping_N_s_m",
+                                "rot_damping_N_m_s",
+                                "t_max_s",
+                            )
+                        )
+                    )
+                    per_lane = True
+                order = _run_order(q[members], np.asarray(best), grid)
+                run = members[order]
+                got = run_lanes(
+                    fld,
+                    grid,
+                    params,
+                    q[run],
+                    method,
+                    max_steps,
+                    stiff,
+                    chunk,
+                    workers,
+                    None,
+                    per_lane,
+                )
+                q_end, st, status, out, e, ts = got
+                steps[run] += st
+                energy[run] = e  # a lane's energy where its latest stretch ended
+                moved = status == EVENT
+                new = _next_states(planes, wet[run], q_end, grid)
+                changed = moved & (new != wet[run]).any(axis=1)
+                t_end = t_off[run] + (ts if dynamic else 0.0)
+                # an event: the lane goes on from that pose, from rest, on its new state
+                ev = run[changed]
+                events[ev] += 1
+                wet[ev] = new[changed]
+                q[ev] = np.round(q_end[changed]) if method == "greedy" else q_end[changed]
+                t_off[ev] = t_end[changed]
+                # an event with no change (the host's node and the device's disagree on a
+                # half-integer index): the lane goes on from there on the same state
+                same = run[moved & ~changed]
+                q[same] = (
+                    np.round(q_end[moved & ~changed])
+                    if method == "greedy"
+                    else q_end[moved & ~changed]
+                )
+                t_off[same] = t_end[moved & ~changed]
+                done = ~moved
+                if dynamic:  # a run whose time is up at an event ends there
+                    up = moved & (t_end >= float(dynamics.t_max_s))
+                    done |= up
+                    out = np.where(up, 4, out)
+                end = run[done]
+                final_q[end], outcome[end] = q_end[done], out[done]
+                if dynamic:
+                    time_s[end] = np.minimum(t_end[done], float(dynamics.t_max_s))
+                active[end] = False
+                bar.update(int(done.sum()))
+        left = np.flatnonzero(active)  # still changing state after MAX_EVENTS: ran out
+        if left.size:
+            final_q[left], outcome[left] = q[left], 4
+            bar.update(int(left.size))
+    dt = time.perf_counter() - t1
+    return BatchResult(
+        method=method,
+        start=poses,
+        final=grid.to_pose(final_q),
+        outcome=outcome,
+        steps=np.minimum(steps, np.iinfo(np.int32).max).astype(np.int32),
+        energy_J=energy,
+        period_deg=float(reference.period_deg),
+        optimum=tuple(float(v) for v in opt.pose),
+        stats={
+            "landscape_s": t_land,
+            "run_s": dt,
+            "starts_per_s": n / dt,
+            "steps_per_s": float(steps.sum()) / dt,
+            "chunk": chunk,
+            "landscape_shape": tuple(int(v) for v in reference.energy.shape),
+            "stiff": False,
+            "footprint_events": int(events.sum()),
+            "footprint_rounds": rounds,
+            "footprint_planes_s": planes.seconds,
+        },
+        time_s=time_s if dynamic else None,
+    )
