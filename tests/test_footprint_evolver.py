@@ -288,9 +288,9 @@ def test_the_curved_wall_dries_the_far_pads_within_10_um_of_evolver(gap):
 
 
 def test_below_the_bridges_flattest_wall_no_receding_wall_exists():
-    # A receding angle a few degrees below the pads' 30 deg already asks for a wall whose arc
-    # turns horizontal below the chip (cos(theta_r) + kappa h > 1): no reach (the held runs'
-    # dome instead). Above it the reach grows fast as the angle falls.
+    # Below 27 deg (3 deg under the pads' 30) the receding wall's arc would turn horizontal
+    # below the chip (cos(theta_r) + kappa h > 1): no reach (the held runs' dome instead).
+    # Above it the reach grows fast as the angle falls.
     _, r30 = curved_reaches(V, L, L - 50, 30.0, 60.0)
     _, r29 = curved_reaches(V, L, L - 50, 30.0, 60.0, receding_deg=29.0)
     _, r10 = curved_reaches(V, L, L - 50, 30.0, 60.0, receding_deg=10.0)

@@ -122,7 +122,11 @@ def free_bridge(volume_um3: float, chip_area_um2: float, walls) -> FreeBridge:
     def excess(h: float) -> float:
         k = pressure(h)
         assert k is not None
-        return A * h + sum(length * arc_wall(h, k, t).area_um2 for length, t in walls) - V
+        held = 0.0
+        for length, t in walls:
+            w = arc_wall(h, k, t)
+            held += length * (w.area_um2 if w is not None else 0.0)  # None: only at round-off
+        return A * h + held - V
 
     h_hi = V / A  # the walls hold liquid: the height is below the volume over the area
     if pressure(h_hi) is None:
