@@ -254,28 +254,40 @@ def test_the_curved_wall_gives_evolvers_height_pressure_and_substrate_reach(gap)
     assert abs(b.h_um / math.tan(math.radians(60)) - reach_se) > 4.0
 
 
-@pytest.mark.parametrize("gap", [50, 100])
-def test_the_curved_wall_dries_the_far_pads_within_10_um_of_evolver(gap):
-    # Outward from alignment with the far pads wet (Surface Evolver's outward path, each
-    # pose at its finest level): they dry between the last wet and the first dry pose. The curved wall's
-    # reach at the pads' 30 deg, with one side of the chip on the pad, puts the drying bias
-    # (L - g) / 2 + d_r within 10 um of that bracket; the flat wall's h cot(30 deg) (h = V/A)
-    # does not on 730/50 (406 um against 420-430 um).
+def _drying_bracket(path: str) -> tuple[float, float]:
+    """The last pose with the far (left) pads wet and the first with them dry along an
+    outward path, each pose at its finest stored level."""
     finest: dict[float, dict[str, str]] = {}
     for r in LEVELS:
-        if r["path"] == f"x_730_{gap}" and float(r["y_um"]) == 0:
+        if r["path"] == path and float(r["y_um"]) == 0:
             x = float(r["x_um"])
             if x not in finest or int(r["level"]) > int(finest[x]["level"]):
                 finest[x] = r
     rows = list(finest.values())
     last_wet = max(float(r["x_um"]) for r in rows if r["left_pads_wetted"] == "True")
     first_dry = min(float(r["x_um"]) for r in rows if r["left_pads_wetted"] == "False")
-    assert first_dry - last_wet <= 10.0
-    _, d_r = curved_reaches(V, L, L - gap, 30.0, 60.0)
-    x_dry = (L - gap) / 2 + d_r
+    return last_wet, first_dry
+
+
+@pytest.mark.parametrize("side,gap,volume", [(730, 50, V), (730, 100, V), (200, 20, 5.0e5)])
+def test_the_curved_wall_dries_the_far_pads_within_10_um_of_evolver(side, gap, volume):
+    # Outward from alignment with the far pads wet (Surface Evolver's outward path): they dry
+    # between the last wet and the first dry pose. The curved wall's reach at the pads' 30 deg,
+    # with one side of the chip on the pad, puts the drying bias (L - g) / 2 + d_r within
+    # 10 um of that bracket: 431.8, 408.3 and 125.6 um against 420-430, 390-400 and 115-120 um
+    # (the flat wall's h cot(30 deg) with h = V / A: 406, 382 and 111.7 um).
+    last_wet, first_dry = _drying_bracket(f"x_{side}_{gap}")
+    assert 0 < first_dry - last_wet <= 10.0
+    _, d_r = curved_reaches(volume, side, side - gap, 30.0, 60.0)
+    x_dry = (side - gap) / 2 + d_r
     assert last_wet - 10 <= x_dry <= first_dry + 10, (x_dry, last_wet, first_dry)
-    # the snap of the inward path (validation/evolver_fourpad_inward.csv, level 1): the far
-    # pads are first wet between two poses 10 um apart; the curved d_s within 10 um of them
+
+
+@pytest.mark.parametrize("gap", [50, 100])
+def test_the_curved_substrate_reach_snaps_onto_the_far_pads_where_evolver_does(gap):
+    # Coming inward with the far pads dry (validation/evolver_fourpad_inward.csv, level 1):
+    # they are first wet between two poses 10 um apart; the curved d_s (24.6 um, every edge
+    # on the substrate) puts the snap, (L - g) / 2 + d_s, within 10 um of them.
     inward = [
         r
         for r in _rows("evolver_fourpad_inward.csv")
@@ -283,6 +295,7 @@ def test_the_curved_wall_dries_the_far_pads_within_10_um_of_evolver(gap):
     ]
     wet_in = max(float(r["x_um"]) for r in inward if r["left_pads_wetted"] == "True")
     dry_in = min(float(r["x_um"]) for r in inward if r["left_pads_wetted"] == "False")
+    assert 0 < dry_in - wet_in <= 10.0
     d_s, _ = curved_reaches(V, L, L - gap, 30.0, 60.0)
     assert wet_in - 10 <= (L - gap) / 2 + d_s <= dry_in + 10
 
