@@ -225,6 +225,12 @@ def test_an_arc_of_vanishing_curvature_is_the_flat_wall_and_an_arc_is_a_circle()
     area, _ = quad(lambda psi: x_of(psi) * math.sin(psi) / k, p, t)
     assert w.area_um2 == pytest.approx(area, rel=1e-10)
     assert arc_wall(h, 0.01, 30.0) is None  # cos 30 + kappa h > 1: no wall reaches the edge
+    # a bridged pad's walls pull gamma (cos(phi_p) - cos(phi_s)) per unit length of edge: the
+    # overlap model's cos(theta_p) - cos(theta_s) at any pressure (the arc makes no dip)
+    for k in (0.0, 0.002, 0.0035):
+        top = {t: math.radians(arc_wall(h, k, t).top_deg) for t in (30.0, 60.0)}
+        pull = math.cos(top[30.0]) - math.cos(top[60.0])
+        assert pull == pytest.approx(math.cos(math.radians(30)) - 0.5, rel=1e-12)
 
 
 def test_free_bridge_conserves_the_volume_and_balances_the_chip():

@@ -36,6 +36,8 @@ reach 24.6 um (Surface Evolver aligned: 35.21, 0.00429, 24.9); the 200 um chip w
 11.47, 0.01484, 8.35 (11.56, 0.0153, 8.5). The pad reach with one side of the chip on a
 30 deg pad: 91.8 um (730/50) and 93.3 um (730/100), where the flat wall gives 65 um: the far
 pads dry at 432 and 408 um, Surface Evolver's between 420 and 430 and between 390 and 400.
+A bridged pad's walls still pull gamma (cos(theta_p) - cos(theta_s)) per unit length at any
+pressure: the curvature moves where the pads dry, not the force while they are wet.
 """
 
 from __future__ import annotations
