@@ -44,6 +44,13 @@ from ._meniscus import (
     require_height as require_height,
     signed_distance_px as signed_distance_px,
 )
+from ._reach import (
+    ArcWall as ArcWall,
+    FreeBridge as FreeBridge,
+    arc_wall as arc_wall,
+    curved_reaches as curved_reaches,
+    free_bridge as free_bridge,
+)
 from ._wetting import (
     Materials as Materials,
     contact_angle_deg as contact_angle_deg,
