@@ -6,7 +6,10 @@ normal noise of 10 um in x and y and 2 degrees in twist (seed 0, the same draws 
 column). Columns: the overlap model with greedy steps, the finite meniscus (free contact
 lines) with gradient steps, and the finite meniscus with overdamped dynamics, without and
 with the pad's contact-angle hysteresis (receding 25, advancing 35 degrees around the 30
-degree pad). Each column's landscape is built once and every bias runs on it; the time
+degree pad); then the footprint as each start's state (``--dispense``, docs/physics.md
+§3.5): the liquid coming in under the chip (``chip``), the droplet dispensed on the pattern
+first (``pattern``), and ``pattern`` with the hysteresis. Each column's landscape (or the
+pads' planes) is built once and every bias runs on it; the time
 of a column is its landscape plus its batches (compilation included, once per column).
 
 Usage: ``python benchmarks/yield_table.py [--starts N] [--resolution UM] [--smoke OUT]``
@@ -36,7 +39,7 @@ from simulator.batch import (  # noqa: E402
     run_batch,
     summarize,
 )
-from simulator.landscape import build_landscape  # noqa: E402
+from simulator.landscape import build_footprint_planes, build_landscape  # noqa: E402
 from simulator.physics import Liquid, Materials  # noqa: E402
 from simulator.scene import Effects, Scene, TwistGrid  # noqa: E402
 
@@ -57,11 +60,32 @@ COLUMNS = [
     ("meniscus, gradient", dict(meniscus=True, hysteresis=False), "gradient"),
     ("meniscus, overdamped", dict(meniscus=True, hysteresis=False), "overdamped"),
     ("meniscus, overdamped, hysteresis 25/35", dict(meniscus=True, hysteresis=True), "overdamped"),
+    # the footprint as each start's state (docs/physics.md §3.5): where the liquid was
+    (
+        "dispense chip, overdamped",
+        dict(meniscus=True, hysteresis=False, dispense="chip"),
+        "overdamped",
+    ),
+    (
+        "dispense pattern, overdamped",
+        dict(meniscus=True, hysteresis=False, dispense="pattern"),
+        "overdamped",
+    ),
+    (
+        "dispense pattern, overdamped, hysteresis 25/35",
+        dict(meniscus=True, hysteresis=True, dispense="pattern"),
+        "overdamped",
+    ),
 ]
 
 
 def scene(
-    gap: int, meniscus: bool, hysteresis: bool, resolution: float, twist_step_deg: float = 2.0
+    gap: int,
+    meniscus: bool,
+    hysteresis: bool,
+    resolution: float,
+    twist_step_deg: float = 2.0,
+    dispense: str | None = None,
 ) -> Scene:
     mat = Materials(pad_receding_deg=25.0, pad_advancing_deg=35.0) if hysteresis else Materials()
     return Scene.from_inputs(
@@ -69,7 +93,7 @@ def scene(
         chip_size_um=730,
         resolution_um=resolution,
         effects=Effects(meniscus=meniscus, hysteresis=hysteresis),
-        liquid=Liquid(volume_nl=20.0),
+        liquid=Liquid(volume_nl=20.0, dispense=dispense),
         materials=mat,
         twist=TwistGrid(twist_step_deg, -45.0, 45.0),
     )
@@ -97,14 +121,21 @@ def _main(args: argparse.Namespace, smoke: bool) -> None:
         seconds: dict[str, float] = {}
         for name, eff, method in columns:
             t0 = time.perf_counter()
-            sc = scene(gap, eff["meniscus"], eff["hysteresis"], args.resolution, step)
-            ls = build_landscape(sc)
+            sc = scene(
+                gap, eff["meniscus"], eff["hysteresis"], args.resolution, step, eff.get("dispense")
+            )
+            # the stateless landscape, or the pads' planes of the footprint state (built once)
+            built = (
+                {"planes": build_footprint_planes(sc)}
+                if eff.get("dispense")
+                else {"landscape": build_landscape(sc)}
+            )
             ys = []
             for bx, by in biases:
                 starts = random_starts(
                     args.starts, (10.0, 10.0, 2.0), seed=0, around=(float(bx), float(by), 0.0)
                 )
-                res = run_batch(sc, starts, method, landscape=ls, progress=False)
+                res = run_batch(sc, starts, method, progress=False, **built)
                 ys.append(summarize(res)["yield"])
             seconds[name] = time.perf_counter() - t0
             yields[name] = ys
