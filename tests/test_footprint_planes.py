@@ -6,6 +6,7 @@ shared-rotation build against pad-by-pad builds of the same footprints."""
 from __future__ import annotations
 
 import dataclasses
+import math
 from pathlib import Path
 
 import numpy as np
@@ -15,7 +16,7 @@ from patterns.mask import Mask
 from simulator.landscape import build_footprint_planes, build_landscape, pad_labels
 from simulator.landscape._build import scene_extent
 from simulator.landscape._correlator import NOISE_FACTOR
-from simulator.landscape._footprint import _variant
+from simulator.landscape._footprint import _variant, footprint_pairs
 from simulator.physics import STEP_PX, TOUCH_PX2, FootprintRules, Liquid, Materials
 from simulator.physics._footprint import upstream_of
 from simulator.scene import Effects, Scene
@@ -244,3 +245,15 @@ def test_the_state_energy_is_mirror_symmetric_with_its_pairs():
             continue
         assert np.abs(e[j] - e[i][::-1]).max() <= 2 * NOISE_FACTOR * eps * scale
         assert np.abs(pairs_only[j] - pairs_only[i][::-1]).max() <= 2 * NOISE_FACTOR * eps * scale
+
+
+def test_the_pairs_are_priced_before_they_are_made(bench):
+    # footprint_pairs lays the pairs' boxes out from the chip's half-widths, no rotation: as
+    # many pairs as the build makes, and at least the poses it keeps (the build's boxes come
+    # from the chip's signed distance, inside the priced ones), by no more than their margins
+    s, planes = bench
+    n_pairs, priced, per_twist = footprint_pairs(s)
+    kept = sum(p.energy.size for p in planes.pairs)
+    assert n_pairs == len(planes.pairs)
+    assert per_twist == math.prod(planes.template.energy.shape[1:])
+    assert kept <= priced <= 1.25 * kept
