@@ -14,10 +14,11 @@ relay of each pad (:meth:`FootprintPlanes.next_state`): no transform per event.
 
 How it is made (docs/physics.md §3.5, cost): the chip's footprints are rotated once per
 twist and shared by every pad (the rotations are the same for every pad); each pad is
-correlated only over the poses where the chip's widest footprint can touch it (its
-bounding box grown by the chip's reach; elsewhere its counts are zero), and each pair over
-the poses where the side of the chip facing it can; the planes are reduced to what the
-state needs a chunk of twists at a time (no full-grid temporary).
+correlated with each footprint only over the poses where that footprint can touch it (its
+bounding box grown by the chip's reach and the footprint's margin; elsewhere the count or
+energy is zero), and each pair over the poses where the side of the chip facing it can;
+the planes are reduced to what the state needs a chunk of twists at a time (no full-grid
+temporary), and the parts whose transforms have the same sizes share their work arrays.
 """
 
 from __future__ import annotations
@@ -337,7 +338,9 @@ class _Part:
     """One pattern part (a pad, or a pad's part upstream of another) correlated on its box of
     the shared grid: its correlator, work space and where its box lies in the grid."""
 
-    def __init__(self, scene, data, profile, twists, extent, center, half, backend, chunk, twins):
+    def __init__(
+        self, scene, data, profile, twists, extent, center, half, backend, chunk, twins, spaces
+    ):
         from ._correlator import Correlator
 
         s = _variant(scene, Mask(data, scene.um_per_px), profile)
@@ -357,7 +360,15 @@ class _Part:
             and self.grid.y_first_px + win.ry == 0
             and bool(np.abs(data - data[::-1]).max() <= SAME_CHIP_TOL)
         )
-        self.work = self.cor.workspace(chunk, mirror=bool(twins) and not self.flip)
+        # The threads' work arrays, shared by the parts whose transforms have the same sizes
+        # (``spaces``; the calls run one after another): a part's own are never touched.
+        mirror = bool(twins) and not self.flip
+        self.work = self.cor.workspace(chunk, mirror=mirror)
+        key = (self.cor.backend, self.cor.ny, self.cor.nx, self.shape[0], mirror)
+        if key in spaces:
+            self.work = self.work._replace(slots=spaces[key])
+        else:
+            spaces[key] = self.work.slots
 
     def offset(self, full) -> tuple[int, int]:
         """(y, x) of this box's first node in the grid ``full``."""
@@ -437,27 +448,40 @@ def build_footprint_planes(
     # forward transform serves both; a resampled PNG chip's twins are not exact, so none.
     twins = mirror_twins(scene.twist_axis.mirror, twists_deg) if exact else {}
     chunk = max(1, min(8, grid.shape[0]))
-    # Each pad on its box: the poses where the chip's widest footprint can touch it.
-    chip_rx, chip_ry = _chip_reach_px(scene.chip, scene.effects.twist)
-    chip_rx, chip_ry = chip_rx + extent["margin"], chip_ry + extent["margin"]
+    # Each pad on its boxes: for each footprint the poses where it can touch the pad (the
+    # chip's reach and that footprint's margin; beyond, its count or energy is zero).
+    reach_x, reach_y = _chip_reach_px(scene.chip, scene.effects.twist)
+    margins = {
+        "wall": prof.margin_px,
+        "reached": counts["reached"].margin_px,
+        "within": counts["within"].margin_px,
+        "covered": counts["covered"].margin_px,
+        "band": counts["band_out"].margin_px,
+    }
     pads, areas, centres = [], [], []
+    spaces: dict = {}
     for mask in masks:
         x0, x1, y0, y1 = _pixel_box(mask)
-        center, half = _box_args((x0 - chip_rx, x1 + chip_rx), (y0 - chip_ry, y1 + chip_ry))
-        pads.append(
-            _Part(
-                scene,
-                np.where(mask, data, 0.0),
-                prof,
-                twists,
-                extent,
-                center,
-                half,
-                backend,
-                chunk,
-                twins,
-            )
-        )
+        parts: dict = {}
+        by_box: dict = {}
+        for nm, mg in margins.items():
+            rx, ry = reach_x + mg, reach_y + mg
+            key = _box_args((x0 - rx, x1 + rx), (y0 - ry, y1 + ry))
+            if key not in by_box:
+                by_box[key] = _Part(
+                    scene,
+                    np.where(mask, data, 0.0),
+                    prof,
+                    twists,
+                    extent,
+                    *key,
+                    backend,
+                    chunk,
+                    twins,
+                    spaces,
+                )
+            parts[nm] = by_box[key]
+        pads.append(parts)
         rr, cc = np.nonzero(mask)
         wk = data[rr, cc]
         areas.append(float(wk.sum()) * s * s)
@@ -493,7 +517,17 @@ def build_footprint_planes(
             continue
         center, half = _box_args(tuple(xr), tuple(yr))
         p = _Part(
-            scene, np.where(part, data, 0.0), prof, twists, extent, center, half, backend, chunk, {}
+            scene,
+            np.where(part, data, 0.0),
+            prof,
+            twists,
+            extent,
+            center,
+            half,
+            backend,
+            chunk,
+            {},
+            spaces,
         )
         # the stored box: the ranges asked for, within the part's correlation box
         oy, ox = p.offset(grid)
@@ -509,7 +543,7 @@ def build_footprint_planes(
     near = {a for a, *_ in pair_parts}
     n_t, ny_full, nx_full = grid.shape
     if not progress:
-        fft_px = sum(math.prod(p.fft) for p in pads) * 5 + sum(
+        fft_px = sum(math.prod(pp[nm].fft) for pp in pads for nm in margins) + sum(
             math.prod(p[3].fft) for p in pair_parts
         )
         wait_line(
@@ -524,7 +558,6 @@ def build_footprint_planes(
     scale = scene.delta_gamma_N_m * s**2 * UM2
     c_band = (rules.band_px - rules.f_inf) / STEP_PX
     w_in, w_out = 0.5 + c_band, 0.5 - c_band
-    offsets = [p.offset(grid) for p in pads]
     paired = set(twins) | set(twins.values())
     singles = [i for i in range(n_t) if i not in paired]
     groups = [(singles[k : k + chunk], []) for k in range(0, len(singles), chunk)]
@@ -541,27 +574,34 @@ def build_footprint_planes(
         band += raster["band_out"] * w_out
         # which pads the chip covers at these twists, on the whole grid (the pairs read them)
         covered = np.zeros((n, len(idx), ny_full, nx_full), bool)
-        for k, p in enumerate(pads):
-            oy, ox = offsets[k]
-            sl = (slice(oy, oy + p.shape[0]), slice(ox, ox + p.shape[1]))
+        for k, parts in enumerate(pads):
+
+            def put(nm: str, chips, sc: float, parts=parts, pos=pos, neg=neg, zero=zero):
+                """The footprint ``nm``'s planes of pad k at these twists, and their slices."""
+                p = parts[nm]
+                oy, ox = p.offset(grid)
+                sl = (slice(oy, oy + p.shape[0]), slice(ox, ox + p.shape[1]))
+                return p.correlate(chips, pos, neg, sc, zero), sl
+
             we = wet_energy[k]
-            we[(idx, *sl)] = p.correlate(raster["wall"], pos, neg, scale, zero)
-            reached[k][(idx, *sl)] = (
-                p.correlate(raster["reached"], pos, neg, 1.0, zero) >= TOUCH_PX2
-            )
-            within[k][(idx, *sl)] = p.correlate(raster["within"], pos, neg, 1.0, zero) >= TOUCH_PX2
+            e, sl = put("wall", raster["wall"], scale)
+            we[(idx, *sl)] = e
+            c, sl = put("reached", raster["reached"], 1.0)
+            reached[k][(idx, *sl)] = c >= TOUCH_PX2
+            c, sl = put("within", raster["within"], 1.0)
+            within[k][(idx, *sl)] = c >= TOUCH_PX2
             if not (deep[k] or k in near):
                 continue
-            cov = p.correlate(raster["covered"], pos, neg, 1.0, zero) >= TOUCH_PX2
-            covered[k][(slice(None), *sl)] = cov
+            c, sl = put("covered", raster["covered"], 1.0)
+            covered[k][(slice(None), *sl)] = c >= TOUCH_PX2
             # a pad narrower than the band: its far edge would take from the bridged term
             if not deep[k]:
                 continue
-            # bridged = jp [N(b) - (b - F_inf) l(b)]: the band's two counts weighted, one footprint
-            bridged = p.correlate(band, pos, neg, scale, zero)
-            # where the chip covers none of the pad (outside the box too: there the bridged
-            # term is that of the whole band, 0 beyond its reach)
-            np.copyto(bridged, we[(idx, *sl)], where=cov)
+            # bridged = jp [N(b) - (b - F_inf) l(b)]: the band's two counts weighted, one
+            # footprint; the wall term where the chip covers some of the pad (the wall's and
+            # the covered count's boxes lie inside the band's, zero beyond them)
+            bridged, sl = put("band", band, scale)
+            np.copyto(bridged, we[(idx, *sl)], where=covered[k][(slice(None), *sl)])
             we[(idx, *sl)] = bridged
         if not pair_parts:
             continue
@@ -595,7 +635,7 @@ def build_footprint_planes(
         delta_gamma=scene.delta_gamma_N_m,
         energy_scale_J=energy_scale_J(scene),
         meniscus_height_um=scene.meniscus_height_um,
-        stats={"backend": pads[0].cor.backend, "footprint_pairs": len(pair_parts)},
+        stats={"backend": pads[0]["wall"].cor.backend, "footprint_pairs": len(pair_parts)},
     )
     return FootprintPlanes(
         rules=rules,
