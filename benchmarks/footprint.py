@@ -7,17 +7,23 @@ with its own peak memory (``ru_maxrss``, printed by the process as it exits):
 
 * the source's bench case: 730/100 four-pad, 730 um chip, 20 nl, 2 um/px, 90 twists,
   inertial from (500, 5, 1), pads 10:35 deg hysteresis (the far pads stay wet);
+* ``--small``: the same at 5 um/px (90 twists: the same work, 6x fewer poses, a minute);
 * ``--smoke OUT``: the same at 10 um/px without twist, greedy, one repeat, its JSON to
   OUT only (a check that the script runs: tests/test_benchmarks_smoke.py).
 
-Usage: ``python benchmarks/footprint.py [--repeats N] [--json PATH] [--smoke OUT]``
-(default ``--json benchmarks/results/footprint.json``).
+Each row has the wall and CPU seconds (user + system) of the process, its peak memory, and
+the machine's load average before it started (what else was running: CPU seconds are the
+fairer figure on a loaded machine).
+
+Usage: ``python benchmarks/footprint.py [--small] [--repeats N] [--json PATH] [--smoke OUT]``
+(default ``--json benchmarks/results/footprint.json``, ``footprint_small.json`` with ``--small``).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import subprocess
 import sys
 import time
@@ -32,24 +38,27 @@ sys.path.insert(0, str(ROOT))
 PATTERN = ROOT / "patterns" / "library" / "four_pad_730_100.png"
 
 
-def case(smoke: bool) -> list[str]:
+def case(smoke: bool, small: bool = False) -> list[str]:
     args = ["simulate", "--pattern", str(PATTERN), "--chip-size", "730", "--meniscus"]
     args += ["--volume", "20", "--hysteresis", "10:35", "--quiet"]
     if smoke:
         return args + ["--resolution", "10", "--no-twist", "--method", "greedy", "--start=500,5,0"]
-    return args + ["--resolution", "2", "--method", "inertial", "--start=500,5,1"]
+    res = "5" if small else "2"
+    return args + ["--resolution", res, "--method", "inertial", "--start=500,5,1"]
 
 
 #: ``python -m simulator.cli`` that prints its own peak memory (kB) on stderr as it exits.
 PEAK = (
-    "import atexit, resource, runpy, sys; atexit.register(lambda: print('PEAK_KB', "
-    "resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, file=sys.stderr)); "
+    "import atexit, resource, runpy, sys; atexit.register(lambda: (lambda u: print('PEAK_KB', "
+    "u.ru_maxrss, u.ru_utime + u.ru_stime, file=sys.stderr))(resource.getrusage(resource.RUSAGE_SELF))); "
     "sys.argv = ['selfalign'] + sys.argv[1:]; runpy.run_module('simulator.cli', run_name='__main__')"
 )
 
 
 def run(args: list[str]) -> dict:
-    """One whole process: wall seconds, its peak memory (MB) and its first output line."""
+    """One whole process: wall and CPU seconds, its peak memory (MB), the load average
+    before it and its first output line."""
+    load = os.getloadavg()[0]
     t0 = time.perf_counter()
     p = subprocess.run(
         [sys.executable, "-c", PEAK, *args], capture_output=True, text=True, cwd=ROOT, check=False
@@ -57,10 +66,12 @@ def run(args: list[str]) -> dict:
     wall = time.perf_counter() - t0
     if p.returncode != 0:
         raise SystemExit(f"benchmarks/footprint.py: {' '.join(args)} failed: {p.stderr.strip()}")
-    kb = [int(line.split()[1]) for line in p.stderr.splitlines() if line.startswith("PEAK_KB")]
+    kb = [line.split()[1:] for line in p.stderr.splitlines() if line.startswith("PEAK_KB")]
     return {
         "wall_s": wall,
-        "peak_mb": kb[-1] / 1024 if kb else float("nan"),
+        "cpu_s": float(kb[-1][1]) if kb else float("nan"),
+        "peak_mb": int(kb[-1][0]) / 1024 if kb else float("nan"),
+        "load_before": load,
         "result": p.stdout.splitlines()[0] if p.stdout else "",
     }
 
@@ -68,28 +79,48 @@ def run(args: list[str]) -> dict:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=2)
-    ap.add_argument("--json", type=Path, default=ROOT / "benchmarks" / "results" / "footprint.json")
+    ap.add_argument("--small", action="store_true", help="the bench case at 5 um/px (a minute)")
+    ap.add_argument("--json", type=Path, default=None)
     add_smoke_arg(ap, "its JSON")
     a = ap.parse_args(argv)
     smoke = smoke_out(ap, a.smoke)
-    out = a.json if smoke is None else smoke
+    name = "footprint_small.json" if a.small else "footprint.json"
+    out = (a.json or ROOT / "benchmarks" / "results" / name) if smoke is None else smoke
     repeats = 1 if smoke is not None else a.repeats
-    base = case(smoke is not None)
+    base = case(smoke is not None, a.small)
     rows = []
     for i in range(repeats):
         for name, extra in (("stateless", []), ("dispense pattern", ["--dispense", "pattern"])):
             r = run(base + extra) | {"run": name, "repeat": i}
             rows.append(r)
-            print(f"{name:18s} {r['wall_s']:8.1f} s  {r['peak_mb']:8.0f} MB  {r['result']}")
+            print(
+                f"{name:18s} {r['wall_s']:8.1f} s wall {r['cpu_s']:8.1f} s CPU {r['peak_mb']:8.0f} MB"
+                f"  (load {r['load_before']:.1f})  {r['result']}"
+            )
     best = {
         n: min(r["wall_s"] for r in rows if r["run"] == n)
         for n in ("stateless", "dispense pattern")
     }
     ratio = best["dispense pattern"] / best["stateless"]
-    print(f"best of {repeats}: ratio {ratio:.2f}x (target 2x)")
+    cpu = {
+        n: min(r["cpu_s"] for r in rows if r["run"] == n) for n in ("stateless", "dispense pattern")
+    }
+    cpu_ratio = cpu["dispense pattern"] / cpu["stateless"]
+    print(f"best of {repeats}: ratio {ratio:.2f}x wall, {cpu_ratio:.2f}x CPU (target 2x)")
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(
-        json.dumps({"case": base, "rows": rows, "best_s": best, "ratio": ratio}, indent=1) + "\n"
+        json.dumps(
+            {
+                "case": base,
+                "rows": rows,
+                "best_s": best,
+                "ratio": ratio,
+                "best_cpu_s": cpu,
+                "cpu_ratio": cpu_ratio,
+            },
+            indent=1,
+        )
+        + "\n"
     )
     print(f"wrote {out}")
     return 0

@@ -3,28 +3,47 @@
 The energy is linear in the pattern, so the pattern's pads (its connected regions) are
 correlated one at a time, each on the same pose grid, with the chip footprints the
 footprint state needs (:mod:`simulator.physics`, ``FootprintRules``): the wall profile (a
-wet pad the chip covers), and five counts of the pad's area within a distance of the chip
-(covered, reached at ``d_s``, within the reach ``d_r``, and two either side of a band just
-beyond it, which give the bridged pad's term and the line length there). The energy of a state is then the sum of
-the wet pads' planes (:meth:`FootprintPlanes.landscape`), and the state at a pose the
+wet pad the chip covers), four counts of the pad's area within a distance of the chip
+(covered, reached at ``d_s``, within the reach ``d_r``) and the bridged pad's term (a
+weighted sum of the counts either side of a band just beyond ``d_r``, one footprint). Pads
+behind one another add a pairwise correction where both are wet (the shadow rule of
+:mod:`simulator.physics._footprint`: a near pad's strip under the bridge to a far pad has no
+line of its own). The energy of a state is then the sum of the wet pads' planes and of the
+wet pairs' corrections (:meth:`FootprintPlanes.landscape`), and the state at a pose the
 relay of each pad (:meth:`FootprintPlanes.next_state`): no transform per event.
 
-Cost: six correlations per pad and twist, against one for the stateless landscape
-(docs/physics.md §3.5).
+How it is made (docs/physics.md §3.5, cost): the chip's footprints are rotated once per
+twist and shared by every pad (the rotations are the same for every pad); each pad is
+correlated with each footprint only over the poses where that footprint can touch it (its
+bounding box grown by the chip's reach and the footprint's margin; elsewhere the count or
+energy is zero), and each pair over the poses where the side of the chip facing it can;
+the planes are reduced to what the state needs a chunk of twists at a time (no full-grid
+temporary), and the parts whose transforms have the same sizes share their work arrays.
 """
 
 from __future__ import annotations
 
+import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from patterns.errors import InputError
 from patterns.mask import Mask
+from simulator.core import UM2, wait_line
 from simulator.scene import Scene
 
-from ._build import build_landscape, scene_extent
+from ._build import (
+    FFT_PX_PER_S,
+    _check_energy_range,
+    _fft_of,
+    _layout,
+    _plan_of,
+    build_landscape,  # noqa: F401  (the name tests patch to see that no plane is built)
+    scene_extent,
+)
+from ._correlator import SAME_CHIP_TOL
 from ._landscape import Landscape
 
 
@@ -63,6 +82,111 @@ def footprint_poses(scene: Scene) -> int:
     return estimate_bytes(wide) // np.dtype(scene.dtype).itemsize
 
 
+def _pads_of(scene: Scene, rules) -> tuple[np.ndarray, int, list, list]:
+    """(labels, n, each pad's mask, whether each is deep enough for the bridged term: its
+    smaller side beyond the band and its steps)."""
+    from scipy import ndimage
+
+    from simulator.physics import STEP_PX
+
+    labels, n = pad_labels(scene.pattern)
+    masks, deep = [], []
+    for k, box in enumerate(ndimage.find_objects(labels), start=1):
+        masks.append(labels == k)
+        deep.append(
+            min(box[0].stop - box[0].start, box[1].stop - box[1].start)
+            >= rules.band_px + 2 * STEP_PX
+        )
+    return labels, n, masks, deep
+
+
+def _shadowed(masks: list, deep: list) -> list[tuple[int, int, int, np.ndarray]]:
+    """The shadow rule's pairs (near, far, axis, the near pad's part upstream of the far one
+    along the axis), for every far pad on its bridged term (a narrow one keeps its wall term:
+    no bridge over the near pad)."""
+    from simulator.physics._footprint import upstream_of
+
+    out = []
+    for b, mb in enumerate(masks):
+        if not deep[b]:
+            continue
+        for ax in range(4):
+            up = upstream_of(mb, ax)
+            for a, ma in enumerate(masks):
+                if a != b and (ma & up).any():
+                    out.append((a, b, ax, ma & up))
+    return sorted(out, key=lambda t: (t[1], t[2], t[0]))
+
+
+def footprint_pairs(scene: Scene) -> tuple[int, int, int]:
+    """(pairs, at most how many poses their planes hold together, poses of one twist of the
+    grid) of the shadow rule (:class:`PairPlane`): each pair's part against the box of the
+    chip's side facing its axis (the chip's half-widths, out to the band), rotated over the
+    grid's twists, within the grid, as the build lays them out (there from the chip's signed
+    distance, inside this box). No rotation, no build."""
+    from simulator.physics import STEP_PX, FootprintRules
+
+    from ._build import _box, _grid_of
+    from ._rotation import _chip_reach_px
+
+    prof = scene.wall_profile
+    if prof is None:
+        return 0, 0, 0
+    m = scene.materials
+    rules = FootprintRules.of(prof, m.pad_receding_deg if scene.effects.hysteresis else None)
+    wide = _variant(scene, scene.pattern, rules.count_profiles()["band_out"])
+    b = _box(wide, None)
+    n_t, ny, nx = b["shape"]
+    x_first, y_first = b["first_px"]
+    tw = np.radians(_grid_of(wide, b).twist_deg())
+    hx, hy = _chip_reach_px(scene.chip, False)
+    lo, hi = rules.d_s - 5.0, rules.band_px + STEP_PX
+    side_box = {  # chip frame, (x0, x1, y0, y1) px: +x, +y, -x, -y
+        0: (hx + lo - 1, hx + hi + 1, -hy - hi - 1, hy + hi + 1),
+        1: (-hx - hi - 1, hx + hi + 1, hy + lo - 1, hy + hi + 1),
+        2: (-hx - hi - 1, -hx - lo + 1, -hy - hi - 1, hy + hi + 1),
+        3: (-hx - hi - 1, hx + hi + 1, -hy - hi - 1, -hy - lo + 1),
+    }
+    _, _, masks, deep = _pads_of(scene, rules)
+    total = 0
+    pairs = _shadowed(masks, deep)
+    for *_, ax, part in pairs:
+        x0, x1, y0, y1 = _pixel_box(part)
+        xr, yr = [np.inf, -np.inf], [np.inf, -np.inf]
+        for side, (a0, a1, b0, b1) in side_box.items():
+            corners = np.array([(a0, b0), (a0, b1), (a1, b0), (a1, b1)])
+            for t in tw[(side + np.rint(tw / (np.pi / 2))).astype(int) % 4 == ax]:
+                qx = corners[:, 0] * math.cos(t) - corners[:, 1] * math.sin(t)
+                qy = corners[:, 0] * math.sin(t) + corners[:, 1] * math.cos(t)
+                xr = [min(xr[0], x0 - qx.max()), max(xr[1], x1 - qx.min())]
+                yr = [min(yr[0], y0 - qy.max()), max(yr[1], y1 - qy.min())]
+        wx = min(xr[1], x_first + nx - 1) - max(xr[0], x_first) + 2
+        wy = min(yr[1], y_first + ny - 1) - max(yr[0], y_first) + 2
+        total += n_t * max(0, int(wx)) * max(0, int(wy))
+    return len(pairs), total, ny * nx
+
+
+@dataclass(frozen=True, eq=False)
+class PairPlane:
+    """The shadow rule's correction for one pair of pads (:mod:`simulator.physics._footprint`):
+    ``near`` and ``far`` (0-based pad indices), the pattern's axis ``axis`` the shadow is cast
+    along, and ``energy`` (T, ny, nx) J on the box of the grid whose first node is
+    (``y0``, ``x0``): added to a state's landscape where both pads are wet (it is already 0
+    where the near pad is not covered or the far pad not on its bridged term)."""
+
+    near: int
+    far: int
+    axis: int
+    y0: int
+    x0: int
+    energy: np.ndarray
+
+    def box(self) -> tuple[slice, slice, slice]:
+        """The slices of the grid (twist, y, x) that :attr:`energy` covers."""
+        _, ny, nx = self.energy.shape
+        return slice(None), slice(self.y0, self.y0 + ny), slice(self.x0, self.x0 + nx)
+
+
 @dataclass(frozen=True, eq=False)
 class FootprintPlanes:
     """Per-pad planes of one scene on one pose grid (module docstring).
@@ -72,8 +196,10 @@ class FootprintPlanes:
     chip covers some of it, the bridged term elsewhere; a pad whose smaller side is below the
     bridged term's band, ``FootprintRules.band_px`` and two steps, keeps the wall term
     everywhere: its far edge would lie inside the band). reached, within_reach: (pads, T, Ny,
-    Nx) booleans, the relay's inputs. template: a landscape of the grid (its metadata).
-    pad_area_um2, pad_centre_um: each pad's area and centroid (x, y um, y up).
+    Nx) booleans, the relay's inputs. pairs: the shadow rule's corrections
+    (:class:`PairPlane`), each added where both its pads are wet. template: a landscape of the
+    grid (its metadata). pad_area_um2, pad_centre_um: each pad's area and centroid (x, y um,
+    y up).
     """
 
     rules: object
@@ -85,20 +211,29 @@ class FootprintPlanes:
     pad_centre_um: np.ndarray
     labels: np.ndarray
     seconds: float
+    pairs: tuple = field(default=())
 
     @property
     def n_pads(self) -> int:
         return int(self.wet_energy.shape[0])
 
-    def landscape(self, wet) -> Landscape:
-        """The landscape of the footprint state ``wet`` ((pads,) booleans)."""
+    def energy(self, wet) -> np.ndarray:
+        """(T, Ny, Nx) J: the energy of the footprint state ``wet`` ((pads,) booleans), the wet
+        pads' planes and the corrections of the pairs of them (:attr:`pairs`)."""
         w = np.asarray(wet, bool)
-        t = self.template
-        e = np.zeros(t.energy.shape, t.energy.dtype)
+        e = np.zeros(self.template.energy.shape, self.template.energy.dtype)
         for k in np.flatnonzero(w):
             e += self.wet_energy[k]
+        for p in self.pairs:
+            if w[p.near] and w[p.far]:
+                e[p.box()] += p.energy
+        return e
+
+    def landscape(self, wet) -> Landscape:
+        """The landscape of the footprint state ``wet`` ((pads,) booleans)."""
+        t = self.template
         return Landscape(
-            energy=e,
+            energy=self.energy(wet),
             grid=t.grid,
             delta_gamma=t.delta_gamma,
             energy_scale_J=t.energy_scale_J,
@@ -145,6 +280,122 @@ class FootprintPlanes:
         return relay(wet, self.reached[(slice(None), *n)], self.within_reach[(slice(None), *n)])
 
 
+class _Sides:
+    """Which side of the chip each pixel of a rotator's canvas lies on: the direction of the
+    signed distance's gradient (outward normal) rounded to one of the chip's four axes
+    (``simulator.physics._footprint.AXES``, in the chip's frame), looked up at every twist
+    as the rotator looks up the distance (nearest pixel of the unrotated footprint)."""
+
+    def __init__(self, rot):
+        sdf = rot._sdf
+        gr, gc = np.gradient(sdf)
+        phi = np.arctan2(-gr, gc)  # rows run down: y = -row
+        self.bins = (np.rint(phi / (np.pi / 2)).astype(np.int64) % 4).astype(np.int8)
+        ho, wo = rot.shape
+        v, u = np.mgrid[0:ho, 0:wo].astype(float)
+        self.x, self.y = u - (wo / 2 - 0.5), -(v - (ho / 2 - 0.5))
+        self.half = rot._half
+
+    def __call__(self, twist_deg: float) -> np.ndarray:
+        """(H, W) int8 sides on the canvas at ``twist_deg``, y up (as the rotator's rasters)."""
+        a = math.radians(twist_deg)
+        ca, sa = math.cos(a), math.sin(a)
+        xi = self.x * ca + self.y * sa
+        yi = -self.x * sa + self.y * ca
+        h, w = self.bins.shape
+        r = np.clip(np.rint(-yi + (h / 2 - 0.5)), 0, h - 1).astype(np.intp)
+        c = np.clip(np.rint(xi + (w / 2 - 0.5)), 0, w - 1).astype(np.intp)
+        return self.bins[r, c][::-1]
+
+    def reach(self, side: int, from_px: float, upto_px: float, sdf: np.ndarray) -> np.ndarray:
+        """(x, y) px (chip frame, about its centre) of the corners of the box holding the
+        canvas pixels on ``side`` between ``from_px`` and ``upto_px`` from the outline."""
+        h, w = sdf.shape
+        rr, cc = np.nonzero((self.bins == side) & (sdf > from_px) & (sdf <= upto_px))
+        if rr.size == 0:
+            return np.zeros((0, 2))
+        xs = cc + 0.5 - w / 2
+        ys = h / 2 - rr - 0.5
+        x0, x1, y0, y1 = xs.min() - 1, xs.max() + 1, ys.min() - 1, ys.max() + 1
+        return np.array([(x0, y0), (x0, y1), (x1, y0), (x1, y1)])
+
+
+def _pixel_box(mask: np.ndarray) -> tuple[float, float, float, float]:
+    """(x0, x1, y0, y1) px from the pattern's centre (y up) of the pixels of ``mask``."""
+    h, w = mask.shape
+    rr, cc = np.nonzero(mask)
+    return cc.min() - w / 2, cc.max() + 1 - w / 2, h / 2 - rr.max() - 1, h / 2 - rr.min()
+
+
+def _box_args(xr: tuple[float, float], yr: tuple[float, float]) -> tuple[tuple[int, int], int]:
+    """(centre px, half-width px) of a square box of poses holding the ranges ``xr``, ``yr``."""
+    cx, cy = 0.5 * (xr[0] + xr[1]), 0.5 * (yr[0] + yr[1])
+    half = max(xr[1] - xr[0], yr[1] - yr[0]) / 2
+    return (int(round(cx)), int(round(cy))), int(math.ceil(half)) + 2
+
+
+class _Part:
+    """One pattern part (a pad, or a pad's part upstream of another) correlated on its box of
+    the shared grid: its correlator, work space and where its box lies in the grid."""
+
+    def __init__(
+        self, scene, data, profile, twists, extent, center, half, backend, chunk, twins, spaces
+    ):
+        from ._correlator import Correlator
+
+        s = _variant(scene, Mask(data, scene.um_per_px), profile)
+        lay = _layout(s, twists, center, half, check_budget=True, extent=extent)
+        self.lay = lay
+        self.grid = lay["grid"]
+        win = lay["window"]
+        assert lay["pad"] == 0, "the chip carries the footprint"
+        self.cor = Correlator(lay["pattern_up"], lay["canvas"], win, scene.dtype, backend)
+        self.shape = (2 * win.ry + 1, 2 * win.rx + 1)
+        self.fft = _fft_of(lay)
+        # A part mirror-symmetric about y = 0 on a box centred there (a pad on the axis of a
+        # two-pad pattern): a twin's plane is its partner's upside down and a plane at twist 0
+        # is made symmetric exactly, as build_landscape does (a start on the mirror line stays on it).
+        self.flip = (
+            scene.chip.geometry is not None
+            and self.grid.y_first_px + win.ry == 0
+            and bool(np.abs(data - data[::-1]).max() <= SAME_CHIP_TOL)
+        )
+        # The threads' work arrays, shared by the parts whose transforms have the same sizes
+        # (``spaces``; the calls run one after another): a part's own are never touched.
+        mirror = bool(twins) and not self.flip
+        self.work = self.cor.workspace(chunk, mirror=mirror)
+        key = (self.cor.backend, self.cor.ny, self.cor.nx, self.shape[0], mirror)
+        if key in spaces:
+            self.work = self.work._replace(slots=spaces[key])
+        else:
+            spaces[key] = self.work.slots
+
+    def offset(self, full) -> tuple[int, int]:
+        """(y, x) of this box's first node in the grid ``full``."""
+        return (
+            self.grid.y_first_px - full.y_first_px,
+            self.grid.x_first_px - full.x_first_px,
+        )
+
+    def correlate(self, stack, pos, neg, scale: float, at_zero=()) -> np.ndarray:
+        """(len(pos) + len(neg), ny, nx): the planes of the chips ``stack`` at twists ``pos``,
+        then, with ``neg``, their mirror twins (the chips upside down), from the same spectra
+        (or, for a symmetric part, :attr:`flip`, the planes upside down); ``at_zero``: the
+        positions in ``pos`` of twist 0 (their planes made symmetric when the part is)."""
+        n = len(pos)
+        out = np.empty((n + len(neg), *self.shape), self.cor.dtype)
+        mirror = out[n:] if neg and not self.flip else None
+        self.cor(stack, out=out[:n], scale=scale, mirror_out=mirror, work=self.work)
+        if self.flip:
+            if neg:
+                out[n:] = out[:n, ::-1]
+            for i in at_zero:
+                plane = out[i]
+                plane += plane[::-1].copy()
+                plane *= 0.5
+        return out
+
+
 def build_footprint_planes(
     scene: Scene, backend: str = "auto", progress: bool = False, twists=None
 ) -> FootprintPlanes:
@@ -157,6 +408,9 @@ def build_footprint_planes(
     """
     from simulator.physics import STEP_PX, TOUCH_PX2, FootprintRules
 
+    from ._build import _check_build_arguments, energy_scale_J
+    from ._rotation import _chip_reach_px, mirror_twins
+
     t0 = time.perf_counter()
     prof = scene.wall_profile
     if prof is None:
@@ -164,26 +418,71 @@ def build_footprint_planes(
             "--dispense needs the finite meniscus with free contact lines (--meniscus, not --pinned) "
             f"of at least a pixel of height; give --meniscus, or a finer --resolution than {scene.um_per_px:g} um"
         )
+    _check_build_arguments(twists, (0, 0), None)
+    _check_energy_range(scene)
     m = scene.materials
     rules = FootprintRules.of(prof, m.pad_receding_deg if scene.effects.hysteresis else None)
-    labels, n = pad_labels(scene.pattern)
+    labels, n, masks, deep = _pads_of(scene, rules)
     counts = rules.count_profiles()
-    extent = scene_extent(_variant(scene, scene.pattern, counts["band_out"]))
+    wide = _variant(scene, scene.pattern, counts["band_out"])
+    extent = scene_extent(wide)
     data = scene.pattern.data
     s = scene.um_per_px
     h, w = data.shape
-    pads, areas, centres, deep = [], [], [], []
-    from scipy import ndimage
-
-    for k, box in enumerate(ndimage.find_objects(labels), start=1):
-        # deep enough for the bridged term: the pad's smaller side beyond the band and its steps
-        deep.append(
-            min(box[0].stop - box[0].start, box[1].stop - box[1].start)
-            >= rules.band_px + 2 * STEP_PX
+    # The whole grid (every pad's planes lie on it) and the chip's footprints, each rotated
+    # once per twist for every pad: one rotator per footprint, on the widest one's canvas.
+    full = _layout(wide, twists, (0, 0), None, check_budget=True, extent=extent)
+    grid = full["grid"]
+    names = ("wall", "reached", "within", "covered", "band_in", "band_out")
+    profiles = {"wall": prof} | {k: counts[k] for k in names[1:]}
+    rotators = {}
+    for name in names:
+        lay = _layout(
+            _variant(scene, scene.pattern, profiles[name]), twists, (0, 0), None, False, extent
         )
-        mk = np.where(labels == k, data, 0.0)
-        pads.append(Mask(mk, s))
-        rr, cc = np.nonzero(labels == k)
+        assert lay["canvas"] == full["canvas"], "one canvas for every footprint"
+        rotators[name] = _plan_of(_variant(scene, scene.pattern, profiles[name]), lay).rotator
+    twists_deg = grid.twist_deg()
+    exact = scene.chip.geometry is not None
+    # Mirror twins (a mirror-symmetric chip at -alpha is the one at +alpha upside down): one
+    # forward transform serves both; a resampled PNG chip's twins are not exact, so none.
+    twins = mirror_twins(scene.twist_axis.mirror, twists_deg) if exact else {}
+    chunk = max(1, min(8, grid.shape[0]))
+    # Each pad on its boxes: for each footprint the poses where it can touch the pad (the
+    # chip's reach and that footprint's margin; beyond, its count or energy is zero).
+    reach_x, reach_y = _chip_reach_px(scene.chip, scene.effects.twist)
+    margins = {
+        "wall": prof.margin_px,
+        "reached": counts["reached"].margin_px,
+        "within": counts["within"].margin_px,
+        "covered": counts["covered"].margin_px,
+        "band": counts["band_out"].margin_px,
+    }
+    pads, areas, centres = [], [], []
+    spaces: dict = {}
+    for mask in masks:
+        x0, x1, y0, y1 = _pixel_box(mask)
+        parts: dict = {}
+        by_box: dict = {}
+        for nm, mg in margins.items():
+            rx, ry = reach_x + mg, reach_y + mg
+            key = _box_args((x0 - rx, x1 + rx), (y0 - ry, y1 + ry))
+            if key not in by_box:
+                by_box[key] = _Part(
+                    scene,
+                    np.where(mask, data, 0.0),
+                    prof,
+                    twists,
+                    extent,
+                    *key,
+                    backend,
+                    chunk,
+                    twins,
+                    spaces,
+                )
+            parts[nm] = by_box[key]
+        pads.append(parts)
+        rr, cc = np.nonzero(mask)
         wk = data[rr, cc]
         areas.append(float(wk.sum()) * s * s)
         centres.append(
@@ -192,52 +491,152 @@ def build_footprint_planes(
                 float(((h / 2 - rr - 0.5) * wk).sum() / wk.sum()) * s,
             )
         )
-    # Pad by pad, each plane reduced to what the state needs as soon as it is made (the wet
-    # energy in place, the counts to flags): the peak holds the pads' results, two planes
-    # and a build.
-    template = None
-    wet_energy = reached = within = None
-
-    def plane(k: int, name: str, profile) -> Landscape:
-        return build_landscape(
-            _variant(scene, pads[k], profile),
-            twists=twists,
-            backend=backend,
-            extent=extent,
-            label=f"footprint plane {name}, pad {k + 1} of {n}",
-        )
-
-    for k in range(n):
-        ls = plane(k, "wall", prof)
-        if template is None:
-            template = ls
-            shape = (n, *ls.energy.shape)
-            wet_energy = np.empty(shape, ls.energy.dtype)
-            reached, within = np.empty(shape, bool), np.empty(shape, bool)
-        assert wet_energy is not None and reached is not None and within is not None
-        jp = ls.joules_per_px2
-        wet_energy[k] = ls.energy
-        del ls
-        reached[k] = plane(k, "reached", counts["reached"]).energy / jp >= TOUCH_PX2
-        within[k] = plane(k, "within", counts["within"]).energy / jp >= TOUCH_PX2
-        if not deep[
-            k
-        ]:  # a pad narrower than the band: its far edge would take from the bridged term
+    # The shadow rule's pairs: the part of pad A upstream of pad B along an axis, on the
+    # poses where the side of the chip facing that axis can reach it (its box, grown by the
+    # reach of that side's strip out to the band).
+    sides = _Sides(rotators["wall"])
+    upto = rules.band_px + STEP_PX
+    tw_rad = np.radians(twists_deg)
+    pair_parts = []
+    for a, b, ax, part in _shadowed(masks, deep):
+        x0, x1, y0, y1 = _pixel_box(part)
+        xr, yr = [np.inf, -np.inf], [np.inf, -np.inf]
+        for side in range(4):
+            corners = sides.reach(side, rules.d_s - 5.0, upto, rotators["wall"]._sdf)
+            if not len(corners):
+                continue
+            # twists where this side faces the axis (its normal rounded to it)
+            on = np.flatnonzero((side + np.rint(tw_rad / (np.pi / 2))).astype(int) % 4 == ax)
+            for t in tw_rad[on]:
+                ca, sa = math.cos(t), math.sin(t)
+                qx = corners[:, 0] * ca - corners[:, 1] * sa
+                qy = corners[:, 0] * sa + corners[:, 1] * ca
+                xr = [min(xr[0], x0 - qx.max()), max(xr[1], x1 - qx.min())]
+                yr = [min(yr[0], y0 - qy.max()), max(yr[1], y1 - qy.min())]
+        if not np.isfinite(xr[0]):
             continue
-        bare = plane(k, "covered", counts["covered"]).energy / jp < TOUCH_PX2
-        # bridged = jp [N(b) - (b - F_inf) l(b)], N(b) the mean of the band's two counts and
-        # l(b) their difference over the step: a weighted sum of the two, made in place
-        c = (rules.band_px - rules.f_inf) / STEP_PX
-        bridged = plane(k, "band_in", counts["band_in"]).energy / jp
-        bridged *= 0.5 + c
-        outer = plane(k, "band_out", counts["band_out"]).energy / jp
-        outer *= 0.5 - c
-        bridged += outer
-        del outer
-        bridged *= jp
-        np.copyto(wet_energy[k], bridged, where=bare)
-        del bridged, bare
-    assert template is not None and wet_energy is not None  # a pattern has a pad
+        center, half = _box_args(tuple(xr), tuple(yr))
+        p = _Part(
+            scene,
+            np.where(part, data, 0.0),
+            prof,
+            twists,
+            extent,
+            center,
+            half,
+            backend,
+            chunk,
+            {},
+            spaces,
+        )
+        # the stored box: the ranges asked for, within the part's correlation box
+        oy, ox = p.offset(grid)
+        gx = grid.x_first_px + ox
+        gy = grid.y_first_px + oy
+        cx0 = max(0, int(math.floor(xr[0])) - gx)
+        cx1 = min(p.shape[1], int(math.ceil(xr[1])) - gx + 1)
+        cy0 = max(0, int(math.floor(yr[0])) - gy)
+        cy1 = min(p.shape[0], int(math.ceil(yr[1])) - gy + 1)
+        if cx1 <= cx0 or cy1 <= cy0:
+            continue
+        pair_parts.append((a, b, ax, p, (cy0, cy1, cx0, cx1)))
+    near = {a for a, *_ in pair_parts}
+    n_t, ny_full, nx_full = grid.shape
+    if not progress:
+        fft_px = sum(math.prod(pp[nm].fft) for pp in pads for nm in margins) + sum(
+            math.prod(p[3].fft) for p in pair_parts
+        )
+        wait_line(
+            f"footprint planes: {n} pads, {len(pair_parts)} pairs, {n_t} twist{'s' if n_t != 1 else ''} x "
+            f"{ny_full:,} x {nx_full:,} poses",
+            n_t * fft_px / FFT_PX_PER_S,
+        )
+    shape = (n, *grid.shape)
+    wet_energy = np.zeros(shape, scene.dtype)
+    reached, within = np.zeros(shape, bool), np.zeros(shape, bool)
+    pair_energy = [np.zeros((n_t, c[1] - c[0], c[3] - c[2]), scene.dtype) for *_, c in pair_parts]
+    scale = scene.delta_gamma_N_m * s**2 * UM2
+    c_band = (rules.band_px - rules.f_inf) / STEP_PX
+    w_in, w_out = 0.5 + c_band, 0.5 - c_band
+    paired = set(twins) | set(twins.values())
+    singles = [i for i in range(n_t) if i not in paired]
+    groups = [(singles[k : k + chunk], []) for k in range(0, len(singles), chunk)]
+    pairs = sorted(twins.items())
+    groups += [
+        ([a for a, _ in pairs[k : k + chunk]], [b for _, b in pairs[k : k + chunk]])
+        for k in range(0, len(pairs), chunk)
+    ]
+    for pos, neg in groups:
+        idx = pos + neg
+        raster = {nm: np.stack([rotators[nm](twists_deg[i]) for i in pos]) for nm in names}
+        zero = [i for i, t in enumerate(pos) if round(float(twists_deg[t]), 9) == 0]
+        band = raster["band_in"] * w_in
+        band += raster["band_out"] * w_out
+        # which pads the chip covers at these twists, on the whole grid (the pairs read them)
+        covered = np.zeros((n, len(idx), ny_full, nx_full), bool)
+        for k, parts in enumerate(pads):
+
+            def put(nm: str, chips, sc: float, parts=parts, pos=pos, neg=neg, zero=zero):
+                """The footprint ``nm``'s planes of pad k at these twists, and their slices."""
+                p = parts[nm]
+                oy, ox = p.offset(grid)
+                sl = (slice(oy, oy + p.shape[0]), slice(ox, ox + p.shape[1]))
+                return p.correlate(chips, pos, neg, sc, zero), sl
+
+            we = wet_energy[k]
+            e, sl = put("wall", raster["wall"], scale)
+            we[(idx, *sl)] = e
+            c, sl = put("reached", raster["reached"], 1.0)
+            reached[k][(idx, *sl)] = c >= TOUCH_PX2
+            c, sl = put("within", raster["within"], 1.0)
+            within[k][(idx, *sl)] = c >= TOUCH_PX2
+            if not (deep[k] or k in near):
+                continue
+            c, sl = put("covered", raster["covered"], 1.0)
+            covered[k][(slice(None), *sl)] = c >= TOUCH_PX2
+            # a pad narrower than the band: its far edge would take from the bridged term
+            if not deep[k]:
+                continue
+            # bridged = jp [N(b) - (b - F_inf) l(b)]: the band's two counts weighted, one
+            # footprint; the wall term where the chip covers some of the pad (the wall's and
+            # the covered count's boxes lie inside the band's, zero beyond them)
+            bridged, sl = put("band", band, scale)
+            np.copyto(bridged, we[(idx, *sl)], where=covered[k][(slice(None), *sl)])
+            we[(idx, *sl)] = bridged
+        if not pair_parts:
+            continue
+        # The shadow rule: N_b - f on the side of the chip facing the pair's axis.
+        strip = 0.5 * (raster["band_in"] + raster["band_out"])
+        strip -= raster["wall"]
+        side_of = np.stack([sides(twists_deg[i]) for i in pos])
+        nearest = np.rint(np.radians(twists_deg[pos]) / (np.pi / 2)).astype(int)
+        full_tw = idx
+        for j, (a, b, ax, p, (cy0, cy1, cx0, cx1)) in enumerate(pair_parts):
+            face = (ax - nearest) % 4  # the chip's side whose normal is nearest the axis
+            chips = np.where(side_of == face[:, None, None], strip, 0.0)
+            planes = p.correlate(chips, pos, [], scale)
+            if neg:  # the twins: the chip upside down, its sides upside down too (+y and -y swap)
+                fneg = (ax + nearest) % 4  # the side facing the axis at -alpha, before the flip
+                mirror_side = np.where(fneg % 2 == 1, (fneg + 2) % 4, fneg)
+                chips_n = np.where(side_of == mirror_side[:, None, None], strip, 0.0)[:, ::-1]
+                planes = np.concatenate(
+                    [planes, p.correlate(np.ascontiguousarray(chips_n), pos, [], scale)]
+                )
+            oy, ox = p.offset(grid)
+            gsl = (slice(oy + cy0, oy + cy1), slice(ox + cx0, ox + cx1))
+            c = planes[:, cy0:cy1, cx0:cx1]
+            # only where the near pad is covered and the far one on its bridged term
+            keep = covered[a][(slice(None), *gsl)] & ~covered[b][(slice(None), *gsl)]
+            c[~keep] = 0
+            pair_energy[j][full_tw] = c
+    template = Landscape(
+        energy=wet_energy[0],
+        grid=grid,
+        delta_gamma=scene.delta_gamma_N_m,
+        energy_scale_J=energy_scale_J(scene),
+        meniscus_height_um=scene.meniscus_height_um,
+        stats={"backend": pads[0]["wall"].cor.backend, "footprint_pairs": len(pair_parts)},
+    )
     return FootprintPlanes(
         rules=rules,
         wet_energy=wet_energy,
@@ -248,4 +647,8 @@ def build_footprint_planes(
         pad_centre_um=np.asarray(centres),
         labels=labels,
         seconds=time.perf_counter() - t0,
+        pairs=tuple(
+            PairPlane(a, b, ax, p.offset(grid)[0] + c[0], p.offset(grid)[1] + c[2], e)
+            for (a, b, ax, p, c), e in zip(pair_parts, pair_energy, strict=True)
+        ),
     )

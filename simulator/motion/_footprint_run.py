@@ -42,15 +42,25 @@ def _cut(tr, j: int):
 
 def footprint_budget_bytes(scene, n_pads: int) -> int:
     """What the footprint state's planes hold at their peak: per pose, each pad's wet energy
-    and two relay flags, two planes being combined and the plane being built with its
-    transforms' work space, a state's summed landscape during the run, and the process with
-    its engines (measured: the source's bench case, 730/100 at 2 um/px, 90 twists, 1,225 x
-    1,225 poses, 4 pads, peaks at 7,063 MB; priced 7,313 MB)."""
+    and two relay flags, and the shadow rule's pair planes on their boxes
+    (:func:`simulator.landscape._footprint.footprint_pairs`, laid out as the build does); per
+    pose of one twist, a chunk of twists' work (the pads' covered flags, the results being
+    reduced) and each pad's and pair's correlator (its kernel and its threads' spectra, about
+    eight values per pose); during the run, the reference landscape (every pad wet), the
+    current state's and the next one's being summed at an event; and the process with its
+    engines (measured: the bench case at 5 um/px, 90 twists, 505 x 505 poses, 4 pads and 8
+    pairs, peaks at 1,882 to 1,890 MB, priced 1,953 MB; at 2 um/px, 1,225 x 1,225 poses, priced
+    8,962 MB, of which the pairs' planes 1,795 MB)."""
     from simulator.landscape import footprint_poses
+    from simulator.landscape._footprint import footprint_pairs
 
     poses = footprint_poses(scene)
+    n_pairs, pair_poses, per_twist = footprint_pairs(scene)
     item = np.dtype(scene.dtype).itemsize
-    return int(poses * (n_pads * (item + 2) + 6 * item) * 1.1) + PROCESS_BYTES
+    n_parts = n_pads + n_pairs
+    work = per_twist * (16 * (n_pads + 3 * item) + 8 * item * n_parts)
+    held = poses * (n_pads * (item + 2) + 3 * item) + pair_poses * item
+    return int((held + work) * 1.15) + PROCESS_BYTES
 
 
 def require_footprint_fits(scene) -> None:

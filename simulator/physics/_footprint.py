@@ -35,6 +35,26 @@ and on the pad while it is wet. Minimising the wall over the line's position:
 
 So each pad is a relay on its distance from the chip, with the hysteresis band
 ``d_s < D <= d_r``; where the chip is in that band, the state is what the history made it.
+
+Pads behind one another (the shadow rule). Along a ray from the chip's edge the liquid
+wall runs to the furthest wet pad it is joined to; a nearer pad under that wall is covered
+by the liquid and has no line of its own on that ray. With a wet near pad ``A`` the chip
+still covers and a wet far pad ``B`` it has left (``B`` on its bridged term), the ray's
+energy is ``A``'s pixels counted whole up to the bridge (the strip of ``A`` outside the
+chip is wetted pad, weight 1 instead of ``f(s)``) plus ``B``'s bridged term: the force
+along the ray is the single edge's ``|Delta_gamma|`` (without the rule ``A``'s own trailing
+line pulls too, up to twice that). The correction is a pairwise term, summed by state where
+both pads are wet, ``Delta_gamma sum_{p in A, upstream of B} (N_b(s) - f(s))`` over the pixels
+of ``A`` that a ray along the chip edge's outward normal carries on to ``B``
+(:func:`upstream_of`), with ``N_b`` the count to the bridged term's band (``1 - f`` up to
+it): a correlation of that part of ``A`` with the chip's footprint ``N_b - f`` kept on the
+side of the chip whose normal the ray follows. Assumptions: rays along the chip edge's
+normal (the signed distance's gradient, one of the chip's four sides: exact on a rectangular
+chip's sides, its corners split on the diagonal), cast along the pattern's axis nearest that
+normal (exact at zero twist; at a twist ``alpha`` the shadow's side edges are off by
+``tan(alpha)`` times the gap); a near pad the chip has left keeps its own bridged term (it
+would need the near pad narrower along the ray than ``d_r`` less the gap); pads in a row two
+deep at most (three pads on one ray count the nearest one's strip twice).
 """
 
 from __future__ import annotations
@@ -151,6 +171,30 @@ def relay(wet: np.ndarray, reached: np.ndarray, within_reach: np.ndarray) -> np.
     pad is dry. ``wet``, ``reached``, ``within_reach``: (pads,) booleans."""
     wet = np.asarray(wet, bool)
     return np.asarray(reached, bool) | (wet & np.asarray(within_reach, bool))
+
+
+#: The pattern's axes a shadow is cast along (:func:`upstream_of`): +x, +y, -x, -y (y up),
+#: index k at angle k * 90 deg.
+AXES = ((1, 0), (0, 1), (-1, 0), (0, -1))
+
+
+def upstream_of(pad: np.ndarray, k: int) -> np.ndarray:
+    """The pixels (of an image y down, like ``pad``) from which a ray along the pattern's axis
+    ``k`` (:data:`AXES`) reaches ``pad`` beyond them: the shadow rule's upstream side of a far
+    pad (module docstring), booleans."""
+    b = np.asarray(pad) > 0
+    out = np.zeros(b.shape, bool)
+    if k == 0:  # +x: some pad pixel further right on the row
+        out[:, :-1] = np.logical_or.accumulate(b[:, :0:-1], axis=1)[:, ::-1]
+    elif k == 2:  # -x: further left
+        out[:, 1:] = np.logical_or.accumulate(b[:, :-1], axis=1)
+    elif k == 1:  # +y: further up, rows above
+        out[1:] = np.logical_or.accumulate(b[:-1], axis=0)
+    elif k == 3:  # -y: rows below
+        out[:-1] = np.logical_or.accumulate(b[:0:-1], axis=0)[::-1]
+    else:
+        raise ValueError(f"axis index must be 0..3, got {k!r}")
+    return out
 
 
 def cap_radius_um(volume_nl: float, angle_deg: float) -> float:

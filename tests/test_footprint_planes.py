@@ -1,0 +1,259 @@
+"""The footprint state's planes (docs/physics.md §3.5): the shadow rule between pads behind
+one another (a near pad's strip under the bridge to a far pad has no line of its own), in
+closed form on a synthetic two-pad pattern and on the bench's 730/100 four-pad, and the
+shared-rotation build against pad-by-pad builds of the same footprints."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from patterns.mask import Mask
+from simulator.landscape import build_footprint_planes, build_landscape, pad_labels
+from simulator.landscape._build import scene_extent
+from simulator.landscape._correlator import NOISE_FACTOR
+from simulator.landscape._footprint import _variant, footprint_pairs
+from simulator.physics import STEP_PX, TOUCH_PX2, FootprintRules, Liquid, Materials
+from simulator.physics._footprint import upstream_of
+from simulator.scene import Effects, Scene
+
+LIB = Path(__file__).resolve().parents[1] / "patterns" / "library"
+PX = 5.0
+
+
+def two_pads(gap_um: float = 40.0) -> Scene:
+    """Two 200 x 200 um pads in a row, ``gap_um`` apart, centred on the pattern (5 um/px),
+    under a 300 um chip with a 20 um meniscus (1.8 nl), pads 30 deg receding at 10 deg."""
+    d = np.zeros((60, 120))
+    g = int(gap_um / 2 / PX)
+    d[10:50, 60 + g : 100 + g] = 1  # pad 2: x in [gap/2, gap/2 + 200] um, y in [-100, 100] um
+    d[10:50, 20 - g : 60 - g] = 1  # pad 1: its mirror image
+    return Scene.from_inputs(
+        Mask(d, PX),
+        chip_size_um=300,
+        effects=Effects(twist=False, meniscus=True, hysteresis=True),
+        materials=Materials(pad_receding_deg=10.0, pad_advancing_deg=35.0),
+        liquid=Liquid(volume_nl=1.8, dispense="pattern"),
+    )
+
+
+def fourpad(res: float, twist: bool = False) -> Scene:
+    return Scene.from_inputs(
+        LIB / "four_pad_730_100.png",
+        chip_size_um=730,
+        resolution_um=res,
+        effects=Effects(twist=twist, meniscus=True, hysteresis=True),
+        materials=Materials(pad_receding_deg=10.0, pad_advancing_deg=35.0),
+        liquid=Liquid(volume_nl=20.0, dispense="pattern"),
+    )
+
+
+@pytest.fixture(scope="module")
+def two():
+    s = two_pads()
+    return s, build_footprint_planes(s)
+
+
+def _pair_plane(planes, near: int, far: int) -> np.ndarray:
+    e = np.zeros(planes.template.energy.shape, planes.template.energy.dtype)
+    for p in planes.pairs:
+        if (p.near, p.far) == (near, far):
+            e[p.box()] += p.energy
+    return e
+
+
+def test_upstream_of_follows_each_axis():
+    pad = np.zeros((5, 6))
+    pad[2, 3] = 1
+    # +x: the pixels left of the pad on its row; -x: right of it; +y (up): rows below; -y: above
+    assert np.argwhere(upstream_of(pad, 0)).tolist() == [[2, 0], [2, 1], [2, 2]]
+    assert np.argwhere(upstream_of(pad, 2)).tolist() == [[2, 4], [2, 5]]
+    assert np.argwhere(upstream_of(pad, 1)).tolist() == [[3, 3], [4, 3]]
+    assert np.argwhere(upstream_of(pad, 3)).tolist() == [[0, 3], [1, 3]]
+
+
+def test_two_pads_in_a_row_shadow_each_other_along_x(two):
+    _, planes = two
+    # pad 2 (right) lies upstream of pad 1 along -x, pad 1 upstream of pad 2 along +x
+    assert sorted((p.near, p.far, p.axis) for p in planes.pairs) == [(0, 1, 0), (1, 0, 2)]
+
+
+def test_the_pair_term_is_the_near_strip_counted_whole_up_to_the_band(two):
+    # Chip at X (um) on y = 0: its left edge at X - 150, pad 2's near edge at 20 um, so a strip
+    # of pad 2 w = X - 170 wide lies outside the chip, under the bridge to pad 1 (wet, the
+    # chip has left it across D = X - 130 um, within d_r). On the pixel lattice at twist 0 the term is
+    # exactly Delta_gamma px^2 * 40 rows * sum over the strip's columns of N_b(s) - f(s),
+    # s = 0.5, 1.5, ... px from the chip's outline (f the wall profile, N_b the count to the band).
+    s, planes = two
+    r = planes.rules
+    c = r.count_profiles()
+    jp = planes.template.joules_per_px2
+    pair = _pair_plane(planes, 1, 0)
+    for x_um in (210.0, 220.0, 230.0, 240.0):
+        node = planes.node((x_um, 0.0, 0.0))
+        si = np.arange(int(round((x_um - 170.0) / PX))) + 0.5
+        n_b = 0.5 * (c["band_in"](si) + c["band_out"](si))
+        expect = jp * 40 * float(np.sum(n_b - r.profile(si)))
+        assert pair[node] == pytest.approx(expect, rel=NOISE_FACTOR * float(np.finfo(s.dtype).eps))
+    # where the near pad's strip is within d_s of the chip, f = 1 = N_b: nothing to correct
+    assert pair[planes.node((170.0 + PX * int(r.d_s), 0.0, 0.0))] == 0.0
+
+
+def test_a_near_pad_under_the_bridge_pulls_once(two):
+    # Both pads wet, the chip covering pad 2 with a strip beyond d_p outside it and pad 1 left
+    # behind across a gap under d_r: one wetted region, one line, at pad 1. The force is the
+    # single edge's, |Delta_gamma| times pad 1's height (200 um); without the pair term pad 2's
+    # own trailing line pulls as much again.
+    s, planes = two
+    wet = np.ones(2, bool)
+    single = -abs(s.delta_gamma_N_m) * 200e-6
+    ls = planes.landscape(wet)
+    ls0 = dataclasses.replace(planes, pairs=()).landscape(wet)
+    eps = float(np.finfo(s.dtype).eps)
+    for x_um in (215.0, 225.0, 235.0):
+        assert planes.next_state(wet, (x_um, 0.0, 0.0)).all()
+        # energies ~ |dg| * 8,000 px^2, differences over 2 px ~ |dg| * 80 px^2: their round-off
+        tol = NOISE_FACTOR * eps * 8000 / 80
+        assert ls.force_at(x_um, 0.0, 0.0)[0] == pytest.approx(single, rel=tol)
+        assert ls0.force_at(x_um, 0.0, 0.0)[0] == pytest.approx(2 * single, rel=tol)
+
+
+def test_no_shadow_across_a_gap_the_rays_do_not_cross():
+    # the two pads offset in y by more than their height: no ray along x or y joins them
+    d = np.zeros((100, 120))
+    d[5:45, 64:104] = 1
+    d[55:95, 16:56] = 1
+    s = two_pads().replace(pattern=Mask(d, PX))
+    assert build_footprint_planes(s).pairs == ()
+
+
+@pytest.fixture(scope="module")
+def bench():
+    s = fourpad(5.0)
+    return s, build_footprint_planes(s)
+
+
+def test_bench_730_100_beyond_436um_pulls_with_the_single_edge(bench):
+    # The source's bench case at 5 um/px (730/100, 20 nl, pads receding at 10 deg), dispensed on
+    # the pattern: beyond 436 um the near pads' strip outside the chip passes d_s, and under the
+    # bridge to the wet far pads it has no line; the force is |Delta_gamma| times the far pads'
+    # edge facing the chip, 2 x 315 um (one pixel row of it: the grid's resolution).
+    s, planes = bench
+    wet = np.ones(planes.n_pads, bool)
+    single = -abs(s.delta_gamma_N_m) * 630e-6
+    ls = planes.landscape(wet)
+    ls0 = dataclasses.replace(planes, pairs=()).landscape(wet)
+    for x_um in (440.0, 460.0, 480.0, 500.0, 520.0):
+        assert planes.next_state(wet, (x_um, 0.0, 0.0)).all()  # the far pads stay wet
+        f = ls.force_at(x_um, 0.0, 0.0)[0]
+        assert f == pytest.approx(single, rel=PX / 630.0)
+    # the defect the rule removes: twice the interior force once the strip passes d_p
+    assert ls0.force_at(500.0, 0.0, 0.0)[0] == pytest.approx(2 * single, rel=PX / 630.0)
+
+
+def test_bench_pairs_are_the_row_and_column_neighbours(bench):
+    _, planes = bench
+    labels, n = pad_labels(fourpad(5.0).pattern)
+    centres = planes.pad_centre_um
+    got = sorted((p.near, p.far) for p in planes.pairs)
+    # each pad with the pads level with it in x or in y, never the diagonal one
+    want = sorted(
+        (a, b)
+        for a in range(n)
+        for b in range(n)
+        if a != b
+        and (abs(centres[a][0] - centres[b][0]) < 1.0 or abs(centres[a][1] - centres[b][1]) < 1.0)
+    )
+    assert got == want and len(got) == 8
+
+
+def _reference(scene: Scene, twists=None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The planes built pad by pad, one build_landscape per pad and footprint (the planes'
+    definition, docs/physics.md §3.5): wet energy, reached, within, and the covered count."""
+    rules = FootprintRules.of(scene.wall_profile, scene.materials.pad_receding_deg)
+    counts = rules.count_profiles()
+    extent = scene_extent(_variant(scene, scene.pattern, counts["band_out"]))
+    labels, n = pad_labels(scene.pattern)
+    out = []
+    for k in range(1, n + 1):
+        pad = Mask(np.where(labels == k, scene.pattern.data, 0.0), scene.um_per_px)
+
+        def build(profile, pad=pad):
+            return build_landscape(_variant(scene, pad, profile), twists=twists, extent=extent)
+
+        wall = build(scene.wall_profile)
+        jp = wall.joules_per_px2
+        cnt = {nm: build(counts[nm]).energy / jp for nm in counts}
+        c = (rules.band_px - rules.f_inf) / STEP_PX
+        bridged = jp * ((0.5 + c) * cnt["band_in"] + (0.5 - c) * cnt["band_out"])
+        rows, cols = np.nonzero(labels == k)
+        deep = min(np.ptp(rows), np.ptp(cols)) + 1 >= rules.band_px + 2 * STEP_PX
+        # a pad narrower than the band keeps the wall term (its far edge would lie in the band)
+        e = np.where(deep & (cnt["covered"] < TOUCH_PX2), bridged, wall.energy)
+        out.append((e, cnt["reached"], cnt["within"], cnt["covered"], c))
+    return out
+
+
+#: A band of twists about 0 (their mirror twins among them) at 12 um/px, fine enough for the
+#: bridged term (the pads deeper than its band).
+TWISTS = np.arange(-4.0, 5.0)
+
+
+@pytest.mark.parametrize("res, twists", [(10.0, None), (12.0, TWISTS)])
+def test_the_shared_build_equals_pad_by_pad_builds(res, twists):
+    # One rotation per footprint and twist for every pad, each pad on its own box of poses:
+    # the same planes as one build_landscape per pad and footprint over the whole grid, to
+    # the transforms' round-off (the bridged term weighs its two counts by c ~ 20: c times the
+    # noise floor), and the same flags wherever a count is not within round-off of the threshold.
+    s = fourpad(res, twists is not None)
+    planes = build_footprint_planes(s, twists=twists)
+    ref = _reference(s, twists)
+    eps = float(np.finfo(s.dtype).eps)
+    for k, (e, reached, within, covered, c) in enumerate(ref):
+        scale = float(np.abs(e).max())
+        near_count = NOISE_FACTOR * eps * max(float(covered.max()), 1.0)
+        # the wall/bridged switch not on a knife edge
+        clear = np.abs(covered - TOUCH_PX2) > near_count
+        diff = np.abs(planes.wet_energy[k] - e)
+        assert diff[clear].max() <= (2 * c + 1) * NOISE_FACTOR * eps * scale
+        for got, cnt in ((planes.reached[k], reached), (planes.within_reach[k], within)):
+            sure = np.abs(cnt - TOUCH_PX2) > NOISE_FACTOR * eps * max(float(cnt.max()), 1.0)
+            assert np.array_equal(got[sure], cnt[sure] >= TOUCH_PX2)
+
+
+def test_the_state_energy_is_mirror_symmetric_with_its_pairs():
+    # The four-pad and the square chip are symmetric about y = 0: E(x, y, -a) = E(x, -y, a) for
+    # every state, the pairs along x and along y (the twins' planes come from their partners'
+    # transforms: sides +y and -y swap under the mirror).
+    s = fourpad(12.0, twist=True)
+    planes = build_footprint_planes(s, twists=TWISTS)
+    e = planes.energy(np.ones(planes.n_pads, bool))
+    tw = planes.template.twist_deg
+    scale = float(np.abs(e).max())
+    eps = float(np.finfo(s.dtype).eps)
+    pairs_only = np.zeros_like(e)
+    for p in planes.pairs:
+        pairs_only[p.box()] += p.energy
+    assert np.abs(pairs_only).max() > 0.01 * scale  # the pairs are there to be tested
+    for i in range(len(tw)):
+        j = int(np.argmin(np.abs(tw + tw[i])))
+        if abs(tw[j] + tw[i]) > 1e-9:
+            continue
+        assert np.abs(e[j] - e[i][::-1]).max() <= 2 * NOISE_FACTOR * eps * scale
+        assert np.abs(pairs_only[j] - pairs_only[i][::-1]).max() <= 2 * NOISE_FACTOR * eps * scale
+
+
+def test_the_pairs_are_priced_before_they_are_made(bench):
+    # footprint_pairs lays the pairs' boxes out from the chip's half-widths, no rotation: as
+    # many pairs as the build makes, and at least the poses it keeps (the build's boxes come
+    # from the chip's signed distance, inside the priced ones), by no more than their margins
+    s, planes = bench
+    n_pairs, priced, per_twist = footprint_pairs(s)
+    kept = sum(p.energy.size for p in planes.pairs)
+    assert n_pairs == len(planes.pairs)
+    assert per_twist == math.prod(planes.template.energy.shape[1:])
+    assert kept <= priced <= 1.25 * kept
