@@ -152,15 +152,11 @@ def test_without_hysteresis_the_far_pads_dry_where_evolver_lets_them_go(gap):
 
 
 # ------------------------------------------------------------------ between the bounds
-DOUBLE_COUNT = (
-    "the near pads' strip outside the chip keeps its own trailing line although the bridge "
-    "to the wet far pads covers it (docs/physics.md §3.5): up to twice the interior force"
-)
 BENCH_POSES = [
     pytest.param(50, 400.0, 0.0, None),
     pytest.param(50, 400.0, 0.0, 10.0),
     pytest.param(50, 450.0, 0.0, None),
-    pytest.param(50, 450.0, 0.0, 10.0, marks=pytest.mark.xfail(strict=True, reason=DOUBLE_COUNT)),
+    pytest.param(50, 450.0, 0.0, 10.0),
     pytest.param(50, 500.0, 0.0, None),
     pytest.param(50, 500.0, 0.0, 10.0),
     pytest.param(50, 300.0, -300.0, None),
@@ -176,7 +172,7 @@ BENCH_POSES = [
             "N/m, above the held bound 15.1 uN (the held liquid's dome lowers the chip to 18 um)",
         ),
     ),
-    pytest.param(100, 450.0, 0.0, 10.0, marks=pytest.mark.xfail(strict=True, reason=DOUBLE_COUNT)),
+    pytest.param(100, 450.0, 0.0, 10.0),
     pytest.param(100, 450.0, 0.0, None),
     pytest.param(100, 500.0, 0.0, None),
     pytest.param(100, 300.0, -300.0, 10.0),

@@ -380,14 +380,15 @@ def test_energy_samples_are_chips_released_at_each_pose(run_cli, tmp_path):
 
 def test_a_dispense_run_over_its_budget_is_refused_before_any_plane(run_cli, monkeypatch):
     # the 730/100 bench case at 2 um/px with a 10 deg receding angle: 4 pads' planes on
-    # 1,225 x 1,225 poses x 90 twists, priced at 7.3 GB; a 1,000 MB budget refuses it before
-    # any plane is built (build_landscape must not be called)
+    # 1,225 x 1,225 poses x 90 twists, priced at 9.0 GB; a 1,000 MB budget refuses it before
+    # any plane is built (no correlation part of a plane may be made, nor a landscape built)
     import simulator.landscape._footprint as fpmod
 
     def no_build(*a, **k):
         raise AssertionError("a plane was built before the refusal")
 
-    monkeypatch.setattr(fpmod, "build_landscape", no_build)
+    monkeypatch.setattr(fpmod, "_Part", no_build)
+    monkeypatch.setattr(fpmod, "build_footprint_planes", no_build)
     rc, _, err = run_cli(
         ["simulate", "--pattern", LIB / "four_pad_730_100.png", "--chip-size", "730"]
         + ["--meniscus", "--resolution", "2", "--dispense", "pattern", "--hysteresis", "10:35"]

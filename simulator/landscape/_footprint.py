@@ -40,7 +40,6 @@ from ._build import (
     _fft_of,
     _layout,
     _plan_of,
-    build_landscape,  # noqa: F401  (the name tests patch to see that no plane is built)
     scene_extent,
 )
 from ._correlator import SAME_CHIP_TOL
