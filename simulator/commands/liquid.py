@@ -70,10 +70,11 @@ def _common(p: argparse.ArgumentParser) -> None:
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "liquid",
-        help="choose the droplet: meniscus height, overflow of protruding pads, critical volume",
+        help="choose the droplet: meniscus height, overflow of protruding pads, critical volume, the volume window of a pattern",
         description="Calculators for the droplet, before any simulation: the meniscus height h = V / A and whether "
         "the thin-film picture holds (height), the no-overflow conditions of a protruding pad (overflow), and the "
-        "smallest droplet that wets all four pads of a four-pad pattern (critical-volume). Units: um, nl, degrees, mN/m.",
+        "smallest droplet that wets all four pads of a four-pad pattern (critical-volume), and all of them for a pattern "
+        "and chip: the usable volume window (window). Units: um, nl, degrees, mN/m.",
     )
     calc = p.add_subparsers(dest="calculator", metavar="CALCULATOR", parser_class=_SubParser)
     calc.required = True
