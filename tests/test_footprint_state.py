@@ -254,6 +254,8 @@ def test_simulate_cli_reports_and_writes_the_footprint(run_cli, tmp_path):
             "--chip-size",
             "730",
             "--meniscus",
+            "--volume",
+            "20",  # the source's droplet: h = 37.53 um under the 730 um chip
             "--resolution",
             "5",
             "--no-twist",
@@ -360,7 +362,17 @@ def test_energy_samples_are_chips_released_at_each_pose(run_cli, tmp_path):
     out = tmp_path / "e.json"
     rc, stdout, err = run_cli(
         ["energy", "--pattern", LIB / "four_pad_730_100.png", "--chip-size", "730", "--meniscus"]
-        + ["--resolution", "5", "--no-twist", "--dispense", "chip", "--at", "400,0,0"]
+        + [
+            "--volume",
+            "20",
+            "--resolution",
+            "5",
+            "--no-twist",
+            "--dispense",
+            "chip",
+            "--at",
+            "400,0,0",
+        ]
         + ["--at", "330,0,0", "--curve", "x", "--from", "300", "--to", "460", "--json", out]
     )
     assert rc == 0, err

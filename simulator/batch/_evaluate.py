@@ -126,6 +126,31 @@ def max_bias_along(
     return out[0], out[1]
 
 
+def probe_distances(ls, chip_um, at, floating: dict | None) -> tuple[float, float]:
+    """(bias um, twist deg) at which the restoring force and torque are probed: 2 % of the
+    chip's smaller side (at least two grid steps) and one twist step (at least 1 deg; 0
+    without twist), or, when the chip floats, one grid step (twist step) beyond the floor's
+    farthest edge from the minimum ``at`` (on the floor the force is zero: a probe there
+    says nothing of the well)."""
+    s = ls.um_per_px
+    near = max(2 * s, 0.02 * min(chip_um))
+    twist = len(ls.twist_deg) > 1
+    near_deg = max(ls.twist_step_deg, 1.0) if twist else 0.0
+    if floating:
+        x, y, t = at
+        reach = max(
+            x - floating["x_from_um"],
+            floating["x_to_um"] - x,
+            y - floating["y_from_um"],
+            floating["y_to_um"] - y,
+        )
+        near = max(near, reach + s)
+        if twist:
+            turn = max(t - floating["twist_from_deg"], floating["twist_to_deg"] - t)
+            near_deg = max(near_deg, turn + ls.twist_step_deg)
+    return float(near), float(near_deg)
+
+
 def evaluate(
     scene: Scene,
     out_dir: str | os.PathLike,
@@ -171,11 +196,31 @@ def evaluate(
         ):  # a layout pattern: file, cell, layers, units, and where the origin is
             summary["layout"] = scene.pattern.params["layout"]
         summary["liquid_warnings"] = list(liquid_warnings or [])
+        summary["volume_window"] = _volume_window(scene, summary)
         summary["seconds"] = round(time.perf_counter() - t_start, 2)
         require_finite(summary, "evaluate summary")
         (tmp / "summary.json").write_text(json.dumps(summary, indent=2, allow_nan=False) + "\n")
         (tmp / "report.html").write_text(_html(summary, source))
     return summary
+
+
+#: The placement bias the report's overflow limit is computed for, in placement-noise
+#: standard deviations (the larger of x and y): 95 % of placements fall within it per axis.
+OVERFLOW_BIAS_SIGMAS = 2.0
+
+
+def _volume_window(scene: Scene, summary: dict) -> dict:
+    """The droplet's volume window (:func:`simulator.liquid.volume_window`) for the report, the
+    overflow limit at :data:`OVERFLOW_BIAS_SIGMAS` of the placement noise; ``volume_given``
+    says whether the volume was typed or derived from the chip."""
+    from simulator.liquid import volume_window
+
+    ps = summary["yield"]["placement_sigma"]
+    bias = OVERFLOW_BIAS_SIGMAS * max(ps["x_um"], ps["y_um"])
+    win = volume_window(
+        scene, bias, f"a placement at {OVERFLOW_BIAS_SIGMAS:g} sigma of the placement noise"
+    )
+    return win | {"volume_given": not scene.liquid.volume_derived}
 
 
 def assess(
@@ -256,8 +301,7 @@ def assess(
                 ):
                     k[key] = 0.0
     w, h = chip_size(scene)
-    near = max(2 * s, 0.02 * min(w, h))
-    near_deg = max(ls.twist_step_deg, 1.0) if len(ls.twist_deg) > 1 else 0.0
+    near, near_deg = probe_distances(ls, (w, h), (xm, ym, tm), floating)
     forces = {}
     for label, dx, dy in (("+x", near, 0), ("-x", -near, 0), ("+y", 0, near), ("-y", 0, -near)):
         fx, fy = ls.force_at(xm + dx, ym + dy, tm)
@@ -371,6 +415,7 @@ def assess(
             "overlap_um2": float(ls.overlap_um2(em)),
             "refined": meniscus is not None and floating is None,
         },
+        "error_limit": yl_sum["error_limit"],
         "restoring_force_N": {"bias_um": near, **forces},
         "restoring_torque_Nm": {"twist_deg": near_deg, **torques} if torques else None,
         "plateaus_um": {a: curves[a]["plateaus"] for a in ("x", "y")},
@@ -543,6 +588,40 @@ def _meniscus_rows(summary: dict) -> str:
     )
 
 
+def _probe_words(summary: dict) -> str:
+    """Where the report probes the restoring force and torque, and why there."""
+    f, tq = summary["restoring_force_N"], summary.get("restoring_torque_Nm")
+    where = f"Probed at a bias of {f['bias_um']:.3g} um from the minimum" + (
+        f" and a twist of {tq['twist_deg']:.3g} deg" if tq else ""
+    )
+    fl = summary.get("floating_range")
+    if fl:
+        return (
+            f"{where}: one grid step beyond the floor the chip floats on (x {_span(fl, 'x', 'um')}, "
+            f"y {_span(fl, 'y', 'um')}), where the force is zero."
+        )
+    return f"{where} (2 % of the chip's smaller side, at least two grid steps)."
+
+
+def _limit_words(limit: dict | None) -> str:
+    from simulator.motion import error_limit_words
+
+    return error_limit_words(limit) or "limit n/a"
+
+
+def _window_rows(window: dict | None) -> str:
+    """The report's section on the droplet's usable volume window (:func:`simulator.liquid.volume_window`)."""
+    if not window:
+        return ""
+    from simulator.liquid import window_lines
+
+    items = "".join(
+        f"<li>{html.escape(line.strip())}</li>"
+        for line in window_lines(window, window.get("volume_given"))
+    )
+    return f"\n<h2>The droplet's volume window</h2>\n<ul>{items}</ul>"
+
+
 def _time_text(t: dict | None) -> str:
     if t is None:
         return "no start aligned"
@@ -647,6 +726,7 @@ pattern centre, x right, y up; twist in degrees, counter-clockwise positive. Com
 overlap {g["overlap_um2"]:,.0f} um&sup2;, energy {_fmt(g["energy_J"], "J")}.</p>
 {_meniscus_rows(summary)}<h2>Restoring force and torque near alignment</h2>
 <table><tr><th>chip displaced by</th><th>F<sub>x</sub></th><th>F<sub>y</sub></th></tr>{rows_force}{rows_torque}</table>
+<p class="note">{e(_probe_words(summary))}</p>
 <p>Maximum bias from which the force points back to the minimum all the way:
 +x {b["+x"]:g} um, &minus;x {b["-x"]:g} um, +y {b["+y"]:g} um, &minus;y {b["-y"]:g} um (twist held at the minimum's).
 Plateaus (zero force): {e(plateaus)}.</p>
@@ -657,7 +737,7 @@ Plateaus (zero force): {e(plateaus)}.</p>
 <p>Capture fraction: <b>{100 * cap["fraction"]:.1f} %</b> of {cap["n"]} {e(s["method"])} starts on a grid from {cap["grid_um"]["from"]:g} to {cap["grid_um"]["to"]:g} um
 in steps of {cap["grid_um"]["step"]:g} um in x and y around the global minimum, twist {cap["twist_deg"]:g} deg ({e(cap_out)}).</p>
 <p>Yield under placement noise: <b>{100 * yl["fraction"]:.1f} %</b> of {yl["n"]} starts drawn normally around the aligned pose (the global minimum) with
-&sigma; = {ps["x_um"]:.3g} um, {ps["y_um"]:.3g} um, {ps["twist_deg"]:g} deg (seed {yl["seed"]}): {e(outcomes)}; aligned runs, final-pose error from the global minimum: {e(err_txt)}.</p>
+&sigma; = {ps["x_um"]:.3g} um, {ps["y_um"]:.3g} um, {ps["twist_deg"]:g} deg (seed {yl["seed"]}): {e(outcomes)}; aligned runs, final-pose error from the global minimum: {e(err_txt)}; {e(_limit_words(summary.get("error_limit")))}.</p>{_window_rows(summary.get("volume_window"))}
 <img src="capture.png" alt="capture map">{_time_rows(cap, yl)}{_protocol_rows(summary.get("protocols"))}
 <p class="note">Written by selfalign. The numbers are in summary.json (units in the key names).</p>
 </body></html>

@@ -74,6 +74,7 @@ def run_footprint_batch(
         EVENT,
         MAX_EVENTS,
         Relay,
+        error_limit,
         field_and_grid,
         footprint_relay,
         is_stiff,
@@ -225,4 +226,6 @@ def run_footprint_batch(
             "footprint_planes_s": planes.seconds,
         },
         time_s=time_s if dynamic else None,
+        # around the aligned pose every pad is wet: the reference landscape's floor and grid
+        error_limit=error_limit(scene, reference, pin=pin),
     )

@@ -94,6 +94,7 @@ from simulator.core import (
 )
 from simulator.landscape import Landscape, build_landscape, global_minimum
 from simulator.motion import (
+    error_limit,
     field_and_grid,
     is_stiff,
 )
@@ -247,6 +248,7 @@ def run_batch(
             "stiff": stiff,  # dynamics: the implicit solver, starts mapped one after the other (_run_chunk)
         },
         time_s=time_s,
+        error_limit=error_limit(scene, ls, pin=pin),
     )
 
 
@@ -323,6 +325,8 @@ def run_realizations(
             period_deg=parts[0].period_deg,
             optimum=(math.nan,) * 3,
             time_s=None if parts[0].time_s is None else np.concatenate([p.time_s for p in parts]),
+            # the loosest of the patterns' limits bounds the pooled errors
+            error_limit=max((p.error_limit for p in parts), key=lambda e: e["um"]),
         )
         summary = summarize(pooled, target="nominal")  # each pattern's own shift is the error
         summary.pop("optimum")

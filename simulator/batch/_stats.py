@@ -47,6 +47,9 @@ class BatchResult:
     optimum: tuple[float, float, float]
     stats: dict = field(default_factory=dict)
     time_s: np.ndarray | None = None
+    #: What limits the final poses' errors (:func:`simulator.motion.error_limit`):
+    #: ``{"by": "grid" | "floor", "um": ...}`` (a batch does not refine below the grid).
+    error_limit: dict | None = None
 
     @property
     def n(self) -> int:
@@ -188,7 +191,8 @@ def summarize(
     (the global minimum, where "aligned" is measured), ``error_target`` (the pose the
     errors are measured from: ``kind`` "global_minimum", the optimum, or "nominal",
     (0, 0, 0), with ``x_um``, ``y_um``, ``twist_deg``), for a grid
-    ``max_bias_um`` / ``max_bias_limited_by_grid`` (:func:`max_bias`), and for the
+    ``max_bias_um`` / ``max_bias_limited_by_grid`` (:func:`max_bias`), ``error_limit``
+    (what limits the final-pose errors, :attr:`BatchResult.error_limit`), and for the
     dynamic methods ``time_to_align_s``: :func:`time_stats` of the aligned starts' times
     (seconds of simulated time; None if none aligned).
     """
@@ -214,6 +218,7 @@ def summarize(
         "optimum": {"x_um": x, "y_um": y, "twist_deg": t},
         "error_target": {"kind": target, "x_um": goal[0], "y_um": goal[1], "twist_deg": goal[2]},
         "period_deg": result.period_deg,
+        "error_limit": result.error_limit,
     }
     if result.time_s is not None:
         out["time_to_align_s"] = time_stats(result.time_to_align_s)

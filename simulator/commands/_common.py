@@ -186,7 +186,8 @@ def add_scene_args(p: argparse.ArgumentParser) -> None:
     q.add_argument(
         "--volume",
         type=float,
-        help="droplet volume in nl (default 20): the meniscus height V / A under the "
+        help="droplet volume in nl (default: derived from the chip, a film V / A of 5 %% of its "
+        "smallest side; selfalign liquid window shows the usable range): the meniscus height V / A under the "
         "chip for --meniscus, and the film of the dynamic methods",
     )
     q.add_argument(
@@ -451,7 +452,17 @@ def liquid_checks(
         bool(args.scene)
         and "volume_nl" in ((scene_document(args) if doc is None else doc).get("liquid") or {})
     )
-    if not given:
+    used = method in ("overdamped", "inertial") or bool(getattr(scene.effects, "meniscus", False))
+    if (
+        not given
+        and used
+        and scene.liquid.volume_derived
+        and getattr(scene.liquid, "height_um", None) is None
+    ):
+        # The volume derived from the chip (simulator.liquid.default_volume_nl), said and checked.
+        print(f"note: {derived_volume_words(scene)}", file=sys.stderr)
+        warns = scene_warnings(scene, biases_um, placed)
+    elif not given:
         warns = []
         if scene.topography is not None:
             warns.append(
@@ -466,6 +477,20 @@ def liquid_checks(
     for w in warns:
         print(f"warning: {w}", file=sys.stderr)
     return warns
+
+
+def derived_volume_words(scene: Scene) -> str:
+    """'droplet volume 6.25 nl derived from the chip (...)': the volume a scene without
+    ``--volume`` takes (:func:`simulator.liquid.default_volume_nl`), its film and the rule."""
+    from simulator.liquid import DEFAULT_FILM_FRACTION
+
+    v = scene.liquid.volume_nl
+    h = scene.liquid_height_um
+    return (
+        f"droplet volume {v:.3g} nl derived from the chip (no --volume): a film h = V / A = {h:.3g} um, "
+        f"{100 * DEFAULT_FILM_FRACTION:g} % of its smallest side {scene.chip_min_side_um:g} um "
+        "(selfalign liquid window shows the usable range; give --volume NL to choose)"
+    )
 
 
 def read_toml(path: str | os.PathLike) -> dict[str, Any]:

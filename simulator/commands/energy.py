@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import sys
 
 import numpy as np
 
@@ -85,6 +86,14 @@ def run(args: argparse.Namespace) -> int:
     else:
         require_landscape_fits(scene, twists=twists_around(scene, twists))
     accuracy_check(scene)
+    if (
+        scene.meniscus_height_um is not None
+        and scene.liquid.volume_derived
+        and scene.liquid.height_um is None
+    ):
+        from simulator.commands._common import derived_volume_words
+
+        print(f"note: {derived_volume_words(scene)}", file=sys.stderr)
     x, y, t = (np.array(v) for v in zip(*poses, strict=True))
     planes = dispensed = None
     if scene.liquid.dispense is not None:

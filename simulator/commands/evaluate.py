@@ -149,6 +149,22 @@ def run(args: argparse.Namespace) -> int:
                 f"-x {pb['-x']:g} um, +y {pb['+y']:g} um, -y {pb['-y']:g} um; capture {100 * r['capture_fraction']:.1f} %, "
                 f"yield {100 * r['yield_fraction']:.1f} % (each start released onto that protocol's footprint)"
             )
+    from simulator.motion import error_limit_words
+
+    print(
+        f"final-pose error of the aligned placement-noise starts {error_limit_words(summary['error_limit'])}"
+    )
+    f = summary["restoring_force_N"]
+    print(
+        f"restoring force probed at {f['bias_um']:.3g} um from the minimum"
+        + (" (one grid step beyond the floor)" if fl else "")
+        + f": +x F_x {f['+x'][0] * 1e6:.3g} uN, +y F_y {f['+y'][1] * 1e6:.3g} uN"
+    )
+    if summary.get("volume_window"):
+        from simulator.liquid import window_lines
+
+        w = summary["volume_window"]
+        print(window_lines(w, w.get("volume_given"))[0])
     pics = "landscape.png, force.png, capture.png, pattern.png"
     if "time_to_align_s" in yl:
         from simulator.commands.montecarlo import time_line

@@ -4,9 +4,11 @@
     selfalign liquid overflow --pad-advancing DEG --chip-angle DEG|LO:HI --edge-angle DEG
                               (--meniscus-height UM | --volume NL --chip-size W[xH]) [--bias UM] [--json [FILE]]
     selfalign liquid critical-volume --size L --gap G --pad-angle DEG --substrate-angle DEG [--json [FILE]]
+    selfalign liquid window --pattern P --chip-size C [--volume NL] [--edge-angle DEG --bias UM] [--json [FILE]]
 
-The calculators of :mod:`simulator.liquid` and :mod:`simulator.liquid`; no
-landscape, so the command starts and answers fast. ``--json`` alone prints the JSON
+The calculators of :mod:`simulator.liquid`; no landscape, so the command starts and
+answers fast (``window`` reads the pattern and chip as simulate does, and computes no
+landscape either). ``--json`` alone prints the JSON
 (units in every key) instead of the text; ``--json FILE`` writes it and prints the text.
 """
 
@@ -68,10 +70,11 @@ def _common(p: argparse.ArgumentParser) -> None:
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "liquid",
-        help="choose the droplet: meniscus height, overflow of protruding pads, critical volume",
+        help="choose the droplet: meniscus height, overflow of protruding pads, critical volume, the volume window of a pattern",
         description="Calculators for the droplet, before any simulation: the meniscus height h = V / A and whether "
         "the thin-film picture holds (height), the no-overflow conditions of a protruding pad (overflow), and the "
-        "smallest droplet that wets all four pads of a four-pad pattern (critical-volume). Units: um, nl, degrees, mN/m.",
+        "smallest droplet that wets all four pads of a four-pad pattern (critical-volume), and all of them for a pattern "
+        "and chip: the usable volume window (window). Units: um, nl, degrees, mN/m.",
     )
     calc = p.add_subparsers(dest="calculator", metavar="CALCULATOR", parser_class=_SubParser)
     calc.required = True
@@ -192,6 +195,45 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     _common(c)
     c.set_defaults(func=run_critical_volume)
+
+    w = calc.add_parser(
+        "window",
+        help="the usable droplet volumes of a pattern and chip: critical volume, thin-film and overflow limits",
+        description="The usable droplet volume window of a pattern (PNG or layout: .gds, .oas, .dxf) under a chip, "
+        "with the reasoning: the critical volume of a four-pad pattern (recognised in the pattern; below it the drop "
+        "may split onto single pads), the thin-film limit (the film h = V / A within 10 % of the chip's smallest "
+        "side) and, for protruding pads (--edge-angle) placed with a --bias, the overflow limit. Prints the volume "
+        "a run without --volume takes (a film of 5 % of the chip's smallest side) or checks --volume. Units: nl, um, deg.",
+    )
+    from simulator.commands._common import add_scene_args
+
+    add_scene_args(w)
+    w.add_argument(
+        "--bias",
+        type=float,
+        metavar="UM",
+        help="the placement bias in um (its magnitude): with --edge-angle, the overflow limit",
+    )
+    w.add_argument(
+        "--density",
+        type=float,
+        default=998.0,
+        metavar="KG_M3",
+        help="liquid density in kg/m^3 (default 998, water): the capillary length",
+    )
+    w.add_argument(
+        "--json",
+        nargs="?",
+        const="-",
+        metavar="FILE",
+        help="the answer as JSON: alone, on standard output instead of the text; with FILE, written there",
+    )
+    w.add_argument(
+        "--force",
+        action="store_true",
+        help="replace the --json FILE if it exists (refused without it)",
+    )
+    w.set_defaults(func=run_window)
 
 
 # ----------------------------------------------------------------------- parsing
@@ -387,3 +429,27 @@ def run_critical_volume(args: argparse.Namespace) -> int:
         "validity: " + "; ".join(doc["validity"]),
     ]
     return _emit(args, doc, lines)
+
+
+# ----------------------------------------------------------------------- volume window
+def run_window(args: argparse.Namespace) -> int:
+    from simulator.commands._common import scene_document, scene_from_args
+    from simulator.liquid import volume_window, window_lines
+
+    if args.json and args.json != "-":
+        from patterns.outputs import check_output_file, require_new_file
+
+        check_output_file(args.json, "--json", [])  # before any work
+        require_new_file(args.json, "--json", args.force)
+    bias = _finite("--bias", args.bias, positive=False)
+    rho = _finite("--density", args.density)
+    doc = scene_document(args)
+    scene = scene_from_args(args, doc=doc, warn=False)
+    if rho is not None and rho != scene.liquid.density_kg_m3:
+        import dataclasses
+
+        scene = scene.replace(liquid=dataclasses.replace(scene.liquid, density_kg_m3=rho))
+    win = volume_window(scene, bias, "a placement")
+    given = not scene.liquid.volume_derived
+    win["volume_given"] = given
+    return _emit(args, win, window_lines(win, given))

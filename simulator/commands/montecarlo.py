@@ -430,6 +430,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _print_summary(summary: dict, result, desc: dict, st: dict) -> None:
+    from simulator.motion import error_limit_words
+
     n = summary["n"]
     if desc["kind"] == "grid":
         t, ny, nx = desc["shape"]
@@ -455,7 +457,8 @@ def _print_summary(summary: dict, result, desc: dict, st: dict) -> None:
             f"{g['twist_deg']:g} deg), mean +- std (max |error|): "
             f"x {e_um['x']['mean']:.3g} +- {e_um['x']['std']:.3g} um ({e_um['x']['max_abs']:.3g} um), "
             f"y {e_um['y']['mean']:.3g} +- {e_um['y']['std']:.3g} um ({e_um['y']['max_abs']:.3g} um), "
-            f"twist {e_deg['twist']['mean']:.3g} +- {e_deg['twist']['std']:.3g} deg ({e_deg['twist']['max_abs']:.3g} deg)"
+            f"twist {e_deg['twist']['mean']:.3g} +- {e_deg['twist']['std']:.3g} deg ({e_deg['twist']['max_abs']:.3g} deg); "
+            + error_limit_words(summary.get("error_limit"))
         )
     if "time_to_align_s" in summary:
         print(time_line(summary["time_to_align_s"]))

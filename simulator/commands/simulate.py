@@ -145,6 +145,8 @@ def run(args: argparse.Namespace) -> int:
         print(
             f"refined below the grid (meniscus {scene.meniscus_height_um:.3g} um): ({r[0]:.1f} um, {r[1]:.1f} um, {r[2]:.1f} deg)"
         )
+    for line in accuracy_lines(traj):
+        print(line)
     c = traj.cost
     if c.get("poses_computed"):
         print(
@@ -216,6 +218,28 @@ def end_line(scene, traj) -> str:
         g = [round(v, 2) + 0.0 for v in traj.optimum]
         line += f"; the global minimum is at ({g[0]:g} um, {g[1]:g} um, {g[2]:g} deg)"
     return line
+
+
+def accuracy_lines(traj) -> list[str]:
+    """The floor the chip floats on (when it does) and the final-pose error from the global
+    minimum with what limits it (:func:`simulator.motion.error_limit`)."""
+    from simulator.motion import error_limit_words
+
+    out = []
+    fl = traj.floor
+    if fl:
+        (x0, x1), (y0, y1), (t0, t1) = fl["x_um"], fl["y_um"], fl["twist_deg"]
+        out.append(
+            f"the chip floats on the well's floor: x {x0:g} to {x1:g} um, y {y0:g} to {y1:g} um, twist {t0:g} to "
+            f"{t1:g} deg (no restoring force there: a run that stops on it is aligned)"
+        )
+    if traj.optimum is not None and traj.error_limit and traj.outcome == "aligned":
+        p = traj.refined if traj.refined is not None else traj.final
+        d = float(np.hypot(p[0] - traj.optimum[0], p[1] - traj.optimum[1]))
+        out.append(
+            f"final-pose error from the global minimum {d:.3g} um, {error_limit_words(traj.error_limit)}"
+        )
+    return out
 
 
 def chip_symmetry_words(scene, period: float) -> str:

@@ -33,6 +33,12 @@ COMPARED = (
     ("stiffness_x_N_per_m", "stiffness k_x (N/m)", 1.0),
     ("stiffness_y_N_per_m", "stiffness k_y (N/m)", 1.0),
     ("restoring_force_plus_x_x_N", "restoring force -F_x at the +x bias (uN)", -1e6),
+    (
+        "restoring_force_bias_um",
+        "the bias the force is probed at (um; beyond the floor when the chip floats)",
+        1.0,
+    ),
+    ("error_limit_um", "what limits the final-pose error (um: grid step or floor)", 1.0),
     ("global_minimum_offset_um", "offset of the global minimum (um)", 1.0),
     ("floating_half_width_um", "the chip floats within +- (um)", 1.0),
     ("yield_error_x_mean_abs_um", "aligned placements: mean |error| in x (um)", 1.0),

@@ -13,13 +13,16 @@ a ``--volume`` (:func:`scene_warnings`):
 * :func:`simulator.liquid.critical_volume`: the smallest drop that wets all four
   pads of a four-pad pattern (docs/physics.md §8), computed from a reduced drop model;
 * :func:`four_pad_geometry`: a four-pad pattern recognised in any mask;
-* :class:`Topography`: a protruding pad's edge angle and the angles the overflow check needs.
+* :class:`Topography`: a protruding pad's edge angle and the angles the overflow check needs;
+* :func:`volume_window`: the usable droplet volumes of a scene (critical volume, thin-film
+  and overflow limits), and :func:`default_volume_nl`, the volume a scene that gives none takes.
 
 Units: lengths um, areas um^2, volumes nl (1 nl = 1e6 um^3), angles degrees, surface
 tension N/m in Python (mN/m on the command line), forces N, stiffness N/m.
 
 Internals: ``_calculators`` (height, overflow, the numbers as typed), ``_critical_volume``
-(the reduced drop model) and ``_warnings`` (the checks and warnings of a scene); every
+(the reduced drop model) and ``_warnings`` (the checks and warnings of a scene), ``_window`` (the volume window and the
+default volume); every
 name is imported from here.
 """
 

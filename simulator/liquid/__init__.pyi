@@ -42,3 +42,9 @@ from ._warnings import (
     scene_warnings as scene_warnings,
     volume_note as volume_note,
 )
+from ._window import (
+    DEFAULT_FILM_FRACTION as DEFAULT_FILM_FRACTION,
+    default_volume_nl as default_volume_nl,
+    volume_window as volume_window,
+    window_lines as window_lines,
+)

@@ -1,5 +1,13 @@
 """Types of ``simulator.motion``'s names, loaded on first use (SPEC 1 lazy loading)."""
 
+from ._accuracy import (
+    LIMITS as LIMITS,
+    error_limit as error_limit,
+    error_limit_words as error_limit_words,
+    floats as floats,
+    floor_reach_um as floor_reach_um,
+    refined_limit_um as refined_limit_um,
+)
 from ._dynamics import (
     DynamicsState as DynamicsState,
     inertial as inertial,

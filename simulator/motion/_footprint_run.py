@@ -254,5 +254,7 @@ def simulate_footprint(
         "cost": cost,
         "optimum": None if last is None else last.optimum,
         "refined": None if last is None else last.refined,
+        "error_limit": ref.error_limit,
+        "floor": ref.floor,
         "footprint": footprint,
     }

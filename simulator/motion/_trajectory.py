@@ -80,6 +80,12 @@ class Trajectory:
     #: With ``--dispense``, the wetted footprint as the run's state: its ``initial`` wet pads
     #: and its ``events`` (docs/physics.md §3.5; :mod:`simulator.motion`).
     footprint: dict | None = None
+    #: What limits the final pose's error (:func:`simulator.motion.error_limit`):
+    #: ``{"by": "grid" | "floor" | "refined", "um": ...}``.
+    error_limit: dict | None = None
+    #: With free contact lines, the floor the chip floats on (x_um, y_um, twist_deg as
+    #: [first, last], :meth:`simulator.landscape.Landscape.floor_range`); None when it does not float.
+    floor: dict | None = None
 
     @property
     def start(self) -> tuple[float, float, float]:
@@ -112,6 +118,8 @@ class Trajectory:
             "cost": self.cost,
             "optimum": None if self.optimum is None else pose(self.optimum),
             "final_refined": None if self.refined is None else pose(self.refined),
+            "error_limit": self.error_limit,
+            "floating_range": self.floor,
         } | ({} if self.footprint is None else {"footprint": self.footprint})
 
 
@@ -308,6 +316,15 @@ def simulate(
             evaluated=boxes.built,
             backend=backend,
         )
+    # The landscape around the global minimum: its floor, the hysteresis window and the
+    # error's limit are read there (None: a grid run that needs none of them).
+    well = (
+        reference
+        if reference is not None
+        else landscape
+        if landscape is not None
+        else (ls if dynamic else None)
+    )
     if landscape is None and not dynamic and (scene.wall_profile is not None or any(pin)):
         # Aligned anywhere on the floor the chip floats on, or within the hysteresis window:
         # measured around the global minimum as on the full landscape (a box that holds the
@@ -316,6 +333,7 @@ def simulate(
 
         near = minimum_box(scene, opt, engine=path_engine, backend=backend)
         tol = align_tolerance(near, pin, floats=scene.wall_profile is not None)
+        well = near
     if path_engine is not None:
         boxes.poses, boxes.planes, boxes.seconds = (
             path_engine.poses,
@@ -355,11 +373,15 @@ def simulate(
     outcome = OUTCOMES[int(out)]
     if relay is not None and status == EVENT:
         outcome = "event"  # not an end: the footprint run goes on (simulate_footprint)
+    from simulator.motion._accuracy import error_limit, floats
+
+    floating = well is not None and floats(scene, well)
     if (
         scene.meniscus_height_um is not None
         and not any(pin)
         and method != "greedy"
         and outcome in ("aligned", "local_minimum")
+        and not floating  # on a flat floor the interpolant's minimum is any pose of it
     ):
         from simulator.landscape import refine_minimum
 
@@ -376,6 +398,10 @@ def simulate(
         cost,
         optimum=opt.pose,
         refined=refined,
+        error_limit=error_limit(
+            scene, well if well is not None else (ls if refined else None), refined=refined, pin=pin
+        ),
+        floor=well.floor_range() if floating and well is not None else None,
     )
 
 

@@ -117,6 +117,10 @@ class Liquid:
         density_kg_m3: density, kg/m^3.
         volume_nl: droplet volume, nl. The default 20 nl is the source's four-pad
             volume (730 um pattern); the defect/jaggedness tests on 200 um used 0.5 nl.
+            None: derived from the chip by the :class:`~simulator.scene.Scene` that holds
+            the liquid (:func:`simulator.liquid.default_volume_nl`), as a scene file or the
+            command line without a volume does; the scene then sets ``volume_derived``.
+        volume_derived: the volume was derived from the chip, not given.
         height_um: the liquid's height under the chip (um) for the finite meniscus
             (:mod:`simulator.physics`; TOML ``meniscus_height_um``) and the film of the
             dynamics' damping alike; None = ``volume_nl`` over the chip's area.
@@ -135,11 +139,12 @@ class Liquid:
     surface_tension_N_m: float = WATER_SURFACE_TENSION_N_M
     viscosity_Pa_s: float = WATER_VISCOSITY_PA_S
     density_kg_m3: float = WATER_DENSITY_KG_M3
-    volume_nl: float = 20.0
+    volume_nl: float | None = 20.0
     height_um: float | None = None
     pinned: bool = False
     dispense: str | None = None
     dispense_at_um: tuple[float, float] | None = None
+    volume_derived: bool = False
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
@@ -185,7 +190,8 @@ class Liquid:
         )
         set_(self, "viscosity_Pa_s", positive("viscosity", self.viscosity_Pa_s, "Pa s"))
         set_(self, "density_kg_m3", positive("liquid density", self.density_kg_m3, "kg/m^3"))
-        set_(self, "volume_nl", positive("droplet volume", self.volume_nl, "nl"))
+        if self.volume_nl is not None:
+            set_(self, "volume_nl", positive("droplet volume", self.volume_nl, "nl"))
 
     def meniscus_height_um(self, area_um2: float) -> float:
         """The liquid's height (um) under a chip of wetted area ``area_um2``: ``height_um``
@@ -194,6 +200,10 @@ class Liquid:
         :attr:`simulator.scene.Scene.liquid_height_um`)."""
         if self.height_um is not None:
             return self.height_um
+        if self.volume_nl is None:
+            raise InputError(
+                "the droplet volume is derived from the chip by the scene: give --volume NL, or use the scene's liquid"
+            )
         return meniscus_height_um(self.volume_nl, area_um2)
 
 

@@ -235,8 +235,10 @@ class SceneBuilders:
             kw["twist"] = TwistGrid(**doc["twist"])
         if "effects" in doc:
             kw["effects"] = Effects(**doc["effects"])
+        # Without a volume the scene derives one from the chip (simulator.liquid.default_volume_nl).
+        kw["liquid"] = Liquid(volume_nl=None)
         if "liquid" in doc:
-            liq = dict(doc["liquid"])
+            liq = {"volume_nl": None} | dict(doc["liquid"])
             if "surface_tension_mN_m" in liq:
                 where = "[liquid] surface_tension_mN_m"
                 liq["surface_tension_N_m"] = (

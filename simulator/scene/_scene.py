@@ -37,7 +37,7 @@ TOML keys (all optional except ``pattern`` and one of ``chip`` / ``chip_size_um`
 
     [liquid]                        # for the dynamic methods
     viscosity_mPa_s = 1.0
-    volume_nl = 20
+    volume_nl = 20                  # default: a film of 5 % of the chip's smallest side
     # chip_thickness_um = 50, chip_density_kg_m3 = 1200, damping_calibration = 600 (top level; see materials.DAMPING_CALIBRATION)
 
     [topography]                    # a protruding pad: the overflow check (simulator.liquid.Topography)
@@ -135,6 +135,13 @@ class Scene(SceneBuilders):
     def __post_init__(self) -> None:
         self.pattern.require_nonempty("pattern")
         self.chip.require_nonempty("chip", "--invert-chip")
+        if self.liquid.volume_nl is None:  # no volume given: derived from the chip
+            from simulator.liquid import default_volume_nl
+
+            v = default_volume_nl(self.chip.area_um2, self.chip_min_side_um)
+            object.__setattr__(
+                self, "liquid", replace(self.liquid, volume_nl=v, volume_derived=True)
+            )
         require(self.dtype in DTYPES, f"dtype must be one of {DTYPES}, got {self.dtype!r}")
         if self.window_um is not None:
             positive("window_um", self.window_um, "um")

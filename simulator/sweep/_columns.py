@@ -137,6 +137,7 @@ def _metric_columns(
     outcomes = ("aligned", "plateau", "local_minimum", "no_contact", "max_steps")
     cols = [f"global_minimum_{k}" for k in ("x_um", "y_um", "twist_deg", "energy_J")]
     cols += ["global_minimum_overlap_um2", "global_minimum_refined", "restoring_force_bias_um"]
+    cols += ["error_limit_um"]
     cols += _product(
         ("restoring_force",), ("plus_x", "minus_x", "plus_y", "minus_y"), ("x_N", "y_N")
     )
