@@ -427,7 +427,7 @@ def _model_note(summary: dict) -> str:
         return "Overlap model (energy = &Delta;&gamma; &times; overlap area)."
     if summary.get("pinned"):
         return (
-            f"Finite meniscus, height meniscus_height_um = {h:.4g} um, contact lines pinned at the pad edges (the overlap "
+            f"Finite meniscus, height {h:.4g} um, contact lines pinned at the pad edges (the overlap "
             "energy with every cusp rounded over h; dashed in the force plot: the overlap model)."
         )
     r = summary.get("contact_line_reach_um")
@@ -437,7 +437,7 @@ def _model_note(summary: dict) -> str:
         else ""
     )
     return (
-        f"Finite meniscus, height meniscus_height_um = {h:.4g} um, free contact lines{reach} (the overlap energy of the "
+        f"Finite meniscus, height {h:.4g} um, free contact lines{reach} (the overlap energy of the "
         "liquid's footprint: flat where the lines stand on one surface, rising where a pad edge holds a line; dashed in the "
         "force plot: the overlap model)."
     )
