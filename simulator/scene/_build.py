@@ -64,6 +64,7 @@ class SceneBuilders:
         invert: bool = False,
         invert_chip: bool = False,
         channel: str | None = None,
+        check_scale: bool = True,
         **kwargs: Any,
     ) -> Self:
         """Scene from a pattern (Mask, PNG or layout path) and a chip (Mask, PNG/layout path, size or layout layer).
@@ -78,7 +79,8 @@ class SceneBuilders:
         that looks inverted (:func:`patterns.polarity.polarity_warning`) is noted in the scene's
         ``input_warnings``. A chip and a pattern of implausible scales for each other (a size
         off by about 1000, a chip of fewer than 3 px) are refused before the chip's raster is
-        made (:func:`simulator.scene._plausible.check_scales`).
+        made (:func:`simulator.scene._plausible.check_scales`); ``check_scale=False`` skips that
+        for a stand-in chip (a probe that only reads the pattern).
         ``resolution_um`` is the pixel size to simulate at (default: the pattern's):
         the pattern is resampled to it (:func:`resample_to_scale`). A chip PNG at
         another scale is resampled to the simulation scale the same way.
@@ -177,7 +179,8 @@ class SceneBuilders:
         if chip_size_um is not None:
             w, h = _chip_size(chip_size_um)
             w, h = positive("chip width", w, "um"), positive("chip height", h, "um")
-            check_scales(pattern, (w, h), s, "size")  # before the chip's raster is made
+            if check_scale:  # before the chip's raster is made
+                check_scales(pattern, (w, h), s, "size")
             chip = mask_from_geometry(
                 box(-w / 2, -h / 2, w / 2, h / 2),
                 s,
@@ -195,7 +198,7 @@ class SceneBuilders:
                 )
             if layout_chip is not None:
                 chip_from = "layout"
-            if np.any(chip.data > 0):  # an empty chip is refused as such (Scene)
+            if check_scale and np.any(chip.data > 0):  # an empty chip is refused as such (Scene)
                 check_scales(pattern, footprint_um(chip), s, chip_from)
             chip = resample_to_scale(chip, s, budget)
         kwargs["input_warnings"] = tuple(n for n in notes if n)
@@ -213,7 +216,9 @@ class SceneBuilders:
         return cls.from_dict(read_scene_file(path), base=Path(path).parent, **overrides)
 
     @classmethod
-    def from_dict(cls, doc: dict, base: Path = Path("."), **overrides: Any) -> Self:
+    def from_dict(
+        cls, doc: dict, base: Path = Path("."), check_scale: bool = True, **overrides: Any
+    ) -> Self:
         known = {
             "pattern",
             "chip",
@@ -239,7 +244,7 @@ class SceneBuilders:
         require(not unknown, f"unknown scene keys {sorted(unknown)}; allowed: {sorted(known)}")
         require("pattern" in doc, "scene needs a 'pattern' (PNG or layout path)")
         try:
-            scene = cls._from_dict(doc, base, overrides)
+            scene = cls._from_dict(doc, base, overrides | {"check_scale": check_scale})
         except TypeError as err:  # an unknown key inside a TOML table
             raise InputError(f"scene: {err}") from None
         explicit = {
@@ -247,7 +252,7 @@ class SceneBuilders:
             "twist_step_deg": (doc.get("twist") or {}).get("step_deg"),
             "dtype": doc.get("dtype"),
         }
-        return scene.with_preset(doc.get("accuracy"), explicit)
+        return scene.with_preset(doc.get("accuracy"), explicit, check_scale=check_scale)
 
     @classmethod
     def _from_dict(cls, doc: dict, base: Path, overrides: dict) -> Self:
@@ -304,7 +309,7 @@ class SceneBuilders:
         ):
             if key in doc:
                 kw[key] = doc[key]
-        kw.update({k: v for k, v in overrides.items() if v is not None})
+        kw.update({k: v for k, v in overrides.items() if v is not None})  # check_scale among them
         chip = doc.get("chip")
         from patterns.layout import LayoutSelection
 

@@ -30,7 +30,8 @@ MIN_CHIP_PX = 3.0
 SLIP_SPREAD = 4.0
 #: The chip's smaller side above this many times the pattern image's larger side: a warning.
 LARGE_CHIP_RATIO = 2.0
-#: Sizes (um) beyond which a chip is implausible: below, a size typed in mm; above, in nm.
+#: Sizes (um) beyond which a chip is implausible: below, a size typed in mm; from the second
+#: (100 mm) on, in nm.
 CHIP_PLAUSIBLE_UM = (5.0, 1e5)
 
 
@@ -71,7 +72,7 @@ def check_scales(
     if slip:
         times = "smaller than" if slip < 0 else "larger than"
         what = f"the {c_text} chip is about 1000 times {times} the pattern ({p_side:.4g} um across)"
-        chip_odd = c_side < lo if slip < 0 else c_side > hi
+        chip_odd = c_side < lo if slip < 0 else c_side >= hi
         if chip_odd:
             f = 1000.0 if slip < 0 else 1e-3
             unit = "mm" if slip < 0 else "nm"

@@ -293,12 +293,16 @@ class Scene(SceneBuilders):
             pattern=resample_to_scale(self.pattern, s, b), chip=resample_to_scale(self.chip, s, b)
         )
 
-    def with_preset(self, name: str | None = None, explicit: dict | None = None) -> Scene:
+    def with_preset(
+        self, name: str | None = None, explicit: dict | None = None, check_scale: bool = True
+    ) -> Scene:
         """The scene with the knobs of an accuracy preset (pixel size, twist step, dtype)
         that ``explicit`` does not set (:func:`simulator.scene.apply_preset`; None =
         the default preset). A pattern image is never refined past its own pixels, and its
         smallest feature (outlining the whole image) is measured only when it can change
-        the pixel size (:func:`simulator.scene.feature_sets_pixel`)."""
+        the pixel size (:func:`simulator.scene.feature_sets_pixel`). A coarser pixel must still
+        give the chip 3 px (:func:`simulator.scene._plausible.check_scales`; ``check_scale=False``
+        skips it for a stand-in chip)."""
         from simulator.scene._accuracy import apply_preset, feature_sets_pixel
 
         native = None if self.pattern.geometry is not None else self.pattern.um_per_px
@@ -309,7 +313,7 @@ class Scene(SceneBuilders):
             else None
         )
         knobs = apply_preset(name, explicit, feature_um=feature, native_um_per_px=native)
-        if knobs["um_per_px"] > self.um_per_px:  # a coarser grid must still carry the chip
+        if check_scale and knobs["um_per_px"] > self.um_per_px:  # a coarser grid must carry the chip
             from patterns.mask import footprint_um
             from simulator.scene._plausible import check_scales
 
