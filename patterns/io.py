@@ -64,7 +64,9 @@ CHANNEL_TOLERANCE = 8
 LOSSY_FORMATS = ("JPEG", "MPO", "JPEG2000")
 
 
-def _colour_value(rgb: np.ndarray, alpha: np.ndarray | None, channel: str | None, path: Path) -> np.ndarray:
+def _colour_value(
+    rgb: np.ndarray, alpha: np.ndarray | None, channel: str | None, path: Path
+) -> np.ndarray:
     """8-bit RGB (..., 3) -> value in [0, 1]: the ``channel`` picked, else the luminance of an
     image whose channels agree (pixels with some opacity; InputError otherwise)."""
     if channel is not None and channel != "luminance":

@@ -127,10 +127,13 @@ def test_mode_RGB_uses_luminance(tmp_path):
     assert m.data[0].tolist() == pytest.approx([1.0, 0.0, 0.299, 0.587, 0.114], abs=1e-12)
     assert m.data[0, 0] == 1.0
     for i, name in enumerate(("red", "green", "blue")):  # one channel, exactly
-        assert read_mask(path, um_per_px=1, channel=name).data[0].tolist() == (
-            a[0, :, i] / 255
-        ).tolist()
-    with pytest.raises(InputError, match=r"channels differ \(by up to 255 of 255 levels\).*--channel"):
+        assert (
+            read_mask(path, um_per_px=1, channel=name).data[0].tolist()
+            == (a[0, :, i] / 255).tolist()
+        )
+    with pytest.raises(
+        InputError, match=r"channels differ \(by up to 255 of 255 levels\).*--channel"
+    ):
         read_mask(path, um_per_px=1)  # colours that disagree: refused without a channel
 
 

@@ -62,9 +62,7 @@ def test_chip_size_in_mm_is_refused_before_any_work(run_cli, tmp_path, monkeypat
 
 def test_chip_size_in_nm_is_refused(run_cli, tmp_path, monkeypatch):
     _no_work(monkeypatch)
-    rc, _, err = run_cli(
-        ["energy", "--pattern", FOURPAD, "--chip-size", "730000", "--at", "0,0,0"]
-    )
+    rc, _, err = run_cli(["energy", "--pattern", FOURPAD, "--chip-size", "730000", "--at", "0,0,0"])
     one_line_error(rc, err, "1000 times larger", "in nm?", "--chip-size 730")
 
 

@@ -300,7 +300,9 @@ def assess(
             figures = ["pattern", "landscape", "force", "capture"] + (
                 ["time to align"] if yl.time_s is not None else []
             )
-            wait_line(f"drawing the report's figures ({', '.join(figures)})", FIGURE_S * len(figures))
+            wait_line(
+                f"drawing the report's figures ({', '.join(figures)})", FIGURE_S * len(figures)
+            )
         plot_pattern(scene.pattern, out / "pattern.png")
         plot_landscape(ls, out / "landscape.png", pattern=scene.pattern)
         plot_forces(

@@ -101,9 +101,7 @@ def _usage(design: Design) -> str:
         else f"[{p.flag} {p.unit.upper() or p.kind.upper()}]"
         for p in design.params
     )
-    return (
-        f"%(prog)s [-h] {params} [--um-per-px UM] [--margin UM] -o OUT.png [--force]"
-    )
+    return f"%(prog)s [-h] {params} [--um-per-px UM] [--margin UM] -o OUT.png [--force]"
 
 
 def describe_designs() -> str:

@@ -313,7 +313,8 @@ class Scene(SceneBuilders):
             else None
         )
         knobs = apply_preset(name, explicit, feature_um=feature, native_um_per_px=native)
-        if check_scale and knobs["um_per_px"] > self.um_per_px:  # a coarser grid must carry the chip
+        # a coarser grid must still carry the chip
+        if check_scale and knobs["um_per_px"] > self.um_per_px:
             from patterns.mask import footprint_um
             from simulator.scene._plausible import check_scales
 
