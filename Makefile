@@ -1,14 +1,26 @@
-# Two entry points: `make demo` and `make test`. Both create .venv on first use.
+# Two entry points: `make demo` and `make test`. Both create .venv on first use: the demo
+# installs selfalign and its own dependencies only; the tests add the `test` extra (pytest,
+# hypothesis, ruff, the notebook runner and the `docs` extra's mkdocs tool chain), `make docs`
+# the `docs` extra alone.
 PY ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: demo test docs lint library bench validate validate-pinned validate-defects validate-fourpad clean
+.PHONY: demo test docs serve lint library bench validate validate-pinned validate-defects validate-fourpad clean
 
 $(BIN)/selfalign: pyproject.toml
 	$(PY) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
+	$(BIN)/pip install --quiet -e .
+	@touch $@
+
+# Stamps of the extras installed on top (re-installed when pyproject.toml changes).
+$(VENV)/.extra-test: $(VENV)/.extra-test
 	$(BIN)/pip install --quiet -e '.[test]'
+	@touch $@
+
+$(VENV)/.extra-docs: $(BIN)/selfalign
+	$(BIN)/pip install --quiet -e '.[docs]'
 	@touch $@
 
 demo: $(BIN)/selfalign
@@ -26,16 +38,21 @@ MKDOCS = NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict
 PYTEST_WORKERS ?= 2
 HYPOTHESIS_PROFILE ?= ci
 
-test: $(BIN)/selfalign
+test: $(VENV)/.extra-test
 	SELFALIGN_HYPOTHESIS_PROFILE=$(HYPOTHESIS_PROFILE) $(BIN)/python -m pytest -q -n $(PYTEST_WORKERS) --durations=25 tests
 	$(BIN)/python -m pytest -q --nbmake notebooks
 	d="$$(mktemp -d)" && $(MKDOCS) --site-dir "$$d" && rm -rf "$$d"
 
-docs: $(BIN)/selfalign
+docs: $(VENV)/.extra-docs
 	$(MKDOCS) --site-dir site
 
+# The manual served live at http://127.0.0.1:8000 (rebuilt on every change); a built site/ is
+# read served too (python3 -m http.server -d site 8000): opened from disk its links lead to folders.
+serve: $(VENV)/.extra-docs
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs serve
+
 # The lint tools (the `dev` extra: pyright, the SciPy stubs, pre-commit) on top of the test environment.
-$(BIN)/pyright: $(BIN)/selfalign
+$(BIN)/pyright: $(VENV)/.extra-test
 	$(BIN)/pip install --quiet -e '.[dev]'
 	@touch $@
 

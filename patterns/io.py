@@ -3,8 +3,15 @@
 Reading (:func:`read_mask`):
 
 * White is wettable (1.0), black is substrate (0.0); grey levels are kept as values in
-  [0, 1]: 8-bit / 255, 16-bit / 65535, 1-bit as 0 or 1. Colour images use the luminance
-  ``(299 R + 587 G + 114 B) / 1000`` (ITU-R 601, as Pillow's ``convert('L')``).
+  [0, 1]: 8-bit / 255, 16-bit / 65535, 1-bit as 0 or 1. A colour image is read when its
+  channels agree (a grey drawing stored as RGB, within :data:`CHANNEL_TOLERANCE` levels):
+  as its luminance ``(299 R + 587 G + 114 B) / 1000`` (ITU-R 601, as Pillow's
+  ``convert('L')``). One whose channels differ (a red-on-white drawing) is refused unless
+  ``channel`` picks what is read: ``"red"``, ``"green"``, ``"blue"`` or ``"luminance"``
+  (``--channel`` on the command line).
+* A lossy format (JPEG) is read as it is, and ``Mask.params["lossy_format"]``
+  names it: its compression speckle is then named as the cause of a "smallest feature"
+  below a few pixels (:func:`simulator.scene.feature_warning`).
 * Transparency (an alpha channel, or a tRNS chunk in palette/grey/RGB images) multiplies the
   value: a transparent pixel is never wettable. ``invert=True`` takes ``1 - value`` *before*
   the alpha is applied, so inverting a drawing on a transparent background keeps the
@@ -40,13 +47,42 @@ from patterns.metadata import parse_png_params
 from patterns.outputs import atomic_output
 from patterns.resources import price_image
 
-__all__ = ["TEXT_KEY", "read_mask", "write_mask"]
+__all__ = ["CHANNELS", "TEXT_KEY", "read_mask", "write_mask"]
 
 #: Key of the PNG text chunk holding the generating parameters as JSON.
 TEXT_KEY = "selfalign"
 
 _UM_PER_M = 1e6
 _SIXTEEN_BIT = {"I;16", "I;16L", "I;16B", "I;16N", "I"}
+
+#: What ``channel`` may pick from a colour image (:func:`read_mask`, ``--channel``).
+CHANNELS = ("red", "green", "blue", "luminance")
+#: Largest difference (8-bit levels) between the channels of a pixel for a colour image to
+#: count as grey (JPEG's chroma rounding of a grey drawing stays within a few levels).
+CHANNEL_TOLERANCE = 8
+#: Pillow formats whose compression changes the pixels.
+LOSSY_FORMATS = ("JPEG", "MPO", "JPEG2000")
+
+
+def _colour_value(
+    rgb: np.ndarray, alpha: np.ndarray | None, channel: str | None, path: Path
+) -> np.ndarray:
+    """8-bit RGB (..., 3) -> value in [0, 1]: the ``channel`` picked, else the luminance of an
+    image whose channels agree (pixels with some opacity; InputError otherwise)."""
+    if channel is not None and channel != "luminance":
+        return rgb[..., CHANNELS.index(channel)] / 255.0
+    if channel is None:
+        spread = rgb.max(axis=-1).astype(np.int16) - rgb.min(axis=-1)
+        if alpha is not None:
+            spread = spread[alpha > 0]
+        worst = int(spread.max()) if spread.size else 0
+        if worst > CHANNEL_TOLERANCE:
+            raise InputError(
+                f"{path}: a colour image whose channels differ (by up to {worst} of 255 levels), so "
+                "its grey value is ambiguous; give --channel red, green or blue (the channel whose bright "
+                "part is the pad) or --channel luminance, or save the drawing as greyscale"
+            )
+    return _luminance(rgb)
 
 
 def _luminance(rgb: np.ndarray) -> np.ndarray:
@@ -55,8 +91,11 @@ def _luminance(rgb: np.ndarray) -> np.ndarray:
     return (299 * r + 587 * g + 114 * b) / (1000.0 * 255.0)
 
 
-def _values(im: Image.Image, path: Path) -> tuple[np.ndarray, np.ndarray | None]:
-    """Image -> (grey value in [0, 1], alpha in [0, 1] or None)."""
+def _values(
+    im: Image.Image, path: Path, channel: str | None = None
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """Image -> (grey value in [0, 1], alpha in [0, 1] or None); a colour image through
+    :func:`_colour_value` (``channel``)."""
     mode, trns = im.mode, im.info.get("transparency")
     if mode in _SIXTEEN_BIT:
         raw = np.asarray(im)  # uint16 or int32 as decoded: no wider copy
@@ -84,14 +123,15 @@ def _values(im: Image.Image, path: Path) -> tuple[np.ndarray, np.ndarray | None]
         la = np.asarray(im.convert("LA"), dtype=np.float64) / 255.0
         return la[..., 0], la[..., 1]
     if mode == "RGB" and trns is None:
-        return _luminance(np.asarray(im)), None
+        return _colour_value(np.asarray(im), None, channel, path), None
     # Palette, RGBA, RGB with tRNS, CMYK, YCbCr, LAB, HSV, ...: go through RGBA.
     with warnings.catch_warnings():
         warnings.simplefilter(
             "ignore", UserWarning
         )  # Pillow's note on palette transparency in bytes
         rgba = np.asarray(im.convert("RGBA"))
-    return _luminance(rgba[..., :3]), rgba[..., 3] / 255.0
+    alpha = rgba[..., 3] / 255.0
+    return _colour_value(rgba[..., :3], alpha, channel, path), alpha
 
 
 def _scale_from_file(
@@ -153,6 +193,7 @@ def read_mask(
     default_um_per_px: float | None = None,
     scale_flag: str = "--um-per-px",
     missing_hint: str | None = None,
+    channel: str | None = None,
 ) -> Mask:
     """Read an image file as a :class:`~patterns.mask.Mask` (see the module notes for the rules).
 
@@ -165,6 +206,8 @@ def read_mask(
         missing_hint: what the error for a file without a scale tells the user to pass
             (default ``scale_flag``).
         invert: take ``1 - value`` (for images where black marks the pad).
+        channel: what to read from a colour image whose channels differ (:data:`CHANNELS`);
+            None: such an image is an InputError (a grey one is read as its luminance).
         max_mpx: largest image in megapixels (default
             :data:`patterns.resources.DEFAULT_MAX_IMAGE_MPX`); checked from the header,
             before the pixels are decoded.
@@ -178,6 +221,8 @@ def read_mask(
         um_per_px = positive("--um-per-px", um_per_px, "um per px")
     if default_um_per_px is not None:
         default_um_per_px = positive(scale_flag, default_um_per_px, "um per px")
+    if channel is not None and channel not in CHANNELS:
+        raise InputError(f"channel must be one of {', '.join(CHANNELS)}, got {channel!r}")
     require_regular_file(path, "image")
     try:
         with warnings.catch_warnings():
@@ -187,8 +232,9 @@ def read_mask(
         with im:
             price_image(im.size[0], im.size[1], path, max_mpx, budget_mb)
             im.load()
-            value, alpha = _values(im, path)
+            value, alpha = _values(im, path, channel)
             info = dict(im.info)
+            lossy = im.format if im.format in LOSSY_FORMATS else None
     except InputError:
         raise
     except Image.DecompressionBombError as err:
@@ -209,6 +255,8 @@ def read_mask(
         value = 1.0 - value
     if alpha is not None:
         value = value * alpha
+    if lossy:
+        params = {**params, "lossy_format": lossy}
     return Mask(data=value, um_per_px=scale, params=params)
 
 

@@ -64,6 +64,50 @@ class OneLineParser(argparse.ArgumentParser):
     def error(self, message: str):  # type: ignore[override]
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
+    def parse_args(self, args=None, namespace=None):  # type: ignore[override]
+        """As argparse's, but an unknown option is said by the subcommand it was given to,
+        with the nearest of that subcommand's options (``did you mean --chip-size?``) and a
+        pointer at the subcommand's ``--help``."""
+        namespace, extras = self.parse_known_args(args, namespace)
+        if extras:
+            sub = self._subcommand(namespace)
+            if sub is None:
+                self.error(f"unrecognized arguments: {' '.join(extras)}")
+            sub.error(unknown_options_message(sub, extras))
+        return namespace
+
+    def _subcommand(self, namespace) -> argparse.ArgumentParser | None:
+        """The parser of the subcommand ``namespace`` ran (its deepest one: ``pattern four-pad``)."""
+        parser: argparse.ArgumentParser | None = None
+        actions = self._subparsers._group_actions if self._subparsers else []
+        for action in actions:
+            if isinstance(action, argparse._SubParsersAction):
+                parser = action.choices.get(getattr(namespace, action.dest, None) or "")
+        if parser is None:
+            return None
+        for action in parser._actions:  # a subcommand of its own (pattern DESIGN)
+            if isinstance(action, argparse._SubParsersAction):
+                deeper = action.choices.get(getattr(namespace, action.dest, None) or "")
+                if deeper is not None:
+                    return deeper
+        return parser
+
+
+def unknown_options_message(parser: argparse.ArgumentParser, extras: list[str]) -> str:
+    """``unrecognized arguments: ...`` and, for a misspelled option, the nearest of
+    ``parser``'s options (difflib, as the scene files' keys)."""
+    import difflib
+
+    options = [o for o in parser._option_string_actions if o.startswith("--")]
+    hints = []
+    for word in extras:
+        if word.startswith("-") and not NEGATIVE_VALUE.match(word):
+            name = word.split("=", 1)[0]
+            near = difflib.get_close_matches(name, options, n=1, cutoff=0.6)
+            if near:
+                hints.append(f"did you mean {near[0]}?")
+    return f"unrecognized arguments: {' '.join(extras)}" + (f"; {' '.join(hints)}" if hints else "")
+
 
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     """The parser of every subcommand, or of ``command`` alone when it names one: a command

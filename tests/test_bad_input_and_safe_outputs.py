@@ -313,7 +313,8 @@ MEMORY_KNOBS = {
     "png_13000_px_rgba": "--max-image-mpx",
     "memory_budget_above_machine": "machine's memory",
     "phys_2_31_px_per_m": "coarser scale",
-    "chip_size_1e5": "coarser scale",
+    # 100 mm on a 200 um pad: 500 times the pattern, refused as a unit slip before it is priced
+    "chip_size_1e5": "a chip size in nm? --chip-size takes um: give --chip-size 100",
     "chip_size_1e300": "coarser scale",
     "twist_step_1e-300": "--twist-step",
     "max_steps_1e12": "32-bit",
@@ -478,6 +479,13 @@ def test_evaluate_1x1_px_pattern(tmp_path, run_cli):
     p = tmp_path / "one.png"
     Image.fromarray(np.array([[255]], np.uint8)).save(p, dpi=(0.0254 * 1e6,) * 2)  # 1 um/px
     rc, out, err = run_cli(["evaluate", p, "--out", tmp_path / "ev", "--quiet"])
+    # the default chip (the pattern's bounding box) is 1 px: refused as a chip under 3 px
+    # (issue 39), not a crash; at a third of a micrometre per pixel it runs
+    one_line_error(rc, err, "spans 1 px at 1 um/px", "--resolution")
+    assert not (tmp_path / "ev").exists()
+    rc, out, err = run_cli(
+        ["evaluate", p, "--out", tmp_path / "ev", "--quiet", "--resolution", "0.25"]
+    )
     assert rc == 0, err
     summary = json.loads((tmp_path / "ev" / "summary.json").read_text())
     assert summary["global_minimum"]["overlap_um2"] == pytest.approx(1.0, abs=1e-6)

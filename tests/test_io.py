@@ -122,9 +122,25 @@ def test_mode_I16_scaled_by_65535(tmp_path):
 
 def test_mode_RGB_uses_luminance(tmp_path):
     a = np.array([[[255, 255, 255], [0, 0, 0], [255, 0, 0], [0, 255, 0], [0, 0, 255]]], np.uint8)
-    m = read_mask(save(tmp_path, Image.fromarray(a)), um_per_px=1)
+    path = save(tmp_path, Image.fromarray(a))
+    m = read_mask(path, um_per_px=1, channel="luminance")
     assert m.data[0].tolist() == pytest.approx([1.0, 0.0, 0.299, 0.587, 0.114], abs=1e-12)
     assert m.data[0, 0] == 1.0
+    for i, name in enumerate(("red", "green", "blue")):  # one channel, exactly
+        assert (
+            read_mask(path, um_per_px=1, channel=name).data[0].tolist()
+            == (a[0, :, i] / 255).tolist()
+        )
+    with pytest.raises(
+        InputError, match=r"channels differ \(by up to 255 of 255 levels\).*--channel"
+    ):
+        read_mask(path, um_per_px=1)  # colours that disagree: refused without a channel
+
+
+def test_grey_stored_as_RGB_reads_without_a_channel(tmp_path):
+    a = np.array([[[255, 255, 255], [0, 0, 0], [128, 128, 128]]], np.uint8)
+    m = read_mask(save(tmp_path, Image.fromarray(a)), um_per_px=1)
+    assert m.data[0].tolist() == pytest.approx([1.0, 0.0, 128 / 255], abs=1e-12)
 
 
 def test_mode_RGBA_is_luminance_times_alpha(tmp_path):
@@ -148,7 +164,7 @@ def test_mode_P_palette(tmp_path):
     path = save(tmp_path, im)
     with Image.open(path) as check:
         assert check.mode == "P"
-    assert read_mask(path, um_per_px=1).data[0].tolist() == pytest.approx(
+    assert read_mask(path, um_per_px=1, channel="luminance").data[0].tolist() == pytest.approx(
         [0.0, 1.0, 0.299], abs=1e-12
     )
 

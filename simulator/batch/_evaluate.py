@@ -48,6 +48,7 @@ from simulator.core import (
     AUTO_LANDSCAPE_MB,
     METHODS,
     require_finite,
+    wait_line,
 )
 from simulator.landscape import build_landscape, estimate_bytes, require_landscape_fits
 from simulator.physics import regime_warning
@@ -64,6 +65,9 @@ from simulator.scene import Scene
 NOISE_FRACTION, NOISE_TWIST_DEG = 0.10, 2.0
 YIELD_STARTS = 2000
 GRID_CELLS = 25
+#: Seconds one report figure takes to draw (matplotlib; 0.9 s each measured for the four of
+#: the 730 um four-pad on a 2-core machine): the figures' waiting line is priced with it.
+FIGURE_S = 1.0
 
 
 #: The coarsest whole multiple of its pixel size :func:`auto_resolution` takes a scene to.
@@ -361,6 +365,13 @@ def assess(
         )
     if pictures is not None:
         out = pictures
+        if not quiet:
+            figures = ["pattern", "landscape", "force", "capture"] + (
+                ["time to align"] if yl.time_s is not None else []
+            )
+            wait_line(
+                f"drawing the report's figures ({', '.join(figures)})", FIGURE_S * len(figures)
+            )
         plot_pattern(scene.pattern, out / "pattern.png")
         plot_landscape(ls, out / "landscape.png", pattern=scene.pattern)
         plot_forces(
@@ -539,7 +550,7 @@ def _model_note(summary: dict) -> str:
         return "Overlap model (energy = &Delta;&gamma; &times; overlap area)."
     if summary.get("pinned"):
         return (
-            f"Finite meniscus, height meniscus_height_um = {h:.4g} um, contact lines pinned at the pad edges (the overlap "
+            f"Finite meniscus, height {h:.4g} um, contact lines pinned at the pad edges (the overlap "
             "energy with every cusp rounded over h; dashed in the force plot: the overlap model)."
         )
     r = summary.get("contact_line_reach_um")
@@ -549,7 +560,7 @@ def _model_note(summary: dict) -> str:
         else ""
     )
     return (
-        f"Finite meniscus, height meniscus_height_um = {h:.4g} um, free contact lines{reach} (the overlap energy of the "
+        f"Finite meniscus, height {h:.4g} um, free contact lines{reach} (the overlap energy of the "
         "liquid's footprint: flat where the lines stand on one surface, rising where a pad edge holds a line; dashed in the "
         "force plot: the overlap model)."
     )

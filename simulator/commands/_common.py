@@ -104,6 +104,15 @@ def add_scene_args(p: argparse.ArgumentParser) -> None:
         "(transparent pixels stay non-wettable)",
     )
     g.add_argument("--invert-chip", action="store_true", help="the same for the chip image")
+    from patterns.io import CHANNELS
+
+    g.add_argument(
+        "--channel",
+        choices=CHANNELS,
+        help="what to read from a colour pattern or chip image whose channels differ: one "
+        "channel (its bright part is wettable) or the luminance (without it such an image is "
+        "refused; a grey image stored as colour is read as it is)",
+    )
     y = p.add_argument_group("layout patterns (.gds, .oas, .dxf)")
     y.add_argument(
         "--layer",
@@ -352,6 +361,7 @@ def scene_from_args(
         (None, "override_scale"): True if getattr(args, "override_scale", False) else None,
         (None, "invert"): True if getattr(args, "invert", False) else None,
         (None, "invert_chip"): True if getattr(args, "invert_chip", False) else None,
+        (None, "channel"): getattr(args, "channel", None),
         (None, "resolution_um"): args.resolution,
         (None, "window_um"): args.window,
         (None, "dtype"): args.dtype,
@@ -426,10 +436,11 @@ def accuracy_check(scene: Scene) -> None:
     """The scene's accuracy warning on stderr, when its pixel size leaves the pattern's
     smallest feature under 3 px (:meth:`Scene.accuracy_warning`). Measuring the feature
     outlines the whole pattern (0.3 s for a 16-megapixel image), so commands that price
-    their run call this once the run is priced: a refusal does not wait for it."""
-    warning = scene.accuracy_warning()
-    if warning:
-        print(f"warning: {warning}", file=sys.stderr)
+    their run call this once the run is priced: a refusal does not wait for it. A chip much
+    larger than the pattern's image (:meth:`Scene.scale_warning`) is warned of here too."""
+    for warning in (*scene.input_warnings, scene.scale_warning(), scene.accuracy_warning()):
+        if warning:
+            print(f"warning: {warning}", file=sys.stderr)
 
 
 def liquid_checks(

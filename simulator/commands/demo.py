@@ -140,7 +140,7 @@ def write_summary(
         f"{stuck.outcome} at ({s[0] + 0.0:.2f} um, {s[1] + 0.0:.2f} um, {s[2] + 0.0:.2f} deg) after {stuck.steps} steps",
         f"run time     {seconds:.1f} s",
         "",
-        "files        " + ", ".join(p.name for p in [*files, path]),
+        "files        " + ", ".join(p.relative_to(path.parent).as_posix() for p in [*files, path]),
         "",
     ]
     with atomic_output(path) as tmp:

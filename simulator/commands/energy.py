@@ -55,6 +55,11 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="write the poses (kind 'pose') and the curve samples (kind 'curve') as CSV: kind, x_um, "
         "y_um, twist_deg, overlap_um2, energy_J, force_x_N, force_y_N, torque_Nm",
     )
+    p.add_argument(
+        "--quiet",
+        action="store_true",
+        help="print only the results (no waiting messages; the warnings stay)",
+    )
     add_force_arg(p)
     p.set_defaults(func=run)
 

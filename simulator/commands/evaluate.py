@@ -138,8 +138,11 @@ def run(args: argparse.Namespace) -> int:
             f"{r['substrate']:.3g} um beyond the chip on the substrate, {r['pad']:.3g} um on a pad)"
         )
     print(f"max bias: +x {b['+x']:g} um, -x {b['-x']:g} um, +y {b['+y']:g} um, -y {b['-y']:g} um")
+    sg = yl["placement_sigma"]
     print(
-        f"capture fraction {100 * cap['fraction']:.1f} % of {cap['n']} grid starts; yield {100 * yl['fraction']:.1f} % under placement noise ({args.method})"
+        f"capture fraction {100 * cap['fraction']:.1f} % of {cap['n']} grid starts; yield {100 * yl['fraction']:.1f} % "
+        f"of {yl['n']} starts under placement noise sigma {sg['x_um']:g} um, {sg['y_um']:g} um, {sg['twist_deg']:g} deg "
+        f"({args.method})"
     )
     for name, r in (summary.get("protocols") or {}).items():
         if isinstance(r, dict):

@@ -35,7 +35,9 @@ class _OneLineParser(OneLineParser):
     def parse_known_args(self, args=None, namespace=None):  # type: ignore[no-untyped-def]
         namespace, extras = super().parse_known_args(args, namespace)
         if extras:  # reject here, before the top-level parser prints its usage block
-            self.error(f"unrecognized arguments: {' '.join(extras)}")
+            from simulator.cli import unknown_options_message
+
+            self.error(unknown_options_message(self, extras))
         return namespace, extras
 
 
@@ -52,7 +54,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     designs = parser.add_subparsers(dest="design", metavar="DESIGN", parser_class=_OneLineParser)
     for design in DESIGNS.values():
         sub = designs.add_parser(
-            design.name, help=design.description, description=design.description
+            design.name,
+            help=design.description,
+            description=design.description,
+            usage=_usage(design),
         )
         for p in design.params:
             sub.add_argument(
@@ -84,6 +89,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         )
         sub.set_defaults(func=run)
     parser.set_defaults(func=run, design=None)
+
+
+def _usage(design: Design) -> str:
+    """The usage line of ``pattern DESIGN``: the required parameters and ``-o`` without the
+    brackets argparse puts round every option (this command checks them itself, to name the
+    parameter's meaning and unit when one is missing)."""
+    params = " ".join(
+        f"{p.flag} {p.unit.upper() or p.kind.upper()}"
+        if p.required
+        else f"[{p.flag} {p.unit.upper() or p.kind.upper()}]"
+        for p in design.params
+    )
+    return f"%(prog)s [-h] {params} [--um-per-px UM] [--margin UM] -o OUT.png [--force]"
 
 
 def describe_designs() -> str:

@@ -311,7 +311,13 @@ def _key_numbers(summary: dict | None) -> dict | None:
         "yield_outcomes": summary["yield"]["outcomes"],
         "max_bias_min_um": min(b.values()),
         "global_minimum": {
-            k: summary["global_minimum"][k] for k in ("x_um", "y_um", "twist_deg", "energy_J")
+            k: summary["global_minimum"][k]
+            for k in ("x_um", "y_um", "twist_deg", "energy_J", "refined")
+            if k in summary["global_minimum"]
+        },
+        "grid": {  # the pose grid's steps: the report shows the minimum to them
+            "um": summary["settings"]["um_per_px"],
+            "twist_deg": summary["settings"].get("twist_step_deg"),
         },
     }
     if summary.get("stiffness"):
@@ -365,6 +371,26 @@ def _fmt(v, unit: str = "") -> str:
     return f"{v:.4g} {unit}".strip()
 
 
+def _pose_text(numbers: dict) -> str:
+    """The global minimum as ``(x, y, twist)``, to the pose grid's steps (``grid``) when it is a
+    grid pose, to 0.1 µm and 0.1° when refined below the grid (as ``evaluate`` prints it): a
+    baseline's minimum on the centre reads (0, 0, 0), not the refinement's round-off
+    (4.9e-08, 6.5e-08, -3.2e-07)."""
+    g = numbers["global_minimum"]
+    grid = numbers.get("grid") or {}
+    refined = g.get("refined", False)
+    steps = (
+        (0.1, 0.1, 0.1)
+        if refined or not grid
+        else (grid["um"], grid["um"], grid.get("twist_deg") or 0.1)
+    )
+    vals = (
+        round(round(v / d) * d, 6) + 0.0
+        for v, d in zip((g["x_um"], g["y_um"], g["twist_deg"]), steps, strict=True)
+    )
+    return "({:g}, {:g}, {:g})".format(*vals)
+
+
 def _rows(doc: dict) -> str:
     e = doc["evaluation"]
     o = doc["objective"]
@@ -389,8 +415,8 @@ def _rows(doc: dict) -> str:
             ),
             (
                 "global minimum (x µm, y µm, twist °)",
-                "({x_um:.4g}, {y_um:.4g}, {twist_deg:.4g})".format(**b["global_minimum"]),
-                "({x_um:.4g}, {y_um:.4g}, {twist_deg:.4g})".format(**a["global_minimum"]),
+                _pose_text(b),
+                _pose_text(a),
             ),
         ]
         if "stiffness" in a and "stiffness" in b:

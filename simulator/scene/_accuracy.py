@@ -423,13 +423,22 @@ def feature_warning(
 
     Returns None when the scale resolves it. The warning names the feature size, its
     width in pixels and the pixel size that would resolve it (feature / min_px, rounded
-    down to 1, 2, 2.5 or 5 x 10^k), as the CLI's ``--resolution`` flag.
+    down to 1, 2, 2.5 or 5 x 10^k), as the CLI's ``--resolution`` flag. For an image read
+    from a lossy format (``params["lossy_format"]``, :func:`patterns.io.read_mask`) it names the
+    compression's speckle as the cause instead, with the fix (threshold, save as PNG).
     """
     s = positive("um_per_px", um_per_px, "um per px")
     need = positive("min_px", min_px, "px")
     f = smallest_feature_um(pattern)
     if f >= need * s * (1 - REL_TOL):
         return None
+    lossy = pattern.params.get("lossy_format") if isinstance(pattern, Mask) else None
+    if lossy:  # the compression's speckle, not a feature: a finer grid would only cost
+        return (
+            f"the pattern's smallest feature is {f:.3g} um, only {f / s:.2g} px at {s:g} um/px: "
+            f"the speckle of its lossy {lossy} compression, not a feature of the drawing; threshold "
+            "the image to black and white and save it as PNG (a finer --resolution would not help)"
+        )
     return (
         f"the pattern's smallest feature is {f:.3g} um, only {f / s:.2g} px at {s:g} um/px; "
         f"use --resolution {_nice_down(f / need)} (um/px) or finer to resolve it with {need:g} px"

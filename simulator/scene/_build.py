@@ -22,17 +22,25 @@ import numpy as np
 from shapely.geometry import box
 
 from patterns.errors import InputError, positive, require
-from patterns.mask import Mask
+from patterns.mask import Mask, footprint_um
 from patterns.raster import mask_from_geometry
 from patterns.resources import check_budget_mb, price_raster
 from simulator.liquid import Topography, check_surface_tension_mN_m
 from simulator.physics import Liquid, Materials
 from simulator.scene._parts import Effects, TwistGrid
+from simulator.scene._plausible import check_scales
 
 #: Scene keys that choose what to read from a layout pattern (:class:`patterns.layout.LayoutSelection`).
 LAYOUT_KEYS = ("layer", "cell", "chip_layer", "dxf_units", "max_polygons")
 #: Scene keys on how the pattern and chip images are read (:meth:`Scene.from_inputs`).
-IMAGE_KEYS = ("pattern_um_per_px", "chip_um_per_px", "override_scale", "invert", "invert_chip")
+IMAGE_KEYS = (
+    "pattern_um_per_px",
+    "chip_um_per_px",
+    "override_scale",
+    "invert",
+    "invert_chip",
+    "channel",
+)
 
 
 class SceneBuilders:
@@ -55,6 +63,8 @@ class SceneBuilders:
         override_scale: bool = False,
         invert: bool = False,
         invert_chip: bool = False,
+        channel: str | None = None,
+        check_scale: bool = True,
         **kwargs: Any,
     ) -> Self:
         """Scene from a pattern (Mask, PNG or layout path) and a chip (Mask, PNG/layout path, size or layout layer).
@@ -64,6 +74,13 @@ class SceneBuilders:
         ``um_per_px``). A scale that contradicts a file's stored one is an InputError unless
         ``override_scale``, which makes the given scales replace the stored ones.
         ``invert`` / ``invert_chip`` read the pattern / chip image with black as wettable.
+        ``channel`` picks what a colour image gives (:func:`patterns.io.read_mask`; red, green,
+        blue or luminance): one whose channels differ is refused without it. A pattern image
+        that looks inverted (:func:`patterns.polarity.polarity_warning`) is noted in the scene's
+        ``input_warnings``. A chip and a pattern of implausible scales for each other (a size
+        off by about 1000, a chip of fewer than 3 px) are refused before the chip's raster is
+        made (:func:`simulator.scene._plausible.check_scales`); ``check_scale=False`` skips that
+        for a stand-in chip (a probe that only reads the pattern).
         ``resolution_um`` is the pixel size to simulate at (default: the pattern's):
         the pattern is resampled to it (:func:`resample_to_scale`). A chip PNG at
         another scale is resampled to the simulation scale the same way.
@@ -86,6 +103,9 @@ class SceneBuilders:
         budget = kwargs.get("memory_budget_mb")
         if budget is not None:
             budget = check_budget_mb(budget, "memory_budget_mb")
+        from patterns.polarity import polarity_warning
+
+        notes: list[str | None] = []  # warnings on the images as read (Scene.input_warnings)
         layout = layout if layout is not None else LayoutSelection()
         layout_chip = None
         p_scale, p_flag = (
@@ -102,7 +122,12 @@ class SceneBuilders:
         def image(path, scale, flag, hint, inv):
             if override_scale:
                 return read_mask(
-                    path, um_per_px=scale, invert=inv, max_mpx=max_image_mpx, budget_mb=budget
+                    path,
+                    um_per_px=scale,
+                    invert=inv,
+                    max_mpx=max_image_mpx,
+                    budget_mb=budget,
+                    channel=channel,
                 )
             return read_mask(
                 path,
@@ -112,6 +137,7 @@ class SceneBuilders:
                 invert=inv,
                 max_mpx=max_image_mpx,
                 budget_mb=budget,
+                channel=channel,
             )
 
         if is_layout(pattern):
@@ -132,6 +158,7 @@ class SceneBuilders:
                 pattern = image(
                     pattern, p_scale, p_flag, "--um-per-px (or --pattern-um-per-px)", invert
                 )
+                notes.append(polarity_warning(pattern, invert))
             elif um_per_px is not None:
                 pattern = Mask(pattern.data, um_per_px, pattern.geometry, pattern.params)
         if layout_chip is not None:
@@ -152,6 +179,8 @@ class SceneBuilders:
         if chip_size_um is not None:
             w, h = _chip_size(chip_size_um)
             w, h = positive("chip width", w, "um"), positive("chip height", h, "um")
+            if check_scale:  # before the chip's raster is made
+                check_scales(pattern, (w, h), s, "size")
             chip = mask_from_geometry(
                 box(-w / 2, -h / 2, w / 2, h / 2),
                 s,
@@ -160,13 +189,19 @@ class SceneBuilders:
                 what=f"the {w:g} x {h:g} um chip raster",
             )
         else:
+            chip_from = "layout" if is_layout(chip) else "image"
             if is_layout(chip):
                 chip = layout_chip_mask(chip, s, layout, budget)
             elif not isinstance(chip, Mask):
                 chip = image(
                     chip, c_scale, c_flag, "--chip-um-per-px (or --um-per-px)", invert_chip
                 )
+            if layout_chip is not None:
+                chip_from = "layout"
+            if check_scale and np.any(chip.data > 0):  # an empty chip is refused as such (Scene)
+                check_scales(pattern, footprint_um(chip), s, chip_from)
             chip = resample_to_scale(chip, s, budget)
+        kwargs["input_warnings"] = tuple(n for n in notes if n)
         return cls(pattern=pattern, chip=chip, **kwargs)
 
     @classmethod
@@ -181,7 +216,9 @@ class SceneBuilders:
         return cls.from_dict(read_scene_file(path), base=Path(path).parent, **overrides)
 
     @classmethod
-    def from_dict(cls, doc: dict, base: Path = Path("."), **overrides: Any) -> Self:
+    def from_dict(
+        cls, doc: dict, base: Path = Path("."), check_scale: bool = True, **overrides: Any
+    ) -> Self:
         known = {
             "pattern",
             "chip",
@@ -207,7 +244,7 @@ class SceneBuilders:
         require(not unknown, f"unknown scene keys {sorted(unknown)}; allowed: {sorted(known)}")
         require("pattern" in doc, "scene needs a 'pattern' (PNG or layout path)")
         try:
-            scene = cls._from_dict(doc, base, overrides)
+            scene = cls._from_dict(doc, base, overrides | {"check_scale": check_scale})
         except TypeError as err:  # an unknown key inside a TOML table
             raise InputError(f"scene: {err}") from None
         explicit = {
@@ -215,7 +252,7 @@ class SceneBuilders:
             "twist_step_deg": (doc.get("twist") or {}).get("step_deg"),
             "dtype": doc.get("dtype"),
         }
-        return scene.with_preset(doc.get("accuracy"), explicit)
+        return scene.with_preset(doc.get("accuracy"), explicit, check_scale=check_scale)
 
     @classmethod
     def _from_dict(cls, doc: dict, base: Path, overrides: dict) -> Self:
@@ -274,7 +311,7 @@ class SceneBuilders:
         ):
             if key in doc:
                 kw[key] = doc[key]
-        kw.update({k: v for k, v in overrides.items() if v is not None})
+        kw.update({k: v for k, v in overrides.items() if v is not None})  # check_scale among them
         chip = doc.get("chip")
         from patterns.layout import LayoutSelection
 

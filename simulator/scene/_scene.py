@@ -116,6 +116,8 @@ class Scene(SceneBuilders):
             (see :data:`simulator.physics.DAMPING_CALIBRATION`).
         topography: a protruding pad's edge angle (None: a flat pattern), for the
             overflow check of :func:`simulator.liquid.scene_warnings`.
+        input_warnings: one-line warnings on the images as read (a pattern that looks
+            inverted, :func:`patterns.polarity.polarity_warning`), printed by the commands.
     """
 
     pattern: Mask
@@ -131,6 +133,7 @@ class Scene(SceneBuilders):
     chip_density_kg_m3: float = SU8_DENSITY_KG_M3
     damping_calibration: float = DAMPING_CALIBRATION
     topography: Topography | None = None
+    input_warnings: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         self.pattern.require_nonempty("pattern")
@@ -297,12 +300,16 @@ class Scene(SceneBuilders):
             pattern=resample_to_scale(self.pattern, s, b), chip=resample_to_scale(self.chip, s, b)
         )
 
-    def with_preset(self, name: str | None = None, explicit: dict | None = None) -> Scene:
+    def with_preset(
+        self, name: str | None = None, explicit: dict | None = None, check_scale: bool = True
+    ) -> Scene:
         """The scene with the knobs of an accuracy preset (pixel size, twist step, dtype)
         that ``explicit`` does not set (:func:`simulator.scene.apply_preset`; None =
         the default preset). A pattern image is never refined past its own pixels, and its
         smallest feature (outlining the whole image) is measured only when it can change
-        the pixel size (:func:`simulator.scene.feature_sets_pixel`)."""
+        the pixel size (:func:`simulator.scene.feature_sets_pixel`). A coarser pixel must still
+        give the chip 3 px (:func:`simulator.scene._plausible.check_scales`; ``check_scale=False``
+        skips it for a stand-in chip)."""
         from simulator.scene._accuracy import apply_preset, feature_sets_pixel
 
         native = None if self.pattern.geometry is not None else self.pattern.um_per_px
@@ -313,6 +320,12 @@ class Scene(SceneBuilders):
             else None
         )
         knobs = apply_preset(name, explicit, feature_um=feature, native_um_per_px=native)
+        # a coarser grid must still carry the chip
+        if check_scale and knobs["um_per_px"] > self.um_per_px:
+            from patterns.mask import footprint_um
+            from simulator.scene._plausible import check_scales
+
+            check_scales(self.pattern, footprint_um(self.chip), knobs["um_per_px"], "size")
         scene = self.at_resolution(knobs["um_per_px"])
         if knobs["twist_step_deg"] != scene.twist.step_deg:
             scene = scene.replace(
@@ -330,6 +343,13 @@ class Scene(SceneBuilders):
             return smallest_feature_um(self.pattern)
         except InputError:
             return None
+
+    def scale_warning(self) -> str | None:
+        """A one-line warning when the chip is much larger than the pattern's whole image
+        (:func:`simulator.scene._plausible.scale_warning`), else None."""
+        from simulator.scene._plausible import scale_warning
+
+        return scale_warning(self.pattern, self.chip)
 
     def accuracy_warning(self, pattern: Mask | None = None) -> str | None:
         """A one-line warning when the pixel size leaves the smallest feature of ``pattern``

@@ -39,6 +39,7 @@ import tomllib
 from typing import Any
 
 from patterns.errors import InputError
+from patterns.io import CHANNELS
 from patterns.metadata import (
     check_nesting,
     show_key,
@@ -118,6 +119,7 @@ SCHEMA: dict[str | None, dict[str, Kind]] = {
         "override_scale": BOOL,
         "invert": BOOL,
         "invert_chip": BOOL,
+        "channel": Choice(CHANNELS),
         "resolution_um": number(f"(0, {MAX_UM:g}]", "um per px"),
         "dtype": Choice(DTYPES),
         "window_um": LENGTH_UM,

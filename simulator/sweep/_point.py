@@ -122,7 +122,9 @@ def point_scene(task: dict):
         # evaluate's default chip: the pattern's wettable bounding box (the pattern read once with a stand-in chip)
         from patterns.mask import footprint_um
 
-        probe = Scene.from_dict(doc | {"chip_size_um": [1.0, 1.0]}, base=Path(task["base"]))
+        probe = Scene.from_dict(
+            doc | {"chip_size_um": [1.0, 1.0]}, base=Path(task["base"]), check_scale=False
+        )
         doc["chip_size_um"] = list(footprint_um(probe.pattern))
     auto = "resolution_um" not in doc
     return Scene.from_dict(doc, base=Path(task["base"])), auto
