@@ -176,6 +176,32 @@ class ResultStore:
         require(os.access(out, os.W_OK), f"{flag} {out}: directory is not writable")
 
     def _take_lock(self) -> None:
+        """The lock, then what a killed run left in the directory removed: its atomic writes'
+        temporaries (``.NAME.XXXXXXXX.EXT``, :func:`simulator.design._leftovers.remove_dead_files`),
+        in the directory and in ``ROWS_DIR``. The lock file is removed when the run ends
+        (:meth:`close`), so the lock taken is checked to be the file's that the path names now
+        (a run that ended meanwhile removed it)."""
+        from simulator.design._leftovers import remove_dead_files
+
+        for _ in range(10):
+            self._lock_once()
+            try:
+                same = os.path.samestat(
+                    os.fstat(self._lock.fileno()), os.stat(self.out / self.LOCK)
+                )
+            except OSError:
+                same = False
+            if same:
+                break
+            self._lock.close()
+            self._lock = None
+        else:
+            raise InputError(
+                f"--out {self.out}: another selfalign {self.COMMAND} keeps taking its lock; wait for it to end"
+            )
+        remove_dead_files(self.out, (self.ROWS_DIR,))
+
+    def _lock_once(self) -> None:
         import fcntl
 
         f = open(self.out / self.LOCK, "a+")  # noqa: SIM115 (held until close())
@@ -286,6 +312,8 @@ class ResultStore:
             self._journal.close()
             self._journal = None
         if self._lock is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(self.out / self.LOCK)  # while held: no other run holds this file
             self._lock.close()
             self._lock = None
 
