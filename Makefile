@@ -35,11 +35,20 @@ MKDOCS = NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict
 # (2, CI's cores; `make test PYTEST_WORKERS=auto` takes one per core, `=0` runs serially),
 # the 25 slowest tests listed at the end. Hypothesis draws the `ci` profile's examples
 # (tests/conftest.py; HYPOTHESIS_PROFILE=dev for random ones).
+# Then the numerical landscape and energy tests (marked `fft`) once more under each FFT
+# backend, forced by SELFALIGN_FFT_BACKEND (the first pass takes the machine's default:
+# OpenCV for float32 where it runs in Intel's IPP, else SciPy): a bound tuned to one
+# backend's round-off fails here, not on the next machine.
 PYTEST_WORKERS ?= 2
 HYPOTHESIS_PROFILE ?= ci
+FFT_BACKENDS ?= scipy opencv jax
 
 test: $(VENV)/.extra-test
 	SELFALIGN_HYPOTHESIS_PROFILE=$(HYPOTHESIS_PROFILE) $(BIN)/python -m pytest -q -n $(PYTEST_WORKERS) --durations=25 tests
+	for b in $(FFT_BACKENDS); do \
+		echo "FFT backend $$b:"; \
+		SELFALIGN_FFT_BACKEND=$$b SELFALIGN_HYPOTHESIS_PROFILE=$(HYPOTHESIS_PROFILE) $(BIN)/python -m pytest -q -n $(PYTEST_WORKERS) -m fft tests || exit 1; \
+	done
 	$(BIN)/python -m pytest -q --nbmake notebooks
 	d="$$(mktemp -d)" && $(MKDOCS) --site-dir "$$d" && rm -rf "$$d"
 

@@ -14,6 +14,11 @@ Hypothesis profiles (``SELFALIGN_HYPOTHESIS_PROFILE``, ``ci`` when unset):
 
 Each property test states its own number of examples (``max_examples``), the same in both.
 
+The ``fft`` marker: the numerical tests of the landscape and the energy whose correlations
+take the default backend. ``make test`` runs them once more under each FFT backend
+(``SELFALIGN_FFT_BACKEND=scipy``, ``opencv``, ``jax``; ``pytest -m fft``), so that a bound
+tuned to one backend's round-off fails on this machine, not on the next.
+
 The suite runs in parallel (``pytest -n 2``, pytest-xdist; ``make test`` does) and
 serially (``pytest -p no:xdist``): every test writes only under its own ``tmp_path`` (or a
 ``tempfile`` directory), never into the checkout, and depends on no other test.
@@ -30,6 +35,13 @@ from hypothesis import settings
 settings.register_profile("ci", deadline=None, derandomize=True, database=None, print_blob=True)
 settings.register_profile("dev", deadline=None, print_blob=True)
 settings.load_profile(os.environ.get("SELFALIGN_HYPOTHESIS_PROFILE", "ci"))
+
+
+def pytest_configure(config):
+    config.addinivalue_line(
+        "markers",
+        "fft: a numerical landscape or energy test that make test reruns under each FFT backend",
+    )
 
 
 @pytest.fixture

@@ -24,6 +24,9 @@ from simulator.scene import (
 )
 from simulator.testing import force_N, gradient_descent, gradient_um2, greedy, overlap_um2
 
+#: Rerun by make test under each FFT backend (SELFALIGN_FFT_BACKEND; tests/conftest.py).
+pytestmark = pytest.mark.fft
+
 SQ = square(200)
 
 

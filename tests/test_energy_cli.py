@@ -2,6 +2,7 @@
 
 import json
 
+import numpy as np
 import pytest
 
 from patterns.geometry import four_pad, square
@@ -156,7 +157,11 @@ def test_twist_curve(fourpad_png, tmp_path):
     cur = json.loads(out.read_text())["curve"]
     e = cur["energy_J"]
     assert cur["values_deg"][10] == 0 and e[10] == min(e)  # minimum at zero twist
-    assert e[0] == pytest.approx(e[-1], rel=1e-6)  # even in twist
+    # Even in twist. Each float32 plane is within the landscape's noise floor of the exact
+    # value, 32 eps(float32) max|E| (simulator.landscape: the FFT round-off bound), so
+    # the two ends differ by at most twice that; rel=1e-6 (8 eps) held on one FFT path only.
+    floor = 32 * float(np.finfo(np.float32).eps) * max(abs(v) for v in e)
+    assert abs(e[0] - e[-1]) <= 2 * floor
 
 
 @pytest.mark.parametrize(

@@ -4,6 +4,7 @@ import json
 import re
 
 import imageio.v3 as iio
+import numpy as np
 import pytest
 
 from patterns.geometry import four_pad
@@ -42,7 +43,9 @@ def test_writes_every_file_with_units(report):
     s = json.loads((report / "summary.json").read_text())
     g = s["global_minimum"]
     assert (g["x_um"], g["y_um"], g["twist_deg"]) == (0.0, 0.0, 0.0)
-    assert g["overlap_um2"] == pytest.approx(4 * 90**2, rel=1e-6)
+    # float32 landscape: within its noise floor, 32 eps(float32) of max|E| (the FFT round-off
+    # bound), and max|E| is this overlap's energy (rel=1e-6, 8 eps, was one FFT path's luck)
+    assert g["overlap_um2"] == pytest.approx(4 * 90**2, rel=32 * float(np.finfo(np.float32).eps))
     # Four-pad: the force near alignment is |dgamma| (L - g) (C4) and points back.
     f = s["restoring_force_N"]["+x"][0]
     assert f == pytest.approx(s["settings"]["delta_gamma_N_m"] * 180e-6, rel=1e-3)

@@ -28,6 +28,9 @@ from simulator.landscape import build_landscape, refine_minimum
 from simulator.physics import Liquid
 from simulator.scene import Effects, Scene, TwistGrid
 
+#: Rerun by make test under each FFT backend (SELFALIGN_FFT_BACKEND; tests/conftest.py).
+pytestmark = pytest.mark.fft
+
 ROOT = Path(__file__).resolve().parents[1]
 LIB = ROOT / "patterns" / "library"
 GAMMA = 0.072  # N/m, the Evolver runs' surface tension

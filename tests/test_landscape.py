@@ -27,6 +27,9 @@ from simulator.landscape import (
 from simulator.physics import Materials
 from simulator.scene import Effects, Scene, TwistGrid, chip_symmetry
 
+#: Rerun by make test under each FFT backend (SELFALIGN_FFT_BACKEND; tests/conftest.py).
+pytestmark = pytest.mark.fft
+
 
 def scene(pattern_geom, chip_geom, um_per_px=1.0, margin=10.0, **kw):
     pat = mask_from_geometry(pattern_geom, um_per_px, margin_um=margin)
@@ -484,3 +487,19 @@ def test_window_restricts_translations():
     assert ls.x_um[0] == -50 and ls.x_um[-1] == 50 and not ls.full_reach
     with pytest.raises(InputError, match="outside the landscape"):
         ls.energy_at(80, 0, 0)
+
+
+def test_fft_backend_env_forces_the_default_and_refuses_an_unknown_name(monkeypatch):
+    from simulator.landscape import Correlator, Window
+
+    pat = np.zeros((8, 8))
+    pat[2:6, 2:6] = 1.0
+    win = Window(2, 2, 3, 3)
+    for name in ("scipy", "opencv", "jax"):
+        monkeypatch.setenv("SELFALIGN_FFT_BACKEND", name)
+        assert Correlator(pat, (3, 3), win, "float32").backend == name
+        # an explicit backend= is not overridden
+        assert Correlator(pat, (3, 3), win, "float32", "scipy").backend == "scipy"
+    monkeypatch.setenv("SELFALIGN_FFT_BACKEND", "cufft")
+    with pytest.raises(InputError, match="SELFALIGN_FFT_BACKEND='cufft'.*scipy, opencv, jax"):
+        Correlator(pat, (3, 3), win, "float32")

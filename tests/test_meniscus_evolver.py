@@ -17,6 +17,9 @@ from simulator.landscape import build_landscape
 from simulator.physics import Liquid, Materials
 from simulator.scene import Effects, Scene, TwistGrid
 
+#: Rerun by make test under each FFT backend (SELFALIGN_FFT_BACKEND; tests/conftest.py).
+pytestmark = pytest.mark.fft
+
 CSV = Path(__file__).resolve().parents[1] / "validation" / "evolver_reference.csv"
 with CSV.open() as _f:
     ROWS = list(csv.DictReader(_f))

@@ -225,6 +225,35 @@ def test_killed_run_resumes_to_the_full_table(tmp_path, cluster):
     )  # not run again
 
 
+def test_a_rerun_removes_a_killed_sweeps_leftovers_and_leaves_no_lock(tiny, tmp_path, cluster):
+    import shutil
+
+    d, table = tiny
+    assert not (d / "out" / ".sweep.lock").exists()  # a finished sweep leaves no lock
+    out = tmp_path / "out"
+    shutil.copytree(d / "out", out)
+    # What a sweep killed outright (SIGKILL: no handler runs) while it wrote leaves: its lock
+    # and its atomic writes' temporaries, named as patterns.outputs names them.
+    (out / ".sweep.lock").touch()
+    dead = [
+        out / ".results.parquet.k2j4_x9q.parquet",
+        out / ".report.html.a1b2c3d4.html",
+        out / ".heatmap_yield_fraction.png.zz00aa11.png",
+        out / "points" / ".00003.json.q9w8e7r6.json",
+    ]
+    for p in dead:
+        p.write_bytes(b"half a file")
+    mine = [out / ".results.parquet.keep", out / "points" / "notes.txt"]  # not temporaries' names
+    for p in mine:
+        p.write_text("mine")
+    again = sweep(d / "tiny.toml", out, scheduler=cluster, pictures=False)
+    assert again.attrs["sweep"]["run_now"] == 0
+    pd.testing.assert_frame_equal(again, table)
+    assert not [p for p in dead if p.exists()]
+    assert all(p.read_text() == "mine" for p in mine)
+    assert not (out / ".sweep.lock").exists()
+
+
 def test_python_api_latin_hypercube_realizations_one_axis_picture(tmp_path):
     spec = {
         "scene": {"resolution_um": 10, "effects": {"twist": False}, "chip_size_um": 200},

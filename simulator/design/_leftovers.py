@@ -6,7 +6,8 @@ writers give their temporaries (:mod:`patterns.outputs`), and only such names ar
 
 * a file written atomically: ``.NAME.XXXXXXXX.EXT`` beside ``NAME.EXT`` (``tempfile``'s eight
   random characters, then the target's own suffix), e.g. ``.history.png.k2j4_x9q.png`` in a
-  search's ``--out``, removed when the search that resumes there holds its lock;
+  search's ``--out``, removed when the search that resumes there holds its lock (the
+  results directory's, a sweep's too: :class:`simulator.sweep.ResultStore`);
 * a directory filled before its rename: ``.NAME.XXXXXXXX.selfalign-tmp`` beside ``NAME``,
   removed by the next free-form run into ``NAME`` unless a live run holds it: each free-form
   run holds an exclusive ``flock`` on its temporary directory while it writes there, which
@@ -21,33 +22,10 @@ import re
 import shutil
 from pathlib import Path
 
-__all__ = ["hold_directory", "remove_dead_directories", "remove_dead_files"]
+__all__ = ["hold_directory", "remove_dead_directories"]
 
 #: ``tempfile``'s random part of a temporary's name.
 _RANDOM = r"[a-z0-9_]{8}"
-_FILE = re.compile(rf"^\.(?P<name>.+)\.{_RANDOM}(?P<ext>\.[^./]+)?$")
-
-
-def _is_temp_file(name: str) -> bool:
-    m = _FILE.match(name)
-    return bool(m) and Path(m["name"]).suffix == (m["ext"] or "")
-
-
-def remove_dead_files(directory: Path, subdirs: tuple[str, ...] = ()) -> list[str]:
-    """Remove the atomic-write temporaries in ``directory`` (and its ``subdirs``), for a caller
-    that holds the directory's lock (nothing else writes there); returns their names."""
-    gone = []
-    for d in (directory, *(directory / s for s in subdirs)):
-        try:
-            entries = list(os.scandir(d))
-        except OSError:
-            continue
-        for e in entries:
-            if _is_temp_file(e.name) and e.is_file(follow_symlinks=False):
-                with contextlib.suppress(OSError):
-                    os.unlink(e.path)
-                    gone.append(str(Path(e.path).relative_to(directory)))
-    return gone
 
 
 def remove_dead_directories(target: Path) -> list[str]:

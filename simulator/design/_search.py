@@ -57,38 +57,6 @@ class _TrialStore(ResultStore):
     LOCK, TABLES = ".search.lock", ("trials.parquet", "trials.csv")
     HOLD = "search-trial"
 
-    def _take_lock(self) -> None:
-        """The lock, then what a killed run left in the directory (its atomic writes'
-        temporaries, :func:`simulator.design._leftovers.remove_dead_files`) removed. The lock
-        file is removed when the search ends (:meth:`close`), so the lock taken is checked to
-        be the file's that the path names now (a run that ended meanwhile removed it)."""
-        from simulator.design._leftovers import remove_dead_files
-
-        for _ in range(10):
-            super()._take_lock()
-            try:
-                same = os.path.samestat(
-                    os.fstat(self._lock.fileno()), os.stat(self.out / self.LOCK)
-                )
-            except OSError:
-                same = False
-            if same:
-                break
-            self._lock.close()
-            self._lock = None
-        else:
-            raise InputError(
-                f"--out {self.out}: another selfalign design keeps taking its lock; wait for it to end"
-            )
-        remove_dead_files(self.out, (self.ROWS_DIR,))
-
-    def close(self) -> None:
-        """Close the journal and release the lock, its file removed (no empty lock is left)."""
-        if self._lock is not None:
-            with contextlib.suppress(OSError):
-                os.unlink(self.out / self.LOCK)  # while held: no other run holds this file
-        super().close()
-
     def _other(self, doc: dict) -> str:
         objs = "; ".join(f"{o['direction']} {o['expression']}" for o in doc.get("objectives", []))
         return f"{doc.get('source', '?')}: {objs or '?'}"

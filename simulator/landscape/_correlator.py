@@ -13,6 +13,7 @@ for is transformed back along x.
 from __future__ import annotations
 
 import functools
+import os
 import threading
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -29,9 +30,31 @@ BACKENDS = ("auto", "scipy", "opencv", "jax")
 NOISE_FACTOR = 32.0
 
 
+#: Environment variable that forces the backend of every correlation asked for with
+#: ``backend="auto"`` (the default): ``scipy``, ``opencv`` or ``jax``; unset or ``auto``,
+#: the choice below. The test suite runs its numerical tests under each (Makefile).
+BACKEND_ENV = "SELFALIGN_FFT_BACKEND"
+
+
+def forced_backend() -> str | None:
+    """The backend ``SELFALIGN_FFT_BACKEND`` forces, or None (unset, empty or ``auto``)."""
+    v = os.environ.get(BACKEND_ENV, "").strip().lower()
+    if v in ("", "auto"):
+        return None
+    if v not in BACKENDS:
+        raise InputError(
+            f"{BACKEND_ENV}={v!r} is not an FFT backend; set it to one of scipy, opencv, jax, or unset it"
+        )
+    return v
+
+
 def _default_backend(dtype) -> str:
-    """JAX where it sees a GPU; else OpenCV's transforms for float32 where OpenCV runs them
-    in Intel's IPP (measured faster than pocketfft: docs/benchmarks.md), else SciPy's."""
+    """The backend ``SELFALIGN_FFT_BACKEND`` forces; else JAX where it sees a GPU; else
+    OpenCV's transforms for float32 where OpenCV runs them in Intel's IPP (measured faster
+    than pocketfft: docs/benchmarks.md), else SciPy's."""
+    forced = forced_backend()
+    if forced is not None:
+        return forced
     try:
         import jax
 

@@ -3,7 +3,8 @@
 Owns :class:`ResultStore` (a resumable directory of rows, also a search's) and
 ``_Store``, the sweep's: the directory's checks (a non-empty directory is resumed only when its
 ``sweep.json`` holds this very sweep's hash; never the working directory or one that
-holds an input), its lock, the journal ``points.jsonl`` (appended and flushed as each
+holds an input), its lock (removed at the end; a killed run's lock and temporaries are
+removed by the next run there), the journal ``points.jsonl`` (appended and flushed as each
 point finishes, read back on a rerun), each point's ``points/NNNNN.json``, the tables
 ``results.parquet`` and ``results.csv`` (rewritten atomically every few seconds and at
 the end) and the ownership marker. pandas and pyarrow are imported when a table is built.
@@ -14,6 +15,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import re
 import time
 from collections.abc import Iterable
 from pathlib import Path
@@ -34,6 +36,35 @@ TABLES = ("results.parquet", "results.csv")
 
 
 __all__ = ["ResultStore", "kept_points"]
+
+
+# ----------------------------------------------------------------------- leftovers
+#: A file written atomically (:func:`patterns.outputs.atomic_output`): ``.NAME.XXXXXXXX.EXT``
+#: beside ``NAME.EXT`` (``tempfile``'s eight random characters, then the target's suffix).
+_TEMP_FILE = re.compile(r"^\.(?P<name>.+)\.[a-z0-9_]{8}(?P<ext>\.[^./]+)?$")
+
+
+def _is_temp_file(name: str) -> bool:
+    m = _TEMP_FILE.match(name)
+    return bool(m) and Path(m["name"]).suffix == (m["ext"] or "")
+
+
+def remove_dead_files(directory: Path, subdirs: tuple[str, ...] = ()) -> list[str]:
+    """Remove the atomic-write temporaries a killed run (SIGKILL, the out-of-memory killer: no
+    handler ran) left in ``directory`` (and its ``subdirs``), for a caller that holds the
+    directory's lock (nothing else writes there); only such names are removed. Returns them."""
+    gone = []
+    for d in (directory, *(directory / s for s in subdirs)):
+        try:
+            entries = list(os.scandir(d))
+        except OSError:
+            continue
+        for e in entries:
+            if _is_temp_file(e.name) and e.is_file(follow_symlinks=False):
+                with contextlib.suppress(OSError):
+                    os.unlink(e.path)
+                    gone.append(str(Path(e.path).relative_to(directory)))
+    return gone
 
 
 # ----------------------------------------------------------------------- the store
@@ -176,6 +207,30 @@ class ResultStore:
         require(os.access(out, os.W_OK), f"{flag} {out}: directory is not writable")
 
     def _take_lock(self) -> None:
+        """The lock, then what a killed run left in the directory removed: its atomic writes'
+        temporaries (``.NAME.XXXXXXXX.EXT``, :func:`remove_dead_files`), in the directory and
+        in ``ROWS_DIR``. The lock file is removed when the run ends
+        (:meth:`close`), so the lock taken is checked to be the file's that the path names now
+        (a run that ended meanwhile removed it)."""
+        for _ in range(10):
+            self._lock_once()
+            try:
+                same = os.path.samestat(
+                    os.fstat(self._lock.fileno()), os.stat(self.out / self.LOCK)
+                )
+            except OSError:
+                same = False
+            if same:
+                break
+            self._lock.close()
+            self._lock = None
+        else:
+            raise InputError(
+                f"--out {self.out}: another selfalign {self.COMMAND} keeps taking its lock; wait for it to end"
+            )
+        remove_dead_files(self.out, (self.ROWS_DIR,))
+
+    def _lock_once(self) -> None:
         import fcntl
 
         f = open(self.out / self.LOCK, "a+")  # noqa: SIM115 (held until close())
@@ -286,6 +341,8 @@ class ResultStore:
             self._journal.close()
             self._journal = None
         if self._lock is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(self.out / self.LOCK)  # while held: no other run holds this file
             self._lock.close()
             self._lock = None
 
