@@ -15,7 +15,7 @@ $(BIN)/selfalign: pyproject.toml
 	@touch $@
 
 # Stamps of the extras installed on top (re-installed when pyproject.toml changes).
-$(VENV)/.extra-test: $(VENV)/.extra-test
+$(VENV)/.extra-test: $(BIN)/selfalign
 	$(BIN)/pip install --quiet -e '.[test]'
 	@touch $@
 
