@@ -16,6 +16,7 @@ from ._correlator import (
 from ._footprint import (
     FootprintPlanes as FootprintPlanes,
     build_footprint_planes as build_footprint_planes,
+    footprint_pairs as footprint_pairs,
     footprint_poses as footprint_poses,
     pad_labels as pad_labels,
 )

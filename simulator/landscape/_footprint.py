@@ -103,7 +103,7 @@ def _shadowed(masks: list, deep: list) -> list[tuple[int, int, int, np.ndarray]]
     """The shadow rule's pairs (near, far, axis, the near pad's part upstream of the far one
     along the axis), for every far pad on its bridged term (a narrow one keeps its wall term:
     no bridge over the near pad)."""
-    from simulator.physics._footprint import upstream_of
+    from simulator.physics import upstream_of
 
     out = []
     for b, mb in enumerate(masks):

@@ -51,8 +51,7 @@ def footprint_budget_bytes(scene, n_pads: int) -> int:
     engines (measured: the bench case at 5 um/px, 90 twists, 505 x 505 poses, 4 pads and 8
     pairs, peaks at 1,882 to 1,890 MB, priced 1,953 MB; at 2 um/px, 1,225 x 1,225 poses, priced
     8,962 MB, of which the pairs' planes 1,795 MB)."""
-    from simulator.landscape import footprint_poses
-    from simulator.landscape._footprint import footprint_pairs
+    from simulator.landscape import footprint_pairs, footprint_poses
 
     poses = footprint_poses(scene)
     n_pairs, pair_poses, per_twist = footprint_pairs(scene)

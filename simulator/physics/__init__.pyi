@@ -8,6 +8,7 @@ from ._footprint import (
     StepProfile as StepProfile,
     cap_radius_um as cap_radius_um,
     relay as relay,
+    upstream_of as upstream_of,
 )
 from ._hysteresis import (
     align_tolerance as align_tolerance,
