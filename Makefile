@@ -33,7 +33,8 @@ MKDOCS = NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict
 
 # The tests run in parallel (pytest-xdist, from the `test` extra): PYTEST_WORKERS processes
 # (2, CI's cores; `make test PYTEST_WORKERS=auto` takes one per core, `=0` runs serially),
-# the 25 slowest tests listed at the end. Hypothesis draws the `ci` profile's examples
+# the 25 slowest tests listed at the end. `--dist loadgroup`: tests marked with one
+# `xdist_group` run on one worker, in order (tests/conftest.py). Hypothesis draws the `ci` profile's examples
 # (tests/conftest.py; HYPOTHESIS_PROFILE=dev for random ones).
 # Then the numerical landscape and energy tests (marked `fft`) once more under each FFT
 # backend, forced by SELFALIGN_FFT_BACKEND (the first pass takes the machine's default:
@@ -44,10 +45,10 @@ HYPOTHESIS_PROFILE ?= ci
 FFT_BACKENDS ?= scipy opencv jax
 
 test: $(VENV)/.extra-test
-	SELFALIGN_HYPOTHESIS_PROFILE=$(HYPOTHESIS_PROFILE) $(BIN)/python -m pytest -q -n $(PYTEST_WORKERS) --durations=25 tests
+	SELFALIGN_HYPOTHESIS_PROFILE=$(HYPOTHESIS_PROFILE) $(BIN)/python -m pytest -q -n $(PYTEST_WORKERS) --dist loadgroup --durations=25 tests
 	for b in $(FFT_BACKENDS); do \
 		echo "FFT backend $$b:"; \
-		SELFALIGN_FFT_BACKEND=$$b SELFALIGN_HYPOTHESIS_PROFILE=$(HYPOTHESIS_PROFILE) $(BIN)/python -m pytest -q -n $(PYTEST_WORKERS) -m fft tests || exit 1; \
+		SELFALIGN_FFT_BACKEND=$$b SELFALIGN_HYPOTHESIS_PROFILE=$(HYPOTHESIS_PROFILE) $(BIN)/python -m pytest -q -n $(PYTEST_WORKERS) --dist loadgroup -m fft tests || exit 1; \
 	done
 	$(BIN)/python -m pytest -q --nbmake notebooks
 	d="$$(mktemp -d)" && $(MKDOCS) --site-dir "$$d" && rm -rf "$$d"

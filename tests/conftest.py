@@ -19,7 +19,13 @@ take the default backend. ``make test`` runs them once more under each FFT backe
 (``SELFALIGN_FFT_BACKEND=scipy``, ``opencv``, ``jax``; ``pytest -m fft``), so that a bound
 tuned to one backend's round-off fails on this machine, not on the next.
 
-The suite runs in parallel (``pytest -n 2``, pytest-xdist; ``make test`` does) and
+The ``xdist_group`` marker (pytest-xdist): tests that share work too costly to repeat
+(e.g. one stepper compiled per dtype, then a comparison of the two) carry one group name,
+and ``make test`` (``--dist loadgroup``) runs a group on one worker, in order. Where the
+installed pytest and pytest-xdist lose the groups, the run is refused
+(:func:`pytest_collection_finish`) rather than left to repeat that work silently.
+
+The suite runs in parallel (``pytest -n 2 --dist loadgroup``, pytest-xdist; ``make test`` does) and
 serially (``pytest -p no:xdist``): every test writes only under its own ``tmp_path`` (or a
 ``tempfile`` directory), never into the checkout, and depends on no other test.
 """
@@ -42,6 +48,24 @@ def pytest_configure(config):
         "markers",
         "fft: a numerical landscape or energy test that make test reruns under each FFT backend",
     )
+
+
+def pytest_collection_finish(session):
+    """On an xdist worker under ``--dist loadgroup``: every test with an ``xdist_group``
+    mark must carry its group in its node id (how xdist sends a group to one worker)."""
+    config = session.config
+    if not getattr(config.option, "loadgroup", False):
+        return
+    lost = [
+        it.nodeid
+        for it in session.items
+        if it.get_closest_marker("xdist_group") and "@" not in it.nodeid
+    ]
+    if lost:
+        raise pytest.UsageError(
+            f"pytest {pytest.__version__} and this pytest-xdist lose the xdist_group of "
+            f"{len(lost)} tests (e.g. {lost[0]}); install the test extra's pytest (<9)"
+        )
 
 
 @pytest.fixture

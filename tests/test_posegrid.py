@@ -42,7 +42,7 @@ def test_landscape_axes_are_its_grid_and_steps_are_the_scenes_exactly():
     np.testing.assert_array_equal(g.to_pose(idx)[:, 0], ls.x_um[idx[:, 2]])
     # The steppers' view carries the same grid.
     field, grid = field_and_grid(ls)
-    assert grid is g and field.pin == (0.0, 0.0, 0.0)
+    assert grid is g and tuple(np.asarray(field.pin)) == (0.0, 0.0, 0.0) and not field.pinned
 
 
 def test_a_run_of_the_axis_is_located_on_it_and_a_box_is_cut():

@@ -201,26 +201,45 @@ def sq100():
 
 
 # ====================================================================== plateaus and ties
-@pytest.mark.parametrize("start", [(50, 0, 0), (50, 50, 0), (-50, 52, 0), (52, -48, 0)])
-def test_plateau_four_pad_flat_part(fp100, start):
-    runs = {dt: run_all(s, start, landscape=ls) for dt, (s, ls) in fp100.items()}
-    for dt, r in runs.items():
-        if start == (52, -48, 0):
-            # On both axes' flat parts a combined twist move gains area (docs/physics.md §6.4):
-            # greedy escapes and aligns; the gradient there is exactly zero.
-            assert r["greedy"].final == (0, 0, 0) and r["greedy"].outcome == "aligned"
-            assert r["gradient"].steps == 0 and r["gradient"].outcome == "plateau"
-            continue
-        # Every move changes the energy by less than the floor: greedy keeps the pose (tie
-        # rule), the gradient is exactly zero. No step at all, no drift.
-        for m in ("greedy", "gradient"):
-            assert r[m].steps == 0 and r[m].final == start and r[m].outcome == "plateau", (dt, m)
-        if start == (50, 50, 0):  # flat in twist as well: the dynamics hold still too
-            for m in ("overdamped", "inertial"):
-                assert r[m].steps == 0 and r[m].final == start and r[m].outcome == "plateau", (
-                    dt,
-                    m,
-                )
+PLATEAU_STARTS = [(50, 0, 0), (50, 50, 0), (-50, 52, 0), (52, -48, 0)]
+_PLATEAU_RUNS: dict = {}
+
+
+def plateau_runs(fp100, start, dt):
+    """The four methods' runs from ``start`` on ``fp100[dt]``, once per worker (the two
+    dtypes compile every stepper anew: a test per dtype, and the comparison reuses them)."""
+    if (start, dt) not in _PLATEAU_RUNS:
+        s, ls = fp100[dt]
+        _PLATEAU_RUNS[start, dt] = run_all(s, start, landscape=ls)
+    return _PLATEAU_RUNS[start, dt]
+
+
+# one xdist group: the comparison below finds the runs on its own worker (make test runs
+# pytest -n 2 --dist loadgroup)
+@pytest.mark.xdist_group("fp100_plateau")
+@pytest.mark.parametrize("dt", DTYPES)
+@pytest.mark.parametrize("start", PLATEAU_STARTS)
+def test_plateau_four_pad_flat_part(fp100, start, dt):
+    r = plateau_runs(fp100, start, dt)
+    if start == (52, -48, 0):
+        # On both axes' flat parts a combined twist move gains area (docs/physics.md §6.4):
+        # greedy escapes and aligns; the gradient there is exactly zero.
+        assert r["greedy"].final == (0, 0, 0) and r["greedy"].outcome == "aligned"
+        assert r["gradient"].steps == 0 and r["gradient"].outcome == "plateau"
+        return
+    # Every move changes the energy by less than the floor: greedy keeps the pose (tie
+    # rule), the gradient is exactly zero. No step at all, no drift.
+    for m in ("greedy", "gradient"):
+        assert r[m].steps == 0 and r[m].final == start and r[m].outcome == "plateau", m
+    if start == (50, 50, 0):  # flat in twist as well: the dynamics hold still too
+        for m in ("overdamped", "inertial"):
+            assert r[m].steps == 0 and r[m].final == start and r[m].outcome == "plateau", m
+
+
+@pytest.mark.xdist_group("fp100_plateau")
+@pytest.mark.parametrize("start", PLATEAU_STARTS)
+def test_plateau_four_pad_outcomes_agree_across_dtypes(fp100, start):
+    runs = {dt: plateau_runs(fp100, start, dt) for dt in DTYPES}
     for m in METHODS:  # float32 and float64 agree on the outcome of every method
         assert runs["float32"][m].outcome == runs["float64"][m].outcome, m
 

@@ -153,9 +153,12 @@ def test_files_tables_pictures_and_page(tiny):
     assert marker["command"] == "sweep" and "results.parquet" in marker["files"]
 
 
-def test_rerun_skips_the_points_done(tiny, cluster):
+def test_rerun_skips_the_points_done(tiny, cluster, tmp_path):
+    import shutil
+
     d, table = tiny
-    out = d / "out"
+    out = tmp_path / "out"  # a copy: the module's other tests read the fixture's own results
+    shutil.copytree(d / "out", out)
     journal = (out / "points.jsonl").read_text()
     again = sweep(d / "tiny.toml", out, scheduler=cluster, pictures=False)
     assert again.attrs["sweep"]["run_now"] == 0 and (out / "points.jsonl").read_text() == journal

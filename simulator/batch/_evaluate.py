@@ -334,7 +334,9 @@ def assess(
     # the stateless footprint (every pad counted by its distance from the chip) on the landscape;
     # a scene with --dispense adds each protocol's numbers below (footprint_protocols)
     stateless = scene.replace(liquid=replace(scene.liquid, dispense=None, dispense_at_um=None))
-    cap = run_batch(stateless, grid, method, landscape=ls, progress=not quiet)
+    # the capture grid and the yield starts padded to one lane count: one compiled batch
+    lanes = max(grid.size, int(yield_starts))
+    cap = run_batch(stateless, grid, method, landscape=ls, progress=not quiet, lanes=lanes)
     cap_sum = summarize(cap, grid)
     noise = (
         (NOISE_FRACTION * w, NOISE_FRACTION * h, NOISE_TWIST_DEG)
@@ -346,7 +348,7 @@ def assess(
     starts = random_starts(yield_starts, noise, seed=seed, around=(gx, gy, gt))
     if len(ls.twist_deg) == 1:
         starts[:, 2] = 0.0
-    yl = run_batch(stateless, starts, method, landscape=ls, progress=not quiet)
+    yl = run_batch(stateless, starts, method, landscape=ls, progress=not quiet, lanes=lanes)
     yl_sum = summarize(yl)
     protocols = None
     if scene.liquid.dispense is not None:
@@ -499,8 +501,13 @@ def footprint_protocols(
             biases[f"+{axis}"], biases[f"-{axis}"] = max_bias_along(
                 c["values"], c["force"], x0, floor=floor
             )
-        cap = summarize(run_batch(sc, grid, method, progress=not quiet, planes=planes), grid)
-        yl = summarize(run_batch(sc, starts, method, progress=not quiet, planes=planes))
+        lanes = max(grid.size, len(starts))  # one compiled batch, as above
+        cap = summarize(
+            run_batch(sc, grid, method, progress=not quiet, planes=planes, lanes=lanes), grid
+        )
+        yl = summarize(
+            run_batch(sc, starts, method, progress=not quiet, planes=planes, lanes=lanes)
+        )
         out[proto] = {
             "why": why,
             "wet_at_dispense": [int(k + 1) for k in np.flatnonzero(dispensed)],

@@ -153,6 +153,10 @@ def run_footprint_batch(
                     per_lane = True
                 order = _run_order(q[members], np.asarray(best), grid)
                 run = members[order]
+                # a group's lanes padded to a power of two (at least 8, at most a chunk):
+                # the rounds' shrinking groups share a few compiled shapes instead of
+                # compiling one per group size (each compile takes seconds)
+                lanes_min = min(chunk, max(8, 1 << (len(run) - 1).bit_length()))
                 got = run_lanes(
                     fld,
                     grid,
@@ -165,6 +169,7 @@ def run_footprint_batch(
                     workers,
                     None,
                     per_lane,
+                    lanes_min,
                 )
                 q_end, st, status, out, e, ts = got
                 steps[run] += st

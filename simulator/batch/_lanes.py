@@ -85,15 +85,18 @@ def run_lanes(
     workers: int,
     on_chunk=None,
     per_lane: bool = False,
+    min_lanes: int = 1,
 ):
     """Every start of ``q0`` ((n, 3) grid indices, in the order to run them) on one field:
     chunks of ``chunk`` lanes (the last padded with copies of its first start, whose
-    results are dropped: one compiled shape) on ``workers`` threads. ``on_chunk(m)``
+    results are dropped: one compiled shape) on ``workers`` threads. Fewer than ``chunk``
+    starts run as one chunk of at least ``min_lanes`` lanes (padded likewise), so that
+    callers running several small sets of starts can keep to a few compiled shapes. ``on_chunk(m)``
     after each chunk of m starts. ``per_lane``: ``params`` has one value per start along
     a leading axis (:func:`_run_chunk`). Returns (q, steps, status, outcome, energy,
     time_s) arrays in q0's order."""
     n = len(q0)
-    chunk = int(min(chunk, n))
+    chunk = int(min(chunk, max(n, min_lanes)))
     final_q = np.empty((n, 3), np.float64)
     steps = np.empty(n, np.int32)
     status = np.empty(n, np.int32)

@@ -117,6 +117,7 @@ def run_batch(
     workers: int | None = None,
     dynamics=None,
     planes=None,
+    lanes: int | None = None,
 ) -> BatchResult:
     """Run every start to its end on one landscape.
 
@@ -141,6 +142,11 @@ def run_batch(
             docs/physics.md §3.5), its pads' planes
             (:func:`simulator.landscape.build_footprint_planes`) when several batches share
             them; default: built here.
+        lanes: run fewer starts than this padded to this many lanes (at most ``chunk``;
+            the padding lanes repeat a start and are dropped): batches of different sizes
+            that pass the same ``lanes`` share one compiled shape (a compile takes
+            seconds; :func:`simulator.batch.assess` runs its capture grid and its yield
+            starts so). Default: the number of starts.
 
     Returns:
         A :class:`BatchResult`; ``stats`` holds seconds, starts and steps per second;
@@ -168,7 +174,12 @@ def run_batch(
         raise InputError(f"workers must be a whole number >= 1 or None, got {workers!r}")
     poses = _as_poses(starts)
     price_starts(len(poses), scene.memory_budget_mb, per_start)
-    n, chunk = len(poses), int(min(chunk, len(poses)))
+    if lanes is not None:
+        require(
+            not isinstance(lanes, bool) and isinstance(lanes, int | np.integer) and lanes >= 1,
+            f"lanes must be a whole number >= 1 or None, got {lanes!r}",
+        )
+    n, chunk = len(poses), int(min(chunk, max(len(poses), lanes or 0)))
     workers = max(1, min(int(workers or threads()), -(-n // chunk)))
     if dynamic:
         # The solver's state per lane, for every chunk in flight: priced before the
@@ -220,7 +231,17 @@ def run_batch(
     t1 = time.perf_counter()
     with progress_bar(progress, n, method, "start") as bar:
         got = run_lanes(
-            fld, grid, dynamics, q0[order], method, max_steps, stiff, chunk, workers, bar.update
+            fld,
+            grid,
+            dynamics,
+            q0[order],
+            method,
+            max_steps,
+            stiff,
+            chunk,
+            workers,
+            bar.update,
+            min_lanes=chunk,
         )
     # back to the caller's order: lanes are independent, so the order changes no result
     final_q, steps, outcome, energy, time_s = (np.empty_like(a) for a in got[:2] + got[3:])

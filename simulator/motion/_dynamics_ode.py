@@ -77,10 +77,10 @@ def _stop_flags(field: Field, grid: Grid, co: _Coeffs, q, grad, kinetic):
     active = _active(grid, q.dtype) > 0
     ke_stop = jnp.maximum(field.floor, jnp.min(jnp.where(active, co.f_ref, jnp.inf)) * delta)
     converged = jnp.all(jnp.abs(grad) <= f_stop) & (kinetic <= ke_stop)
-    if any(field.pin):
+    if field.pinned:
         # Hysteresis (simulator.physics): pinned where no axis's force beats its pinning
         # force and the kinetic energy left is below the pinning work over one grid step.
-        pin = jnp.asarray(field.pin, q.dtype)
+        pin = field.pin.astype(q.dtype)
         work = jnp.min(jnp.where(active & (pin > 0), pin, jnp.inf))
         converged = converged | (
             jnp.all(jnp.abs(grad) <= jnp.maximum(pin, f_stop))

@@ -60,8 +60,8 @@ class Relay:
 
 @functools.partial(
     jax.tree_util.register_dataclass,
-    data_fields=["padded", "floor", "best", "scale", "relay"],
-    meta_fields=["pin", "align_tol"],
+    data_fields=["padded", "floor", "best", "scale", "relay", "pin", "align_lim"],
+    meta_fields=["pinned", "wide_tol"],
 )
 @dataclass(frozen=True)
 class Field:
@@ -74,13 +74,23 @@ class Field:
     floor: noise floor (J): differences at or below it are ties.
     best: (3,) grid indices (it, iy, ix) of the global minimum.
     scale: max |E| over the landscape (J), the energy scale of force references.
-    pin: contact-angle hysteresis, the pinning work over one grid step along (twist, y,
-        x) in J (:mod:`simulator.physics`); zeros = none, today's stopping rules
-        exactly. Static (part of the pytree's structure): jit compiles the rule in or out.
-    align_tol: (twist steps, px) within which a final pose counts as aligned (static).
     relay: the footprint state's :class:`Relay` (``--dispense``), or None: a run then never
         stops for an event (None is part of the pytree's structure: jit compiles the test
         in or out).
+    pin: (3,) float64, contact-angle hysteresis, the pinning work over one grid step along
+        (twist, y, x) in J (:mod:`simulator.physics`); zeros = none, today's stopping
+        rules exactly.
+    align_lim: (2,) float64, the (twist steps, px) within which a final pose counts as
+        aligned (the align tolerance), plus 1e-6 index units of round-off.
+    pinned: any pinning at all (static: jit compiles the rule in or out).
+    wide_tol: an align tolerance wider than one step, a floor or a hysteresis window
+        (static: jit compiles the rule that a run ending there is aligned in or out).
+
+    The pinning values and the tolerance are traced, not static: scenes that differ only
+    in their hysteresis window, their liquid height or the floor a chip floats on share
+    one compiled stepper (a compile takes seconds; a calibration or a sweep runs many).
+    Build a Field with :func:`make_field`, change one with :meth:`_replace` (which takes
+    ``pin=`` and ``align_tol=`` as tuples and keeps the static flags in step).
     """
 
     padded: jax.Array
@@ -88,16 +98,44 @@ class Field:
     best: jax.Array
     scale: jax.Array
     relay: Relay | None = None
-    pin: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    align_tol: tuple[float, float] = (1.0, 1.0)
+    pin: jax.Array = None  # type: ignore[assignment]  (set by make_field)
+    align_lim: jax.Array = None  # type: ignore[assignment]
+    pinned: bool = False
+    wide_tol: bool = False
 
     @property
     def dtype(self):
         return self.padded.dtype
 
+    @property
+    def align_tol(self) -> tuple[float, float]:
+        """The align tolerance (twist steps, px), host-side."""
+        lim = np.asarray(self.align_lim, np.float64)
+        return (float(lim[0]) - 1e-6, float(lim[1]) - 1e-6)
+
     def _replace(self, **changes) -> Field:
-        """A copy with some fields changed (as a NamedTuple's ``_replace``)."""
+        """A copy with some fields changed (as a NamedTuple's ``_replace``); ``pin`` and
+        ``align_tol`` are given as tuples (:func:`pinning_fields`)."""
+        pin = changes.pop("pin", None)
+        tol = changes.pop("align_tol", None)
+        if pin is not None or tol is not None:
+            now_pin = tuple(np.asarray(self.pin, np.float64)) if pin is None else pin
+            changes.update(pinning_fields(now_pin, self.align_tol if tol is None else tol))
         return replace(self, **changes)
+
+
+def pinning_fields(pin, align_tol) -> dict:
+    """The :class:`Field` entries of a pinning work per grid step (J, twist/y/x) and an
+    align tolerance (twist steps, px): float64 arrays and the two static flags. The
+    tolerance's 1e-6 round-off is added here, in float64, as the rule always did."""
+    pin = tuple(float(v) for v in pin)
+    tol = (float(align_tol[0]), float(align_tol[1]))
+    return {
+        "pin": jnp.asarray(np.asarray(pin, np.float64)),
+        "align_lim": jnp.asarray(np.asarray([tol[0] + 1e-6, tol[1] + 1e-6], np.float64)),
+        "pinned": any(pin),
+        "wide_tol": max(tol) > 1.0,
+    }
 
 
 #: The steppers' static grid is the landscape's :class:`~simulator.landscape.PoseGrid`.
@@ -147,8 +185,7 @@ def make_field(
         floor=jnp.asarray(floor, dt),
         best=jnp.asarray(best, dt),
         scale=jnp.asarray(scale, dt),
-        pin=(float(pin[0]), float(pin[1]), float(pin[2])),
-        align_tol=(float(align_tol[0]), float(align_tol[1])),
+        **pinning_fields(pin, align_tol),
     )
 
 

@@ -96,10 +96,11 @@ def greedy(field: Field, grid: Grid, start, max_steps: int, record: bool = True)
     """
     moves, rank = jnp.asarray(BLOCK_MOVES), jnp.asarray(TIE_RANK)
     pin_work = None
-    if any(field.pin):
-        pin_work = jnp.asarray(
-            np.abs(np.asarray(BLOCK_MOVES, float)) @ np.asarray(field.pin, float), field.dtype
-        )
+    if field.pinned:
+        # the pinning work of each move: the axes it moves along, summed in float64
+        m = np.abs(BLOCK_MOVES).astype(np.float64)
+        p = field.pin
+        pin_work = (m[:, 0] * p[0] + m[:, 1] * p[1] + m[:, 2] * p[2]).astype(field.dtype)
     start = clamp_start(grid, jnp.asarray(start, jnp.int32))
     n = max_steps + 1 if record else 1
     e0 = lookup(field, grid, *start)
@@ -188,7 +189,7 @@ def gradient_descent(
     # Metric: index units -> px. Twist index -> arc length in px.
     metric = jnp.asarray([grid.twist_px_per_step if grid.shape[0] > 1 else 1.0, 1.0, 1.0], dt)
     g_ref = reference_gradient(field, grid)
-    pin = jnp.asarray(field.pin, dt) if any(field.pin) else None
+    pin = field.pin.astype(dt) if field.pinned else None
     n = max_steps + 1 if record else 1
     e0 = interpolate(field, grid, start)
     path = jnp.zeros((n, 3), dt).at[0].set(start)
@@ -276,12 +277,11 @@ def classify(
     period = grid.period_deg / grid.twist_step_deg
     dtw = q[0] - field.best[0]
     dtw = dtw - period * jnp.round(dtw / period)
-    near = (jnp.abs(dtw) <= field.align_tol[0] + 1e-6) & jnp.all(
-        jnp.abs(q[1:] - field.best[1:]) <= field.align_tol[1] + 1e-6
-    )
+    lim = field.align_lim.astype(field.dtype)  # the tolerance + 1e-6, rounded once
+    near = (jnp.abs(dtw) <= lim[0]) & jnp.all(jnp.abs(q[1:] - field.best[1:]) <= lim[1])
     no_contact = jnp.abs(energy) <= field.floor
     ran_out = (status == MAX_STEPS) & ~(jnp.asarray(timed_out) & jnp.asarray(flat))
-    if max(field.align_tol) > 1.0:  # static: a floor or a hysteresis window
+    if field.wide_tol:  # static: a floor or a hysteresis window
         ran_out = ran_out & ~near
     out = jnp.where(
         ran_out,
