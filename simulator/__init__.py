@@ -53,6 +53,9 @@ _EXPORTS = {
     # design sweeps
     "sweep": "simulator.sweep",
     "load_sweep": "simulator.sweep",
+    # the model fitted to a bench
+    "calibrate": "simulator.design",
+    "read_trials": "simulator.design",
     # pictures
     "plot_pattern": "simulator.render",
     "plot_landscape": "simulator.render",

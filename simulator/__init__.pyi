@@ -17,6 +17,10 @@ from simulator.batch import (
 from simulator.core import (
     UM2,
 )
+from simulator.design import (
+    calibrate,
+    read_trials,
+)
 from simulator.landscape import (
     GlobalMinimum,
     Landscape,
@@ -76,6 +80,7 @@ __all__ = [
     "apply_preset",
     "assess",
     "build_landscape",
+    "calibrate",
     "capture_map",
     "estimate_bytes",
     "evaluate",
@@ -90,6 +95,7 @@ __all__ = [
     "plot_pattern",
     "pyplot",
     "random_starts",
+    "read_trials",
     "run_batch",
     "run_realizations",
     "save_figure",

@@ -36,6 +36,7 @@ COMMANDS = (
     "evaluate",
     "sweep",
     "design",
+    "calibrate",
     "liquid",
     "demo",
 )

@@ -24,6 +24,7 @@ BENCH = ROOT / "benchmarks"
 #: script -> (the smoke run's file name, extra arguments, what its table must hold).
 SMOKE = {
     "accuracy.py": ("accuracy.md", [], "| baseline | - |"),
+    "calibrate.py": ("calibrate.md", [], "| receding_angle_deg | 20 |"),
     "design_freeform.py": ("design_freeform.json", [], '"seconds_per_iteration"'),
     "dynamics_calibration.py": ("dynamics.md", [], "| (500, 0, 0) | overdamped |"),
     "footprint.py": ("footprint.json", [], '"ratio"'),

@@ -795,6 +795,7 @@ def _code_defaults() -> dict[str, object]:
     from patterns.resources import DEFAULT_BUDGET_CAP_MB, DEFAULT_MAX_IMAGE_MPX
     from simulator.batch import StartGrid, random_starts
     from simulator.core import DEFAULT_CHUNK, DEFAULT_MAX_STEPS, METHODS
+    from simulator.design import DRAWS, TIME_SIGMA, TRIALS
     from simulator.physics import Liquid, Materials
     from simulator.scene import DEFAULT_PRESET
 
@@ -826,6 +827,10 @@ def _code_defaults() -> dict[str, object]:
         "--density": liq.density_kg_m3,
         "--um-per-px": DEFAULT_UM_PER_PX,
         "--max-polygons": DEFAULT_MAX_POLYGONS,
+        # calibrate
+        "--trials": TRIALS,
+        "--draws": DRAWS,
+        "--time-sigma": TIME_SIGMA,
     }
 
 

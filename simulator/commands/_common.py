@@ -318,6 +318,35 @@ def scene_from_args(
     ``warn=False`` leaves the accuracy warning (:func:`accuracy_check`) to the command, which
     prints it once its run is priced.
     """
+    doc, base = scene_document_from_args(args, doc)
+    try:
+        scene = Scene.from_dict(
+            doc, base=base
+        )  # the accuracy preset applies here, as for Scene.from_toml
+    except InputError as err:
+        raise InputError(_cli_spelling(str(err), bool(args.scene))) from None
+    if "volume_nl" in (
+        doc.get("liquid") or {}
+    ):  # a volume as typed: a film thicker than the chip is refused
+        from simulator.liquid import check_scene_volume
+
+        check_scene_volume(scene)
+    if warn:
+        accuracy_check(scene)
+    if note_frame and "layout" in scene.pattern.params:
+        from patterns.layout import frame_note
+
+        print(frame_note(scene.pattern.params["layout"]), file=sys.stderr)
+    return scene
+
+
+def scene_document_from_args(
+    args: argparse.Namespace, doc: dict[str, Any] | None = None
+) -> tuple[dict[str, Any], Path]:
+    """The scene document the flags and an optional TOML file make (flags win, under the
+    TOML keys), and the directory its relative paths are read against: what
+    :func:`scene_from_args` builds its scene from (``doc``: the scene file's document, not
+    changed)."""
     doc = copy.deepcopy(scene_document(args) if doc is None else doc)
     base = Path(args.scene).parent if args.scene else Path(".")
     if args.pattern:
@@ -391,25 +420,7 @@ def scene_from_args(
             (doc.setdefault(table, {}) if table else doc)[key] = value
     if getattr(args, "accuracy", None):
         doc["accuracy"] = args.accuracy
-    try:
-        scene = Scene.from_dict(
-            doc, base=base
-        )  # the accuracy preset applies here, as for Scene.from_toml
-    except InputError as err:
-        raise InputError(_cli_spelling(str(err), bool(args.scene))) from None
-    if "volume_nl" in (
-        doc.get("liquid") or {}
-    ):  # a volume as typed: a film thicker than the chip is refused
-        from simulator.liquid import check_scene_volume
-
-        check_scene_volume(scene)
-    if warn:
-        accuracy_check(scene)
-    if note_frame and "layout" in scene.pattern.params:
-        from patterns.layout import frame_note
-
-        print(frame_note(scene.pattern.params["layout"]), file=sys.stderr)
-    return scene
+    return doc, base
 
 
 #: Python keyword spellings in the scene's messages: the command-line flag and the scene file's key.

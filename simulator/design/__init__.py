@@ -1,4 +1,4 @@
-"""Design search: which alignment pattern to make.
+"""Design search: which alignment pattern to make, and the model fitted to a bench.
 
 Two modes of ``selfalign design``: a search over a generated design's parameters (Optuna
 trials run on Dask as sweep points are, :func:`search`), and a free-form pattern on the

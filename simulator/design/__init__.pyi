@@ -1,5 +1,27 @@
 """Types of ``simulator.design``'s names, loaded on first use (SPEC 1 lazy loading)."""
 
+from ._calibrate import (
+    DRAWS as DRAWS,
+    TIME_SIGMA as TIME_SIGMA,
+    TRIALS as TRIALS,
+    calibrate as calibrate,
+    log_likelihood as log_likelihood,
+    synthetic_trials as synthetic_trials,
+)
+from ._calibrate_params import (
+    FITTABLE as FITTABLE,
+    Fittable as Fittable,
+    parse_bounds as parse_bounds,
+    parse_fit as parse_fit,
+)
+from ._calibrate_report import (
+    scene_toml as scene_toml,
+)
+from ._calibrate_table import (
+    BenchTable as BenchTable,
+    read_trials as read_trials,
+    write_trials as write_trials,
+)
 from ._freeform import (
     FreeformResult as FreeformResult,
     Problem as Problem,

@@ -1,0 +1,620 @@
+"""``selfalign calibrate``: the scene's parameters fitted to a bench table of yields and times.
+
+:func:`calibrate` fits the names of ``fit`` (:data:`FITTABLE`) to a bench table
+(:func:`read_trials`): per row a nominal start, how many of its trials aligned and
+optionally the median time to align. Each candidate runs a Monte Carlo batch
+(:func:`simulator.batch.run_batch`) of ``draws`` placements per row, the nominal start plus
+the row's placement noise times standard-normal draws that are the SAME for every candidate
+(common random numbers, drawn once from ``seed``), so the objective changes with the
+parameters and not with the draws.
+
+The objective is a log-likelihood (docs/guide/calibrate.md):
+
+* per row, binomial: ``log C(N, a) + a log p + (N - a) log(1 - p)``, with N the row's
+  trials, a its aligned and ``p = (k + 1/2) / (draws + 1)`` the model's yield from k of its
+  ``draws`` placements aligned (the half keeps a model count of 0 or ``draws`` finite);
+* per row with ``time_s``: a Gaussian on log time, ``-1/2 ((ln t_bench - ln t_model) /
+  s)^2 - ln(s sqrt(2 pi))``, t_model the median time to align of the model's aligned
+  placements and s = ``time_sigma`` (default 0.1: a 10 % scatter of the median); a model
+  none of whose placements aligned counts as 5 s away.
+
+Optuna's TPE sampler (seeded) proposes the candidates; trial 0 is the scene as given (the
+baseline). The run is priced before it starts (the landscape and the dynamics' lanes against
+the memory budget) and is resumable from ``out`` as the design search is
+(:class:`simulator.sweep.ResultStore`: ``calibrate.json`` holds the fit's hash, ``trials.jsonl``
+the journal); a directory holding a different table, scene or fit is refused. The range of a
+parameter is the span of the evaluated trials within 1/2 of the best log-likelihood (a 1-sigma
+profile over the trials evaluated, not a fitted curvature), widened on each side to the
+nearest evaluated trial outside it (or the bound): an outer bound of that set.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import math
+import os
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from patterns.errors import InputError, require
+from simulator.design._calibrate_params import (
+    FITTABLE,
+    default_bounds,
+    parse_bounds,
+    parse_fit,
+    prepared_document,
+    scene_value,
+    scene_with,
+)
+from simulator.design._calibrate_table import BenchTable, read_trials
+from simulator.sweep import ResultStore
+
+__all__ = ["DRAWS", "TIME_SIGMA", "TRIALS", "calibrate", "log_likelihood", "synthetic_trials"]
+
+#: Monte Carlo placements per row and candidate (the same draws for every candidate).
+DRAWS = 32
+#: Optuna trials of a fit (enough for two parameters, docs/guide/calibrate.md).
+TRIALS = 40
+MAX_TRIALS = 10_000
+MAX_DRAWS = 4096
+#: The width of the log-time term (natural log: a 10 % scatter of the median time).
+TIME_SIGMA = 0.1
+#: How far (in widths) a model with no aligned placement is from a bench time.
+NO_TIME_PENALTY = 5.0
+#: The log-likelihood drop that bounds a parameter's range (1 sigma for one parameter).
+DELTA_LOG_L = 0.5
+METHODS = ("greedy", "gradient", "overdamped", "inertial")
+DYNAMIC = ("overdamped", "inertial")
+
+
+class _FitStore(ResultStore):
+    """The trials of a calibration, in memory and in a resumable directory."""
+
+    COMMAND = "calibrate"
+    KEY = "trial"
+    MANIFEST, JOURNAL, ROWS_DIR = "calibrate.json", "trials.jsonl", "trials"
+    LOCK, TABLES = ".calibrate.lock", ("trials.parquet", "trials.csv")
+    HOLD = "calibrate-trial"
+
+    def _other(self, doc: dict) -> str:
+        return f"{doc.get('source', '?')}, fitting {', '.join(doc.get('fit', [])) or '?'}"
+
+    def record(self, i: int, row: dict, doc: dict) -> dict:
+        """As the sweep's, and the trial's per-row numbers kept in memory too."""
+        self.__dict__.setdefault("details", {})[i] = doc
+        return super().record(i, row, doc)
+
+
+# ----------------------------------------------------------------------- the model
+def _log_binom(n: np.ndarray, k: np.ndarray) -> np.ndarray:
+    from math import lgamma
+
+    return np.array(
+        [lgamma(a + 1) - lgamma(b + 1) - lgamma(a - b + 1) for a, b in zip(n, k, strict=True)]
+    )
+
+
+def log_likelihood(
+    table: BenchTable,
+    model_aligned: np.ndarray,
+    model_time: np.ndarray,
+    draws: int,
+    time_sigma: float,
+) -> tuple[float, float, np.ndarray]:
+    """(yield term, time term, per-row total) of the log-likelihood (module docstring)."""
+    p = (model_aligned + 0.5) / (draws + 1.0)
+    n, a = table.trials.astype(float), table.aligned.astype(float)
+    ly = _log_binom(table.trials, table.aligned) + a * np.log(p) + (n - a) * np.log1p(-p)
+    lt = np.zeros(table.n)
+    has = np.isfinite(table.time_s)
+    norm = -math.log(time_sigma * math.sqrt(2 * math.pi))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        r = (np.log(table.time_s) - np.log(model_time)) / time_sigma
+    r = np.where(np.isfinite(r), r, NO_TIME_PENALTY)
+    lt[has] = -0.5 * r[has] ** 2 + norm
+    return float(ly.sum()), float(lt.sum()), ly + lt
+
+
+class _Model:
+    """The Monte Carlo model of the bench: the scene, the common draws, the landscape cache."""
+
+    def __init__(
+        self, scene, table: BenchTable, sigma: np.ndarray, draws: int, seed: int, method: str
+    ):
+        self.scene, self.table, self.draws, self.method = scene, table, draws, method
+        z = np.random.default_rng(seed).standard_normal((table.n, draws, 3))
+        self.starts = (table.start[:, None, :] + z * sigma[:, None, :]).reshape(-1, 3)
+        self._ls_key = None
+        self._ls = None
+
+    def _landscape(self, scene):
+        """The landscape of ``scene``: rebuilt only when what it depends on changed (the pad's
+        angle, the volume with a meniscus); None for a footprint-state scene (the batch builds
+        its pads' planes)."""
+        from simulator.landscape import build_landscape
+
+        if scene.liquid.dispense is not None:
+            return None
+        key = (
+            scene.materials.pad_angle_deg,
+            scene.meniscus_height_um if scene.effects.meniscus else None,
+        )
+        if key != self._ls_key:
+            self._ls, self._ls_key = None, None
+            self._ls = build_landscape(scene, progress=False)
+            self._ls_key = key
+        return self._ls
+
+    def run(self, values: dict) -> tuple[np.ndarray, np.ndarray]:
+        """Per row: the model's aligned count of its draws and the median time to align (s;
+        NaN where none aligned or the method has no time)."""
+        from simulator.batch import run_batch
+
+        scene = scene_with(self.scene, values)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            r = run_batch(
+                scene, self.starts, self.method, landscape=self._landscape(scene), progress=False
+            )
+        ok = (np.asarray(r.outcome) == 0).reshape(self.table.n, self.draws)
+        times = np.full(self.table.n, np.nan)
+        if r.time_s is not None:
+            t = np.asarray(r.time_to_align_s).reshape(self.table.n, self.draws)
+            for i in range(self.table.n):
+                if ok[i].any():
+                    times[i] = float(np.median(t[i][ok[i]]))
+        return ok.sum(axis=1).astype(np.int64), times
+
+
+# ----------------------------------------------------------------------- Optuna
+@contextlib.contextmanager
+def _quiet_optuna():
+    import optuna
+
+    before = optuna.logging.get_verbosity()
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
+            yield optuna
+    finally:
+        optuna.logging.set_verbosity(before)
+
+
+def _scene_document(scene, base) -> tuple[dict, Path, str]:
+    """(document, base directory, source) of a scene given as a TOML path or a dict."""
+    if isinstance(scene, dict):
+        return scene, Path(base or "."), "scene (dict)"
+    from simulator.scene import read_scene_file
+
+    p = Path(scene)
+    return read_scene_file(p), p.parent, str(p)
+
+
+def _absolute(doc: dict, base: Path) -> dict:
+    """The document with its pattern and chip files as absolute paths (a scene file
+    written elsewhere, fitted.toml, reads them)."""
+    doc = dict(doc)
+    for key in ("pattern", "chip"):
+        if isinstance(doc.get(key), str):
+            doc[key] = str((base / doc[key]).resolve())
+    return doc
+
+
+def _file_digest(doc: dict) -> str:
+    h = hashlib.sha256()
+    for key in ("pattern", "chip"):
+        if isinstance(doc.get(key), str) and Path(doc[key]).is_file():
+            h.update(Path(doc[key]).read_bytes())
+    return h.hexdigest()
+
+
+def _fmt(v: float) -> str:
+    return f"{v:.4g}"
+
+
+def calibrate(
+    table: str | os.PathLike | BenchTable,
+    scene: str | os.PathLike | dict,
+    fit: str | list[str] | tuple[str, ...],
+    out: str | os.PathLike | None = None,
+    *,
+    bounds: dict | list[str] | None = None,
+    trials: int | None = None,
+    draws: int = DRAWS,
+    spread: tuple[float, float, float] | None = None,
+    seed: int = 0,
+    method: str | None = None,
+    time_sigma: float = TIME_SIGMA,
+    quiet: bool = True,
+    base: str | os.PathLike | None = None,
+    pictures: bool = True,
+) -> dict:
+    """Fit the scene's parameters ``fit`` to a bench table; return the fit (``fit.json``'s dict).
+
+    Args:
+        table: the bench table (a CSV path, :func:`read_trials`).
+        scene: the scene: a TOML scene file or its document as a dict (relative paths
+            against ``base``).
+        fit: the names to fit (:data:`FITTABLE`), a list or ``"NAME,NAME"``.
+        out: the results directory (resumable; None: in memory only, nothing written).
+        bounds: NAME -> (LO, HI), or ``"NAME=LO:HI"`` strings; default per name (:data:`FITTABLE`).
+        trials: Optuna's budget (default :data:`TRIALS`); trial 0, the scene as given, besides.
+        draws: Monte Carlo placements per row and candidate.
+        spread: placement noise (um, um, degrees; standard deviations) of the rows that give none.
+        seed: seeds the common draws and the TPE sampler.
+        method: the stepper (default: overdamped when the table gives times, else greedy).
+        time_sigma: the width of the log-time term.
+        quiet: no progress lines on stderr.
+        pictures: with ``out``, write report.html and bench.png.
+
+    Returns:
+        ``best`` (NAME -> value), ``range`` (NAME -> [lo, hi] within Delta log L = 1/2),
+        ``rows`` (bench against model per row), ``log_likelihood`` and the run's record.
+    """
+    t_start = time.perf_counter()
+    tab = table if isinstance(table, BenchTable) else read_trials(table)
+    names = parse_fit(fit)
+    given = parse_bounds(bounds or {})
+    extra = sorted(set(given) - set(names))
+    require(
+        not extra,
+        f"--bounds {extra[0] if extra else ''}: not among the fitted names ({', '.join(names)}); add it to --fit or drop its bounds",
+    )
+    n = TRIALS if trials is None else trials
+    require(
+        isinstance(n, int) and not isinstance(n, bool) and 1 <= n <= MAX_TRIALS,
+        f"--trials must be a whole number from 1 to {MAX_TRIALS:,}, got {n!r}",
+    )
+    require(
+        isinstance(draws, int) and not isinstance(draws, bool) and 1 <= draws <= MAX_DRAWS,
+        f"--draws must be a whole number from 1 to {MAX_DRAWS:,}, got {draws!r}",
+    )
+    require(
+        isinstance(seed, int) and not isinstance(seed, bool) and seed >= 0,
+        f"--seed must be a whole number >= 0, got {seed!r}",
+    )
+    require(
+        isinstance(time_sigma, int | float) and math.isfinite(time_sigma) and time_sigma > 0,
+        f"--time-sigma must be a finite number > 0 (natural log of time), got {time_sigma!r}",
+    )
+    method = method or ("overdamped" if tab.has_times else "greedy")
+    require(method in METHODS, f"--method must be one of {', '.join(METHODS)}, got {method!r}")
+    if tab.has_times and method not in DYNAMIC:
+        raise InputError(
+            f"{tab.source}: the table gives time_s, which only the dynamics have: use --method overdamped "
+            f"or inertial (not {method}), or drop the time_s column"
+        )
+    if "damping" in names and method not in DYNAMIC:
+        raise InputError(
+            "--fit damping: the damping sets only the times of the dynamics; give --method overdamped "
+            "(and the bench's time_s) or fit something else"
+        )
+    sigma = tab.with_spread(spread)
+
+    raw, base_dir, source = _scene_document(scene, base)
+    doc = prepared_document(_absolute(raw, base_dir), names)
+    from simulator.scene import Scene
+
+    scene0 = Scene.from_dict(doc, base=base_dir)
+    bnd = {k: given.get(k, default_bounds(k, scene0)) for k in names}
+    for k in names:
+        f = FITTABLE[k]
+        if f.log and bnd[k][0] <= 0:
+            raise InputError(f"--bounds {k}: must be > 0 ({f.unit})")
+
+    # ------------------------------------------------------------------ priced first
+    from simulator.landscape import require_landscape_fits
+
+    corners = [{}] + [
+        {k: bnd[k][j] for k in names if k in ("volume_nl", "pad_angle_deg")} for j in (0, 1)
+    ]
+    for c in corners:
+        try:
+            s = scene_with(scene0, c)
+        except InputError:
+            continue
+        require_landscape_fits(s)
+    lanes = tab.n * draws
+    if method in DYNAMIC:
+        from simulator.batch import price_dynamics_lanes
+        from simulator.core import DEFAULT_DYNAMICS_CHUNK, threads
+
+        chunk = min(DEFAULT_DYNAMICS_CHUNK, lanes)
+        price_dynamics_lanes(
+            chunk * max(1, min(threads(), -(-lanes // chunk))), scene0.memory_budget_mb
+        )
+
+    describe = {
+        "source": tab.source,
+        "scene": source,
+        "fit": list(names),
+        "bounds": {k: list(v) for k, v in bnd.items()},
+        "draws": draws,
+        "seed": seed,
+        "method": method,
+        "time_sigma": time_sigma,
+    }
+    digest = hashlib.sha256(
+        json.dumps(
+            describe
+            | {
+                "table": tab.digest,
+                "sigma": sigma.tolist(),
+                "doc": doc,
+                "files": _file_digest(doc),
+            },
+            sort_keys=True,
+            default=str,
+        ).encode()
+    ).hexdigest()
+    inputs = [Path(tab.source)] + ([Path(source)] if Path(source).is_file() else [])
+    store = _FitStore(out, digest, describe, inputs=inputs)
+    model = _Model(scene0, tab, sigma, draws, seed, method)
+
+    def evaluate(values: dict) -> tuple[dict, dict]:
+        t0 = time.perf_counter()
+        try:
+            k, tm = model.run(values)
+        except InputError as err:
+            row = {"state": "fail", "error": str(err)[:300], "log_likelihood": None}
+            return row, {}
+        ly, lt, per_row = log_likelihood(tab, k, tm, draws, time_sigma)
+        row = {
+            "state": "complete",
+            "error": None,
+            "log_likelihood": ly + lt,
+            "log_likelihood_yield": ly,
+            "log_likelihood_time": lt,
+        }
+        detail = {
+            "model_aligned": k.tolist(),
+            "model_time_s": [None if not math.isfinite(v) else v for v in tm.tolist()],
+            "log_likelihood_rows": per_row.tolist(),
+        }
+        row["seconds"] = round(time.perf_counter() - t0, 3)
+        return row, detail
+
+    baseline_values = {k: scene_value(k, scene0) for k in names}
+    t_run = time.perf_counter()
+    try:
+        if 0 not in store.rows:  # the scene as given: run before anything is written
+            row0, det0 = evaluate(baseline_values)
+            if row0["state"] != "complete":
+                raise InputError(f"the scene as given cannot run: {row0['error']}")
+        store.open()
+        if 0 not in store.rows:
+            r = {"trial": 0, "kind": "baseline", **baseline_values, **row0}
+            store.record(0, r, {"trial": 0, "row": r, **det0})
+        with _quiet_optuna() as optuna:
+            from optuna.distributions import FloatDistribution
+            from optuna.trial import create_trial
+
+            dists = {k: FloatDistribution(bnd[k][0], bnd[k][1], log=FITTABLE[k].log) for k in names}
+            sampler = optuna.samplers.TPESampler(
+                seed=seed, n_startup_trials=max(4, min(10, n // 4))
+            )
+            study = optuna.create_study(sampler=sampler, direction="maximize")
+            for i in sorted(store.rows):  # replay: the study learns what was evaluated
+                row = store.rows[i]
+                params = {k: row[k] for k in names}
+                if row.get("state") != "complete" or not all(
+                    bnd[k][0] <= params[k] <= bnd[k][1] for k in names
+                ):
+                    continue
+                study.add_trial(
+                    create_trial(value=row["log_likelihood"], params=params, distributions=dists)
+                )
+            done_before = sum(1 for i in store.rows if i > 0)
+            if not quiet and done_before < n:
+                print(
+                    f"calibrate {digest[:12]}: {n} trials (TPE, seed {seed}) over {', '.join(names)}; "
+                    f"{tab.n} rows x {draws} draws ({method}); {done_before} done before",
+                    file=sys.stderr,
+                    flush=True,
+                )
+            best = max(
+                (r for r in store.rows.values() if r.get("state") == "complete"),
+                key=lambda r: r["log_likelihood"],
+                default=None,
+            )
+            for i in range(1, n + 1):
+                if i in store.rows:
+                    continue
+                ot = study.ask(dists)
+                values = {k: float(ot.params[k]) for k in names}
+                row, det = evaluate(values)
+                r = {"trial": i, "kind": "search", **values, **row}
+                store.record(i, r, {"trial": i, "row": r, **det})
+                if row["state"] == "complete":
+                    study.tell(ot, row["log_likelihood"])
+                    if best is None or row["log_likelihood"] > best["log_likelihood"]:
+                        best = r
+                else:  # outside the model's domain (receding > advancing, ...): told as far worse
+                    worst = min(
+                        (
+                            r["log_likelihood"]
+                            for r in store.rows.values()
+                            if r.get("state") == "complete"
+                        ),
+                        default=0.0,
+                    )
+                    study.tell(ot, worst - 1000.0)
+                if not quiet:
+                    got = (
+                        f"log L = {row['log_likelihood']:.2f}"
+                        if row["state"] == "complete"
+                        else f"failed ({row['error']})"
+                    )
+                    b = (
+                        f"best {best['log_likelihood']:.2f} (trial {best['trial']})"
+                        if best
+                        else "no best yet"
+                    )
+                    print(
+                        f"calibrate trial {i}/{n}: "
+                        + ", ".join(f"{k} = {_fmt(v)}" for k, v in values.items())
+                        + f": {got}; {b}; {row.get('seconds', 0):.1f} s",
+                        file=sys.stderr,
+                        flush=True,
+                    )
+    finally:
+        if store.out is not None and store._journal is not None:
+            with contextlib.suppress(Exception):
+                store.write_tables()
+        store.close()
+    run_s = time.perf_counter() - t_run
+    result = _result(store, tab, names, bnd, describe, digest, draws, sigma, n)
+    result["seconds"] = round(time.perf_counter() - t_start, 3)
+    result["run_s"] = round(run_s, 3)
+    if store.out is not None:
+        from simulator.design._calibrate_report import write_outputs
+
+        write_outputs(store.out, result, doc, pictures=pictures)
+        store.write_tables()
+        store.write_marker()
+    return result
+
+
+def _detail(store: _FitStore, i: int) -> dict:
+    if i in store.__dict__.get("details", {}):
+        return store.details[i]
+    if store.out is None:
+        return {}
+    try:
+        return json.loads((store.out / store.ROWS_DIR / f"{i:05d}.json").read_text())
+    except (OSError, ValueError):
+        return {}
+
+
+def _result(store, tab: BenchTable, names, bnd, describe, digest, draws, sigma, n) -> dict:
+    rows = [store.rows[i] for i in sorted(store.rows)]
+    ok = [r for r in rows if r.get("state") == "complete"]
+    require(ok, "no trial of the fit completed; see the trials' errors in trials.csv")
+    best = max(ok, key=lambda r: (r["log_likelihood"], -r["trial"]))
+    near = [r for r in ok if r["log_likelihood"] >= best["log_likelihood"] - DELTA_LOG_L]
+    rng = {}
+    far = [r for r in ok if r["log_likelihood"] < best["log_likelihood"] - DELTA_LOG_L]
+    for k in names:
+        lo, hi = min(r[k] for r in near), max(r[k] for r in near)
+        # bracketed by the nearest evaluated trials outside the set (else the bounds): an
+        # outer bound of the 1-sigma set, which few trials near the best would understate
+        lo = max((r[k] for r in far if r[k] < lo), default=bnd[k][0])
+        hi = min((r[k] for r in far if r[k] > hi), default=bnd[k][1])
+        span = bnd[k][1] - bnd[k][0]
+        rng[k] = {
+            "lo": lo,
+            "hi": hi,
+            "at_lower_bound": bool(lo - bnd[k][0] <= 0.02 * span),
+            "at_upper_bound": bool(bnd[k][1] - hi <= 0.02 * span),
+        }
+    det = _detail(store, best["trial"])
+    base = store.rows.get(0)
+    base_det = _detail(store, 0) if base else {}
+    per_row = []
+    for j in range(tab.n):
+        t = tab.time_s[j]
+        per_row.append(
+            {
+                "row": int(tab.line[j]),
+                "x_um": float(tab.start[j, 0]),
+                "y_um": float(tab.start[j, 1]),
+                "twist_deg": float(tab.start[j, 2]),
+                "sigma_um_um_deg": [float(v) for v in sigma[j]],
+                "trials": int(tab.trials[j]),
+                "aligned": int(tab.aligned[j]),
+                "bench_yield": float(tab.aligned[j] / tab.trials[j]),
+                "model_yield": det["model_aligned"][j] / draws if det else None,
+                "model_aligned_of_draws": det["model_aligned"][j] if det else None,
+                "baseline_yield": base_det["model_aligned"][j] / draws if base_det else None,
+                "bench_time_s": float(t) if math.isfinite(t) else None,
+                "model_time_s": det["model_time_s"][j] if det else None,
+                "baseline_time_s": base_det["model_time_s"][j] if base_det else None,
+                "log_likelihood": det["log_likelihood_rows"][j] if det else None,
+            }
+        )
+    units = {k: FITTABLE[k].unit for k in names}
+    return {
+        "tool": "selfalign",
+        "command": "calibrate",
+        "hash": digest,
+        **describe,
+        "units": units,
+        "best": {k: best[k] for k in names},
+        "best_trial": best["trial"],
+        "log_likelihood": best["log_likelihood"],
+        "log_likelihood_yield": best["log_likelihood_yield"],
+        "log_likelihood_time": best["log_likelihood_time"],
+        "baseline": ({k: base[k] for k in names} | {"log_likelihood": base.get("log_likelihood")})
+        if base
+        else None,
+        "range": rng,
+        "range_means": (
+            f"the span of the evaluated trials whose log-likelihood is within {DELTA_LOG_L} of the best "
+            "(a 1-sigma profile over the trials evaluated), widened to the nearest evaluated trial outside "
+            "it on each side (or the bound): an outer bound; at_*_bound: the range reaches a bound, widen it"
+        ),
+        "trials": n,
+        "done": sum(1 for r in rows if r["trial"] > 0),
+        "failed": sum(1 for r in rows if r.get("state") != "complete"),
+        "trials_in_range": len(near),
+        "rows": per_row,
+    }
+
+
+def synthetic_trials(
+    scene: str | os.PathLike | dict,
+    starts,
+    values: dict[str, float],
+    *,
+    trials: int = 100,
+    spread: tuple[float, float, float] = (20.0, 20.0, 2.0),
+    seed: int = 1,
+    method: str = "greedy",
+    base: str | os.PathLike | None = None,
+) -> list[dict]:
+    """Bench rows the model itself generates: for each nominal start of ``starts`` ((R, 3)
+    um, um, degrees), ``trials`` placements with normal noise ``spread`` drawn from ``seed``,
+    run on the scene with ``values`` (:data:`FITTABLE` names); the rows' ``aligned`` counts
+    (and, for the dynamics, ``time_s``: the median time to align), for :func:`write_trials`.
+    A test of :func:`calibrate` fits them back (with another seed for its own draws)."""
+    from simulator.scene import Scene
+
+    raw, base_dir, _ = _scene_document(scene, base)
+    doc = prepared_document(_absolute(raw, base_dir), tuple(values))
+    s = Scene.from_dict(doc, base=base_dir)
+    start = np.asarray(starts, dtype=float).reshape(-1, 3)
+    r = len(start)
+    sig = np.tile(np.asarray(spread, dtype=float), (r, 1))
+    tab = BenchTable(
+        "synthetic",
+        start,
+        np.full(r, trials),
+        np.zeros(r, np.int64),
+        np.full(r, np.nan),
+        sig,
+        tuple(range(2, r + 2)),
+    )
+    k, t = _Model(s, tab, sig, trials, seed, method).run(values)
+    rows = []
+    for j in range(r):
+        row = {
+            "x_um": float(start[j, 0]),
+            "y_um": float(start[j, 1]),
+            "twist_deg": float(start[j, 2]),
+            "trials": int(trials),
+            "aligned": int(k[j]),
+            "sigma_x_um": float(spread[0]),
+            "sigma_y_um": float(spread[1]),
+            "sigma_twist_deg": float(spread[2]),
+        }
+        if method in DYNAMIC and math.isfinite(t[j]):
+            row["time_s"] = float(t[j])
+        rows.append(row)
+    return rows

@@ -1,0 +1,197 @@
+"""``selfalign calibrate`` (simulator.design.calibrate): bad tables refused in one line before
+any work, the known parameter found back within its reported range from trials the model
+itself made, a resumed fit continues, the outputs are written and fitted.toml is a scene.
+
+Small and coarse throughout: the 730/100 um four-pad at 20 um/px and 5 degree twists, the
+overlap model with hysteresis and greedy steps (about a second per candidate)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from simulator.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+SCENE = {
+    "pattern": str(ROOT / "patterns" / "library" / "four_pad_730_100.png"),
+    "chip_size_um": 730,
+    "resolution_um": 20.0,
+    "twist": {"step_deg": 5.0},
+    "materials": {"pad_angle_deg": 30, "pad_receding_deg": 25, "pad_advancing_deg": 35},
+    "effects": {"hysteresis": True},
+}
+#: The starts near the four-pad's capture edge, where the receding angle sets the yield.
+EDGE = [(300, 0, 0), (325, 0, 0), (350, 0, 0), (375, 0, 0)]
+HEADER = "x_um,y_um,twist_deg,trials,aligned"
+
+
+def _scene_file(tmp_path: Path) -> Path:
+    from simulator.design import scene_toml
+
+    p = tmp_path / "scene.toml"
+    p.write_text(scene_toml(SCENE))
+    return p
+
+
+@pytest.mark.parametrize(
+    ("body", "says"),
+    [
+        ("x_um,y_um,twist_deg,trials\n1,2,0,10\n", "missing column aligned"),
+        (HEADER + "\n0,0,0,5,7\n", "row 2, column aligned: 7 aligned of 5 trials"),
+        (HEADER + "\n0,0,0,-5,0\n", "row 2, column trials: -5 is negative"),
+        (
+            HEADER + "\n0,0,0,10,5\n0,nan,0,10,5\n",
+            "row 3, column y_um: 'nan' is not a finite number",
+        ),
+        (HEADER + "\n0,abc,0,10,5\n", "row 2, column y_um: 'abc' is not a number"),
+        (HEADER + "\n", "has a header but no rows"),
+        ("", "is empty"),
+        (HEADER + ",time_ms\n0,0,0,10,5,1\n", "did you mean time_s?"),
+        (HEADER + ",time_s\n0,0,0,10,0,0.3\n", "none of whose trials aligned"),
+    ],
+)
+def test_a_bad_table_is_refused_in_one_line_before_any_work(tmp_path, capsys, body, says):
+    csv = tmp_path / "bench.csv"
+    csv.write_text(body)
+    out = tmp_path / "fit"
+    code = main(
+        ["calibrate", str(csv), str(_scene_file(tmp_path)), "--fit", "receding_angle_deg"]
+        + ["--spread", "20,20,2", "--out", str(out)]
+    )
+    err = capsys.readouterr().err
+    assert code == 2
+    assert len(err.strip().splitlines()) == 1, err
+    assert says in err and str(csv) in err, err
+    assert not out.exists()
+
+
+def test_unknown_names_and_bounds_get_a_did_you_mean(tmp_path, capsys):
+    csv = tmp_path / "bench.csv"
+    csv.write_text(HEADER + "\n300,0,0,10,5\n")
+    out = tmp_path / "fit"
+    scene = str(_scene_file(tmp_path))
+    assert (
+        main(
+            [
+                "calibrate",
+                str(csv),
+                scene,
+                "--fit",
+                "receding_angle",
+                "--spread",
+                "1,1,1",
+                "--out",
+                str(out),
+            ]
+        )
+        == 2
+    )
+    assert "did you mean receding_angle_deg?" in capsys.readouterr().err
+    assert (
+        main(
+            [
+                "calibrate",
+                str(csv),
+                scene,
+                "--fit",
+                "volume_nl",
+                "--bounds",
+                "volume=1:2",
+                "--spread",
+                "1,1,1",
+                "--out",
+                str(out),
+            ]
+        )
+        == 2
+    )
+    assert "did you mean volume_nl?" in capsys.readouterr().err
+    assert main(["calibrate", str(csv), scene, "--fit", "volume_nl", "--out", str(out)]) == 2
+    assert "--spread" in capsys.readouterr().err  # no placement noise for the row
+    assert not out.exists()
+
+
+def test_it_finds_the_receding_angle_the_trials_were_made_with():
+    from simulator.design import calibrate, read_trials, synthetic_trials, write_trials
+
+    truth = 27.0  # where the yields at the capture edge change with it (below ~15 deg they do not)
+    rows = synthetic_trials(SCENE, EDGE, {"receding_angle_deg": truth}, trials=100, seed=1)
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as d:
+        csv = write_trials(Path(d) / "bench.csv", rows)
+        fit = calibrate(
+            read_trials(csv), SCENE, "receding_angle_deg", None, trials=10, draws=64, seed=0
+        )
+    r = fit["range"]["receding_angle_deg"]
+    best = fit["best"]["receding_angle_deg"]
+    assert r["lo"] <= truth <= r["hi"], fit["range"]
+    assert r["lo"] <= best <= r["hi"]
+    # the range is informative: narrower than the bounds (0 to the advancing 35 deg)
+    assert r["hi"] - r["lo"] < 0.6 * 35.0, r
+    assert fit["log_likelihood"] > fit["baseline"]["log_likelihood"]
+
+
+def test_a_fit_resumes_writes_its_outputs_and_fitted_toml_is_a_scene(tmp_path, capsys):
+    from simulator.design import synthetic_trials, write_trials
+    from simulator.scene import Scene
+
+    csv = write_trials(
+        tmp_path / "bench.csv",
+        synthetic_trials(SCENE, EDGE[:2], {"receding_angle_deg": 20.0}, trials=50, seed=1),
+    )
+    scene = str(_scene_file(tmp_path))
+    out = tmp_path / "fit"
+    args = [
+        "calibrate",
+        str(csv),
+        scene,
+        "--fit",
+        "receding_angle_deg",
+        "--draws",
+        "16",
+        "--out",
+        str(out),
+    ]
+    assert main([*args, "--trials", "2"]) == 0
+    first = (out / "trials.jsonl").read_text().splitlines()
+    assert [json.loads(line)["trial"] for line in first] == [0, 1, 2]
+    assert main([*args, "--trials", "4", "--quiet"]) == 0
+    lines = (out / "trials.jsonl").read_text().splitlines()
+    assert [json.loads(line)["trial"] for line in lines] == [0, 1, 2, 3, 4]
+    assert lines[:3] == first  # continued, not redone
+    capsys.readouterr()
+    for name in ("fitted.toml", "fit.json", "bench.png", "report.html", "trials.csv"):
+        assert (out / name).stat().st_size > 0, name
+    fit = json.loads((out / "fit.json").read_text())
+    assert fit["done"] == 4 and len(fit["rows"]) == 2
+    assert {"bench_yield", "model_yield", "bench_time_s", "model_time_s"} <= set(fit["rows"][0])
+    s = Scene.from_toml(out / "fitted.toml")
+    assert s.materials.pad_receding_deg == pytest.approx(fit["best"]["receding_angle_deg"])
+    assert s.effects.hysteresis
+    # a different table into the same directory: refused in one line, nothing changed
+    other = write_trials(
+        tmp_path / "other.csv", [dict(x_um=300, y_um=0, twist_deg=0, trials=9, aligned=3)]
+    )
+    assert (
+        main(
+            [
+                "calibrate",
+                str(other),
+                scene,
+                "--fit",
+                "receding_angle_deg",
+                "--spread",
+                "20,20,2",
+                "--out",
+                str(out),
+            ]
+        )
+        == 2
+    )
+    err = capsys.readouterr().err
+    assert "holds a different calibrate" in err and len(err.strip().splitlines()) == 1, err
+    assert (out / "trials.jsonl").read_text().splitlines() == lines
