@@ -20,6 +20,7 @@ def test_every_example_is_covered():
         "sweep_fourpad.toml",
         "design_fourpad_gap.toml",
         "design_freeform_rfid.toml",
+        "calibrate_fourpad.toml",
     }
 
 
@@ -101,3 +102,24 @@ def test_freeform_design_example_loads():
     assert spec.twists_deg() == (0.0, 90.0, 180.0, 270.0) and spec.shape == (180, 180)
     assert spec.keep_in.sum() * 16 == 4 * 120 * 120  # the four 120 um pads at 4 um/px
     assert np.array_equal(spec.baseline.data >= 0.5, spec.keep_in)
+
+
+def test_calibrate_example_runs_its_header_command(tmp_path):
+    """The calibrate example's own command (its first line), cut to one trial after the
+    scene's own start and 16 draws a row (the full fit is in docs/guide/calibrate.md): the
+    ten bench rows are read and each gets the model's yield beside the bench's."""
+    import shlex
+
+    header = (EX / "calibrate_fourpad.toml").read_text().splitlines()[0]
+    argv = shlex.split(header.lstrip("# "))
+    assert argv[:2] == ["selfalign", "calibrate"] and argv[-2:] == ["--out", "fit"]
+    argv = [str(EX.parent / a) if a.startswith("examples/") else a for a in argv[1:-2]]
+    out = tmp_path / "fit"
+    assert main([*argv, "--out", str(out), "--trials", "1", "--draws", "16", "--quiet"]) == 0
+    fit = json.loads((out / "fit.json").read_text())
+    bench = (EX / "calibrate_trials.csv").read_text().splitlines()[1:]
+    assert len(fit["rows"]) == len(bench) == 10
+    assert set(fit["best"]) == {"receding_angle_deg", "pad_angle_deg"}
+    assert [r["bench_yield"] for r in fit["rows"]] == pytest.approx(
+        [int(line.split(",")[4]) / int(line.split(",")[3]) for line in bench]
+    )
