@@ -13,6 +13,7 @@ from pathlib import Path
 import pytest
 
 from simulator.cli import main
+from simulator.design._calibrate import PROFILE_BASE
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENE = {
@@ -135,6 +136,29 @@ def test_it_finds_the_receding_angle_the_trials_were_made_with():
     assert fit["log_likelihood"] > fit["baseline"]["log_likelihood"]
 
 
+def test_two_names_that_trade_are_reported_as_such_with_the_truth_in_both_ranges():
+    """On the overlap model with hysteresis, greedy yields depend on the pinning against the
+    drive, gamma (cos th_r - cos th_a) / (gamma (cos th_s - cos th_p)), and not on the two
+    angles apart: a valley of equal likelihood along which the receding and the pad angle
+    trade. The search alone lands on one point of it (narrow ranges that missed the truth
+    before the profile and the beta-binomial term); the profile follows the valley, so both
+    ranges hold the angles the trials were made with, and at least one is flagged."""
+    from simulator.design import calibrate, read_trials, synthetic_trials, write_trials
+
+    truth = {"receding_angle_deg": 20.0, "pad_angle_deg": 30.0}
+    rows = synthetic_trials(SCENE, EDGE, truth, trials=100, seed=1)
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as d:
+        csv = write_trials(Path(d) / "bench.csv", rows)
+        fit = calibrate(read_trials(csv), SCENE, list(truth), None, trials=8, draws=32, profile=4)
+    for k, v in truth.items():
+        r = fit["range"][k]
+        assert r["lo"] <= v <= r["hi"], (k, fit["best"], fit["range"])
+    assert not all(r["identified"] for r in fit["range"].values()), fit["range"]
+    assert fit["profiled"] > 0
+
+
 def test_a_fit_resumes_writes_its_outputs_and_fitted_toml_is_a_scene(tmp_path, capsys):
     from simulator.design import synthetic_trials, write_trials
     from simulator.scene import Scene
@@ -158,16 +182,27 @@ def test_a_fit_resumes_writes_its_outputs_and_fitted_toml_is_a_scene(tmp_path, c
     ]
     assert main([*args, "--trials", "2"]) == 0
     first = (out / "trials.jsonl").read_text().splitlines()
-    assert [json.loads(line)["trial"] for line in first] == [0, 1, 2]
+    trials = [json.loads(line)["trial"] for line in first]
+    assert [t for t in trials if t < PROFILE_BASE] == [0, 1, 2]
+    # one parameter's profile: its likelihood at the middles of six equal shares of 0..35 deg
+    prof = [json.loads(line) for line in first if json.loads(line)["trial"] >= PROFILE_BASE]
+    assert sorted(r["receding_angle_deg"] for r in prof) == pytest.approx(
+        [35 * (j + 0.5) / 6 for j in range(6)]
+    )
+    assert {r["kind"] for r in prof} == {"profile"}
     assert main([*args, "--trials", "4", "--quiet"]) == 0
     lines = (out / "trials.jsonl").read_text().splitlines()
-    assert [json.loads(line)["trial"] for line in lines] == [0, 1, 2, 3, 4]
-    assert lines[:3] == first  # continued, not redone
+    trials = [json.loads(line)["trial"] for line in lines]
+    assert [t for t in trials if t < PROFILE_BASE] == [0, 1, 2, 3, 4]
+    assert lines[: len(first)] == first  # continued, not redone
+    values = [json.loads(line)["receding_angle_deg"] for line in lines]
+    assert len(set(values)) == len(values)  # the profile's points found again, not run twice
     capsys.readouterr()
     for name in ("fitted.toml", "fit.json", "bench.png", "report.html", "trials.csv"):
         assert (out / name).stat().st_size > 0, name
     fit = json.loads((out / "fit.json").read_text())
     assert fit["done"] == 4 and len(fit["rows"]) == 2
+    assert fit["profiled"] == sum(t >= PROFILE_BASE for t in trials) >= 6
     assert {"bench_yield", "model_yield", "bench_time_s", "model_time_s"} <= set(fit["rows"][0])
     s = Scene.from_toml(out / "fitted.toml")
     assert s.materials.pad_receding_deg == pytest.approx(fit["best"]["receding_angle_deg"])

@@ -795,7 +795,7 @@ def _code_defaults() -> dict[str, object]:
     from patterns.resources import DEFAULT_BUDGET_CAP_MB, DEFAULT_MAX_IMAGE_MPX
     from simulator.batch import StartGrid, random_starts
     from simulator.core import DEFAULT_CHUNK, DEFAULT_MAX_STEPS, METHODS
-    from simulator.design import DRAWS, TIME_SIGMA, TRIALS
+    from simulator.design import DRAWS, PROFILE, TIME_SIGMA, TRIALS
     from simulator.physics import Liquid, Materials
     from simulator.scene import DEFAULT_PRESET
 
@@ -831,6 +831,7 @@ def _code_defaults() -> dict[str, object]:
         "--trials": TRIALS,
         "--draws": DRAWS,
         "--time-sigma": TIME_SIGMA,
+        "--profile": PROFILE,
     }
 
 

@@ -119,7 +119,7 @@ def test_calibrate_example_runs_its_header_command(tmp_path):
     fit = json.loads((out / "fit.json").read_text())
     bench = (EX / "calibrate_trials.csv").read_text().splitlines()[1:]
     assert len(fit["rows"]) == len(bench) == 10
-    assert set(fit["best"]) == {"receding_angle_deg", "pad_angle_deg"}
+    assert set(fit["best"]) == {"receding_angle_deg"}
     assert [r["bench_yield"] for r in fit["rows"]] == pytest.approx(
         [int(line.split(",")[4]) / int(line.split(",")[3]) for line in bench]
     )

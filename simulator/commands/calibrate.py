@@ -59,6 +59,14 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="SX,SY,STWIST",
         help="placement noise (standard deviations: um, um, degrees) of the rows that give no sigma columns",
     )
+    f.add_argument(
+        "--profile",
+        type=int,
+        metavar="N",
+        help="after the search, profile each parameter's likelihood at N values across its bounds, "
+        "the others re-fitted at each (default 6; 0: none): the ranges then see a valley along which "
+        "two parameters trade",
+    )
     f.add_argument("--seed", type=int, help="seed of the draws and of the sampler (default 0)")
     f.add_argument(
         "--method",
@@ -93,7 +101,7 @@ def run(args: argparse.Namespace) -> int:
     from patterns.errors import InputError
     from simulator.commands._common import parse_pose, scene_document, scene_document_from_args
     from simulator.commands.design import without_force
-    from simulator.design import calibrate, read_trials
+    from simulator.design import PROFILE, calibrate, read_trials
 
     try:
         table = read_trials(args.trials_csv)  # a bad table: refused before anything else
@@ -117,6 +125,7 @@ def run(args: argparse.Namespace) -> int:
             time_sigma=0.1 if args.time_sigma is None else args.time_sigma,
             quiet=args.quiet,
             base=base,
+            profile=PROFILE if args.profile is None else args.profile,
         )
     except InputError as err:
         raise InputError(without_force(str(err))) from None
@@ -124,15 +133,19 @@ def run(args: argparse.Namespace) -> int:
     print(
         f"calibrate {result['hash'][:12]}: {result['done']} of {result['trials']} trials over "
         f"{', '.join(result['fit'])}, {len(result['rows'])} rows x {result['draws']} draws ({result['method']}); "
-        f"{result['failed']} failed; {result['run_s']:.1f} s"
+        f"{result['profiled']} profile points; {result['failed']} failed; {result['run_s']:.1f} s"
     )
     for k, v in result["best"].items():
         r = result["range"][k]
-        edge = (
-            " (reaches a bound: widen --bounds)"
-            if r["at_lower_bound"] or r["at_upper_bound"]
-            else ""
-        )
+        if not r["identified"]:
+            edge = (
+                " (not identified: the range covers most of its bounds; the table does not tell it, "
+                "or another fitted name trades against it: fit fewer names)"
+            )
+        elif r["at_lower_bound"] or r["at_upper_bound"]:
+            edge = " (reaches a bound: widen --bounds)"
+        else:
+            edge = ""
         print(
             f"best {k} = {v:.4g} {units[k]} (range {r['lo']:.4g} .. {r['hi']:.4g}, Delta log L <= 0.5){edge}"
         )

@@ -2,6 +2,7 @@
 
 from ._calibrate import (
     DRAWS as DRAWS,
+    PROFILE as PROFILE,
     TIME_SIGMA as TIME_SIGMA,
     TRIALS as TRIALS,
     calibrate as calibrate,

@@ -10,22 +10,30 @@ parameters and not with the draws.
 
 The objective is a log-likelihood (docs/guide/calibrate.md):
 
-* per row, binomial: ``log C(N, a) + a log p + (N - a) log(1 - p)``, with N the row's
-  trials, a its aligned and ``p = (k + 1/2) / (draws + 1)`` the model's yield from k of its
-  ``draws`` placements aligned (the half keeps a model count of 0 or ``draws`` finite);
+* per row, beta-binomial: the probability of the bench's a aligned of its N trials when
+  the model's yield p is known only from k of its ``draws`` placements aligned, p's
+  distribution the Beta(k + 1/2, draws - k + 1/2) that k gives (Jeffreys' prior):
+  ``log C(N, a) + log B(a + k + 1/2, N - a + draws - k + 1/2) - log B(k + 1/2, draws - k +
+  1/2)``. A binomial with p = k / draws would take the model's Monte Carlo estimate as
+  exact: a candidate whose draws happen to match the bench's counts would stand out by
+  luck, and the ranges would shrink around it;
 * per row with ``time_s``: a Gaussian on log time, ``-1/2 ((ln t_bench - ln t_model) /
   s)^2 - ln(s sqrt(2 pi))``, t_model the median time to align of the model's aligned
   placements and s = ``time_sigma`` (default 0.1: a 10 % scatter of the median); a model
   none of whose placements aligned counts as 5 s away.
 
 Optuna's TPE sampler (seeded) proposes the candidates; trial 0 is the scene as given (the
-baseline). The run is priced before it starts (the landscape and the dynamics' lanes against
+baseline). After the search, each parameter's likelihood is profiled (:func:`_profile`): at
+``profile`` values across its bounds, the best log-likelihood over the other parameters (a
+short pattern search from the neighbouring value's best, along the valley two parameters
+that trade against each other make). The run is priced before it starts (the landscape and the dynamics' lanes against
 the memory budget) and is resumable from ``out`` as the design search is
 (:class:`simulator.sweep.ResultStore`: ``calibrate.json`` holds the fit's hash, ``trials.jsonl``
 the journal); a directory holding a different table, scene or fit is refused. The range of a
-parameter is the span of the evaluated trials within 1/2 of the best log-likelihood (a 1-sigma
-profile over the trials evaluated, not a fitted curvature), widened on each side to the
-nearest evaluated trial outside it (or the bound): an outer bound of that set.
+parameter is the span of the evaluated trials (search and profile) within 1/2 of the best
+log-likelihood (a 1-sigma profile, not a fitted curvature), widened on each side to the
+nearest evaluated trial outside it (or the bound): an outer bound of that set. A range over
+most of the bounds says that the table does not tell that parameter (``identified`` false).
 """
 
 from __future__ import annotations
@@ -55,7 +63,15 @@ from simulator.design._calibrate_params import (
 from simulator.design._calibrate_table import BenchTable, read_trials
 from simulator.sweep import ResultStore
 
-__all__ = ["DRAWS", "TIME_SIGMA", "TRIALS", "calibrate", "log_likelihood", "synthetic_trials"]
+__all__ = [
+    "DRAWS",
+    "PROFILE",
+    "TIME_SIGMA",
+    "TRIALS",
+    "calibrate",
+    "log_likelihood",
+    "synthetic_trials",
+]
 
 #: Monte Carlo placements per row and candidate (the same draws for every candidate).
 DRAWS = 32
@@ -69,6 +85,10 @@ TIME_SIGMA = 0.1
 NO_TIME_PENALTY = 5.0
 #: The log-likelihood drop that bounds a parameter's range (1 sigma for one parameter).
 DELTA_LOG_L = 0.5
+#: Points of each parameter's likelihood profile (:func:`_profile`; 0: none).
+PROFILE = 6
+#: The profile's trials are numbered from here (the search's from 1 to MAX_TRIALS).
+PROFILE_BASE = 1_000_000
 METHODS = ("greedy", "gradient", "overdamped", "inertial")
 DYNAMIC = ("overdamped", "inertial")
 
@@ -108,9 +128,16 @@ def log_likelihood(
     time_sigma: float,
 ) -> tuple[float, float, np.ndarray]:
     """(yield term, time term, per-row total) of the log-likelihood (module docstring)."""
-    p = (model_aligned + 0.5) / (draws + 1.0)
+    from scipy.special import betaln
+
     n, a = table.trials.astype(float), table.aligned.astype(float)
-    ly = _log_binom(table.trials, table.aligned) + a * np.log(p) + (n - a) * np.log1p(-p)
+    alpha = np.asarray(model_aligned, float) + 0.5
+    beta = draws - np.asarray(model_aligned, float) + 0.5
+    ly = (
+        _log_binom(table.trials, table.aligned)
+        + betaln(a + alpha, n - a + beta)
+        - betaln(alpha, beta)
+    )
     lt = np.zeros(table.n)
     has = np.isfinite(table.time_s)
     norm = -math.log(time_sigma * math.sqrt(2 * math.pi))
@@ -235,6 +262,7 @@ def calibrate(
     quiet: bool = True,
     base: str | os.PathLike | None = None,
     pictures: bool = True,
+    profile: int = PROFILE,
 ) -> dict:
     """Fit the scene's parameters ``fit`` to a bench table; return the fit (``fit.json``'s dict).
 
@@ -253,6 +281,7 @@ def calibrate(
         time_sigma: the width of the log-time term.
         quiet: no progress lines on stderr.
         pictures: with ``out``, write report.html and bench.png.
+        profile: points of each parameter's likelihood profile after the search (0: none).
 
     Returns:
         ``best`` (NAME -> value), ``range`` (NAME -> [lo, hi] within Delta log L = 1/2),
@@ -283,6 +312,10 @@ def calibrate(
     require(
         isinstance(time_sigma, int | float) and math.isfinite(time_sigma) and time_sigma > 0,
         f"--time-sigma must be a finite number > 0 (natural log of time), got {time_sigma!r}",
+    )
+    require(
+        isinstance(profile, int) and not isinstance(profile, bool) and 0 <= profile <= 100,
+        f"--profile must be a whole number from 0 to 100, got {profile!r}",
     )
     method = method or ("overdamped" if tab.has_times else "greedy")
     require(method in METHODS, f"--method must be one of {', '.join(METHODS)}, got {method!r}")
@@ -411,7 +444,7 @@ def calibrate(
                 study.add_trial(
                     create_trial(value=row["log_likelihood"], params=params, distributions=dists)
                 )
-            done_before = sum(1 for i in store.rows if i > 0)
+            done_before = sum(1 for i in store.rows if 0 < i < PROFILE_BASE)
             if not quiet and done_before < n:
                 print(
                     f"calibrate {digest[:12]}: {n} trials (TPE, seed {seed}) over {', '.join(names)}; "
@@ -464,6 +497,8 @@ def calibrate(
                         file=sys.stderr,
                         flush=True,
                     )
+        if profile:
+            _profile(store, names, bnd, profile, evaluate, quiet)
     finally:
         if store.out is not None and store._journal is not None:
             with contextlib.suppress(Exception):
@@ -480,6 +515,108 @@ def calibrate(
         store.write_tables()
         store.write_marker()
     return result
+
+
+#: A range over at least this share of a parameter's bounds (log scale where the name is) is
+#: "not identified".
+IDENTIFIED_SHARE = 0.6
+
+
+def _scaled(k: str, v: float, bnd: dict) -> float:
+    """``v`` as a share of the bounds of ``k`` (on a log scale where :data:`FITTABLE` says)."""
+    lo, hi = bnd[k]
+    if FITTABLE[k].log:
+        return math.log(v / lo) / math.log(hi / lo)
+    return (v - lo) / (hi - lo)
+
+
+def _unscaled(k: str, u: float, bnd: dict) -> float:
+    lo, hi = bnd[k]
+    if FITTABLE[k].log:
+        return lo * (hi / lo) ** u
+    return lo + u * (hi - lo)
+
+
+def _profile(store: _FitStore, names, bnd: dict, points: int, evaluate, quiet: bool) -> None:
+    """Each parameter's likelihood profile: at ``points`` values of it (the middles of equal
+    shares of its bounds), the best log-likelihood over the other parameters, found by a
+    short pattern search (steps of 1/8, then 1/16 and 1/32 of their bounds, each way) that
+    starts from the best of the neighbouring value on the way out from the best trial: it
+    follows a valley along which two parameters trade. One parameter: its likelihood at
+    those values. Every point is a trial of the store (numbered from :data:`PROFILE_BASE`,
+    kind ``profile``), so a resumed fit finds them again instead of running them twice."""
+    seen: dict[tuple, float] = {}
+
+    def key(values: dict) -> tuple:
+        return tuple(round(_scaled(k, values[k], bnd), 9) for k in names)
+
+    for r in store.rows.values():
+        if r.get("state") == "complete":
+            seen.setdefault(key(r), r["log_likelihood"])
+        elif all(k in r for k in names):
+            seen.setdefault(key(r), -math.inf)
+    done = [max((i for i in store.rows if i >= PROFILE_BASE), default=PROFILE_BASE - 1)]
+    total = points * len(names)
+
+    def at(values: dict, label: str) -> float:
+        kk = key(values)
+        if kk in seen:
+            return seen[kk]
+        row, det = evaluate(values)
+        done[0] += 1
+        i = done[0]
+        r = {"trial": i, "kind": "profile", **values, **row}
+        store.record(i, r, {"trial": i, "row": r, **det})
+        seen[kk] = row["log_likelihood"] if row["state"] == "complete" else -math.inf
+        if not quiet:
+            print(
+                f"calibrate profile {label}: "
+                + ", ".join(f"{k} = {_fmt(v)}" for k, v in values.items())
+                + (
+                    f": log L = {row['log_likelihood']:.2f}"
+                    if row["state"] == "complete"
+                    else f": failed ({row['error']})"
+                ),
+                file=sys.stderr,
+                flush=True,
+            )
+        return seen[kk]
+
+    ok = [r for r in store.rows.values() if r.get("state") == "complete"]
+    if not ok:
+        return
+    best = max(ok, key=lambda r: (r["log_likelihood"], -r["trial"]))
+    grid = [(j + 0.5) / points for j in range(points)]
+    n = 0
+    for k in names:
+        others = [o for o in names if o != k]
+        u0 = _scaled(k, best[k], bnd)
+        up = [u for u in grid if u >= u0]
+        down = [u for u in reversed(grid) if u < u0]
+        for side in (up, down):
+            cur = {o: _scaled(o, best[o], bnd) for o in others}
+            for u in side:
+                n += 1
+                label = f"{n}/{total} ({k})"
+
+                def value(c: dict, u=u, k=k, others=others, label=label) -> float:
+                    return at(
+                        {k: _unscaled(k, u, bnd)} | {o: _unscaled(o, c[o], bnd) for o in others},
+                        label,
+                    )
+
+                here = value(cur)
+                for step in (1 / 8, 1 / 16, 1 / 32):
+                    for o in others:
+                        for sgn in (1, -1):
+                            c = dict(cur)
+                            c[o] = min(1.0, max(0.0, cur[o] + sgn * step))
+                            if c[o] == cur[o]:
+                                continue
+                            v = value(c)
+                            if v > here:
+                                here, cur = v, c
+                                break
 
 
 def _detail(store: _FitStore, i: int) -> dict:
@@ -513,6 +650,8 @@ def _result(store, tab: BenchTable, names, bnd, describe, digest, draws, sigma, 
             "hi": hi,
             "at_lower_bound": bool(lo - bnd[k][0] <= 0.02 * span),
             "at_upper_bound": bool(bnd[k][1] - hi <= 0.02 * span),
+            # over most of its bounds: the table does not tell this parameter (alone)
+            "identified": bool(_scaled(k, hi, bnd) - _scaled(k, lo, bnd) < IDENTIFIED_SHARE),
         }
     det = _detail(store, best["trial"])
     base = store.rows.get(0)
@@ -557,11 +696,14 @@ def _result(store, tab: BenchTable, names, bnd, describe, digest, draws, sigma, 
         "range": rng,
         "range_means": (
             f"the span of the evaluated trials whose log-likelihood is within {DELTA_LOG_L} of the best "
-            "(a 1-sigma profile over the trials evaluated), widened to the nearest evaluated trial outside "
-            "it on each side (or the bound): an outer bound; at_*_bound: the range reaches a bound, widen it"
+            "(search and profile: a 1-sigma profile likelihood), widened to the nearest evaluated trial outside "
+            "it on each side (or the bound): an outer bound; at_*_bound: the range reaches a bound; "
+            f"identified false: the range covers {IDENTIFIED_SHARE:.0%} or more of the bounds, the table does not "
+            "tell this parameter (another fitted one trades against it, or the yields do not depend on it)"
         ),
         "trials": n,
-        "done": sum(1 for r in rows if r["trial"] > 0),
+        "done": sum(1 for r in rows if 0 < r["trial"] < PROFILE_BASE),
+        "profiled": sum(1 for r in rows if r["trial"] >= PROFILE_BASE),
         "failed": sum(1 for r in rows if r.get("state") != "complete"),
         "trials_in_range": len(near),
         "rows": per_row,

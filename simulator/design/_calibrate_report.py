@@ -133,13 +133,21 @@ def _plot(result: dict, path: Path) -> None:
     plt.close(fig)
 
 
+def _range_note(r: dict) -> str:
+    if not r.get("identified", True):
+        return " (not identified: the table does not tell it, or a fitted name trades against it)"
+    if r["at_lower_bound"] or r["at_upper_bound"]:
+        return " (reaches a bound)"
+    return ""
+
+
 def _page(result: dict) -> str:
     e = html.escape
     units = result["units"]
     prm = "".join(
         f"<tr><td><code>{e(k)}</code></td><td>{v:.4g} {e(units[k])}</td>"
         f"<td>{result['range'][k]['lo']:.4g} .. {result['range'][k]['hi']:.4g}"
-        f"{' (reaches a bound)' if result['range'][k]['at_lower_bound'] or result['range'][k]['at_upper_bound'] else ''}</td>"
+        f"{_range_note(result['range'][k])}</td>"
         f"<td>{result['bounds'][k][0]:.4g} .. {result['bounds'][k][1]:.4g}</td>"
         f"<td>{'' if result['baseline'] is None else format(result['baseline'][k], '.4g')}</td></tr>"
         for k, v in result["best"].items()
@@ -161,7 +169,8 @@ def _page(result: dict) -> str:
 <style>body{{font-family:sans-serif;max-width:70em;margin:2em auto}}table{{border-collapse:collapse}}
 td,th{{border:1px solid #ccc;padding:.2em .6em;text-align:left}}</style></head><body>
 <h1>Calibration against {e(result["source"])}</h1>
-<p>Fit {e(result["hash"][:12])}: {result["done"]} of {result["trials"]} trials (Optuna TPE, seed {result["seed"]}),
+<p>Fit {e(result["hash"][:12])}: {result["done"]} of {result["trials"]} trials (Optuna TPE, seed {result["seed"]})
+and {result.get("profiled", 0)} points of the parameters' likelihood profiles,
 {result["failed"]} failed; {len(result["rows"])} rows, {result["draws"]} Monte Carlo placements per row and
 candidate, the same placements for every candidate; method {e(result["method"])}; scene {e(result["scene"])}.
 Best: trial {result["best_trial"]}, log-likelihood {result["log_likelihood"]:.3f}
