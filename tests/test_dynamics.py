@@ -336,8 +336,13 @@ def test_square_aligns_from_30_20_5(square_200):
         abs(x) <= grid.um_per_px and abs(y) <= grid.um_per_px and abs(twist) <= grid.twist_step_deg
     )
     assert_energy_never_rises(s, float(field.floor))
-    # the energy the other steppers report, at the end of the path
-    assert float(s.energy) == pytest.approx(float(interpolate(field, grid, s.q)), rel=1e-6)
+    # the energy the other steppers report, at the end of the path: two float32 trilinear
+    # interpolations of the same corners (the stepper's block, interpolate's lookups), each
+    # within about ten eps(float32) of max|E|, so within the field's noise floor (32 eps
+    # max|E|) of each other; rel=1e-6 (8 eps of |E| at the minimum) held on one machine
+    assert float(s.energy) == pytest.approx(
+        float(interpolate(field, grid, s.q)), rel=0, abs=float(field.floor)
+    )
 
 
 def test_no_contact_start_returns_immediately(square_200):

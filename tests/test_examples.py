@@ -64,11 +64,16 @@ def test_evaluate_example(tmp_path):
     )  # C11: the defect does not move it
 
 
+@pytest.mark.fft
 @pytest.mark.parametrize("flags", [["--at", "40,25,0"]])
 def test_energy_example(tmp_path, flags):
     out = tmp_path / "e.json"
     assert main(["energy", str(EX / "energy_fourpad.toml"), *flags, "--json", str(out)]) == 0
-    assert json.loads(out.read_text())["poses"][0]["overlap_um2"] == pytest.approx(419200, abs=1)
+    doc = json.loads(out.read_text())
+    # float32: within the noise floor, 32 eps(float32) max|E| (the FFT round-off bound),
+    # 1.8 um^2 at max|E| = 4 x 340^2 um^2 (abs=1 um^2 was below it: one machine's luck)
+    floor_um2 = doc["noise_floor_J"] / (abs(doc["delta_gamma_N_m"]) * 1e-12)
+    assert doc["poses"][0]["overlap_um2"] == pytest.approx(419200, abs=floor_um2)
 
 
 def test_design_example_is_the_guides_search():

@@ -82,6 +82,7 @@ def test_two_pads_in_a_row_shadow_each_other_along_x(two):
     assert sorted((p.near, p.far, p.axis) for p in planes.pairs) == [(0, 1, 0), (1, 0, 2)]
 
 
+@pytest.mark.fft
 def test_the_pair_term_is_the_near_strip_counted_whole_up_to_the_band(two):
     # Chip at X (um) on y = 0: its left edge at X - 150, pad 2's near edge at 20 um, so a strip
     # of pad 2 w = X - 170 wide lies outside the chip, under the bridge to pad 1 (wet, the
@@ -93,14 +94,18 @@ def test_the_pair_term_is_the_near_strip_counted_whole_up_to_the_band(two):
     c = r.count_profiles()
     jp = planes.template.joules_per_px2
     pair = _pair_plane(planes, 1, 0)
+    # the FFT round-off bound, NOISE_FACTOR eps(dtype) of the plane's max |E| (rel= of the
+    # value was tighter at the narrow strips, 1/6 of the plane's scale; an exact 0 held on
+    # OpenCV's transforms only, SciPy's and JAX's leave -4e-18 J, 0.05 eps of the scale)
+    floor = NOISE_FACTOR * float(np.finfo(s.dtype).eps) * float(np.abs(pair).max())
     for x_um in (210.0, 220.0, 230.0, 240.0):
         node = planes.node((x_um, 0.0, 0.0))
         si = np.arange(int(round((x_um - 170.0) / PX))) + 0.5
         n_b = 0.5 * (c["band_in"](si) + c["band_out"](si))
         expect = jp * 40 * float(np.sum(n_b - r.profile(si)))
-        assert pair[node] == pytest.approx(expect, rel=NOISE_FACTOR * float(np.finfo(s.dtype).eps))
+        assert pair[node] == pytest.approx(expect, rel=0, abs=floor)
     # where the near pad's strip is within d_s of the chip, f = 1 = N_b: nothing to correct
-    assert pair[planes.node((170.0 + PX * int(r.d_s), 0.0, 0.0))] == 0.0
+    assert abs(pair[planes.node((170.0 + PX * int(r.d_s), 0.0, 0.0))]) <= floor
 
 
 def test_a_near_pad_under_the_bridge_pulls_once(two):

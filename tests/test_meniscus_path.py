@@ -120,6 +120,7 @@ def test_a_generated_four_pad_on_the_floor():
     "name, chip, res, vol",
     [("defect_B_inward", 200, 5.0, 0.9), ("four_pad_730_100", 730, 10.0, 20.0)],
 )
+@pytest.mark.fft
 def test_global_minimum_without_the_cube(name, chip, res, vol):
     """Proved from the run's boxes and the path engine's sparse footprint (its mass for the
     absolute bound): the full landscape's minimum, and no rotation of the whole canvas."""
@@ -129,7 +130,9 @@ def test_global_minimum_without_the_cube(name, chip, res, vol):
     pe = PathEnergy(s)
     got = global_minimum(s, evaluated=pe.nominal_boxes(), engine=pe)
     assert got.pose == pytest.approx(want.pose, abs=1e-9)
-    assert got.energy_J == pytest.approx(want.energy_J, rel=1e-6)
+    # The FFT's energy within the noise floor (32 eps(float32) max|E|) of the exact one, the
+    # path engine's rounded once from float64: rel=1e-6 (8 eps of |E| = max|E|) was one path's luck
+    assert got.energy_J == pytest.approx(want.energy_J, rel=0, abs=full.noise_floor_J)
 
 
 def test_global_minimum_by_the_cell_bound_with_the_footprint():

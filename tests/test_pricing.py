@@ -298,6 +298,7 @@ def test_sweep_point_over_budget_fails_before_any_work(tmp_path):
     assert rss < REFUSED_RSS_MB
 
 
+@pytest.mark.fft
 def test_a_build_takes_smaller_chunks_of_twists_before_it_refuses():
     # The work space grows with the twists transformed together (their chip rasters, and one
     # transform pipeline per thread up to one per twist): a budget that holds one twist at a
@@ -312,7 +313,11 @@ def test_a_build_takes_smaller_chunks_of_twists_before_it_refuses():
     one, eight = _build_bytes(sc, lay, 1), _build_bytes(sc, lay, 8)
     assert eight > one
     tight = sc.replace(memory_budget_mb=(one + 0.2 * (eight - one)) / 2**20)
-    np.testing.assert_array_equal(build_landscape(tight).energy, build_landscape(sc).energy)
+    # The same energies up to round-off: a JAX transform of a smaller batch rounds otherwise
+    # (bit for bit only on the CPU paths, one twist per transform), and each build is within
+    # the noise floor (32 eps(float64) max|E|, the FFT round-off bound) of the exact value.
+    a, b = build_landscape(tight), build_landscape(sc)
+    np.testing.assert_allclose(a.energy, b.energy, rtol=0, atol=2 * b.noise_floor_J)
 
 
 def test_the_bound_rotates_the_footprint_once_when_the_pattern_is_the_smaller(monkeypatch):
