@@ -133,7 +133,8 @@ def run(args: argparse.Namespace) -> int:
     )
     from simulator.motion import simulate  # JAX, imported when the run goes ahead
 
-    compiling(method, args.quiet)
+    if method not in ("overdamped", "inertial"):  # a dynamic run says it after its landscape
+        compiling(method, args.quiet)
     traj = simulate(scene, start, method=method, max_steps=max_steps, engine=args.engine)
     print(end_line(scene, traj))
     if traj.footprint is not None:
