@@ -214,6 +214,8 @@ def test_misspelled_flag_gets_did_you_mean_and_the_subcommand_help(run_cli):
     one_line_error(rc, err, "did you mean --chip-size?", "(see selfalign simulate --help)")
     rc, _, err = run_cli(["pattern", "four-pad", "--size", "730", "--gapp", "50", "-o", "x.png"])
     one_line_error(rc, err, "did you mean --gap?", "(see selfalign pattern four-pad --help)")
+    rc, _, err = run_cli(["liquid", "window", "--patern", FOURPAD, "--chip-size", "730"])
+    one_line_error(rc, err, "did you mean --pattern?", "(see selfalign liquid window --help)")
 
 
 def test_required_design_parameters_show_without_brackets(run_cli):
