@@ -162,6 +162,27 @@ def test_evaluate_of_the_overlap_model_is_grid_limited(run_cli, tmp_path):
     assert s["restoring_force_N"]["bias_um"] == 8.0  # two grid steps (2 % of 200 um is 4 um)
 
 
+def test_evaluate_reads_the_window_at_the_pattern_s_own_pixels(run_cli, tmp_path, monkeypatch):
+    # evaluate coarsens a pattern to keep its landscape small; the four-pad's L and gap are
+    # read before that, so its window is liquid window's (at 4 um/px the gap reads 16 um).
+    import simulator.batch._evaluate as ev
+
+    monkeypatch.setattr(ev, "auto_resolution", lambda scene: scene.at_resolution(4.0))
+    fp, out = _fourpad_png(tmp_path / "fp.png"), tmp_path / "ev"
+    rc, text, err = run_cli(
+        ["evaluate", fp, "--um-per-px", "1", "--chip-size", "200", "--no-twist", "--quiet"]
+        + ["--out", out]
+    )
+    assert rc == 0, err
+    s = json.loads((out / "summary.json").read_text())
+    assert s["settings"]["um_per_px"] == 4.0 and s["settings"]["resolution_auto"] is True
+    w = _window(run_cli, "--pattern", fp, "--um-per-px", "1", "--chip-size", "200")
+    cv = critical_volume(L, G, 30.0, 60.0).critical_volume_nl
+    assert s["volume_window"]["critical_volume_nl"] == w["critical_volume_nl"] == pytest.approx(cv)
+    assert "L 200 um, gap 20 um" in s["volume_window"]["critical_volume_note"]
+    assert f"usable droplet volume: {cv:.3g} to" in text
+
+
 # ----------------------------------------------------------------------- the window
 def _thin_nl(side: float, area: float) -> float:
     return THIN_FILM_FRACTION * side * area / UM3_PER_NL

@@ -464,6 +464,28 @@ def test_a_run_that_does_not_align_names_the_minimum():
     )
 
 
+@pytest.mark.parametrize(
+    "time_s, words",
+    [
+        (6.88e-3, "after 1 steps, 6.88 ms"),
+        (0.9996, "after 1 steps, 1 s"),
+        (2.5, "after 1 steps, 2.5 s"),
+    ],
+)
+def test_a_dynamic_run_s_time_reads_in_ms_or_s(time_s, words):
+    # a run of 1 s of simulated time read "1e+03 ms"
+    from simulator.commands.simulate import end_line
+    from simulator.motion import Trajectory
+
+    s = Scene(
+        pattern=mask_from_geometry(square(200), 4.0, margin_um=8),
+        chip=mask_from_geometry(square(200), 4.0),
+    )
+    path = np.array([[40.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    t = Trajectory("overdamped", "aligned", path, np.zeros(2), 1, time_s, optimum=(0.0, 0.0, 0.0))
+    assert end_line(s, t).endswith(words)
+
+
 # ============================================================ 4. negative values after a space
 NEGATIVE_FORMS = [
     (["simulate", "--pattern", "p.png", "--start", "-300,200,10"], "start", "-300,200,10"),

@@ -214,6 +214,8 @@ def test_misspelled_flag_gets_did_you_mean_and_the_subcommand_help(run_cli):
     one_line_error(rc, err, "did you mean --chip-size?", "(see selfalign simulate --help)")
     rc, _, err = run_cli(["pattern", "four-pad", "--size", "730", "--gapp", "50", "-o", "x.png"])
     one_line_error(rc, err, "did you mean --gap?", "(see selfalign pattern four-pad --help)")
+    rc, _, err = run_cli(["liquid", "window", "--patern", FOURPAD, "--chip-size", "730"])
+    one_line_error(rc, err, "did you mean --pattern?", "(see selfalign liquid window --help)")
 
 
 def test_required_design_parameters_show_without_brackets(run_cli):
@@ -284,3 +286,36 @@ def test_demo_installs_only_what_it_runs():
     extras = project["project"]["optional-dependencies"]
     assert "selfalign[docs]" in extras["test"]
     assert not any(d.startswith(("pytest", "mkdocs")) for d in project["project"]["dependencies"])
+
+
+def test_a_dynamic_run_says_each_stage_after_its_landscape(run_cli, monkeypatch):
+    # The 730 um four-pad at 2 um/px (345 M poses): after its landscape, the floor, the
+    # stepper's field, the compile and the end's classification each took 3-16 s on a loaded
+    # machine, all under one line. Each says what it does now, in the order it runs.
+    import simulator.core._progress as progress
+
+    monkeypatch.setenv("SELFALIGN_WAIT_S", "0")  # every waiting line shows
+    monkeypatch.setattr(progress, "_shown", set())  # the compile line not yet shown
+    rc, out, err = run_cli(
+        ["simulate", "--pattern", library_path("square_200"), "--chip-size", "200"]
+        + ["--resolution", "4", "--no-twist", "--meniscus", "--volume", "0.4"]
+        + ["--method", "overdamped", "--start", "20,0,0"]
+    )
+    assert rc == 0, err
+    stages = [
+        "landscape: 1 twist x ",
+        "the well's floor around the global minimum (",
+        "the overdamped stepper's field on the landscape (",
+        "compiling the overdamped stepper with JAX",
+        "where the run ended: plateau, global minimum and error limit (",
+    ]
+    lines = err.splitlines()
+    at = [next(i for i, line in enumerate(lines) if line.startswith(s)) for s in stages]
+    assert at == sorted(at), lines
+    assert out.startswith("overdamped: aligned at")
+    rc, out, err = run_cli(
+        ["simulate", "--pattern", library_path("square_200"), "--chip-size", "200"]
+        + ["--resolution", "4", "--no-twist", "--meniscus", "--volume", "0.4"]
+        + ["--method", "overdamped", "--start", "20,0,0", "--quiet"]
+    )
+    assert rc == 0 and err == "", err

@@ -221,6 +221,8 @@ def test_demo_writes_all_its_files(tmp_path, capsys):
     )  # escapes by twisting
     summary = (out / "summary.txt").read_text()
     assert "outcome      aligned" in summary and "plateau at (380.00 um" in summary
+    # the files by their paths in --out (it named report.html, which is report/report.html)
+    assert "report/report.html" in summary and " report.html" not in summary
     frames = iio.imread(out / "demo.gif", index=None)
     assert 100 <= len(frames) <= 120 and (out / "demo.gif").stat().st_size < 2e6
 

@@ -182,6 +182,7 @@ def evaluate(
     t_start = time.perf_counter()
     check_output_dir(out_dir, "--out", force, inputs)  # before any work
     native = scene.um_per_px
+    given = scene  # the droplet window reads the pattern as given (liquid window's pixels)
     if auto:
         scene = auto_resolution(scene)
     require_landscape_fits(scene)  # the landscape and the chip's footprint priced before any work
@@ -200,7 +201,7 @@ def evaluate(
         ):  # a layout pattern: file, cell, layers, units, and where the origin is
             summary["layout"] = scene.pattern.params["layout"]
         summary["liquid_warnings"] = list(liquid_warnings or [])
-        summary["volume_window"] = _volume_window(scene, summary)
+        summary["volume_window"] = _volume_window(given, summary)
         summary["seconds"] = round(time.perf_counter() - t_start, 2)
         require_finite(summary, "evaluate summary")
         (tmp / "summary.json").write_text(json.dumps(summary, indent=2, allow_nan=False) + "\n")
@@ -216,7 +217,10 @@ OVERFLOW_BIAS_SIGMAS = 2.0
 def _volume_window(scene: Scene, summary: dict) -> dict:
     """The droplet's volume window (:func:`simulator.liquid.volume_window`) for the report, the
     overflow limit at :data:`OVERFLOW_BIAS_SIGMAS` of the placement noise; ``volume_given``
-    says whether the volume was typed or derived from the chip."""
+    says whether the volume was typed or derived from the chip. ``scene`` is the one given,
+    before the automatic coarsening: a four-pad's L and gap are read at the pattern's own
+    pixels, as ``selfalign liquid window`` reads them (the 730 um four-pad coarsened to
+    3 um/px read as L 732, gap 48 um: a critical volume of 8.89 nl against 9)."""
     from simulator.liquid import volume_window
 
     ps = summary["yield"]["placement_sigma"]

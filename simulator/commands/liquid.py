@@ -21,7 +21,7 @@ import sys
 from typing import NoReturn
 
 from patterns.errors import InputError
-from simulator.cli import OneLineParser
+from simulator.cli import OneLineParser, unknown_options_message
 
 
 class _SubParser(OneLineParser):
@@ -32,8 +32,8 @@ class _SubParser(OneLineParser):
 
     def parse_known_args(self, args=None, namespace=None):  # type: ignore[no-untyped-def]
         namespace, extras = super().parse_known_args(args, namespace)
-        if extras:
-            self.error(f"unrecognized arguments: {' '.join(extras)}")
+        if extras:  # with the nearest of this calculator's options (did you mean --pattern?)
+            self.error(unknown_options_message(self, extras))
         return namespace, extras
 
 

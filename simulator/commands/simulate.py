@@ -133,7 +133,8 @@ def run(args: argparse.Namespace) -> int:
     )
     from simulator.motion import simulate  # JAX, imported when the run goes ahead
 
-    compiling(method, args.quiet)
+    if method not in ("overdamped", "inertial"):  # a dynamic run says it after its landscape
+        compiling(method, args.quiet)
     traj = simulate(scene, start, method=method, max_steps=max_steps, engine=args.engine)
     print(end_line(scene, traj))
     if traj.footprint is not None:
@@ -205,7 +206,10 @@ def end_line(scene, traj) -> str:
     the chip's symmetry when the chip ended turned by a symmetry period or more (a square
     at 90 deg is the square at 0 deg), and the global minimum it was measured against."""
     f = [round(v, 2) + 0.0 for v in traj.final]  # no "-0.00"
-    time_txt = f", {traj.time_s * 1e3:.3g} ms" if traj.time_s is not None else ""
+    time_txt = ""
+    if traj.time_s is not None:  # the simulated time: ms below a second ("1e+03 ms" read badly)
+        ms = traj.time_s * 1e3
+        time_txt = f", {ms:.3g} ms" if float(f"{ms:.3g}") < 1e3 else f", {traj.time_s:.3g} s"
     period = scene.twist_axis.period_deg
     same = round(float(np.mod(traj.final[2] + period / 2, period) - period / 2), 2) + 0.0
     twin = (

@@ -98,7 +98,7 @@ def volume_window(scene, bias_um: float | None = None, biased: str = "the placem
     thin_note = (
         f"the film h = V / A stays within {100 * THIN_FILM_FRACTION:g} % of the chip's smallest side ({side:g} um)"
         + (" and of the capillary length" if lc < side else "")
-        + f": h at most {h_max:.4g} um over the {area:.6g} um^2 chip (docs/physics.md §7)"
+        + f": h at most {h_max:.4g} um over the {area:,.0f} um^2 chip (docs/physics.md §7)"
     )
     # overflow limit (protruding pads)
     over, over_note = None, "no protruding pad (give --edge-angle for the overflow check)"
