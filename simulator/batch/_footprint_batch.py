@@ -39,9 +39,7 @@ def _nodes(grid, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def _next_states(planes, wet: np.ndarray, q: np.ndarray, grid) -> np.ndarray:
     """Each lane's state ((N, pads) booleans) after arriving at q (N, 3) with ``wet``."""
-    it, iy, ix = _nodes(grid, q)
-    reached = planes.reached[:, it, iy, ix].T
-    within = planes.within_reach[:, it, iy, ix].T
+    reached, within = planes.flags_at(*_nodes(grid, q))
     return reached | (wet & within)
 
 

@@ -194,8 +194,9 @@ class FootprintPlanes:
     (pads, T, Ny, Nx) J, each pad's energy while it is wet (the wall profile's term where the
     chip covers some of it, the bridged term elsewhere; a pad whose smaller side is below the
     bridged term's band, ``FootprintRules.band_px`` and two steps, keeps the wall term
-    everywhere: its far edge would lie inside the band). reached, within_reach: (pads, T, Ny,
-    Nx) booleans, the relay's inputs. pairs: the shadow rule's corrections
+    everywhere: its far edge would lie inside the band). reached_bits, within_bits: (T, Ny,
+    Nx, ceil(pads / 8)) uint8, the relay's inputs packed a bit per pad (pad k in bit k % 8 of
+    byte k // 8: :attr:`reached` and :attr:`within_reach` unpack them). pairs: the shadow rule's corrections
     (:class:`PairPlane`), each added where both its pads are wet. template: a landscape of the
     grid (its metadata). pad_area_um2, pad_centre_um: each pad's area and centroid (x, y um,
     y up).
@@ -203,8 +204,8 @@ class FootprintPlanes:
 
     rules: object
     wet_energy: np.ndarray
-    reached: np.ndarray
-    within_reach: np.ndarray
+    reached_bits: np.ndarray
+    within_bits: np.ndarray
     template: Landscape
     pad_area_um2: np.ndarray
     pad_centre_um: np.ndarray
@@ -215,6 +216,30 @@ class FootprintPlanes:
     @property
     def n_pads(self) -> int:
         return int(self.wet_energy.shape[0])
+
+    def _unpacked(self, bits: np.ndarray) -> np.ndarray:
+        """(..., W) packed flags as (..., pads) booleans."""
+        return np.unpackbits(bits, axis=-1, count=self.n_pads, bitorder="little").astype(bool)
+
+    @property
+    def reached(self) -> np.ndarray:
+        """(pads, T, Ny, Nx) booleans: some of the pad within ``d_s`` of the chip (a dry pad
+        wets). Unpacked from :attr:`reached_bits` on each call: a byte per pad and pose."""
+        return np.moveaxis(self._unpacked(self.reached_bits), -1, 0)
+
+    @property
+    def within_reach(self) -> np.ndarray:
+        """(pads, T, Ny, Nx) booleans: some of the pad within ``d_r`` of the chip (a wet pad
+        stays wet). Unpacked from :attr:`within_bits` on each call."""
+        return np.moveaxis(self._unpacked(self.within_bits), -1, 0)
+
+    def flags_at(self, it, iy, ix) -> tuple[np.ndarray, np.ndarray]:
+        """(reached, within_reach) at grid nodes (index arrays of one shape S): (*S, pads)
+        booleans each, unpacked there only."""
+        return (
+            self._unpacked(self.reached_bits[it, iy, ix]),
+            self._unpacked(self.within_bits[it, iy, ix]),
+        )
 
     def energy(self, wet) -> np.ndarray:
         """(T, Ny, Nx) J: the energy of the footprint state ``wet`` ((pads,) booleans), the wet
@@ -275,8 +300,8 @@ class FootprintPlanes:
         """The pads' state once the chip, with the footprint ``wet``, is at ``pose``."""
         from simulator.physics import relay
 
-        n = self.node(pose)
-        return relay(wet, self.reached[(slice(None), *n)], self.within_reach[(slice(None), *n)])
+        reached, within = self.flags_at(*self.node(pose))
+        return relay(wet, reached, within)
 
 
 class _Sides:
@@ -552,7 +577,10 @@ def build_footprint_planes(
         )
     shape = (n, *grid.shape)
     wet_energy = np.zeros(shape, scene.dtype)
-    reached, within = np.zeros(shape, bool), np.zeros(shape, bool)
+    # the relay's flags packed a bit per pad (pad k in bit k % 8 of byte k // 8), as the
+    # steppers read them: n / 4 bytes a pose for both instead of 2 n
+    bits = (*grid.shape, -(-n // 8))
+    reached, within = np.zeros(bits, np.uint8), np.zeros(bits, np.uint8)
     pair_energy = [np.zeros((n_t, c[1] - c[0], c[3] - c[2]), scene.dtype) for *_, c in pair_parts]
     scale = scene.delta_gamma_N_m * s**2 * UM2
     c_band = (rules.band_px - rules.f_inf) / STEP_PX
@@ -585,10 +613,11 @@ def build_footprint_planes(
             we = wet_energy[k]
             e, sl = put("wall", raster["wall"], scale)
             we[(idx, *sl)] = e
-            c, sl = put("reached", raster["reached"], 1.0)
-            reached[k][(idx, *sl)] = c >= TOUCH_PX2
-            c, sl = put("within", raster["within"], 1.0)
-            within[k][(idx, *sl)] = c >= TOUCH_PX2
+            bit, byte = np.uint8(1 << (k % 8)), k // 8
+            for nm, flags in (("reached", reached), ("within", within)):
+                c, sl = put(nm, raster[nm], 1.0)
+                at = (idx, *sl, byte)
+                flags[at] = flags[at] | np.where(c >= TOUCH_PX2, bit, np.uint8(0))
             if not (deep[k] or k in near):
                 continue
             c, sl = put("covered", raster["covered"], 1.0)
@@ -639,8 +668,8 @@ def build_footprint_planes(
     return FootprintPlanes(
         rules=rules,
         wet_energy=wet_energy,
-        reached=reached,
-        within_reach=within,
+        reached_bits=reached,
+        within_bits=within,
         template=template,
         pad_area_um2=np.asarray(areas),
         pad_centre_um=np.asarray(centres),

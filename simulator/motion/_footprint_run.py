@@ -46,11 +46,13 @@ def footprint_budget_bytes(scene, n_pads: int) -> int:
     (:func:`simulator.landscape._footprint.footprint_pairs`, laid out as the build does); per
     pose of one twist, a chunk of twists' work (the pads' covered flags, the results being
     reduced) and each pad's and pair's correlator (its kernel and its threads' spectra, about
-    eight values per pose); during the run, the reference landscape (every pad wet), the
+    eight values per pose); the relay's two flags packed a bit per pad, and the steppers' copy
+    of them; during the run, the reference landscape (every pad wet), the
     current state's and the next one's being summed at an event; and the process with its
     engines (measured: the bench case at 5 um/px, 90 twists, 505 x 505 poses, 4 pads and 8
-    pairs, peaks at 1,882 to 1,890 MB, priced 1,953 MB; at 2 um/px, 1,225 x 1,225 poses, priced
-    8,962 MB, of which the pairs' planes 1,795 MB)."""
+    pairs, peaked at 1,882 to 1,890 MB with the flags a byte per pad; at 2 um/px, 1,225 x 1,225
+    poses, priced 8,370 MB, of which the pairs' planes 1,795 MB, peaked at 6,923 MB with the
+    flags a bit per pad, 8,138 MB with a byte)."""
     from simulator.landscape import footprint_pairs, footprint_poses
 
     poses = footprint_poses(scene)
@@ -58,7 +60,8 @@ def footprint_budget_bytes(scene, n_pads: int) -> int:
     item = np.dtype(scene.dtype).itemsize
     n_parts = n_pads + n_pairs
     work = per_twist * (16 * (n_pads + 3 * item) + 8 * item * n_parts)
-    held = poses * (n_pads * (item + 2) + 3 * item) + pair_poses * item
+    words = -(-n_pads // 8)  # the relay's flags, a bit per pad, and their device copies
+    held = poses * (n_pads * item + 4 * words + 3 * item) + pair_poses * item
     return int((held + work) * 1.15) + PROCESS_BYTES
 
 
@@ -98,14 +101,12 @@ def footprint_words(fp: dict) -> str:
 
 def footprint_relay(planes) -> tuple:
     """The pads' relay flags of ``planes`` (:class:`simulator.landscape.FootprintPlanes`)
-    packed for the steppers: (reached, within) as (T, Ny, Nx, W) uint8 device arrays, pad
-    ``k`` in bit ``k % 8`` of byte ``k // 8`` (:class:`simulator.motion.Relay`)."""
+    for the steppers: (reached, within) as (T, Ny, Nx, W) uint8 device arrays, pad ``k`` in
+    bit ``k % 8`` of byte ``k // 8`` (:class:`simulator.motion.Relay`), as the planes hold
+    them."""
     import jax.numpy as jnp
 
-    def pack(flags):
-        return jnp.asarray(np.moveaxis(np.packbits(flags, axis=0, bitorder="little"), 0, -1))
-
-    return pack(planes.reached), pack(planes.within_reach)
+    return jnp.asarray(planes.reached_bits), jnp.asarray(planes.within_bits)
 
 
 def wet_bits(wet) -> np.ndarray:
@@ -166,7 +167,8 @@ def simulate_footprint(
             pose,
             method=method,
             max_steps=max_steps,
-            landscape=planes.landscape(wet),
+            # every pad wet (the pattern protocol above the critical volume): the reference
+            landscape=reference if wet.all() else planes.landscape(wet),
             dynamics=remaining_params(dynamics, t_off),
             backend=backend,
             reference=reference,
