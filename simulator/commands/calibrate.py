@@ -126,6 +126,7 @@ def run(args: argparse.Namespace) -> int:
             quiet=args.quiet,
             base=base,
             profile=PROFILE if args.profile is None else args.profile,
+            scene_name=args.scene or "(command-line flags)",
         )
     except InputError as err:
         raise InputError(without_force(str(err))) from None

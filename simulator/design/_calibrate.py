@@ -214,10 +214,11 @@ def _quiet_optuna():
         optuna.logging.set_verbosity(before)
 
 
-def _scene_document(scene, base) -> tuple[dict, Path, str]:
-    """(document, base directory, source) of a scene given as a TOML path or a dict."""
+def _scene_document(scene, base, name: str | None = None) -> tuple[dict, Path, str]:
+    """(document, base directory, source) of a scene given as a TOML path or a dict
+    (``name``: what the dict came from, for the record)."""
     if isinstance(scene, dict):
-        return scene, Path(base or "."), "scene (dict)"
+        return scene, Path(base or "."), name or "scene (dict)"
     from simulator.scene import read_scene_file
 
     p = Path(scene)
@@ -263,6 +264,7 @@ def calibrate(
     base: str | os.PathLike | None = None,
     pictures: bool = True,
     profile: int = PROFILE,
+    scene_name: str | None = None,
 ) -> dict:
     """Fit the scene's parameters ``fit`` to a bench table; return the fit (``fit.json``'s dict).
 
@@ -282,6 +284,8 @@ def calibrate(
         quiet: no progress lines on stderr.
         pictures: with ``out``, write report.html and bench.png.
         profile: points of each parameter's likelihood profile after the search (0: none).
+        scene_name: what a scene given as a dict came from (the command line: its scene
+            file, which flags may override), as the record names it.
 
     Returns:
         ``best`` (NAME -> value), ``range`` (NAME -> [lo, hi] within Delta log L = 1/2),
@@ -331,7 +335,7 @@ def calibrate(
         )
     sigma = tab.with_spread(spread)
 
-    raw, base_dir, source = _scene_document(scene, base)
+    raw, base_dir, source = _scene_document(scene, base, scene_name)
     doc = prepared_document(_absolute(raw, base_dir), names)
     from simulator.scene import Scene
 
