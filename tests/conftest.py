@@ -21,7 +21,12 @@ tuned to one backend's round-off fails on this machine, not on the next.
 
 The ``xdist_group`` marker (pytest-xdist): tests that share work too costly to repeat
 (e.g. one stepper compiled per dtype, then a comparison of the two) carry one group name,
-and ``make test`` (``--dist loadgroup``) runs a group on one worker, in order. Where the
+and ``make test`` (``--dist loadgroup``) runs a group on one worker, in order. Most modules
+whose tests run the steppers in this process are one group each (a ``pytestmark``): a
+stepper compiles per grid shape, in seconds, and a module's tests share a few shapes (and its
+module fixtures), which each worker would otherwise compile again. The groups go out first,
+largest first; the modules left ungrouped (tests that run commands in subprocesses, or that
+compile nothing) fill in around them and even out the two workers' ends. Where the
 installed pytest and pytest-xdist lose the groups, the run is refused
 (:func:`pytest_collection_finish`) rather than left to repeat that work silently.
 
