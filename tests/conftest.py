@@ -21,7 +21,12 @@ tuned to one backend's round-off fails on this machine, not on the next.
 
 The ``xdist_group`` marker (pytest-xdist): tests that share work too costly to repeat
 (e.g. one stepper compiled per dtype, then a comparison of the two) carry one group name,
-and ``make test`` (``--dist loadgroup``) runs a group on one worker, in order. Where the
+and ``make test`` (``--dist loadgroup``) runs a group on one worker, in order. Most modules
+whose tests run the steppers in this process are one group each (a ``pytestmark``): a
+stepper compiles per grid shape, in seconds, and a module's tests share a few shapes (and its
+module fixtures), which each worker would otherwise compile again. The groups go out first,
+largest first; the modules left ungrouped (tests that run commands in subprocesses, or that
+compile nothing) fill in around them and even out the two workers' ends. Where the
 installed pytest and pytest-xdist lose the groups, the run is refused
 (:func:`pytest_collection_finish`) rather than left to repeat that work silently.
 
@@ -33,6 +38,8 @@ serially (``pytest -p no:xdist``): every test writes only under its own ``tmp_pa
 from __future__ import annotations
 
 import os
+import shutil
+import tempfile
 from collections.abc import Callable, Sequence
 
 import pytest
@@ -43,10 +50,49 @@ settings.register_profile("dev", deadline=None, print_blob=True)
 settings.load_profile(os.environ.get("SELFALIGN_HYPOTHESIS_PROFILE", "ci"))
 
 
+#: JAX's persistent compilation cache, one directory for the whole run: the pytest processes
+#: (the xdist workers, or the one serial process) share what any of them compiled, so the same
+#: stepper on the same grid compiles once per run, not once per worker. A fresh temporary
+#: directory per run (nothing is read from an earlier run, nothing written into the checkout),
+#: made by the first process (the xdist controller), named to the workers by an environment
+#: variable of the suite's own, and removed by its maker at the end. The commands the tests
+#: start in subprocesses never see it (JAX reads only its own variables): they compile as a
+#: user's run does, and a child killed mid-write or held under a file-size limit cannot leave
+#: half an entry for the others. Two workers writing and reading the same entry at once read
+#: a truncated entry as a miss and compile (the "persistent compilation cache" warnings are
+#: not errors here: pyproject.toml's filterwarnings); nothing else changes what runs.
+_JAX_CACHE_VAR = "SELFALIGN_TEST_JAX_CACHE"
+_made_jax_cache: str | None = None
+
+
+def _share_jax_compilations() -> None:
+    global _made_jax_cache
+    path = os.environ.get(_JAX_CACHE_VAR)
+    if path is None:
+        path = _made_jax_cache = tempfile.mkdtemp(prefix="selfalign-jax-cache-")
+        os.environ[_JAX_CACHE_VAR] = path
+    import jax
+
+    jax.config.update("jax_compilation_cache_dir", path)
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+    jax.config.update("jax_persistent_cache_min_entry_size_bytes", -1)
+
+
+def pytest_unconfigure(config):
+    if _made_jax_cache is not None:
+        shutil.rmtree(_made_jax_cache, ignore_errors=True)
+
+
 def pytest_configure(config):
+    _share_jax_compilations()
     config.addinivalue_line(
         "markers",
         "fft: a numerical landscape or energy test that make test reruns under each FFT backend",
+    )
+    # registered here too: pytest-xdist registers it, but a serial run (-p no:xdist) would
+    # otherwise fail on an unknown mark (filterwarnings = error)
+    config.addinivalue_line(
+        "markers", "xdist_group(name): tests that run on one xdist worker, in order"
     )
 
 

@@ -25,7 +25,9 @@ from simulator.scene import (
 from simulator.testing import force_N, gradient_descent, gradient_um2, greedy, overlap_um2
 
 #: Rerun by make test under each FFT backend (SELFALIGN_FFT_BACKEND; tests/conftest.py).
-pytestmark = pytest.mark.fft
+# One xdist group for the whole module (make test: pytest -n 2 --dist loadgroup): its tests
+# share scenes whose steppers take seconds to compile; on one worker each compiles once.
+pytestmark = [pytest.mark.fft, pytest.mark.xdist_group("accuracy")]
 
 SQ = square(200)
 

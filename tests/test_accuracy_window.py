@@ -28,6 +28,10 @@ from simulator.liquid import (
     overflow_bias_um,
 )
 
+# One xdist group for the whole module (make test: pytest -n 2 --dist loadgroup): its tests
+# share scenes whose steppers take seconds to compile; on one worker each compiles once.
+pytestmark = pytest.mark.xdist_group("accuracy_window")
+
 SQUARE = "patterns/library/square_200.png"  # a 200 um pad at 1 um/px
 COARSE = ["--resolution", "4", "--no-twist", "--quiet"]
 L, G = 200.0, 20.0  # the four-pad: outer side and gap (um)

@@ -364,6 +364,9 @@ def memory_runs(tmp_path_factory):
     return json.loads(proc.stdout.splitlines()[-1]), d
 
 
+# the tests that read memory_runs (one subprocess of every case) run on one xdist worker, which
+# runs it once (make test: --dist loadgroup)
+@pytest.mark.xdist_group("memory_runs")
 @pytest.mark.parametrize("name", list(MEMORY_CASES))
 def test_memory_is_priced_before_allocation(memory_runs, name):
     runs, d = memory_runs
@@ -372,6 +375,7 @@ def test_memory_is_priced_before_allocation(memory_runs, name):
     assert listing(d) == ["bomb.png", "phys.png"]  # nothing written
 
 
+@pytest.mark.xdist_group("memory_runs")
 def test_memory_peak_of_all_refusals_stays_small(memory_runs):
     # VmHWM is the peak over the whole process: every refusal above came before any
     # large allocation (the requests range from 8 GB to 1e+290 TB).

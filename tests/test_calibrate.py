@@ -15,6 +15,10 @@ import pytest
 from simulator.cli import main
 from simulator.design._calibrate import PROFILE_BASE
 
+# One xdist group for the whole module (make test: pytest -n 2 --dist loadgroup): its tests
+# share scenes whose steppers take seconds to compile; on one worker each compiles once.
+pytestmark = pytest.mark.xdist_group("calibrate")
+
 ROOT = Path(__file__).resolve().parents[1]
 SCENE = {
     "pattern": str(ROOT / "patterns" / "library" / "four_pad_730_100.png"),

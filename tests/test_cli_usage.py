@@ -45,6 +45,10 @@ from simulator.cli import build_parser, main
 from simulator.physics import Materials
 from simulator.scene import Effects, Scene, TwistGrid
 
+# One xdist group for the whole module (make test: pytest -n 2 --dist loadgroup): its tests
+# share scenes whose steppers take seconds to compile; on one worker each compiles once.
+pytestmark = pytest.mark.xdist_group("cli_usage")
+
 ROOT = Path(__file__).resolve().parents[1]
 SQUARE = str(library_path("square_200"))  # 200 um square pad at 1 um/px
 

@@ -24,6 +24,10 @@ from simulator.physics import Liquid, couette_damping, couette_torsional_damping
 from simulator.scene import Effects, Scene, TwistAxis, TwistGrid, chip_radius_of_gyration_px
 from simulator.testing import radius_of_gyration_um
 
+# One xdist group for the whole module (make test: pytest -n 2 --dist loadgroup): its tests
+# share scenes whose steppers take seconds to compile; on one worker each compiles once.
+pytestmark = pytest.mark.xdist_group("derived_once")
+
 
 def small_scene(**kw) -> Scene:
     """A 200 um square on its own pad at 4 um/px, untwisted: cheap to build."""

@@ -16,6 +16,10 @@ import pytest
 from patterns.errors import InputError
 from patterns.mask import Mask
 
+# One xdist group for the whole module (make test: pytest -n 2 --dist loadgroup): its tests
+# share scenes whose steppers take seconds to compile; on one worker each compiles once.
+pytestmark = pytest.mark.xdist_group("design_freeform")
+
 jax = pytest.importorskip("jax")
 
 

@@ -30,6 +30,10 @@ from simulator.design import (
 )
 from simulator.sweep import expected_columns, sweep
 
+# One xdist group for the whole module (make test: pytest -n 2 --dist loadgroup): its tests
+# share scenes whose steppers take seconds to compile; on one worker each compiles once.
+pytestmark = pytest.mark.xdist_group("design_search")
+
 #: The gaps of the 200 um four-pad; 5 um pixels, no twist, a coarse capture grid.
 GAPS = [10, 20, 40, 60, 80]
 #: The widest gap whose yield under the placement noise stays at 90 %.

@@ -44,6 +44,10 @@ from simulator.motion import (
 from simulator.physics import DAMPING_CALIBRATION, Chip, Liquid, parallelepiped_stiffness
 from simulator.scene import Scene, TwistGrid
 
+# One xdist group for the whole module (make test: pytest -n 2 --dist loadgroup): its tests
+# share scenes whose steppers take seconds to compile; on one worker each compiles once.
+pytestmark = pytest.mark.xdist_group("dynamics")
+
 STATIC = ("grid", "max_steps", "record")
 OVERDAMPED = jax.jit(overdamped, static_argnames=STATIC)
 INERTIAL = jax.jit(inertial, static_argnames=STATIC)

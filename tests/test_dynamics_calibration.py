@@ -32,6 +32,10 @@ from simulator.motion import DynamicsParams, simulate
 from simulator.physics import DAMPING_CALIBRATION, Liquid
 from simulator.scene import Effects, Scene, TwistGrid
 
+# One xdist group for the whole module (make test: pytest -n 2 --dist loadgroup): its tests
+# share scenes whose steppers take seconds to compile; on one worker each compiles once.
+pytestmark = pytest.mark.xdist_group("dynamics_calibration")
+
 
 def _scene(viscosity_Pa_s=1e-3):
     return Scene.from_inputs(

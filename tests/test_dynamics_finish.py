@@ -32,6 +32,10 @@ from simulator.motion import (
 )
 from simulator.motion._dynamics_ode import _hessian
 
+# One xdist group for the whole module (make test: pytest -n 2 --dist loadgroup): its tests
+# share scenes whose steppers take seconds to compile; on one worker each compiles once.
+pytestmark = pytest.mark.xdist_group("dynamics_finish")
+
 
 def four_pad_scene(meniscus: bool):
     argv = [

@@ -12,6 +12,10 @@ from patterns.raster import mask_from_geometry
 from simulator.cli import main
 from simulator.physics import Materials
 
+# One xdist group for the whole module (make test: pytest -n 2 --dist loadgroup): its tests
+# share scenes whose steppers take seconds to compile; on one worker each compiles once.
+pytestmark = pytest.mark.xdist_group("energy_cli")
+
 
 @pytest.fixture(scope="module")
 def fourpad_png(tmp_path_factory):

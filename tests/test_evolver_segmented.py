@@ -29,7 +29,9 @@ from simulator.physics import Liquid
 from simulator.scene import Effects, Scene, TwistGrid
 
 #: Rerun by make test under each FFT backend (SELFALIGN_FFT_BACKEND; tests/conftest.py).
-pytestmark = pytest.mark.fft
+# One xdist group for the whole module (make test: pytest -n 2 --dist loadgroup): its tests
+# share scenes whose steppers take seconds to compile; on one worker each compiles once.
+pytestmark = [pytest.mark.fft, pytest.mark.xdist_group("evolver_segmented")]
 
 ROOT = Path(__file__).resolve().parents[1]
 LIB = ROOT / "patterns" / "library"

@@ -22,6 +22,10 @@ from simulator.motion import DynamicsParams, Relay, footprint_relay, simulate, w
 from simulator.physics import Liquid
 from simulator.scene import Effects, Scene
 
+# One xdist group for the whole module (make test: pytest -n 2 --dist loadgroup): its tests
+# share scenes whose steppers take seconds to compile; on one worker each compiles once.
+pytestmark = pytest.mark.xdist_group("footprint_batch")
+
 #: float32 poses (the landscapes' dtype) carry about 7 digits: two runs of the same
 #: computation agree to a few ulps of the largest coordinate (the grid spans 600 um)
 POSE_TOL_UM = 8 * float(np.finfo(np.float32).eps) * 600.0

@@ -21,6 +21,10 @@ from simulator.physics import STEP_PX, TOUCH_PX2, FootprintRules, Liquid, Materi
 from simulator.physics._footprint import upstream_of
 from simulator.scene import Effects, Scene
 
+# One xdist group for the whole module (make test: pytest -n 2 --dist loadgroup): its tests
+# share scenes whose steppers take seconds to compile; on one worker each compiles once.
+pytestmark = pytest.mark.xdist_group("footprint_planes")
+
 LIB = Path(__file__).resolve().parents[1] / "patterns" / "library"
 PX = 5.0
 

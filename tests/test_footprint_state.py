@@ -21,6 +21,10 @@ from simulator.physics import FootprintRules, Liquid, Materials, WallProfile, ca
 from simulator.scene import Effects, Scene
 from tests.cli_helpers import one_line_error
 
+# One xdist group for the whole module (make test: pytest -n 2 --dist loadgroup): its tests
+# share scenes whose steppers take seconds to compile; on one worker each compiles once.
+pytestmark = pytest.mark.xdist_group("footprint_state")
+
 ROOT = Path(__file__).resolve().parents[1]
 LIB = ROOT / "patterns" / "library"
 VALIDATION = ROOT / "validation"

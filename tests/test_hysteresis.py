@@ -28,6 +28,10 @@ from simulator.physics import (
 )
 from simulator.scene import Effects, Scene
 
+# One xdist group for the whole module (make test: pytest -n 2 --dist loadgroup): its tests
+# share scenes whose steppers take seconds to compile; on one worker each compiles once.
+pytestmark = pytest.mark.xdist_group("hysteresis")
+
 GAMMA = 0.0728
 
 

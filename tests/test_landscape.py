@@ -28,7 +28,9 @@ from simulator.physics import Materials
 from simulator.scene import Effects, Scene, TwistGrid, chip_symmetry
 
 #: Rerun by make test under each FFT backend (SELFALIGN_FFT_BACKEND; tests/conftest.py).
-pytestmark = pytest.mark.fft
+# One xdist group for the whole module (make test: pytest -n 2 --dist loadgroup): its tests
+# share scenes whose steppers take seconds to compile; on one worker each compiles once.
+pytestmark = [pytest.mark.fft, pytest.mark.xdist_group("landscape")]
 
 
 def scene(pattern_geom, chip_geom, um_per_px=1.0, margin=10.0, **kw):

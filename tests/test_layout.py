@@ -36,6 +36,10 @@ from patterns.library import library_path
 from simulator.cli import main
 from simulator.scene import LAYOUT_KEYS, Scene
 
+# One xdist group for the whole module (make test: pytest -n 2 --dist loadgroup): its tests
+# share scenes whose steppers take seconds to compile; on one worker each compiles once.
+pytestmark = pytest.mark.xdist_group("layout")
+
 ROOT = Path(__file__).resolve().parents[1]
 SITE = ROOT / "examples" / "site.gds"
 

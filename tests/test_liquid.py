@@ -40,6 +40,10 @@ from simulator.liquid import (
     minimise_footprint,
 )
 
+# One xdist group for the whole module (make test: pytest -n 2 --dist loadgroup): its tests
+# share scenes whose steppers take seconds to compile; on one worker each compiles once.
+pytestmark = pytest.mark.xdist_group("liquid")
+
 GAMMA = 0.0728
 #: Largest relative deviation of V_ND from its straight-line fit over relative gaps
 #: 5-30 % at 41/89 and 40/60 degrees (docs/physics.md §8 states it; measured 3.4 % and 1.0 %).

@@ -22,6 +22,10 @@ from simulator.landscape import build_landscape, refine_minimum
 from simulator.physics import Liquid, free_bridge
 from simulator.scene import Effects, Scene, TwistGrid
 
+# One xdist group for the whole module (make test: pytest -n 2 --dist loadgroup): its tests
+# share scenes whose steppers take seconds to compile; on one worker each compiles once.
+pytestmark = pytest.mark.xdist_group("liquid_height")
+
 ROOT = Path(__file__).resolve().parents[1]
 LIB = ROOT / "patterns" / "library"
 L, V = 730.0, 2.0e7  # um, um^3 (20 nl)

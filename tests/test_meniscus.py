@@ -26,6 +26,10 @@ from simulator.physics import (
 )
 from simulator.scene import Effects, Scene, TwistGrid
 
+# One xdist group for the whole module (make test: pytest -n 2 --dist loadgroup): its tests
+# share scenes whose steppers take seconds to compile; on one worker each compiles once.
+pytestmark = pytest.mark.xdist_group("meniscus")
+
 GAMMA = 0.0728
 
 

@@ -13,6 +13,10 @@ from simulator.landscape import build_landscape, global_minimum
 from simulator.physics import Liquid
 from simulator.scene import Effects, Scene
 
+# One xdist group for the whole module (make test: pytest -n 2 --dist loadgroup): its tests
+# share scenes whose steppers take seconds to compile; on one worker each compiles once.
+pytestmark = pytest.mark.xdist_group("meniscus_optimum")
+
 LIB = Path(__file__).resolve().parents[1] / "patterns" / "library"
 
 

@@ -20,6 +20,10 @@ from simulator.motion import choose_engine, simulate
 from simulator.physics import Liquid
 from simulator.scene import Effects, Scene, TwistGrid
 
+# One xdist group for the whole module (make test: pytest -n 2 --dist loadgroup): its tests
+# share scenes whose steppers take seconds to compile; on one worker each compiles once.
+pytestmark = pytest.mark.xdist_group("meniscus_path")
+
 LIBRARY_200 = [
     "square_200",
     "defect_A_inward",

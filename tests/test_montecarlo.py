@@ -34,6 +34,10 @@ from simulator.motion import (
 )
 from simulator.scene import Scene, TwistGrid
 
+# One xdist group for the whole module (make test: pytest -n 2 --dist loadgroup): its tests
+# share scenes whose steppers take seconds to compile; on one worker each compiles once.
+pytestmark = pytest.mark.xdist_group("montecarlo")
+
 
 def make_scene(L, g, um_per_px, step_deg, **kw):
     pat = four_pad(L, g) if g else square(L)

@@ -22,6 +22,10 @@ from simulator.physics import Liquid
 from simulator.scene import Effects, Scene, TwistGrid
 from simulator.sweep import flatten
 
+# One xdist group for the whole module (make test: pytest -n 2 --dist loadgroup): its tests
+# share scenes whose steppers take seconds to compile; on one worker each compiles once.
+pytestmark = pytest.mark.xdist_group("montecarlo_dynamics")
+
 ROOT = Path(__file__).resolve().parents[1]
 SQUARE = ROOT / "patterns" / "library" / "square_200.png"
 DYNAMIC = ("overdamped", "inertial")

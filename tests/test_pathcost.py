@@ -17,6 +17,10 @@ from simulator.motion import choose_engine, simulate
 from simulator.physics import Liquid
 from simulator.scene import Effects, Scene, TwistGrid
 
+# One xdist group for the whole module (make test: pytest -n 2 --dist loadgroup): its tests
+# share scenes whose steppers take seconds to compile; on one worker each compiles once.
+pytestmark = pytest.mark.xdist_group("pathcost")
+
 
 def make_scene(L, g, um_per_px=1.0, png_chip=False, **kw):
     pat = four_pad(L, g) if g else square(L)

@@ -9,6 +9,10 @@ from PIL import Image
 from patterns.geometry import DESIGNS, build
 from patterns.io import read_mask
 
+# One xdist group for the whole module (make test: pytest -n 2 --dist loadgroup): its tests
+# share scenes whose steppers take seconds to compile; on one worker each compiles once.
+pytestmark = pytest.mark.xdist_group("pattern_cli")
+
 DESIGN_ARGS = {
     "square": (["--size", "200"], {"size": 200}),
     "rectangle": (["--width", "120", "--height", "50.5"], {"width": 120, "height": 50.5}),

@@ -18,6 +18,10 @@ from simulator.landscape import PoseGrid, build_landscape, consecutive_runs, pla
 from simulator.motion import field_and_grid
 from simulator.scene import Scene, TwistAxis, TwistGrid
 
+# One xdist group for the whole module (make test: pytest -n 2 --dist loadgroup): its tests
+# share scenes whose steppers take seconds to compile; on one worker each compiles once.
+pytestmark = pytest.mark.xdist_group("posegrid")
+
 
 def scene(step_deg=5.0, **kw) -> Scene:
     return Scene(

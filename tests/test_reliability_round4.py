@@ -16,6 +16,10 @@ from cli_helpers import listing, one_line_error  # tests/cli_helpers.py
 
 from patterns.errors import InputError
 
+# One xdist group for the whole module (make test: pytest -n 2 --dist loadgroup): its tests
+# share scenes whose steppers take seconds to compile; on one worker each compiles once.
+pytestmark = pytest.mark.xdist_group("reliability_round4")
+
 ROOT = Path(__file__).resolve().parents[1]
 SEARCH_EXAMPLE = ROOT / "examples" / "design_fourpad_gap.toml"
 

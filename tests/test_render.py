@@ -28,6 +28,10 @@ from simulator.render import (
 )
 from simulator.scene import Effects, Scene
 
+# One xdist group for the whole module (make test: pytest -n 2 --dist loadgroup): its tests
+# share scenes whose steppers take seconds to compile; on one worker each compiles once.
+pytestmark = pytest.mark.xdist_group("render")
+
 SQUARE = str(library_path("square_200"))
 START = (40.0, -30.0, 6.0)
 CHIP_RGB = np.array(to_rgb(CHIP_COLOUR)) * 255

@@ -94,6 +94,10 @@ from simulator.motion import (
 from simulator.physics import Liquid, Materials
 from simulator.scene import Effects, Scene, TwistGrid
 
+# One xdist group for the whole module (make test: pytest -n 2 --dist loadgroup): its tests
+# share scenes whose steppers take seconds to compile; on one worker each compiles once.
+pytestmark = pytest.mark.xdist_group("robustness")
+
 DTYPES = ("float32", "float64")
 METHODS = ("greedy", "gradient", "overdamped", "inertial")
 #: Each new grid shape compiles every stepper anew (about 9 s for all four): scenes of
@@ -214,9 +218,7 @@ def plateau_runs(fp100, start, dt):
     return _PLATEAU_RUNS[start, dt]
 
 
-# one xdist group: the comparison below finds the runs on its own worker (make test runs
-# pytest -n 2 --dist loadgroup)
-@pytest.mark.xdist_group("fp100_plateau")
+# the module's xdist group (pytestmark): the comparison below finds the runs on its own worker
 @pytest.mark.parametrize("dt", DTYPES)
 @pytest.mark.parametrize("start", PLATEAU_STARTS)
 def test_plateau_four_pad_flat_part(fp100, start, dt):
@@ -236,7 +238,6 @@ def test_plateau_four_pad_flat_part(fp100, start, dt):
             assert r[m].steps == 0 and r[m].final == start and r[m].outcome == "plateau", m
 
 
-@pytest.mark.xdist_group("fp100_plateau")
 @pytest.mark.parametrize("start", PLATEAU_STARTS)
 def test_plateau_four_pad_outcomes_agree_across_dtypes(fp100, start):
     runs = {dt: plateau_runs(fp100, start, dt) for dt in DTYPES}

@@ -10,6 +10,10 @@ from patterns.mask import Mask
 from patterns.raster import mask_from_geometry
 from simulator.scene import Scene, TwistGrid
 
+# One xdist group for the whole module (make test: pytest -n 2 --dist loadgroup): its tests
+# share scenes whose steppers take seconds to compile; on one worker each compiles once.
+pytestmark = pytest.mark.xdist_group("scene")
+
 
 @pytest.fixture()
 def pattern_png(tmp_path):

@@ -8,6 +8,10 @@ import pytest
 from patterns.library import library_path
 from simulator.cli import main
 
+# One xdist group for the whole module (make test: pytest -n 2 --dist loadgroup): its tests
+# share scenes whose steppers take seconds to compile; on one worker each compiles once.
+pytestmark = pytest.mark.xdist_group("simulate_cli")
+
 SQUARE = str(library_path("square_200"))
 KEYS = {"method", "outcome", "start", "final", "steps", "time_s", "path"}
 

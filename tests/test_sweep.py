@@ -21,6 +21,10 @@ from simulator.cli import main
 from simulator.scene import Scene
 from simulator.sweep import dask_client, flatten, load_sweep, sweep
 
+# One xdist group for the module (make test: --dist loadgroup): its tests share the Dask
+# worker and the tiny sweep of the module's fixtures, made once on one worker.
+pytestmark = pytest.mark.xdist_group("sweep")
+
 ROOT = Path(__file__).resolve().parents[1]
 
 #: Two axes on a small four-pad at a coarse pixel, no twist; gap 250 > size 200 cannot be built.

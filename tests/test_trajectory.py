@@ -9,6 +9,10 @@ from simulator.landscape import build_landscape
 from simulator.motion import GREEDY_MOVES, simulate
 from simulator.scene import Scene, TwistGrid
 
+# One xdist group for the whole module (make test: pytest -n 2 --dist loadgroup): its tests
+# share scenes whose steppers take seconds to compile; on one worker each compiles once.
+pytestmark = pytest.mark.xdist_group("trajectory")
+
 
 def make_scene(L, g, dtype="float32", um_per_px=1.0, **kw):
     pat = four_pad(L, g) if g else square(L)
