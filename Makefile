@@ -39,13 +39,16 @@ MKDOCS = NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict
 # Then the numerical landscape and energy tests (marked `fft`) once more under each FFT
 # backend, forced by SELFALIGN_FFT_BACKEND (the first pass takes the machine's default:
 # OpenCV for float32 where it runs in Intel's IPP, else SciPy): a bound tuned to one
-# backend's round-off fails here, not on the next machine.
+# backend's round-off fails here, not on the next machine. The pytest stages share one JAX
+# compilation cache (SELFALIGN_TEST_JAX_CACHE, tests/conftest.py: a fresh temporary folder,
+# removed when they end), so a rerun does not compile again what the first stage compiled.
 PYTEST_WORKERS ?= 2
 HYPOTHESIS_PROFILE ?= ci
 FFT_BACKENDS ?= scipy opencv jax
 
 test: $(VENV)/.extra-test
-	SELFALIGN_HYPOTHESIS_PROFILE=$(HYPOTHESIS_PROFILE) $(BIN)/python -m pytest -q -n $(PYTEST_WORKERS) --dist loadgroup --durations=25 tests
+	cache="$$(mktemp -d)"; trap 'rm -rf "$$cache"' EXIT; export SELFALIGN_TEST_JAX_CACHE="$$cache"; \
+	SELFALIGN_HYPOTHESIS_PROFILE=$(HYPOTHESIS_PROFILE) $(BIN)/python -m pytest -q -n $(PYTEST_WORKERS) --dist loadgroup --durations=25 tests || exit 1; \
 	for b in $(FFT_BACKENDS); do \
 		echo "FFT backend $$b:"; \
 		SELFALIGN_FFT_BACKEND=$$b SELFALIGN_HYPOTHESIS_PROFILE=$(HYPOTHESIS_PROFILE) $(BIN)/python -m pytest -q -n $(PYTEST_WORKERS) --dist loadgroup -m fft tests || exit 1; \
