@@ -64,6 +64,13 @@ def _run(args: list[str], cwd: Path) -> subprocess.CompletedProcess:
         "MPLBACKEND": "Agg",
         "PYTHON": sys.executable,
     }
+    cache = os.environ.get("SELFALIGN_TEST_JAX_CACHE")
+    if cache:  # the suite's JAX compilation cache (tests/conftest.py), shared by these runs too
+        env |= {
+            "JAX_COMPILATION_CACHE_DIR": cache,
+            "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS": "0",
+            "JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES": "-1",
+        }
     return subprocess.run(args, capture_output=True, text=True, cwd=cwd, env=env, timeout=600)
 
 
