@@ -55,10 +55,12 @@ settings.load_profile(os.environ.get("SELFALIGN_HYPOTHESIS_PROFILE", "ci"))
 #: stepper on the same grid compiles once per run, not once per worker. A fresh temporary
 #: directory per run (nothing is read from an earlier run, nothing written into the checkout),
 #: made by the first process (the xdist controller), named to the workers by an environment
-#: variable of the suite's own, and removed by its maker at the end. The commands the tests
-#: start in subprocesses never see it (JAX reads only its own variables): they compile as a
-#: user's run does, and a child killed mid-write or held under a file-size limit cannot leave
-#: half an entry for the others. Two workers writing and reading the same entry at once read
+#: variable of the suite's own, and removed by its maker at the end (``make test`` makes one
+#: for all its pytest stages and removes it itself). The commands the tests start in
+#: subprocesses never see it (JAX reads only its own variables): they compile as a user's run
+#: does, and a child killed mid-write or held under a file-size limit cannot leave half an
+#: entry for the others; the benchmarks' smoke runs alone are handed it in JAX's own
+#: variables (tests/test_benchmarks_smoke.py: nothing kills or limits them). Two workers writing and reading the same entry at once read
 #: a truncated entry as a miss and compile (the "persistent compilation cache" warnings are
 #: not errors here: pyproject.toml's filterwarnings); nothing else changes what runs.
 _JAX_CACHE_VAR = "SELFALIGN_TEST_JAX_CACHE"
