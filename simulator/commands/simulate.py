@@ -20,7 +20,14 @@ from simulator.commands._common import (
     scene_from_args,
     write_json,
 )
-from simulator.core import AREA_REL_TOL, DEFAULT_MAX_STEPS, DEG_TOL, METHODS, compiling
+from simulator.core import (
+    AREA_REL_TOL,
+    DEFAULT_MAX_STEPS,
+    DEG_TOL,
+    DYNAMIC_METHODS,
+    METHODS,
+    compiling,
+)
 from simulator.physics import DAMPING_CALIBRATION
 
 
@@ -133,7 +140,7 @@ def run(args: argparse.Namespace) -> int:
     )
     from simulator.motion import simulate  # JAX, imported when the run goes ahead
 
-    if method not in ("overdamped", "inertial"):  # a dynamic run says it after its landscape
+    if method not in DYNAMIC_METHODS:  # a dynamic run says it after its landscape
         compiling(method, args.quiet)
     traj = simulate(scene, start, method=method, max_steps=max_steps, engine=args.engine)
     print(end_line(scene, traj))

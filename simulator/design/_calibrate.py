@@ -51,6 +51,7 @@ from pathlib import Path
 import numpy as np
 
 from patterns.errors import InputError, require
+from simulator.core import DYNAMIC_METHODS as DYNAMIC, METHODS
 from simulator.design._calibrate_params import (
     FITTABLE,
     default_bounds,
@@ -89,8 +90,6 @@ DELTA_LOG_L = 0.5
 PROFILE = 6
 #: The profile's trials are numbered from here (the search's from 1 to MAX_TRIALS).
 PROFILE_BASE = 1_000_000
-METHODS = ("greedy", "gradient", "overdamped", "inertial")
-DYNAMIC = ("overdamped", "inertial")
 
 
 class _FitStore(ResultStore):

@@ -232,6 +232,12 @@ class Landscape:
         """
         return self._floor
 
+    @property
+    def floor_labelled(self) -> bool:
+        """Whether :meth:`floor_extent` is already known (its labelling is done once per
+        landscape and takes seconds on a large one: a caller says so before asking)."""
+        return "_floor" in vars(self)
+
     @functools.cached_property
     def _floor(self) -> tuple[tuple[int, int], tuple[int, int], tuple[int, int]]:
         """:meth:`floor_extent`, labelled once per landscape (1.6 s on a 90 x 985 x 985 one;

@@ -290,7 +290,7 @@ def simulate(
         tol = (1.0, 1.0)
         if whole:
             wel = ls if reference is None else reference
-            if scene.wall_profile is not None and "_floor" not in vars(wel):  # not labelled yet
+            if scene.wall_profile is not None and not wel.floor_labelled:
                 wait_line(
                     f"the well's floor around the global minimum ({wel.energy.size:,} poses)",
                     wel.energy.size * FLOOR_S_PER_POSE,
