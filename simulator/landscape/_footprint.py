@@ -148,6 +148,14 @@ def _shadow_part(masks: list, a: int, b: int, ax: int, r: float) -> np.ndarray:
     return masks[a] & upstream_along(masks[b], ax * 90.0 + r)
 
 
+def _covering(mask: np.ndarray, reach: tuple[float, float], margin: float) -> tuple:
+    """(x0, x1, y0, y1) px: the poses at which a chip of half-extent ``reach`` (px, over its
+    twists) with a footprint ``margin`` px wide can cover some of ``mask``."""
+    x0, x1, y0, y1 = _pixel_box(mask)
+    rx, ry = reach[0] + margin, reach[1] + margin
+    return x0 - rx - 1, x1 + rx + 1, y0 - ry - 1, y1 + ry + 1
+
+
 def _faces(twists_deg, ax: int) -> tuple[np.ndarray, np.ndarray]:
     """(the chip's side whose normal is nearest the pattern's axis ``ax``, the twist's
     residual deg) at each twist (the chip frame's sides as ``_Sides``)."""
@@ -158,10 +166,11 @@ def _faces(twists_deg, ax: int) -> tuple[np.ndarray, np.ndarray]:
     return (ax - nearest) % 4, shadow_residual_deg(t)
 
 
-def _pair_ranges(boxes: dict, corners, tw_rad, res) -> tuple[list, list]:
+def _pair_ranges(boxes: dict, corners, tw_rad, res, within=None) -> tuple[list, list]:
     """([x0, x1], [y0, y1]) px from the pattern's centre of the poses at which a chip side's
     strip (``corners``: per twist, the chip-frame corners of the box holding it) reaches the
-    near pad's part (``boxes``, by residual), over the twists ``tw_rad`` (residuals ``res``)."""
+    near pad's part (``boxes``, by residual), over the twists ``tw_rad`` (residuals ``res``),
+    within the box ``within`` (x0, x1, y0, y1) px where one is given."""
     xr, yr = [np.inf, -np.inf], [np.inf, -np.inf]
     for c, t, r in zip(corners, tw_rad, res, strict=True):
         c = np.asarray(c, float).reshape(-1, 2)
@@ -173,6 +182,9 @@ def _pair_ranges(boxes: dict, corners, tw_rad, res) -> tuple[list, list]:
         qy = c[:, 0] * sa + c[:, 1] * ca
         xr = [min(xr[0], x0 - qx.max()), max(xr[1], x1 - qx.min())]
         yr = [min(yr[0], y0 - qy.max()), max(yr[1], y1 - qy.min())]
+    if within is not None:  # the poses where the chip covers some of the near pad
+        xr = [max(xr[0], within[0]), min(xr[1], within[1])]
+        yr = [max(yr[0], within[2]), min(yr[1], within[3])]
     return xr, yr
 
 
@@ -212,10 +224,18 @@ def footprint_pairs(scene: Scene) -> tuple[int, int, int]:
     _, _, masks, deep = _pads_of(scene, rules)
     total = 0
     pairs = _shadowed(masks, deep, _faces(twists_deg, 0)[1])
-    for *_, ax, boxes in pairs:
+    reach = _chip_reach_px(scene.chip, scene.effects.twist)
+    cm = rules.count_profiles()["covered"].margin_px
+    for a, _, ax, boxes in pairs:
         face, res = _faces(twists_deg, ax)
         on = [i for i in range(len(tw)) if res[i] in boxes]
-        xr, yr = _pair_ranges(boxes, [corners[int(face[i])] for i in on], tw[on], res[on])
+        xr, yr = _pair_ranges(
+            boxes,
+            [corners[int(face[i])] for i in on],
+            tw[on],
+            res[on],
+            _covering(masks[a], reach, cm),
+        )
         wx = min(xr[1], x_first + nx - 1) - max(xr[0], x_first) + 2
         wy = min(yr[1], y_first + ny - 1) - max(yr[0], y_first) + 2
         total += len(on) * max(0, int(wx)) * max(0, int(wy))
@@ -629,7 +649,8 @@ def build_footprint_planes(
     for a, b, ax, boxes in _shadowed(masks, deep, _faces(twists_deg, 0)[1]):
         face, res = _faces(twists_deg, ax)
         on = np.array([i for i in range(n_t_all) if res[i] in boxes], np.intp)
-        xr, yr = _pair_ranges(boxes, [strips[int(face[i])] for i in on], tw_rad[on], res[on])
+        cover = _covering(masks[a], (reach_x, reach_y), margins["covered"])
+        xr, yr = _pair_ranges(boxes, [strips[int(face[i])] for i in on], tw_rad[on], res[on], cover)
         if not np.isfinite(xr[0]):
             continue
         center, half = _box_args(tuple(xr), tuple(yr))
@@ -735,7 +756,7 @@ def build_footprint_planes(
         strip = 0.5 * (raster["band_in"] + raster["band_out"])
         strip -= raster["wall"]
         side_of = np.stack([sides(twists_deg[i]) for i in pos])
-        for j, (a, b, ax, p, (cy0, cy1, cx0, cx1), _) in enumerate(pair_parts):
+        for j, (a, _b, ax, p, (cy0, cy1, cx0, cx1), _) in enumerate(pair_parts):
             face, res = _faces(twists_deg, ax)
             # (position in idx, twist, the chip raster at that twist, upside down or not)
             todo = [(k, i, k, False) for k, i in enumerate(pos) if i in pair_at[j]]
@@ -759,10 +780,10 @@ def build_footprint_planes(
                 c = planes[:, cy0:cy1, cx0:cx1]
                 rows = [t[0] for t in at]
                 # only where the near pad is covered and the far one on its bridged term
-                keep = covered[a][(rows, *gsl)] & ~covered[b][(rows, *gsl)]
+                keep = covered[a][(rows, *gsl)]
                 c[~keep] = 0
                 pair_energy[j][[pair_at[j][t[1]] for t in at]] = c
-            p.keep(res[[t[1] for t in todo]][-1:] if todo else ())
+                p.keep(())  # one pair's part at a time: each is made again where needed
     template = Landscape(
         energy=wet_energy[0],
         grid=grid,

@@ -58,7 +58,7 @@ def footprint_budget_bytes(scene, n_pads: int) -> int:
     poses = footprint_poses(scene)
     n_pairs, pair_poses, per_twist = footprint_pairs(scene)
     item = np.dtype(scene.dtype).itemsize
-    n_parts = n_pads + n_pairs
+    n_parts = n_pads + min(n_pairs, 1)  # a pair's part is made, used and dropped in turn
     work = per_twist * (16 * (n_pads + 3 * item) + 8 * item * n_parts)
     words = -(-n_pads // 8)  # the relay's flags, a bit per pad, and their device copies
     held = poses * (n_pads * item + 4 * words + 3 * item) + pair_poses * item
