@@ -52,7 +52,10 @@ def footprint_budget_bytes(scene, n_pads: int) -> int:
     engines (measured: the bench case at 5 um/px, 90 twists, 505 x 505 poses, 4 pads and 8
     pairs, peaked at 1,882 to 1,890 MB with the flags a byte per pad; at 2 um/px, 1,225 x 1,225
     poses, priced 8,370 MB, of which the pairs' planes 1,795 MB, peaked at 6,923 MB with the
-    flags a bit per pad, 8,138 MB with a byte)."""
+    flags a bit per pad, 8,138 MB with a byte; with the shadow cast along the chip side's
+    normal at each twist, 32 pairs on the twists where each exists and the poses that cover
+    its near pad, priced 8,422 MB, of which the pairs' planes 1,911 MB, peaked at 7,537 MB).
+    A pair's part is made, used and dropped in turn, so one pair's correlator is counted."""
     from simulator.landscape import footprint_pairs, footprint_poses
 
     poses = footprint_poses(scene)
