@@ -80,34 +80,12 @@ def _share_jax_compilations() -> None:
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", -1)
 
 
-#: The suite compiles far more than it computes: its landscapes are small and each stepper,
-#: grid and method is compiled once. XLA's CPU backend at optimisation level 0 compiles the
-#: diffrax steppers about a fifth faster (tests/test_montecarlo_dynamics.py: 97 -> 77 s of
-#: CPU) and runs them a little slower. The suite's bounds come from the dtype's round-off and
-#: the quantity's scale, which holds for any instruction selection, as it must on another
-#: CPU. Set in XLA's own variable (the pytest processes and the commands they start read it
-#: when JAX starts its backend); a run that sets the flag itself keeps its own, and
-#: ``SELFALIGN_TEST_XLA_OPTIMIZE=1`` runs the suite as a user's run compiles.
-_XLA_QUICK = "--xla_backend_optimization_level=0"
-
-
-def _compile_quickly() -> None:
-    flags = os.environ.get("XLA_FLAGS", "")
-    if (
-        os.environ.get("SELFALIGN_TEST_XLA_OPTIMIZE") == "1"
-        or "xla_backend_optimization_level" in flags
-    ):
-        return
-    os.environ["XLA_FLAGS"] = f"{flags} {_XLA_QUICK}".strip()
-
-
 def pytest_unconfigure(config):
     if _made_jax_cache is not None:
         shutil.rmtree(_made_jax_cache, ignore_errors=True)
 
 
 def pytest_configure(config):
-    _compile_quickly()
     _share_jax_compilations()
     config.addinivalue_line(
         "markers",
@@ -117,6 +95,11 @@ def pytest_configure(config):
     # otherwise fail on an unknown mark (filterwarnings = error)
     config.addinivalue_line(
         "markers", "xdist_group(name): tests that run on one xdist worker, in order"
+    )
+    config.addinivalue_line(
+        "markers",
+        "xla_exact: compares two compiled programs bit for bit; make test runs it as XLA "
+        "compiles for users (its other stages compile at optimisation level 0)",
     )
 
 
