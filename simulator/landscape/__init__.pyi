@@ -37,6 +37,9 @@ from ._pathcost import (
     PathEnergy as PathEnergy,
     path_engine_supported as path_engine_supported,
 )
+from ._pathfoot import (
+    FootprintPath as FootprintPath,
+)
 from ._posegrid import (
     PoseGrid as PoseGrid,
     axis_step as axis_step,

@@ -157,6 +157,10 @@ class FootprintPath:
         self.rotations = 0
         self.seconds = time.perf_counter() - t0
 
+    @property
+    def n_pads(self) -> int:
+        return self.n
+
     # -- the footprints at one twist
     def _span(self, *names) -> tuple[float, float]:
         lo = min(self._rots[k].band_px[0] for k in names)

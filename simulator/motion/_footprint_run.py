@@ -123,8 +123,35 @@ def remaining_params(dynamics, t_off: float):
     return None if left <= 0.0 else dataclasses.replace(dynamics, t_max_s=left)
 
 
+def footprint_engine(scene, start, method: str, engine: str, planes=None) -> str:
+    """Which engine gives a ``--dispense`` run its per-pose planes: "path" (the footprint
+    state in the path engine's boxes that follow the chip,
+    :class:`simulator.landscape.FootprintPath`) or "fft" (the pads' planes over the whole
+    grid, :func:`simulator.landscape.build_footprint_planes`). Greedy and gradient choose as
+    their stateless runs do (:func:`simulator.motion.choose_engine`, ``engine`` "auto",
+    "fft" or "path"); the dynamics, and a run given its ``planes``, take the planes."""
+    if planes is not None or method not in ("greedy", "gradient"):
+        if engine == "path" and planes is None:
+            raise InputError(
+                f"--engine path runs greedy and gradient; {method} builds the whole landscape (leave --engine out)"
+            )
+        return "fft"
+    from simulator.motion._pathrun import choose_engine
+    from simulator.motion._pricing import BAND_PX, BAND_STEPS
+
+    return choose_engine(scene, start, method, engine, BAND_STEPS, BAND_PX)
+
+
 def simulate_footprint(
-    scene, start, method: str, max_steps: int, dynamics, backend: str, simulate, planes=None
+    scene,
+    start,
+    method: str,
+    max_steps: int,
+    dynamics,
+    backend: str,
+    simulate,
+    planes=None,
+    engine: str = "fft",
 ) -> dict:
     """:func:`simulator.motion.simulate` with the footprint as the run's state (module
     docstring): the fields of the joined trajectory, ``footprint`` among them (where the
@@ -132,14 +159,28 @@ def simulate_footprint(
     on a given landscape (the caller's own function, passed in), stopping where the state
     changes (its ``relay``); ``max_steps`` bounds each stretch between events, the dynamics'
     ``t_max_s`` the whole run. ``planes``: the scene's pads' planes, when given (built
-    here otherwise)."""
+    here otherwise). ``engine``: :func:`footprint_engine`'s choice; with "path" each stretch
+    runs on the path engine's boxes of the current state (:class:`simulator.motion.StateBoxes`),
+    the state's events and relay the same."""
     from simulator.landscape import build_footprint_planes
     from simulator.liquid import dispensed_footprint
     from simulator.motion._field import Relay
 
     t0 = time.perf_counter()
     proto = scene.liquid.dispense
-    if planes is None:
+    engine = footprint_engine(scene, start, method, engine, planes)
+    inner = scene.replace(
+        liquid=dataclasses.replace(scene.liquid, dispense=None, dispense_at_um=None)
+    )
+    path_src = None
+    if engine == "path":
+        from simulator.landscape import FootprintPath, PathEnergy
+
+        # the state's planes at the poses the run visits (FootprintPath), and the stateless
+        # engine for the global minimum's proof (the aligned pose, every pad wet)
+        planes = FootprintPath(scene)
+        path_src = (planes, PathEnergy(inner))
+    elif planes is None:
         require_footprint_fits(scene)
         planes = build_footprint_planes(scene, backend=backend)
     n = planes.n_pads  # the planes' own labelling: the pattern is not labelled again
@@ -150,30 +191,42 @@ def simulate_footprint(
         dynamics = DynamicsParams.from_scene(scene)
     # "aligned": against the minimum with every pad wet (the aligned pose on the whole
     # pattern), not the current state's (a state with only some pads wet has its own).
-    reference = planes.landscape(np.ones(n, bool))
-    reached, within = footprint_relay(planes)
+    # (the path engine: the scene's own global minimum, where every pad is covered and the
+    # all-wet state's energy is the stateless one)
+    reference = None if path_src else planes.landscape(np.ones(n, bool))
+    reached, within = (None, None) if path_src else footprint_relay(planes)
     wet = planes.next_state(dispensed, start)
     initial = wet.copy()
-    inner = scene.replace(
-        liquid=dataclasses.replace(scene.liquid, dispense=None, dispense_at_um=None)
-    )
     pose = tuple(float(v) for v in start)
     pieces, events, done = [], [], 0
     t_off = 0.0
     last = None
     for _ in range(MAX_EVENTS + 1):
-        tr = simulate(
-            inner,
-            pose,
-            method=method,
-            max_steps=max_steps,
-            # every pad wet (the pattern protocol above the critical volume): the reference
-            landscape=reference if wet.all() else planes.landscape(wet),
-            dynamics=remaining_params(dynamics, t_off),
-            backend=backend,
-            reference=reference,
-            relay=Relay(reached, within, np.asarray(wet_bits(wet))),
-        )
+        if path_src:
+            from simulator.motion._pathrun import StateBoxes
+
+            tr = simulate(
+                inner,
+                pose,
+                method=method,
+                max_steps=max_steps,
+                backend=backend,
+                engine="path",
+                path=StateBoxes(*path_src, wet),
+            )
+        else:
+            tr = simulate(
+                inner,
+                pose,
+                method=method,
+                max_steps=max_steps,
+                # every pad wet (the pattern protocol above the critical volume): the reference
+                landscape=reference if wet.all() else planes.landscape(wet),
+                dynamics=remaining_params(dynamics, t_off),
+                backend=backend,
+                reference=reference,
+                relay=Relay(reached, within, np.asarray(wet_bits(wet))),
+            )
         last = tr
         if tr.outcome != "event":
             pieces.append((tr, t_off))
@@ -239,7 +292,7 @@ def simulate_footprint(
     }
     ref = pieces[-1][0] if last is None else last
     cost = dict(ref.cost) | {
-        "engine": "footprint planes",
+        "engine": "footprint path" if path_src is not None else "footprint planes",
         "footprint_planes_s": planes.seconds,
         "footprint_pieces": len(pieces),
         "total_s": time.perf_counter() - t0,
