@@ -152,7 +152,6 @@ class FootprintPath:
         self._outlines: dict = {}
         self._support: dict = {}
         self._cache: dict = {}
-        self._pairs: dict = {}  # residual deg -> [(near, far, axis)]
         self.poses = 0
         self.rotations = 0
         self.seconds = time.perf_counter() - t0
@@ -257,13 +256,56 @@ class FootprintPath:
     def _part(self, key):
         p = self.parts.get(key)
         if p is None:  # a pair's part: the near pad's pixels upstream of the far pad
-            from simulator.physics import upstream_along
-
             a, b, ax, r = key
             r0, r1, c0, c1 = self._crop
-            m = self.masks[a] & upstream_along(self.masks[b], ax * 90.0 + r)
+            m = np.zeros(self._data.shape, bool)
+            rr, cc = self._upstream(a, b, ax * 90.0 + r)
+            m[rr, cc] = True
             p = self.parts[key] = _Part(np.where(m, self._data, 0.0)[r0:r1, c0:c1][::-1])
         return p
+
+    def _pixels(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        if not hasattr(self, "_pix"):
+            self._pix = {}
+        if k not in self._pix:
+            self._pix[k] = np.nonzero(self.masks[k])
+        return self._pix[k]
+
+    def _upstream(self, a: int, b: int, angle_deg: float) -> tuple[np.ndarray, np.ndarray]:
+        """(rows, cols) of pad ``a``'s pixels from which a ray at ``angle_deg`` reaches pad
+        ``b`` beyond them: ``masks[a] & upstream_along(masks[b], angle_deg)`` (the FFT build's
+        part, :func:`simulator.physics.upstream_along`), on the two pads' pixels only."""
+        from simulator.physics import ray_coordinates
+
+        shape = self._data.shape
+        rb, cb = self._pixels(b)
+        ra, ca = self._pixels(a)
+        ray_b, along_b = ray_coordinates(rb, cb, shape, angle_deg)
+        ray_a, along_a = ray_coordinates(ra, ca, shape, angle_deg)
+        lo = min(int(ray_b.min()), int(ray_a.min()))
+        far = np.full(max(int(ray_b.max()), int(ray_a.max())) - lo + 1, -np.inf)
+        np.maximum.at(far, ray_b - lo, along_b)
+        up = along_a < far[ray_a - lo]
+        return ra[up], ca[up]
+
+    def _may_shadow(self, a: int, b: int, angle_deg: float) -> bool:
+        """False where pad ``b`` lies wholly behind pad ``a`` or beside it along ``angle_deg``
+        (their bounding boxes: no ray from ``a`` reaches ``b``), so the part is empty."""
+        if not hasattr(self, "_corners"):
+            h, w = self._data.shape
+            self._corners = {}
+            for k in range(self.n):
+                rr, cc = self._pixels(k)
+                xs = np.array([cc.min(), cc.max() + 1]) - w / 2
+                ys = h / 2 - np.array([rr.max() + 1, rr.min()])
+                self._corners[k] = np.array([(x, y) for x in xs for y in ys])
+        t = np.radians(angle_deg)
+        d = np.array([np.cos(t), np.sin(t)])
+        n = np.array([-d[1], d[0]])
+        pa, pb = self._corners[a], self._corners[b]
+        if (pb @ d).max() <= (pa @ d).min():
+            return False  # b lies behind a
+        return (pb @ n).max() + 1 >= (pa @ n).min() and (pa @ n).max() + 1 >= (pb @ n).min()
 
     def _reaches(self, name: str, key, k: int, y0: int, ny: int, x0: int, nx: int) -> bool:
         """Whether the footprint ``name`` at twist index ``k`` can touch the part ``key`` from
@@ -332,16 +374,6 @@ class FootprintPath:
     def _energy(self, name, key, k, y0, ny, x0, nx) -> np.ndarray:
         return (self.sums(name, key, k, y0, ny, x0, nx) * self.scale).astype(self.dtype)
 
-    def pairs_at(self, residual: float) -> list[tuple[int, int, int]]:
-        """The shadow rule's pairs (near, far, axis) whose near part is not empty at the
-        twists of this residual (``_shadowed``, made once per residual)."""
-        r = float(residual)
-        if r not in self._pairs:
-            from ._footprint import _shadowed
-
-            self._pairs[r] = [(a, b, ax) for a, b, ax, _ in _shadowed(self.masks, self.deep, [r])]
-        return self._pairs[r]
-
     # -- the planes of a box
     def box(self, twist_idx, center_px: tuple[int, int], half_px: int | None):
         """:class:`~simulator.landscape.FootprintPlanes` at the consecutive axis twists
@@ -371,16 +403,13 @@ class FootprintPath:
             k = j % na
             tw = float(twists[i])
             res = float(shadow_residual_deg(tw))
-            pairs = self.pairs_at(res)
-            near = {a for a, _, _ in pairs}
             covered = {}
             for p in range(n):
                 bit, byte = np.uint8(1 << (p % 8)), p // 8
-                cov = None
-                if self.deep[p] or p in near:
-                    cov = self.sums("covered", p, k, *box) >= TOUCH_PX2
-                    covered[p] = cov
-                if cov is not None and cov.all():
+                # every pad's covered count: the pairs read the near pads' (the FFT build
+                # makes it for the deep pads and the near ones; it is the same count)
+                cov = covered[p] = self.sums("covered", p, k, *box) >= TOUCH_PX2
+                if cov.all():
                     r_, w_ = cov, cov
                 else:
                     w_ = self.sums("within", p, k, *box) >= TOUCH_PX2
@@ -390,7 +419,6 @@ class FootprintPath:
                 if not self.deep[p]:
                     wet[p, i] = self._energy("wall", p, k, *box)
                     continue
-                assert cov is not None  # a deep pad's covered count is made above
                 if cov.all():
                     wet[p, i] = self._energy("wall", p, k, *box)
                 elif not cov.any():
@@ -402,16 +430,26 @@ class FootprintPath:
                         self._energy("band", p, k, *box),
                     )
             # The shadow rule: N_b - f on the chip's side facing the pair's axis, with the
-            # near pad's part upstream of the far one along that side's normal.
+            # near pad's part upstream of the far one along that side's normal: the pairs
+            # (near, far on its bridged term, axis) whose part is not empty at this residual
+            # (the FFT build's _shadowed), where the near pad is covered and the far one not.
             nearest = int(np.rint(tw / 90.0))
-            for a, bb, ax in pairs:
-                keep = covered[a] & ~covered[bb]
-                if not keep.any():
-                    continue
-                face = (ax - nearest) % 4
-                c = self._energy(f"strip{face}", (a, bb, ax, res), k, *box)
-                c[~keep] = 0
-                pair_planes.setdefault((a, bb, ax), []).append((i, c))
+            for a in range(n):
+                for bb in range(n):
+                    if a == bb or not self.deep[bb]:
+                        continue
+                    keep = covered[a] & ~covered[bb]
+                    if not keep.any():
+                        continue
+                    for ax in range(4):
+                        if not self._may_shadow(a, bb, ax * 90.0 + res):
+                            continue
+                        if self._part((a, bb, ax, res)).empty:
+                            continue
+                        face = (ax - nearest) % 4
+                        c = self._energy(f"strip{face}", (a, bb, ax, res), k, *box)
+                        c[~keep] = 0
+                        pair_planes.setdefault((a, bb, ax), []).append((i, c))
         template = Landscape(
             energy=wet[0] if n else np.zeros(g.shape, self.dtype),
             grid=g,
