@@ -65,11 +65,40 @@ def footprint_budget_bytes(scene, n_pads: int) -> int:
     return int((held + work) * 1.15) + PROCESS_BYTES
 
 
-def require_footprint_fits(scene) -> None:
+#: The path engine's footprint state keeps six rotators' smooth chips (the wall profile,
+#: three counts and the band's two) where the stateless run keeps one.
+PATH_ROTATORS = 6
+
+
+def footprint_path_bytes(scene) -> int:
+    """What a ``--dispense`` run on the path engine holds besides the stateless run's: the
+    smooth chips of its five more rotators (:class:`simulator.landscape.FootprintPath`; the
+    rows and footprints it keeps are those of a run's band of twists, as the stateless
+    engine's). Sizes only."""
+    from simulator.landscape._rotation import smooth_bytes
+
+    prof = scene.wall_profile
+    if prof is None:
+        return 0
+    make, kept = smooth_bytes(scene.chip, scene.meniscus_height_px, 0, prof, (0, 0))
+    return int((PATH_ROTATORS - 1) * kept + make)
+
+
+def require_footprint_fits(scene, engine: str = "fft") -> None:
     """Refuse (InputError) a ``--dispense`` run whose pads' planes exceed the memory budget,
-    before any of them is made (no JAX, no transform)."""
+    before any of them is made (no JAX, no transform); with ``engine`` "path", whose
+    footprint state's rotators do (:func:`footprint_path_bytes`)."""
     from simulator.landscape import pad_labels
 
+    if engine == "path":
+        need = footprint_path_bytes(scene)
+        if need > scene.memory_budget_mb * 2**20:
+            raise InputError(
+                f"--dispense {scene.liquid.dispense} on the path engine: the footprint state's rotators would hold "
+                f"{need / 2**20:,.0f} MB, over the memory budget of {scene.memory_budget_mb:,.0f} MB; give a coarser "
+                "--resolution, or raise --memory-budget"
+            )
+        return
     _, n = pad_labels(scene.pattern)
     need = footprint_budget_bytes(scene, n)
     if need > scene.memory_budget_mb * 2**20:
