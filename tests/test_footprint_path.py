@@ -152,3 +152,52 @@ def test_auto_takes_the_path_engine_for_a_greedy_dispense_run():
 
     with pytest.raises(InputError, match="--engine path runs greedy and gradient"):
         footprint_engine(s, (100.0, 0.0, 0.0), "inertial", "path")
+
+
+def test_cli_dispense_run_on_the_path_engine(run_cli, tmp_path):
+    """`simulate --dispense pattern --engine path`: the footprint record and the engine in the
+    JSON, no plane priced or built."""
+    import json
+
+    from tests.test_footprint_planes import LIB
+
+    out = tmp_path / "run.json"
+    rc, stdout, err = run_cli(
+        ["simulate", "--pattern", LIB / "four_pad_730_100.png", "--chip-size", "730"]
+        + ["--meniscus", "--volume", "20", "--resolution", "10", "--no-twist"]
+        + ["--hysteresis", "10:35", "--dispense", "pattern", "--method", "greedy"]
+        + ["--start=400,10,0", "--engine", "path", "--quiet", "--json", out]
+    )
+    assert rc == 0, err
+    d = json.loads(out.read_text())
+    assert d["cost"]["engine"] == "footprint path"
+    assert d["footprint"]["initial"] == [1, 2, 3, 4] and d["outcome"] == "aligned"
+    assert "footprint (--dispense pattern)" in stdout
+
+
+def test_path_footprint_over_its_budget_is_refused(run_cli, tmp_path):
+    """A 4000 um chip's stateful path run is priced before any rotator is made: over the
+    budget, one line naming the rotators and the fix."""
+    from patterns.errors import InputError
+    from simulator.motion import footprint_path_bytes, require_footprint_fits
+    from simulator.physics import Liquid
+    from simulator.scene import Effects, Scene
+
+    pattern = tmp_path / "fp4k.png"
+    rc, _, err = run_cli(
+        ["pattern", "four-pad", "--size", "4000", "--gap", "200", "--um-per-px", "4"]
+        + ["-o", pattern]
+    )
+    assert rc == 0, err
+    s = Scene.from_inputs(
+        pattern,
+        chip_size_um=4000,
+        effects=Effects(meniscus=True),
+        liquid=Liquid(volume_nl=500, dispense="pattern"),
+    )
+    need = footprint_path_bytes(s) / 2**20
+    assert need > 50
+    require_footprint_fits(s.replace(memory_budget_mb=need + 1), "path")
+    with pytest.raises(InputError, match="on the path engine: the footprint state's rotators") as e:
+        require_footprint_fits(s.replace(memory_budget_mb=need / 2), "path")
+    assert "--memory-budget" in str(e.value) and "\n" not in str(e.value)
