@@ -179,7 +179,8 @@ def test_path_footprint_over_its_budget_is_refused(run_cli, tmp_path):
     """A 4000 um chip's stateful path run is priced before any rotator is made: over the
     budget, one line naming the rotators and the fix."""
     from patterns.errors import InputError
-    from simulator.motion import footprint_path_bytes, require_footprint_fits
+    from simulator.landscape import footprint_path_bytes
+    from simulator.motion import require_footprint_fits
     from simulator.physics import Liquid
     from simulator.scene import Effects, Scene
 

@@ -39,6 +39,7 @@ from ._pathcost import (
 )
 from ._pathfoot import (
     FootprintPath as FootprintPath,
+    footprint_path_bytes as footprint_path_bytes,
 )
 from ._posegrid import (
     PoseGrid as PoseGrid,

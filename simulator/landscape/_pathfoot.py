@@ -502,3 +502,22 @@ class FootprintPath:
 
     def close(self) -> None:
         """Nothing runs in the background (as :meth:`PathEnergy.close`)."""
+
+
+#: The path engine's footprint state keeps six rotators' smooth chips (the wall profile,
+#: three counts and the band's two) where the stateless run keeps one.
+PATH_ROTATORS = 6
+
+
+def footprint_path_bytes(scene) -> int:
+    """What a ``--dispense`` run on the path engine holds besides the stateless run's: the
+    smooth chips of its five more rotators (:class:`simulator.landscape.FootprintPath`; the
+    rows and footprints it keeps are those of a run's band of twists, as the stateless
+    engine's). Sizes only."""
+    from ._rotation import smooth_bytes
+
+    prof = scene.wall_profile
+    if prof is None:
+        return 0
+    make, kept = smooth_bytes(scene.chip, scene.meniscus_height_px, 0, prof, (0, 0))
+    return int((PATH_ROTATORS - 1) * kept + make)

@@ -37,7 +37,6 @@ from ._footprint_run import (
     MAX_EVENTS as MAX_EVENTS,
     footprint_budget_bytes as footprint_budget_bytes,
     footprint_engine as footprint_engine,
-    footprint_path_bytes as footprint_path_bytes,
     footprint_relay as footprint_relay,
     footprint_words as footprint_words,
     remaining_params as remaining_params,

@@ -65,32 +65,15 @@ def footprint_budget_bytes(scene, n_pads: int) -> int:
     return int((held + work) * 1.15) + PROCESS_BYTES
 
 
-#: The path engine's footprint state keeps six rotators' smooth chips (the wall profile,
-#: three counts and the band's two) where the stateless run keeps one.
-PATH_ROTATORS = 6
-
-
-def footprint_path_bytes(scene) -> int:
-    """What a ``--dispense`` run on the path engine holds besides the stateless run's: the
-    smooth chips of its five more rotators (:class:`simulator.landscape.FootprintPath`; the
-    rows and footprints it keeps are those of a run's band of twists, as the stateless
-    engine's). Sizes only."""
-    from simulator.landscape._rotation import smooth_bytes
-
-    prof = scene.wall_profile
-    if prof is None:
-        return 0
-    make, kept = smooth_bytes(scene.chip, scene.meniscus_height_px, 0, prof, (0, 0))
-    return int((PATH_ROTATORS - 1) * kept + make)
-
-
 def require_footprint_fits(scene, engine: str = "fft") -> None:
     """Refuse (InputError) a ``--dispense`` run whose pads' planes exceed the memory budget,
     before any of them is made (no JAX, no transform); with ``engine`` "path", whose
-    footprint state's rotators do (:func:`footprint_path_bytes`)."""
+    footprint state's rotators do (:func:`simulator.landscape.footprint_path_bytes`)."""
     from simulator.landscape import pad_labels
 
     if engine == "path":
+        from simulator.landscape import footprint_path_bytes
+
         need = footprint_path_bytes(scene)
         if need > scene.memory_budget_mb * 2**20:
             raise InputError(
