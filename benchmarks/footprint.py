@@ -114,7 +114,7 @@ def path_cases(smoke: bool, tmp: Path) -> list[tuple[str, str, list[str]]]:
         ("bench", "stateless path", bench + ["--engine", "path"]),
         ("bench", "dispense pattern path", bench + ["--dispense", "pattern", "--engine", "path"]),
     ]
-    # the FFT planes of the bench case are priced 11.2 GB: over the default budget
+    # the FFT planes of the bench case are priced over the default budget (11.2 GB when measured)
     fft = ("bench", "dispense pattern fft", bench + ["--dispense", "pattern", "--engine", "fft"])
     if smoke:
         return [*out, fft]
