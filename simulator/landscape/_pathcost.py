@@ -338,7 +338,7 @@ class PathEnergy:
                     total -= o.band.flat.nbytes if users[id(o.band.flat)] == 0 else 0
 
     # -- energies
-    def _rows(self, o: _Outline, ys: np.ndarray, x0: int, n: int) -> np.ndarray:
+    def _rows(self, o: _Outline, ys: np.ndarray, x0: int, n: int, part=None) -> np.ndarray:
         """Correlation (unscaled, float64), shape (len(ys), n), at twist outline ``o``, the
         rows ``ys`` and the consecutive columns ``x0 .. x0 + n - 1``: for each step of the
         outline and each row, ``n`` consecutive prefix sums of one pattern row (a contiguous
@@ -346,19 +346,24 @@ class PathEnergy:
         whose columns lie all beyond the pattern's right end read the row total, all before
         its left end nothing. No BLAS (a threaded BLAS call on a busy machine costs
         milliseconds for a few thousand products): einsum sums in float64. Long runs of
-        columns are cut so that one gather (steps x columns) stays near 2 M values."""
+        columns are cut so that one gather (steps x columns) stays near 2 M values.
+        ``part``: another pattern than the scene's, with the same attributes ``P``, ``T``,
+        ``hp``, ``wp`` and ``_pattern_steps`` (the footprint state's pads,
+        :mod:`simulator.landscape._pathfoot`)."""
+        src = self if part is None else part
         cols = max(16, 2_000_000 // max(o.nnz, 1))
         if o.band is not None:
             cols = min(cols, SEGMENT_PAD)
         if n > cols:
             return np.concatenate(
-                [self._rows(o, ys, x0 + i, min(cols, n - i)) for i in range(0, n, cols)], axis=1
+                [self._rows(o, ys, x0 + i, min(cols, n - i), part) for i in range(0, n, cols)],
+                axis=1,
             )
         out = np.zeros((len(ys), n))
         if len(ys) == 0 or n == 0:
             return out
-        wp, hp = self.wp, self.hp
-        flat = self.P.reshape(-1)
+        wp, hp = src.wp, src.hp
+        flat = src.P.reshape(-1)
         lo = o.cols + x0
         hi = lo + (n - 1)
         inside = (lo >= 0) & (hi <= wp)
@@ -384,16 +389,14 @@ class PathEnergy:
                 if kind == 0:
                     acc = acc + np.einsum("sn,s->n", win[rr + c[a:b]], v[a:b])
                 elif kind == 1:  # beyond the right end: the row total
-                    acc = acc + np.einsum("s,s->", self.T[r[a:b] + y], v[a:b])
+                    acc = acc + np.einsum("s,s->", src.T[r[a:b] + y], v[a:b])
                 else:
                     cc = np.clip(c[a:b, None] + cn, 0, wp)
                     acc = acc + np.einsum("sn,s->n", flat[rr[:, None] + cc], v[a:b])
             out[j] -= acc
             if o.band is not None:  # the footprint's part B, on the pattern's side
-                assert self._pattern_steps is not None  # a band comes with free lines only
-                out[j] += o.band.correlate(
-                    self._pattern_steps, y + o.offset[0], x0 + o.offset[1], n
-                )
+                assert src._pattern_steps is not None  # a band comes with free lines only
+                out[j] += o.band.correlate(src._pattern_steps, y + o.offset[0], x0 + o.offset[1], n)
         return out
 
     def mass(self, k: int) -> float:
