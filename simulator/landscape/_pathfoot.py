@@ -432,13 +432,14 @@ class FootprintPath:
             # The shadow rule: N_b - f on the chip's side facing the pair's axis, with the
             # near pad's part upstream of the far one along that side's normal: the pairs
             # (near, far on its bridged term, axis) whose part is not empty at this residual
-            # (the FFT build's _shadowed), where the near pad is covered and the far one not.
+            # (the FFT build's _shadowed), where the near pad is covered (whether or not a corner
+            # of the chip has reached the far one: the bridge to it holds).
             nearest = int(np.rint(tw / 90.0))
             for a in range(n):
                 for bb in range(n):
                     if a == bb or not self.deep[bb]:
                         continue
-                    keep = covered[a] & ~covered[bb]
+                    keep = covered[a]
                     if not keep.any():
                         continue
                     for ax in range(4):
