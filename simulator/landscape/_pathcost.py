@@ -113,6 +113,34 @@ class _Outline:
         self.offset, self.shape, self.band = offset, shape, band
 
 
+def rows_to_compute(rows: dict, y0: int, ny: int, x0: int, nx: int) -> dict:
+    """The runs of columns still to compute for the poses of rows ``y0 ..`` and columns
+    ``x0 .. x0 + nx - 1`` px, given ``rows`` (row -> (first column, values) kept so far; a
+    row kept too far from the box is dropped from it): (first column, count) -> rows, with
+    :data:`ROW_AHEAD` columns more on each side of a new row and twice that beyond an end
+    a kept row extends (:meth:`PathEnergy.plane`)."""
+    x1 = x0 + nx - 1
+    todo: dict[tuple[int, int], list[int]] = {}
+    for y in range(y0, y0 + ny):
+        have = rows.get(y)
+        if have is not None:
+            a, e = have
+            b = a + len(e) - 1
+            if x0 > b + ROW_GAP or x1 < a - ROW_GAP:  # far from the run kept: start afresh
+                del rows[y]
+                have = None
+        if have is None:
+            todo.setdefault((x0 - ROW_AHEAD, nx + 2 * ROW_AHEAD), []).append(y)
+            continue
+        if x0 < a:
+            lo = min(x0, a - 2 * ROW_AHEAD)
+            todo.setdefault((lo, a - lo), []).append(y)
+        if x1 > b:
+            hi = max(x1, b + 2 * ROW_AHEAD)
+            todo.setdefault((b + 1, hi - b), []).append(y)
+    return todo
+
+
 class PathEnergy:
     """A scene's energies at any grid pose, computed on demand at the cost of the chip's
     outline (module docstring), and kept.
@@ -428,28 +456,7 @@ class PathEnergy:
         almost whatever its length, so a few columns more cost less than one more call);
         rows that need the same columns are computed together."""
         rows = self._cache.setdefault(k, {})
-        x1 = x0 + nx - 1
-        ahead = ROW_AHEAD
-        todo: dict[tuple[int, int], list[int]] = {}  # (first column, count) -> rows
-        for y in range(y0, y0 + ny):
-            have = rows.get(y)
-            if have is not None:
-                a, e = have
-                b = a + len(e) - 1
-                if (
-                    x0 > b + ROW_GAP or x1 < a - ROW_GAP
-                ):  # far from the run kept: start the row afresh
-                    del rows[y]
-                    have = None
-            if have is None:
-                todo.setdefault((x0 - ahead, nx + 2 * ahead), []).append(y)
-                continue
-            if x0 < a:
-                lo = min(x0, a - 2 * ahead)
-                todo.setdefault((lo, a - lo), []).append(y)
-            if x1 > b:
-                hi = max(x1, b + 2 * ahead)
-                todo.setdefault((b + 1, hi - b), []).append(y)
+        todo = rows_to_compute(rows, y0, ny, x0, nx)
         if todo:
             t0 = time.perf_counter()
             o = self.outline(k)

@@ -44,7 +44,7 @@ from simulator.scene import Scene
 from ._build import _box, _grid_of, energy_scale_J
 from ._landscape import Landscape
 from ._pathband import SEGMENT_PAD, footprint_band, pattern_outline
-from ._pathcost import ROW_AHEAD, ROW_GAP, PathEnergy, _Outline
+from ._pathcost import PathEnergy, _Outline, rows_to_compute
 from ._rotation import ChipRotator
 
 #: The footprints of the state by name (module docstring); the strips' names end in the side.
@@ -330,25 +330,7 @@ class FootprintPath:
         if not self._reaches(name, key, k, y0, ny, x0, nx):
             return np.zeros((ny, nx))
         rows = self._cache.setdefault((name, key, k), {})
-        x1 = x0 + nx - 1
-        todo: dict[tuple[int, int], list[int]] = {}
-        for y in range(y0, y0 + ny):
-            have = rows.get(y)
-            if have is not None:
-                a, e = have
-                b = a + len(e) - 1
-                if x0 > b + ROW_GAP or x1 < a - ROW_GAP:
-                    del rows[y]
-                    have = None
-            if have is None:
-                todo.setdefault((x0 - ROW_AHEAD, nx + 2 * ROW_AHEAD), []).append(y)
-                continue
-            if x0 < a:
-                lo = min(x0, a - 2 * ROW_AHEAD)
-                todo.setdefault((lo, a - lo), []).append(y)
-            if x1 > b:
-                hi = max(x1, b + 2 * ROW_AHEAD)
-                todo.setdefault((b + 1, hi - b), []).append(y)
+        todo = rows_to_compute(rows, y0, ny, x0, nx)
         if todo:
             t0 = time.perf_counter()
             o, part = self.outline(name, k), self._part(key)
