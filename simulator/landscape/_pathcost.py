@@ -141,6 +141,28 @@ def rows_to_compute(rows: dict, y0: int, ny: int, x0: int, nx: int) -> dict:
     return todo
 
 
+def keep_rows(rows: dict, ys, xa: int, values) -> None:
+    """Add the computed runs ``values`` (one per row of ``ys``, from column ``xa``) to the
+    runs ``rows`` keeps (:func:`rows_to_compute` planned them at a kept run's ends)."""
+    for y, v in zip(ys, values, strict=True):
+        have = rows.get(y)
+        if have is None:
+            rows[y] = [xa, v]
+        elif xa < have[0]:
+            rows[y] = [xa, np.concatenate([v, have[1]])]
+        else:
+            have[1] = np.concatenate([have[1], v])
+
+
+def read_rows(rows: dict, y0: int, ny: int, x0: int, nx: int, dtype) -> np.ndarray:
+    """(ny, nx) of ``dtype``: the box of rows ``y0 ..`` and columns ``x0 ..`` from ``rows``."""
+    out = np.empty((ny, nx), dtype)
+    for i, y in enumerate(range(y0, y0 + ny)):
+        a, e = rows[y]
+        out[i] = e[x0 - a : x0 - a + nx]
+    return out
+
+
 class PathEnergy:
     """A scene's energies at any grid pose, computed on demand at the cost of the chip's
     outline (module docstring), and kept.
@@ -465,20 +487,9 @@ class PathEnergy:
                     self.dtype
                 )
                 self.poses += e.size
-                for y, v in zip(ys, e, strict=True):
-                    have = rows.get(y)
-                    if have is None:
-                        rows[y] = [xa, v]
-                    elif xa < have[0]:
-                        rows[y] = [xa, np.concatenate([v, have[1]])]
-                    else:
-                        have[1] = np.concatenate([have[1], v])
+                keep_rows(rows, ys, xa, e)
             self.seconds += time.perf_counter() - t0
-        out = np.empty((ny, nx), self.dtype)
-        for i, y in enumerate(range(y0, y0 + ny)):
-            a, e = rows[y]
-            out[i] = e[x0 - a : x0 - a + nx]
-        return out
+        return read_rows(rows, y0, ny, x0, nx, self.dtype)
 
     def energies(self, k: int, ys: np.ndarray, xs: np.ndarray) -> np.ndarray:
         """Energies (J, the scene's dtype) at twist index k and integer poses (ys[i], xs[i]) px

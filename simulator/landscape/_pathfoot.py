@@ -44,7 +44,7 @@ from simulator.scene import Scene
 from ._build import _box, _grid_of, energy_scale_J
 from ._landscape import Landscape
 from ._pathband import SEGMENT_PAD, footprint_band, pattern_outline
-from ._pathcost import PathEnergy, _Outline, rows_to_compute
+from ._pathcost import PathEnergy, _Outline, keep_rows, read_rows, rows_to_compute
 from ._rotation import ChipRotator
 
 #: The footprints of the state by name (module docstring); the strips' names end in the side.
@@ -338,20 +338,9 @@ class FootprintPath:
                 yy = np.asarray(ys, np.int64)
                 e = self.pe._rows(o, yy - part.i0, xa - part.j0, n, part)
                 self.poses += e.size
-                for y, v in zip(ys, e, strict=True):
-                    have = rows.get(y)
-                    if have is None:
-                        rows[y] = [xa, v]
-                    elif xa < have[0]:
-                        rows[y] = [xa, np.concatenate([v, have[1]])]
-                    else:
-                        have[1] = np.concatenate([have[1], v])
+                keep_rows(rows, ys, xa, e)
             self.seconds += time.perf_counter() - t0
-        out = np.empty((ny, nx))
-        for i, y in enumerate(range(y0, y0 + ny)):
-            a, e = rows[y]
-            out[i] = e[x0 - a : x0 - a + nx]
-        return out
+        return read_rows(rows, y0, ny, x0, nx, np.float64)
 
     def _energy(self, name, key, k, y0, ny, x0, nx) -> np.ndarray:
         return (self.sums(name, key, k, y0, ny, x0, nx) * self.scale).astype(self.dtype)
