@@ -108,21 +108,23 @@ def _shadowed(masks: list, deep: list, residuals) -> list[tuple[int, int, int, d
     in ``residuals``; a pair is listed where some residual gives it a part."""
     from simulator.physics import ray_coordinates
 
-    lab = np.zeros(masks[0].shape, np.int32) if masks else None
+    if not any(deep):
+        return []
+    lab = np.zeros(masks[0].shape, np.int32)
     for k, m in enumerate(masks):
         lab[m] = k + 1
-    rows, cols = np.nonzero(lab) if masks else (np.zeros(0, int), np.zeros(0, int))
-    pad = lab[rows, cols] - 1 if masks else rows
-    h, w = lab.shape if masks else (0, 0)
+    rows, cols = np.nonzero(lab)
+    pad = lab[rows, cols] - 1
+    h, w = lab.shape
     found: dict = {}
     for ax in range(4):
         for r in sorted({float(v) for v in np.asarray(residuals, float)}):
             ray, along = ray_coordinates(rows, cols, (h, w), ax * 90.0 + r)
-            lo = ray.min() if ray.size else 0
+            lo = ray.min()
             for b in range(len(masks)):
                 if not deep[b]:
                     continue
-                far = np.full(ray.max() - lo + 1 if ray.size else 0, -np.inf)
+                far = np.full(ray.max() - lo + 1, -np.inf)
                 on_b = pad == b
                 np.maximum.at(far, ray[on_b] - lo, along[on_b])
                 up = (along < far[ray - lo]) & ~on_b
