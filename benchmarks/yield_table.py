@@ -4,8 +4,8 @@ The 730/50 and 730/100 um four-pads under a 730 um chip, 20 nl of water (h = 37.
 4 um/px and 2 degree twist steps; at each nominal bias, ``--starts`` placements with
 normal noise of 10 um in x and y and 2 degrees in twist (seed 0, the same draws for every
 column). Columns: the overlap model with greedy steps, the finite meniscus (free contact
-lines) with gradient steps, and the finite meniscus with overdamped dynamics, without and
-with the pad's contact-angle hysteresis (receding 25, advancing 35 degrees around the 30
+lines, stateless: ``--dispense none``) with gradient steps, and the same with overdamped
+dynamics, without and with the pad's contact-angle hysteresis (receding 25, advancing 35 degrees around the 30
 degree pad); then the footprint as each start's state (``--dispense``, docs/physics.md
 §3.5): the liquid coming in under the chip (``chip``), the droplet dispensed on the pattern
 first (``pattern``), and ``pattern`` with the hysteresis. Each column's landscape (or the
@@ -85,7 +85,7 @@ def scene(
     hysteresis: bool,
     resolution: float,
     twist_step_deg: float = 2.0,
-    dispense: str | None = None,
+    dispense: str = "none",
 ) -> Scene:
     mat = Materials(pad_receding_deg=25.0, pad_advancing_deg=35.0) if hysteresis else Materials()
     return Scene.from_inputs(
@@ -122,7 +122,12 @@ def _main(args: argparse.Namespace, smoke: bool) -> None:
         for name, eff, method in columns:
             t0 = time.perf_counter()
             sc = scene(
-                gap, eff["meniscus"], eff["hysteresis"], args.resolution, step, eff.get("dispense")
+                gap,
+                eff["meniscus"],
+                eff["hysteresis"],
+                args.resolution,
+                step,
+                eff.get("dispense", "none"),
             )
             # the stateless landscape, or the pads' planes of the footprint state (built once)
             built = (

@@ -65,7 +65,7 @@ def test_a_relayed_run_stops_where_the_state_first_changes(scene_planes):
     start = (80.0, 0.0, 0.0)
     wet = fp.next_state(dispensed, start)
     assert wet.all()  # the chip covers some of both pads at release
-    inner = s.replace(liquid=dataclasses.replace(s.liquid, dispense=None))
+    inner = s.replace(liquid=dataclasses.replace(s.liquid, dispense="none"))
     free = simulate(inner, start, landscape=fp.landscape(wet))
     first = next(i for i, p in enumerate(free.path) if (fp.next_state(wet, p) != wet).any())
     reached, within = footprint_relay(fp)
@@ -138,7 +138,7 @@ def test_montecarlo_cli_carries_the_footprint(run_cli, tmp_path):
     assert d["scene"]["dispense"] == "chip" and d["footprint"]["dispense"] == "chip"
     assert d["outcomes"]["aligned"] == 1 and d["outcomes"]["plateau"] == 2, d["outcomes"]
     assert d["footprint"]["events"] == 0  # each start's pads wet at release, or never reached
-    rc, _, err = run_cli([*args, "--json", tmp_path / "stateless.json"])
+    rc, _, err = run_cli([*args, "--dispense", "none", "--json", tmp_path / "stateless.json"])
     assert rc == 0, err
     d = json.loads((tmp_path / "stateless.json").read_text())
     assert d["scene"]["dispense"] is None and "footprint" not in d

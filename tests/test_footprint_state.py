@@ -115,10 +115,53 @@ def test_pattern_dispense_on_a_single_pad_and_on_an_arbitrary_png():
 def test_dispense_needs_the_free_line_meniscus():
     with pytest.raises(InputError, match="--meniscus"):
         Scene.from_inputs(LIB / "square_200.png", chip_size_um=200, liquid=Liquid(dispense="chip"))
-    with pytest.raises(InputError, match="'pattern' or 'chip'"):
+    with pytest.raises(InputError, match="'pattern', 'chip' or 'none'"):
         Liquid(dispense="sideways")
-    with pytest.raises(InputError, match="--dispense pattern"):
+    with pytest.raises(InputError, match="--dispense chip"):
         Liquid(dispense="chip", dispense_at_um=(0, 0))
+    with pytest.raises(InputError, match="--dispense none"):
+        Liquid(dispense="none", dispense_at_um=(0, 0))
+    # a dispense point needs the state: refused on the overlap model, where nothing keeps it
+    with pytest.raises(InputError, match="--dispense-at"):
+        Scene.from_inputs(
+            LIB / "square_200.png", chip_size_um=200, liquid=Liquid(dispense_at_um=(0, 0))
+        )
+
+
+def test_the_droplet_on_the_pattern_is_the_default_wherever_the_footprint_is_free():
+    """Without ``dispense`` a scene with the free contact lines' meniscus starts from the
+    droplet dispensed on the pattern; ``none`` keeps the stateless footprint; the overlap
+    model, pinned lines and a meniscus below a pixel have no footprint to keep."""
+    free = dict(chip_size_um=730, resolution_um=10.0, effects=Effects(twist=False, meniscus=True))
+    path = LIB / "four_pad_730_100.png"
+    assert Scene.from_inputs(path, **free, liquid=Liquid(volume_nl=20)).dispense == "pattern"
+    for proto in ("pattern", "chip"):
+        sc = Scene.from_inputs(path, **free, liquid=Liquid(volume_nl=20, dispense=proto))
+        assert sc.dispense == proto
+    assert Scene.from_inputs(path, **free, liquid=Liquid(dispense="none")).dispense is None
+    assert Scene.from_inputs(path, chip_size_um=730, resolution_um=10.0).dispense is None
+    pinned = Liquid(volume_nl=20, pinned=True)
+    assert Scene.from_inputs(path, **free, liquid=pinned).dispense is None
+    # 0.05 nl under the 730 um chip: h = 0.09 um, below a 10 um pixel
+    low = Scene.from_inputs(path, **free, liquid=Liquid(volume_nl=0.05))
+    assert low.wall_profile is None and low.dispense is None
+    # a default run carries the state: the droplet wets all four pads before the chip arrives
+    sc = Scene.from_inputs(path, **free, liquid=Liquid(volume_nl=20))
+    t = simulate(sc, (0.0, 0.0, 0.0), method="greedy")
+    assert t.footprint is not None and t.footprint["dispensed"] == [1, 2, 3, 4]
+
+
+def test_dispense_none_on_the_command_line_runs_stateless(run_cli, tmp_path):
+    args = ["--pattern", LIB / "four_pad_730_100.png", "--chip-size", "730", "--meniscus"]
+    args += ["--volume", "20", "--resolution", "10", "--no-twist", "--start=100,0,0"]
+    runs = {}
+    for extra in ([], ["--dispense", "none"]):
+        out = tmp_path / f"t{len(extra)}.json"
+        rc, _, err = run_cli(["simulate", *args, *extra, "--json", out, "--quiet"])
+        assert rc == 0, err
+        runs[len(extra)] = json.loads(out.read_text())
+    assert runs[0]["footprint"]["dispensed"] == [1, 2, 3, 4]
+    assert "footprint" not in runs[2]
 
 
 # ------------------------------------------------------------------ the relay

@@ -36,7 +36,8 @@ GAMMA = 0.0728
 
 
 def _scene(h=20.0, window=(31.0, 50.0), hysteresis=True, L=200.0, s=2.0, pinned=True, pad=None):
-    """A square chip of side L over a square pad of side ``pad`` (default L), meniscus height h."""
+    """A square chip of side L over a square pad of side ``pad`` (default L), meniscus height h
+    (the stateless footprint: the stopping rule by itself, without the pad's wet state)."""
     pad = L if pad is None else pad
     pat = mask_from_geometry(box(-pad / 2, -pad / 2, pad / 2, pad / 2), s, margin_um=4)
     mat = (
@@ -49,7 +50,7 @@ def _scene(h=20.0, window=(31.0, 50.0), hysteresis=True, L=200.0, s=2.0, pinned=
         chip_size_um=L,
         materials=mat,
         effects=Effects(twist=False, meniscus=True, hysteresis=hysteresis),
-        liquid=Liquid(height_um=h, pinned=pinned),
+        liquid=Liquid(height_um=h, pinned=pinned, dispense="none"),
         window_um=80,
         dtype="float64",
     )

@@ -52,7 +52,7 @@ def library_scene(name: str, chip_um: float, um_per_px: float, volume_nl: float)
         chip_size_um=chip_um,
         resolution_um=um_per_px,
         effects=Effects(meniscus=True),
-        liquid=Liquid(volume_nl=volume_nl),
+        liquid=Liquid(dispense="none", volume_nl=volume_nl),
         twist=TWISTS,
         window_um=20 * um_per_px if chip_um <= 200 else 50 * um_per_px,
     )
@@ -108,7 +108,7 @@ def test_a_generated_four_pad_on_the_floor():
         mask_from_geometry(four_pad(200, 20), 2.0, margin_um=4),
         chip_size_um=200,
         effects=Effects(meniscus=True),
-        liquid=Liquid(height_um=16.0),
+        liquid=Liquid(dispense="none", height_um=16.0),
         twist=TwistGrid(1.0, -4.0, 4.0),
         window_um=100.0,
     )
@@ -148,7 +148,7 @@ def test_global_minimum_by_the_cell_bound_with_the_footprint():
         pat,
         chip_size_um=100,
         effects=Effects(meniscus=True),
-        liquid=Liquid(height_um=8.0),
+        liquid=Liquid(dispense="none", height_um=8.0),
         twist=TwistGrid(5.0, -20.0, 20.0),
     )
     full = build_landscape(s)
@@ -167,7 +167,7 @@ def test_the_split_footprint_is_the_rotated_one(twist):
         mask_from_geometry(four_pad(200, 20), 1.0, margin_um=2),
         chip_size_um=200,
         effects=Effects(meniscus=True),
-        liquid=Liquid(volume_nl=0.9),
+        liquid=Liquid(dispense="none", volume_nl=0.9),
     )
     rot = ChipRotator(
         s.chip,
@@ -198,7 +198,7 @@ def _footprint_scene(chip) -> Scene:
         mask_from_geometry(four_pad(200, 20), 1.0, margin_um=2),
         chip=mask_from_geometry(chip, 1.0),
         effects=Effects(meniscus=True),
-        liquid=Liquid(volume_nl=0.9),
+        liquid=Liquid(dispense="none", volume_nl=0.9),
     )
 
 

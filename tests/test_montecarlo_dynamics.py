@@ -67,7 +67,7 @@ def floating():
         chip_size_um=200,
         resolution_um=5,
         effects=Effects(twist=False, meniscus=True),
-        liquid=Liquid(volume_nl=0.9),
+        liquid=Liquid(volume_nl=0.9, dispense="none"),  # the stateless landscape, built once
     )
     starts = np.array(
         [[0, 0, 0], [8, -4, 0], [30, 0, 0], [60, 40, 0], [150, 0, 0], [95, 0, 0], [0, -110, 0]],

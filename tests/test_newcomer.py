@@ -295,24 +295,27 @@ def test_a_dynamic_run_says_each_stage_after_its_landscape(run_cli, monkeypatch)
     import simulator.core._progress as progress
 
     monkeypatch.setenv("SELFALIGN_WAIT_S", "0")  # every waiting line shows
-    monkeypatch.setattr(progress, "_shown", set())  # the compile line not yet shown
-    rc, out, err = run_cli(
-        ["simulate", "--pattern", library_path("square_200"), "--chip-size", "200"]
-        + ["--resolution", "4", "--no-twist", "--meniscus", "--volume", "0.4"]
-        + ["--method", "overdamped", "--start", "20,0,0"]
-    )
-    assert rc == 0, err
-    stages = [
-        "landscape: 1 twist x ",
-        "the well's floor around the global minimum (",
-        "the overdamped stepper's field on the landscape (",
-        "compiling the overdamped stepper with JAX",
-        "where the run ended: plateau, global minimum and error limit (",
-    ]
-    lines = err.splitlines()
-    at = [next(i for i, line in enumerate(lines) if line.startswith(s)) for s in stages]
-    assert at == sorted(at), lines
-    assert out.startswith("overdamped: aligned at")
+    monkeypatch.setattr(progress, "_shown", set())
+    scene = ["simulate", "--pattern", library_path("square_200"), "--chip-size", "200"]
+    scene += ["--resolution", "4", "--no-twist", "--meniscus", "--volume", "0.4"]
+    scene += ["--method", "overdamped", "--start", "20,0,0"]
+    # stateless, then with the default footprint state (the pads' planes before the floor)
+    runs = ((["--dispense", "none"], "landscape: 1 twist x "), ([], "footprint planes: 1 pads"))
+    for protocol, first in runs:
+        progress._shown.clear()  # the compile line not yet shown
+        rc, out, err = run_cli(scene + protocol)
+        assert rc == 0, err
+        stages = [
+            first,
+            "the well's floor around the global minimum (",
+            "the overdamped stepper's field on the landscape (",
+            "compiling the overdamped stepper with JAX",
+            "where the run ended: plateau, global minimum and error limit (",
+        ]
+        lines = err.splitlines()
+        at = [next(i for i, line in enumerate(lines) if line.startswith(s)) for s in stages]
+        assert at == sorted(at), lines
+        assert out.startswith("overdamped: aligned at")
     rc, out, err = run_cli(
         ["simulate", "--pattern", library_path("square_200"), "--chip-size", "200"]
         + ["--resolution", "4", "--no-twist", "--meniscus", "--volume", "0.4"]

@@ -138,7 +138,7 @@ def test_free_contact_lines_are_covered_and_equal():
         mask_from_geometry(four_pad(200, 20), 1.0, margin_um=2),
         chip_size_um=200,
         effects=Effects(twist=True, meniscus=True),
-        liquid=Liquid(height_um=5.0, pinned=False),
+        liquid=Liquid(height_um=5.0, pinned=False, dispense="none"),
         twist=TwistGrid(0.5, -2, 2),
         window_um=40.0,
         dtype="float64",

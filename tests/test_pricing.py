@@ -195,8 +195,13 @@ CASES = {
         ["the landscape needs about", "memory budget is 1,000 MB", "--memory-budget"],
     ),
     "energy with the meniscus: the footprint": (
-        ["energy", "--at", "0,0,0", "--meniscus-height", "31", "--memory-budget", "80"],
+        ["energy", "--at", "0,0,0", "--meniscus-height", "31", "--dispense", "none"]
+        + ["--memory-budget", "80"],
         ["meniscus footprint", "distance transform", "--memory-budget"],
+    ),
+    "energy with the meniscus: the default footprint state's planes": (
+        ["energy", "--at", "0,0,0", "--meniscus-height", "31", "--memory-budget", "200"],
+        ["--dispense pattern (the default)", "footprint state's planes", "--dispense none"],
     ),
     "simulate with a droplet below the critical volume: refused before the droplet's warning": (
         [
@@ -390,6 +395,8 @@ MENISCUS_RUN = [
     "5",
     "--meniscus-height",
     "20",
+    "--dispense",
+    "none",  # the stateless path engine's boxes (the footprint state's: tests/test_footprint_path.py)
     "--method",
     "gradient",
     "--start=60,-40,4",

@@ -158,9 +158,9 @@ def test_choices_and_limits_match_the_code_downstream():
     assert schema.SIMULATE_METHODS == METHODS
     assert schema.MONTECARLO_METHODS == BATCH_METHODS
     assert schema.DISTRIBUTIONS == DISTRIBUTIONS
-    from simulator.physics import DISPENSE
+    from simulator.physics import DISPENSE_CHOICES
 
-    assert schema.DISPENSE == DISPENSE
+    assert schema.DISPENSE == DISPENSE_CHOICES
     assert schema.MAX_STARTS == MAX_STARTS
     assert schema.MAX_STEPS == MAX_STEPS_LIMIT
     assert schema.MAX_CHUNK == MAX_CHUNK

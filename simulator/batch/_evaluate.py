@@ -186,7 +186,7 @@ def evaluate(
     if auto:
         scene = auto_resolution(scene)
     require_landscape_fits(scene)  # the landscape and the chip's footprint priced before any work
-    if scene.liquid.dispense is not None:  # and the pads' planes of the two protocols
+    if scene.dispense is not None:  # and the pads' planes of the two protocols
         from simulator.motion import require_footprint_fits
 
         require_footprint_fits(scene)
@@ -288,7 +288,7 @@ def assess(
             "overlap": build_landscape(
                 scene.replace(
                     effects=replace(scene.effects, meniscus=False),
-                    liquid=replace(scene.liquid, dispense=None, dispense_at_um=None),
+                    liquid=replace(scene.liquid, dispense="none", dispense_at_um=None),
                 ),
                 twists=np.array([ls.twist_deg[int(np.argmin(np.abs(ls.twist_deg - tm)))]]),
             ),
@@ -337,7 +337,7 @@ def assess(
     )
     # the stateless footprint (every pad counted by its distance from the chip) on the landscape;
     # a scene with --dispense adds each protocol's numbers below (footprint_protocols)
-    stateless = scene.replace(liquid=replace(scene.liquid, dispense=None, dispense_at_um=None))
+    stateless = scene.replace(liquid=replace(scene.liquid, dispense="none", dispense_at_um=None))
     # the capture grid and the yield starts padded to one lane count: one compiled batch
     lanes = max(grid.size, int(yield_starts))
     cap = run_batch(stateless, grid, method, landscape=ls, progress=not quiet, lanes=lanes)
@@ -355,7 +355,7 @@ def assess(
     yl = run_batch(stateless, starts, method, landscape=ls, progress=not quiet, lanes=lanes)
     yl_sum = summarize(yl)
     protocols = None
-    if scene.liquid.dispense is not None:
+    if scene.dispense is not None:
         protocols = footprint_protocols(
             scene,
             (xm, ym, tm),
@@ -495,7 +495,8 @@ def footprint_protocols(
     planes = build_footprint_planes(scene, progress=not quiet)
     out = {}
     for proto in DISPENSE:
-        sc = scene.replace(liquid=replace(scene.liquid, dispense=proto))
+        at = scene.liquid.dispense_at_um if proto == "pattern" else None
+        sc = scene.replace(liquid=replace(scene.liquid, dispense=proto, dispense_at_um=at))
         dispensed, why = dispensed_footprint(sc, planes.labels, planes.n_pads)
         biases = {}
         for axis, (lo, hi) in spans.items():
@@ -522,7 +523,7 @@ def footprint_protocols(
             "yield_outcomes": yl["outcomes"],
         } | ({"time_to_align_s": yl["time_to_align_s"]} if "time_to_align_s" in yl else {})
     return {
-        "dispense": scene.liquid.dispense,
+        "dispense": scene.dispense,
         "substrate_reach_um": planes.rules.d_s * scene.um_per_px,
         "wet_reach_um": planes.rules.d_r * scene.um_per_px,
         "receding_deg": planes.rules.receding_deg,

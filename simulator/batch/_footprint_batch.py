@@ -88,8 +88,11 @@ def run_footprint_batch(
         require_footprint_fits(scene)
         planes = build_footprint_planes(scene, progress=progress)
     n_pads = planes.n_pads
-    if dispense is not None and dispense != scene.liquid.dispense:
-        scene = scene.replace(liquid=dataclasses.replace(scene.liquid, dispense=dispense))
+    if dispense is not None and dispense != scene.dispense:
+        at = scene.liquid.dispense_at_um if dispense == "pattern" else None
+        scene = scene.replace(
+            liquid=dataclasses.replace(scene.liquid, dispense=dispense, dispense_at_um=at)
+        )
     dispensed, _ = dispensed_footprint(scene, planes.labels, n_pads)
     reference = planes.landscape(np.ones(n_pads, bool))
     t_land = time.perf_counter() - t0

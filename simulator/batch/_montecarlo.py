@@ -127,7 +127,10 @@ def run_batch(
         method: "greedy", "gradient", "overdamped" or "inertial" (the dynamics of
             :mod:`simulator.motion`, ``jax.vmap`` of the single-run solver).
         landscape: the landscape to run on; default ``build_landscape(scene)`` (the full
-            landscape, built once).
+            landscape, built once), or the pads' planes of the footprint state where the
+            scene has one (:attr:`simulator.scene.Scene.dispense`). A given landscape is run
+            on as it is, stateless, as :func:`simulator.motion.simulate` does, unless the
+            scene's liquid names a protocol itself (refused: the state needs the planes).
         chunk: starts per compiled batch (at most N); memory is bounded by it. Default
             :data:`DEFAULT_CHUNK` for the steppers, :data:`DEFAULT_DYNAMICS_CHUNK` for
             the dynamics.
@@ -191,8 +194,9 @@ def run_batch(
             dynamics = DynamicsParams.from_scene(scene)
     else:
         dynamics = None
-    if scene.liquid.dispense is not None:
-        # the footprint as each lane's state (docs/physics.md §3.5), on the pads' planes
+    # the footprint as each lane's state (docs/physics.md §3.5), on the pads' planes; a given
+    # landscape is run on as it is (stateless) unless the scene asked for a protocol itself
+    if scene.dispense is not None and (landscape is None or scene.liquid.dispense is not None):
         require(
             landscape is None,
             "--dispense: a batch on a given landscape cannot carry the footprint state (it is built "

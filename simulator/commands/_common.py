@@ -243,13 +243,14 @@ def add_scene_args(p: argparse.ArgumentParser) -> None:
     )
     q.add_argument(
         "--dispense",
-        choices=("pattern", "chip"),
-        help="make the wetted footprint a state of the run, starting from where the process puts "
-        "the liquid: 'pattern' (the droplet dispensed on the pattern before the chip is released "
+        choices=("pattern", "chip", "none"),
+        help="where the process puts the liquid, which makes the wetted footprint a state of the "
+        "run: 'pattern' (the droplet dispensed on the pattern before the chip is released "
         "onto it: every pad it covers starts wet) or 'chip' (the liquid comes in under the chip and "
         "wets what it reaches); pads then wet when the liquid's foot reaches them and dry beyond "
-        "the reach of the chip's wall (docs/physics.md §3.5; needs --meniscus, free contact lines; "
-        "default: no state, every pad counted by its distance from the chip)",
+        "the reach of the chip's wall (docs/physics.md §3.5; needs --meniscus, free contact lines); "
+        "'none': no state, every pad counted by its distance from the chip (default: 'pattern' "
+        "with --meniscus and free contact lines, else none)",
     )
     q.add_argument(
         "--dispense-at",

@@ -84,7 +84,7 @@ def run(args: argparse.Namespace) -> int:
     # Priced before any work (the accuracy warning's pattern outline among it), then warned.
     from simulator.landscape import require_landscape_fits
 
-    if scene.liquid.dispense is not None:
+    if scene.dispense is not None:
         from simulator.motion import require_footprint_fits
 
         require_footprint_fits(scene)
@@ -101,16 +101,14 @@ def run(args: argparse.Namespace) -> int:
         print(f"note: {derived_volume_words(scene)}", file=sys.stderr)
     x, y, t = (np.array(v) for v in zip(*poses, strict=True))
     planes = dispensed = None
-    if scene.liquid.dispense is not None:
+    if scene.dispense is not None:
         # Each pose is a chip released there onto the footprint the process left (docs/physics.md §3.5).
         from simulator.landscape import build_footprint_planes
         from simulator.liquid import dispensed_footprint
 
         planes = build_footprint_planes(scene, twists=twists_around(scene, twists))
         dispensed, why = dispensed_footprint(scene, planes.labels, planes.n_pads)
-        print(
-            f"footprint (--dispense {scene.liquid.dispense}): {why}; each pose is a chip released there"
-        )
+        print(f"footprint (--dispense {scene.dispense}): {why}; each pose is a chip released there")
         ls = planes.template
         wet_at = [planes.next_state(dispensed, p) for p in poses]
         energy, fx, fy, torque = (np.empty(len(poses)) for _ in range(4))

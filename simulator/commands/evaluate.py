@@ -148,7 +148,7 @@ def run(args: argparse.Namespace) -> int:
         if isinstance(r, dict):
             pb = r["max_bias_um"]
             print(
-                f"--dispense {name}{' (this scene)' if name == scene.liquid.dispense else ''}: max bias +x {pb['+x']:g} um, "
+                f"--dispense {name}{' (this scene)' if name == scene.dispense else ''}: max bias +x {pb['+x']:g} um, "
                 f"-x {pb['-x']:g} um, +y {pb['+y']:g} um, -y {pb['-y']:g} um; capture {100 * r['capture_fraction']:.1f} %, "
                 f"yield {100 * r['yield_fraction']:.1f} % (each start released onto that protocol's footprint)"
             )

@@ -367,7 +367,7 @@ def run(args: argparse.Namespace) -> int:
             "dtype": scene.dtype,
             "meniscus_height_um": scene.meniscus_height_um,
             "pinned": scene.liquid.pinned,
-            "dispense": scene.liquid.dispense,
+            "dispense": scene.dispense,
             "hysteresis_deg": (
                 {
                     "receding": scene.materials.pad_receding_deg,
@@ -387,7 +387,7 @@ def run(args: argparse.Namespace) -> int:
         doc["time_to_align_histogram"] = time_histogram(result.time_to_align_s)
     if "footprint_events" in st:  # the footprint as each start's state (--dispense)
         doc["footprint"] = {
-            "dispense": scene.liquid.dispense,
+            "dispense": scene.dispense,
             "events": st["footprint_events"],
             "rounds": st["footprint_rounds"],
             "planes_s": st["footprint_planes_s"],

@@ -125,7 +125,7 @@ def run(args: argparse.Namespace) -> int:
         engine = choose_engine(scene, start, method, args.engine, 3, 48)
     # the first landscape (and footprint), or what the path engine needs, priced before any work
     require_run_fits(scene, start, method, engine=engine)
-    if scene.liquid.dispense is not None:
+    if scene.dispense is not None:
         # the pads' planes over the whole grid, or the path engine's rotators (it computes
         # the visited poses only)
         from simulator.motion import require_footprint_fits

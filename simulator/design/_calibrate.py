@@ -165,7 +165,7 @@ class _Model:
         its pads' planes)."""
         from simulator.landscape import build_landscape
 
-        if scene.liquid.dispense is not None:
+        if scene.dispense is not None:
             return None
         key = (
             scene.materials.pad_angle_deg,

@@ -81,7 +81,7 @@ def dispensed_wet(scene, labels: np.ndarray, n_pads: int, at_um=None) -> tuple[n
 def dispensed_footprint(scene, labels: np.ndarray, n_pads: int) -> tuple[np.ndarray, str]:
     """(wet pads, why) before the chip arrives, for ``scene``'s protocol: :func:`dispensed_wet`
     for ``pattern``, no pad for ``chip`` (the liquid comes in under the chip)."""
-    if scene.liquid.dispense == "pattern":
+    if scene.dispense == "pattern":
         return dispensed_wet(scene, labels, n_pads, scene.liquid.dispense_at_um)
     return np.zeros(n_pads, bool), (
         "the liquid comes in under the chip: it wets the pads the chip's liquid reaches"

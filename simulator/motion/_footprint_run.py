@@ -68,6 +68,11 @@ def footprint_budget_bytes(scene, n_pads: int) -> int:
     return int((held + work) * 1.15) + PROCESS_BYTES
 
 
+def _proto(scene) -> str:
+    """The scene's protocol as its flag reads, saying when it is the default."""
+    return f"{scene.dispense}" + (" (the default)" if scene.liquid.dispense is None else "")
+
+
 def require_footprint_fits(scene, engine: str = "fft") -> None:
     """Refuse (InputError) a ``--dispense`` run whose pads' planes exceed the memory budget,
     before any of them is made (no JAX, no transform); with ``engine`` "path", whose
@@ -80,18 +85,19 @@ def require_footprint_fits(scene, engine: str = "fft") -> None:
         need = footprint_path_bytes(scene)
         if need > scene.memory_budget_mb * 2**20:
             raise InputError(
-                f"--dispense {scene.liquid.dispense} on the path engine: the footprint state's rotators would hold "
+                f"--dispense {_proto(scene)} on the path engine: the footprint state's rotators would hold "
                 f"{need / 2**20:,.0f} MB, over the memory budget of {scene.memory_budget_mb:,.0f} MB; give a coarser "
-                "--resolution, or raise --memory-budget"
+                "--resolution, raise --memory-budget, or run stateless with --dispense none"
             )
         return
     _, n = pad_labels(scene.pattern)
     need = footprint_budget_bytes(scene, n)
     if need > scene.memory_budget_mb * 2**20:
         raise InputError(
-            f"--dispense {scene.liquid.dispense}: the footprint state's planes for {n} pads would hold "
+            f"--dispense {_proto(scene)}: the footprint state's planes for {n} pads would hold "
             f"{need / 2**20:,.0f} MB, over the memory budget of {scene.memory_budget_mb:,.0f} MB; give a coarser "
-            "--resolution, a smaller --window or a larger --twist-step, or raise --memory-budget"
+            "--resolution, a smaller --window or a larger --twist-step, raise --memory-budget, or run stateless "
+            "with --dispense none"
         )
 
 
@@ -182,10 +188,10 @@ def simulate_footprint(
     from simulator.motion._field import Relay
 
     t0 = time.perf_counter()
-    proto = scene.liquid.dispense
+    proto = scene.dispense
     engine = footprint_engine(scene, start, method, engine, planes)
     inner = scene.replace(
-        liquid=dataclasses.replace(scene.liquid, dispense=None, dispense_at_um=None)
+        liquid=dataclasses.replace(scene.liquid, dispense="none", dispense_at_um=None)
     )
     path_src = None
     if engine == "path":

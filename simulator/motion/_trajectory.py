@@ -215,7 +215,7 @@ def simulate(
             f"({MAX_START_PX} px) and |twist| at most {MAX_START_TWIST_DEG:g} deg"
         )
     dynamic = method in ("overdamped", "inertial")
-    if scene.liquid.dispense is not None and landscape is None:
+    if scene.dispense is not None and landscape is None:
         # The footprint as the run's state (docs/physics.md §3.5): on the pads' planes, or on
         # the path engine's boxes of each state.
         from simulator.motion._footprint_run import simulate_footprint

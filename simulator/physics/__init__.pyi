@@ -1,7 +1,9 @@
 """Types of ``simulator.physics``'s names, loaded on first use (SPEC 1 lazy loading)."""
 
 from ._footprint import (
+    DEFAULT_DISPENSE as DEFAULT_DISPENSE,
     DISPENSE as DISPENSE,
+    DISPENSE_CHOICES as DISPENSE_CHOICES,
     SHADOW_STEP_DEG as SHADOW_STEP_DEG,
     STEP_PX as STEP_PX,
     TOUCH_PX2 as TOUCH_PX2,

@@ -70,6 +70,14 @@ from simulator.physics._meniscus import WallProfile
 #: before the chip arrives, or the liquid coming in under the chip.
 DISPENSE = ("pattern", "chip")
 
+#: What ``--dispense`` accepts: the two protocols, and ``none`` for the stateless footprint
+#: (every pad counted by its distance from the chip, the model before the state existed).
+DISPENSE_CHOICES = (*DISPENSE, "none")
+
+#: The protocol of a scene that names none and whose meniscus has free contact lines (the
+#: source's experiments, and most droplet processes, dispense the droplet on the pattern).
+DEFAULT_DISPENSE = "pattern"
+
 #: Width (px) of the smooth steps of the count footprints (:class:`StepProfile`), and of the
 #: band whose difference gives the line length ``l(d_r)``.
 STEP_PX = 2.0

@@ -129,8 +129,10 @@ class Liquid:
         dispense: where the process puts the liquid (``--dispense``, TOML ``dispense``), which
             makes the wetted footprint a state of the run (docs/physics.md §3.5):
             ``"pattern"`` (the droplet on the pattern before the chip arrives) or ``"chip"``
-            (the liquid comes in under the chip); None: the stateless footprint (every pad
-            counted by its distance from the chip, as before the state existed).
+            (the liquid comes in under the chip); ``"none"``: the stateless footprint (every
+            pad counted by its distance from the chip, as before the state existed); None
+            (not given): ``"pattern"`` where the scene's meniscus has free contact lines,
+            else stateless (:attr:`simulator.scene.Scene.dispense`).
         dispense_at_um: (x, y) um where a ``pattern`` droplet is dispensed (default the
             pattern's centre; ``--dispense-at X,Y``).
     """
@@ -149,9 +151,9 @@ class Liquid:
     def __post_init__(self) -> None:
         set_ = object.__setattr__
         set_(self, "name", str(self.name))
-        if self.dispense is not None and self.dispense not in ("pattern", "chip"):
+        if self.dispense is not None and self.dispense not in ("pattern", "chip", "none"):
             raise InputError(
-                f"dispense (--dispense) must be 'pattern' or 'chip', got {self.dispense!r}"
+                f"dispense (--dispense) must be 'pattern', 'chip' or 'none', got {self.dispense!r}"
             )
         if self.dispense_at_um is not None:
             at = self.dispense_at_um
@@ -163,9 +165,10 @@ class Liquid:
                 raise InputError(
                     f"dispense point (--dispense-at X,Y) must be two finite numbers of um, got {at!r}"
                 )
-            if self.dispense != "pattern":
+            if self.dispense in ("chip", "none"):
                 raise InputError(
-                    "--dispense-at places a droplet dispensed on the pattern: give it with --dispense pattern"
+                    f"--dispense-at places a droplet dispensed on the pattern, not with --dispense {self.dispense}: "
+                    "leave out one of the two"
                 )
             set_(self, "dispense_at_um", xy)
         if not isinstance(self.pinned, bool | np.bool_):

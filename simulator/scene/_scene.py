@@ -166,7 +166,7 @@ class Scene(SceneBuilders):
             )
         if self.effects.meniscus:
             _ = self.meniscus_height_um  # validated here: positive, finite, not above the chip
-        if self.liquid.dispense is not None and self.wall_profile is None:
+        if self.liquid.dispense in ("pattern", "chip") and self.wall_profile is None:
             raise InputError(
                 f"--dispense {self.liquid.dispense} makes the wetted footprint a state of the run, which needs the "
                 "finite meniscus with free contact lines: give --meniscus (not --pinned)"
@@ -175,6 +175,13 @@ class Scene(SceneBuilders):
                     if self.effects.meniscus and not self.liquid.pinned
                     else ""
                 )
+                + ", or leave --dispense out"
+            )
+        if self.liquid.dispense_at_um is not None and self.dispense != "pattern":
+            raise InputError(
+                "--dispense-at places a droplet dispensed on the pattern, which makes the wetted footprint a "
+                "state of the run and needs the finite meniscus with free contact lines: give --meniscus "
+                "(not --pinned), or leave --dispense-at out"
             )
         if self.effects.hysteresis:
             require(
@@ -182,6 +189,23 @@ class Scene(SceneBuilders):
                 "contact-angle hysteresis needs the pad's receding and advancing angles: --hysteresis RECEDING:ADVANCING "
                 "(or [materials] pad_receding_deg and pad_advancing_deg)",
             )
+
+    @property
+    def dispense(self) -> str | None:
+        """The protocol the run's footprint state starts from (docs/physics.md §3.5):
+        ``"pattern"`` or ``"chip"``, or None for the stateless footprint. The liquid's
+        ``dispense`` when given (``"none"``: None); when not, ``"pattern"``
+        (:data:`simulator.physics.DEFAULT_DISPENSE`) wherever the scene's meniscus has free
+        contact lines and a height of a pixel or more (:attr:`wall_profile`), else None: the
+        overlap model, pinned lines and sub-pixel heights have no footprint to keep."""
+        given = self.liquid.dispense
+        if given is not None:
+            return None if given == "none" else given
+        if self.wall_profile is None:
+            return None
+        from simulator.physics import DEFAULT_DISPENSE
+
+        return DEFAULT_DISPENSE
 
     @property
     def delta_gamma_N_m(self) -> float:

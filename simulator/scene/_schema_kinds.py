@@ -42,7 +42,7 @@ ACCURACY_PRESETS = ("fast", "balanced", "precise")  # simulator.scene.PRESETS
 SIMULATE_METHODS = ("greedy", "gradient", "overdamped", "inertial")  # simulator.motion.METHODS
 MONTECARLO_METHODS = ("greedy", "gradient", "overdamped", "inertial")  # simulator.batch.METHODS
 DISTRIBUTIONS = ("normal", "uniform")  # simulator.batch.DISTRIBUTIONS
-DISPENSE = ("pattern", "chip")  # simulator.physics.DISPENSE
+DISPENSE = ("pattern", "chip", "none")  # simulator.physics.DISPENSE_CHOICES
 DXF_UNITS = ("um", "mm", "nm")  # patterns.layout.DXF_UNITS
 
 

@@ -214,7 +214,12 @@ def expected_columns(spec) -> list[str]:
         meniscus=bool(effects.get("meniscus", False)),
         free=not liquid.get("pinned", False),
         dynamics=any(m in DYNAMIC_METHODS for m in methods),
-        dispense=liquid.get("dispense") is not None,
+        dispense=liquid.get("dispense") in ("pattern", "chip")
+        or (  # the default protocol (simulator.scene.Scene.dispense)
+            liquid.get("dispense") is None
+            and bool(effects.get("meniscus", False))
+            and not liquid.get("pinned", False)
+        ),
     )
     if spec.design is None or spec.design["name"] == "four-pad":
         cols.append("critical_volume_nl")

@@ -219,7 +219,7 @@ def price_point(task: dict) -> None:
     scene, auto = point_scene(task)
     scene = auto_resolution(scene) if auto else scene
     require_landscape_fits(scene)
-    if scene.liquid.dispense is not None:  # the pads' planes of the two protocols
+    if scene.dispense is not None:  # the pads' planes of the two protocols
         from simulator.motion import require_footprint_fits
 
         require_footprint_fits(scene)
@@ -249,7 +249,7 @@ def point_bytes(task: dict) -> int:
     scene, auto = point_scene(task)
     scene = auto_resolution(scene) if auto else scene
     require_landscape_fits(scene)
-    if scene.liquid.dispense is not None:  # the pads' planes, built after the landscape is freed
+    if scene.dispense is not None:  # the pads' planes, built after the landscape is freed
         from simulator.landscape import pad_labels
         from simulator.motion import footprint_budget_bytes, require_footprint_fits
 
