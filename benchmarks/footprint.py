@@ -111,7 +111,7 @@ def path_cases(smoke: bool, tmp: Path) -> list[tuple[str, str, list[str]]]:
     else:
         bench += ["--resolution", "2", "--start=500,5,1"]
     out = [
-        ("bench", "stateless path", bench + ["--engine", "path"]),
+        ("bench", "stateless path", bench + ["--dispense", "none", "--engine", "path"]),
         ("bench", "dispense pattern path", bench + ["--dispense", "pattern", "--engine", "path"]),
     ]
     # the FFT planes of the bench case are priced over the default budget (11.2 GB when measured)
@@ -132,7 +132,7 @@ def path_cases(smoke: bool, tmp: Path) -> list[tuple[str, str, list[str]]]:
     k4 += ["--volume", "500", "--hysteresis", "10:35", "--quiet", "--method", "greedy"]
     k4 += ["--start=1200,-800,10", "--engine", "path"]
     out += [
-        ("4000 um", "stateless path", k4),
+        ("4000 um", "stateless path", k4 + ["--dispense", "none"]),
         ("4000 um", "dispense pattern path", k4 + ["--dispense", "pattern"]),
         fft,  # last: the largest
     ]
@@ -216,7 +216,10 @@ def main(argv=None) -> int:
     base = case(smoke is not None, a.small, a.batch and smoke is None)
     rows = []
     for i in range(repeats):
-        for name, extra in (("stateless", []), ("dispense pattern", ["--dispense", "pattern"])):
+        for name, extra in (
+            ("stateless", ["--dispense", "none"]),
+            ("dispense pattern", ["--dispense", "pattern"]),
+        ):
             r = run(base + extra) | {"run": name, "repeat": i}
             rows.append(r)
             print(

@@ -239,13 +239,13 @@ res = float(sys.argv[4]) if len(sys.argv) > 4 else None
 if which == "730":
     from patterns.library import library_path
     volume, start = 20.0, (300.0, 200.0, 10.0)
-    kw = {"effects": Effects(meniscus=True), "liquid": Liquid(volume_nl=volume)} if model == "meniscus" else {}
+    kw = {"effects": Effects(meniscus=True), "liquid": Liquid(volume_nl=volume, dispense="none")} if model == "meniscus" else {}
     scene = Scene.from_inputs(library_path("four_pad_730_50"), chip_size_um=730, resolution_um=res, **kw)
 else:
     from patterns.geometry import four_pad, square
     from patterns.raster import mask_from_geometry
     volume, start = 500.0, (1200.0, -800.0, 10.0)
-    kw = {"effects": Effects(meniscus=True), "liquid": Liquid(volume_nl=volume)} if model == "meniscus" else {}
+    kw = {"effects": Effects(meniscus=True), "liquid": Liquid(volume_nl=volume, dispense="none")} if model == "meniscus" else {}
     scene = Scene(pattern=mask_from_geometry(four_pad(4000, 200), 1.0),
                   chip=mask_from_geometry(square(4000), 1.0), **kw)
 t0 = time.perf_counter()
