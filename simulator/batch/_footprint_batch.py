@@ -80,6 +80,7 @@ def run_footprint_batch(
         require_footprint_fits,
         wet_bits,
     )
+    from simulator.motion._pinning import pin_lines
     from simulator.physics import align_tolerance, pin_per_index
 
     dynamic = dynamics is not None
@@ -96,6 +97,7 @@ def run_footprint_batch(
     _check_starts_fit(reference, poses)
     reached, within = footprint_relay(planes)
     pin = pin_per_index(scene, reference.um_per_px, reference.twist_step_deg)
+    lines = pin_lines(scene, reference.energy.dtype)
     tol = align_tolerance(reference, pin, floats=scene.wall_profile is not None)
     opt = global_minimum(scene, landscape=reference)  # "aligned": every pad wet
     grid = reference.grid
@@ -126,7 +128,9 @@ def run_footprint_batch(
             for g in range(len(states)):
                 members = lanes[group.ravel() == g]
                 state = wet[members[0]]
-                fld, _ = field_and_grid(planes.landscape(state), pin=pin, align_tol=tol)
+                fld, _ = field_and_grid(
+                    planes.landscape(state), pin=pin, align_tol=tol, lines=lines
+                )
                 fld = fld._replace(
                     best=jnp.asarray(best, fld.dtype),
                     relay=Relay(reached, within, jnp.asarray(wet_bits(state))),

@@ -85,7 +85,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     d.add_argument(
         "--damping-calibration",
         type=float,
-        help="damping factor over the Couette drag (default 600)",
+        help="override the damping: the Couette drag times this factor (default: none, the "
+        "damping's documented terms)",
+    )
+    d.add_argument(
+        "--line-friction",
+        type=float,
+        metavar="PA_S",
+        help="molecular-kinetic contact-line friction in Pa s (default 0.03)",
     )
     p.add_argument(
         "--out",

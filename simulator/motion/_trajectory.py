@@ -35,6 +35,7 @@ from simulator.landscape import (
     global_minimum,
 )
 from simulator.motion._field import field_and_grid
+from simulator.motion._pinning import pin_lines
 from simulator.motion._pricing import (
     BAND_PX,
     BAND_STEPS,
@@ -300,7 +301,9 @@ def simulate(
                 f"the {method} stepper's field on the landscape ({ls.energy.size:,} poses)",
                 ls.energy.size * FIELD_S_PER_POSE,
             )
-        field, grid = field_and_grid(ls, pin=pin, align_tol=tol, scale=scale)
+        field, grid = field_and_grid(
+            ls, pin=pin, align_tol=tol, scale=scale, lines=pin_lines(scene, ls.energy.dtype)
+        )
         if relay is not None:
             field = field._replace(relay=relay)
         if dynamic:  # said here, not before the landscape: the compile comes now
