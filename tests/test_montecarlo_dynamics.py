@@ -68,6 +68,7 @@ def floating():
         resolution_um=5,
         effects=Effects(twist=False, meniscus=True),
         liquid=Liquid(volume_nl=0.9),
+        damping_calibration=600.0,  # the former fit: heavily damped, the stiff (IMEX) path
     )
     starts = np.array(
         [[0, 0, 0], [8, -4, 0], [30, 0, 0], [60, 40, 0], [150, 0, 0], [95, 0, 0], [0, -110, 0]],
