@@ -12,14 +12,15 @@ height the finite meniscus's energy uses) held on its edges.
   changes the times by well under 1 %, and adding it moved a float64 inertial run on the
   overlap four-pad (tests/test_robustness.py) into the explicit solver's step-size
   trouble, to be added once that is fixed;
-* damping ``c = k mu A / h`` and ``c_t = k mu J / h``: the Couette drag of the film times the
-  calibration ``k`` (:data:`simulator.physics.DAMPING_CALIBRATION`, 600, fitted to the
-  source's video of a 730 um chip on 20 nl; what the factor stands for, the other
-  dissipation estimated term by term and the fit are documented there).
+* damping: the sum of its terms (:func:`simulator.physics.dissipation_terms`,
+  :func:`dissipation`): the film's Couette drag ``mu A / h`` (``mu J / h`` in twist) with
+  its unsteady correction, the wedges at the moving contact lines and their
+  molecular-kinetic friction; or, where the scene gives ``damping_calibration`` k (the
+  override), ``c = k mu A / h`` and ``c_t = k mu J / h`` (600,
+  :data:`simulator.physics.DAMPING_CALIBRATION`, was the fit to the source's video).
 
-J is the footprint's polar moment about the chip centre. The same factor multiplies both
-dampings: the moving contact lines, the largest term besides the film, have the film's
-twist-to-shift ratio ``J / A`` on a square.
+J is the footprint's polar moment about the chip centre. Contact-angle hysteresis is not a
+damping: it is friction, carried by the steppers (docs/physics.md §4).
 """
 
 from __future__ import annotations

@@ -32,21 +32,21 @@ lines that slide over a pad add the pad's hysteresis:
   give (zero). Without a meniscus the line is at the chip's edge (``d_p = 0``).
 
 Each element of the outline counts with the pattern's value where its free line would
-stand on a pad, ``d_p`` beyond it along its normal, with the chip at its nominal pose
-(0, 0, 0): the pinning decides where a chip stops, and that is near where it rests.
-The shares are one number per axis for the whole run. On a same-size pad they are 0
-(free lines stand on the substrate at rest), in a pad wider than the chip by more than
-``d_p`` 1, without a meniscus 1/2 (the outline lies on the pad's edge: half of it moves
-over the pad either way). Away from rest the real shares change with the pose (a chip
-near its pad's edge has that side's line held by the edge); that dependence is left out.
+stand on a pad, ``d_p`` beyond it along its normal, at the chip's *current* pose and with
+zero on a pad the footprint state has dry (:func:`sliding_pinning_at`, the NumPy reference
+of :func:`simulator.motion.pin_at`, which the steppers evaluate per pose). At rest on a
+same-size pad the shares are 0 (free lines stand on the substrate), in a pad wider than the
+chip by more than ``d_p`` 1, without a meniscus 1/2 (the outline lies on the pad's edge:
+half of it moves over the pad either way); a chip near its pad's edge has that side's line
+held by the edge. :func:`sliding_shares` and :func:`pin_per_index` are the nominal pose's
+(the align tolerance and the error limit read them).
 
-The steppers use the sliding lines' forces (:func:`pin_per_index`) as their stopping rule,
-axis by axis: a gradient or dynamic run stops at the first pose where the restoring force
-along every axis is at most its pinning force, ``|dE/dq_k| <= P_k`` (and, for the inertial
-method, where the kinetic energy left is at most the pinning work over one grid step); a
-greedy move is taken only if the energy it releases exceeds the pinning work
-``sum_k P_k |dq_k|``. With zero hysteresis, or no sliding line, every rule is today's
-exactly. Where lines slide and the well is a spring of stiffness ``k``, the chip stops
+The steppers use the sliding lines' forces as friction (docs/physics.md §4, §5.3): a
+gradient or dynamic run stops where the restoring force along every axis is at most its
+pinning force at the current pose, ``|dE/dq_k| <= P_k(q)``, and the chip is at rest (the
+dynamics carry the pinning as Coulomb friction); a greedy move is taken only if the energy
+it releases exceeds the pinning work ``sum_k P_k |dq_k|``. With zero hysteresis, or a
+pinned scene, every rule is the one without hysteresis exactly. Where lines slide and the well is a spring of stiffness ``k``, the chip stops
 about ``P / k`` short: for free lines in a pad wider than the chip, where the wall
 profile's force ``|Delta_gamma| L f(u)`` falls to ``f_pin L``, ``f(u) = f_pin /
 |Delta_gamma|``.

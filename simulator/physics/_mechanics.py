@@ -28,7 +28,9 @@ from simulator.core import (
     WATER_VISCOSITY_PA_S,
 )
 
-#: Multiplier on the Couette (uncoupled, linear-profile) damping estimate.
+#: The former default multiplier on the Couette damping estimate, now the override
+#: ``--damping-calibration 600`` (the default damping is the sum of its terms,
+#: :func:`dissipation_terms`; what follows is the fit's record).
 #:
 #: The damping model (docs/physics.md §4). The chip slides on a film of height
 #: ``h = V / A``; with the liquid held on the chip's edges and the substrate at rest, the
