@@ -150,8 +150,10 @@ def radius_of_gyration_px(scene: Scene) -> float:
 def is_stiff(method: str, field, grid, params) -> bool:
     """An inertial run is stiff when inertia relaxes (m / c) much faster than the chip
     creeps one pixel under a typical force (overdamped, c s / F): then the IMEX solver
-    (:func:`simulator.motion.stiff_solver`) takes ~100 steps where an explicit one takes ~10^4."""
-    if method != "inertial":
+    (:func:`simulator.motion.stiff_solver`) takes ~100 steps where an explicit one takes ~10^4.
+    Never with hysteresis: the friction's Moreau-Jean step takes the damping implicitly
+    (:class:`simulator.motion.MoreauJean`), and a batch then runs vmapped."""
+    if method != "inertial" or field.pinned:
         return False
     f_ref = float(reference_gradient(field, grid)) / (
         grid.um_per_px * 1e-6
