@@ -76,11 +76,11 @@ def run_footprint_batch(
         field_and_grid,
         footprint_relay,
         is_stiff,
+        pin_lines,
         remaining_params,
         require_footprint_fits,
         wet_bits,
     )
-    from simulator.motion._pinning import pin_lines
     from simulator.physics import align_tolerance, pin_per_index
 
     dynamic = dynamics is not None

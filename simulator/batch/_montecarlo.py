@@ -215,7 +215,7 @@ def run_batch(
     ls = build_landscape(scene, progress=progress) if landscape is None else landscape
     t_land = time.perf_counter() - t0
     _check_starts_fit(ls, poses)
-    from simulator.motion._pinning import pin_lines
+    from simulator.motion import pin_lines
 
     pin = pin_per_index(scene, ls.um_per_px, ls.twist_step_deg)
     fld, grid = field_and_grid(
