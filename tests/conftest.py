@@ -96,6 +96,11 @@ def pytest_configure(config):
     config.addinivalue_line(
         "markers", "xdist_group(name): tests that run on one xdist worker, in order"
     )
+    config.addinivalue_line(
+        "markers",
+        "xla_exact: compares two compiled programs bit for bit; make test runs it as XLA "
+        "compiles for users (its other stages compile at optimisation level 0)",
+    )
 
 
 def pytest_collection_finish(session):

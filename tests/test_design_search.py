@@ -431,3 +431,36 @@ def test_a_failing_trial_is_its_error_row_and_the_search_goes_on(tmp_path):
     assert all("gap=250 um must be smaller than size=200 um" in e for e in bad["error"])
     assert bad["objective_1"].isna().all() and not bad["feasible"].any()
     assert table[table["best"]]["gap_um"].tolist() == [20]
+
+
+def test_the_comparison_shows_what_the_constraints_read():
+    # the example's constraint reads a footprint protocol's yield, which the base rows lack:
+    # the table shows it (and each protocol's rows), once, beside the baseline's
+    import tomllib
+    from pathlib import Path
+
+    from simulator.design._search_report import _compare_table
+
+    doc = tomllib.loads(
+        (Path(__file__).resolve().parents[1] / "examples" / "design_fourpad_gap.toml").read_text()
+    )
+    doc["search"]["constraints"] += ["protocols_pattern_yield_outcomes_plateau <= 20"]
+    spec = load_search(doc)
+    table = pd.DataFrame(
+        {
+            "trial": [0, 3],
+            "objective_1": [50.0, 75.9],
+            "yield_fraction": [1.0, 0.9935],
+            "protocols_pattern_yield_fraction": [0.9905, 0.99],
+            "protocols_chip_yield_fraction": [0.9875, 0.9865],
+            "critical_volume_nl": [9.0, 10.3],
+            "protocols_pattern_yield_outcomes_plateau": [19, 20],
+        }
+    )
+    page = _compare_table(spec, table, 3)
+    assert page.count("--dispense pattern: yield under placement noise (%)") == 1
+    assert "<td>99.05</td><td>99</td>" in page and "<td>98.75</td><td>98.65</td>" in page
+    assert "constraint volume_nl &gt;= critical_volume_nl: critical_volume_nl" not in page
+    assert page.count("critical volume of the four-pad (nl)") == 1
+    row = "constraint protocols_pattern_yield_outcomes_plateau &lt;= 20: "
+    assert page.count(row) == 1 and "<td>19</td><td>20</td>" in page

@@ -86,9 +86,10 @@ def test_design_example_is_the_guides_search():
     assert spec.trials == 24 and spec.sampler == "tpe"
     assert [o.text for o in spec.objectives] == ["maximize gap_um"]
     assert [c.text for c in spec.constraints] == [
-        "yield_fraction >= 0.99",
+        "protocols_pattern_yield_fraction >= 0.99",
         "volume_nl >= critical_volume_nl",
     ]
+    assert spec.sweep.scene["liquid"]["dispense"] == "pattern"
     assert spec.sweep.design["params"] == {"size": 730, "gap": 50}
     assert spec.baseline_values() == {"placement_sigma_um": 150, "placement_sigma_deg": 2}
 

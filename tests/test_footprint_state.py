@@ -411,3 +411,30 @@ def test_a_dispense_run_over_its_budget_is_refused_before_any_plane(run_cli, mon
         + ["--start=500,5,1", "--method", "inertial", "--memory-budget", "1000"]
     )
     one_line_error(rc, err, "--dispense pattern", "footprint state's planes", "--memory-budget")
+
+
+def test_as_the_height_vanishes_the_released_curve_tends_to_the_overlap_model():
+    # The state's reaches (d_s, d_p = d_r without hysteresis) are h cot(theta): the force of a
+    # chip released at each x onto the pattern-dispensed footprint differs from the overlap
+    # model's only within them of its steps, so the L1 distance of the two force curves is at
+    # most twice the largest force times (d_p + d_r), and halves with h.
+    from simulator.liquid import dispensed_footprint
+
+    over = Scene.from_inputs(
+        LIB / "four_pad_730_100.png",
+        chip_size_um=730,
+        resolution_um=5.0,
+        effects=Effects(twist=False, meniscus=False),
+    )
+    ref = build_landscape(over).curve("x", (0, 0, 0), 0, 700)
+    l1 = {}
+    for h in (40.0, 20.0, 10.0):  # 8, 4 and 2 px at 5 um/px
+        s = fourpad(100, dispense="pattern", height_um=h)
+        p = build_footprint_planes(s)
+        wet, _ = dispensed_footprint(s, p.labels, p.n_pads)
+        c = p.released_curve(wet, "x", (0, 0, 0), 0, 700)
+        f_ref = np.interp(c["values"], ref["values"], ref["force"])
+        l1[h] = np.trapezoid(np.abs(c["force"] - f_ref), c["values"])  # N um
+        d_p = h / math.tan(math.radians(30.0))  # the pads' angle, and d_r without hysteresis
+        assert l1[h] <= 2 * np.abs(f_ref).max() * (2 * d_p)
+    assert 0.4 <= l1[20.0] / l1[40.0] <= 0.6 and 0.4 <= l1[10.0] / l1[20.0] <= 0.6

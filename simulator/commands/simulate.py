@@ -61,7 +61,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "thousands of px; exact geometry, chip images and the free contact lines' footprint, not the "
         "K_h-blurred meniscus or a meniscus below one pixel) or auto (path where it covers the scene: "
         "for chips of at least 1000 x 1000 px greedy, 2000 x 2000 px gradient, and for every chip "
-        "with free contact lines; default). "
+        "with free contact lines; default). With --dispense the same choice: path computes the "
+        "footprint state (each pad's energy and relay, the shadow pairs) at the poses the run visits, "
+        "fft builds the pads' planes over the whole grid. "
         "The JSON's cost.engine says which ran",
     )
     d = p.add_argument_group("liquid and chip body (dynamic methods)")
@@ -134,9 +136,11 @@ def run(args: argparse.Namespace) -> int:
     # the first landscape (and footprint), or what the path engine needs, priced before any work
     require_run_fits(scene, start, method, engine=engine)
     if scene.liquid.dispense is not None:
+        # the pads' planes over the whole grid, or the path engine's rotators (it computes
+        # the visited poses only)
         from simulator.motion import require_footprint_fits
 
-        require_footprint_fits(scene)
+        require_footprint_fits(scene, engine)
     if method in ("overdamped", "inertial"):
         from simulator.motion import DynamicsParams  # JAX: once the run is priced
 

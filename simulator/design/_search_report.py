@@ -19,6 +19,7 @@ from __future__ import annotations
 import html
 import json
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -44,6 +45,20 @@ COMPARED = (
     ("yield_error_x_mean_abs_um", "aligned placements: mean |error| in x (um)", 1.0),
     ("volume_nl", "droplet volume (nl)", 1.0),
     ("critical_volume_nl", "critical volume of the four-pad (nl)", 1.0),
+)
+#: The same per footprint protocol, for a scene with ``dispense`` (docs/physics.md §3.5).
+PROTOCOL_COMPARED = tuple(
+    row
+    for name in ("pattern", "chip")
+    for row in (
+        (f"protocols_{name}_max_bias_x_um", f"--dispense {name}: max bias along x (um)", 1.0),
+        (f"protocols_{name}_capture_fraction", f"--dispense {name}: capture fraction (%)", 100.0),
+        (
+            f"protocols_{name}_yield_fraction",
+            f"--dispense {name}: yield under placement noise (%)",
+            100.0,
+        ),
+    )
 )
 #: The most trial rows the HTML table shows (the CSV has them all).
 MAX_ROWS = 1000
@@ -355,7 +370,13 @@ def _compare_table(spec, table, top: int | None) -> str:
         (f"objective_{j + 1}", f"objective {j + 1}: {lab}", 1.0)
         for j, lab in enumerate(_labels(spec))
     ]
-    cols += [c for c in COMPARED if c[0] in table.columns]
+    cols += [c for c in COMPARED + PROTOCOL_COMPARED if c[0] in table.columns]
+    shown = {c[0] for c in cols}
+    for c in spec.constraints:  # every column a constraint reads, as the table holds it
+        for name in re.findall(r"[A-Za-z_][A-Za-z0-9_]*", c.text):
+            if name in table.columns and name not in shown:
+                shown.add(name)
+                cols.append((name, f"constraint {c.text}: {name}", 1.0))
     rows = []
     for col, label, f in cols:
         cells = []

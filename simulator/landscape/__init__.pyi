@@ -37,6 +37,10 @@ from ._pathcost import (
     PathEnergy as PathEnergy,
     path_engine_supported as path_engine_supported,
 )
+from ._pathfoot import (
+    FootprintPath as FootprintPath,
+    footprint_path_bytes as footprint_path_bytes,
+)
 from ._posegrid import (
     PoseGrid as PoseGrid,
     axis_step as axis_step,

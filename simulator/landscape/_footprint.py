@@ -99,22 +99,95 @@ def _pads_of(scene: Scene, rules) -> tuple[np.ndarray, int, list, list]:
     return labels, n, masks, deep
 
 
-def _shadowed(masks: list, deep: list) -> list[tuple[int, int, int, np.ndarray]]:
-    """The shadow rule's pairs (near, far, axis, the near pad's part upstream of the far one
-    along the axis), for every far pad on its bridged term (a narrow one keeps its wall term:
-    no bridge over the near pad)."""
-    from simulator.physics import upstream_of
+def _shadowed(masks: list, deep: list, residuals) -> list[tuple[int, int, int, dict]]:
+    """The shadow rule's pairs (near, far, axis, {residual deg: pixel box of the near pad's
+    part upstream of the far one}), for every far pad on its bridged term (a narrow one keeps
+    its wall term: no bridge over the near pad). The shadow of the side of the chip facing
+    the pattern's axis ``axis`` is cast along that side's own normal, ``axis * 90`` deg plus
+    the twist's residual (:func:`simulator.physics.shadow_residual_deg`), for each residual
+    in ``residuals``; a pair is listed where some residual gives it a part."""
+    from simulator.physics import ray_coordinates
 
-    out = []
-    for b, mb in enumerate(masks):
-        if not deep[b]:
+    if not any(deep):
+        return []
+    lab = np.zeros(masks[0].shape, np.int32)
+    for k, m in enumerate(masks):
+        lab[m] = k + 1
+    rows, cols = np.nonzero(lab)
+    pad = lab[rows, cols] - 1
+    h, w = lab.shape
+    found: dict = {}
+    for ax in range(4):
+        for r in sorted({float(v) for v in np.asarray(residuals, float)}):
+            ray, along = ray_coordinates(rows, cols, (h, w), ax * 90.0 + r)
+            lo = ray.min()
+            for b in range(len(masks)):
+                if not deep[b]:
+                    continue
+                far = np.full(ray.max() - lo + 1, -np.inf)
+                on_b = pad == b
+                np.maximum.at(far, ray[on_b] - lo, along[on_b])
+                up = (along < far[ray - lo]) & ~on_b
+                for a in np.unique(pad[up]):
+                    rr, cc = rows[up & (pad == a)], cols[up & (pad == a)]
+                    box = (
+                        cc.min() - w / 2,
+                        cc.max() + 1 - w / 2,
+                        h / 2 - rr.max() - 1,
+                        h / 2 - rr.min(),
+                    )
+                    found.setdefault((int(a), b, ax), {})[r] = box
+    return sorted(
+        ((a, b, ax, d) for (a, b, ax), d in found.items()), key=lambda t: (t[1], t[2], t[0])
+    )
+
+
+def _shadow_part(masks: list, a: int, b: int, ax: int, r: float) -> np.ndarray:
+    """The near pad ``a``'s part upstream of the far pad ``b`` along ``axis * 90 + r`` deg
+    (:func:`_shadowed`), booleans on the pattern."""
+    from simulator.physics import upstream_along
+
+    return masks[a] & upstream_along(masks[b], ax * 90.0 + r)
+
+
+def _covering(mask: np.ndarray, reach: tuple[float, float], margin: float) -> tuple:
+    """(x0, x1, y0, y1) px: the poses at which a chip of half-extent ``reach`` (px, over its
+    twists) with a footprint ``margin`` px wide can cover some of ``mask``."""
+    x0, x1, y0, y1 = _pixel_box(mask)
+    rx, ry = reach[0] + margin, reach[1] + margin
+    return x0 - rx - 1, x1 + rx + 1, y0 - ry - 1, y1 + ry + 1
+
+
+def _faces(twists_deg, ax: int) -> tuple[np.ndarray, np.ndarray]:
+    """(the chip's side whose normal is nearest the pattern's axis ``ax``, the twist's
+    residual deg) at each twist (the chip frame's sides as ``_Sides``)."""
+    from simulator.physics import shadow_residual_deg
+
+    t = np.asarray(twists_deg, float)
+    nearest = np.rint(t / 90.0).astype(int)
+    return (ax - nearest) % 4, shadow_residual_deg(t)
+
+
+def _pair_ranges(boxes: dict, corners, tw_rad, res, within=None) -> tuple[list, list]:
+    """([x0, x1], [y0, y1]) px from the pattern's centre of the poses at which a chip side's
+    strip (``corners``: per twist, the chip-frame corners of the box holding it) reaches the
+    near pad's part (``boxes``, by residual), over the twists ``tw_rad`` (residuals ``res``),
+    within the box ``within`` (x0, x1, y0, y1) px where one is given."""
+    xr, yr = [np.inf, -np.inf], [np.inf, -np.inf]
+    for c, t, r in zip(corners, tw_rad, res, strict=True):
+        c = np.asarray(c, float).reshape(-1, 2)
+        if not len(c):
             continue
-        for ax in range(4):
-            up = upstream_of(mb, ax)
-            for a, ma in enumerate(masks):
-                if a != b and (ma & up).any():
-                    out.append((a, b, ax, ma & up))
-    return sorted(out, key=lambda t: (t[1], t[2], t[0]))
+        x0, x1, y0, y1 = boxes[r]
+        ca, sa = math.cos(t), math.sin(t)
+        qx = c[:, 0] * ca - c[:, 1] * sa
+        qy = c[:, 0] * sa + c[:, 1] * ca
+        xr = [min(xr[0], x0 - qx.max()), max(xr[1], x1 - qx.min())]
+        yr = [min(yr[0], y0 - qy.max()), max(yr[1], y1 - qy.min())]
+    if within is not None:  # the poses where the chip covers some of the near pad
+        xr = [max(xr[0], within[0]), min(xr[1], within[1])]
+        yr = [max(yr[0], within[2]), min(yr[1], within[3])]
+    return xr, yr
 
 
 def footprint_pairs(scene: Scene) -> tuple[int, int, int]:
@@ -137,7 +210,8 @@ def footprint_pairs(scene: Scene) -> tuple[int, int, int]:
     b = _box(wide, None)
     n_t, ny, nx = b["shape"]
     x_first, y_first = b["first_px"]
-    tw = np.radians(_grid_of(wide, b).twist_deg())
+    twists_deg = _grid_of(wide, b).twist_deg()
+    tw = np.radians(twists_deg)
     hx, hy = _chip_reach_px(scene.chip, False)
     lo, hi = rules.d_s - 5.0, rules.band_px + STEP_PX
     side_box = {  # chip frame, (x0, x1, y0, y1) px: +x, +y, -x, -y
@@ -146,32 +220,39 @@ def footprint_pairs(scene: Scene) -> tuple[int, int, int]:
         2: (-hx - hi - 1, -hx - lo + 1, -hy - hi - 1, hy + hi + 1),
         3: (-hx - hi - 1, hx + hi + 1, -hy - hi - 1, -hy - lo + 1),
     }
+    corners = {
+        k: [(a0, b0), (a0, b1), (a1, b0), (a1, b1)] for k, (a0, a1, b0, b1) in side_box.items()
+    }
     _, _, masks, deep = _pads_of(scene, rules)
     total = 0
-    pairs = _shadowed(masks, deep)
-    for *_, ax, part in pairs:
-        x0, x1, y0, y1 = _pixel_box(part)
-        xr, yr = [np.inf, -np.inf], [np.inf, -np.inf]
-        for side, (a0, a1, b0, b1) in side_box.items():
-            corners = np.array([(a0, b0), (a0, b1), (a1, b0), (a1, b1)])
-            for t in tw[(side + np.rint(tw / (np.pi / 2))).astype(int) % 4 == ax]:
-                qx = corners[:, 0] * math.cos(t) - corners[:, 1] * math.sin(t)
-                qy = corners[:, 0] * math.sin(t) + corners[:, 1] * math.cos(t)
-                xr = [min(xr[0], x0 - qx.max()), max(xr[1], x1 - qx.min())]
-                yr = [min(yr[0], y0 - qy.max()), max(yr[1], y1 - qy.min())]
+    pairs = _shadowed(masks, deep, _faces(twists_deg, 0)[1])
+    reach = _chip_reach_px(scene.chip, scene.effects.twist)
+    cm = rules.count_profiles()["covered"].margin_px
+    for a, _, ax, boxes in pairs:
+        face, res = _faces(twists_deg, ax)
+        on = [i for i in range(len(tw)) if res[i] in boxes]
+        xr, yr = _pair_ranges(
+            boxes,
+            [corners[int(face[i])] for i in on],
+            tw[on],
+            res[on],
+            _covering(masks[a], reach, cm),
+        )
         wx = min(xr[1], x_first + nx - 1) - max(xr[0], x_first) + 2
         wy = min(yr[1], y_first + ny - 1) - max(yr[0], y_first) + 2
-        total += n_t * max(0, int(wx)) * max(0, int(wy))
+        total += len(on) * max(0, int(wx)) * max(0, int(wy))
     return len(pairs), total, ny * nx
 
 
 @dataclass(frozen=True, eq=False)
 class PairPlane:
     """The shadow rule's correction for one pair of pads (:mod:`simulator.physics._footprint`):
-    ``near`` and ``far`` (0-based pad indices), the pattern's axis ``axis`` the shadow is cast
-    along, and ``energy`` (T, ny, nx) J on the box of the grid whose first node is
-    (``y0``, ``x0``): added to a state's landscape where both pads are wet (it is already 0
-    where the near pad is not covered or the far pad not on its bridged term)."""
+    ``near`` and ``far`` (0-based pad indices), the pattern's axis ``axis`` whose facing chip
+    side casts the shadow, and ``energy`` (len(twists), ny, nx) J at the grid's twists
+    ``twists`` (those whose shadow reaches from the near pad to the far one) on the box of
+    the grid whose first node is (``y0``, ``x0``): added to a state's landscape where both
+    pads are wet (it is already 0 where the near pad is not covered or the far pad not on its
+    bridged term)."""
 
     near: int
     far: int
@@ -179,11 +260,12 @@ class PairPlane:
     y0: int
     x0: int
     energy: np.ndarray
+    twists: np.ndarray
 
-    def box(self) -> tuple[slice, slice, slice]:
-        """The slices of the grid (twist, y, x) that :attr:`energy` covers."""
+    def box(self) -> tuple[np.ndarray, slice, slice]:
+        """The indices of the grid (twists, y slice, x slice) that :attr:`energy` covers."""
         _, ny, nx = self.energy.shape
-        return slice(None), slice(self.y0, self.y0 + ny), slice(self.x0, self.x0 + nx)
+        return self.twists, slice(self.y0, self.y0 + ny), slice(self.x0, self.x0 + nx)
 
 
 @dataclass(frozen=True, eq=False)
@@ -420,6 +502,48 @@ class _Part:
         return out
 
 
+class _PairBox:
+    """A shadow pair's parts (:func:`_shadow_part`, one per residual of the twists) on one box
+    of the shared grid: each made when first asked for and dropped when the build moves on
+    (:meth:`keep`), all on the same box and work space."""
+
+    def __init__(self, scene, masks, data, key, profile, twists, extent, center, half, *rest):
+        self._args = (scene, masks, data, key, profile, twists, extent, center, half, *rest)
+        self._parts: dict = {}
+        first = self.part(None)
+        self.shape, self.fft, self.grid = first.shape, first.fft, first.grid
+        self.offset = first.offset
+
+    def part(self, r) -> _Part:
+        """The part at the residual ``r`` deg (``None``: an empty part, for the box's sizes)."""
+        if r not in self._parts:
+            scene, masks, data, (a, b, ax), profile, twists, extent, center, half, *rest = (
+                self._args
+            )
+            part = _shadow_part(masks, a, b, ax, r) if r is not None else np.zeros(data.shape, bool)
+            if r is None:
+                part[masks[a]] = True  # the near pad itself: the same box and sizes
+            self._parts[r] = _Part(
+                scene,
+                np.where(part, data, 0.0),
+                profile,
+                twists,
+                extent,
+                center,
+                half,
+                rest[0],
+                rest[1],
+                {},
+                rest[2],
+            )
+        return self._parts[r]
+
+    def keep(self, residuals) -> None:
+        """Drop every part but those at ``residuals``."""
+        for r in [r for r in self._parts if r not in {float(v) for v in residuals}]:
+            del self._parts[r]
+
+
 def build_footprint_planes(
     scene: Scene, backend: str = "auto", progress: bool = False, twists=None
 ) -> FootprintPlanes:
@@ -467,6 +591,7 @@ def build_footprint_planes(
         assert lay["canvas"] == full["canvas"], "one canvas for every footprint"
         rotators[name] = _plan_of(_variant(scene, scene.pattern, profiles[name]), lay).rotator
     twists_deg = grid.twist_deg()
+    n_t_all = len(twists_deg)
     exact = scene.chip.geometry is not None
     # Mirror twins (a mirror-symmetric chip at -alpha is the one at +alpha upside down): one
     # forward transform serves both; a resampled PNG chip's twins are not exact, so none.
@@ -515,34 +640,27 @@ def build_footprint_planes(
                 float(((h / 2 - rr - 0.5) * wk).sum() / wk.sum()) * s,
             )
         )
-    # The shadow rule's pairs: the part of pad A upstream of pad B along an axis, on the
-    # poses where the side of the chip facing that axis can reach it (its box, grown by the
-    # reach of that side's strip out to the band).
+    # The shadow rule's pairs: the part of pad A upstream of pad B along the normal of the
+    # chip's side facing an axis, on the poses where that side can reach it (its box, grown by
+    # the reach of the side's strip out to the band), at the twists where the part is not empty.
     sides = _Sides(rotators["wall"])
     upto = rules.band_px + STEP_PX
     tw_rad = np.radians(twists_deg)
+    strips = [sides.reach(side, rules.d_s - 5.0, upto, rotators["wall"]._sdf) for side in range(4)]
     pair_parts = []
-    for a, b, ax, part in _shadowed(masks, deep):
-        x0, x1, y0, y1 = _pixel_box(part)
-        xr, yr = [np.inf, -np.inf], [np.inf, -np.inf]
-        for side in range(4):
-            corners = sides.reach(side, rules.d_s - 5.0, upto, rotators["wall"]._sdf)
-            if not len(corners):
-                continue
-            # twists where this side faces the axis (its normal rounded to it)
-            on = np.flatnonzero((side + np.rint(tw_rad / (np.pi / 2))).astype(int) % 4 == ax)
-            for t in tw_rad[on]:
-                ca, sa = math.cos(t), math.sin(t)
-                qx = corners[:, 0] * ca - corners[:, 1] * sa
-                qy = corners[:, 0] * sa + corners[:, 1] * ca
-                xr = [min(xr[0], x0 - qx.max()), max(xr[1], x1 - qx.min())]
-                yr = [min(yr[0], y0 - qy.max()), max(yr[1], y1 - qy.min())]
+    for a, b, ax, boxes in _shadowed(masks, deep, _faces(twists_deg, 0)[1]):
+        face, res = _faces(twists_deg, ax)
+        on = np.array([i for i in range(n_t_all) if res[i] in boxes], np.intp)
+        cover = _covering(masks[a], (reach_x, reach_y), margins["covered"])
+        xr, yr = _pair_ranges(boxes, [strips[int(face[i])] for i in on], tw_rad[on], res[on], cover)
         if not np.isfinite(xr[0]):
             continue
         center, half = _box_args(tuple(xr), tuple(yr))
-        p = _Part(
+        p = _PairBox(
             scene,
-            np.where(part, data, 0.0),
+            masks,
+            data,
+            (a, b, ax),
             prof,
             twists,
             extent,
@@ -550,7 +668,6 @@ def build_footprint_planes(
             half,
             backend,
             chunk,
-            {},
             spaces,
         )
         # the stored box: the ranges asked for, within the part's correlation box
@@ -563,12 +680,12 @@ def build_footprint_planes(
         cy1 = min(p.shape[0], int(math.ceil(yr[1])) - gy + 1)
         if cx1 <= cx0 or cy1 <= cy0:
             continue
-        pair_parts.append((a, b, ax, p, (cy0, cy1, cx0, cx1)))
+        pair_parts.append((a, b, ax, p, (cy0, cy1, cx0, cx1), on))
     near = {a for a, *_ in pair_parts}
     n_t, ny_full, nx_full = grid.shape
     if not progress:
         fft_px = sum(math.prod(pp[nm].fft) for pp in pads for nm in margins) + sum(
-            math.prod(p[3].fft) for p in pair_parts
+            math.prod(p[3].fft) * len(p[5]) / n_t for p in pair_parts
         )
         wait_line(
             f"footprint planes: {n} pads, {len(pair_parts)} pairs, {n_t} twist{'s' if n_t != 1 else ''} x "
@@ -581,7 +698,10 @@ def build_footprint_planes(
     # steppers read them: n / 4 bytes a pose for both instead of 2 n
     bits = (*grid.shape, -(-n // 8))
     reached, within = np.zeros(bits, np.uint8), np.zeros(bits, np.uint8)
-    pair_energy = [np.zeros((n_t, c[1] - c[0], c[3] - c[2]), scene.dtype) for *_, c in pair_parts]
+    pair_energy = [
+        np.zeros((len(on), c[1] - c[0], c[3] - c[2]), scene.dtype) for *_, c, on in pair_parts
+    ]
+    pair_at = [{int(i): k for k, i in enumerate(on)} for *_, on in pair_parts]
     scale = scene.delta_gamma_N_m * s**2 * UM2
     c_band = (rules.band_px - rules.f_inf) / STEP_PX
     w_in, w_out = 0.5 + c_band, 0.5 - c_band
@@ -633,30 +753,39 @@ def build_footprint_planes(
             we[(idx, *sl)] = bridged
         if not pair_parts:
             continue
-        # The shadow rule: N_b - f on the side of the chip facing the pair's axis.
+        # The shadow rule: N_b - f on the side of the chip facing the pair's axis, its part
+        # of the near pad the one of each twist's residual.
         strip = 0.5 * (raster["band_in"] + raster["band_out"])
         strip -= raster["wall"]
         side_of = np.stack([sides(twists_deg[i]) for i in pos])
-        nearest = np.rint(np.radians(twists_deg[pos]) / (np.pi / 2)).astype(int)
-        full_tw = idx
-        for j, (a, b, ax, p, (cy0, cy1, cx0, cx1)) in enumerate(pair_parts):
-            face = (ax - nearest) % 4  # the chip's side whose normal is nearest the axis
-            chips = np.where(side_of == face[:, None, None], strip, 0.0)
-            planes = p.correlate(chips, pos, [], scale)
-            if neg:  # the twins: the chip upside down, its sides upside down too (+y and -y swap)
-                fneg = (ax + nearest) % 4  # the side facing the axis at -alpha, before the flip
-                mirror_side = np.where(fneg % 2 == 1, (fneg + 2) % 4, fneg)
-                chips_n = np.where(side_of == mirror_side[:, None, None], strip, 0.0)[:, ::-1]
-                planes = np.concatenate(
-                    [planes, p.correlate(np.ascontiguousarray(chips_n), pos, [], scale)]
-                )
+        for j, (a, _b, ax, p, (cy0, cy1, cx0, cx1), _) in enumerate(pair_parts):
+            face, res = _faces(twists_deg, ax)
+            # (position in idx, twist, the chip raster at that twist, upside down or not)
+            todo = [(k, i, k, False) for k, i in enumerate(pos) if i in pair_at[j]]
+            # the twins: the chip upside down, its sides upside down too (+y and -y swap)
+            todo += [(len(pos) + k, i, k, True) for k, i in enumerate(neg) if i in pair_at[j]]
             oy, ox = p.offset(grid)
             gsl = (slice(oy + cy0, oy + cy1), slice(ox + cx0, ox + cx1))
-            c = planes[:, cy0:cy1, cx0:cx1]
-            # only where the near pad is covered and the far one on its bridged term
-            keep = covered[a][(slice(None), *gsl)] & ~covered[b][(slice(None), *gsl)]
-            c[~keep] = 0
-            pair_energy[j][full_tw] = c
+            for r in sorted({float(res[i]) for _, i, _, _ in todo}):
+                at = [t for t in todo if res[t[1]] == r]
+                chips = []
+                for _, i, k, flipped in at:
+                    if flipped:  # the side facing the axis at -alpha, before the flip
+                        fneg = (ax + (ax - int(face[pos[k]]))) % 4
+                        side = (fneg + 2) % 4 if fneg % 2 == 1 else fneg
+                        chips.append(np.where(side_of[k] == side, strip[k], 0.0)[::-1])
+                    else:
+                        chips.append(np.where(side_of[k] == face[i], strip[k], 0.0))
+                planes = p.part(r).correlate(
+                    np.ascontiguousarray(np.stack(chips)), range(len(at)), [], scale
+                )
+                c = planes[:, cy0:cy1, cx0:cx1]
+                rows = [t[0] for t in at]
+                # only where the near pad is covered and the far one on its bridged term
+                keep = covered[a][(rows, *gsl)]
+                c[~keep] = 0
+                pair_energy[j][[pair_at[j][t[1]] for t in at]] = c
+                p.keep(())  # one pair's part at a time: each is made again where needed
     template = Landscape(
         energy=wet_energy[0],
         grid=grid,
@@ -676,7 +805,7 @@ def build_footprint_planes(
         labels=labels,
         seconds=time.perf_counter() - t0,
         pairs=tuple(
-            PairPlane(a, b, ax, p.offset(grid)[0] + c[0], p.offset(grid)[1] + c[2], e)
-            for (a, b, ax, p, c), e in zip(pair_parts, pair_energy, strict=True)
+            PairPlane(a, b, ax, p.offset(grid)[0] + c[0], p.offset(grid)[1] + c[2], e, on)
+            for (a, b, ax, p, c, on), e in zip(pair_parts, pair_energy, strict=True)
         ),
     )

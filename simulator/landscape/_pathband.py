@@ -129,9 +129,11 @@ class Band:
 TASK_PX = 1 << 17
 
 
-def _band_pixels(rot, inverse, lo: float, hi: float, cand: np.ndarray, tile_rows, hc: int, wc: int):
+def _band_pixels(
+    rot, inverse, lo: float, hi: float, cand: np.ndarray, tile_rows, hc: int, wc: int, values=None
+):
     """(rows, columns, footprint) of the band's pixels in the candidate tiles (``cand``) of
-    the tile rows ``tile_rows``, row-major."""
+    the tile rows ``tile_rows``, row-major (``values``: :func:`footprint_band`'s)."""
     t = TILE_PX
     rows, cols = [], []
     for r in tile_rows:
@@ -144,18 +146,31 @@ def _band_pixels(rot, inverse, lo: float, hi: float, cand: np.ndarray, tile_rows
     ll = np.concatenate(cols) if cols else np.zeros(0, np.int64)
     xi, yi = inverse(kk.astype(float), ll.astype(float))
     s = rot.distance_at(xi, yi)
+    if values is not None:
+        band = np.flatnonzero((s >= lo) & (s <= hi))
+        f, keep = values(xi[band], yi[band], s[band])
+        band = band[keep]
+        return kk[band], ll[band], f[keep]
     band = np.flatnonzero((s >= lo) & (s <= hi))
     return kk[band], ll[band], rot.profile_at(xi[band], yi[band], s[band])
 
 
-def footprint_band(rot, twist_deg: float, dtype) -> tuple:
+def footprint_band(
+    rot, twist_deg: float, dtype, values=None, span=None, inside_value: float = 1.0
+) -> tuple:
     """One twist of the free contact lines' footprint on the rotator's canvas, split (module
     docstring): (rows, cols, values) of G's row differences (canvas coordinates, y up; columns
     0 .. W, one beyond the last) and the :class:`Band` of B. The band's pixels are found
     and evaluated by tiles, tasks of about :data:`TASK_PX` candidate pixels on
-    :func:`simulator.core.threads` threads (the same values whatever the count)."""
+    :func:`simulator.core.threads` threads (the same values whatever the count).
+
+    Another footprint of the chip's signed distance (the footprint state's counts and
+    corrections, :mod:`simulator.landscape._pathfoot`): ``values(xi, yi, s)`` gives (its
+    values, which pixels to keep) at band pixels (unrotated chip coordinates, px; their
+    signed distance), ``span`` the signed distances (lo, hi) of its band (default the
+    rotator's), and ``inside_value`` what it is below ``lo`` (0 beyond ``hi``)."""
     hc, wc = rot.shape
-    lo, hi = rot.band_px
+    lo, hi = rot.band_px if span is None else span
     a = math.radians(twist_deg)
     ca, sa = math.cos(a), math.sin(a)
     cx, cy = wc / 2 - 0.5, hc / 2 - 0.5
@@ -185,10 +200,12 @@ def footprint_band(rot, twist_deg: float, dtype) -> tuple:
     n = min(threads(), len(tasks))
     if n > 1:
         parts = list(
-            _pool(n).map(lambda rs: _band_pixels(rot, inverse, lo, hi, cand, rs, hc, wc), tasks)
+            _pool(n).map(
+                lambda rs: _band_pixels(rot, inverse, lo, hi, cand, rs, hc, wc, values), tasks
+            )
         )
     else:
-        parts = [_band_pixels(rot, inverse, lo, hi, cand, rs, hc, wc) for rs in tasks]
+        parts = [_band_pixels(rot, inverse, lo, hi, cand, rs, hc, wc, values) for rs in tasks]
     if parts:
         bk, bl, f = (np.concatenate(v) for v in zip(*parts, strict=True))
     else:
@@ -207,6 +224,8 @@ def footprint_band(rot, twist_deg: float, dtype) -> tuple:
 
     # The pixels just before and after each segment: inside (G = 1) or outside (G = 0).
     def inside(k, col):
+        if inside_value == 0.0:
+            return np.zeros(len(k))
         on = (col >= 0) & (col < wc)
         x, y = inverse(k.astype(float), col.astype(float))
         return (on & (rot.distance_at(x, y) < lo)).astype(float)

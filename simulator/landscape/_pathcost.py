@@ -113,6 +113,56 @@ class _Outline:
         self.offset, self.shape, self.band = offset, shape, band
 
 
+def rows_to_compute(rows: dict, y0: int, ny: int, x0: int, nx: int) -> dict:
+    """The runs of columns still to compute for the poses of rows ``y0 ..`` and columns
+    ``x0 .. x0 + nx - 1`` px, given ``rows`` (row -> (first column, values) kept so far; a
+    row kept too far from the box is dropped from it): (first column, count) -> rows, with
+    :data:`ROW_AHEAD` columns more on each side of a new row and twice that beyond an end
+    a kept row extends (:meth:`PathEnergy.plane`)."""
+    x1 = x0 + nx - 1
+    todo: dict[tuple[int, int], list[int]] = {}
+    for y in range(y0, y0 + ny):
+        have = rows.get(y)
+        if have is not None:
+            a, e = have
+            b = a + len(e) - 1
+            if x0 > b + ROW_GAP or x1 < a - ROW_GAP:  # far from the run kept: start afresh
+                del rows[y]
+                have = None
+        if have is None:
+            todo.setdefault((x0 - ROW_AHEAD, nx + 2 * ROW_AHEAD), []).append(y)
+            continue
+        if x0 < a:
+            lo = min(x0, a - 2 * ROW_AHEAD)
+            todo.setdefault((lo, a - lo), []).append(y)
+        if x1 > b:
+            hi = max(x1, b + 2 * ROW_AHEAD)
+            todo.setdefault((b + 1, hi - b), []).append(y)
+    return todo
+
+
+def keep_rows(rows: dict, ys, xa: int, values) -> None:
+    """Add the computed runs ``values`` (one per row of ``ys``, from column ``xa``) to the
+    runs ``rows`` keeps (:func:`rows_to_compute` planned them at a kept run's ends)."""
+    for y, v in zip(ys, values, strict=True):
+        have = rows.get(y)
+        if have is None:
+            rows[y] = [xa, v]
+        elif xa < have[0]:
+            rows[y] = [xa, np.concatenate([v, have[1]])]
+        else:
+            have[1] = np.concatenate([have[1], v])
+
+
+def read_rows(rows: dict, y0: int, ny: int, x0: int, nx: int, dtype) -> np.ndarray:
+    """(ny, nx) of ``dtype``: the box of rows ``y0 ..`` and columns ``x0 ..`` from ``rows``."""
+    out = np.empty((ny, nx), dtype)
+    for i, y in enumerate(range(y0, y0 + ny)):
+        a, e = rows[y]
+        out[i] = e[x0 - a : x0 - a + nx]
+    return out
+
+
 class PathEnergy:
     """A scene's energies at any grid pose, computed on demand at the cost of the chip's
     outline (module docstring), and kept.
@@ -338,7 +388,7 @@ class PathEnergy:
                     total -= o.band.flat.nbytes if users[id(o.band.flat)] == 0 else 0
 
     # -- energies
-    def _rows(self, o: _Outline, ys: np.ndarray, x0: int, n: int) -> np.ndarray:
+    def _rows(self, o: _Outline, ys: np.ndarray, x0: int, n: int, part=None) -> np.ndarray:
         """Correlation (unscaled, float64), shape (len(ys), n), at twist outline ``o``, the
         rows ``ys`` and the consecutive columns ``x0 .. x0 + n - 1``: for each step of the
         outline and each row, ``n`` consecutive prefix sums of one pattern row (a contiguous
@@ -346,19 +396,24 @@ class PathEnergy:
         whose columns lie all beyond the pattern's right end read the row total, all before
         its left end nothing. No BLAS (a threaded BLAS call on a busy machine costs
         milliseconds for a few thousand products): einsum sums in float64. Long runs of
-        columns are cut so that one gather (steps x columns) stays near 2 M values."""
+        columns are cut so that one gather (steps x columns) stays near 2 M values.
+        ``part``: another pattern than the scene's, with the same attributes ``P``, ``T``,
+        ``hp``, ``wp`` and ``_pattern_steps`` (the footprint state's pads,
+        :mod:`simulator.landscape._pathfoot`)."""
+        src = self if part is None else part
         cols = max(16, 2_000_000 // max(o.nnz, 1))
         if o.band is not None:
             cols = min(cols, SEGMENT_PAD)
         if n > cols:
             return np.concatenate(
-                [self._rows(o, ys, x0 + i, min(cols, n - i)) for i in range(0, n, cols)], axis=1
+                [self._rows(o, ys, x0 + i, min(cols, n - i), part) for i in range(0, n, cols)],
+                axis=1,
             )
         out = np.zeros((len(ys), n))
         if len(ys) == 0 or n == 0:
             return out
-        wp, hp = self.wp, self.hp
-        flat = self.P.reshape(-1)
+        wp, hp = src.wp, src.hp
+        flat = src.P.reshape(-1)
         lo = o.cols + x0
         hi = lo + (n - 1)
         inside = (lo >= 0) & (hi <= wp)
@@ -384,16 +439,14 @@ class PathEnergy:
                 if kind == 0:
                     acc = acc + np.einsum("sn,s->n", win[rr + c[a:b]], v[a:b])
                 elif kind == 1:  # beyond the right end: the row total
-                    acc = acc + np.einsum("s,s->", self.T[r[a:b] + y], v[a:b])
+                    acc = acc + np.einsum("s,s->", src.T[r[a:b] + y], v[a:b])
                 else:
                     cc = np.clip(c[a:b, None] + cn, 0, wp)
                     acc = acc + np.einsum("sn,s->n", flat[rr[:, None] + cc], v[a:b])
             out[j] -= acc
             if o.band is not None:  # the footprint's part B, on the pattern's side
-                assert self._pattern_steps is not None  # a band comes with free lines only
-                out[j] += o.band.correlate(
-                    self._pattern_steps, y + o.offset[0], x0 + o.offset[1], n
-                )
+                assert src._pattern_steps is not None  # a band comes with free lines only
+                out[j] += o.band.correlate(src._pattern_steps, y + o.offset[0], x0 + o.offset[1], n)
         return out
 
     def mass(self, k: int) -> float:
@@ -425,28 +478,7 @@ class PathEnergy:
         almost whatever its length, so a few columns more cost less than one more call);
         rows that need the same columns are computed together."""
         rows = self._cache.setdefault(k, {})
-        x1 = x0 + nx - 1
-        ahead = ROW_AHEAD
-        todo: dict[tuple[int, int], list[int]] = {}  # (first column, count) -> rows
-        for y in range(y0, y0 + ny):
-            have = rows.get(y)
-            if have is not None:
-                a, e = have
-                b = a + len(e) - 1
-                if (
-                    x0 > b + ROW_GAP or x1 < a - ROW_GAP
-                ):  # far from the run kept: start the row afresh
-                    del rows[y]
-                    have = None
-            if have is None:
-                todo.setdefault((x0 - ahead, nx + 2 * ahead), []).append(y)
-                continue
-            if x0 < a:
-                lo = min(x0, a - 2 * ahead)
-                todo.setdefault((lo, a - lo), []).append(y)
-            if x1 > b:
-                hi = max(x1, b + 2 * ahead)
-                todo.setdefault((b + 1, hi - b), []).append(y)
+        todo = rows_to_compute(rows, y0, ny, x0, nx)
         if todo:
             t0 = time.perf_counter()
             o = self.outline(k)
@@ -455,20 +487,9 @@ class PathEnergy:
                     self.dtype
                 )
                 self.poses += e.size
-                for y, v in zip(ys, e, strict=True):
-                    have = rows.get(y)
-                    if have is None:
-                        rows[y] = [xa, v]
-                    elif xa < have[0]:
-                        rows[y] = [xa, np.concatenate([v, have[1]])]
-                    else:
-                        have[1] = np.concatenate([have[1], v])
+                keep_rows(rows, ys, xa, e)
             self.seconds += time.perf_counter() - t0
-        out = np.empty((ny, nx), self.dtype)
-        for i, y in enumerate(range(y0, y0 + ny)):
-            a, e = rows[y]
-            out[i] = e[x0 - a : x0 - a + nx]
-        return out
+        return read_rows(rows, y0, ny, x0, nx, self.dtype)
 
     def energies(self, k: int, ys: np.ndarray, xs: np.ndarray) -> np.ndarray:
         """Energies (J, the scene's dtype) at twist index k and integer poses (ys[i], xs[i]) px

@@ -43,6 +43,10 @@ SPLINE_PAD_PX = 24
 #: the chip it was made from (a chip freed and another made at its address is not it), and
 #: the arrays. One entry: a run works on one chip.
 _SMOOTH: dict = {}
+#: The last chip's signed distance on its smooth canvas (:meth:`ChipRotator._blur`): the key
+#: (the chip's id, canvas), a weak reference to the chip and the array (read only). The
+#: footprints of one chip (the wall profile and the footprint state's counts) share it.
+_SDF: dict = {}
 
 
 def _chip_reach_px(chip: Mask, twist: bool, um_per_px: float | None = None) -> tuple[float, float]:
@@ -260,7 +264,15 @@ class ChipRotator:
             # Free contact lines: the wall profile of the distance from the chip's outline.
             from simulator.physics import signed_distance_px
 
-            sdf = signed_distance_px(img)
+            # the same chip on the same canvas: one distance transform for every footprint
+            # of it (the footprint state's rotators, one per count, share it)
+            key = (id(c), ho, wo)
+            kept = _SDF.get("entry")
+            if kept is not None and kept[0] == key and kept[1]() is c:
+                sdf = kept[2]
+            else:
+                sdf = signed_distance_px(img)
+                _SDF["entry"] = (key, weakref.ref(c), sdf)
             out = self.profile(sdf)
             self._sdf = sdf
         else:

@@ -39,6 +39,7 @@ from ._field import (
 from ._footprint_run import (
     MAX_EVENTS as MAX_EVENTS,
     footprint_budget_bytes as footprint_budget_bytes,
+    footprint_engine as footprint_engine,
     footprint_relay as footprint_relay,
     footprint_words as footprint_words,
     remaining_params as remaining_params,
@@ -47,6 +48,7 @@ from ._footprint_run import (
 )
 from ._pathrun import (
     ENGINES as ENGINES,
+    StateBoxes as StateBoxes,
     choose_engine as choose_engine,
 )
 from ._pinning import (

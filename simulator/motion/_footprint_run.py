@@ -52,24 +52,39 @@ def footprint_budget_bytes(scene, n_pads: int) -> int:
     engines (measured: the bench case at 5 um/px, 90 twists, 505 x 505 poses, 4 pads and 8
     pairs, peaked at 1,882 to 1,890 MB with the flags a byte per pad; at 2 um/px, 1,225 x 1,225
     poses, priced 8,370 MB, of which the pairs' planes 1,795 MB, peaked at 6,923 MB with the
-    flags a bit per pad, 8,138 MB with a byte)."""
+    flags a bit per pad, 8,138 MB with a byte; with the shadow cast along the chip side's
+    normal at each twist, 32 pairs on the twists where each exists and the poses that cover
+    its near pad, priced 8,422 MB, of which the pairs' planes 1,911 MB, peaked at 7,537 MB).
+    A pair's part is made, used and dropped in turn, so one pair's correlator is counted."""
     from simulator.landscape import footprint_pairs, footprint_poses
 
     poses = footprint_poses(scene)
     n_pairs, pair_poses, per_twist = footprint_pairs(scene)
     item = np.dtype(scene.dtype).itemsize
-    n_parts = n_pads + n_pairs
+    n_parts = n_pads + min(n_pairs, 1)  # a pair's part is made, used and dropped in turn
     work = per_twist * (16 * (n_pads + 3 * item) + 8 * item * n_parts)
     words = -(-n_pads // 8)  # the relay's flags, a bit per pad, and their device copies
     held = poses * (n_pads * item + 4 * words + 3 * item) + pair_poses * item
     return int((held + work) * 1.15) + PROCESS_BYTES
 
 
-def require_footprint_fits(scene) -> None:
+def require_footprint_fits(scene, engine: str = "fft") -> None:
     """Refuse (InputError) a ``--dispense`` run whose pads' planes exceed the memory budget,
-    before any of them is made (no JAX, no transform)."""
+    before any of them is made (no JAX, no transform); with ``engine`` "path", whose
+    footprint state's rotators do (:func:`simulator.landscape.footprint_path_bytes`)."""
     from simulator.landscape import pad_labels
 
+    if engine == "path":
+        from simulator.landscape import footprint_path_bytes
+
+        need = footprint_path_bytes(scene)
+        if need > scene.memory_budget_mb * 2**20:
+            raise InputError(
+                f"--dispense {scene.liquid.dispense} on the path engine: the footprint state's rotators would hold "
+                f"{need / 2**20:,.0f} MB, over the memory budget of {scene.memory_budget_mb:,.0f} MB; give a coarser "
+                "--resolution, or raise --memory-budget"
+            )
+        return
     _, n = pad_labels(scene.pattern)
     need = footprint_budget_bytes(scene, n)
     if need > scene.memory_budget_mb * 2**20:
@@ -123,8 +138,35 @@ def remaining_params(dynamics, t_off: float):
     return None if left <= 0.0 else dataclasses.replace(dynamics, t_max_s=left)
 
 
+def footprint_engine(scene, start, method: str, engine: str, planes=None) -> str:
+    """Which engine gives a ``--dispense`` run its per-pose planes: "path" (the footprint
+    state in the path engine's boxes that follow the chip,
+    :class:`simulator.landscape.FootprintPath`) or "fft" (the pads' planes over the whole
+    grid, :func:`simulator.landscape.build_footprint_planes`). Greedy and gradient choose as
+    their stateless runs do (:func:`simulator.motion.choose_engine`, ``engine`` "auto",
+    "fft" or "path"); the dynamics, and a run given its ``planes``, take the planes."""
+    if planes is not None or method not in ("greedy", "gradient"):
+        if engine == "path" and planes is None:
+            raise InputError(
+                f"--engine path runs greedy and gradient; {method} builds the whole landscape (leave --engine out)"
+            )
+        return "fft"
+    from simulator.motion._pathrun import choose_engine
+    from simulator.motion._pricing import BAND_PX, BAND_STEPS
+
+    return choose_engine(scene, start, method, engine, BAND_STEPS, BAND_PX)
+
+
 def simulate_footprint(
-    scene, start, method: str, max_steps: int, dynamics, backend: str, simulate, planes=None
+    scene,
+    start,
+    method: str,
+    max_steps: int,
+    dynamics,
+    backend: str,
+    simulate,
+    planes=None,
+    engine: str = "fft",
 ) -> dict:
     """:func:`simulator.motion.simulate` with the footprint as the run's state (module
     docstring): the fields of the joined trajectory, ``footprint`` among them (where the
@@ -132,14 +174,28 @@ def simulate_footprint(
     on a given landscape (the caller's own function, passed in), stopping where the state
     changes (its ``relay``); ``max_steps`` bounds each stretch between events, the dynamics'
     ``t_max_s`` the whole run. ``planes``: the scene's pads' planes, when given (built
-    here otherwise)."""
+    here otherwise). ``engine``: :func:`footprint_engine`'s choice; with "path" each stretch
+    runs on the path engine's boxes of the current state (:class:`simulator.motion.StateBoxes`),
+    the state's events and relay the same."""
     from simulator.landscape import build_footprint_planes
     from simulator.liquid import dispensed_footprint
     from simulator.motion._field import Relay
 
     t0 = time.perf_counter()
     proto = scene.liquid.dispense
-    if planes is None:
+    engine = footprint_engine(scene, start, method, engine, planes)
+    inner = scene.replace(
+        liquid=dataclasses.replace(scene.liquid, dispense=None, dispense_at_um=None)
+    )
+    path_src = None
+    if engine == "path":
+        from simulator.landscape import FootprintPath, PathEnergy
+
+        # the state's planes at the poses the run visits (FootprintPath), and the stateless
+        # engine for the global minimum's proof (the aligned pose, every pad wet)
+        planes = FootprintPath(scene)
+        path_src = (planes, PathEnergy(inner))
+    elif planes is None:
         require_footprint_fits(scene)
         planes = build_footprint_planes(scene, backend=backend)
     n = planes.n_pads  # the planes' own labelling: the pattern is not labelled again
@@ -150,30 +206,42 @@ def simulate_footprint(
         dynamics = DynamicsParams.from_scene(scene)
     # "aligned": against the minimum with every pad wet (the aligned pose on the whole
     # pattern), not the current state's (a state with only some pads wet has its own).
-    reference = planes.landscape(np.ones(n, bool))
-    reached, within = footprint_relay(planes)
+    # (the path engine: the scene's own global minimum, where every pad is covered and the
+    # all-wet state's energy is the stateless one)
+    reference = None if path_src else planes.landscape(np.ones(n, bool))
+    reached, within = (None, None) if path_src else footprint_relay(planes)
     wet = planes.next_state(dispensed, start)
     initial = wet.copy()
-    inner = scene.replace(
-        liquid=dataclasses.replace(scene.liquid, dispense=None, dispense_at_um=None)
-    )
     pose = tuple(float(v) for v in start)
     pieces, events, done = [], [], 0
     t_off = 0.0
     last = None
     for _ in range(MAX_EVENTS + 1):
-        tr = simulate(
-            inner,
-            pose,
-            method=method,
-            max_steps=max_steps,
-            # every pad wet (the pattern protocol above the critical volume): the reference
-            landscape=reference if wet.all() else planes.landscape(wet),
-            dynamics=remaining_params(dynamics, t_off),
-            backend=backend,
-            reference=reference,
-            relay=Relay(reached, within, np.asarray(wet_bits(wet))),
-        )
+        if path_src:
+            from simulator.motion._pathrun import StateBoxes
+
+            tr = simulate(
+                inner,
+                pose,
+                method=method,
+                max_steps=max_steps,
+                backend=backend,
+                engine="path",
+                path=StateBoxes(*path_src, wet),
+            )
+        else:
+            tr = simulate(
+                inner,
+                pose,
+                method=method,
+                max_steps=max_steps,
+                # every pad wet (the pattern protocol above the critical volume): the reference
+                landscape=reference if wet.all() else planes.landscape(wet),
+                dynamics=remaining_params(dynamics, t_off),
+                backend=backend,
+                reference=reference,
+                relay=Relay(reached, within, np.asarray(wet_bits(wet))),
+            )
         last = tr
         if tr.outcome != "event":
             pieces.append((tr, t_off))
@@ -239,7 +307,7 @@ def simulate_footprint(
     }
     ref = pieces[-1][0] if last is None else last
     cost = dict(ref.cost) | {
-        "engine": "footprint planes",
+        "engine": "footprint path" if path_src is not None else "footprint planes",
         "footprint_planes_s": planes.seconds,
         "footprint_pieces": len(pieces),
         "total_s": time.perf_counter() - t0,

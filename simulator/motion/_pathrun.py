@@ -70,11 +70,64 @@ def choose_engine(
     return "path" if _chip_px(scene) >= least[method] else "fft"
 
 
-def path_boxes(scene: Scene, method: str, cost):
+class StateBoxes:
+    """One footprint state's boxes for the path engine (docs/physics.md §3.5): what
+    :func:`path_boxes` asks of a :class:`~simulator.landscape.PathEnergy`, from the pads'
+    energies, relay flags and pairs' corrections of each box
+    (:class:`~simulator.landscape.FootprintPath`), summed for the wet pads ``wet``; each box
+    carries its relay flags (``stats["relay"]``, :meth:`relay`). ``plain``: the stateless
+    engine of the scene, which the run's global minimum reads (the aligned pose, where every
+    pad is covered and the all-wet state's energy is the stateless one)."""
+
+    def __init__(self, footprint, plain: PathEnergy, wet):
+        self.footprint, self.plain = footprint, plain
+        self.wet = np.asarray(wet, bool)
+        self.bits = np.packbits(self.wet, bitorder="little")
+
+    def box(self, twist_idx, center_px, half_px) -> Landscape:
+        pl = self.footprint.box(twist_idx, center_px, half_px)
+        ls = pl.landscape(self.wet)
+        ls.stats["relay"] = (pl.reached_bits, pl.within_bits)
+        return ls
+
+    def relay(self, ls: Landscape):
+        """The steppers' :class:`simulator.motion.Relay` of a box made here."""
+        import jax.numpy as jnp
+
+        from simulator.motion._field import Relay
+
+        reached, within = ls.stats["relay"]
+        return Relay(jnp.asarray(reached), jnp.asarray(within), jnp.asarray(self.bits))
+
+    def drop_outlines(self, keep) -> None:
+        self.footprint.drop_outlines(keep)
+
+    def prefetch(self, k: int) -> None:
+        """Nothing ahead: a state's footprints are made as the boxes ask for them."""
+
+    def close(self) -> None:
+        self.footprint.close()
+
+    @property
+    def poses(self) -> int:
+        return self.footprint.poses
+
+    @property
+    def rotations(self) -> int:
+        return self.footprint.rotations
+
+    @property
+    def seconds(self) -> float:
+        return self.footprint.seconds
+
+
+def path_boxes(scene: Scene, method: str, cost, source=None):
     """(generator, engine): the generator is sent the chip's pose and yields the box around
     it (None when the box would be the last one again: the chip cannot move on), as
-    :func:`simulator.motion._trajectory._box_landscapes` does."""
-    pe = PathEnergy(scene)
+    :func:`simulator.motion._trajectory._box_landscapes` does. ``source``: a footprint
+    state's boxes (:class:`StateBoxes`) instead of the scene's stateless energy; each box
+    then carries the relay's flags of its twists (``stats["relay"]``)."""
+    pe = PathEnergy(scene) if source is None else source
     half, band = FOLLOW_BOX.get(method, FOLLOW_BOX["gradient"])
 
     def gen():
@@ -108,11 +161,15 @@ def path_boxes(scene: Scene, method: str, cost):
             # Only the band's outlines are kept (a meniscus footprint's are megabytes each).
             pe.drop_outlines({j % n for j in want})
             planes: dict[int, np.ndarray] = {}
+            flags: dict[int, tuple] = {}
             template = None
             for run in consecutive_runs({j % n for j in want}):
                 ls = pe.box(run, (cx, cy), half)
                 template = ls
                 planes.update({j: ls.energy[i] for i, j in enumerate(run)})
+                if "relay" in ls.stats:
+                    r, w = ls.stats["relay"]
+                    flags.update({j: (r[i], w[i]) for i, j in enumerate(run)})
             assert template is not None  # want is never empty: one box at least
             # The twist the run turns to next, made meanwhile (a meniscus footprint: costly).
             ahead = hi + 1 if turn > 0 else lo - 1
@@ -134,12 +191,17 @@ def path_boxes(scene: Scene, method: str, cost):
             bar.set_postfix_str(
                 f"chip at ({pose[0]:.0f}, {pose[1]:.0f}) um, {pose[2]:.1f} deg", refresh=False
             )
+            stats = template.stats
+            if flags:
+                stats = stats | {
+                    "relay": tuple(np.stack([flags[j % n][f] for j in want]) for f in (0, 1))
+                }
             pose = yield Landscape(
                 energy=np.stack([planes[j % n] for j in want]),
                 grid=grid,
                 delta_gamma=template.delta_gamma,
                 energy_scale_J=template.energy_scale_J,
-                stats=template.stats,
+                stats=stats,
             )
 
     return gen(), pe

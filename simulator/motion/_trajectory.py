@@ -177,6 +177,7 @@ def simulate(
     reference: Landscape | None = None,
     relay=None,
     planes=None,
+    path=None,
 ) -> Trajectory:
     """Run one trajectory from ``start`` = (x_um, y_um, twist_deg).
 
@@ -201,6 +202,9 @@ def simulate(
         reference: with ``landscape``, the landscape whose global minimum and floor "aligned"
             is measured against, when that is not ``landscape`` itself (a footprint state's
             landscape, whose own minimum need not be the aligned pose).
+        path: a footprint state's boxes for the path engine (:class:`simulator.motion.StateBoxes`,
+            from :func:`simulator.motion.simulate_footprint`): the run steps on that state's
+            energy in boxes that follow the chip, each with its relay, and stops at an event.
     """
     if method not in METHODS:
         raise InputError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
@@ -215,15 +219,26 @@ def simulate(
         )
     dynamic = method in ("overdamped", "inertial")
     if scene.liquid.dispense is not None and landscape is None:
-        # The footprint as the run's state (docs/physics.md §3.5): on the pads' planes.
+        # The footprint as the run's state (docs/physics.md §3.5): on the pads' planes, or on
+        # the path engine's boxes of each state.
         from simulator.motion._footprint_run import simulate_footprint
 
         return Trajectory(
             **simulate_footprint(
-                scene, start, method, max_steps, dynamics, backend, simulate, planes=planes
+                scene,
+                start,
+                method,
+                max_steps,
+                dynamics,
+                backend,
+                simulate,
+                planes=planes,
+                engine=engine,
             )
         )
-    if landscape is None and not dynamic:
+    if path is not None:
+        engine = "path"
+    elif landscape is None and not dynamic:
         from simulator.motion._pathrun import choose_engine
 
         engine = choose_engine(scene, start, method, engine, band_steps, band_px)
@@ -258,7 +273,7 @@ def simulate(
         from simulator.motion._pathrun import path_boxes
 
         if engine == "path":
-            around, path_engine = path_boxes(scene, method, boxes)
+            around, path_engine = path_boxes(scene, method, boxes, source=path)
     else:
         engine = "landscape" if landscape is not None else "fft"
     if path_engine is None:
@@ -270,8 +285,9 @@ def simulate(
         # The global minimum first (its proof reads the nominal box, pose by pose): its energy
         # is the whole landscape's largest |E|, the force scale of a gradient step, which the
         # small boxes that follow the chip do not hold.
+        plain = path_engine if path is None else path.plain
         opt = global_minimum(
-            scene, evaluated=nominal_box(scene, path_engine), backend=backend, engine=path_engine
+            scene, evaluated=nominal_box(scene, plain), backend=backend, engine=plain
         )
         scale = -opt.energy_J if opt.energy_J < 0 else None
     next(around)
@@ -308,6 +324,8 @@ def simulate(
         )
         if relay is not None:
             field = field._replace(relay=relay)
+        elif path is not None:  # the state's relay on this box
+            field = field._replace(relay=path.relay(ls))
         if dynamic:  # said here, not before the landscape: the compile comes now
             compiling(method, quiet=not shows_wait(math.inf))
         run = jitted(method, is_stiff(method, field, grid, dynamics))
@@ -369,7 +387,9 @@ def simulate(
         # floor), not on the run's last box.
         from simulator.landscape import minimum_box
 
-        near = minimum_box(scene, opt, engine=path_engine, backend=backend)
+        near = minimum_box(
+            scene, opt, engine=path_engine if path is None else path.plain, backend=backend
+        )
         tol = align_tolerance(near, pin, floats=scene.wall_profile is not None)
         well = near
     if path_engine is not None:
@@ -409,7 +429,7 @@ def simulate(
     }
     refined = None
     outcome = OUTCOMES[int(out)]
-    if relay is not None and status == EVENT:
+    if (relay is not None or path is not None) and status == EVENT:
         outcome = "event"  # not an end: the footprint run goes on (simulate_footprint)
     from simulator.motion._accuracy import error_limit, floats
 

@@ -2,12 +2,16 @@
 
 from ._footprint import (
     DISPENSE as DISPENSE,
+    SHADOW_STEP_DEG as SHADOW_STEP_DEG,
     STEP_PX as STEP_PX,
     TOUCH_PX2 as TOUCH_PX2,
     FootprintRules as FootprintRules,
     StepProfile as StepProfile,
     cap_radius_um as cap_radius_um,
+    ray_coordinates as ray_coordinates,
     relay as relay,
+    shadow_residual_deg as shadow_residual_deg,
+    upstream_along as upstream_along,
     upstream_of as upstream_of,
 )
 from ._hysteresis import (

@@ -197,6 +197,56 @@ def upstream_of(pad: np.ndarray, k: int) -> np.ndarray:
     return out
 
 
+#: Step (deg) of the shadow's direction at a twist (:func:`shadow_residual_deg`): the rays
+#: follow the chip side's own normal, rounded to this step, so the shadow's side edges are
+#: off by at most ``tan(SHADOW_STEP_DEG / 2)`` times the gap (1.7 um per 100 um).
+SHADOW_STEP_DEG = 2.0
+
+
+def shadow_residual_deg(twist_deg) -> np.ndarray:
+    """The angle (deg) between the chip side facing a pattern axis and that axis at the
+    twist ``twist_deg``: the twist less its nearest multiple of 90 deg, in [-45, 45], rounded
+    to :data:`SHADOW_STEP_DEG` (the shadow is cast along ``axis * 90 deg`` plus it)."""
+    t = np.asarray(twist_deg, float)
+    r = t - 90.0 * np.rint(t / 90.0)
+    return np.round(np.rint(r / SHADOW_STEP_DEG) * SHADOW_STEP_DEG, 9) + 0.0
+
+
+def ray_coordinates(rows, cols, shape, angle_deg: float) -> tuple[np.ndarray, np.ndarray]:
+    """(ray index, distance along it, px) of pixels (``rows``, ``cols`` of an image of
+    ``shape``, y down) for rays at ``angle_deg`` from +x (y up), one pixel wide: pixels share
+    a ray where their centres lie within half a pixel of one line across it. Measured from
+    the image's centre, so the rays of a mirrored image are the mirrored rays (at ``-angle``
+    for an image upside down), and exact along the axes."""
+    k = round(angle_deg / 90.0)
+    if abs(angle_deg - 90.0 * k) < 1e-9:
+        ca, sa = AXES[k % 4]
+    else:
+        a = math.radians(angle_deg)
+        ca, sa = math.cos(a), math.sin(a)
+    h, w = shape
+    x = np.asarray(cols, float) + 0.5 - w / 2
+    y = h / 2 - np.asarray(rows, float) - 0.5
+    return np.floor(-sa * x + ca * y + 0.5).astype(np.int64), ca * x + sa * y
+
+
+def upstream_along(pad: np.ndarray, angle_deg: float) -> np.ndarray:
+    """The pixels (of an image y down, like ``pad``) from which a ray at ``angle_deg`` from
+    +x (y up) reaches ``pad`` beyond them: the shadow rule's upstream side of a far pad
+    along the chip side's normal (module docstring), booleans. A pixel is upstream where
+    some pad pixel lies further along its ray (:func:`ray_coordinates`); at multiples of
+    90 deg this is :func:`upstream_of`."""
+    b = np.asarray(pad) > 0
+    if not b.any():
+        return np.zeros(b.shape, bool)
+    rows, cols = np.mgrid[0 : b.shape[0], 0 : b.shape[1]]
+    ray, along = ray_coordinates(rows, cols, b.shape, angle_deg)
+    lo = ray.min()
+    far = np.full(ray.max() - lo + 1, -np.inf)
+    np.maximum.at(far, ray[b] - lo, along[b])
+    return along < far[ray - lo]
+
+
 def cap_radius_um(volume_nl: float, angle_deg: float) -> float:
     """The footprint radius (um) of a spherical cap of ``volume_nl`` resting at contact
     angle ``angle_deg``: ``V = pi R^3 (2 - 3 cos t + cos^3 t) / (3 sin^3 t)``."""
