@@ -7,6 +7,7 @@ import argparse
 import sys
 
 from simulator.commands._common import add_scene_args, finite_limit
+from simulator.physics import LINE_FRICTION_PA_S
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -92,7 +93,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--line-friction",
         type=float,
         metavar="PA_S",
-        help="molecular-kinetic contact-line friction in Pa s (default 0.03)",
+        help=f"molecular-kinetic contact-line friction in Pa s (default {LINE_FRICTION_PA_S:g}, "
+        "fitted to the source's video; docs/physics.md §4)",
     )
     p.add_argument(
         "--out",

@@ -83,7 +83,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         type=float,
         metavar="PA_S",
         help=f"molecular-kinetic contact-line friction coefficient in Pa s (default "
-        f"{LINE_FRICTION_PA_S:g}; water on hydrophilic oxide 0.01-0.1)",
+        f"{LINE_FRICTION_PA_S:g}, fitted to the source's video: 60 times the top of water "
+        f"on hydrophilic oxide's 0.01-0.1; docs/physics.md §4)",
     )
     o = p.add_argument_group("outputs")
     o.add_argument("--json", help="write the trajectory as JSON")

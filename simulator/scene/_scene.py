@@ -38,7 +38,7 @@ TOML keys (all optional except ``pattern`` and one of ``chip`` / ``chip_size_um`
     [liquid]                        # for the dynamic methods
     viscosity_mPa_s = 1.0
     volume_nl = 20                  # default: a film of 5 % of the chip's smallest side
-    # chip_thickness_um = 50, chip_density_kg_m3 = 1200, damping_calibration (top level; none: the damping's terms, docs/physics.md §4), line_friction_Pa_s = 0.03
+    # chip_thickness_um = 50, chip_density_kg_m3 = 1200, damping_calibration (top level; none: the damping's terms, docs/physics.md §4), line_friction_Pa_s = 6 (fitted to the video; water on oxide 0.01-0.1)
 
     [topography]                    # a protruding pad: the overflow check (simulator.liquid.Topography)
     edge_angle_deg = 90             # solid wedge angle of the pad edge (90 = vertical wall)
