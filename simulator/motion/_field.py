@@ -196,6 +196,11 @@ def make_field(
         scale = np.abs(energy).max() if energy.size else 0.0
     fields = pinning_fields(pin, align_tol)
     fields["pinned"] = fields["pinned"] or lines is not None
+    if lines is not None:  # the grid's origin as data (PinLines.origin)
+        lines = replace(
+            lines,
+            origin=jnp.asarray([grid.t0_deg, grid.y0_um, grid.x0_um], lines.origin.dtype),
+        )
     return Field(
         padded=jnp.asarray(pad_energy(energy, grid.wrap, grid.cut)),
         floor=jnp.asarray(floor, dt),

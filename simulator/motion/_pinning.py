@@ -28,7 +28,18 @@ import numpy as np
 
 @functools.partial(
     jax.tree_util.register_dataclass,
-    data_fields=["mids", "normals", "ds", "wt", "pattern", "labels", "reach_um", "f2", "um_per_px"],
+    data_fields=[
+        "mids",
+        "normals",
+        "ds",
+        "wt",
+        "pattern",
+        "labels",
+        "reach_um",
+        "f2",
+        "um_per_px",
+        "origin",
+    ],
     meta_fields=[],
 )
 @dataclass(frozen=True)
@@ -40,6 +51,10 @@ class PinLines:
     pattern: (H + 2, W + 2) the pattern's values with a ring of zeros (no bounds logic);
     labels: (H + 2, W + 2) int32, pad labels 1..n (0: substrate), ringed likewise.
     reach_um, f2 (N/m), um_per_px: scalars (traced: scenes differing in them share a compile).
+    origin: (3,) the pose of the grid's node (0, 0, 0), (twist deg, y um, x um), set by
+    :func:`simulator.motion.make_field` from its grid: traced, because a grid's origin is not
+    part of the static grid's identity (boxes of one shape share a compiled stepper), and a
+    pinning read from the static grid's origin would be the first box's in every later one.
     """
 
     mids: jax.Array
@@ -51,6 +66,7 @@ class PinLines:
     reach_um: jax.Array
     f2: jax.Array
     um_per_px: jax.Array
+    origin: jax.Array
 
 
 def pin_lines(scene, dtype) -> PinLines | None:
@@ -75,6 +91,7 @@ def pin_lines(scene, dtype) -> PinLines | None:
         reach_um=jnp.asarray(d["reach_um"], dt),
         f2=jnp.asarray(d["f2"], dt),
         um_per_px=jnp.asarray(d["um_per_px"], dt),
+        origin=jnp.zeros(3, dt),  # the field's grid sets it (make_field)
     )
 
 
@@ -99,9 +116,10 @@ def pin_at(field, grid, q):
         return field.pin.astype(dt)
     q = jnp.asarray(q, dt)
     s = jnp.asarray(grid.um_per_px, dt)
-    x = grid.x0_um + q[2] * s
-    y = grid.y0_um + q[1] * s
-    a = jnp.deg2rad(grid.t0_deg + (q[0] if grid.shape[0] > 1 else 0.0) * grid.twist_step_deg)
+    t0, y0, x0 = lines.origin[0], lines.origin[1], lines.origin[2]
+    x = x0 + q[2] * s
+    y = y0 + q[1] * s
+    a = jnp.deg2rad(t0 + (q[0] if grid.shape[0] > 1 else 0.0) * grid.twist_step_deg)
     c, sn = jnp.cos(a), jnp.sin(a)
     mx, my = lines.mids[:, 0], lines.mids[:, 1]
     nx = c * lines.normals[:, 0] - sn * lines.normals[:, 1]
