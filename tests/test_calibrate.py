@@ -3,7 +3,8 @@ any work, the known parameter found back within its reported range from trials t
 itself made, a resumed fit continues, the outputs are written and fitted.toml is a scene.
 
 Small and coarse throughout: the 730/100 um four-pad at 20 um/px and 5 degree twists, the
-overlap model with hysteresis and greedy steps (about a second per candidate)."""
+overlap model with hysteresis and greedy steps (about a second per candidate); gradient steps
+where the fit must place an angle between the grid's steps."""
 
 from __future__ import annotations
 
@@ -30,6 +31,8 @@ SCENE = {
 }
 #: The starts near the four-pad's capture edge, where the receding angle sets the yield.
 EDGE = [(300, 0, 0), (325, 0, 0), (350, 0, 0), (375, 0, 0)]
+#: Starts where the pinning weighs against a force that varies continuously with the pose.
+THRESHOLD = [(650, 300, 0), (700, 350, 0), (0, 0, 40), (0, 0, 44)]
 HEADER = "x_um,y_um,twist_deg,trials,aligned"
 
 
@@ -120,21 +123,62 @@ def test_unknown_names_and_bounds_get_a_did_you_mean(tmp_path, capsys):
 
 
 def test_it_finds_the_receding_angle_the_trials_were_made_with():
-    from simulator.design import calibrate, read_trials, synthetic_trials, write_trials
-
-    truth = 27.0  # where the yields at the capture edge change with it (below ~15 deg they do not)
-    rows = synthetic_trials(SCENE, EDGE, {"receding_angle_deg": truth}, trials=100, seed=1)
+    """Rows where the pinning decides against a force that varies continuously with the
+    placement: a chip half off the pads' corner (its x force set by how far its edges
+    overlap the pads in y) and a centred chip turned 40-44 deg (its torque against the
+    lines' pinning torque), made and fitted with gradient steps. The chip stops where the
+    force falls to the pinning at a continuous pose, so with the rows' placement noise the
+    yields change smoothly and monotonically with the receding angle. (Greedy snaps every
+    placement to the 20 um grid and 5 deg twists and weighs a few discrete energy steps
+    against the pinning work: its yields at the capture edge step once, between 24 and 25
+    deg, and are flat on either side, so no fit can place the angle within a step.)"""
     import tempfile
 
+    import numpy as np
+
+    from simulator.design import calibrate, read_trials, synthetic_trials, write_trials
+
+    truth, n, draws = 22.0, 100, 64
+    rows = synthetic_trials(
+        SCENE, THRESHOLD, {"receding_angle_deg": truth}, trials=n, seed=1, method="gradient"
+    )
     with tempfile.TemporaryDirectory() as d:
         csv = write_trials(Path(d) / "bench.csv", rows)
         fit = calibrate(
-            read_trials(csv), SCENE, "receding_angle_deg", None, trials=10, draws=64, seed=0
+            read_trials(csv),
+            SCENE,
+            "receding_angle_deg",
+            None,
+            trials=10,
+            draws=draws,
+            seed=0,
+            method="gradient",
         )
     r = fit["range"]["receding_angle_deg"]
     best = fit["best"]["receding_angle_deg"]
     assert r["lo"] <= truth <= r["hi"], fit["range"]
     assert r["lo"] <= best <= r["hi"]
+
+    # What n trials per row can tell: the Fisher information of the rows' yields p(theta),
+    # sum (dp/dtheta)^2 / (p (1 - p) (1/n + 1/draws)) (the bench's binomial and the model's
+    # own draws), dp/dtheta from the model at truth -+ 3 deg on common draws. The best lies
+    # within three of its standard errors of the truth.
+    def yields(angle, trials, seed):
+        made = synthetic_trials(
+            SCENE,
+            THRESHOLD,
+            {"receding_angle_deg": angle},
+            trials=trials,
+            seed=seed,
+            method="gradient",
+        )
+        return np.array([row["aligned"] for row in made]) / trials
+
+    many, h = 400, 3.0
+    p_lo, p_mid, p_hi = (yields(a, many, 2) for a in (truth - h, truth, truth + h))
+    var = np.clip(p_mid * (1 - p_mid), 1 / many, None) * (1 / n + 1 / draws)
+    sigma = float(np.sum(((p_hi - p_lo) / (2 * h)) ** 2 / var) ** -0.5)
+    assert abs(best - truth) <= 3 * sigma, (best, sigma)
     # the range is informative: narrower than the bounds (0 to the advancing 35 deg)
     assert r["hi"] - r["lo"] < 0.6 * 35.0, r
     assert fit["log_likelihood"] > fit["baseline"]["log_likelihood"]

@@ -840,6 +840,7 @@ def _code_defaults() -> dict[str, object]:
         "--chip-thickness": scene_fields["chip_thickness_um"].default,
         "--chip-density": scene_fields["chip_density_kg_m3"].default,
         "--damping-calibration": scene_fields["damping_calibration"].default,
+        "--line-friction": scene_fields["line_friction_Pa_s"].default,
         "--max-steps": DEFAULT_MAX_STEPS,
         "--chunk": DEFAULT_CHUNK,
         "--method": METHODS[0],

@@ -58,7 +58,7 @@ def cli_scene(*flags: str) -> Scene:
 def test_an_explicit_meniscus_height_is_the_height_of_the_energy_and_of_the_damping():
     # --meniscus-height 8 with --volume 0.5 (V / A = 12.5 um under the 200 um chip): the
     # meniscus's energy and the dynamics' Couette damping both take the 8 um.
-    scene = cli_scene("--meniscus-height", "8", "--volume", "0.5")
+    scene = cli_scene("--meniscus-height", "8", "--volume", "0.5", "--damping-calibration", "600")
     p = DynamicsParams.from_scene(scene)
     area, mu, cal = scene.chip.area_um2, scene.liquid.viscosity_Pa_s, scene.damping_calibration
     assert scene.meniscus_height_um == scene.liquid_height_um == 8.0
@@ -74,7 +74,7 @@ def test_an_explicit_meniscus_height_is_the_height_of_the_energy_and_of_the_damp
 
 
 def test_without_a_given_height_energy_and_damping_take_the_volume_over_the_area():
-    scene = cli_scene("--meniscus", "--volume", "0.5")
+    scene = cli_scene("--meniscus", "--volume", "0.5", "--damping-calibration", "600")
     h = meniscus_height_um(0.5, scene.chip.area_um2)
     assert scene.meniscus_height_um == scene.liquid_height_um == h == pytest.approx(12.5)
     p = DynamicsParams.from_scene(scene)
@@ -84,7 +84,7 @@ def test_without_a_given_height_energy_and_damping_take_the_volume_over_the_area
         rel=1e-12,
     )
     # The overlap model (no meniscus) has no meniscus height; the film under the chip is the same.
-    flat = cli_scene("--volume", "0.5")
+    flat = cli_scene("--volume", "0.5", "--damping-calibration", "600")
     assert flat.meniscus_height_um is None and flat.liquid_height_um == h
     assert DynamicsParams.from_scene(flat).damping_N_s_m == p.damping_N_s_m
 
@@ -107,7 +107,7 @@ def test_the_height_is_derived_once_per_scene(monkeypatch):
 
 # ---------------------------------------------------------------- the radius of gyration
 def test_one_radius_of_gyration_for_the_pose_grid_the_steppers_and_the_dynamics():
-    scene = small_scene(effects=Effects(), twist=TwistGrid(5.0))
+    scene = small_scene(effects=Effects(), twist=TwistGrid(5.0), damping_calibration=600.0)
     rg = chip_radius_of_gyration_px(scene.chip)
     assert scene.chip_rg_px == rg
     # The plan makes the pose grid complete: the landscape and the steppers carry it unchanged.

@@ -270,8 +270,10 @@ def test_params_from_physics_is_the_calibrated_couette_estimate():
     # c = 30 mu A / h with h = V / A = 12.5 um
     assert p.damping_N_s_m == pytest.approx(30 * 1e-3 * 4e-8 / 12.5e-6)
     assert p.rot_damping_N_m_s == pytest.approx(30 * 1e-3 * (4e-8 * 8e-8 / 12) / 12.5e-6)
-    default = DynamicsParams.from_physics(chip, liquid, 200.0 * 200.0)
-    assert default.damping_N_s_m == pytest.approx(p.damping_N_s_m * DAMPING_CALIBRATION / 30)
+    former = DynamicsParams.from_physics(
+        chip, liquid, 200.0 * 200.0, calibration=DAMPING_CALIBRATION
+    )
+    assert former.damping_N_s_m == pytest.approx(p.damping_N_s_m * DAMPING_CALIBRATION / 30)
     assert p.mass_kg == pytest.approx(2.4e-9) and p.inertia_kg_m2 == pytest.approx(
         2.4e-9 * 8e-8 / 12
     )

@@ -195,9 +195,11 @@ def test_free_lines_on_the_pad_stop_where_the_force_falls_to_the_pinning_force(m
     # Free lines, a 200 um chip on a 300 um pad (pads 30 deg, substrate 60 deg): at rest every line
     # stands on the pad d_p = h cot 30 beyond the chip and slides. The chip floats for
     # |x| <= 50 - d_p; from x = 48 the pad edge comes within d_p of the chip's right edge and pulls
-    # with |Delta_gamma| L f(u) (u = 50 - x, the wall profile), against the pinning f_pin L of
-    # today's rule: the chip stops where f(u) = f_pin / |Delta_gamma|, i.e. where
-    # u / sqrt(u^2 + h^2) = cos 30 - (cos r - cos a), short of the floor by d_p - u.
+    # with |Delta_gamma| L f(u) (u = 50 - x, the wall profile), against the pinning of the lines
+    # that slide at that pose: the right-hand line stands d_p beyond the chip, past the pad's edge,
+    # held there, so only the left-hand one slides, f_pin L / 2 (per pose; the nominal pose's
+    # shares had both, f_pin L). The chip stops where f(u) = f_pin / (2 |Delta_gamma|), i.e.
+    # where u / sqrt(u^2 + h^2) = cos 30 - (cos r - cos a) / 2, short of the floor by d_p - u.
     finals = {}
     cp = math.cos(math.radians(30))
     for h in (10.0, 20.0):
@@ -206,7 +208,7 @@ def test_free_lines_on_the_pad_stop_where_the_force_falls_to_the_pinning_force(m
             sc = _scene(h=h, window=w, pinned=False, pad=300.0)
             assert sliding_shares(sc) == (1.0, 1.0, 1.0)
             t = simulate(sc, (48.0, 0.0, 0.0), method=method)
-            c = cp - _dcos(w)
+            c = cp - _dcos(w) / 2
             u = h * c / math.sqrt(1 - c * c)
             short = t.final[0] - (50.0 - d_p)
             finals[h, w] = short

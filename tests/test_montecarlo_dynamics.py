@@ -34,11 +34,15 @@ DYNAMIC = ("overdamped", "inertial")
 @pytest.fixture(scope="module")
 def overlap():
     """200 um four-pad (gap 20 um) at 4 um/px, 10 degree twist steps; starts aligned, on
-    the pads, at a corner, twisted, and two beyond the pattern (no contact)."""
+    the pads, at a corner, twisted, and two beyond the pattern (no contact). The damping's
+    terms with line friction in water's range (0.03 Pa s): every start that aligns does so
+    well within the run's second (at the default, fitted to the 730 um chip's video, the
+    corner start creeps)."""
     scene = Scene(
         pattern=mask_from_geometry(four_pad(200, 20), 4.0, margin_um=10),
         chip=mask_from_geometry(square(200), 4.0),
         twist=TwistGrid(step_deg=10.0),
+        line_friction_Pa_s=0.03,
     )
     starts = np.array(
         [
@@ -68,6 +72,7 @@ def floating():
         resolution_um=5,
         effects=Effects(twist=False, meniscus=True),
         liquid=Liquid(volume_nl=0.9, dispense="none"),  # the stateless landscape, built once
+        damping_calibration=600.0,  # the former fit: heavily damped, the stiff (IMEX) path
     )
     starts = np.array(
         [[0, 0, 0], [8, -4, 0], [30, 0, 0], [60, 40, 0], [150, 0, 0], [95, 0, 0], [0, -110, 0]],

@@ -195,8 +195,14 @@ def with_landscape(s):
 
 @pytest.fixture(scope="module")
 def fp100():
-    """Four-pad 100/10 px, 100 px chip: pads of 45 px; on the axes flat for 45 <= |x| <= 55."""
-    return {dt: with_landscape(base(four_pad(100, 10), dt)) for dt in DTYPES}
+    """Four-pad 100/10 px, 100 px chip: pads of 45 px; on the axes flat for 45 <= |x| <= 55.
+    Line friction in water's range (0.03 Pa s): at the default, fitted to the 730 um chip's
+    video, this 100 um chip under a 2 mm column of the default 20 nl relaxes its inertia in
+    0.5 us against a creep of 0.1 s, and the implicit solver's float64 runs use up their
+    5000 steps where float32's align (what the dtypes are compared on here is the plateau)."""
+    return {
+        dt: with_landscape(base(four_pad(100, 10), dt, line_friction_Pa_s=0.03)) for dt in DTYPES
+    }
 
 
 @pytest.fixture(scope="module")
@@ -475,7 +481,9 @@ def test_extreme_surface_tension(fp100, gamma):
 @pytest.mark.parametrize("k", [1e-3, 1e3])
 def test_extreme_scale(fp100, k):
     # Geometry, droplet volume (x k^3) and chip thickness (x k) scaled with the pixel size:
-    # the same poses in px; for the overdamped model, time scales with k.
+    # the same poses in px; for the overdamped model with the Couette damping (a calibration
+    # given), time scales with k. (The damping's terms do not scale: the wedges' ln(h / a)
+    # has a molecular a, the film's unsteady factor the chip's natural frequency.)
     s, ls = with_landscape(
         scene(
             four_pad(100 * k, 10 * k),
@@ -484,9 +492,11 @@ def test_extreme_scale(fp100, k):
             twist=TWIST3,
             liquid=Liquid(volume_nl=20 * k**3),
             chip_thickness_um=50 * k,
+            damping_calibration=600.0,
         )
     )
     ref_s, ref_ls = fp100["float32"]
+    ref_s = ref_s.replace(damping_calibration=600.0)
     for m in QUICK:
         a = simulate(ref_s, START, method=m, landscape=ref_ls)
         b = simulate(s, (START[0] * k, START[1] * k, START[2]), method=m, landscape=ls)

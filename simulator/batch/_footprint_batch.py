@@ -76,6 +76,7 @@ def run_footprint_batch(
         field_and_grid,
         footprint_relay,
         is_stiff,
+        pin_lines,
         remaining_params,
         require_footprint_fits,
         wet_bits,
@@ -99,6 +100,7 @@ def run_footprint_batch(
     _check_starts_fit(reference, poses)
     reached, within = footprint_relay(planes)
     pin = pin_per_index(scene, reference.um_per_px, reference.twist_step_deg)
+    lines = pin_lines(scene, reference.energy.dtype)
     tol = align_tolerance(reference, pin, floats=scene.wall_profile is not None)
     opt = global_minimum(scene, landscape=reference)  # "aligned": every pad wet
     grid = reference.grid
@@ -129,7 +131,9 @@ def run_footprint_batch(
             for g in range(len(states)):
                 members = lanes[group.ravel() == g]
                 state = wet[members[0]]
-                fld, _ = field_and_grid(planes.landscape(state), pin=pin, align_tol=tol)
+                fld, _ = field_and_grid(
+                    planes.landscape(state), pin=pin, align_tol=tol, lines=lines
+                )
                 fld = fld._replace(
                     best=jnp.asarray(best, fld.dtype),
                     relay=Relay(reached, within, jnp.asarray(wet_bits(state))),

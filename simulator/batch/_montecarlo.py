@@ -219,9 +219,14 @@ def run_batch(
     ls = build_landscape(scene, progress=progress) if landscape is None else landscape
     t_land = time.perf_counter() - t0
     _check_starts_fit(ls, poses)
+    from simulator.motion import pin_lines
+
     pin = pin_per_index(scene, ls.um_per_px, ls.twist_step_deg)
     fld, grid = field_and_grid(
-        ls, pin=pin, align_tol=align_tolerance(ls, pin, floats=scene.wall_profile is not None)
+        ls,
+        pin=pin,
+        align_tol=align_tolerance(ls, pin, floats=scene.wall_profile is not None),
+        lines=pin_lines(scene, ls.energy.dtype),
     )
     stiff = (
         bool(is_stiff(method, fld, grid, dynamics)) if dynamic else False

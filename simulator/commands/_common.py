@@ -410,6 +410,7 @@ def scene_document_from_args(
         (None, "chip_thickness_um"): getattr(args, "chip_thickness", None),
         (None, "chip_density_kg_m3"): getattr(args, "chip_density", None),
         (None, "damping_calibration"): getattr(args, "damping_calibration", None),
+        (None, "line_friction_Pa_s"): getattr(args, "line_friction", None),
     }
     if getattr(args, "hysteresis", None):
         from simulator.physics import parse_window

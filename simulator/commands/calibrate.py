@@ -7,6 +7,7 @@ import argparse
 import sys
 
 from simulator.commands._common import add_scene_args, finite_limit
+from simulator.physics import LINE_FRICTION_PA_S
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -85,7 +86,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     d.add_argument(
         "--damping-calibration",
         type=float,
-        help="damping factor over the Couette drag (default 600)",
+        help="override the damping: the Couette drag times this factor (default: none, the "
+        "damping's documented terms)",
+    )
+    d.add_argument(
+        "--line-friction",
+        type=float,
+        metavar="PA_S",
+        help=f"molecular-kinetic contact-line friction in Pa s (default {LINE_FRICTION_PA_S:g}, "
+        "fitted to the source's video; docs/physics.md §4)",
     )
     p.add_argument(
         "--out",

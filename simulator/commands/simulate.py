@@ -28,7 +28,7 @@ from simulator.core import (
     METHODS,
     compiling,
 )
-from simulator.physics import DAMPING_CALIBRATION
+from simulator.physics import LINE_FRICTION_PA_S
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -73,7 +73,18 @@ def register(sub: argparse._SubParsersAction) -> None:
     d.add_argument(
         "--damping-calibration",
         type=float,
-        help=f"multiplier on the Couette damping estimate (default {DAMPING_CALIBRATION:g})",
+        help="override the damping: the film's Couette drag times this factor (600 was the fit "
+        "to the source's video before the damping's terms; default: none, the sum of the film's "
+        "Couette drag with its unsteady correction, the contact lines' wedges and their "
+        "molecular-kinetic friction, docs/physics.md section 4)",
+    )
+    d.add_argument(
+        "--line-friction",
+        type=float,
+        metavar="PA_S",
+        help=f"molecular-kinetic contact-line friction coefficient in Pa s (default "
+        f"{LINE_FRICTION_PA_S:g}, fitted to the source's video: 60 times the top of water "
+        f"on hydrophilic oxide's 0.01-0.1; docs/physics.md §4)",
     )
     o = p.add_argument_group("outputs")
     o.add_argument("--json", help="write the trajectory as JSON")

@@ -222,6 +222,6 @@ def scene_with(scene, values: dict[str, float]):
         changes["liquid"] = replace(
             scene.liquid, volume_nl=float(values["volume_nl"]), volume_derived=False
         )
-    if "damping" in values:
+    if values.get("damping") is not None:  # None: the scene's own damping (its terms)
         changes["damping_calibration"] = float(values["damping"])
     return scene.replace(**changes) if changes else scene

@@ -14,10 +14,13 @@ from ._dynamics import (
     overdamped as overdamped,
 )
 from ._dynamics_ode import (
+    MOREAU_TOL as MOREAU_TOL,
     REST_TOL_STEPS as REST_TOL_STEPS,
+    MoreauJean as MoreauJean,
 )
 from ._dynamics_params import (
     DynamicsParams as DynamicsParams,
+    dissipation as dissipation,
 )
 from ._field import (
     PAD as PAD,
@@ -47,6 +50,12 @@ from ._pathrun import (
     ENGINES as ENGINES,
     StateBoxes as StateBoxes,
     choose_engine as choose_engine,
+)
+from ._pinning import (
+    PinLines as PinLines,
+    pin_at as pin_at,
+    pin_lines as pin_lines,
+    soft_threshold as soft_threshold,
 )
 from ._potential import (
     potential as potential,

@@ -80,6 +80,8 @@ import optimistix as optx
 from patterns.errors import InputError
 from simulator.motion._dynamics_ode import (
     IMEX,
+    MOREAU_TOL,
+    MoreauJean,
     _active,
     _axis_scales,
     _Coeffs,
@@ -137,6 +139,12 @@ def _run(
         raise InputError(f"max_steps must be a positive integer (static), got {max_steps!r}")
     dt = field.dtype
     d_rtol, d_atol = default_tolerances(dt)
+    moreau = inertial and field.pinned  # static: hysteresis as friction, MoreauJean
+    # The first-order Moreau-Jean step is held to its own tolerance (MOREAU_TOL, grid steps
+    # per step) unless one is given; at the dtype's (5e-10 in float64) it would take steps
+    # of a fifth of m / c. The stop test keeps the dtype's.
+    s_tol = (MOREAU_TOL if moreau else d_rtol) if rtol is None else rtol
+    a_tol = (MOREAU_TOL if moreau else d_atol) if atol is None else atol
     rtol = d_rtol if rtol is None else rtol
     atol = d_atol if atol is None else atol
     # The SI products m s^2 and c s^2 (about 1e-21 and 1e-17 for a 200 um chip at 1 um/px)
@@ -193,6 +201,9 @@ def _run(
     )
     zeros = jnp.zeros(3, dt)
     y0 = (zeros, zeros) if inertial else zeros
+    if moreau:
+        # static: contact-angle hysteresis as Coulomb friction, stepped exactly (MoreauJean)
+        solver = MoreauJean()
     if isinstance(solver, IMEX):
         if not inertial:
             raise InputError(
@@ -208,7 +219,7 @@ def _run(
         else diffrax.SaveAt(t1=True, fn=save_fn)
     )
     pid = diffrax.PIDController(
-        rtol=rtol, atol=atol, norm=error_norm(co) if inertial else optx.rms_norm
+        rtol=s_tol, atol=a_tol, norm=error_norm(co) if inertial else optx.rms_norm
     )
     sol = diffrax.diffeqsolve(
         term,
@@ -220,7 +231,7 @@ def _run(
         args=(field, grid, co),
         saveat=saveat,
         stepsize_controller=_GuardedController(
-            inner=pid, rtol=rtol, atol=atol, norm=pid.norm, inertial=inertial
+            inner=pid, rtol=s_tol, atol=a_tol, norm=pid.norm, inertial=inertial
         ),
         event=diffrax.Event(_stop_inertial if inertial else _stop_overdamped),
         max_steps=max_steps,

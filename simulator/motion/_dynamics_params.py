@@ -12,14 +12,15 @@ height the finite meniscus's energy uses) held on its edges.
   changes the times by well under 1 %, and adding it moved a float64 inertial run on the
   overlap four-pad (tests/test_robustness.py) into the explicit solver's step-size
   trouble, to be added once that is fixed;
-* damping ``c = k mu A / h`` and ``c_t = k mu J / h``: the Couette drag of the film times the
-  calibration ``k`` (:data:`simulator.physics.DAMPING_CALIBRATION`, 600, fitted to the
-  source's video of a 730 um chip on 20 nl; what the factor stands for, the other
-  dissipation estimated term by term and the fit are documented there).
+* damping: the sum of its terms (:func:`simulator.physics.dissipation_terms`,
+  :func:`dissipation`): the film's Couette drag ``mu A / h`` (``mu J / h`` in twist) with
+  its unsteady correction, the wedges at the moving contact lines and their
+  molecular-kinetic friction; or, where the scene gives ``damping_calibration`` k (the
+  override), ``c = k mu A / h`` and ``c_t = k mu J / h`` (600,
+  :data:`simulator.physics.DAMPING_CALIBRATION`, was the fit to the source's video).
 
-J is the footprint's polar moment about the chip centre. The same factor multiplies both
-dampings: the moving contact lines, the largest term besides the film, have the film's
-twist-to-shift ratio ``J / A`` on a square.
+J is the footprint's polar moment about the chip centre. Contact-angle hysteresis is not a
+damping: it is friction, carried by the steppers (docs/physics.md §4).
 """
 
 from __future__ import annotations
@@ -35,11 +36,12 @@ import numpy as np
 from patterns.errors import InputError, positive
 from simulator.core import UM, UM2
 from simulator.physics import (
-    DAMPING_CALIBRATION,
+    LINE_FRICTION_PA_S,
     Chip,
     Liquid,
     couette_damping,
     couette_torsional_damping,
+    dissipation_terms,
 )
 
 #: Thinnest liquid film (um) the dynamics accept: 1e-6 nm. Real films are nm or more thick
@@ -89,26 +91,34 @@ class DynamicsParams:
         chip: Chip,
         liquid: Liquid,
         wetted_area_um2: float | None = None,
-        calibration: float = DAMPING_CALIBRATION,
+        calibration: float | None = None,
         t_max_s: float = 1.0,
         polar_moment_um4: float | None = None,
+        line_angle_deg: float = 60.0,
+        line_friction_Pa_s: float = LINE_FRICTION_PA_S,
+        moving_lines: bool = True,
     ) -> DynamicsParams:
-        """Couette damping of the liquid film under a rigid chip (docs/physics.md §4, §7).
+        """The damping of a rectangular chip on a film (docs/physics.md §4, §7).
 
-        ``h = V / A`` (flat slab; the liquid's ``height_um`` when given), ``c = calibration * mu A / h`` and
-        ``c_t = calibration * mu J / h``; mass and inertia of the chip's cuboid body (the
-        liquid's added mass is left out: module docstring).
+        ``h = V / A`` (flat slab; the liquid's ``height_um`` when given). ``calibration``
+        None: the sum of the documented terms (:func:`simulator.physics.dissipation_terms`:
+        the film's Couette drag with its unsteady correction, the wedges and the line
+        friction of the chip's outline, moving with it at ``line_angle_deg``); a number k:
+        ``c = k mu A / h`` and ``c_t = k mu J / h`` (the Couette drag times k, as before the
+        terms; 600 was the fit to the source's video). Mass and inertia of the chip's cuboid
+        body (the liquid's added mass is left out: module docstring).
 
         Args:
             chip: the chip body (mass, moment of inertia, footprint).
-            liquid: viscosity and droplet volume.
+            liquid: viscosity, density, surface tension and droplet volume.
             wetted_area_um2: area A of the liquid film, um^2 (default: the chip footprint).
-            calibration: multiplier on both Couette values; the default
-                :data:`simulator.physics.DAMPING_CALIBRATION` (600) and why it exists
-                are documented there. 1 gives the bare (lightly damped) estimate.
+            calibration: None (the terms) or the multiplier on both Couette values.
             t_max_s: time limit of a run, s.
             polar_moment_um4: polar second moment J of the film about the chip centre,
                 um^4 (default: the chip's ``(w^2 + h^2)/12`` per unit area times A).
+            line_angle_deg: the moving lines' contact angle (the wedge term), deg.
+            line_friction_Pa_s: the molecular-kinetic line friction, Pa s.
+            moving_lines: False where every line is held by an edge (no wedge, no line friction).
         """
         area = (
             chip.area_um2
@@ -120,6 +130,8 @@ class DynamicsParams:
             if polar_moment_um4 is None
             else positive("polar moment", polar_moment_um4, "um^4")
         )
+        w, hh = chip.width_um, chip.height_um
+        lines = (2 * hh, 2 * w, (w**3 + hh**3) / 6.0) if moving_lines else None
         return cls._film(
             chip.mass_kg,
             chip.moment_of_inertia_kg_m2,
@@ -129,11 +141,15 @@ class DynamicsParams:
             liquid,
             calibration,
             t_max_s,
+            lines=lines,
+            across_um=2 * hh,
+            line_angle_deg=line_angle_deg,
+            line_friction_Pa_s=line_friction_Pa_s,
         )
 
     @classmethod
     def from_scene(cls, scene, t_max_s: float = 1.0) -> DynamicsParams:
-        """From a :class:`simulator.scene.Scene`: its chip footprint, liquid and calibration.
+        """From a :class:`simulator.scene.Scene`: its chip footprint, liquid and damping.
 
         The chip body is its wettable footprint (the mask, any shape, area coverage per
         pixel) extruded to ``scene.chip_thickness_um`` at ``scene.chip_density_kg_m3``;
@@ -142,12 +158,14 @@ class DynamicsParams:
         the radius of gyration of the pose grid (:attr:`~simulator.scene.Scene.chip_rg_px`)
         and the film height ``h`` of the meniscus
         (:attr:`~simulator.scene.Scene.liquid_height_um`: ``--meniscus-height`` when given,
-        else ``V / A``).
+        else ``V / A``). The damping: ``scene.damping_calibration`` times Couette where one
+        is given, else the terms (:func:`dissipation`).
         """
         s = float(scene.um_per_px)
         area = positive("chip footprint area", scene.chip.area_um2, "um^2")
         j = area * (scene.chip_rg_px * s) ** 2  # um^4
         rho_t = scene.chip_density_kg_m3 * scene.chip_thickness_um * UM  # kg/m^2
+        lines, across, angle = _scene_lines(scene)
         return cls._film(
             rho_t * area * UM2,
             rho_t * j * UM2 * UM2,
@@ -157,11 +175,29 @@ class DynamicsParams:
             scene.liquid,
             scene.damping_calibration,
             t_max_s,
+            lines=lines,
+            across_um=across,
+            line_angle_deg=angle,
+            line_friction_Pa_s=scene.line_friction_Pa_s,
         )
 
     @classmethod
-    def _film(cls, mass, inertia, area, j, h, liquid, calibration, t_max_s) -> DynamicsParams:
-        cal = positive("damping calibration", calibration)
+    def _film(
+        cls,
+        mass,
+        inertia,
+        area,
+        j,
+        h,
+        liquid,
+        calibration,
+        t_max_s,
+        *,
+        lines=None,
+        across_um=0.0,
+        line_angle_deg=60.0,
+        line_friction_Pa_s=LINE_FRICTION_PA_S,
+    ) -> DynamicsParams:
         mu = liquid.viscosity_Pa_s
         if not h >= MIN_FILM_UM:
             if liquid.height_um is not None:
@@ -174,17 +210,77 @@ class DynamicsParams:
                 f"({area:,.0f} um^2), thinner than {MIN_FILM_UM * 1e3:g} nm, where the damping overflows the solver (and no real film is that thin); "
                 f"use at least {MIN_FILM_UM * area * 1e-6:.3g} nl (--volume)"
             )
+        if calibration is not None:
+            cal = positive("damping calibration", calibration)
+            return cls(
+                mass_kg=mass,
+                inertia_kg_m2=inertia,
+                damping_N_s_m=cal * couette_damping(mu, area, h),
+                rot_damping_N_m_s=cal * couette_torsional_damping(mu, j, h),
+                t_max_s=t_max_s,
+            )
+        d = dissipation_terms(
+            viscosity_Pa_s=mu,
+            density_kg_m3=liquid.density_kg_m3,
+            surface_tension_N_m=liquid.surface_tension_N_m,
+            area_um2=area,
+            polar_moment_um4=j,
+            h_um=h,
+            mass_kg=mass,
+            line_um=lines,
+            across_um=across_um,
+            line_angle_deg=line_angle_deg,
+            line_friction_Pa_s=line_friction_Pa_s,
+        )
         return cls(
             mass_kg=mass,
             inertia_kg_m2=inertia,
-            damping_N_s_m=cal * couette_damping(mu, area, h),
-            rot_damping_N_m_s=cal * couette_torsional_damping(mu, j, h),
+            damping_N_s_m=d["damping_N_s_m"],
+            rot_damping_N_m_s=d["rot_damping_N_m_s"],
             t_max_s=t_max_s,
         )
 
     def damping_ratio(self, stiffness_N_m: float) -> float:
         """``zeta = c / (2 sqrt(k m))`` of the translation for a spring of stiffness k (N/m)."""
         return self.damping_N_s_m / (2.0 * math.sqrt(stiffness_N_m * self.mass_kg))
+
+
+def _scene_lines(scene) -> tuple[tuple[float, float, float] | None, float, float]:
+    """(the moving lines' integrals or None, oint |n_x| ds in um, their contact angle in deg)
+    of a scene: the chip's outline moves its lines with it where they are free (a finite
+    meniscus with free lines, or the overlap model's line at the chip's edge); a pinned
+    scene holds every line at an edge. The angle: the substrate's, where a free line stands
+    at rest (docs/physics.md §3.3)."""
+    from simulator.physics import contact_line_integrals_um, line_dissipation_integrals_um
+
+    across, _, _ = contact_line_integrals_um(scene.chip)
+    angle = scene.materials.substrate_angle_deg
+    if scene.liquid.pinned:
+        return None, across, angle
+    return line_dissipation_integrals_um(scene.chip), across, angle
+
+
+def dissipation(scene) -> dict:
+    """The scene's damping term by term (:func:`simulator.physics.dissipation_terms`): what
+    :meth:`DynamicsParams.from_scene` sums where no ``damping_calibration`` is given."""
+    s = float(scene.um_per_px)
+    area = positive("chip footprint area", scene.chip.area_um2, "um^2")
+    j = area * (scene.chip_rg_px * s) ** 2
+    rho_t = scene.chip_density_kg_m3 * scene.chip_thickness_um * UM
+    lines, across, angle = _scene_lines(scene)
+    return dissipation_terms(
+        viscosity_Pa_s=scene.liquid.viscosity_Pa_s,
+        density_kg_m3=scene.liquid.density_kg_m3,
+        surface_tension_N_m=scene.liquid.surface_tension_N_m,
+        area_um2=area,
+        polar_moment_um4=j,
+        h_um=scene.liquid_height_um,
+        mass_kg=rho_t * area * UM2,
+        line_um=lines,
+        across_um=across,
+        line_angle_deg=angle,
+        line_friction_Pa_s=scene.line_friction_Pa_s,
+    )
 
 
 def default_tolerances(dtype) -> tuple[float, float]:

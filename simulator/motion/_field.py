@@ -60,7 +60,7 @@ class Relay:
 
 @functools.partial(
     jax.tree_util.register_dataclass,
-    data_fields=["padded", "floor", "best", "scale", "relay", "pin", "align_lim"],
+    data_fields=["padded", "floor", "best", "scale", "relay", "pin", "align_lim", "lines"],
     meta_fields=["pinned", "wide_tol"],
 )
 @dataclass(frozen=True)
@@ -82,6 +82,10 @@ class Field:
         rules exactly.
     align_lim: (2,) float64, the (twist steps, px) within which a final pose counts as
         aligned (the align tolerance), plus 1e-6 index units of round-off.
+    lines: the outline's elements and the pattern the per-pose pinning reads
+        (:class:`simulator.motion.PinLines`, :func:`simulator.motion.pin_at`), or None: the
+        constant ``pin`` (a field made by hand). The runs of a scene with hysteresis carry
+        them (docs/physics.md §5.3).
     pinned: any pinning at all (static: jit compiles the rule in or out).
     wide_tol: an align tolerance wider than one step, a floor or a hysteresis window
         (static: jit compiles the rule that a run ending there is aligned in or out).
@@ -100,6 +104,7 @@ class Field:
     relay: Relay | None = None
     pin: jax.Array = None  # type: ignore[assignment]  (set by make_field)
     align_lim: jax.Array = None  # type: ignore[assignment]
+    lines: object = None  # PinLines | None
     pinned: bool = False
     wide_tol: bool = False
 
@@ -121,6 +126,13 @@ class Field:
         if pin is not None or tol is not None:
             now_pin = tuple(np.asarray(self.pin, np.float64)) if pin is None else pin
             changes.update(pinning_fields(now_pin, self.align_tol if tol is None else tol))
+        if "lines" in changes or "pinned" in changes:
+            lines = changes.get("lines", self.lines)
+            changes["pinned"] = lines is not None or bool(
+                changes["pinned"]
+                if "pinned" in changes
+                else np.any(np.asarray(self.pin, np.float64))
+            )
         return replace(self, **changes)
 
 
@@ -172,20 +184,30 @@ def make_field(
     pin: tuple[float, float, float] = (0.0, 0.0, 0.0),
     align_tol: tuple[float, float] = (1.0, 1.0),
     scale: float | None = None,
+    lines=None,
 ) -> Field:
     """A :class:`Field` from a (T, Ny, Nx) energy array (J) on ``grid``; ``scale``: its
-    max |E| (default: the array's own; a box of a larger landscape passes the landscape's)."""
+    max |E| (default: the array's own; a box of a larger landscape passes the landscape's);
+    ``lines``: the per-pose pinning's :class:`simulator.motion.PinLines` (or None)."""
     enable_float64()
     energy = np.asarray(energy)
     dt = energy.dtype
     if scale is None:
         scale = np.abs(energy).max() if energy.size else 0.0
+    fields = pinning_fields(pin, align_tol)
+    fields["pinned"] = fields["pinned"] or lines is not None
+    if lines is not None:  # the grid's origin as data (PinLines.origin)
+        lines = replace(
+            lines,
+            origin=jnp.asarray([grid.t0_deg, grid.y0_um, grid.x0_um], lines.origin.dtype),
+        )
     return Field(
         padded=jnp.asarray(pad_energy(energy, grid.wrap, grid.cut)),
         floor=jnp.asarray(floor, dt),
         best=jnp.asarray(best, dt),
         scale=jnp.asarray(scale, dt),
-        **pinning_fields(pin, align_tol),
+        lines=lines,
+        **fields,
     )
 
 
@@ -196,19 +218,21 @@ def field_and_grid(
     pin: tuple[float, float, float] = (0.0, 0.0, 0.0),
     align_tol: tuple[float, float] = (1.0, 1.0),
     scale: float | None = None,
+    lines=None,
 ) -> tuple[Field, PoseGrid]:
     """The stepper view of a landscape: its arrays and its pose grid. ``rg_px``: a radius of
     gyration in px other than the grid's own (a landscape's grid carries its scene's,
     :attr:`simulator.scene.Scene.chip_rg_px`); ``pin``: the pinning work per grid step (J,
     twist/y/x) of contact-angle hysteresis; ``scale``: the max |E| the force references
     use (:func:`make_field`; a small box passes its landscape's, so that a gradient run
-    takes the steps it takes on the whole landscape)."""
+    takes the steps it takes on the whole landscape); ``lines``: the per-pose pinning
+    (:func:`simulator.motion.pin_lines`), which replaces ``pin`` in the steppers."""
     e = ls.energy if dtype is None else ls.energy.astype(dtype)
     it, iy, ix = (
         ls.minimum_index()
     )  # the global minimum: ties decided by position (Landscape.minimum_index)
     grid = ls.grid if rg_px is None else replace(ls.grid, rg_px=float(rg_px))
-    return make_field(e, grid, ls.noise_floor_J, [it, iy, ix], pin, align_tol, scale), grid
+    return make_field(e, grid, ls.noise_floor_J, [it, iy, ix], pin, align_tol, scale, lines), grid
 
 
 def relay_changes(field: Field, grid: Grid, q) -> jax.Array:

@@ -48,6 +48,7 @@ from simulator.motion._field import (
     neighbourhood,
     relay_changes,
 )
+from simulator.motion._pinning import pin_at
 
 # Stop codes of a run (``status``), and the outcomes a trajectory reports. EVENT: the
 # footprint state changes at the pose the run stopped at (a field with a relay,
@@ -96,9 +97,9 @@ def greedy(field: Field, grid: Grid, start, max_steps: int, record: bool = True)
     """
     moves, rank = jnp.asarray(BLOCK_MOVES), jnp.asarray(TIE_RANK)
     pin_work = None
-    if field.pinned:
+    m = np.abs(BLOCK_MOVES).astype(np.float64)
+    if field.pinned and field.lines is None:
         # the pinning work of each move: the axes it moves along, summed in float64
-        m = np.abs(BLOCK_MOVES).astype(np.float64)
         p = field.pin
         pin_work = (m[:, 0] * p[0] + m[:, 1] * p[1] + m[:, 2] * p[2]).astype(field.dtype)
     start = clamp_start(grid, jnp.asarray(start, jnp.int32))
@@ -113,8 +114,14 @@ def greedy(field: Field, grid: Grid, start, max_steps: int, record: bool = True)
     def body(s: GreedyState):
         at_edge = at_cut_edge(grid, s.idx)
         e_true = neighbourhood(field, grid, s.idx)  # block order
-        # Hysteresis: a move is worth its energy plus the pinning work it costs.
-        e = e_true + pin_work if pin_work is not None else e_true
+        # Hysteresis: a move is worth its energy plus the pinning work it costs, with the
+        # lines that slide at the current pose (docs/physics.md §5.3).
+        if field.lines is not None:
+            p = pin_at(field, grid, s.idx)
+            work = jnp.asarray(m, field.dtype) @ p
+            e = e_true + work
+        else:
+            e = e_true + pin_work if pin_work is not None else e_true
         best = jnp.min(e)
         # the first tie for the best in the documented order: the smallest tie rank
         r = jnp.min(jnp.where(e <= best + field.floor, rank, len(rank)))
@@ -189,7 +196,7 @@ def gradient_descent(
     # Metric: index units -> px. Twist index -> arc length in px.
     metric = jnp.asarray([grid.twist_px_per_step if grid.shape[0] > 1 else 1.0, 1.0, 1.0], dt)
     g_ref = reference_gradient(field, grid)
-    pin = field.pin.astype(dt) if field.pinned else None
+    pinned_run = field.pinned
     n = max_steps + 1 if record else 1
     e0 = interpolate(field, grid, start)
     path = jnp.zeros((n, 3), dt).at[0].set(start)
@@ -201,7 +208,11 @@ def gradient_descent(
         g_index = gradient(field, grid, s.q)  # J per index step
         g = g_index / metric  # J per px
         # Hysteresis: pinned where no axis's force beats its pinning force.
-        pinned = jnp.all(jnp.abs(g_index) <= pin) if pin is not None else jnp.asarray(False)
+        pinned = (
+            jnp.all(jnp.abs(g_index) <= pin_at(field, grid, s.q))
+            if pinned_run
+            else jnp.asarray(False)
+        )
         # Zero force is tested per axis: squaring g (joules per px) underflows to 0 in
         # float32 for weak landscapes (|g| < 1e-19 J/px, e.g. 1e-12 N/m) and overflows for
         # strong ones, which would call a real slope flat.

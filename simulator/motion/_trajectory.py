@@ -35,6 +35,7 @@ from simulator.landscape import (
     global_minimum,
 )
 from simulator.motion._field import field_and_grid
+from simulator.motion._pinning import pin_lines
 from simulator.motion._pricing import (
     BAND_PX,
     BAND_STEPS,
@@ -149,8 +150,10 @@ def radius_of_gyration_px(scene: Scene) -> float:
 def is_stiff(method: str, field, grid, params) -> bool:
     """An inertial run is stiff when inertia relaxes (m / c) much faster than the chip
     creeps one pixel under a typical force (overdamped, c s / F): then the IMEX solver
-    (:func:`simulator.motion.stiff_solver`) takes ~100 steps where an explicit one takes ~10^4."""
-    if method != "inertial":
+    (:func:`simulator.motion.stiff_solver`) takes ~100 steps where an explicit one takes ~10^4.
+    Never with hysteresis: the friction's Moreau-Jean step takes the damping implicitly
+    (:class:`simulator.motion.MoreauJean`), and a batch then runs vmapped."""
+    if method != "inertial" or field.pinned:
         return False
     f_ref = float(reference_gradient(field, grid)) / (
         grid.um_per_px * 1e-6
@@ -316,7 +319,9 @@ def simulate(
                 f"the {method} stepper's field on the landscape ({ls.energy.size:,} poses)",
                 ls.energy.size * FIELD_S_PER_POSE,
             )
-        field, grid = field_and_grid(ls, pin=pin, align_tol=tol, scale=scale)
+        field, grid = field_and_grid(
+            ls, pin=pin, align_tol=tol, scale=scale, lines=pin_lines(scene, ls.energy.dtype)
+        )
         if relay is not None:
             field = field._replace(relay=relay)
         elif path is not None:  # the state's relay on this box

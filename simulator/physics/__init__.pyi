@@ -19,24 +19,32 @@ from ._footprint import (
 from ._hysteresis import (
     align_tolerance as align_tolerance,
     contact_line_integrals_um as contact_line_integrals_um,
+    line_dissipation_integrals_um as line_dissipation_integrals_um,
     line_reach_um as line_reach_um,
     parse_window as parse_window,
     pin_per_index as pin_per_index,
     pinning as pinning,
     pinning_force_per_length as pinning_force_per_length,
+    pinning_lines as pinning_lines,
     sliding_pinning as sliding_pinning,
+    sliding_pinning_at as sliding_pinning_at,
     sliding_shares as sliding_shares,
 )
 from ._mechanics import (
     DAMPING_CALIBRATION as DAMPING_CALIBRATION,
+    LINE_FRICTION_PA_S as LINE_FRICTION_PA_S,
+    WEDGE_CUTOFF_NM as WEDGE_CUTOFF_NM,
     Chip as Chip,
     Liquid as Liquid,
     couette_damping as couette_damping,
     couette_rotational_damping as couette_rotational_damping,
     couette_torsional_damping as couette_torsional_damping,
+    dissipation_terms as dissipation_terms,
     meniscus_height_um as meniscus_height_um,
     parallelepiped_force as parallelepiped_force,
     parallelepiped_stiffness as parallelepiped_stiffness,
+    stokes_layer_factor as stokes_layer_factor,
+    wedge_friction_Pa_s as wedge_friction_Pa_s,
 )
 from ._meniscus import (
     CHIP_BLUR_MIN_PX as CHIP_BLUR_MIN_PX,

@@ -32,21 +32,21 @@ lines that slide over a pad add the pad's hysteresis:
   give (zero). Without a meniscus the line is at the chip's edge (``d_p = 0``).
 
 Each element of the outline counts with the pattern's value where its free line would
-stand on a pad, ``d_p`` beyond it along its normal, with the chip at its nominal pose
-(0, 0, 0): the pinning decides where a chip stops, and that is near where it rests.
-The shares are one number per axis for the whole run. On a same-size pad they are 0
-(free lines stand on the substrate at rest), in a pad wider than the chip by more than
-``d_p`` 1, without a meniscus 1/2 (the outline lies on the pad's edge: half of it moves
-over the pad either way). Away from rest the real shares change with the pose (a chip
-near its pad's edge has that side's line held by the edge); that dependence is left out.
+stand on a pad, ``d_p`` beyond it along its normal, at the chip's *current* pose and with
+zero on a pad the footprint state has dry (:func:`sliding_pinning_at`, the NumPy reference
+of :func:`simulator.motion.pin_at`, which the steppers evaluate per pose). At rest on a
+same-size pad the shares are 0 (free lines stand on the substrate), in a pad wider than the
+chip by more than ``d_p`` 1, without a meniscus 1/2 (the outline lies on the pad's edge:
+half of it moves over the pad either way); a chip near its pad's edge has that side's line
+held by the edge. :func:`sliding_shares` and :func:`pin_per_index` are the nominal pose's
+(the align tolerance and the error limit read them).
 
-The steppers use the sliding lines' forces (:func:`pin_per_index`) as their stopping rule,
-axis by axis: a gradient or dynamic run stops at the first pose where the restoring force
-along every axis is at most its pinning force, ``|dE/dq_k| <= P_k`` (and, for the inertial
-method, where the kinetic energy left is at most the pinning work over one grid step); a
-greedy move is taken only if the energy it releases exceeds the pinning work
-``sum_k P_k |dq_k|``. With zero hysteresis, or no sliding line, every rule is today's
-exactly. Where lines slide and the well is a spring of stiffness ``k``, the chip stops
+The steppers use the sliding lines' forces as friction (docs/physics.md §4, §5.3): a
+gradient or dynamic run stops where the restoring force along every axis is at most its
+pinning force at the current pose, ``|dE/dq_k| <= P_k(q)``, and the chip is at rest (the
+dynamics carry the pinning as Coulomb friction); a greedy move is taken only if the energy
+it releases exceeds the pinning work ``sum_k P_k |dq_k|``. With zero hysteresis, or a
+pinned scene, every rule is the one without hysteresis exactly. Where lines slide and the well is a spring of stiffness ``k``, the chip stops
 about ``P / k`` short: for free lines in a pad wider than the chip, where the wall
 profile's force ``|Delta_gamma| L f(u)`` falls to ``f_pin L``, ``f(u) = f_pin /
 |Delta_gamma|``.
@@ -181,6 +181,30 @@ def contact_line_integrals_um(chip: Mask) -> tuple[float, float, float]:
     return float(wx.sum()), float(wy.sum()), float(wt.sum())
 
 
+def line_dissipation_integrals_um(chip: Mask) -> tuple[float, float, float]:
+    """(oint n_x^2 ds, oint n_y^2 ds in um, oint ((z x r) . n)^2 ds in um^3) of the chip's
+    outline: what a line friction per unit length (normal to the line) adds to the damping
+    along x, along y and in twist (docs/physics.md §4). A w x h rectangle: 2h, 2w and
+    (w^3 + h^3) / 6 (a square of side L: 2L and L^3 / 3)."""
+    if chip.geometry is not None:
+        mids, normals, wx, wy, _ = _outline_elements(chip, piece_um=max(chip.um_per_px, 1e-3) / 4)
+        ds = np.hypot(wx, wy)
+        arm = normals[:, 1] * mids[:, 0] - normals[:, 0] * mids[:, 1]  # (z x r) . n
+        # the arm changes by one per unit length along a straight piece: ds^2 / 12 beyond
+        # the midpoint's square, exactly
+        return (
+            float((normals[:, 0] ** 2 * ds).sum()),
+            float((normals[:, 1] ** 2 * ds).sum()),
+            float(((arm**2 + ds**2 / 12.0) * ds).sum()),
+        )
+    mids, normals, wx, wy, _ = _outline_elements(chip, piece_um=math.inf)
+    # pixel edges: a vertical edge (normal x) at height y adds y^2 ds, a horizontal one x^2 ds;
+    # the edge's own extent adds s^2 / 12 per unit length
+    s = chip.um_per_px
+    arm2 = np.where(wx > 0, mids[:, 1] ** 2, mids[:, 0] ** 2) + s * s / 12.0
+    return float(wx.sum()), float(wy.sum()), float((arm2 * (wx + wy)).sum())
+
+
 def pinning_force_scale(scene) -> float:
     """``f_pin / 2`` in N/m: what one sliding line holds per unit length across the motion."""
     m = scene.materials
@@ -243,6 +267,80 @@ def sliding_shares(scene) -> tuple[float, float, float]:
         return float((w * on_pad).sum()) / tot if tot > 0 else 0.0
 
     return share(wt), share(wy), share(wx)
+
+
+def pinning_lines(scene) -> dict | None:
+    """What the per-pose pinning reads (docs/physics.md §5.3), host-side, or None where no
+    line can slide over a pad: no hysteresis, a zero window, or a pinned scene.
+
+    ``mids`` (n, 2) um and ``normals`` (n, 2): the outline's elements at the nominal pose,
+    about the chip's centre (pieces of at most half a pixel); ``ds`` (n,) um their lengths;
+    ``wt`` (n,) um^2 their ``|(z x r) . n| ds`` (the torque's arm, the same at every twist);
+    ``reach_um`` where a free line stands beyond the chip (:func:`line_reach_um`);
+    ``f2`` the force per unit length of one sliding line, N/m (:func:`pinning_force_scale`);
+    ``pattern`` (H, W) the pattern's values and ``labels`` (H, W) int32 its pads (1..n, 0
+    substrate: :func:`simulator.landscape.pad_labels`) at ``um_per_px``."""
+    if not scene.effects.hysteresis or scene.liquid.pinned:
+        return None
+    f2 = pinning_force_scale(scene)
+    if not f2 > 0:
+        return None
+    from scipy import ndimage
+
+    s = float(scene.um_per_px)
+    mids, normals, wx, wy, wt = _outline_elements(scene.chip, piece_um=0.5 * s)
+    pat = np.asarray(scene.pattern.data, float)
+    labels, _ = ndimage.label(pat > 0)  # as simulator.landscape.pad_labels
+    return {
+        "mids": mids,
+        "normals": normals,
+        "ds": np.hypot(wx, wy),
+        "wt": wt,
+        "reach_um": float(line_reach_um(scene)),
+        "f2": float(f2),
+        "pattern": pat,
+        "labels": labels.astype(np.int32),
+        "um_per_px": s,
+    }
+
+
+def sliding_pinning_at(scene, pose, wet=None) -> tuple[float, float, float]:
+    """(P_twist in N m, P_y in N, P_x in N) of the lines that slide over a *wet* pad with the
+    chip at ``pose`` = (x um, y um, twist deg) (docs/physics.md §5.3): each element of the
+    outline, turned and moved with the chip, counts with the wet pattern's value (bilinear)
+    ``d_p`` beyond it along its normal, ``|n_x| ds`` for x, ``|n_y| ds`` for y and
+    ``|(z x r) . n| ds`` for the twist. ``wet``: (pads,) booleans, the footprint state
+    (``--dispense``), pad ``k`` the pattern's label ``k + 1``; None: every pad. The NumPy
+    reference of what the steppers compute per pose (:func:`simulator.motion.pin_at`)."""
+    lines = pinning_lines(scene)
+    if lines is None:
+        return 0.0, 0.0, 0.0
+    from scipy.ndimage import map_coordinates
+
+    x, y, a = (float(v) for v in pose)
+    c, sn = math.cos(math.radians(a)), math.sin(math.radians(a))
+    rot = np.array([[c, -sn], [sn, c]])
+    m = lines["mids"] @ rot.T + np.array([x, y])
+    n = lines["normals"] @ rot.T
+    p = m + lines["reach_um"] * n
+    pat = lines["pattern"]
+    if wet is not None:
+        keep = np.concatenate([[False], np.asarray(wet, bool)])
+        pat = pat * keep[lines["labels"]]
+    s = lines["um_per_px"]
+    hh, ww = pat.shape
+    col = p[:, 0] / s + ww / 2 - 0.5
+    row = hh / 2 - 0.5 - p[:, 1] / s
+    on = np.clip(
+        map_coordinates(pat, [row, col], order=1, mode="grid-constant", cval=0.0), 0.0, 1.0
+    )
+    ds = lines["ds"]
+    f2 = lines["f2"]
+    return (
+        f2 * float((on * lines["wt"]).sum()) * 1e-12,
+        f2 * float((on * np.abs(n[:, 1]) * ds).sum()) * 1e-6,
+        f2 * float((on * np.abs(n[:, 0]) * ds).sum()) * 1e-6,
+    )
 
 
 def sliding_pinning(scene) -> tuple[float, float, float]:

@@ -28,7 +28,9 @@ from simulator.core import (
     WATER_VISCOSITY_PA_S,
 )
 
-#: Multiplier on the Couette (uncoupled, linear-profile) damping estimate.
+#: The former default multiplier on the Couette damping estimate, now the override
+#: ``--damping-calibration 600`` (the default damping is the sum of its terms,
+#: :func:`dissipation_terms`; what follows is the fit's record).
 #:
 #: The damping model (docs/physics.md §4). The chip slides on a film of height
 #: ``h = V / A``; with the liquid held on the chip's edges and the substrate at rest, the
@@ -283,6 +285,115 @@ def couette_torsional_damping(viscosity_Pa_s: float, polar_moment_um4: float, h_
     j = positive("polar moment", polar_moment_um4, "um^4")
     h = positive("meniscus height", h_um, "um")
     return mu * j * UM2 * UM2 / (h * UM)
+
+
+#: Molecular cut-off ``a`` of the wedge term's ``ln(l / a)`` (:func:`wedge_friction_Pa_s`), nm:
+#: the size of a water molecule, where the continuum wedge ends (de Gennes 1985 takes
+#: ``ln(l / a)`` of 10-15 for l a macroscopic size; with l the film height, 37.5 um, it is 10.5).
+WEDGE_CUTOFF_NM = 1.0
+
+#: Molecular-kinetic contact-line friction coefficient ``zeta``, Pa s (force per unit length
+#: of contact line per unit normal speed, N/m per m/s), fitted to the source's video of the
+#: 730/100 um four-pad (docs/physics.md §4): with the pads' window 10:35 deg and the droplet
+#: dispensed on the pattern, 6 Pa s takes the chip from (500, 0-5 um, 0-2 deg) to the floor in
+#: 0.32 s and from 380 um in 0.26 s (the video: aligned at about 0.33 s). Water on hydrophilic
+#: oxide gives 0.01-0.1 Pa s (Johansson and Hess, "Molecular origin of contact line friction
+#: in dynamic wetting", Phys. Rev. Fluids 3, 074201, 2018; Blake and Haynes 1969 for the
+#: theory): the fit is 60 times that range's top. It is the one term that can set the time:
+#: the film's terms are fixed by the water and the film's height, the wedges' cut-off enters
+#: by a logarithm, and a wider hysteresis window stops the chip instead of slowing it.
+LINE_FRICTION_PA_S = 6.0
+
+
+def stokes_layer_factor(omega_rad_s: float, h_um: float, kinematic_viscosity_m2_s: float) -> float:
+    """In-phase drag of a film of height h under a plate oscillating at ``omega``, over its
+    steady Couette value ``mu A / h``: ``Re[kh coth(kh)]``, ``k = sqrt(i omega / nu)``
+    (the unsteady, Stokes-layer correction; docs/physics.md §4). In real form, with
+    ``x = h / delta``, ``delta = sqrt(2 nu / omega)`` the Stokes layer's thickness,
+    ``x (sinh 2x + sin 2x) / (cosh 2x - cos 2x)``: 1 + 4 x^4 / 45 for a thin film (the
+    quasi-steady limit), x for a thick one (the layer's ``mu A / delta``)."""
+    if not (omega_rad_s >= 0 and math.isfinite(omega_rad_s)):
+        raise InputError(f"angular frequency must be finite and >= 0 rad/s, got {omega_rad_s!r}")
+    h = positive("film height", h_um, "um") * UM
+    nu = positive("kinematic viscosity", kinematic_viscosity_m2_s, "m^2/s")
+    kh = complex(math.sqrt(omega_rad_s / (2 * nu)), math.sqrt(omega_rad_s / (2 * nu))) * h
+    if abs(kh) < 1e-3:
+        return 1.0 + (omega_rad_s * h * h / nu) ** 2 / 45.0
+    if kh.real > 20:  # coth -> 1 to double precision
+        return kh.real
+    import cmath
+
+    return (kh / cmath.tanh(kh)).real
+
+
+def wedge_friction_Pa_s(viscosity_Pa_s: float, angle_deg: float, h_um: float) -> float:
+    """The viscous wedge at a moving contact line (Cox, J. Fluid Mech. 168, 169, 1986; de
+    Gennes, Rev. Mod. Phys. 57, 827, 1985): ``3 mu ln(l / a) / theta`` per unit length of
+    line per unit normal speed, Pa s, with ``l`` the film height, ``a`` =
+    :data:`WEDGE_CUTOFF_NM` and ``theta`` the line's contact angle (radians; small-angle form,
+    good to 10 % below 60 deg)."""
+    mu = positive("viscosity", viscosity_Pa_s, "Pa s")
+    th = math.radians(positive("contact angle", angle_deg, "deg"))
+    ln = math.log(positive("film height", h_um, "um") * 1e3 / WEDGE_CUTOFF_NM)
+    return 3.0 * mu * max(ln, 0.0) / th
+
+
+def dissipation_terms(
+    *,
+    viscosity_Pa_s: float,
+    density_kg_m3: float,
+    surface_tension_N_m: float,
+    area_um2: float,
+    polar_moment_um4: float,
+    h_um: float,
+    mass_kg: float,
+    line_um: tuple[float, float, float] | None,
+    across_um: float,
+    line_angle_deg: float,
+    line_friction_Pa_s: float = LINE_FRICTION_PA_S,
+) -> dict:
+    """The chip's viscous dissipation, term by term (docs/physics.md §4): each term's
+    translational (N s/m) and twist (N m s) damping, and their sums.
+
+    * ``couette``: the sheared film, ``mu A / h`` and ``mu J / h``;
+    * ``stokes``: the unsteady correction of the film at the chip's natural frequency near
+      alignment, ``omega = sqrt(k / m)`` with the sheared block's stiffness
+      ``k = gamma * across / h`` (docs/physics.md §3.3; ``across = oint |n_x| ds``, 2L on a
+      square): Couette times ``stokes_layer_factor - 1``, the fastest motion the chip
+      makes (its ring-down), so an upper bound for the creep;
+    * ``wedge``: the wedges at the moving contact lines, :func:`wedge_friction_Pa_s` times
+      the line integrals;
+    * ``line``: molecular-kinetic line friction ``zeta`` (Pa s) times the same integrals.
+
+    ``line_um``: the moving contact lines' ``oint n_x^2 ds``, ``oint n_y^2 ds`` (um) and
+    ``oint ((z x r) . n)^2 ds`` (um^3), or None where no line moves (lines held at the pad
+    edges); translation takes the mean of x and y (exact on a square)."""
+    mu = viscosity_Pa_s
+    c_film = couette_damping(mu, area_um2, h_um)
+    ct_film = couette_torsional_damping(mu, polar_moment_um4, h_um)
+    k = surface_tension_N_m * across_um * UM / (h_um * UM)
+    omega = math.sqrt(k / mass_kg) if mass_kg > 0 and k > 0 else 0.0
+    f = stokes_layer_factor(omega, h_um, mu / density_kg_m3)
+    terms = {
+        "couette": (c_film, ct_film),
+        "stokes": (c_film * (f - 1.0), ct_film * (f - 1.0)),
+    }
+    if line_um is None:
+        terms["wedge"] = terms["line"] = (0.0, 0.0)
+    else:
+        lx, ly, lt = line_um
+        trans = 0.5 * (lx + ly) * UM
+        twist = lt * UM**3
+        zw = wedge_friction_Pa_s(mu, line_angle_deg, h_um)
+        terms["wedge"] = (zw * trans, zw * twist)
+        terms["line"] = (line_friction_Pa_s * trans, line_friction_Pa_s * twist)
+    return {
+        "terms": terms,
+        "omega_rad_s": omega,
+        "stokes_factor": f,
+        "damping_N_s_m": sum(v[0] for v in terms.values()),
+        "rot_damping_N_m_s": sum(v[1] for v in terms.values()),
+    }
 
 
 def couette_added_mass_kg(density_kg_m3: float, wetted_area_um2: float, h_um: float) -> float:

@@ -235,6 +235,7 @@ class SceneBuilders:
             "chip_thickness_um",
             "chip_density_kg_m3",
             "damping_calibration",
+            "line_friction_Pa_s",
             "max_image_mpx",
             "topography",
             *LAYOUT_KEYS,
@@ -308,6 +309,7 @@ class SceneBuilders:
             "chip_thickness_um",
             "chip_density_kg_m3",
             "damping_calibration",
+            "line_friction_Pa_s",
         ):
             if key in doc:
                 kw[key] = doc[key]

@@ -38,7 +38,7 @@ TOML keys (all optional except ``pattern`` and one of ``chip`` / ``chip_size_um`
     [liquid]                        # for the dynamic methods
     viscosity_mPa_s = 1.0
     volume_nl = 20                  # default: a film of 5 % of the chip's smallest side
-    # chip_thickness_um = 50, chip_density_kg_m3 = 1200, damping_calibration = 600 (top level; see materials.DAMPING_CALIBRATION)
+    # chip_thickness_um = 50, chip_density_kg_m3 = 1200, damping_calibration (top level; none: the damping's terms, docs/physics.md §4), line_friction_Pa_s = 6 (fitted to the video; water on oxide 0.01-0.1)
 
     [topography]                    # a protruding pad: the overflow check (simulator.liquid.Topography)
     edge_angle_deg = 90             # solid wedge angle of the pad edge (90 = vertical wall)
@@ -66,7 +66,7 @@ from patterns.mask import Mask
 from patterns.resources import check_budget_mb, default_budget_mb
 from simulator.core import SU8_DENSITY_KG_M3
 from simulator.liquid import Topography
-from simulator.physics import DAMPING_CALIBRATION, Liquid, Materials
+from simulator.physics import LINE_FRICTION_PA_S, Liquid, Materials
 from simulator.scene._build import SceneBuilders, resample_to_scale
 from simulator.scene._parts import Effects, TwistGrid
 from simulator.scene._twist_axis import TwistAxis
@@ -112,8 +112,12 @@ class Scene(SceneBuilders):
         memory_budget_mb: the landscape build refuses to exceed this.
         liquid: the droplet (viscosity, volume) for the dynamic methods.
         chip_thickness_um, chip_density_kg_m3: the chip body (mass, inertia) for dynamics.
-        damping_calibration: multiplier on the Couette damping estimate
-            (see :data:`simulator.physics.DAMPING_CALIBRATION`).
+        damping_calibration: None (default): the damping is the sum of its documented terms
+            (:func:`simulator.physics.dissipation_terms`, docs/physics.md §4); a number k:
+            the film's Couette drag times k instead (the override; 600,
+            :data:`simulator.physics.DAMPING_CALIBRATION`, was the fit to the source's video).
+        line_friction_Pa_s: molecular-kinetic contact-line friction coefficient, Pa s
+            (:data:`simulator.physics.LINE_FRICTION_PA_S`), one of the terms.
         topography: a protruding pad's edge angle (None: a flat pattern), for the
             overflow check of :func:`simulator.liquid.scene_warnings`.
         input_warnings: one-line warnings on the images as read (a pattern that looks
@@ -131,7 +135,8 @@ class Scene(SceneBuilders):
     liquid: Liquid = field(default_factory=Liquid)
     chip_thickness_um: float = 50.0
     chip_density_kg_m3: float = SU8_DENSITY_KG_M3
-    damping_calibration: float = DAMPING_CALIBRATION
+    damping_calibration: float | None = None
+    line_friction_Pa_s: float = LINE_FRICTION_PA_S
     topography: Topography | None = None
     input_warnings: tuple[str, ...] = ()
 
@@ -151,7 +156,9 @@ class Scene(SceneBuilders):
         check_budget_mb(self.memory_budget_mb, "memory_budget_mb")
         positive("chip thickness", self.chip_thickness_um, "um")
         positive("chip density", self.chip_density_kg_m3, "kg/m^3")
-        positive("damping calibration", self.damping_calibration)
+        if self.damping_calibration is not None:
+            positive("damping calibration", self.damping_calibration)
+        positive("line friction", self.line_friction_Pa_s, "Pa s")
         ps, cs = self.pattern.um_per_px, self.chip.um_per_px
         require(
             math.isclose(ps, cs, rel_tol=1e-9),

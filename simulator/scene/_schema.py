@@ -130,7 +130,8 @@ SCHEMA: dict[str | None, dict[str, Kind]] = {
         "accuracy": Choice(ACCURACY_PRESETS),
         "chip_thickness_um": LENGTH_UM,
         "chip_density_kg_m3": number("(0, 1e6]", "kg/m^3"),  # osmium 22590
-        "damping_calibration": number("(0, 1e9]"),  # default 600
+        "damping_calibration": number("(0, 1e9]"),  # default: none, the damping's terms
+        "line_friction_Pa_s": number("(0, 100]", "Pa s"),  # default 6 (LINE_FRICTION_PA_S)
     },
     "materials": {
         "surface_tension_mN_m": SURFACE_TENSION_MN_M,
