@@ -378,8 +378,13 @@ def _interrupted_sweep(tmp_path: Path, sig: signal.Signals) -> tuple[int, list[s
     journalled (``SELFALIGN_HOLD_AT=sweep-point:1``, patterns/hold.py); (rc, stderr lines, out).
     The hold line is read from the pipe as it comes, so nothing waits on a clock."""
     out = tmp_path / "out"
+    # the example's points, stateless (each point's footprint protocols would only make it slower)
+    spec = tmp_path / "sweep.toml"
+    text = SWEEP.read_text()
+    assert "[design]" in text and "[scene.liquid]" not in text
+    spec.write_text(text.replace("[design]", '[scene.liquid]\ndispense = "none"\n\n[design]', 1))
     proc = subprocess.Popen(
-        python_m("simulator", "sweep", SWEEP, "--out", out, "--workers", "1"),
+        python_m("simulator", "sweep", spec, "--out", out, "--workers", "1"),
         cwd=tmp_path,
         stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE,

@@ -184,6 +184,8 @@ def _write_toml(path: Path, size_px: int, budget_mb: float, quick: bool = False)
             ("yield_starts = 2000", "yield_starts = 20"),
             ("capture_grid = 25", "capture_grid = 3"),
             ("step_deg = 2", "step_deg = 30"),
+            # the check's stateless numbers only (the footprint protocols: tests/test_footprint_*)
+            ("meniscus_height_um = 10", 'meniscus_height_um = 10\ndispense = "none"'),
         ]
     for old, new in edits:
         assert old in text

@@ -40,7 +40,7 @@ def _cut(tr, j: int):
     )
 
 
-def footprint_budget_bytes(scene, n_pads: int) -> int:
+def footprint_budget_bytes(scene, n_pads: int, pairs: bool = True) -> int:
     """What the footprint state's planes hold at their peak: per pose, each pad's wet energy
     and two relay flags, and the shadow rule's pair planes on their boxes
     (:func:`simulator.landscape._footprint.footprint_pairs`, laid out as the build does); per
@@ -55,11 +55,17 @@ def footprint_budget_bytes(scene, n_pads: int) -> int:
     flags a bit per pad, 8,138 MB with a byte; with the shadow cast along the chip side's
     normal at each twist, 32 pairs on the twists where each exists and the poses that cover
     its near pad, priced 8,422 MB, of which the pairs' planes 1,911 MB, peaked at 7,537 MB).
-    A pair's part is made, used and dropped in turn, so one pair's correlator is counted."""
+    A pair's part is made, used and dropped in turn, so one pair's correlator is counted.
+    ``pairs`` False: without the shadow rule's pairs (whose boxes take a pass over the
+    twists to find), a lower bound that refuses an oversize scene at once."""
     from simulator.landscape import footprint_pairs, footprint_poses
 
     poses = footprint_poses(scene)
-    n_pairs, pair_poses, per_twist = footprint_pairs(scene)
+    if pairs:
+        n_pairs, pair_poses, per_twist = footprint_pairs(scene)
+    else:
+        n_pairs, pair_poses = 0, 0
+        per_twist = poses // max(1, scene.twist_axis.count)
     item = np.dtype(scene.dtype).itemsize
     n_parts = n_pads + min(n_pairs, 1)  # a pair's part is made, used and dropped in turn
     work = per_twist * (16 * (n_pads + 3 * item) + 8 * item * n_parts)
@@ -91,10 +97,14 @@ def require_footprint_fits(scene, engine: str = "fft") -> None:
             )
         return
     _, n = pad_labels(scene.pattern)
-    need = footprint_budget_bytes(scene, n)
+    need = footprint_budget_bytes(scene, n, pairs=False)  # at least this: refused at once
+    least = need > scene.memory_budget_mb * 2**20
+    if not least:
+        need = footprint_budget_bytes(scene, n)
     if need > scene.memory_budget_mb * 2**20:
         raise InputError(
             f"--dispense {_proto(scene)}: the footprint state's planes for {n} pads would hold "
+            f"{'at least ' if least else ''}"
             f"{need / 2**20:,.0f} MB, over the memory budget of {scene.memory_budget_mb:,.0f} MB; give a coarser "
             "--resolution, a smaller --window or a larger --twist-step, raise --memory-budget, or run stateless "
             "with --dispense none"
