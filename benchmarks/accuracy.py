@@ -178,8 +178,7 @@ def _poses(case: str, n: int, seed: int) -> np.ndarray:
 
 
 def _scene(case: str, k: Knobs):
-    from patterns.mask import Mask
-    from patterns.raster import mask_from_geometry
+    from patterns.geometry import Mask, mask_from_geometry
     from simulator.scene import Scene, TwistGrid
 
     pattern_geom, chip_geom = _geometry(case)
@@ -394,9 +393,8 @@ def preset_library_check(n_poses: int, presets: list[str] | None = None) -> list
     last steps); a +-70 um window and twists within +-12 degrees keep each landscape
     small. Errors as in the sweep.
     """
-    from patterns.geometry import build, square
+    from patterns.geometry import build, mask_from_geometry, square
     from patterns.library import LIBRARY
-    from patterns.raster import mask_from_geometry
     from simulator.landscape import UM2_TO_M2, build_landscape
     from simulator.scene import PRESETS, Scene, TwistGrid, apply_preset, smallest_feature_um
     from simulator.testing import gradient_um2, overlap_um2

@@ -145,7 +145,7 @@ def make_chips(n: int, twists_deg: np.ndarray, kind: str = "exact") -> np.ndarra
         from shapely import affinity
         from shapely.geometry import box
 
-        from patterns.raster import rasterize
+        from patterns.geometry import rasterize
 
         h = chip_side(n) / 2
         sq = box(-h, -h, h, h)

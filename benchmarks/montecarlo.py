@@ -50,8 +50,7 @@ import numpy as np
 from _smoke import add_smoke_arg, smoke_out  # noqa: E402  (benchmarks/ is on sys.path)
 
 import simulator  # noqa: F401  (x64 on)
-from patterns.geometry import four_pad, square
-from patterns.raster import mask_from_geometry
+from patterns.geometry import four_pad, mask_from_geometry, square
 from simulator.batch import random_starts, run_batch
 from simulator.batch._montecarlo import _one
 from simulator.core import DEFAULT_CHUNK, DEFAULT_MAX_STEPS, METHODS

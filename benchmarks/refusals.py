@@ -51,10 +51,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from _smoke import add_smoke_arg, smoke_out, tee_stdout  # noqa: E402
 
-from patterns.errors import InputError  # noqa: E402
-from patterns.geometry import four_pad, square  # noqa: E402
-from patterns.mask import Mask  # noqa: E402
-from patterns.raster import mask_from_geometry  # noqa: E402
+from foundation import InputError  # noqa: E402
+from patterns.geometry import (  # noqa: E402
+    Mask,  # noqa: E402
+    four_pad,
+    mask_from_geometry,  # noqa: E402
+    square,
+)
 from simulator import Scene, build_landscape, simulate  # noqa: E402
 
 TARGETS_S = {
@@ -105,7 +108,7 @@ def hostile_files_seconds(repeats: int = 3, big: bool = True) -> float:
     ``big``: with the 50 MB scene file)."""
     import tempfile
 
-    from patterns.metadata import parse_png_params
+    from patterns import parse_png_params
     from simulator.scene import read_scene_file
 
     texts = {

@@ -260,7 +260,7 @@ def _report(out: dict, runs: dict, n: int) -> int:
         f"on {out['cpus']} cores"
     )
     res = Path(__file__).resolve().parent / "results" / "sweep.json"
-    from patterns.outputs import atomic_output
+    from foundation import atomic_output
 
     with atomic_output(res) as tmp:
         tmp.write_text(json.dumps(out, indent=1) + "\n")

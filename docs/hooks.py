@@ -11,7 +11,7 @@
   link there; a link to a file that does not exist is a warning, so ``mkdocs build
   --strict`` fails on it as on any broken link between pages.
 * The API reference. A package's face loads its names lazily from its ``__init__.pyi``
-  stub, so a page's ``::: simulator.PACKAGE`` (with no options of its own) gets the names
+  stub, so a page's ``::: PACKAGE`` (of simulator, patterns or foundation; no options of its own) gets the names
   of that stub, its ``__all__``, as the members to show. The docstrings render as
   Markdown; their Sphinx roles (``:func:`name```, ``:class:`~pkg.Name```) are shown as
   the plain code they name.
@@ -32,7 +32,7 @@ RESULTS = ROOT / "benchmarks" / "results"
 MARKER = re.compile(r"^<!-- table: ([\w-]+) -->$", re.M)
 LINK = re.compile(r"(\]\()([^)\s#]+)(#[^)\s]*)?(\))")
 REPO_PREFIX = "repo"
-API_BLOCK = re.compile(r"^::: (simulator(?:\.\w+)*)[ \t]*$(?!\n    )", re.M)
+API_BLOCK = re.compile(r"^::: ((?:simulator|patterns|foundation)(?:\.\w+)*)[ \t]*$(?!\n    )", re.M)
 ROLE = re.compile(r":(?:py:)?(?:func|mod|class|meth|data|attr|exc|obj):<code>(~?)([^<]*)</code>")
 
 log = logging.getLogger("mkdocs.hooks.selfalign")

@@ -14,9 +14,8 @@ from pathlib import Path
 
 from shapely.geometry import box
 
-from patterns.geometry import four_pad
-from patterns.io import write_mask
-from patterns.raster import mask_from_geometry
+from patterns import write_mask
+from patterns.geometry import four_pad, mask_from_geometry
 
 HERE = Path(__file__).resolve().parent
 

@@ -20,10 +20,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from patterns.errors import InputError
-from patterns.geometry import DEFECT_TYPES, build, design_record
-from patterns.mask import Mask
-from patterns.outputs import atomic_output
+from foundation import InputError, atomic_output
+from patterns.geometry import DEFECT_TYPES, Mask, build, design_record
 
 __all__ = ["LIBRARY", "LIBRARY_DIR", "MARGIN_UM", "UM_PER_PX", "build_library", "library_path"]
 
@@ -159,8 +157,8 @@ def build_library(out_dir: str | Path = LIBRARY_DIR, overview: bool = True) -> l
 
     Returns the index entries (file, design, parameters with units, scale, shape, areas).
     """
-    from patterns.io import write_mask
-    from patterns.raster import mask_from_geometry
+    from patterns._io import write_mask
+    from patterns.geometry import mask_from_geometry
 
     out = Path(out_dir)
     if not out.is_dir():

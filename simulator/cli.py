@@ -2,7 +2,7 @@
 
 Each command module defines ``register(subparsers)``, which adds its parser and sets
 ``func`` to a function ``run(args) -> int``. Every failure is one line on stderr:
-errors a user can fix (:class:`patterns.errors.InputError`, a full disk, memory) exit
+errors a user can fix (:class:`foundation.InputError`, a full disk, memory) exit
 with code 2; anything unexpected says "internal error", where its traceback was saved
 (``SELFALIGN_DEBUG=1`` prints it instead) and exits with code 1. SIGTERM and Ctrl-C
 leave no temporary file or directory behind (Ctrl-C unwinds; SIGTERM removes the
@@ -24,8 +24,7 @@ import threading
 import traceback
 import warnings
 
-from patterns.errors import InputError
-from patterns.hold import hold
+from foundation import InputError, hold
 
 #: Subcommands, in the order ``selfalign --help`` lists them.
 COMMANDS = (
@@ -145,7 +144,7 @@ def _boundary():
         # End at once: unwinding an exception raised at an arbitrary point (inside a lock,
         # a thread pool's shutdown, an XLA call) can hang. Temporaries are removed here;
         # os.write, not print: the main thread may be inside a write to stderr.
-        from patterns.outputs import remove_pending
+        from foundation import remove_pending
 
         remove_pending()
         os.write(2, b"selfalign: terminated (no partial output was kept)\n")
@@ -203,7 +202,7 @@ def main(argv: list[str] | None = None) -> int:
             parser = build_parser(argv[0] if argv else None)
             args = parser.parse_args(argv)
             name = args.command
-            from simulator.core import quiet_waits
+            from foundation import quiet_waits
 
             with quiet_waits(
                 bool(getattr(args, "quiet", False))

@@ -6,11 +6,17 @@ import math
 import numpy as np
 import pytest
 
-from patterns.errors import InputError
-from patterns.geometry import build, defect_type, four_pad, random_jagged, square
+from foundation import InputError
+from patterns.geometry import (
+    Mask,
+    build,
+    defect_type,
+    four_pad,
+    mask_from_geometry,
+    random_jagged,
+    square,
+)
 from patterns.library import LIBRARY
-from patterns.mask import Mask
-from patterns.raster import mask_from_geometry
 from simulator.landscape import UM2_TO_M2, build_landscape
 from simulator.scene import (
     KNOBS,
@@ -195,7 +201,7 @@ def test_a_scene_measures_the_feature_only_when_it_sets_the_pixel(monkeypatch, t
     """Outlining a pattern image is measured work: the scene of a 1 um/px image under the
     balanced or precise preset never outlines it (its pixel is 1 um/px whatever the
     feature); under the fast preset it does, and takes the pixel from its 50 um gap."""
-    from patterns.io import write_mask
+    from patterns import write_mask
     from simulator.scene import Scene, _accuracy
 
     calls = []
@@ -246,5 +252,5 @@ def test_smallest_feature_of_geometry_and_png():
     assert smallest_feature_um(Mask(png.data, 1.0)) == pytest.approx(
         100.0, abs=1.0
     )  # no geometry: outline
-    with pytest.raises(InputError, match="geometry or a patterns.mask.Mask"):
+    with pytest.raises(InputError, match="geometry or a patterns.geometry.Mask"):
         smallest_feature_um(np.ones((4, 4)))

@@ -22,8 +22,8 @@ import pytest
 from cli_helpers import listing, one_line_error, python_m  # noqa: F401  (tests/cli_helpers.py)
 from PIL import Image
 
+from foundation import MARKER
 from patterns.library import library_path
-from patterns.outputs import MARKER
 from simulator.cli import main
 
 SQUARE = str(library_path("square_200"))  # 200 um square pad at 1 um/px
@@ -628,7 +628,7 @@ def test_library_warning_is_one_line(monkeypatch, capsys):
 
 # ======================================================= 4. strict scenes (in Python too)
 def test_scene_from_toml_in_python_refuses_string_booleans(tmp_path):
-    from patterns.errors import InputError
+    from foundation import InputError
     from simulator.scene import Scene
 
     with pytest.raises(InputError, match="allow_repulsive"):
@@ -638,7 +638,7 @@ def test_scene_from_toml_in_python_refuses_string_booleans(tmp_path):
 
 
 def test_python_api_refuses_string_booleans():
-    from patterns.errors import InputError
+    from foundation import InputError
     from simulator.physics import Materials
     from simulator.scene import Effects
 
@@ -692,7 +692,7 @@ def test_equal_angles_with_allow_repulsive_print_no_nan(tmp_path, run_cli):
 
 
 def test_non_finite_result_is_refused_before_writing(tmp_path):
-    from patterns.errors import InputError
+    from foundation import InputError
     from simulator.commands._common import write_json
 
     with pytest.raises(InputError, match=r"a\.b\[1\] is nan"):
@@ -761,7 +761,7 @@ def test_json_onto_a_symlink_keeps_the_link(tmp_path, run_cli):
 def held_run(args: list[str], point: str, cwd: Path, env: dict | None = None) -> subprocess.Popen:
     """Start the CLI with ``SELFALIGN_HOLD_AT=point`` and return once it holds there.
 
-    The process announces the hold on stderr and waits for a signal (patterns/hold.py),
+    The process announces the hold on stderr and waits for a signal (foundation/_hold.py),
     so the test signals at a known stage of the run, however fast the machine is.
     """
     env = (env or os.environ) | {"SELFALIGN_HOLD_AT": point}

@@ -36,11 +36,17 @@ from PIL import Image
 from shapely import affinity
 from shapely.geometry import box
 
-from patterns.geometry import DESIGNS, REQUIRED, four_pad, random_jagged, square
-from patterns.io import write_mask
+from patterns import write_mask
+from patterns.geometry import (
+    DESIGNS,
+    REQUIRED,
+    Mask,
+    four_pad,
+    mask_from_geometry,
+    random_jagged,
+    square,
+)
 from patterns.library import library_path
-from patterns.mask import Mask
-from patterns.raster import mask_from_geometry
 from simulator.cli import build_parser, main
 from simulator.physics import Materials
 from simulator.scene import Effects, Scene, TwistGrid
@@ -817,8 +823,8 @@ def _parsers():
 
 def _code_defaults() -> dict[str, object]:
     """The code's default for each flag whose argparse default is None (resolved downstream)."""
+    from foundation import DEFAULT_BUDGET_CAP_MB, DEFAULT_MAX_IMAGE_MPX
     from patterns.layout import DEFAULT_MAX_POLYGONS, DEFAULT_UM_PER_PX
-    from patterns.resources import DEFAULT_BUDGET_CAP_MB, DEFAULT_MAX_IMAGE_MPX
     from simulator.batch import StartGrid, random_starts
     from simulator.core import DEFAULT_CHUNK, DEFAULT_MAX_STEPS, METHODS
     from simulator.design import DRAWS, PROFILE, TIME_SIGMA, TRIALS

@@ -11,10 +11,9 @@ import tomllib
 
 import pytest
 
-from patterns.geometry import four_pad, square
-from patterns.io import read_mask
+from patterns import read_mask
+from patterns.geometry import four_pad, mask_from_geometry, square
 from patterns.library import library_path
-from patterns.raster import mask_from_geometry
 from simulator.batch import auto_resolution
 from simulator.cli import build_parser, main
 from simulator.commands._common import scene_from_args

@@ -13,8 +13,8 @@ import json
 import numpy as np
 import pytest
 
-from patterns.errors import InputError
-from patterns.mask import Mask
+from foundation import InputError
+from patterns.geometry import Mask
 
 # One xdist group for the whole module (make test: pytest -n 2 --dist loadgroup): its tests
 # share scenes whose steppers take seconds to compile; on one worker each compiles once.
@@ -162,8 +162,8 @@ def _doc(tmp_path, **ff):
 
 
 def test_keep_in_wettable_and_keep_out_dry_in_every_output(tmp_path):
-    from patterns.io import read_mask
-    from patterns.raster import rasterize
+    from patterns import read_mask
+    from patterns.geometry import rasterize
     from simulator.design import freeform, load_freeform, read_gds_polygons
 
     spec = load_freeform(_doc(tmp_path, iterations=25, learning_rate=0.5), base=tmp_path)
@@ -374,7 +374,7 @@ BAD = {
 
 @pytest.mark.parametrize("case", sorted(BAD))
 def test_bad_design_files_are_one_line(case, tmp_path, run_cli):
-    from patterns.io import write_mask
+    from patterns import write_mask
 
     write_mask(tmp_path / "small.png", Mask(np.zeros((10, 10)), 1.0))
     change, needle = BAD[case]

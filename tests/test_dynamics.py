@@ -20,9 +20,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from patterns.errors import InputError
-from patterns.geometry import square
-from patterns.raster import mask_from_geometry
+from foundation import InputError
+from patterns.geometry import mask_from_geometry, square
 from simulator.landscape import build_landscape
 from simulator.motion import (
     CONVERGED,

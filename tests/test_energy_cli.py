@@ -6,9 +6,8 @@ import re
 import numpy as np
 import pytest
 
-from patterns.geometry import four_pad, square
-from patterns.io import write_mask
-from patterns.raster import mask_from_geometry
+from patterns import write_mask
+from patterns.geometry import four_pad, mask_from_geometry, square
 from simulator.cli import main
 from simulator.physics import Materials
 

@@ -7,10 +7,9 @@ import imageio.v3 as iio
 import numpy as np
 import pytest
 
-from patterns.geometry import four_pad
-from patterns.io import write_mask
+from patterns import write_mask
+from patterns.geometry import four_pad, mask_from_geometry
 from patterns.library import library_path
-from patterns.raster import mask_from_geometry
 from simulator.cli import main
 
 # One xdist group for the whole module (make test: pytest -n 2 --dist loadgroup): its tests

@@ -13,7 +13,7 @@ import json
 import numpy as np
 import pytest
 
-from patterns.mask import Mask
+from patterns.geometry import Mask
 from simulator.batch import assess, run_batch
 from simulator.core import OUTCOMES
 from simulator.landscape import build_footprint_planes

@@ -148,7 +148,7 @@ def test_auto_takes_the_path_engine_for_a_greedy_dispense_run():
     assert footprint_engine(s, (100.0, 0.0, 0.0), "greedy", "auto") == "path"
     assert footprint_engine(s, (100.0, 0.0, 0.0), "greedy", "fft") == "fft"
     assert footprint_engine(s, (100.0, 0.0, 0.0), "inertial", "auto") == "fft"
-    from patterns.errors import InputError
+    from foundation import InputError
 
     with pytest.raises(InputError, match="--engine path runs greedy and gradient"):
         footprint_engine(s, (100.0, 0.0, 0.0), "inertial", "path")
@@ -178,7 +178,7 @@ def test_cli_dispense_run_on_the_path_engine(run_cli, tmp_path):
 def test_path_footprint_over_its_budget_is_refused(run_cli, tmp_path):
     """A 4000 um chip's stateful path run is priced before any rotator is made: over the
     budget, one line naming the rotators and the fix."""
-    from patterns.errors import InputError
+    from foundation import InputError
     from simulator.landscape import footprint_path_bytes
     from simulator.motion import require_footprint_fits
     from simulator.physics import Liquid

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from patterns.mask import Mask
+from patterns.geometry import Mask
 from simulator.landscape import build_footprint_planes, build_landscape, pad_labels
 from simulator.landscape._build import scene_extent
 from simulator.landscape._correlator import NOISE_FACTOR

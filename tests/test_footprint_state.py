@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from patterns.errors import InputError
-from patterns.mask import Mask
+from foundation import InputError
+from patterns.geometry import Mask
 from simulator.landscape import build_footprint_planes, build_landscape, pad_labels
 from simulator.liquid import dispensed_wet
 from simulator.motion import simulate

@@ -23,8 +23,7 @@ import numpy as np
 import pytest
 from shapely.geometry import box
 
-from patterns.mask import Mask
-from patterns.raster import mask_from_geometry
+from patterns.geometry import Mask, mask_from_geometry
 from simulator.motion import (
     MOREAU_TOL,
     OUTCOMES,

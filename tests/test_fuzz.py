@@ -22,8 +22,8 @@ import numpy as np
 from hypothesis import HealthCheck, given, settings, strategies as st
 from PIL import Image, PngImagePlugin
 
-from patterns.errors import InputError
-from patterns.io import read_mask
+from foundation import InputError
+from patterns import read_mask
 from simulator.cli import main
 
 MEMORY_LIMIT = 2**30

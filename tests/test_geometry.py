@@ -8,7 +8,7 @@ import shapely
 from shapely import affinity
 from shapely.geometry import Point
 
-from patterns.errors import InputError
+from foundation import InputError
 from patterns.geometry import (
     DEFECT_TYPES,
     DESIGNS,

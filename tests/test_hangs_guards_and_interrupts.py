@@ -28,7 +28,7 @@ import numpy as np
 import pytest
 from cli_helpers import listing, one_line_error, python_m  # noqa: F401  (tests/cli_helpers.py)
 
-from patterns.errors import InputError
+from foundation import InputError
 from patterns.library import library_path
 
 SQUARE = str(library_path("square_200"))  # 200 um square pad at 1 um/px
@@ -263,7 +263,7 @@ def test_limit_flags_refuse_non_finite_values(flag, value, tmp_path):
 
 
 def test_image_limit_refuses_nan_in_the_api():
-    from patterns.resources import price_image
+    from foundation import price_image
 
     for bad in (float("nan"), float("inf"), 0.0):
         with pytest.raises(InputError, match="finite number of megapixels"):
@@ -366,7 +366,7 @@ def test_critical_volume_size_1e300_is_refused(run_cli):
 )
 def test_output_in_a_directory_that_takes_no_files_is_refused_before_any_work(args, run_cli):
     rc, out, err = run_cli(args)
-    # The message comes from the output check made before any work (patterns.outputs.probe_writable);
+    # The message comes from the output check made before any work (probe_writable, in foundation);
     # after the work, the same failure used to be an internal error.
     one_line_error(rc, err, "cannot write in directory /proc", "choose another path")
     assert out == ""
@@ -375,7 +375,7 @@ def test_output_in_a_directory_that_takes_no_files_is_refused_before_any_work(ar
 # ============================================================== 5. interruptions are quiet and truthful
 def _interrupted_sweep(tmp_path: Path, sig: signal.Signals) -> tuple[int, list[str], Path]:
     """A sweep of 24 points on one worker, signalled while it holds after its first point is
-    journalled (``SELFALIGN_HOLD_AT=sweep-point:1``, patterns/hold.py); (rc, stderr lines, out).
+    journalled (``SELFALIGN_HOLD_AT=sweep-point:1``, foundation/_hold.py); (rc, stderr lines, out).
     The hold line is read from the pipe as it comes, so nothing waits on a clock."""
     out = tmp_path / "out"
     # the example's points, stateless (each point's footprint protocols would only make it slower)
@@ -470,7 +470,7 @@ def test_truncated_oasis_file_is_refused(tmp_path, run_cli):
 def test_oasis_completeness_check_accepts_validated_files_and_refuses_a_changed_byte(tmp_path):
     import gdstk
 
-    from patterns.layout_gds import _oasis_incomplete
+    from patterns.layout._gds import _oasis_incomplete
 
     lib = gdstk.Library(unit=1e-6, precision=1e-9)
     lib.new_cell("TOP").add(gdstk.rectangle((0, 0), (5, 5)))
@@ -561,8 +561,8 @@ def test_critical_volume_of_a_1e300_um_pattern_is_refused_without_a_numpy_warnin
 
 
 def test_sweep_workers_are_capped_by_cores_and_memory_and_say_so(monkeypatch, tmp_path, capsys):
+    import foundation as resources  # the face worker_cap reads the memory from
     import simulator.sweep._run as sw
-    from patterns import resources
     from simulator.sweep import WORKER_MEMORY_MB, worker_cap
 
     monkeypatch.setattr(os, "cpu_count", lambda: 2)

@@ -10,9 +10,8 @@ import numpy as np
 import pytest
 from shapely.geometry import box
 
-from patterns.errors import InputError
-from patterns.mask import Mask
-from patterns.raster import mask_from_geometry
+from foundation import InputError
+from patterns.geometry import Mask, mask_from_geometry
 from simulator.motion import simulate
 from simulator.physics import (
     Liquid,

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from patterns.errors import InputError
-from patterns.io import TEXT_KEY, read_mask, write_mask
-from patterns.mask import Mask
+from foundation import InputError
+from patterns import TEXT_KEY, read_mask, write_mask
+from patterns.geometry import Mask
 
 
 def chunks(path):

@@ -1,6 +1,6 @@
 """The landscape engine against docs/physics.md section 12 (C1-C8, C11) and exact polygon overlap.
 
-Rasters are exact area coverage (patterns.raster), so shapes whose edges lie on pixel
+Rasters are exact area coverage (patterns.geometry), so shapes whose edges lie on pixel
 boundaries give integer overlaps up to FFT round-off; rotated chips differ from the
 exact polygon overlap by an amount bounded by their perimeter (stated per test).
 """
@@ -12,10 +12,8 @@ import pytest
 import shapely
 from shapely import affinity
 
-from patterns.errors import InputError
-from patterns.geometry import defect_type, four_pad, square
-from patterns.mask import Mask
-from patterns.raster import mask_from_geometry
+from foundation import InputError
+from patterns.geometry import Mask, defect_type, four_pad, mask_from_geometry, square
 from simulator.landscape import (
     Correlator,
     Window,

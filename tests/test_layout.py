@@ -21,7 +21,7 @@ import pytest
 import shapely
 from shapely.geometry import box
 
-from patterns.errors import InputError
+from foundation import InputError
 from patterns.geometry import DESIGNS, build
 from patterns.layout import (
     DXF_UNITS,

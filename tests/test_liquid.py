@@ -22,11 +22,9 @@ import math
 import numpy as np
 import pytest
 
-from patterns.geometry import four_pad
-from patterns.io import write_mask
+from patterns import write_mask
+from patterns.geometry import Mask, four_pad, mask_from_geometry
 from patterns.library import library_path
-from patterns.mask import Mask
-from patterns.raster import mask_from_geometry
 from simulator import liquid
 from simulator.cli import main
 from simulator.liquid import (
@@ -590,7 +588,7 @@ def test_critical_volume_bad_input(run_cli, argv, words):
 
 # ------------------------------------------------------------------ the pattern's shape
 def test_four_pad_is_recognised_from_the_pixels(tmp_path):
-    from patterns.io import read_mask
+    from patterns import read_mask
 
     assert liquid.four_pad_geometry(read_mask(library_path("four_pad_730_50"))) == pytest.approx(
         (730, 50), abs=1

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from patterns.errors import InputError
+from foundation import InputError
 from simulator.liquid import (
     critical_volume_nl,
     dimensionless_volume,

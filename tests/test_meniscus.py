@@ -12,8 +12,8 @@ import pytest
 from shapely import affinity
 from shapely.geometry import Polygon, box
 
-from patterns.errors import InputError
-from patterns.raster import mask_from_geometry
+from foundation import InputError
+from patterns.geometry import mask_from_geometry
 from simulator.landscape import build_landscape, refine_minimum, stiffness
 from simulator.physics import (
     Liquid,

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 from shapely.geometry import box
 
-from patterns.raster import mask_from_geometry
+from patterns.geometry import mask_from_geometry
 from simulator.landscape import build_landscape
 from simulator.physics import Liquid, Materials
 from simulator.scene import Effects, Scene, TwistGrid

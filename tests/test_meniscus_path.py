@@ -10,9 +10,8 @@ import numpy as np
 import pytest
 from shapely.geometry import box
 
-from patterns.geometry import four_pad
+from patterns.geometry import four_pad, mask_from_geometry
 from patterns.library import library_path
-from patterns.raster import mask_from_geometry
 from simulator.landscape import PathEnergy, build_landscape, global_minimum, minimum_box
 from simulator.landscape._pathband import footprint_band
 from simulator.landscape._rotation import ChipRotator
@@ -269,7 +268,7 @@ def test_the_bands_threads_do_not_change_it(monkeypatch):
 def test_a_long_path_run_shows_its_boxes(monkeypatch, capsys):
     """A counter of the boxes with the chip's pose, on stderr, once the run has taken the
     waiting threshold (0 here); nothing with the waits silenced (``--quiet``)."""
-    from simulator.core import WAIT_ENV, quiet_waits
+    from foundation import WAIT_ENV, quiet_waits
 
     s = library_scene("square_200", 200, 5.0, 0.9)
     monkeypatch.setenv(WAIT_ENV, "0")

@@ -8,9 +8,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from patterns.geometry import four_pad, square
-from patterns.io import write_mask
-from patterns.raster import mask_from_geometry
+from patterns import write_mask
+from patterns.geometry import four_pad, mask_from_geometry, square
 from simulator.batch import (
     BatchResult,
     StartGrid,
@@ -339,7 +338,7 @@ def test_cli_bad_input_one_line_exit_2_no_files(fp_png, tmp_path, capsys, extra,
 
 
 def test_cli_failure_while_writing_leaves_no_files(fp_png, tmp_path, monkeypatch, capsys):
-    from patterns.errors import InputError
+    from foundation import InputError
     from simulator.commands import montecarlo as cmd
 
     def broken(*a, **k):

@@ -10,10 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from patterns.errors import InputError
-from patterns.geometry import four_pad, square
-from patterns.io import write_mask
-from patterns.raster import mask_from_geometry
+from foundation import InputError
+from patterns import write_mask
+from patterns.geometry import four_pad, mask_from_geometry, square
 from simulator.batch import assess, random_starts, run_batch, summarize, time_histogram, time_stats
 from simulator.cli import main
 from simulator.landscape import build_landscape

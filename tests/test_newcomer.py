@@ -23,10 +23,10 @@ import pytest
 from cli_helpers import one_line_error
 from PIL import Image
 
-from patterns.errors import InputError
-from patterns.io import read_mask
+from foundation import InputError
+from patterns import read_mask
+from patterns.geometry import Mask
 from patterns.library import library_path
-from patterns.mask import Mask
 
 ROOT = Path(__file__).resolve().parents[1]
 FOURPAD = library_path("four_pad_730_50")  # 750 x 750 px at 1 um/px, pads 340 um, gap 50 um
@@ -135,7 +135,7 @@ def test_all_white_image_is_warned_of(run_cli, tmp_path):
 
 
 def test_library_patterns_are_not_warned_of():
-    from patterns.polarity import polarity_warning
+    from patterns import polarity_warning
 
     for name in ("four_pad_730_50", "four_pad_710_100", "defect_C_outward", "constant_jagged_a1p7"):
         assert polarity_warning(read_mask(library_path(name))) is None, name
@@ -292,7 +292,7 @@ def test_a_dynamic_run_says_each_stage_after_its_landscape(run_cli, monkeypatch)
     # The 730 um four-pad at 2 um/px (345 M poses): after its landscape, the floor, the
     # stepper's field, the compile and the end's classification each took 3-16 s on a loaded
     # machine, all under one line. Each says what it does now, in the order it runs.
-    import simulator.core._progress as progress
+    import foundation._progress as progress
 
     monkeypatch.setenv("SELFALIGN_WAIT_S", "0")  # every waiting line shows
     monkeypatch.setattr(progress, "_shown", set())

@@ -19,6 +19,8 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "simulator"
+#: The three packages, from the ground floor up: each stands only on those before it.
+FLOORS = ("foundation", "patterns", "simulator")
 #: The subpackages by concept, in the order data flows through them (physics and render beside).
 SUBPACKAGES = (
     "core",
@@ -38,7 +40,7 @@ SUBPACKAGES = (
 
 def _modules() -> dict[str, Path]:
     out = {}
-    for path in sorted(PACKAGE.rglob("*.py")):
+    for path in sorted(p for floor in FLOORS for p in (ROOT / floor).rglob("*.py")):
         parts = path.relative_to(ROOT).with_suffix("").parts
         name = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
         out[name] = path
@@ -57,7 +59,7 @@ def _type_checking_nodes(tree: ast.AST) -> set[int]:
 
 
 def _imports(name: str) -> set[str]:
-    """The simulator modules ``name`` imports (its own package's ``__init__`` included)."""
+    """The project's modules ``name`` imports (its own package's ``__init__`` included)."""
     path = MODULES[name]
     source = path.read_text()
     stub = path.with_suffix(".pyi")
@@ -145,22 +147,68 @@ def test_each_package_keeps_its_internals_in_underscore_modules(package):
     assert all(m.startswith("_") for m in modules), modules
 
 
+def _package(name: str) -> str:
+    return name if MODULES[name].name == "__init__.py" else name.rpartition(".")[0]
+
+
 def test_no_module_reaches_into_another_packages_internals():
     """Outside its package, a module imports a package's names from the package (its
     ``__init__``), never from its underscore modules."""
     crossing = []
     for name in MODULES:
-        own = ".".join(name.split(".")[:2])
         for target in _imports(name):
-            parts = target.split(".")
-            if len(parts) >= 3 and parts[2].startswith("_") and ".".join(parts[:2]) != own:
+            leaf = target.rpartition(".")[2]
+            if leaf.startswith("_") and _package(target) != _package(name):
                 crossing.append(f"{name} -> {target}")
     assert crossing == []
 
 
-@pytest.mark.parametrize("package", [p for p in SUBPACKAGES if p != "commands"])
+def test_each_floor_stands_only_on_the_floors_below():
+    """``foundation`` imports nothing of the project, ``patterns`` only ``foundation``."""
+    upward = [
+        f"{name} -> {target}"
+        for name in MODULES
+        for target in _imports(name)
+        if FLOORS.index(target.split(".")[0]) > FLOORS.index(name.split(".")[0])
+    ]
+    assert upward == []
+
+
+def test_the_ground_floors_are_their_faces_and_families():
+    def tree(folder: Path) -> list[str]:
+        return sorted(
+            p.name
+            for p in folder.iterdir()
+            if p.suffix == ".py" or (p.is_dir() and (p / "__init__.py").exists())
+        )
+
+    assert all(m == "__init__.py" or m.startswith("_") for m in tree(ROOT / "foundation"))
+    # patterns: its face, the geometry and layout families, and the library's builder
+    # (``python -m patterns.library``, next to the bundled PNGs in patterns/library/)
+    assert tree(ROOT / "patterns") == sorted(
+        [
+            "__init__.py",
+            "_io.py",
+            "_metadata.py",
+            "_polarity.py",
+            "geometry",
+            "layout",
+            "library.py",
+        ]
+    )
+    for family in ("geometry", "layout"):
+        assert all(
+            m == "__init__.py" or m.startswith("_") for m in tree(ROOT / "patterns" / family)
+        )
+
+
+FACES = [f"simulator.{p}" for p in SUBPACKAGES if p != "commands"]
+FACES += ["foundation", "patterns", "patterns.geometry", "patterns.layout"]
+
+
+@pytest.mark.parametrize("package", FACES)
 def test_each_package_face_exports_what_it_imports(package):
-    module = importlib.import_module(f"simulator.{package}")
+    module = importlib.import_module(package)
     assert module.__doc__ and module.__all__ == sorted(module.__all__)
     for name in module.__all__:
         assert getattr(module, name) is not None, name

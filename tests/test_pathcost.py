@@ -9,9 +9,7 @@ import pytest
 from shapely import affinity
 from shapely.geometry import Point, box
 
-from patterns.geometry import four_pad, square
-from patterns.mask import Mask
-from patterns.raster import coverage_steps, mask_from_geometry, rasterize
+from patterns.geometry import Mask, coverage_steps, four_pad, mask_from_geometry, rasterize, square
 from simulator.landscape import PathEnergy, build_landscape, path_engine_supported
 from simulator.motion import choose_engine, simulate
 from simulator.physics import Liquid

@@ -6,8 +6,8 @@ import struct
 import pytest
 from PIL import Image
 
+from patterns import read_mask
 from patterns.geometry import DESIGNS, build
-from patterns.io import read_mask
 
 # One xdist group for the whole module (make test: pytest -n 2 --dist loadgroup): its tests
 # share scenes whose steppers take seconds to compile; on one worker each compiles once.

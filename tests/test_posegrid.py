@@ -11,9 +11,8 @@ import sys
 import numpy as np
 import pytest
 
-from patterns.errors import InputError
-from patterns.geometry import four_pad, square
-from patterns.raster import mask_from_geometry
+from foundation import InputError
+from patterns.geometry import four_pad, mask_from_geometry, square
 from simulator.landscape import PoseGrid, build_landscape, consecutive_runs, plan
 from simulator.motion import field_and_grid
 from simulator.scene import Scene, TwistAxis, TwistGrid

@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 from cli_helpers import one_line_error
 
-from simulator.core import WAIT_ENV, WAIT_S, quiet_waits, shows_wait, wait_threshold_s
+from foundation import WAIT_ENV, WAIT_S, quiet_waits, shows_wait, wait_threshold_s
 from simulator.physics import Liquid
 from simulator.scene import Effects, Scene
 
@@ -540,7 +540,7 @@ def test_the_transform_sizes_are_scipys_without_importing_it():
 def test_memory_figures_read_as_numbers():
     """A refusal's figures: three significant digits below 1,000 of a unit, whole units with
     thousands separators above (a 1,000 MB budget is not '1e+03 MB')."""
-    from patterns.resources import fmt_bytes
+    from foundation import fmt_bytes
 
     mb = 2**20
     assert [fmt_bytes(v * mb) for v in (1000, 999.4, 340, 1023.9)] == [

@@ -7,8 +7,8 @@ from hypothesis import assume, given, settings, strategies as st
 from shapely import affinity
 from shapely.geometry import Point, Polygon, box
 
-from patterns.errors import InputError
-from patterns.raster import canvas_shape, mask_from_geometry, rasterize, to_pixel_frame
+from foundation import InputError
+from patterns.geometry import canvas_shape, mask_from_geometry, rasterize, to_pixel_frame
 
 
 def shapely_coverage(geometry, um_per_px, shape):
@@ -116,7 +116,7 @@ def test_a_rectangle_is_the_product_of_its_covered_rows_and_columns(um_per_px):
     """An axis-aligned rectangle (every ``--chip-size`` chip) is rasterized as the product of
     the lengths each row and column covers: the edge accumulation's values to round-off,
     shapely's per-pixel areas, and exactly 0 and 1 when its edges lie on the pixel grid."""
-    from patterns.raster import _coverage, _rectangle
+    from patterns.geometry._raster import _coverage, _rectangle
 
     rng = np.random.default_rng(7)
     for _ in range(20):
@@ -139,7 +139,7 @@ def test_a_rectangle_is_the_product_of_its_covered_rows_and_columns(um_per_px):
 def test_only_a_rectangle_takes_the_product():
     """A rotated box, a box with a hole, two boxes, an L and a triangle on three corners of
     its bounding box are not rectangles: they go through the edge accumulation."""
-    from patterns.raster import _rectangle
+    from patterns.geometry._raster import _rectangle
 
     not_rectangles = [
         affinity.rotate(box(0, 0, 4, 4), 10),

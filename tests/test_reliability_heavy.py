@@ -3,7 +3,7 @@
 
 Bounds on time are generous ceilings over a cost the test also checks by counting (the
 outline's calls into shapely do not grow with the pads); a process that must be stopped at
-a known point holds there (``SELFALIGN_HOLD_AT``, patterns/hold.py) and is signalled once
+a known point holds there (``SELFALIGN_HOLD_AT``, foundation/_hold.py) and is signalled once
 its hold line is read from the pipe, so nothing waits on a clock.
 """
 
@@ -24,8 +24,8 @@ import shapely
 from cli_helpers import one_line_error, python_m  # tests/cli_helpers.py
 from shapely.geometry import Polygon
 
-from patterns.errors import InputError
-from patterns.mask import Mask
+from foundation import InputError
+from patterns.geometry import Mask
 
 
 # ============================================================== 2. the outline of many tiny pads
@@ -373,7 +373,7 @@ def test_search_leaves_no_lock_and_a_resume_removes_a_killed_runs_temporaries(tm
     assert rc == 0, err
     assert not (out / ".search.lock").exists()  # it was left behind, empty
     # what a search killed in its report phase (SIGKILL: no handler runs) leaves: the atomic
-    # writes' temporaries, named as patterns.outputs names them
+    # writes' temporaries, named as foundation names them
     dead = [
         out / ".history.png.k2j4_x9q.png",
         out / ".report.html.a1b2c3d4.html",
@@ -440,7 +440,7 @@ capture_grid = 5
 
 
 def test_workers_are_capped_by_their_priced_peaks_together(monkeypatch):
-    from patterns.resources import MB
+    from foundation import MB
     from simulator.sweep import worker_cap
 
     monkeypatch.setattr(os, "cpu_count", lambda: 8)

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from cli_helpers import listing, one_line_error  # tests/cli_helpers.py
 
-from patterns.errors import InputError
+from foundation import InputError
 
 # One xdist group for the whole module (make test: pytest -n 2 --dist loadgroup): its tests
 # share scenes whose steppers take seconds to compile; on one worker each compiles once.
@@ -105,8 +105,7 @@ def test_dxf_insert_with_a_normal_scale_still_reads(tmp_path):
 # ------------------------------------------------------------------ item 3: the Python API's checks
 @pytest.fixture(scope="module")
 def small_scene():
-    from patterns.geometry import square
-    from patterns.raster import mask_from_geometry
+    from patterns.geometry import mask_from_geometry, square
     from simulator.scene import Scene
 
     return Scene(
@@ -145,8 +144,7 @@ def test_build_landscape_still_takes_whole_numbers_of_any_type(small_scene):
 
 @pytest.mark.parametrize("size", [(1, 2, 3), (100,), [[1, 2]], True, "100x50", (100, None)])
 def test_scene_chip_size_of_the_wrong_shape_is_an_input_error(size):
-    from patterns.geometry import square
-    from patterns.raster import mask_from_geometry
+    from patterns.geometry import mask_from_geometry, square
     from simulator.scene import Scene
 
     with pytest.raises(InputError, match="chip"):
@@ -154,8 +152,7 @@ def test_scene_chip_size_of_the_wrong_shape_is_an_input_error(size):
 
 
 def test_scene_chip_size_of_one_or_two_numbers_still_makes_the_chip():
-    from patterns.geometry import square
-    from patterns.raster import mask_from_geometry
+    from patterns.geometry import mask_from_geometry, square
     from simulator.scene import Scene
 
     pattern = mask_from_geometry(square(100), 5)
@@ -166,7 +163,7 @@ def test_scene_chip_size_of_one_or_two_numbers_still_makes_the_chip():
 
 @pytest.mark.parametrize("data", [np.full((4, 4), 0.5 + 0.5j), [[0.5 + 0j, 1.0]]])
 def test_mask_refuses_complex_values(data, recwarn):
-    from patterns.mask import Mask
+    from patterns.geometry import Mask
 
     with pytest.raises(InputError, match="real-valued image, got complex values"):
         Mask(data, 1.0)
@@ -174,7 +171,7 @@ def test_mask_refuses_complex_values(data, recwarn):
 
 
 def test_mask_refuses_text_and_takes_real_numbers():
-    from patterns.mask import Mask
+    from patterns.geometry import Mask
 
     with pytest.raises(InputError, match="image of numbers"):
         Mask(np.array([["a", "b"]]), 1.0)
@@ -186,9 +183,8 @@ SQUARE_ARGS = ["--chip-size", "100", "--resolution", "5", "--at", "0,0,0"]
 
 
 def _square_png(tmp_path: Path) -> Path:
-    from patterns.geometry import square
-    from patterns.io import write_mask
-    from patterns.raster import mask_from_geometry
+    from patterns import write_mask
+    from patterns.geometry import mask_from_geometry, square
 
     return write_mask(tmp_path / "square.png", mask_from_geometry(square(100), 5))
 

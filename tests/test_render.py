@@ -8,13 +8,10 @@ import numpy as np
 import pytest
 from matplotlib.colors import to_rgb
 
-from patterns.errors import InputError
-from patterns.geometry import build
+from foundation import InputError, announce_once
+from patterns.geometry import Mask, build, mask_from_geometry
 from patterns.library import library_path
-from patterns.mask import Mask
-from patterns.raster import mask_from_geometry
 from simulator.cli import main
-from simulator.core import announce_once
 from simulator.landscape import build_landscape
 from simulator.motion import Trajectory, simulate
 from simulator.render import (

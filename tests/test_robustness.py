@@ -66,10 +66,8 @@ from hypothesis import given, settings, strategies as st
 from shapely import affinity
 from shapely.geometry import Polygon
 
-from patterns.errors import InputError
-from patterns.geometry import defect, four_pad, rectangle, square
-from patterns.mask import Mask
-from patterns.raster import mask_from_geometry
+from foundation import InputError
+from patterns.geometry import Mask, defect, four_pad, mask_from_geometry, rectangle, square
 from simulator.core import DEFAULT_MAX_STEPS
 from simulator.landscape import build_landscape
 from simulator.motion import (
@@ -818,7 +816,7 @@ import json, time
 t0 = time.perf_counter()
 import simulator
 from patterns.geometry import four_pad, square
-from patterns.raster import mask_from_geometry
+from patterns.geometry import mask_from_geometry
 from simulator.scene import Scene
 from simulator.motion import simulate
 s = Scene(pattern=mask_from_geometry(four_pad(4096, 96), 1.0), chip=mask_from_geometry(square(4000), 1.0))

@@ -3,11 +3,9 @@
 import numpy as np
 import pytest
 
-from patterns.errors import InputError
-from patterns.geometry import four_pad, square
-from patterns.io import write_mask
-from patterns.mask import Mask
-from patterns.raster import mask_from_geometry
+from foundation import InputError
+from patterns import write_mask
+from patterns.geometry import Mask, four_pad, mask_from_geometry, square
 from simulator.scene import Scene, TwistGrid
 
 # One xdist group for the whole module (make test: pytest -n 2 --dist loadgroup): its tests

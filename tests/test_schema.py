@@ -1,4 +1,4 @@
-"""The scene-file schema (simulator.scene) and the PNG metadata note (patterns.metadata).
+"""The scene-file schema (simulator.scene) and the PNG metadata note (patterns).
 
 Regression tests named after the bugs they pin: string booleans read as True, unknown
 [simulate] keys ignored, wrong types, and files that crashed or hung the TOML reader
@@ -19,8 +19,8 @@ import pytest
 from hypothesis import given, settings, strategies as st
 from PIL import Image
 
-from patterns.errors import InputError
-from patterns.metadata import (
+from foundation import InputError
+from patterns import (
     MAX_PARAMS_CHARS,
     MAX_PARAMS_DEPTH,
     MAX_PARAMS_ITEMS,
@@ -658,9 +658,8 @@ def test_library_png_notes_validate(path):
 
 
 def test_note_written_by_write_mask_reads_back(tmp_path):
-    from patterns.geometry import design_record, four_pad
-    from patterns.io import write_mask
-    from patterns.raster import mask_from_geometry
+    from patterns import write_mask
+    from patterns.geometry import design_record, four_pad, mask_from_geometry
 
     record = design_record("four-pad", size=200, gap=20)
     path = write_mask(

@@ -14,8 +14,7 @@ import pandas as pd
 import pytest
 
 import simulator
-from patterns.geometry import four_pad
-from patterns.raster import mask_from_geometry
+from patterns.geometry import four_pad, mask_from_geometry
 from simulator.batch import assess
 from simulator.cli import main
 from simulator.scene import Scene
@@ -186,7 +185,7 @@ def test_killed_run_resumes_to_the_full_table(tmp_path, cluster):
     )
     (tmp_path / "s.toml").write_text(spec)
     out = tmp_path / "out"
-    # The run holds once its second point is journalled (patterns/hold.py); it is killed there.
+    # The run holds once its second point is journalled (foundation/_hold.py); it is killed there.
     env = os.environ | {"PYTHONWARNINGS": "ignore", "SELFALIGN_HOLD_AT": "sweep-point:2"}
     proc = subprocess.Popen(
         [
@@ -240,7 +239,7 @@ def test_a_rerun_removes_a_killed_sweeps_leftovers_and_leaves_no_lock(tiny, tmp_
     out = tmp_path / "out"
     shutil.copytree(d / "out", out)
     # What a sweep killed outright (SIGKILL: no handler runs) while it wrote leaves: its lock
-    # and its atomic writes' temporaries, named as patterns.outputs names them.
+    # and its atomic writes' temporaries, named as foundation names them.
     (out / ".sweep.lock").touch()
     dead = [
         out / ".results.parquet.k2j4_x9q.parquet",

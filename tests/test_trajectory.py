@@ -3,8 +3,7 @@
 import numpy as np
 import pytest
 
-from patterns.geometry import four_pad, square
-from patterns.raster import mask_from_geometry
+from patterns.geometry import four_pad, mask_from_geometry, square
 from simulator.landscape import build_landscape
 from simulator.motion import GREEDY_MOVES, simulate
 from simulator.scene import Scene, TwistGrid

@@ -3,7 +3,7 @@
 
 A 200 um square chip face sits over a 200 um square pad that carries ONE triangular edge
 defect (docs/physics.md §10, types A, B, C on the right edge, inward or outward; the geometry
-is ``patterns.defects.defect_type``, so it is exactly the project's).  Liquid of volume
+is ``patterns.geometry.defect_type``, so it is exactly the project's).  Liquid of volume
 ``V`` fills the gap.  Both contact lines are **pinned**: the liquid is held at the pad's
 boundary polygon (defect included) and at the chip's four edges.  Only the liquid-air
 area counts, ``E = gamma * area`` with ``gamma = 0.072 N/m`` (lengths in um, so
@@ -34,7 +34,7 @@ for the 12 defect cases plus the two defect-free sanity cases (4 refinements, ab
 17 min on one core).  Each finished case is written to the CSV at once (atomically);
 cases already in the output file are skipped, so an interrupted run resumes.  See
 validation/DEFECTS.md for the set-up, the convergence evidence and the results.  Standard library plus numpy (and the
-project's ``patterns.defects``).
+project's ``patterns.geometry``).
 """
 
 from __future__ import annotations
@@ -60,7 +60,7 @@ ROOT = HERE.parent
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from patterns.defects import DEFECT_TYPES, defect_type  # noqa: E402
+from patterns.geometry import DEFECT_TYPES, defect_type  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from evolver import EvolverError, find_evolver, write_csv_atomic  # noqa: E402,F401  (the pinned-bridge harness's I/O)

@@ -39,17 +39,12 @@ from dataclasses import replace
 
 import numpy as np
 
-from patterns.mask import footprint_um
-from patterns.outputs import check_output_dir, output_directory
+from foundation import check_output_dir, output_directory, require_finite, wait_line
+from patterns.geometry import footprint_um
 from simulator.batch._montecarlo import run_batch
 from simulator.batch._starts import StartGrid, random_starts
 from simulator.batch._stats import capture_map, summarize, time_histogram, time_stats
-from simulator.core import (
-    AUTO_LANDSCAPE_MB,
-    METHODS,
-    require_finite,
-    wait_line,
-)
+from simulator.core import AUTO_LANDSCAPE_MB, METHODS
 from simulator.landscape import build_landscape, estimate_bytes, require_landscape_fits
 from simulator.physics import regime_warning
 from simulator.render import (
@@ -174,7 +169,7 @@ def evaluate(
     ``liquid_warnings`` (:func:`simulator.liquid.scene_warnings`) go into the summary
     (``liquid_warnings``, a list of one-line strings) and the report.
 
-    ``out_dir`` is created atomically (see :func:`patterns.outputs.output_directory`): it
+    ``out_dir`` is created atomically (see :func:`foundation.output_directory`): it
     must not exist, or be an empty directory, or with ``force`` hold nothing but a
     previous selfalign output. ``inputs`` (files the scene was read from) are never
     inside it. A failure leaves ``out_dir`` as it was.
@@ -254,7 +249,7 @@ def assess(
     time; None when no start aligned) to ``capture`` and ``yield``, and
     ``time_to_align.png`` (the yield starts' histogram) to ``pictures``.
     """
-    from patterns.errors import require
+    from foundation import require
 
     require(method in METHODS, f"method must be one of {', '.join(METHODS)}, got {method!r}")
     s = scene.um_per_px

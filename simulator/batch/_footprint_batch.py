@@ -24,7 +24,7 @@ import time
 
 import numpy as np
 
-from simulator.core import progress_bar
+from foundation import progress_bar
 
 
 def _nodes(grid, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -15,8 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from patterns.errors import require
-from patterns.hold import hold
+from foundation import hold, require
 from simulator.landscape import Landscape
 from simulator.motion import Field, Grid, finish, stepper
 

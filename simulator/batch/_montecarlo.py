@@ -61,8 +61,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from patterns.errors import InputError, require
-from patterns.mask import Mask
+from foundation import InputError, progress_bar, require
+from patterns.geometry import Mask
 from simulator.batch._lanes import (  # noqa: F401 - _one, _run_chunk: the benchmarks' and tests' handles
     _check_starts_fit,
     _one,
@@ -89,7 +89,6 @@ from simulator.core import (
     DYNAMIC_METHODS,
     MAX_CHUNK,
     MAX_STEPS_LIMIT,
-    progress_bar,
     threads,
 )
 from simulator.landscape import Landscape, build_landscape, global_minimum
@@ -318,8 +317,7 @@ def run_realizations(
         over every seed and start, and ``optima`` (per seed, the global minimum's
         ``x_um``, ``y_um``, ``twist_deg``: where that pattern aligns a chip).
     """
-    from patterns.geometry import random_jagged
-    from patterns.raster import mask_from_geometry
+    from patterns.geometry import mask_from_geometry, random_jagged
 
     require(len(sigmas) >= 1 and len(seeds) >= 1, "give at least one sigma and one seed")
     poses = _as_poses(starts)

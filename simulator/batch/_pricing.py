@@ -8,7 +8,7 @@ refuses such a batch in the time it takes to read its inputs.
 
 from __future__ import annotations
 
-from patterns.resources import require_fits
+from foundation import require_fits
 
 #: Peak bytes per lane of a vmapped dynamics chunk (the solver's state, stages, controller
 #: and event; XLA's temporaries): measured with JAX's compiled memory analysis at 0.6-1.5 KB

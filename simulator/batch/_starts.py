@@ -8,8 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from patterns.errors import InputError, require
-from patterns.resources import require_fits
+from foundation import InputError, require, require_fits
 from simulator.core import floor_whole
 
 DISTRIBUTIONS = ("normal", "uniform")

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from patterns.errors import require
+from foundation import require
 from simulator.batch._starts import StartGrid
 from simulator.core import OUTCOMES
 

@@ -15,8 +15,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from patterns.errors import InputError
-from patterns.outputs import atomic_output
+from foundation import InputError, atomic_output
 from simulator.scene import Scene
 
 
@@ -104,7 +103,7 @@ def add_scene_args(p: argparse.ArgumentParser) -> None:
         "(transparent pixels stay non-wettable)",
     )
     g.add_argument("--invert-chip", action="store_true", help="the same for the chip image")
-    from patterns.io import CHANNELS
+    from patterns import CHANNELS
 
     g.add_argument(
         "--channel",
@@ -135,7 +134,7 @@ def add_scene_args(p: argparse.ArgumentParser) -> None:
         choices=("um", "mm", "nm"),
         help="units of a DXF file that states none ($INSUNITS)",
     )
-    from patterns.layout_formats import DEFAULT_MAX_POLYGONS
+    from patterns.layout import DEFAULT_MAX_POLYGONS
 
     y.add_argument(
         "--max-polygons",
@@ -551,7 +550,7 @@ def check_outputs(
     exists is refused unless ``args.force`` (:func:`add_force_arg`).
     ``doc``: the scene file's document (:func:`scene_document`; default: read here).
     """
-    from patterns.outputs import check_distinct, check_output_file, require_new_file
+    from foundation import check_distinct, check_output_file, require_new_file
 
     inputs = input_paths(args, doc)
     named = {f"--{f.replace('_', '-')}": getattr(args, f, None) for f in flags}
@@ -574,7 +573,7 @@ def add_force_arg(p: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
 
 def write_json(path: str | os.PathLike, obj: Any) -> None:
     """Write JSON atomically (no half-written file on failure); every number must be finite."""
-    from simulator.core import require_finite
+    from foundation import require_finite
 
     require_finite(obj, f"output {path}")
     with atomic_output(path) as tmp:
@@ -587,7 +586,7 @@ def write_csv(path: str | os.PathLike, columns: list[str], values: list) -> None
     finite (:func:`simulator.core.require_finite`)."""
     import numpy as np
 
-    from simulator.core import require_finite
+    from foundation import require_finite
 
     cols = [np.asarray(v) for v in values]
     require_finite(
@@ -618,7 +617,7 @@ def sigterm_says_what_was_kept(out: str, command: str, noun: str, *kept: str) ->
         return
 
     def terminate(signum, frame):
-        from patterns.outputs import remove_pending
+        from foundation import remove_pending
         from simulator.sweep import kept_points, release_semaphores
 
         remove_pending()

@@ -6,12 +6,12 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from patterns.errors import InputError
+from foundation import InputError
 
 
 def run_freeform(args: argparse.Namespace, path: Path, doc: dict) -> int:
     """Run the free-form design of the file at ``path`` (parsed: ``doc``) into ``args.out``."""
-    from simulator.core import quiet_waits
+    from foundation import quiet_waits
     from simulator.design import freeform, load_freeform
 
     for flag, value in (("--workers", args.workers), ("--scheduler", args.scheduler)):

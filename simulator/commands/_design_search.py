@@ -22,7 +22,7 @@ _BUDGET_ADVICE = (
 def run_search(args: argparse.Namespace, path: Path, doc: dict) -> int:
     """Run the search of the design file ``path`` (already read into ``doc``); print what it
     found. A refusal's memory advice names the file's budget, the one a search has."""
-    from patterns.errors import InputError
+    from foundation import InputError
 
     try:
         return _run_search(args, path, doc)
@@ -37,7 +37,7 @@ def _run_search(args: argparse.Namespace, path: Path, doc: dict) -> int:
     from simulator.design import load_search, search
 
     if getattr(args, "memory_budget", None) is not None:
-        from patterns.errors import InputError
+        from foundation import InputError
 
         raise InputError(
             "--memory-budget sets the budget of a [freeform] design; the trials of a [search] take theirs "

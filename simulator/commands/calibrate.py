@@ -107,7 +107,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from patterns.errors import InputError
+    from foundation import InputError
     from simulator.commands._common import parse_pose, scene_document, scene_document_from_args
     from simulator.commands.design import without_force
     from simulator.design import PROFILE, calibrate, read_trials

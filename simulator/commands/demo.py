@@ -18,9 +18,8 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from foundation import announce, atomic_output, check_output_dir, compiling, output_directory
 from patterns.library import library_path
-from patterns.outputs import atomic_output, check_output_dir, output_directory
-from simulator.core import announce, compiling
 from simulator.scene import Scene
 
 if TYPE_CHECKING:

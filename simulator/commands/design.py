@@ -63,7 +63,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from patterns.errors import InputError
+    from foundation import InputError
 
     try:
         return _run(args)

@@ -8,8 +8,7 @@ import sys
 
 import numpy as np
 
-from patterns.errors import InputError
-from patterns.outputs import atomic_output
+from foundation import InputError, atomic_output
 from simulator.commands._common import (
     accuracy_check,
     add_force_arg,

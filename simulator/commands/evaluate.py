@@ -5,8 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from patterns.errors import InputError
-from patterns.outputs import check_output_dir
+from foundation import InputError, check_output_dir
 from simulator.commands._common import (
     accuracy_check,
     add_scene_args,
@@ -83,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
         from patterns.layout import frame_note
 
         print(frame_note(layout))
-    from simulator.core import compiling
+    from foundation import compiling
     from simulator.landscape import require_landscape_fits, twist_axis
 
     twist_axis(scene)  # a twist step that gives too many twists fails before the announcement
@@ -191,9 +190,9 @@ def _noise_biases(scene):
 
 def _bbox_chip(args: argparse.Namespace) -> str:
     """Default chip: the size of the pattern's wettable bounding box (W x H um)."""
-    from patterns.io import read_mask
+    from patterns import read_mask
+    from patterns.geometry import footprint_um
     from patterns.layout import LayoutSelection, is_layout, layout_geometry
-    from patterns.mask import footprint_um
 
     if is_layout(args.pattern):
         sel = LayoutSelection(

@@ -20,7 +20,7 @@ import math
 import sys
 from typing import NoReturn
 
-from patterns.errors import InputError
+from foundation import InputError
 from simulator.cli import OneLineParser, unknown_options_message
 
 
@@ -276,7 +276,7 @@ def _liquid(args: argparse.Namespace) -> tuple[float, float]:
 
 
 def _emit(args: argparse.Namespace, doc: dict, lines: list[str]) -> int:
-    from simulator.core import require_finite
+    from foundation import require_finite
 
     require_finite(doc, "the answer")
     text = json.dumps(doc, indent=2, allow_nan=False) + "\n"
@@ -284,7 +284,7 @@ def _emit(args: argparse.Namespace, doc: dict, lines: list[str]) -> int:
         sys.stdout.write(text)
         return 0
     if args.json:
-        from patterns.outputs import atomic_output, check_output_file, require_new_file
+        from foundation import atomic_output, check_output_file, require_new_file
 
         check_output_file(args.json, "--json", [])
         require_new_file(args.json, "--json", args.force)
@@ -437,7 +437,7 @@ def run_window(args: argparse.Namespace) -> int:
     from simulator.liquid import volume_window, window_lines
 
     if args.json and args.json != "-":
-        from patterns.outputs import check_output_file, require_new_file
+        from foundation import check_output_file, require_new_file
 
         check_output_file(args.json, "--json", [])  # before any work
         require_new_file(args.json, "--json", args.force)

@@ -10,8 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from patterns.errors import InputError
-from patterns.outputs import atomic_output
+from foundation import InputError, atomic_output, require_finite
 from simulator.batch import DISTRIBUTIONS, MAX_STARTS, StartGrid
 from simulator.commands._common import (
     accuracy_check,
@@ -30,7 +29,6 @@ from simulator.core import (
     DEFAULT_MAX_STEPS,
     DYNAMIC_METHODS,
     MAX_STEPS_LIMIT,
-    require_finite,
 )
 from simulator.landscape import axis_step
 from simulator.render import plot_capture_map  # matplotlib is imported when it draws
@@ -321,7 +319,7 @@ def run(args: argparse.Namespace) -> int:
     grid = starts if isinstance(starts, StartGrid) else None
     _check_outputs(args, grid is not None, opt["method"], scene_doc)
     scene = scene_from_args(args, doc=scene_doc, warn=False)
-    from simulator.core import compiling
+    from foundation import compiling
     from simulator.landscape import require_landscape_fits
 
     require_landscape_fits(scene)

@@ -18,7 +18,7 @@ import argparse
 from pathlib import Path
 from typing import NoReturn
 
-from patterns.errors import InputError, positive
+from foundation import InputError, positive
 from patterns.geometry import DESIGNS, Design
 from simulator.cli import OneLineParser
 
@@ -138,9 +138,8 @@ def run(args: argparse.Namespace) -> int:
     if args.design is None:
         raise InputError(f"name a design ({', '.join(DESIGNS)}) or use --list")
     # Lazy imports: the raster and PNG code are not needed for --list or --help.
-    from patterns.geometry import build, design_record
-    from patterns.io import write_mask
-    from patterns.raster import mask_from_geometry
+    from patterns import write_mask
+    from patterns.geometry import build, design_record, mask_from_geometry
 
     design = DESIGNS[args.design]
     values = _design_values(design, args)
@@ -156,7 +155,7 @@ def run(args: argparse.Namespace) -> int:
             "-o OUT.png is required (the PNG file to write; or OUT.gds, OUT.oas, OUT.dxf for a layout)"
         )
     if not Path(args.output).is_dir():  # a directory: write_mask and write_layout say so
-        from patterns.outputs import check_output_file, require_new_file
+        from foundation import check_output_file, require_new_file
 
         check_output_file(args.output, "-o")  # a link, a device: said as such, before "exists"
         require_new_file(args.output, "-o", args.force)

@@ -7,8 +7,7 @@ import contextlib
 
 import numpy as np
 
-from patterns.errors import InputError
-from patterns.outputs import atomic_output
+from foundation import InputError, atomic_output, compiling
 from simulator.commands._common import (
     accuracy_check,
     add_force_arg,
@@ -20,14 +19,7 @@ from simulator.commands._common import (
     scene_from_args,
     write_json,
 )
-from simulator.core import (
-    AREA_REL_TOL,
-    DEFAULT_MAX_STEPS,
-    DEG_TOL,
-    DYNAMIC_METHODS,
-    METHODS,
-    compiling,
-)
+from simulator.core import AREA_REL_TOL, DEFAULT_MAX_STEPS, DEG_TOL, DYNAMIC_METHODS, METHODS
 from simulator.physics import LINE_FRICTION_PA_S
 
 

@@ -1,5 +1,6 @@
-"""The core every package stands on: units and reference constants, tolerances and the
-numerical floor, finite-value checks, the defaults of the command line, and progress lines.
+"""The simulator's core: units and reference constants, tolerances and the numerical floor,
+and the defaults of the command line. The project's plumbing (errors, outputs, resources,
+finite-value checks, progress lines) is the ``foundation`` package below it.
 """
 
 import lazy_loader as lazy

@@ -23,23 +23,6 @@ from ._defaults import (
     THREADS_ENV as THREADS_ENV,
     threads as threads,
 )
-from ._finite import (
-    require_finite as require_finite,
-)
-from ._progress import (
-    WAIT_ENV as WAIT_ENV,
-    WAIT_S as WAIT_S,
-    NoBar as NoBar,
-    announce as announce,
-    announce_once as announce_once,
-    compiling as compiling,
-    counter_bar as counter_bar,
-    progress_bar as progress_bar,
-    quiet_waits as quiet_waits,
-    shows_wait as shows_wait,
-    wait_line as wait_line,
-    wait_threshold_s as wait_threshold_s,
-)
 from ._tolerances import (
     AREA_REL_TOL as AREA_REL_TOL,
     DEG_TOL as DEG_TOL,

@@ -21,7 +21,7 @@ def threads() -> int:
     if not v:
         return os.cpu_count() or 1
     if not v.isdigit() or int(v) < 1:
-        from patterns.errors import InputError
+        from foundation import InputError
 
         raise InputError(
             f"{THREADS_ENV}={v!r} must be a whole number of threads >= 1; set it to e.g. 1, or unset it"

@@ -50,7 +50,7 @@ from pathlib import Path
 
 import numpy as np
 
-from patterns.errors import InputError, require
+from foundation import InputError, require
 from simulator.core import DYNAMIC_METHODS as DYNAMIC, METHODS
 from simulator.design._calibrate_params import (
     FITTABLE,

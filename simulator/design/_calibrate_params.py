@@ -8,7 +8,7 @@ import difflib
 import math
 from dataclasses import dataclass, replace
 
-from patterns.errors import InputError
+from foundation import InputError
 
 
 @dataclass(frozen=True)

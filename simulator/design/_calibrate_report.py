@@ -1,6 +1,6 @@
 """The outputs of a calibration: ``fitted.toml`` (a scene file every command reads),
 ``fit.json``, ``bench.png`` (bench against model per row) and ``report.html``, written
-together or not at all (:func:`patterns.outputs.atomic_output` for each, moved into place
+together or not at all (:func:`foundation.atomic_output` for each, moved into place
 when every one is ready)."""
 
 from __future__ import annotations
@@ -189,8 +189,7 @@ Best: trial {result["best_trial"]}, log-likelihood {result["log_likelihood"]:.3f
 def write_outputs(out: Path, result: dict, doc: dict, *, pictures: bool = True) -> list[str]:
     """``fitted.toml``, ``fit.json`` and (``pictures``) ``bench.png`` and ``report.html``
     into ``out``, all or none."""
-    from patterns.outputs import atomic_output
-    from simulator.core import require_finite
+    from foundation import atomic_output, require_finite
 
     fitted = with_values(doc, result["best"])
     head = (

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from patterns.errors import InputError, require_regular_file
+from foundation import InputError, require_regular_file
 
 #: The columns every row gives: the nominal start (um, um, degrees) and its counts.
 REQUIRED = ("x_um", "y_um", "twist_deg", "trials", "aligned")
@@ -202,7 +202,7 @@ def read_trials(path: str | os.PathLike) -> BenchTable:
 def write_trials(path: str | os.PathLike, rows: list[dict]) -> Path:
     """Write a bench table (the columns the rows give, required first) atomically: what a
     synthetic example or a test hands to :func:`read_trials`."""
-    from patterns.outputs import atomic_output
+    from foundation import atomic_output
 
     cols = [c for c in REQUIRED + OPTIONAL if any(c in r for r in rows)]
     with atomic_output(path) as tmp:

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from patterns.mask import Mask
+from patterns.geometry import Mask
 
 __all__ = [
     "FreeformResult",
@@ -241,7 +241,7 @@ def _run(spec, pictures: Path | None, quiet: bool, verify: bool) -> FreeformResu
     import jax
     import optax
 
-    from simulator.core import wait_line
+    from foundation import wait_line
     from simulator.design._freeform_spec import SETUP_S_PER_PX
 
     h, w = spec.shape
@@ -268,7 +268,7 @@ def _run(spec, pictures: Path | None, quiet: bool, verify: bool) -> FreeformResu
     bs = betas(spec, n)
     root = jax.random.PRNGKey(spec.seed)
     hist: dict[str, list] = {"iteration": [], "beta": [], "objective": []}
-    from simulator.core import progress_bar
+    from foundation import progress_bar
 
     t_first = t0 = time.perf_counter()
     with progress_bar(not quiet, n, "free-form design", "it") as bar:

@@ -13,7 +13,7 @@ the same poses to round-off (tested). Below a pixel of meniscus the ``K_h`` blur
 pattern side, as in the build: its spectrum multiplies the pattern's.
 
 Conventions: the pattern ``w`` is (H, W) in image rows (row 0 at the top), its centre the
-physical origin (:mod:`patterns.mask`); a plane is ``[y, x]`` with y up, plane index
+physical origin (:mod:`patterns.geometry`); a plane is ``[y, x]`` with y up, plane index
 ``(Y + ry, X + rx)`` for a chip centre at ``(X, Y)`` px from the origin.
 """
 
@@ -99,7 +99,7 @@ def chip_side(scene, pattern_shape: tuple[int, int], twists_deg) -> ChipSide:
     (:func:`simulator.landscape.plan` of the scene on a canvas of this shape), padded to one
     canvas for all twists.
     """
-    from patterns.mask import Mask
+    from patterns.geometry import Mask
     from simulator.landscape import plan
 
     h, w = pattern_shape

@@ -2,7 +2,7 @@
 evaluator's check beside the baseline's, ``result.json`` and ``report.html``.
 
 The GDSII polygons are the written raster's pixels merged (exact, in um, the pattern frame
-of :mod:`patterns.mask`) and simplified by half a pixel, well below the minimum feature
+of :mod:`patterns.geometry`) and simplified by half a pixel, well below the minimum feature
 (at least two pixels). :func:`feature_check` measures, on the polygons read back from the
 file, what an opening and a closing by a disk of the minimum feature (its radius less one
 pixel of slack) change: a wettable part or a dry gap narrower than the feature would move by its
@@ -22,8 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from patterns.errors import InputError
-from patterns.outputs import MARKER, check_output_dir, output_directory
+from foundation import MARKER, InputError, check_output_dir, output_directory
 
 __all__ = [
     "COMMAND",
@@ -165,8 +164,8 @@ def write_outputs(result, tmp: Path, quiet: bool = True):
     result with its ``layout`` check and ``files``."""
     from dataclasses import replace
 
-    from patterns.io import write_mask
-    from patterns.layout_write import write_layout
+    from patterns import write_mask
+    from patterns.layout import write_layout
 
     spec = result.spec
     write_mask(tmp / "pattern_mask.png", result.pattern)
@@ -191,7 +190,7 @@ def write_outputs(result, tmp: Path, quiet: bool = True):
     if result.verification is not None:
         _plot_captures(tmp, tmp / "capture_before_after.png")
     doc = result_json(result)
-    from simulator.core import require_finite
+    from foundation import require_finite
 
     require_finite(doc, "free-form result")
     (tmp / "result.json").write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n")

@@ -46,7 +46,7 @@ A free-form design file has two tables::
     seed = 0
 
 :func:`load_freeform` reads and checks it into a :class:`FreeformSpec` (one
-:class:`~patterns.errors.InputError` line per problem, nothing heavy imported).
+:class:`~foundation.InputError` line per problem, nothing heavy imported).
 """
 
 from __future__ import annotations
@@ -59,9 +59,9 @@ from typing import Any
 
 import numpy as np
 
-from patterns.errors import InputError, require, require_regular_file
-from patterns.mask import Mask
-from patterns.metadata import show_value
+from foundation import InputError, require, require_regular_file
+from patterns import show_value
+from patterns.geometry import Mask
 
 __all__ = [
     "FREEFORM_KEYS",
@@ -149,7 +149,7 @@ class FreeformSpec:
 
     scene: the scene at the design's pixel size, its pattern the baseline (the canvas's
     shape, centred on the target pose). keep_in, keep_out: (H, W) bool in image rows (row 0
-    at the top, as :class:`patterns.mask.Mask`). baseline: the pattern the result is checked
+    at the top, as :class:`patterns.geometry.Mask`). baseline: the pattern the result is checked
     against. terms: {name: {"weight": w, ...settings}} for every term of :data:`TERMS`
     (weight 0 for those not given). perturbation: samples, edge_um, length_um. verify:
     the evaluator's settings. files: the input files read (never written over).
@@ -242,8 +242,7 @@ def _design_mask(
     """A generated design (patterns.geometry) rasterized on the canvas, moved by ``offset_um``."""
     from shapely import affinity
 
-    from patterns.geometry import DESIGNS, build, design_record
-    from patterns.raster import rasterize
+    from patterns.geometry import DESIGNS, build, design_record, rasterize
 
     t = dict(t)
     name = t.pop("design", None)
@@ -276,7 +275,7 @@ def _design_mask(
 def _png_mask(
     where: str, path: Path, shape: tuple[int, int], s: float, budget: float | None
 ) -> np.ndarray:
-    from patterns.io import read_mask
+    from patterns import read_mask
 
     require(
         path.exists(),
@@ -665,7 +664,7 @@ def _price_canvas(src: str, shape: tuple[int, int], dtype: str, budget_mb: float
     """InputError when the design canvas's own arrays (:data:`CANVAS_BYTES_PER_PX`, with
     :data:`XLA_FIXED_BYTES`) are over the memory budget: checked from the file's numbers,
     before the masks or the chip are rasterized (:func:`price_freeform` prices the whole run)."""
-    from patterns.resources import budget_bytes, fmt_bytes
+    from foundation import budget_bytes, fmt_bytes
 
     H, W = shape
     item = 2 if dtype == "float64" else 1
@@ -682,7 +681,7 @@ def _price_canvas(src: str, shape: tuple[int, int], dtype: str, budget_mb: float
 def price_freeform(spec: FreeformSpec, budget_mb: float | None = None) -> int:
     """Bytes a free-form run holds at its peak (:func:`freeform_cost`); InputError above the
     memory budget (``budget_mb``, else the scene's ``memory_budget_mb``), before any work."""
-    from patterns.resources import fmt_bytes
+    from foundation import fmt_bytes
 
     c = freeform_cost(spec)
     need = c["bytes"]

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from patterns.errors import InputError
+from foundation import InputError
 
 __all__ = ["design_mode"]
 

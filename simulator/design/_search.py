@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from patterns.errors import InputError, require
+from foundation import InputError, require
 from simulator.design._search_spec import MAX_TRIALS, SearchSpec, load_search
 from simulator.sweep import ResultStore
 
@@ -425,7 +425,7 @@ def best_trials(spec: SearchSpec, table) -> list[int]:
 # ----------------------------------------------------------------------- the entry
 def _bar(show: bool, total: int):
     if not show:
-        from simulator.core import NoBar
+        from foundation import NoBar
 
         return NoBar()
     from tqdm import tqdm
@@ -467,7 +467,7 @@ def search(
     realizations). ``table.attrs["search"]`` holds the hash, the counts, the best trials
     and the times.
     """
-    from patterns.resources import budget_bytes
+    from foundation import budget_bytes
     from simulator.sweep import check_where, dask_client, run_tasks, worker_cap
 
     spec = spec if isinstance(spec, SearchSpec) else load_search(spec, base)
@@ -487,7 +487,7 @@ def search(
     t0 = time.perf_counter()
     run = None
     try:
-        from simulator.core import NoBar
+        from foundation import NoBar
 
         run = _Run(spec, store, n, NoBar())
         todo = (0 if run.exhausted else len(run.free)) + run.baseline

@@ -11,7 +11,7 @@
   baseline's, and with several objectives the whole front;
 * ``report.html``: the search, the best against the baseline, the pictures and the trials.
 
-Written atomically (:func:`simulator.render.save_figure`, :mod:`patterns.outputs`).
+Written atomically (:func:`simulator.render.save_figure`, :mod:`foundation`).
 """
 
 from __future__ import annotations
@@ -292,7 +292,7 @@ def _values(spec, row: dict) -> dict:
 
 def write_best(out: Path, spec, table, best: list[int]) -> list[str]:
     """``best.json`` (always), and with a best design ``best.png`` and ``best.gds``."""
-    from patterns.outputs import atomic_output
+    from foundation import atomic_output
 
     written = []
     base = _json_row(_row(table, 0))
@@ -407,7 +407,7 @@ def _compare_table(spec, table, top: int | None) -> str:
 
 def write_search_report(out: Path, spec, table, stats: dict) -> list[str]:
     """The pictures, the best design's files and ``report.html``; returns the files written."""
-    from patterns.outputs import atomic_output
+    from foundation import atomic_output
 
     out = Path(out)
     best = stats["best"]

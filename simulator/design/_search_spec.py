@@ -39,8 +39,8 @@ from typing import Any
 
 import numpy as np
 
-from patterns.errors import InputError, require
-from patterns.metadata import show_value
+from foundation import InputError, require
+from patterns import show_value
 
 __all__ = [
     "SAMPLERS",
@@ -480,7 +480,7 @@ def load_search(
 
     ``base``: the directory relative paths are read from (default: the file's, or the working
     directory for a dict); ``source``: the name errors give a dict. Every problem is one
-    :class:`~patterns.errors.InputError` line, before any work.
+    :class:`~foundation.InputError` line, before any work.
     """
     from simulator.sweep import expected_columns, load_sweep, read_toml_file
 

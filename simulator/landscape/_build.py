@@ -14,10 +14,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from patterns.errors import InputError
-from patterns.mask import nonzero_box
-from patterns.resources import RASTER_BYTES_PER_PX
-from simulator.core import UM2, progress_bar, wait_line
+from foundation import RASTER_BYTES_PER_PX, InputError, progress_bar, wait_line
+from patterns.geometry import nonzero_box
+from simulator.core import UM2
 from simulator.landscape._correlator import (
     NOISE_FACTOR,
     SAME_CHIP_TOL,

@@ -21,7 +21,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from patterns.errors import InputError
+from foundation import InputError
 from simulator.core import threads
 
 BACKENDS = ("auto", "scipy", "opencv", "jax")

@@ -26,12 +26,13 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from patterns.errors import InputError
-from patterns.mask import Mask
-from simulator.core import UM2, wait_line
+from foundation import InputError, wait_line
+from patterns.geometry import Mask
+from simulator.core import UM2
 from simulator.scene import Scene
 
 from ._build import (
@@ -44,6 +45,9 @@ from ._build import (
 )
 from ._correlator import SAME_CHIP_TOL
 from ._landscape import Landscape
+
+if TYPE_CHECKING:
+    from simulator.physics import FootprintRules
 
 
 def pad_labels(pattern: Mask) -> tuple[np.ndarray, int]:
@@ -115,7 +119,7 @@ def _shadowed(masks: list, deep: list, residuals) -> list[tuple[int, int, int, d
         lab[m] = k + 1
     rows, cols = np.nonzero(lab)
     pad = lab[rows, cols] - 1
-    h, w = lab.shape
+    h, w = (int(v) for v in lab.shape)
     found: dict = {}
     for ax in range(4):
         for r in sorted({float(v) for v in np.asarray(residuals, float)}):
@@ -284,7 +288,7 @@ class FootprintPlanes:
     y up).
     """
 
-    rules: object
+    rules: FootprintRules
     wet_energy: np.ndarray
     reached_bits: np.ndarray
     within_bits: np.ndarray

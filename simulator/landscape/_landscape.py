@@ -34,8 +34,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from patterns.errors import InputError
-from patterns.resources import fmt_bytes
+from foundation import InputError, fmt_bytes
 from simulator.core import UM2, WHOLE_TOL, floor_whole
 from simulator.landscape._correlator import NOISE_FACTOR
 from simulator.landscape._posegrid import PoseGrid

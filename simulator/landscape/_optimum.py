@@ -346,7 +346,7 @@ class _Search:
         return self._cells(bounds)
 
     def _cells(self, b: _Bounds) -> str:
-        from simulator.core import progress_bar, shows_wait
+        from foundation import progress_bar, shows_wait
 
         n = len(self.axis)
         k = max(2, math.ceil(max(b.ny, b.nx) / CELLS_PER_AXIS))

@@ -77,7 +77,7 @@ class _Bounds:
         """InputError unless the bound's least memory fits the budget: the chip at one twist
         on its ``canvas`` (with a ``footprint``, its rotation's work space), its block maxima
         and the pooling's copy."""
-        from patterns.resources import require_fits
+        from foundation import require_fits
 
         hc, wc = canvas
         require_fits(
@@ -174,7 +174,7 @@ class _Bounds:
         if c.geometry is not None and not self.footprint:
             from shapely import affinity
 
-            from patterns.raster import rasterize
+            from patterns.geometry import rasterize
 
             t = float(self.twists[j])
             g = c.geometry if t == 0 else affinity.rotate(c.geometry, t, origin=(0, 0))

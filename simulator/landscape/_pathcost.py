@@ -40,7 +40,7 @@ from concurrent.futures import Future, ThreadPoolExecutor
 import numpy as np
 from shapely import affinity
 
-from patterns.raster import coverage_steps
+from patterns.geometry import coverage_steps
 from simulator.core import UM2
 from simulator.landscape._build import _box, _check_energy_range, _extent, _grid_of, energy_scale_J
 from simulator.landscape._pathband import (

@@ -88,7 +88,7 @@ class FootprintPath:
 
         prof = scene.wall_profile
         if prof is None:
-            from patterns.errors import InputError
+            from foundation import InputError
 
             raise InputError(
                 "--dispense needs the finite meniscus with free contact lines (--meniscus, not --pinned) "
@@ -201,7 +201,7 @@ class FootprintPath:
             side = int(name[len("strip") :])
             rot, rin, wall = rots["band_out"], rots["band_in"], rots["wall"]
 
-            def values(xi, yi, s):
+            def side_values(xi, yi, s):
                 keep = self._side_at(xi, yi) == side
                 f = np.zeros(len(xi))
                 xk, yk = xi[keep], yi[keep]
@@ -210,7 +210,7 @@ class FootprintPath:
                 return f, keep
 
             r, c, v, band = footprint_band(
-                rot, tw, self.dtype, values, self._span("wall", "band_in", "band_out"), 0.0
+                rot, tw, self.dtype, side_values, self._span("wall", "band_in", "band_out"), 0.0
             )
         hc, wc = rot.shape
         origin = self.pe.origin

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from patterns.errors import InputError
+from foundation import InputError
 from simulator.core import DEG_TOL, ceil_whole, floor_whole
 from simulator.scene import Scene, TwistAxis
 

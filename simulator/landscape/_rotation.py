@@ -10,8 +10,7 @@ import weakref
 import numpy as np
 from shapely import affinity
 
-from patterns.mask import Mask, nonzero_box
-from patterns.raster import rasterize
+from patterns.geometry import Mask, nonzero_box, rasterize
 from simulator.core import ceil_whole
 from simulator.scene import resampled_extent
 
@@ -217,7 +216,7 @@ class ChipRotator:
             self._blurred, self._half, self._sdf, self._coeffs = cached[2]
             return
         self._sdf = None
-        from simulator.core import wait_line
+        from foundation import wait_line
 
         ho, wo = smooth_canvas(self.chip, self.margin_px, self.shape, self.profile is not None)
         w_um, h_um = (v * self.chip.um_per_px for v in self.chip.shape[::-1])

@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from patterns.errors import InputError, positive
+from foundation import InputError, positive
 from simulator.core import UM, UM3_PER_NL, WATER_DENSITY_KG_M3, WATER_SURFACE_TENSION_N_M
 from simulator.physics import contact_angle_deg, meniscus_height_um
 

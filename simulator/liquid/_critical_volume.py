@@ -39,7 +39,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from patterns.errors import InputError, positive
+from foundation import InputError, positive
 
 UM3_PER_NL = 1e6
 #: Volume-grid points of the final pass (the split is exact on this grid).

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from patterns.errors import InputError
+from foundation import InputError
 
 
 def dispensed_wet(scene, labels: np.ndarray, n_pads: int, at_um=None) -> tuple[np.ndarray, str]:

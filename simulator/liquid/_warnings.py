@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from patterns.errors import InputError
+from foundation import InputError
 from simulator.core import UM3_PER_NL
 from simulator.liquid._calculators import THIN_FILM_FRACTION, height_report, overflow_conditions
 from simulator.physics import meniscus_height_um
@@ -76,7 +76,7 @@ def _label(wet: np.ndarray) -> tuple[np.ndarray, int]:
 
 
 def _footprint_um(mask) -> tuple[float, float]:
-    from patterns.mask import footprint_um
+    from patterns.geometry import footprint_um
 
     return footprint_um(mask)
 

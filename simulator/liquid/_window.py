@@ -53,8 +53,8 @@ def volume_window(scene, bias_um: float | None = None, biased: str = "the placem
     (:func:`default_volume_nl`). ``bias_um``: the placement bias (um) the overflow limit
     is computed for; ``biased`` names it in the note.
     """
-    from patterns.errors import InputError
-    from patterns.mask import footprint_um
+    from foundation import InputError
+    from patterns.geometry import footprint_um
     from simulator.liquid._calculators import overflow_bias_um
     from simulator.liquid._critical_volume import critical_volume
     from simulator.liquid._warnings import four_pad_geometry, pad_count

@@ -77,7 +77,7 @@ import jax
 import jax.numpy as jnp
 import optimistix as optx
 
-from patterns.errors import InputError
+from foundation import InputError
 from simulator.motion._dynamics_ode import (
     IMEX,
     MOREAU_TOL,

@@ -33,7 +33,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from patterns.errors import InputError, positive
+from foundation import InputError, positive
 from simulator.core import UM, UM2
 from simulator.physics import (
     LINE_FRICTION_PA_S,

@@ -19,10 +19,11 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from typing import Any
 
 import numpy as np
 
-from patterns.errors import InputError
+from foundation import InputError
 
 #: The process itself, with NumPy, SciPy and JAX loaded (what a run holds besides its arrays).
 PROCESS_BYTES = 512 * 2**20
@@ -181,7 +182,7 @@ def simulate_footprint(
     dynamics,
     backend: str,
     simulate,
-    planes=None,
+    planes: Any = None,
     engine: str = "fft",
 ) -> dict:
     """:func:`simulator.motion.simulate` with the footprint as the run's state (module
@@ -246,6 +247,9 @@ def simulate_footprint(
                 path=StateBoxes(*path_src, wet),
             )
         else:
+            import jax.numpy as jnp
+
+            assert reached is not None and within is not None  # the planes' relay
             tr = simulate(
                 inner,
                 pose,
@@ -256,7 +260,7 @@ def simulate_footprint(
                 dynamics=remaining_params(dynamics, t_off),
                 backend=backend,
                 reference=reference,
-                relay=Relay(reached, within, np.asarray(wet_bits(wet))),
+                relay=Relay(reached, within, jnp.asarray(wet_bits(wet))),
             )
         last = tr
         if tr.outcome != "event":
@@ -301,6 +305,7 @@ def simulate_footprint(
     t_s = None
     if pieces[0][0].t_s is not None:
         # each stretch's times are clamped to its own limit; their sum to the run's
+        assert dynamics is not None  # a timed run is a dynamic one
         t_s = np.minimum(np.concatenate([p.t_s + off for p, off in pieces]), dynamics.t_max_s)
     time_s = None if t_s is None else float(t_s[-1])
     outcome = "max_steps" if last is None else last.outcome

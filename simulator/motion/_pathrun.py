@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from simulator.core import counter_bar
+from foundation import counter_bar
 from simulator.landscape import (
     Landscape,
     PathEnergy,
@@ -43,7 +43,7 @@ AUTO_MIN_CHIP_PX_MENISCUS = {"greedy": 0, "gradient": 0}
 
 def _chip_px(scene: Scene) -> int:
     """Pixels of the chip's wettable bounding box (width x height)."""
-    from patterns.mask import footprint_um
+    from patterns.geometry import footprint_um
 
     w, h = footprint_um(scene.chip)
     return int(round(w / scene.um_per_px) * round(h / scene.um_per_px))
@@ -59,7 +59,7 @@ def choose_engine(
         raise ValueError(f"engine must be one of {', '.join(ENGINES)}, got {engine!r}")
     ok, why = path_engine_supported(scene)
     if engine == "path" and not ok:
-        from patterns.errors import InputError
+        from foundation import InputError
 
         raise InputError(f"the path-cost engine does not cover this scene: {why}")
     if engine != "auto":

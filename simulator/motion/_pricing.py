@@ -13,8 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from patterns.errors import InputError
-from patterns.resources import require_fits
+from foundation import InputError, require_fits
 from simulator.core import DYNAMIC_METHODS, MAX_STEPS_LIMIT
 from simulator.landscape import consecutive_runs
 from simulator.scene import Scene

@@ -17,16 +17,8 @@ from dataclasses import dataclass, field
 import jax.numpy as jnp
 import numpy as np
 
-from patterns.errors import InputError
-from simulator.core import (
-    DEFAULT_MAX_STEPS,
-    DEG_TOL,
-    METHODS,
-    compiling,
-    shows_wait,
-    tiny,
-    wait_line,
-)
+from foundation import InputError, compiling, shows_wait, wait_line
+from simulator.core import DEFAULT_MAX_STEPS, DEG_TOL, METHODS, tiny
 from simulator.landscape import (
     Landscape,
     PoseGrid,
@@ -356,6 +348,7 @@ def simulate(
     # (simulator.landscape: the same pose every command uses, found without the full landscape).
     q_end = grid.to_index(np.asarray(traj.final))
     if whole:
+        assert ls is not None  # a whole landscape's run has one
         wait_line(
             f"where the run ended: plateau, global minimum and error limit ({ls.energy.size:,} poses)",
             ls.energy.size * END_S_PER_POSE,

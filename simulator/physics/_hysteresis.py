@@ -58,8 +58,8 @@ import math
 
 import numpy as np
 
-from patterns.errors import InputError
-from patterns.mask import Mask
+from foundation import InputError
+from patterns.geometry import Mask
 
 
 def parse_window(text: str, flag: str = "--hysteresis") -> tuple[float, float]:

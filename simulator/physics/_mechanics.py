@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from patterns.errors import InputError, positive
+from foundation import InputError, positive
 from simulator.core import (
     SU8_DENSITY_KG_M3,
     UM,

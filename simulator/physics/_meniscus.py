@@ -131,7 +131,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from patterns.errors import InputError
+from foundation import InputError
 
 #: From this height (px) up the blur is applied to the chip, which is then rotated as a
 #: smooth image; below it to the pattern (exact chip rasters; the h -> 0 limit to round-off).

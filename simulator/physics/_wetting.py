@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from patterns.errors import InputError, positive
+from foundation import InputError, positive
 from simulator.core import (
     UM2,
     WATER_SURFACE_TENSION_N_M,

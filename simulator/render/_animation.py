@@ -15,9 +15,8 @@ from collections.abc import Iterator
 
 import numpy as np
 
-from patterns.errors import InputError
-from patterns.mask import Mask
-from patterns.outputs import atomic_output
+from foundation import InputError, atomic_output
+from patterns.geometry import Mask
 from simulator.render._style import CHIP_COLOUR, J_TO_NJ, PATH_COLOUR, S_TO_MS
 
 __all__ = ["TrajectoryAnimation", "chip_outline", "frame_indices", "write_trajectory_gif"]

@@ -21,8 +21,8 @@ import os
 
 import numpy as np
 
-from patterns.errors import InputError
-from patterns.mask import Mask
+from foundation import InputError
+from patterns.geometry import Mask
 from simulator.landscape import axis_step
 from simulator.render._style import (
     CHIP_COLOUR,

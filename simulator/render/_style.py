@@ -12,8 +12,7 @@ from __future__ import annotations
 
 import os
 
-from patterns.errors import InputError
-from patterns.outputs import atomic_output
+from foundation import InputError, atomic_output
 
 __all__ = ["CHIP_COLOUR", "PATH_COLOUR", "PLATEAU_COLOUR", "pyplot", "save_figure"]
 

@@ -44,8 +44,8 @@ import shapely
 from shapely.geometry import Polygon
 from shapely.geometry.base import BaseGeometry
 
-from patterns.errors import InputError, positive
-from patterns.mask import Mask
+from foundation import InputError, positive
+from patterns.geometry import Mask
 from simulator.core import REL_TOL
 
 __all__ = [
@@ -77,7 +77,7 @@ def _geometry_of(pattern: Mask | BaseGeometry) -> tuple[BaseGeometry, float, flo
         return pattern, 0.05, 0.1
     if not isinstance(pattern, Mask):
         raise InputError(
-            f"expected a shapely geometry or a patterns.mask.Mask, got {type(pattern).__name__}"
+            f"expected a shapely geometry or a patterns.geometry.Mask, got {type(pattern).__name__}"
         )
     if pattern.geometry is not None:
         return pattern.geometry, 0.05, 0.1
@@ -113,8 +113,7 @@ def price_outline(mask: Mask, budget_mb: float | None = None) -> int:
     """The outline's vertices (:func:`_outline_vertices`); InputError when their polygons
     would not fit the memory budget (None: the default budget), and a waiting line on stderr
     when outlining them takes long (:func:`simulator.core.wait_line`)."""
-    from patterns.resources import require_fits
-    from simulator.core import wait_line
+    from foundation import require_fits, wait_line
 
     n = _outline_vertices(mask.data)
     h, w = mask.shape
@@ -236,7 +235,7 @@ def smallest_feature_um(pattern: Mask | BaseGeometry, corner_deg: float = CORNER
     2 um (pitch 8 um) gives about 4 (a tooth flank).
 
     Args:
-        pattern: exact shapely geometry (um), or a :class:`~patterns.mask.Mask`; a mask
+        pattern: exact shapely geometry (um), or a :class:`~patterns.geometry.Mask`; a mask
             with ``geometry`` uses it, one without is outlined at its 0.5 level and
             simplified by half a pixel (features below about a pixel cannot be seen).
         corner_deg: turning angle above which an outline vertex is a corner.
@@ -372,8 +371,7 @@ def _smallest_feature_um(pattern: Mask | BaseGeometry, corner_deg: float) -> flo
 
 
 def _measure(pattern: Mask | BaseGeometry, corner_deg: float) -> float:
-    from patterns.resources import require_fits
-    from simulator.core import wait_line
+    from foundation import require_fits, wait_line
 
     geom, tol, merge = _geometry_of(pattern)
     vertices = int(shapely.get_num_coordinates(geom))
@@ -424,7 +422,7 @@ def feature_warning(
     Returns None when the scale resolves it. The warning names the feature size, its
     width in pixels and the pixel size that would resolve it (feature / min_px, rounded
     down to 1, 2, 2.5 or 5 x 10^k), as the CLI's ``--resolution`` flag. For an image read
-    from a lossy format (``params["lossy_format"]``, :func:`patterns.io.read_mask`) it names the
+    from a lossy format (``params["lossy_format"]``, :func:`patterns.read_mask`) it names the
     compression's speckle as the cause instead, with the fix (threshold, save as PNG).
     """
     s = positive("um_per_px", um_per_px, "um per px")

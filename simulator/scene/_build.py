@@ -21,10 +21,8 @@ from typing import Any, Self
 import numpy as np
 from shapely.geometry import box
 
-from patterns.errors import InputError, positive, require
-from patterns.mask import Mask, footprint_um
-from patterns.raster import mask_from_geometry
-from patterns.resources import check_budget_mb, price_raster
+from foundation import InputError, check_budget_mb, positive, price_raster, require
+from patterns.geometry import Mask, footprint_um, mask_from_geometry
 from simulator.liquid import Topography, check_surface_tension_mN_m
 from simulator.physics import Liquid, Materials
 from simulator.scene._parts import Effects, TwistGrid
@@ -74,9 +72,9 @@ class SceneBuilders:
         ``um_per_px``). A scale that contradicts a file's stored one is an InputError unless
         ``override_scale``, which makes the given scales replace the stored ones.
         ``invert`` / ``invert_chip`` read the pattern / chip image with black as wettable.
-        ``channel`` picks what a colour image gives (:func:`patterns.io.read_mask`; red, green,
+        ``channel`` picks what a colour image gives (:func:`patterns.read_mask`; red, green,
         blue or luminance): one whose channels differ is refused without it. A pattern image
-        that looks inverted (:func:`patterns.polarity.polarity_warning`) is noted in the scene's
+        that looks inverted (:func:`patterns.polarity_warning`) is noted in the scene's
         ``input_warnings``. A chip and a pattern of implausible scales for each other (a size
         off by about 1000, a chip of fewer than 3 px) are refused before the chip's raster is
         made (:func:`simulator.scene._plausible.check_scales`); ``check_scale=False`` skips that
@@ -91,7 +89,7 @@ class SceneBuilders:
         else :data:`patterns.layout.DEFAULT_UM_PER_PX`); its ``chip_layer`` gives the chip.
         Every raster is priced against ``memory_budget_mb`` before it is made.
         """
-        from patterns.io import read_mask
+        from patterns import read_mask
         from patterns.layout import (
             DEFAULT_UM_PER_PX,
             LayoutSelection,
@@ -103,7 +101,7 @@ class SceneBuilders:
         budget = kwargs.get("memory_budget_mb")
         if budget is not None:
             budget = check_budget_mb(budget, "memory_budget_mb")
-        from patterns.polarity import polarity_warning
+        from patterns import polarity_warning
 
         notes: list[str | None] = []  # warnings on the images as read (Scene.input_warnings)
         layout = layout if layout is not None else LayoutSelection()
@@ -355,16 +353,15 @@ def resampled_extent(
 ) -> tuple[tuple[int, int], tuple[int, int, int, int]]:
     """(shape, nonzero box) of :func:`resample_to_scale` ``(mask, um_per_px)``, computed
     without making the raster: the box (row0, row1, col0, col1, end-exclusive) as
-    :func:`patterns.mask.nonzero_box` would give it.
+    :func:`patterns.geometry.nonzero_box` would give it.
 
-    Exact geometry: the canvas of :func:`patterns.raster.canvas_shape` and the pixels the
+    Exact geometry: the canvas of :func:`patterns.geometry.canvas_shape` and the pixels the
     geometry's bounds reach into (every pixel a polygon reaches into it covers with a positive
     area). A raster coarsened by a whole factor ``k``: the padded raster's blocks of k x k
     pixels, a block non-zero where one of its pixels is (area averaging). Any other
     resampling of a raster is made (and measured).
     """
-    from patterns.mask import nonzero_box
-    from patterns.raster import canvas_shape
+    from patterns.geometry import canvas_shape, nonzero_box
 
     s = positive("resolution", um_per_px, "um per px")
     if math.isclose(mask.um_per_px, s, rel_tol=1e-9):
@@ -374,7 +371,7 @@ def resampled_extent(
         xmin, ymin, xmax, ymax = mask.geometry.bounds
         a = (
             1 / s
-        )  # the pixel frame of patterns.raster.to_pixel_frame: column = x / s + w / 2, row = h / 2 - y / s
+        )  # the pixel frame of patterns.geometry.to_pixel_frame: column = x / s + w / 2, row = h / 2 - y / s
         c0, c1 = math.floor(a * xmin + w / 2), math.ceil(a * xmax + w / 2)
         r0, r1 = math.floor(-a * ymax + h / 2), math.ceil(-a * ymin + h / 2)
         return (h, w), (max(r0, 0), min(r1, h), max(c0, 0), min(c1, w))
@@ -435,7 +432,7 @@ def resample_to_scale(mask: Mask, um_per_px: float, budget_mb: float | None = No
 
 def _chip_size(size: Any) -> tuple[Any, Any]:
     """(width, height) of ``chip_size_um``: one number (a square) or two (a rectangle); InputError
-    for anything else (each side is then checked by :func:`~patterns.errors.positive`)."""
+    for anything else (each side is then checked by :func:`~foundation.positive`)."""
     if isinstance(size, bool | np.bool_):
         raise InputError(f"chip_size_um must be a size in um, not {size!r}")
     if np.isscalar(size):

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from patterns.errors import InputError, positive, require
+from foundation import InputError, positive, require
 
 
 @dataclass(frozen=True)

@@ -20,8 +20,8 @@ import math
 
 import numpy as np
 
-from patterns.errors import InputError
-from patterns.mask import Mask, footprint_um
+from foundation import InputError
+from patterns.geometry import Mask, footprint_um
 
 #: Fewest pixels of the simulation grid the chip's smaller side may span.
 MIN_CHIP_PX = 3.0

@@ -61,9 +61,8 @@ from typing import Any
 
 import numpy as np
 
-from patterns.errors import InputError, positive, require
-from patterns.mask import Mask
-from patterns.resources import check_budget_mb, default_budget_mb
+from foundation import InputError, check_budget_mb, default_budget_mb, positive, require
+from patterns.geometry import Mask
 from simulator.core import SU8_DENSITY_KG_M3
 from simulator.liquid import Topography
 from simulator.physics import LINE_FRICTION_PA_S, Liquid, Materials
@@ -121,7 +120,7 @@ class Scene(SceneBuilders):
         topography: a protruding pad's edge angle (None: a flat pattern), for the
             overflow check of :func:`simulator.liquid.scene_warnings`.
         input_warnings: one-line warnings on the images as read (a pattern that looks
-            inverted, :func:`patterns.polarity.polarity_warning`), printed by the commands.
+            inverted, :func:`patterns.polarity_warning`), printed by the commands.
     """
 
     pattern: Mask
@@ -224,8 +223,8 @@ class Scene(SceneBuilders):
 
     @property
     def chip_min_side_um(self) -> float:
-        """The smallest side (um) of the chip's wettable footprint (:func:`patterns.mask.footprint_um`)."""
-        from patterns.mask import footprint_um
+        """The smallest side (um) of the chip's wettable footprint (:func:`patterns.geometry.footprint_um`)."""
+        from patterns.geometry import footprint_um
 
         return float(min(footprint_um(self.chip)))
 
@@ -353,7 +352,7 @@ class Scene(SceneBuilders):
         knobs = apply_preset(name, explicit, feature_um=feature, native_um_per_px=native)
         # a coarser grid must still carry the chip
         if check_scale and knobs["um_per_px"] > self.um_per_px:
-            from patterns.mask import footprint_um
+            from patterns.geometry import footprint_um
             from simulator.scene._plausible import check_scales
 
             check_scales(self.pattern, footprint_um(self.chip), knobs["um_per_px"], "size")

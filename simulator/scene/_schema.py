@@ -3,7 +3,7 @@
 :data:`SCHEMA` lists, per section (``None`` is the top level), every key a scene file
 may hold and what its value must be: a TOML type (numbers unquoted, booleans
 ``true``/``false``), a range with its unit, or a set of choices. :func:`validate_scene`
-checks a parsed document against it and raises :class:`~patterns.errors.InputError`
+checks a parsed document against it and raises :class:`~foundation.InputError`
 for the first problem, in one line that names the key with its section, shows the
 value and says what is allowed, e.g.::
 
@@ -38,13 +38,8 @@ import stat
 import tomllib
 from typing import Any
 
-from patterns.errors import InputError
-from patterns.io import CHANNELS
-from patterns.metadata import (
-    check_nesting,
-    show_key,
-    show_value,
-)
+from foundation import InputError
+from patterns import CHANNELS, check_nesting, show_key, show_value
 
 __all__ = ["SCHEMA", "read_scene_file", "validate_scene"]
 

@@ -10,7 +10,7 @@ import re
 from dataclasses import dataclass
 from typing import Any
 
-from patterns.metadata import show_value
+from patterns import show_value
 
 # ----------------------------------------------------------------------- limits
 #: Largest scene file read (bytes); real scenes are under 2 KB.

@@ -14,9 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 from shapely import affinity
 
-from patterns.errors import InputError
-from patterns.mask import Mask
-from patterns.resources import fmt_bytes
+from foundation import InputError, fmt_bytes
+from patterns.geometry import Mask
 from simulator.core import AREA_REL_TOL, DEG_TOL, floor_whole, is_whole, tiny
 from simulator.scene._parts import Effects, TwistGrid
 

@@ -17,8 +17,8 @@ from typing import Any
 
 import numpy as np
 
-from patterns.errors import InputError, require
-from patterns.metadata import show_value
+from foundation import InputError, require
+from patterns import show_value
 
 __all__ = ["AXES", "HARD_MAX_POINTS", "Axis", "AxisKind", "axis_kinds"]
 

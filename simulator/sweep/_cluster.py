@@ -17,7 +17,7 @@ import time
 from collections.abc import Callable, Iterable, Iterator
 from typing import Any
 
-from patterns.errors import InputError, require
+from foundation import InputError, require
 from simulator.sweep._point import XLA_ONE_THREAD, _one_line, run_point
 
 __all__ = ["CONNECT_TIMEOUT_S", "check_where", "dask_client", "run_tasks"]
@@ -53,7 +53,7 @@ def worker_cap(
     their sum within the memory available now and within ``budget_bytes`` (the sweep's
     memory budget, for all its workers together). At least one: a point that fits its own
     budget runs, one at a time."""
-    from patterns.resources import MB, available_memory_bytes, fmt_bytes
+    from foundation import MB, available_memory_bytes, fmt_bytes
 
     cores = os.cpu_count() or 1
     each = float(point_bytes) if point_bytes else WORKER_MEMORY_MB * MB

@@ -18,7 +18,7 @@ import sys
 import time
 from pathlib import Path
 
-from patterns.errors import InputError
+from foundation import InputError
 from simulator.core import THREADS_ENV
 from simulator.sweep._axes import AXES, _design_axes
 from simulator.sweep._spec import _design_seed
@@ -79,7 +79,7 @@ def point_geometry(task: dict):
 
 def point_scene(task: dict):
     """The scene of one point, built as ``selfalign evaluate`` builds it; also whether to coarsen automatically."""
-    from patterns.raster import mask_from_geometry
+    from patterns.geometry import mask_from_geometry
     from simulator.scene import Scene
 
     doc = copy.deepcopy(task["scene"])
@@ -120,7 +120,7 @@ def point_scene(task: dict):
             doc["chip_size_um"] = [x1 - x0, y1 - y0]
     elif not any(k in doc for k in ("chip", "chip_size_um", "chip_layer")):
         # evaluate's default chip: the pattern's wettable bounding box (the pattern read once with a stand-in chip)
-        from patterns.mask import footprint_um
+        from patterns.geometry import footprint_um
 
         probe = Scene.from_dict(
             doc | {"chip_size_um": [1.0, 1.0]}, base=Path(task["base"]), check_scale=False
@@ -169,8 +169,8 @@ def assess_point(task: dict) -> dict:
     four-pad pattern's ``critical_volume_nl`` (:func:`critical_volume_nl`) is added, to set
     beside the droplet's volume.
     """
+    from foundation import require_finite
     from simulator.batch import NOISE_FRACTION, NOISE_TWIST_DEG, assess, auto_resolution, chip_size
-    from simulator.core import require_finite
 
     scene, auto = point_scene(task)
     native = scene.um_per_px
@@ -268,7 +268,7 @@ def run_point(task: dict) -> dict:
     """Run one point; never raises for the point's own failure: ``status`` "ok" with the
     ``summary``, or "error" with the one-line ``error``. What each Dask task runs."""
     _cap_threads()
-    from simulator.core import quiet_waits
+    from foundation import quiet_waits
 
     t0 = time.perf_counter()
     try:

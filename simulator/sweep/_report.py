@@ -10,7 +10,7 @@
 * ``report.html``: the sweep, its counts and times, the pictures and a table of the
   points, each linking its numbers (``points/NNNNN.json``).
 
-Written atomically (:func:`simulator.render.save_figure`, :func:`patterns.outputs.atomic_output`).
+Written atomically (:func:`simulator.render.save_figure`, :func:`foundation.atomic_output`).
 """
 
 from __future__ import annotations
@@ -309,7 +309,7 @@ def _cell(v) -> str:
 
 def write_report(out: Path, spec, table, stats: dict) -> list[str]:
     """The pictures and ``report.html``; returns the files written."""
-    from patterns.outputs import atomic_output
+    from foundation import atomic_output
 
     out = Path(out)
     pics = write_pictures(out, spec, table)

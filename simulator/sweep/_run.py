@@ -84,7 +84,7 @@ import sys
 import time
 from pathlib import Path
 
-from patterns.errors import require
+from foundation import require
 from simulator.sweep._axes import HARD_MAX_POINTS
 from simulator.sweep._cluster import (
     check_where,
@@ -108,7 +108,7 @@ __all__ = ["sweep"]
 def _bar(show: bool, total: int):
     """Progress on stderr: points done of the total, failed so far, rate and the time left (tqdm)."""
     if not show:
-        from simulator.core import NoBar
+        from foundation import NoBar
 
         return NoBar()
     from tqdm import tqdm
@@ -139,8 +139,7 @@ def _price_workers(spec: SweepSpec, tasks: list[dict]) -> tuple[float | None, fl
     """(the largest priced peak of one point with a worker's imports, the sweep's memory
     budget in bytes) for :func:`worker_cap`: its workers together must fit the budget. A
     point that cannot be built or priced here is left to its run (its error row)."""
-    from patterns.errors import InputError
-    from patterns.resources import budget_bytes
+    from foundation import InputError, budget_bytes
     from simulator.sweep._point import point_bytes
 
     peak = None

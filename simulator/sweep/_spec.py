@@ -26,8 +26,8 @@ from typing import Any
 
 import numpy as np
 
-from patterns.errors import InputError, require, require_regular_file
-from patterns.metadata import check_nesting, show_value
+from foundation import InputError, require, require_regular_file
+from patterns import check_nesting, show_value
 from simulator.sweep._axes import (
     AXES,
     HARD_MAX_POINTS,

@@ -20,8 +20,7 @@ import time
 from collections.abc import Iterable
 from pathlib import Path
 
-from patterns.errors import InputError, require
-from patterns.hold import hold
+from foundation import InputError, hold, require
 from simulator.sweep._columns import STATUS_COLUMNS, flatten
 from simulator.sweep._spec import SweepSpec
 
@@ -39,7 +38,7 @@ __all__ = ["ResultStore", "kept_points"]
 
 
 # ----------------------------------------------------------------------- leftovers
-#: A file written atomically (:func:`patterns.outputs.atomic_output`): ``.NAME.XXXXXXXX.EXT``
+#: A file written atomically (:func:`foundation.atomic_output`): ``.NAME.XXXXXXXX.EXT``
 #: beside ``NAME.EXT`` (``tempfile``'s eight random characters, then the target's suffix).
 _TEMP_FILE = re.compile(r"^\.(?P<name>.+)\.[a-z0-9_]{8}(?P<ext>\.[^./]+)?$")
 
@@ -69,7 +68,7 @@ def remove_dead_files(directory: Path, subdirs: tuple[str, ...] = ()) -> list[st
 
 # ----------------------------------------------------------------------- the store
 def _write_text(path: Path, text: str) -> None:
-    from patterns.outputs import atomic_output
+    from foundation import atomic_output
 
     with atomic_output(path) as tmp:
         tmp.write_text(text)
@@ -100,7 +99,7 @@ class ResultStore:
     COMMAND = "sweep"  # the command, in the manifest, the marker and the messages
     KEY = "point"  # the column that numbers the rows
     MANIFEST, JOURNAL, ROWS_DIR, LOCK, TABLES = MANIFEST, JOURNAL, POINTS_DIR, LOCK, TABLES
-    HOLD = "sweep-point"  # the hold point after each row (patterns.hold)
+    HOLD = "sweep-point"  # the hold point after each row (foundation)
 
     def __init__(
         self,
@@ -117,7 +116,7 @@ class ResultStore:
         ``digest``: the run's hash (what a rerun must match); ``describe``: what the manifest
         records beside it; ``n``: rows are numbered below it (None: any number from 0).
         """
-        from patterns.outputs import check_output_dir
+        from foundation import check_output_dir
 
         self.digest, self.describe, self.n, self.flush_s = digest, describe, n, flush_s
         self.out = Path(out) if out is not None else None
@@ -140,7 +139,7 @@ class ResultStore:
     # .................................................................. directory
     def open(self) -> None:
         """Create the directory (when new) and its manifest; open the journal for appending."""
-        from patterns.outputs import check_output_dir
+        from foundation import check_output_dir
 
         out = self.out
         if out is None:
@@ -301,7 +300,7 @@ class ResultStore:
 
         t0 = time.monotonic()
         df = self.table() if df is None else df
-        from patterns.outputs import atomic_output
+        from foundation import atomic_output
 
         with atomic_output(self.out / self.TABLES[0]) as tmp:
             pq.write_table(pa.Table.from_pandas(df, preserve_index=False), tmp)
@@ -313,11 +312,11 @@ class ResultStore:
         )  # a large table: at most a tenth of the time on rewriting it
 
     def write_marker(self) -> None:
-        from patterns.outputs import MARKER, _listing
+        from foundation import MARKER, tree_listing
 
         files = [
             e
-            for e in _listing(self.out)
+            for e in tree_listing(self.out)
             if not e.endswith("/") and e != MARKER and not e.startswith(".") and "/." not in e
         ]
         _write_text(

@@ -36,7 +36,7 @@ import numpy as np
 import shapely
 from shapely.geometry.base import BaseGeometry
 
-from patterns.errors import InputError, positive
+from foundation import InputError, positive
 from simulator.core import UM2
 from simulator.motion import GREEDY_MOVES
 from simulator.physics import Materials

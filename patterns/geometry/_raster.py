@@ -7,7 +7,7 @@ whenever the geometry lies inside the canvas. Cost grows with the perimeter in
 pixels plus one cumulative sum over the canvas (about 25 ms for a 912 x 912 px
 canvas holding a rotated 730 px square).
 
-Frame conventions are those of :mod:`patterns.mask`: the image centre is the
+Frame conventions are those of :mod:`patterns.geometry`: the image centre is the
 physical origin, row 0 is the top (largest y), x grows with the column.
 """
 
@@ -20,9 +20,8 @@ import shapely
 from shapely import affinity
 from shapely.geometry.base import BaseGeometry
 
-from patterns.errors import InputError, positive
-from patterns.mask import Mask
-from patterns.resources import price_raster
+from foundation import InputError, positive, price_raster
+from patterns.geometry._mask import Mask
 
 
 def canvas_shape(
@@ -201,7 +200,7 @@ def rasterize(
         shape: (H, W) of the canvas; default :func:`canvas_shape` (even, symmetric).
         margin_um: border added around the geometry when ``shape`` is None.
         budget_mb: memory budget (MiB) the raster must fit (default: the default budget);
-            priced before anything is allocated (:func:`patterns.resources.price_raster`).
+            priced before anything is allocated (:func:`foundation.price_raster`).
         what: the raster's name in the refusal message.
 
     Returns:

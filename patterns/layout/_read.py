@@ -35,14 +35,13 @@ layer :data:`WRITE_DXF_LAYER` (``$INSUNITS`` micrometres; holes as inner closed
 polylines), in one cell named after the design. Reading it back gives the same polygon
 to the database unit.
 
-Every failure is an :class:`~patterns.errors.InputError` with one line naming the file
-and the fix; nothing is written on failure (:func:`patterns.outputs.atomic_output`).
+Every failure is an :class:`~foundation.InputError` with one line naming the file
+and the fix; nothing is written on failure (:func:`foundation.atomic_output`).
 
-Modules: :mod:`patterns.layout_formats` (formats, units, layer names, the selection),
-:mod:`patterns.layout_gds` and :mod:`patterns.layout_dxf` (the readers),
-:mod:`patterns.layout_cell` (the flattened cell and its merged geometry),
-:mod:`patterns.layout_write` (writing); this module reads a layout and gives the scene
-its view (frame, masks). Every name is importable from here.
+The family's modules (their names are :mod:`patterns.layout`'s): ``_formats`` (formats,
+units, layer names, the selection), ``_gds`` and ``_dxf`` (the readers), ``_cell`` (the
+flattened cell and its merged geometry), ``_write`` (writing); this module reads a layout
+and gives the scene its view (frame, masks).
 """
 
 from __future__ import annotations
@@ -55,17 +54,20 @@ import shapely
 from shapely import affinity
 from shapely.geometry.base import BaseGeometry
 
-from patterns.errors import InputError, positive, require_regular_file
-from patterns.layout_cell import Layout
-from patterns.layout_dxf import _read_dxf
-from patterns.layout_formats import (
-    BYTES_PER_POLYGON as BYTES_PER_POLYGON,
-    BYTES_PER_VERTEX as BYTES_PER_VERTEX,
-    DBU_UM as DBU_UM,
-    DEFAULT_MAX_POLYGONS as DEFAULT_MAX_POLYGONS,
+from foundation import (
+    RASTER_BYTES_PER_PX,
+    InputError,
+    budget_bytes,
+    fmt_bytes,
+    positive,
+    require_fits,
+    require_regular_file,
+)
+from patterns.geometry import Mask
+from patterns.layout._cell import Layout
+from patterns.layout._dxf import _read_dxf
+from patterns.layout._formats import (
     DXF_UNITS,
-    INSUNITS as INSUNITS,
-    MAX_DEPTH as MAX_DEPTH,
     NAMES,
     READ_FACTOR,
     SUFFIXES,
@@ -75,10 +77,8 @@ from patterns.layout_formats import (
     is_layout,
     layout_format,
 )
-from patterns.layout_gds import _read_gdstk
-from patterns.layout_write import WRITE_DXF_LAYER, WRITE_LAYER, snap, write_layout
-from patterns.mask import Mask
-from patterns.resources import RASTER_BYTES_PER_PX, budget_bytes, fmt_bytes, require_fits
+from patterns.layout._gds import _read_gdstk
+from patterns.layout._write import WRITE_DXF_LAYER, WRITE_LAYER, snap, write_layout
 
 __all__ = [
     "DEFAULT_UM_PER_PX",
@@ -214,7 +214,7 @@ def layout_mask(
     geometry: BaseGeometry, um_per_px: float, what: str, params: dict, budget_mb: float | None
 ) -> Mask:
     """Rasterize layout geometry; over the budget, the refusal says which scale would fit."""
-    from patterns.raster import mask_from_geometry
+    from patterns.geometry import mask_from_geometry
 
     s = positive("the layout raster's pixel size (--resolution)", um_per_px, "um per px")
     x0, y0, x1, y1 = geometry.bounds

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from patterns.errors import InputError
+from foundation._errors import InputError
 
 
 def first_non_finite(obj: Any, path: str = "") -> tuple[str, float] | None:

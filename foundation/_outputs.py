@@ -32,8 +32,8 @@ import tempfile
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
-from patterns.errors import InputError
-from patterns.hold import hold
+from foundation._errors import InputError
+from foundation._hold import hold
 
 #: Marker file of an output directory: JSON listing the files selfalign wrote there.
 MARKER = ".selfalign-output.json"
@@ -215,7 +215,7 @@ def _writable_dir(path: Path) -> bool:
     return os.access(path, os.W_OK) and bool(mode & stat.S_IWUSR)
 
 
-def _listing(root: Path) -> list[str]:
+def tree_listing(root: Path) -> list[str]:
     """Every entry below ``root`` as a relative POSIX path (directories end in '/')."""
     out = []
     for dirpath, dirnames, filenames in os.walk(root):
@@ -232,7 +232,7 @@ def _previous_output(out: Path) -> bool:
         listed = set(doc["files"]) | {MARKER}
     except (OSError, ValueError, KeyError, TypeError):
         return False
-    for entry in _listing(out):
+    for entry in tree_listing(out):
         if entry.endswith("/"):
             if not any(f.startswith(entry) for f in listed):
                 return False
@@ -319,7 +319,7 @@ def output_directory(
     try:
         hold("output")
         yield tmp
-        files = [e for e in _listing(tmp) if not e.endswith("/")]
+        files = [e for e in tree_listing(tmp) if not e.endswith("/")]
         (tmp / MARKER).write_text(
             json.dumps({"tool": "selfalign", "command": command, "files": files}, indent=1) + "\n"
         )

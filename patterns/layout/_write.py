@@ -3,7 +3,7 @@
 Vertices rounded to the 1 nm database unit, on GDS/OASIS layer :data:`WRITE_LAYER` (holes
 as keyhole polygons) or the DXF layer :data:`WRITE_DXF_LAYER` (holes as inner closed
 polylines), in one cell named after the design; written atomically
-(:func:`patterns.outputs.atomic_output`). gdstk and ezdxf are imported only when writing.
+(:func:`foundation.atomic_output`). gdstk and ezdxf are imported only when writing.
 """
 
 from __future__ import annotations
@@ -18,9 +18,8 @@ import shapely
 from shapely.geometry import Polygon
 from shapely.geometry.base import BaseGeometry
 
-from patterns.errors import InputError
-from patterns.layout_formats import DBU_UM, SUFFIXES, _on_grid
-from patterns.outputs import atomic_output
+from foundation import InputError, atomic_output
+from patterns.layout._formats import DBU_UM, SUFFIXES, _on_grid
 
 #: GDS/OASIS layer and datatype that :func:`write_layout` draws on; the DXF layer name.
 WRITE_LAYER = (1, 0)

@@ -1,6 +1,6 @@
 """One flattened layout cell (:class:`Layout`) and its outline rings merged into exact geometry.
 
-A reader (:mod:`patterns.layout_gds`, :mod:`patterns.layout_dxf`) gives the closed rings of
+A reader (:mod:`patterns.layout`, :mod:`patterns.layout`) gives the closed rings of
 every layer; :meth:`Layout.geometry` turns one layer's rings into valid polygons (a GDS
 keyhole is a polygon with a hole, a polygon that crosses itself is refused) and merges
 them (DXF: an outline inside another is a hole, by nesting depth).
@@ -19,8 +19,8 @@ import shapely
 from shapely.geometry import Polygon
 from shapely.geometry.base import BaseGeometry
 
-from patterns.errors import InputError
-from patterns.layout_formats import _MAX_LISTED, _count, _layer_key, _layer_text
+from foundation import InputError
+from patterns.layout._formats import _MAX_LISTED, _count, _layer_key, _layer_text
 
 
 # --------------------------------------------------------------------------- the layout

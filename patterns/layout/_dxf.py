@@ -17,9 +17,9 @@ from typing import Any
 
 import numpy as np
 
-from patterns.errors import InputError
-from patterns.layout_cell import Layout
-from patterns.layout_formats import (
+from foundation import InputError, require_fits
+from patterns.layout._cell import Layout
+from patterns.layout._formats import (
     _MAX_LISTED,
     BYTES_PER_POLYGON,
     BYTES_PER_VERTEX,
@@ -32,7 +32,6 @@ from patterns.layout_formats import (
     _on_grid,
     require_polygon_count,
 )
-from patterns.resources import require_fits
 
 
 # --------------------------------------------------------------------------- DXF

@@ -41,11 +41,9 @@ from typing import Any
 import numpy as np
 from PIL import Image, PngImagePlugin
 
-from patterns.errors import InputError, positive, require_regular_file
-from patterns.mask import Mask
-from patterns.metadata import parse_png_params
-from patterns.outputs import atomic_output
-from patterns.resources import price_image
+from foundation import InputError, atomic_output, positive, price_image, require_regular_file
+from patterns._metadata import parse_png_params
+from patterns.geometry import Mask
 
 __all__ = ["CHANNELS", "TEXT_KEY", "read_mask", "write_mask"]
 
@@ -195,7 +193,7 @@ def read_mask(
     missing_hint: str | None = None,
     channel: str | None = None,
 ) -> Mask:
-    """Read an image file as a :class:`~patterns.mask.Mask` (see the module notes for the rules).
+    """Read an image file as a :class:`~patterns.geometry.Mask` (see the module notes for the rules).
 
     Args:
         path: any Pillow-readable image (PNG expected); the first frame of multi-frame files.
@@ -209,7 +207,7 @@ def read_mask(
         channel: what to read from a colour image whose channels differ (:data:`CHANNELS`);
             None: such an image is an InputError (a grey one is read as its luminance).
         max_mpx: largest image in megapixels (default
-            :data:`patterns.resources.DEFAULT_MAX_IMAGE_MPX`); checked from the header,
+            :data:`foundation.DEFAULT_MAX_IMAGE_MPX`); checked from the header,
             before the pixels are decoded.
         budget_mb: memory budget the decoded image must fit (default: the default budget).
 

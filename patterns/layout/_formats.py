@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from patterns.errors import InputError
+from foundation import InputError
 
 #: File extensions of the layout formats (used when the content does not tell).
 SUFFIXES = {
@@ -177,7 +177,7 @@ def layout_wait_line(n: int, what: str) -> bool:
     process has loaded it; silent for a library caller without it. Returns whether shown."""
     import sys
 
-    progress = sys.modules.get("simulator.core._progress")
+    progress = sys.modules.get("foundation")
     if progress is None:
         return False
     seconds = n * S_PER_POLYGON

@@ -15,7 +15,7 @@ import math
 import os
 from pathlib import Path
 
-from patterns.errors import InputError
+from foundation._errors import InputError
 
 #: Ceiling of the default memory budget (MiB).
 DEFAULT_BUDGET_CAP_MB = 8192.0

@@ -21,8 +21,8 @@ import numpy as np
 import shapely
 from shapely.geometry import Polygon
 
-from patterns.errors import InputError, require
-from patterns.shapes import EDGES, _choice, _finish, _length, rotate_quarter, square
+from foundation import InputError, require
+from patterns.geometry._shapes import EDGES, _choice, _finish, _length, rotate_quarter, square
 
 # ---------------------------------------------------------------------------- defect
 

@@ -21,9 +21,9 @@ from typing import Any
 
 import numpy as np
 
-from patterns.errors import InputError, positive
-from patterns.layout_cell import Layout
-from patterns.layout_formats import (
+from foundation import InputError, positive, require_fits
+from patterns.layout._cell import Layout
+from patterns.layout._formats import (
     _MAX_LISTED,
     BYTES_PER_POLYGON,
     BYTES_PER_VERTEX,
@@ -34,7 +34,6 @@ from patterns.layout_formats import (
     layout_wait_line,
     require_polygon_count,
 )
-from patterns.resources import require_fits
 
 
 # --------------------------------------------------------------------------- GDSII / OASIS

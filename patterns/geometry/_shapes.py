@@ -18,7 +18,7 @@ from shapely import affinity
 from shapely.geometry import MultiPolygon, Polygon, box
 from shapely.geometry.polygon import orient
 
-from patterns.errors import InputError, positive, require
+from foundation import InputError, positive, require
 
 EDGES = ("right", "top", "left", "bottom")  # counter-clockwise order; index = quarter turns
 

@@ -1,13 +1,13 @@
 """Exact pattern geometry: shapely polygons in micrometres, centred on the nominal pattern.
 
-Conventions (see :mod:`patterns.mask` for the image side):
+Conventions (see :mod:`patterns.geometry` for the image side):
 
 * Units are micrometres. The origin is the centre of the *nominal* (ideal) pattern, x right,
   y up. For defect and jagged designs the origin is the centre of the nominal square, not the
   centroid of the defective shape (docs/physics.md §1).
 * Every builder returns a valid shapely geometry (``Polygon``, or ``MultiPolygon`` for the
   four-pad design) with counter-clockwise exterior rings, and raises
-  :class:`patterns.errors.InputError` with a one-line message for impossible input.
+  :class:`foundation.InputError` with a one-line message for impossible input.
 * Quarter turns are applied with exact integer matrices, so rotated copies of an edge carry
   bit-identical coordinates (4-fold symmetry holds to machine precision).
 
@@ -22,10 +22,10 @@ never cross at a corner: a tooth that would reach past a corner is clipped by th
 neighbouring edge's nominal line, and two inward teeth that meet at a corner simply both cut
 it.
 
-Modules: :mod:`patterns.shapes` (the ideal shapes and the builders' shared helpers),
-:mod:`patterns.defects` (defect and jagged designs); this module holds the registry of
-named designs (:data:`DESIGNS`, :func:`build`, :func:`design_record`). Every builder is
-importable from here.
+The family's modules (their names are :mod:`patterns.geometry`'s): ``_shapes`` (the ideal
+shapes and the builders' shared helpers), ``_defects`` (defect and jagged designs); this
+module holds the registry of named designs (:data:`DESIGNS`, :func:`build`,
+:func:`design_record`).
 """
 
 from __future__ import annotations
@@ -34,39 +34,21 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from patterns.defects import DEFECT_TYPES, constant_jagged, defect, defect_type, random_jagged
-from patterns.errors import InputError, positive, require
-from patterns.shapes import (
+from foundation import InputError, positive, require
+from patterns.geometry._defects import (
+    constant_jagged,
+    defect,
+    random_jagged,
+)
+from patterns.geometry._shapes import (
     EDGES,
     _choice,
     circle,
     four_pad,
     polygon,
     rectangle,
-    rotate_quarter,
     square,
 )
-
-__all__ = [
-    "DEFECT_TYPES",
-    "DESIGNS",
-    "Design",
-    "Param",
-    "build",
-    "circle",
-    "constant_jagged",
-    "defect",
-    "defect_type",
-    "design_record",
-    "four_pad",
-    "polygon",
-    "random_jagged",
-    "rectangle",
-    "resolve",
-    "rotate_quarter",
-    "square",
-]
-
 
 # ---------------------------------------------------------------------------- registry
 

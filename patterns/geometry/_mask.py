@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from patterns.errors import InputError, positive
+from foundation import InputError, positive
 
 
 @dataclass(frozen=True, eq=False)

@@ -1,13 +1,13 @@
 """The ``selfalign`` PNG text chunk (JSON provenance), parsed and checked with one-line errors.
 
-:func:`write_mask <patterns.io.write_mask>` stores the parameters that generated a pattern
+:func:`write_mask <patterns.write_mask>` stores the parameters that generated a pattern
 as JSON in a PNG text chunk; :func:`parse_png_params` reads it back. The note is
 provenance, so a note that is not JSON at all, or not a JSON object, is ignored (``{}``)
 and never makes the image unusable. A note that *is* an object must be sane, because
 the tool reads some of its keys (:data:`PNG_KEYS`): a wrong type, a NaN or an infinity
 there, a note over :data:`MAX_PARAMS_CHARS` characters, or one nested deeper than
 :data:`MAX_PARAMS_DEPTH` (deep JSON makes ``json.loads`` raise RecursionError) raises
-:class:`~patterns.errors.InputError` naming the PNG file and the key. Unknown keys are
+:class:`~foundation.InputError` naming the PNG file and the key. Unknown keys are
 kept as they are.
 
 Also here, because both the scene schema (:mod:`simulator.scene`) and this module
@@ -26,7 +26,7 @@ import re
 from collections.abc import Callable
 from typing import Any
 
-from patterns.errors import InputError
+from foundation import InputError
 
 __all__ = [
     "MAX_PARAMS_CHARS",
