@@ -51,7 +51,7 @@ _EXPORTS = {
     "feature_warning": "simulator.scene",
     "smallest_feature_um": "simulator.scene",
     # design sweeps
-    "sweep": "simulator.sweep",
+    "run_sweep": "simulator.sweep",
     "load_sweep": "simulator.sweep",
     # the model fitted to a bench
     "calibrate": "simulator.design",

@@ -186,9 +186,4 @@ def test_the_top_level_names_are_the_package_faces_names():
         value = getattr(
             importlib.import_module(module), simulator._EXPORTS[name].partition(":")[2] or name
         )
-        got = getattr(simulator, name)
-        # ``simulator.sweep`` is both a package and a function: once the package is imported,
-        # the attribute is the package, which calls the function.
-        assert got is value or (
-            name == "sweep" and callable(got) and got.__name__ == "simulator.sweep"
-        ), name
+        assert getattr(simulator, name) is value, name

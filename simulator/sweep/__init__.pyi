@@ -36,7 +36,7 @@ from ._report import (
     column_label as column_label,
 )
 from ._run import (
-    sweep as sweep,
+    run_sweep as run_sweep,
 )
 from ._spec import (
     DEFAULT_MAX_POINTS as DEFAULT_MAX_POINTS,
