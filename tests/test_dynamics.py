@@ -23,12 +23,12 @@ import pytest
 from patterns.errors import InputError
 from patterns.geometry import square
 from patterns.raster import mask_from_geometry
+from simulator.core import OUTCOMES
 from simulator.landscape import build_landscape
 from simulator.motion import (
     CONVERGED,
     EDGE,
     MAX_STEPS,
-    OUTCOMES,
     DynamicsParams,
     Grid,
     classify,

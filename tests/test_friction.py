@@ -25,9 +25,9 @@ from shapely.geometry import box
 
 from patterns.mask import Mask
 from patterns.raster import mask_from_geometry
+from simulator.core import OUTCOMES
 from simulator.motion import (
     MOREAU_TOL,
-    OUTCOMES,
     DynamicsParams,
     Grid,
     Relay,

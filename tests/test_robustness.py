@@ -70,13 +70,12 @@ from patterns.errors import InputError
 from patterns.geometry import defect, four_pad, rectangle, square
 from patterns.mask import Mask
 from patterns.raster import mask_from_geometry
-from simulator.core import DEFAULT_MAX_STEPS
+from simulator.core import DEFAULT_MAX_STEPS, OUTCOMES
 from simulator.landscape import build_landscape
 from simulator.motion import (
     CONVERGED,
     EDGE,
     MAX_STEPS,
-    OUTCOMES,
     REST_TOL_STEPS,
     DynamicsParams,
     classify,

@@ -78,7 +78,6 @@ from ._stepping import (
     EVENT as EVENT,
     GREEDY_MOVES as GREEDY_MOVES,
     MAX_STEPS as MAX_STEPS,
-    OUTCOMES as OUTCOMES,
     STAY as STAY,
     TIE_RANK as TIE_RANK,
     classify as classify,

@@ -36,7 +36,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from simulator.core import OUTCOMES  # noqa: F401 - simulator.motion.OUTCOMES, as before
 from simulator.motion._field import (
     Field,
     Grid,
@@ -268,7 +267,7 @@ def gradient_descent(
 def classify(
     field: Field, grid: Grid, q, energy, status, flat, timed_out: bool | jax.Array = False
 ) -> jax.Array:
-    """Outcome index into :data:`OUTCOMES` for a final pose q (fractional indices).
+    """Outcome index into :data:`simulator.core.OUTCOMES` for a final pose q (fractional indices).
 
     aligned: within ``field.align_tol`` (twist steps, px) of the global minimum, twist
     compared modulo the chip's symmetry period. no_contact: zero overlap (|E| at or

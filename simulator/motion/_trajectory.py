@@ -22,6 +22,7 @@ from simulator.core import (
     DEFAULT_MAX_STEPS,
     DEG_TOL,
     METHODS,
+    OUTCOMES,
     compiling,
     shows_wait,
     tiny,
@@ -51,7 +52,6 @@ from simulator.motion._stepping import (
     EDGE,
     EVENT,
     MAX_STEPS,
-    OUTCOMES,
     classify,
     reference_gradient,
 )
