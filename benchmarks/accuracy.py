@@ -42,8 +42,8 @@ Measured per point, against :mod:`simulator.testing` (exact shapely overlap, flo
   for dA/dtwist, 90th percentile in % of A_chip / 2 (the slope of the twist cusp,
   docs/physics.md C5);
 * final-pose error: the raster stepper's final pose against the same stepper on the
-  exact overlap with the same step sizes (:func:`simulator.testing.greedy` /
-  :func:`~simulator.testing.gradient_descent`), from 12 random starts; translation (um)
+  exact overlap with the same step sizes (:func:`simulator.testing.exact_greedy` /
+  :func:`~simulator.testing.exact_gradient_descent`), from 12 random starts; translation (um)
   and twist (degrees, modulo 90), max over the starts;
 * cost: wall time and peak memory of the full landscape (``build_landscape``), of one
   trajectory (``simulate`` without a landscape: the boxes it needs; warm, i.e. after one
@@ -323,13 +323,13 @@ def _reference_field(case: str, n: int) -> tuple[np.ndarray, np.ndarray]:
 def _reference_final(
     case: str, k: Knobs, start: tuple, rg_um: float, a_max: float
 ) -> tuple[float, float, float]:
-    from simulator.testing import gradient_descent, greedy
+    from simulator.testing import exact_gradient_descent, exact_greedy
 
     pattern, chip = _geometry(case)
     if k.method == "greedy":
         ev = _evaluator(case, k.um_per_px, k.twist_step_deg)
-        return greedy(pattern, chip, start, k.um_per_px, k.twist_step_deg, evaluator=ev).final
-    run = gradient_descent(
+        return exact_greedy(pattern, chip, start, k.um_per_px, k.twist_step_deg, evaluator=ev).final
+    run = exact_gradient_descent(
         pattern, chip, start, k.um_per_px, k.twist_step_deg, rg_um=rg_um, force_scale_um2=a_max
     )
     return run.final
