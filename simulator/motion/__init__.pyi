@@ -25,7 +25,6 @@ from ._dynamics_params import (
 from ._field import (
     PAD as PAD,
     Field as Field,
-    Grid as Grid,
     Relay as Relay,
     block as block,
     field_and_grid as field_and_grid,
