@@ -222,8 +222,8 @@ def _best_of(fn, first_s: float, budget_s: float = 3.0, repeats: int = 5) -> flo
 def measure_point(case: str, knobs: dict, settings: dict) -> dict:
     """Everything about one point that needs the raster engine (run in a fresh process)."""
     from simulator.batch import random_starts, run_batch
-    from simulator.core import DEFAULT_CHUNK
-    from simulator.landscape import UM2_TO_M2, build_landscape
+    from simulator.core import DEFAULT_CHUNK, UM2
+    from simulator.landscape import build_landscape
     from simulator.motion import radius_of_gyration_px, simulate
 
     k = Knobs(**knobs)
@@ -242,12 +242,12 @@ def measure_point(case: str, knobs: dict, settings: dict) -> dict:
     dg = ls.delta_gamma
     e = ls.energy_at(poses[:, 0], poses[:, 1], poses[:, 2])
     gx, gy, gt = ls.gradient_at(poses[:, 0], poses[:, 1], poses[:, 2])
-    area = np.asarray(e, float) / (dg * UM2_TO_M2)
+    area = np.asarray(e, float) / (dg * UM2)
     grad = np.stack(
         [
-            np.asarray(gx) / (dg * UM2_TO_M2 / 1e-6),
-            np.asarray(gy) / (dg * UM2_TO_M2 / 1e-6),
-            np.asarray(gt) / (dg * UM2_TO_M2),
+            np.asarray(gx) / (dg * UM2 / 1e-6),
+            np.asarray(gy) / (dg * UM2 / 1e-6),
+            np.asarray(gt) / (dg * UM2),
         ],
         axis=1,
     )
@@ -397,7 +397,8 @@ def preset_library_check(n_poses: int, presets: list[str] | None = None) -> list
     from patterns.geometry import build, square
     from patterns.library import LIBRARY
     from patterns.raster import mask_from_geometry
-    from simulator.landscape import UM2_TO_M2, build_landscape
+    from simulator.core import UM2
+    from simulator.landscape import build_landscape
     from simulator.scene import PRESETS, Scene, TwistGrid, apply_preset, smallest_feature_um
     from simulator.testing import gradient_um2, overlap_um2
 
@@ -420,7 +421,7 @@ def preset_library_check(n_poses: int, presets: list[str] | None = None) -> list
                 memory_budget_mb=16384,
             )
             ls = build_landscape(scene)
-            unit = ls.delta_gamma * UM2_TO_M2
+            unit = ls.delta_gamma * UM2
             da = ls.energy_at(*poses.T) / unit - a_ref
             gx, gy, _ = ls.gradient_at(*poses.T)
             df = np.hypot(gx / (unit / 1e-6) - g_ref[:, 0], gy / (unit / 1e-6) - g_ref[:, 1])

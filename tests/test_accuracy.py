@@ -11,7 +11,8 @@ from patterns.geometry import build, defect_type, four_pad, random_jagged, squar
 from patterns.library import LIBRARY
 from patterns.mask import Mask
 from patterns.raster import mask_from_geometry
-from simulator.landscape import UM2_TO_M2, build_landscape
+from simulator.core import UM2
+from simulator.landscape import build_landscape
 from simulator.scene import (
     KNOBS,
     PRESETS,
@@ -132,7 +133,7 @@ def _scene(geom, chip, s, dtype="float32", step=1.0):
 def _energy_error(geom, chip, s, poses, **kw) -> float:
     """RMS |A_raster - A_exact| / A_chip at the poses."""
     ls = build_landscape(_scene(geom, chip, s, **kw))
-    a = ls.energy_at(*poses.T) / (ls.delta_gamma * UM2_TO_M2)
+    a = ls.energy_at(*poses.T) / (ls.delta_gamma * UM2)
     return float(np.sqrt(np.mean((a - overlap_um2(geom, chip, poses)) ** 2)) / chip.area)
 
 
