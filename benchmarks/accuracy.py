@@ -42,8 +42,8 @@ Measured per point, against :mod:`simulator.testing` (exact shapely overlap, flo
   for dA/dtwist, 90th percentile in % of A_chip / 2 (the slope of the twist cusp,
   docs/physics.md C5);
 * final-pose error: the raster stepper's final pose against the same stepper on the
-  exact overlap with the same step sizes (:func:`simulator.testing.greedy` /
-  :func:`~simulator.testing.gradient_descent`), from 12 random starts; translation (um)
+  exact overlap with the same step sizes (:func:`simulator.testing.exact_greedy` /
+  :func:`~simulator.testing.exact_gradient_descent`), from 12 random starts; translation (um)
   and twist (degrees, modulo 90), max over the starts;
 * cost: wall time and peak memory of the full landscape (``build_landscape``), of one
   trajectory (``simulate`` without a landscape: the boxes it needs; warm, i.e. after one
@@ -221,8 +221,8 @@ def _best_of(fn, first_s: float, budget_s: float = 3.0, repeats: int = 5) -> flo
 def measure_point(case: str, knobs: dict, settings: dict) -> dict:
     """Everything about one point that needs the raster engine (run in a fresh process)."""
     from simulator.batch import random_starts, run_batch
-    from simulator.core import DEFAULT_CHUNK
-    from simulator.landscape import UM2_TO_M2, build_landscape
+    from simulator.core import DEFAULT_CHUNK, UM2
+    from simulator.landscape import build_landscape
     from simulator.motion import radius_of_gyration_px, simulate
 
     k = Knobs(**knobs)
@@ -241,12 +241,12 @@ def measure_point(case: str, knobs: dict, settings: dict) -> dict:
     dg = ls.delta_gamma
     e = ls.energy_at(poses[:, 0], poses[:, 1], poses[:, 2])
     gx, gy, gt = ls.gradient_at(poses[:, 0], poses[:, 1], poses[:, 2])
-    area = np.asarray(e, float) / (dg * UM2_TO_M2)
+    area = np.asarray(e, float) / (dg * UM2)
     grad = np.stack(
         [
-            np.asarray(gx) / (dg * UM2_TO_M2 / 1e-6),
-            np.asarray(gy) / (dg * UM2_TO_M2 / 1e-6),
-            np.asarray(gt) / (dg * UM2_TO_M2),
+            np.asarray(gx) / (dg * UM2 / 1e-6),
+            np.asarray(gy) / (dg * UM2 / 1e-6),
+            np.asarray(gt) / (dg * UM2),
         ],
         axis=1,
     )
@@ -322,13 +322,13 @@ def _reference_field(case: str, n: int) -> tuple[np.ndarray, np.ndarray]:
 def _reference_final(
     case: str, k: Knobs, start: tuple, rg_um: float, a_max: float
 ) -> tuple[float, float, float]:
-    from simulator.testing import gradient_descent, greedy
+    from simulator.testing import exact_gradient_descent, exact_greedy
 
     pattern, chip = _geometry(case)
     if k.method == "greedy":
         ev = _evaluator(case, k.um_per_px, k.twist_step_deg)
-        return greedy(pattern, chip, start, k.um_per_px, k.twist_step_deg, evaluator=ev).final
-    run = gradient_descent(
+        return exact_greedy(pattern, chip, start, k.um_per_px, k.twist_step_deg, evaluator=ev).final
+    run = exact_gradient_descent(
         pattern, chip, start, k.um_per_px, k.twist_step_deg, rg_um=rg_um, force_scale_um2=a_max
     )
     return run.final
@@ -395,7 +395,8 @@ def preset_library_check(n_poses: int, presets: list[str] | None = None) -> list
     """
     from patterns.geometry import build, mask_from_geometry, square
     from patterns.library import LIBRARY
-    from simulator.landscape import UM2_TO_M2, build_landscape
+    from simulator.core import UM2
+    from simulator.landscape import build_landscape
     from simulator.scene import PRESETS, Scene, TwistGrid, apply_preset, smallest_feature_um
     from simulator.testing import gradient_um2, overlap_um2
 
@@ -418,7 +419,7 @@ def preset_library_check(n_poses: int, presets: list[str] | None = None) -> list
                 memory_budget_mb=16384,
             )
             ls = build_landscape(scene)
-            unit = ls.delta_gamma * UM2_TO_M2
+            unit = ls.delta_gamma * UM2
             da = ls.energy_at(*poses.T) / unit - a_ref
             gx, gy, _ = ls.gradient_at(*poses.T)
             df = np.hypot(gx / (unit / 1e-6) - g_ref[:, 0], gy / (unit / 1e-6) - g_ref[:, 1])

@@ -10,7 +10,7 @@ evaluate's 2000 yield starts and 25 x 25 capture grid. Measured, in this order, 
    worker is (XLA's thread pool off, the FFTs and batches sized for one core); 1c. two such
    children at once, without Dask: the speed-up two processes get from the machine right now
    (2 on an idle machine with two free cores), the bound for item 3;
-2. ``simulator.sweep(..., workers=1)`` and 3. ``workers=2``, each on a fresh LocalCluster
+2. ``simulator.run_sweep(..., workers=1)`` and 3. ``workers=2``, each on a fresh LocalCluster
    into a fresh directory (journal, per-point JSON and tables written as points finish;
    pictures off, they are not part of the scaling).
 
@@ -208,11 +208,11 @@ def main(argv: list[str] | None = None) -> int:
 
 def _dask_run(sp: dict, n: int, workers: int, rep: int) -> dict:
     """A sweep of ``sp`` on a fresh LocalCluster of ``workers`` (cold workers), timed."""
-    from simulator.sweep import sweep
+    from simulator.sweep import run_sweep
 
     with tempfile.TemporaryDirectory() as d:
         t = time.perf_counter()
-        table = sweep(sp, Path(d) / "out", workers=workers, pictures=False)
+        table = run_sweep(sp, Path(d) / "out", workers=workers, pictures=False)
         wall = time.perf_counter() - t
     st = table.attrs["sweep"]
     assert st["run_now"] == n and st["failed"] == 0, st

@@ -3,7 +3,8 @@
 The names users call are importable from here (``from simulator import Scene,
 build_landscape, simulate``); each is loaded on first use, so ``import simulator``
 is fast and imports neither JAX nor matplotlib. ``simulator/__init__.pyi`` declares their
-types for editors. The packages behind them (``simulator.core``, ``.scene``, ``.physics``,
+types for editors and is their one list: each name is loaded from the package its stub line
+names (:func:`_exports`). The packages behind them (``simulator.core``, ``.scene``, ``.physics``,
 ``.liquid``, ``.landscape``, ``.motion``, ``.batch``, ``.sweep``, ``.render``, ``.testing``)
 are described in ``docs/architecture.md``; each package's ``__init__`` is its public face.
 
@@ -16,58 +17,38 @@ float64 landscape stays float64; float32 landscapes still compute in float32.
 from __future__ import annotations
 
 import importlib
+import os
 
-#: Public name -> the module that defines it ("module:name" where the name differs).
-_EXPORTS = {
-    # what to simulate
-    "Scene": "simulator.scene",
-    "TwistGrid": "simulator.scene",
-    "Effects": "simulator.scene",
-    "Materials": "simulator.physics",
-    "Liquid": "simulator.physics",
-    "UM2": "simulator.core",
-    # the energy landscape
-    "build_landscape": "simulator.landscape",
-    "estimate_bytes": "simulator.landscape",
-    "Landscape": "simulator.landscape",
-    "global_minimum": "simulator.landscape",
-    "GlobalMinimum": "simulator.landscape",
-    # trajectories and batches
-    "simulate": "simulator.motion",
-    "Trajectory": "simulator.motion",
-    "run_batch": "simulator.batch",
-    "StartGrid": "simulator.batch",
-    "random_starts": "simulator.batch",
-    "summarize": "simulator.batch",
-    "capture_map": "simulator.batch",
-    "run_realizations": "simulator.batch",
-    "BatchResult": "simulator.batch",
-    # assessment and accuracy
-    "evaluate": "simulator.batch",
-    "assess": "simulator.batch",
-    "exact_overlap_um2": "simulator.testing:overlap_um2",
-    "PRESETS": "simulator.scene",
-    "apply_preset": "simulator.scene",
-    "feature_warning": "simulator.scene",
-    "smallest_feature_um": "simulator.scene",
-    # design sweeps
-    "sweep": "simulator.sweep",
-    "load_sweep": "simulator.sweep",
-    # the model fitted to a bench
-    "calibrate": "simulator.design",
-    "read_trials": "simulator.design",
-    # pictures
-    "plot_pattern": "simulator.render",
-    "plot_landscape": "simulator.render",
-    "plot_forces": "simulator.render",
-    "plot_energy_curve": "simulator.render",
-    "plot_capture_map": "simulator.render",
-    "write_trajectory_gif": "simulator.render",
-    "save_figure": "simulator.render",
-    "pyplot": "simulator.render",
-}
 
-__all__ = sorted(_EXPORTS)
+def _read_stub() -> dict[str, str]:
+    """Public name -> the package that defines it ("package:name" where the name differs),
+    from the ``from simulator.PACKAGE import ...`` lines of ``__init__.pyi``."""
+    import ast
+
+    path = os.path.join(os.path.dirname(__file__), "__init__.pyi")
+    with open(path, encoding="utf-8") as f:
+        tree = ast.parse(f.read(), path)
+    out = {}
+    for node in tree.body:
+        if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("simulator."):
+            for alias in node.names:
+                name = alias.asname or alias.name
+                out[name] = node.module if name == alias.name else f"{node.module}:{alias.name}"
+    return out
+
+
+def _exports() -> dict[str, str]:
+    """The top-level names, read from the stub on first use: the stub is their one list.
+
+    Read then, not at import: importing :mod:`ast` and parsing the stub take about 3 ms,
+    several times what ``import simulator`` takes without them, and every ``selfalign``
+    command imports this package. Sets ``_EXPORTS`` (name -> "package" or "package:name")
+    and ``__all__``."""
+    exports = globals().get("_EXPORTS")
+    if exports is None:
+        exports = globals()["_EXPORTS"] = _read_stub()
+        globals()["__all__"] = sorted(exports)
+    return exports
 
 
 def _version() -> str:
@@ -85,7 +66,10 @@ def __getattr__(name: str):
     if name == "__version__":
         value = globals()[name] = _version()
         return value
-    where = _EXPORTS.get(name)
+    if name in ("_EXPORTS", "__all__"):
+        _exports()
+        return globals()[name]
+    where = _exports().get(name)
     if where is None:
         raise AttributeError(f"module 'simulator' has no attribute {name!r}")
     module, _, attr = where.partition(":")
@@ -95,4 +79,4 @@ def __getattr__(name: str):
 
 
 def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_EXPORTS) | {"__version__"})
+    return sorted(set(globals()) | set(_exports()) | {"__all__", "__version__"})

@@ -57,7 +57,7 @@ from simulator.scene import (
 )
 from simulator.sweep import (
     load_sweep,
-    sweep,
+    run_sweep,
 )
 from simulator.testing import (
     overlap_um2 as exact_overlap_um2,
@@ -98,10 +98,10 @@ __all__ = [
     "read_trials",
     "run_batch",
     "run_realizations",
+    "run_sweep",
     "save_figure",
     "simulate",
     "smallest_feature_um",
     "summarize",
-    "sweep",
     "write_trajectory_gif",
 ]

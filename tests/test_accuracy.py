@@ -17,7 +17,8 @@ from patterns.geometry import (
     square,
 )
 from patterns.library import LIBRARY
-from simulator.landscape import UM2_TO_M2, build_landscape
+from simulator.core import UM2
+from simulator.landscape import build_landscape
 from simulator.scene import (
     KNOBS,
     PRESETS,
@@ -28,7 +29,13 @@ from simulator.scene import (
     feature_warning,
     smallest_feature_um,
 )
-from simulator.testing import force_N, gradient_descent, gradient_um2, greedy, overlap_um2
+from simulator.testing import (
+    exact_gradient_descent,
+    exact_greedy,
+    force_N,
+    gradient_um2,
+    overlap_um2,
+)
 
 #: Rerun by make test under each FFT backend (SELFALIGN_FFT_BACKEND; tests/conftest.py).
 # One xdist group for the whole module (make test: pytest -n 2 --dist loadgroup): its tests
@@ -100,20 +107,20 @@ def test_c9_greedy_on_exact_overlap():
         ((100, 0, 0), (100, 0, 0), 0),
         ((120, 0, 5), (110, 0, 0), 10),
     ]:
-        run = greedy(fp, SQ, start)
+        run = exact_greedy(fp, SQ, start)
         assert run.final == final and run.steps == steps and run.status == "converged"
-    assert greedy(fp, SQ, (91, 0, 0)).final == (0, 0, 0)  # the escape at the plateau end
+    assert exact_greedy(fp, SQ, (91, 0, 0)).final == (0, 0, 0)  # the escape at the plateau end
 
 
 def test_greedy_step_sizes_follow_the_grid():
-    run = greedy(SQ, SQ, (41, -19, 3.2), step_um=2.0, step_deg=0.5)
+    run = exact_greedy(SQ, SQ, (41, -19, 3.2), step_um=2.0, step_deg=0.5)
     assert run.final == (0, 0, 0)
     assert np.all(np.abs(np.diff(run.path, axis=0)) <= [2, 2, 0.5])
     assert np.allclose(run.path[:, :2] % 2, 0) and np.allclose(run.path[:, 2] % 0.5, 0)
 
 
 def test_gradient_descent_reaches_the_minimum():
-    run = gradient_descent(SQ, SQ, (30.3, -12.7, 4.0))
+    run = exact_gradient_descent(SQ, SQ, (30.3, -12.7, 4.0))
     assert np.all(np.abs(run.final) < [0.05, 0.05, 0.05])
     assert np.all(np.diff(run.overlap_um2) > 0)
 
@@ -132,7 +139,7 @@ def _scene(geom, chip, s, dtype="float32", step=1.0):
 def _energy_error(geom, chip, s, poses, **kw) -> float:
     """RMS |A_raster - A_exact| / A_chip at the poses."""
     ls = build_landscape(_scene(geom, chip, s, **kw))
-    a = ls.energy_at(*poses.T) / (ls.delta_gamma * UM2_TO_M2)
+    a = ls.energy_at(*poses.T) / (ls.delta_gamma * UM2)
     return float(np.sqrt(np.mean((a - overlap_um2(geom, chip, poses)) ** 2)) / chip.area)
 
 

@@ -28,7 +28,7 @@ from simulator.design import (
     parse_expression,
     search,
 )
-from simulator.sweep import expected_columns, sweep
+from simulator.sweep import expected_columns, run_sweep
 
 # One xdist group for the whole module (make test: pytest -n 2 --dist loadgroup): its tests
 # share scenes whose steppers take seconds to compile; on one worker each compiles once.
@@ -68,7 +68,7 @@ def run(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def swept():
-    return sweep(_sweep_doc(SPEC), workers=0)
+    return run_sweep(_sweep_doc(SPEC), workers=0)
 
 
 def test_search_over_the_gap_finds_the_exhaustive_sweeps_best(run, swept):

@@ -22,14 +22,13 @@ import pytest
 
 from foundation import InputError
 from patterns.geometry import mask_from_geometry, square
-from simulator.landscape import build_landscape
+from simulator.core import OUTCOMES
+from simulator.landscape import PoseGrid, build_landscape
 from simulator.motion import (
     CONVERGED,
     EDGE,
     MAX_STEPS,
-    OUTCOMES,
     DynamicsParams,
-    Grid,
     classify,
     field_and_grid,
     gradient,
@@ -66,7 +65,7 @@ def spring_field(k=K0, sign=1.0):
     x = (np.arange(NX) - XC) * UM_PER_PX * 1e-6
     e = np.broadcast_to(sign * 0.5 * k * x * x, (1, NY, NX)).astype(np.float32)
     floor = 32 * np.finfo(np.float32).eps * np.abs(e).max()
-    grid = Grid.uniform(
+    grid = PoseGrid.uniform(
         (1, NY, NX),
         wrap=False,
         cut=((False, False), (True, True), (True, True)),

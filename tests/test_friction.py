@@ -24,11 +24,11 @@ import pytest
 from shapely.geometry import box
 
 from patterns.geometry import Mask, mask_from_geometry
+from simulator.core import OUTCOMES
+from simulator.landscape import PoseGrid
 from simulator.motion import (
     MOREAU_TOL,
-    OUTCOMES,
     DynamicsParams,
-    Grid,
     Relay,
     field_and_grid,
     inertial,
@@ -75,7 +75,7 @@ def spring_field(pin_N=P_N):
     x = (np.arange(NX) - XC) * S_UM * 1e-6
     e = np.broadcast_to(0.5 * K0 * x * x, (1, NY, NX)).astype(np.float32)
     floor = 32 * EPS32 * np.abs(e).max()
-    grid = Grid.uniform(
+    grid = PoseGrid.uniform(
         (1, NY, NX),
         wrap=False,
         cut=((False, False), (True, True), (True, True)),

@@ -587,6 +587,6 @@ def test_sweep_workers_are_capped_by_cores_and_memory_and_say_so(monkeypatch, tm
 
     monkeypatch.setattr(sw, "dask_client", fake_client)
     with pytest.raises(Stop):
-        sw.sweep(SWEEP, tmp_path / "out", workers=1000)
+        sw.run_sweep(SWEEP, tmp_path / "out", workers=1000)
     assert started == [2]  # a process per point (24) on a 2-core machine before
     assert "note: --workers 1000 capped at 2: this machine has 2 cores" in capsys.readouterr().err

@@ -22,9 +22,9 @@ from simulator.batch import (
     twist_error,
 )
 from simulator.cli import main
+from simulator.core import OUTCOMES
 from simulator.landscape import build_landscape
 from simulator.motion import (
-    OUTCOMES,
     field_and_grid,
     gradient_descent,
     greedy,

@@ -15,8 +15,9 @@ from patterns import write_mask
 from patterns.geometry import four_pad, mask_from_geometry, square
 from simulator.batch import assess, random_starts, run_batch, summarize, time_histogram, time_stats
 from simulator.cli import main
+from simulator.core import OUTCOMES
 from simulator.landscape import build_landscape
-from simulator.motion import OUTCOMES, simulate
+from simulator.motion import simulate
 from simulator.physics import Liquid
 from simulator.scene import Effects, Scene, TwistGrid
 from simulator.sweep import flatten

@@ -13,6 +13,9 @@ from __future__ import annotations
 
 import ast
 import importlib
+import inspect
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -234,9 +237,103 @@ def test_the_top_level_names_are_the_package_faces_names():
         value = getattr(
             importlib.import_module(module), simulator._EXPORTS[name].partition(":")[2] or name
         )
-        got = getattr(simulator, name)
-        # ``simulator.sweep`` is both a package and a function: once the package is imported,
-        # the attribute is the package, which calls the function.
-        assert got is value or (
-            name == "sweep" and callable(got) and got.__name__ == "simulator.sweep"
-        ), name
+        assert getattr(simulator, name) is value, name
+
+
+# ----------------------------------------------------------------- one import path per name
+def _stub_imports(stub: Path) -> list[tuple[ast.ImportFrom, ast.alias]]:
+    """The ``from X import name [as alias]`` lines of a stub (``__future__`` left out)."""
+    tree = ast.parse(stub.read_text())
+    return [
+        (node, alias)
+        for node in tree.body
+        if isinstance(node, ast.ImportFrom) and node.module != "__future__"
+        for alias in node.names
+    ]
+
+
+def _stub_all(stub: Path) -> list[str]:
+    for node in ast.parse(stub.read_text()).body:
+        if isinstance(node, ast.Assign) and [ast.unparse(t) for t in node.targets] == ["__all__"]:
+            return ast.literal_eval(node.value)
+    raise AssertionError(f"{stub} has no __all__")
+
+
+#: Each package face's public names (its stub's), by package.
+FACES = {
+    package: sorted(
+        a.asname or a.name for _, a in _stub_imports(PACKAGE / package / "__init__.pyi")
+    )
+    for package in SUBPACKAGES
+    if package != "commands"
+}
+
+
+def test_the_top_level_names_are_read_from_the_stub():
+    """``simulator/__init__.pyi`` is the one list of the top-level names: ``_EXPORTS`` is read
+    from its import lines (name -> "package", or "package:name" under an alias), its
+    ``__all__`` lists the same names, and ``import simulator`` does not read it yet."""
+    import simulator
+
+    stub = PACKAGE / "__init__.pyi"
+    expected = {}
+    for node, alias in _stub_imports(stub):
+        name = alias.asname or alias.name
+        assert node.level == 0 and node.module.startswith("simulator."), ast.unparse(node)
+        expected[name] = node.module if name == alias.name else f"{node.module}:{alias.name}"
+    assert expected["exact_overlap_um2"] == "simulator.testing:overlap_um2"
+    assert simulator._EXPORTS == expected
+    assert simulator.__all__ == sorted(expected) == _stub_all(stub)
+    code = (
+        "import sys, simulator; "
+        "print('_EXPORTS' in vars(simulator), sorted({'jax', 'matplotlib'} & set(sys.modules)))"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True
+    )
+    assert out.stdout.split() == ["False", "[]"]
+
+
+def test_no_public_name_is_in_two_package_faces():
+    homes: dict[str, list[str]] = {}
+    for package, names in FACES.items():
+        for name in names:
+            homes.setdefault(name, []).append(package)
+    assert {name: where for name, where in homes.items() if len(where) > 1} == {}
+
+
+def _defined_names(path: Path) -> tuple[set[str], set[str]]:
+    """(names a module defines at its top level, names it imports there); an assignment of
+    an imported name to another (``Grid = PoseGrid``) counts as imported, not defined."""
+    defined, imported = set(), set()
+    for node in ast.parse(path.read_text()).body:
+        for sub in ast.walk(node) if isinstance(node, ast.If | ast.Try) else [node]:
+            if isinstance(sub, ast.Import | ast.ImportFrom):
+                imported |= {(a.asname or a.name).partition(".")[0] for a in sub.names}
+            elif isinstance(sub, ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef):
+                defined.add(sub.name)
+            elif isinstance(sub, ast.Assign | ast.AnnAssign) and sub.value is not None:
+                targets = sub.targets if isinstance(sub, ast.Assign) else [sub.target]
+                names = {n.id for t in targets for n in ast.walk(t) if isinstance(n, ast.Name)}
+                alias = isinstance(sub.value, ast.Name) and sub.value.id in imported
+                (imported if alias else defined).update(names)
+    return defined, imported
+
+
+@pytest.mark.parametrize("package", sorted(FACES))
+def test_each_face_names_what_its_package_defines(package):
+    """A face re-exports only its own package's underscore modules, and each name there is
+    defined in that module, not imported from another package (no second import path)."""
+    foreign = []
+    for node, alias in _stub_imports(PACKAGE / package / "__init__.pyi"):
+        assert node.level == 1 and node.module.startswith("_"), ast.unparse(node)
+        assert alias.asname in (None, alias.name), ast.unparse(node)
+        defined, _ = _defined_names(PACKAGE / package / f"{node.module}.py")
+        if alias.name not in defined:
+            foreign.append(f"{node.module}.{alias.name}")
+    assert foreign == []
+    face = importlib.import_module(f"simulator.{package}")
+    for name in face.__all__:
+        value = getattr(face, name)
+        if inspect.isclass(value) or inspect.isfunction(value):
+            assert value.__module__.startswith(f"simulator.{package}."), (name, value.__module__)

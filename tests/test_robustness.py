@@ -68,13 +68,12 @@ from shapely.geometry import Polygon
 
 from foundation import InputError
 from patterns.geometry import Mask, defect, four_pad, mask_from_geometry, rectangle, square
-from simulator.core import DEFAULT_MAX_STEPS
+from simulator.core import DEFAULT_MAX_STEPS, OUTCOMES
 from simulator.landscape import build_landscape
 from simulator.motion import (
     CONVERGED,
     EDGE,
     MAX_STEPS,
-    OUTCOMES,
     REST_TOL_STEPS,
     DynamicsParams,
     classify,

@@ -7,13 +7,13 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from simulator.landscape import PoseGrid
 from simulator.motion import (
     BLOCK_MOVES,
     GREEDY_MOVES,
     PAD,
     STAY,
     TIE_RANK,
-    Grid,
     block,
     gradient,
     interpolate,
@@ -42,8 +42,8 @@ def reference(e: np.ndarray, wrap: bool, cut, it, iy, ix) -> float:
     return float(e[it, iy, ix])
 
 
-def grid_for(wrap: bool, cut) -> Grid:
-    return Grid.uniform(
+def grid_for(wrap: bool, cut) -> PoseGrid:
+    return PoseGrid.uniform(
         (T, NY, NX),
         wrap=wrap,
         cut=cut,

@@ -18,7 +18,7 @@ from patterns.geometry import four_pad, mask_from_geometry
 from simulator.batch import assess
 from simulator.cli import main
 from simulator.scene import Scene
-from simulator.sweep import dask_client, flatten, load_sweep, sweep
+from simulator.sweep import dask_client, flatten, load_sweep, run_sweep
 
 # One xdist group for the module (make test: --dist loadgroup): its tests share the Dask
 # worker and the tiny sweep of the module's fixtures, made once on one worker.
@@ -63,7 +63,7 @@ def cluster():
 def tiny(tmp_path_factory, cluster):
     d = tmp_path_factory.mktemp("sw")
     (d / "tiny.toml").write_text(TINY)
-    table = sweep(d / "tiny.toml", d / "out", scheduler=cluster)
+    table = run_sweep(d / "tiny.toml", d / "out", scheduler=cluster)
     return d, table
 
 
@@ -163,14 +163,14 @@ def test_rerun_skips_the_points_done(tiny, cluster, tmp_path):
     out = tmp_path / "out"  # a copy: the module's other tests read the fixture's own results
     shutil.copytree(d / "out", out)
     journal = (out / "points.jsonl").read_text()
-    again = sweep(d / "tiny.toml", out, scheduler=cluster, pictures=False)
+    again = run_sweep(d / "tiny.toml", out, scheduler=cluster, pictures=False)
     assert again.attrs["sweep"]["run_now"] == 0 and (out / "points.jsonl").read_text() == journal
     pd.testing.assert_frame_equal(again, table)
     # Forget two points: exactly those two run again; the other rows stay as they were.
     lines = journal.splitlines(keepends=True)
     (out / "points.jsonl").write_text("".join(lines[:4]))
     kept = {json.loads(x)["point"] for x in lines[:4]}
-    third = sweep(d / "tiny.toml", out, scheduler=cluster, pictures=False)
+    third = run_sweep(d / "tiny.toml", out, scheduler=cluster, pictures=False)
     assert third.attrs["sweep"]["run_now"] == 2 and len(third) == 6 and third["point"].is_unique
     same = third[third["point"].isin(kept)].reset_index(drop=True)
     pd.testing.assert_frame_equal(same, table[table["point"].isin(kept)].reset_index(drop=True))
@@ -214,7 +214,7 @@ def test_killed_run_resumes_to_the_full_table(tmp_path, cluster):
     assert proc.returncode == -signal.SIGKILL, err.decode()[-2000:]
     done = [json.loads(x) for x in journal.read_text().splitlines() if x.endswith("}")]
     assert len(done) == 2
-    table = sweep(tmp_path / "s.toml", out, scheduler=cluster)
+    table = run_sweep(tmp_path / "s.toml", out, scheduler=cluster)
     assert table.attrs["sweep"]["run_now"] == 30 - len(done)
     assert (
         len(table) == 30
@@ -252,7 +252,7 @@ def test_a_rerun_removes_a_killed_sweeps_leftovers_and_leaves_no_lock(tiny, tmp_
     mine = [out / ".results.parquet.keep", out / "points" / "notes.txt"]  # not temporaries' names
     for p in mine:
         p.write_text("mine")
-    again = sweep(d / "tiny.toml", out, scheduler=cluster, pictures=False)
+    again = run_sweep(d / "tiny.toml", out, scheduler=cluster, pictures=False)
     assert again.attrs["sweep"]["run_now"] == 0
     pd.testing.assert_frame_equal(again, table)
     assert not [p for p in dead if p.exists()]
@@ -273,7 +273,7 @@ def test_python_api_latin_hypercube_realizations_one_axis_picture(tmp_path):
             "capture_grid": 5,
         },
     }
-    table = simulator.sweep(spec, tmp_path / "lhs", workers=0)
+    table = simulator.run_sweep(spec, tmp_path / "lhs", workers=0)
     assert len(table) == 8 and (table["status"] == "ok").all()
     sig = table["sigma_um"].to_numpy()[::2]
     assert sorted(np.floor((sig - 1) / 1.0).astype(int)) == [

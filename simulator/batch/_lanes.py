@@ -16,12 +16,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from foundation import hold, require
-from simulator.landscape import Landscape
-from simulator.motion import Field, Grid, finish, stepper
+from simulator.landscape import Landscape, PoseGrid
+from simulator.motion import Field, finish, stepper
 
 
 # --------------------------------------------------------------------- batch
-def _one(field: Field, grid: Grid, params, start, method: str, max_steps: int, stiff: bool):
+def _one(field: Field, grid: PoseGrid, params, start, method: str, max_steps: int, stiff: bool):
     """One start -> (final q, steps, status, outcome, energy, time_s); the single run vmap maps.
 
     ``params``: the :class:`~simulator.motion.DynamicsParams` of a dynamic method
@@ -37,7 +37,7 @@ def _run_chunk(
     field: Field,
     params,
     starts: jax.Array,
-    grid: Grid,
+    grid: PoseGrid,
     method: str,
     max_steps: int,
     stiff: bool = False,
@@ -74,7 +74,7 @@ def _run_chunk(
 
 def run_lanes(
     fld: Field,
-    grid: Grid,
+    grid: PoseGrid,
     params,
     q0: np.ndarray,
     method: str,
@@ -179,7 +179,7 @@ def _check_starts_fit(ls: Landscape, poses: np.ndarray) -> None:
         )
 
 
-def _distance_in_steps(q: np.ndarray, best: np.ndarray, grid: Grid) -> np.ndarray:
+def _distance_in_steps(q: np.ndarray, best: np.ndarray, grid: PoseGrid) -> np.ndarray:
     """max over axes of |q - best| in grid steps (twist modulo the period): a lower bound
     on greedy's step count from q (docs/physics.md C10), a rough one for gradient."""
     d = np.abs(np.asarray(q, float) - best)
@@ -204,7 +204,7 @@ def _z_order(q: np.ndarray) -> np.ndarray:
 ORDER_BAND_STEPS = 8
 
 
-def _run_order(q: np.ndarray, best: np.ndarray, grid: Grid) -> np.ndarray:
+def _run_order(q: np.ndarray, best: np.ndarray, grid: PoseGrid) -> np.ndarray:
     """The order starts are run in: by distance from the global minimum in bands of
     :data:`ORDER_BAND_STEPS` grid steps (a lower bound on greedy's step count, so a chunk
     holds runs of similar length and few lanes idle in the vmapped while loop), and

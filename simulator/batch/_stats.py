@@ -28,7 +28,7 @@ class BatchResult:
 
     start: (N, 3) requested poses (x_um, y_um, twist_deg).
     final: (N, 3) final poses (twist unwrapped: as the chip turned).
-    outcome: (N,) int8 index into :data:`simulator.motion.OUTCOMES`.
+    outcome: (N,) int8 index into :data:`simulator.core.OUTCOMES`.
     steps: (N,) int32 moves (greedy) or accepted steps (gradient).
     energy_J: (N,) final energy.
     period_deg: the chip's rotational symmetry period (twist errors are modulo it).
@@ -134,7 +134,7 @@ def error_stats(final: np.ndarray, period_deg: float, target=(0.0, 0.0, 0.0)) ->
 
 
 def outcome_counts(outcome: np.ndarray) -> dict[str, int]:
-    """Counts per outcome name, every name of :data:`simulator.motion.OUTCOMES` present."""
+    """Counts per outcome name, every name of :data:`simulator.core.OUTCOMES` present."""
     c = np.bincount(np.asarray(outcome, np.int64), minlength=len(OUTCOMES))
     return {name: int(c[k]) for k, name in enumerate(OUTCOMES)}
 

@@ -65,12 +65,12 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from simulator.sweep import kept_points, load_sweep, sweep
+    from simulator.sweep import kept_points, load_sweep, run_sweep
 
     spec = load_sweep(args.sweep_file)
     try:
         with sigterm_says_what_was_kept(args.out, "sweep", "point"):
-            table = sweep(
+            table = run_sweep(
                 spec,
                 args.out,
                 workers=args.workers,

@@ -22,7 +22,6 @@ from ._footprint import (
 )
 from ._landscape import (
     MAX_CURVE_SAMPLES as MAX_CURVE_SAMPLES,
-    UM2_TO_M2 as UM2_TO_M2,
     Landscape as Landscape,
     runs as runs,
     trilinear as trilinear,

@@ -39,9 +39,6 @@ from simulator.core import UM2, WHOLE_TOL, floor_whole
 from simulator.landscape._correlator import NOISE_FACTOR
 from simulator.landscape._posegrid import PoseGrid
 
-#: m^2 per um^2 (an alias of :data:`simulator.physics.UM2`, kept for old imports).
-UM2_TO_M2 = UM2
-
 
 def _frozen(a: np.ndarray) -> np.ndarray:
     a.setflags(write=False)
@@ -427,7 +424,6 @@ __all__ = [
     "MAX_CURVE_SAMPLES",
     "NOMINAL_BALL_PX",
     "NOMINAL_PX_PER_STEP",
-    "UM2_TO_M2",
     "nominal_distance",
     "nominal_order",
     "runs",

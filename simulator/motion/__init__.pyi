@@ -25,7 +25,6 @@ from ._dynamics_params import (
 from ._field import (
     PAD as PAD,
     Field as Field,
-    Grid as Grid,
     Relay as Relay,
     block as block,
     field_and_grid as field_and_grid,
@@ -78,7 +77,6 @@ from ._stepping import (
     EVENT as EVENT,
     GREEDY_MOVES as GREEDY_MOVES,
     MAX_STEPS as MAX_STEPS,
-    OUTCOMES as OUTCOMES,
     STAY as STAY,
     TIE_RANK as TIE_RANK,
     classify as classify,

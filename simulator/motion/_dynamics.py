@@ -78,6 +78,7 @@ import jax.numpy as jnp
 import optimistix as optx
 
 from foundation import InputError
+from simulator.landscape import PoseGrid
 from simulator.motion._dynamics_ode import (
     IMEX,
     MOREAU_TOL,
@@ -102,7 +103,7 @@ from simulator.motion._dynamics_ode import (
 
 # Parameters (simulator.motion) and the potential Phi (simulator.motion), re-exported.
 from simulator.motion._dynamics_params import MIN_FILM_UM, DynamicsParams, default_tolerances  # noqa: E402, F401
-from simulator.motion._field import Field, Grid, clamp_start, relay_changes
+from simulator.motion._field import Field, clamp_start, relay_changes
 from simulator.motion._potential import potential, potential_and_gradient  # noqa: E402, F401
 from simulator.motion._stepping import CONVERGED, EDGE, EVENT, MAX_STEPS, on_plateau
 
@@ -297,7 +298,7 @@ def _run(
 
 def overdamped(
     field: Field,
-    grid: Grid,
+    grid: PoseGrid,
     params: DynamicsParams,
     start,
     max_steps: int,
@@ -329,7 +330,7 @@ def overdamped(
 
 def inertial(
     field: Field,
-    grid: Grid,
+    grid: PoseGrid,
     params: DynamicsParams,
     start,
     max_steps: int,

@@ -23,7 +23,8 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from simulator.motion._field import Field, Grid, at_cut_edge, interpolate, relay_changes
+from simulator.landscape import PoseGrid
+from simulator.motion._field import Field, at_cut_edge, interpolate, relay_changes
 from simulator.motion._pinning import pin_at, soft_threshold
 from simulator.motion._potential import _OFFSETS, _kernel, _node_energy, potential_and_gradient
 from simulator.motion._stepping import reference_gradient
@@ -42,25 +43,25 @@ class _Coeffs(NamedTuple):
     atol: jax.Array
 
 
-def _axis_scales(grid: Grid) -> np.ndarray:
+def _axis_scales(grid: PoseGrid) -> np.ndarray:
     """SI length of one index step along (it, iy, ix): radians, metres, metres."""
     return np.array(
         [math.radians(grid.twist_step_deg), grid.um_per_px * 1e-6, grid.um_per_px * 1e-6]
     )
 
 
-def _reference_force(field: Field, grid: Grid, dt) -> jax.Array:
+def _reference_force(field: Field, grid: PoseGrid, dt) -> jax.Array:
     """Typical |dE/dq| per index step (J), as in stepping.gradient_descent: a chip edge of
     length 2 rg sliding over a pad, for x and y; times the arc per twist step for twist."""
     g = jnp.maximum(reference_gradient(field, grid), jnp.finfo(dt).tiny / jnp.finfo(dt).eps)
     return g * jnp.asarray([max(grid.twist_px_per_step, 1e-6), 1.0, 1.0], dt)
 
 
-def _active(grid: Grid, dt) -> jax.Array:
+def _active(grid: PoseGrid, dt) -> jax.Array:
     return jnp.asarray([grid.shape[0] > 1, True, True], dt)
 
 
-def _stop_flags(field: Field, grid: Grid, co: _Coeffs, q, grad, kinetic):
+def _stop_flags(field: Field, grid: PoseGrid, co: _Coeffs, q, grad, kinetic):
     """(converged, at_edge) at pose q with Phi gradient ``grad`` and kinetic energy (J).
 
     converged: the force along every axis, as the energy change over one grid step
@@ -98,7 +99,7 @@ def _stop_flags(field: Field, grid: Grid, co: _Coeffs, q, grad, kinetic):
 REST_TOL_STEPS = 0.05
 
 
-def _hessian(field: Field, grid: Grid, q):
+def _hessian(field: Field, grid: PoseGrid, q):
     """Phi's Hessian at q (J per index step squared), one-sided where it jumps.
 
     Phi is C1 and piecewise quadratic (:mod:`simulator.motion`): its second derivative
@@ -142,7 +143,7 @@ def _hessian(field: Field, grid: Grid, q):
     return jnp.stack([jnp.stack([term(a, c) for c in range(3)]) for a in range(3)])
 
 
-def _near_rest(field: Field, grid: Grid, q, grad, kinetic):
+def _near_rest(field: Field, grid: PoseGrid, q, grad, kinetic):
     """True where the chip is at rest within :data:`REST_TOL_STEPS` of a stable rest point.
 
     Near a stable rest point the force falls linearly with the distance to it, so the
@@ -251,7 +252,7 @@ def _split(y, inertial: bool):
     return y if inertial else (y, jnp.zeros_like(y))
 
 
-def _energy(field: Field, grid: Grid, q):
+def _energy(field: Field, grid: PoseGrid, q):
     """Landscape energy E (:func:`simulator.motion.interpolate`) at q, read at the nearest
     point of the grid where q has passed a wall (a cut side, an end of a bounded twist
     axis): the run stops there with EDGE and reports the edge value, as Phi repeats it,

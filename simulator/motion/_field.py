@@ -2,13 +2,13 @@
 
 Owns the :class:`Field` (the landscape padded on every side with what lies beyond it, a
 JAX pytree; :func:`pad_energy`, :func:`make_field`, :func:`field_and_grid`) on its static
-:class:`~simulator.landscape.PoseGrid` (:data:`Grid`), and every look-up the steppers and
+:class:`~simulator.landscape.PoseGrid`, and every look-up the steppers and
 the dynamics make on it: energies at integer grid indices (:func:`lookup`, and the
 (3, 3, 3) and (4, 4, 4) blocks of :func:`neighbourhood` and :func:`block`), trilinear
 interpolation (:func:`interpolate`) and the noise-floored gradient (:func:`gradient`)
 at fractional indices, and the tests on the grid's cut sides (:func:`at_cut_edge`,
 :func:`clamp_start`). Index units as in :mod:`simulator.motion`, which holds the
-steppers and re-exports every name here.
+steppers.
 """
 
 from __future__ import annotations
@@ -150,10 +150,6 @@ def pinning_fields(pin, align_tol) -> dict:
     }
 
 
-#: The steppers' static grid is the landscape's :class:`~simulator.landscape.PoseGrid`.
-Grid = PoseGrid
-
-
 def pad_energy(energy: np.ndarray, wrap: bool, cut) -> np.ndarray:
     """The landscape with PAD cells on every side holding what lies beyond it: past an
     uncut x/y side 0 (no contact); past a cut side, or the end of a non-periodic twist
@@ -235,7 +231,7 @@ def field_and_grid(
     return make_field(e, grid, ls.noise_floor_J, [it, iy, ix], pin, align_tol, scale, lines), grid
 
 
-def relay_changes(field: Field, grid: Grid, q) -> jax.Array:
+def relay_changes(field: Field, grid: PoseGrid, q) -> jax.Array:
     """True where the footprint state would change at fractional indices q (the node
     round(q), the twist wrapped on a periodic axis, every index clipped to the grid):
     some pad reached that is dry, or some wet pad out of reach. False without a relay."""
@@ -251,7 +247,7 @@ def relay_changes(field: Field, grid: Grid, q) -> jax.Array:
 
 
 # ----------------------------------------------------------------- look-ups
-def lookup(field: Field, grid: Grid, it, iy, ix):
+def lookup(field: Field, grid: PoseGrid, it, iy, ix):
     """Energy at integer grid indices (broadcasting). Beyond an uncut x/y side: 0 (no
     contact); beyond a cut side or the end of a non-periodic twist axis: +inf (a wall
     the steppers never cross; they stop at a cut side first). One gather from
@@ -264,7 +260,7 @@ def lookup(field: Field, grid: Grid, it, iy, ix):
     ]
 
 
-def _cube(field: Field, grid: Grid, b, side: int):
+def _cube(field: Field, grid: PoseGrid, b, side: int):
     """Energies at ``b + (i, j, k)``, i, j, k in -1 .. side - 2, as a (side, side, side)
     array equal to :func:`lookup`'s values.
 
@@ -290,13 +286,13 @@ def _cube(field: Field, grid: Grid, b, side: int):
     )
 
 
-def neighbourhood(field: Field, grid: Grid, idx):
+def neighbourhood(field: Field, grid: PoseGrid, idx):
     """Energies at the 27 nodes ``idx + BLOCK_MOVES`` (the (3, 3, 3) block around idx,
     ``(dt, dy, dx)`` lexicographic), exactly as :func:`lookup` gives them (:func:`_cube`)."""
     return _cube(field, grid, idx, 3).reshape(27)
 
 
-def at_cut_edge(grid: Grid, q, margin: float = 0.0):
+def at_cut_edge(grid: PoseGrid, q, margin: float = 0.0):
     """True where fractional indices q lie within ``margin`` of a cut side of the grid."""
     out = False
     for k, n in enumerate(grid.shape):
@@ -308,7 +304,7 @@ def at_cut_edge(grid: Grid, q, margin: float = 0.0):
     return jnp.asarray(out)
 
 
-def clamp_start(grid: Grid, q):
+def clamp_start(grid: PoseGrid, q):
     """A start past the end of a bounded (non-periodic) twist axis, e.g. a twist within
     half a step of the range that greedy rounds outward, starts at that end: beyond it
     lies a wall (+inf), which no energy output may show."""
@@ -329,7 +325,7 @@ def _trilinear(f, corner_energy, dtype):
     return total
 
 
-def interpolate(field: Field, grid: Grid, q):
+def interpolate(field: Field, grid: PoseGrid, q):
     """Energy at fractional indices q = (it, iy, ix) by trilinear interpolation."""
     q = jnp.asarray(q, field.dtype)
     base = jnp.floor(q)
@@ -341,14 +337,14 @@ def interpolate(field: Field, grid: Grid, q):
     )
 
 
-def block(field: Field, grid: Grid, b):
+def block(field: Field, grid: PoseGrid, b):
     """Energies at ``b + (i, j, k)``, i, j, k in -1..2: the (4, 4, 4) block that holds
     every corner of the trilinear interpolations at q and q +- one step along any axis,
     for b = floor(q) (:func:`_cube`)."""
     return _cube(field, grid, b, 4)
 
 
-def gradient(field: Field, grid: Grid, q):
+def gradient(field: Field, grid: PoseGrid, q):
     """dE/dq (J per index unit) by central differences of one grid step; differences
     at or below the noise floor are 0, so plateaus are exactly flat. Next to a wall (the
     end of a bounded twist axis, a cut side) the one-sided difference away from the wall

@@ -32,7 +32,8 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from simulator.motion._field import PAD, Field, Grid
+from simulator.landscape import PoseGrid
+from simulator.motion._field import PAD, Field
 
 _OFFSETS = np.arange(-1, 3)  # the 4 nodes per axis in the support of Phi's kernel
 
@@ -50,7 +51,7 @@ def _kernel(t):
     return k, dk
 
 
-def _node_energy(field: Field, grid: Grid, it, iy, ix):
+def _node_energy(field: Field, grid: PoseGrid, it, iy, ix):
     """Node energies for Phi, as :func:`simulator.motion.lookup` but finite: beyond an
     uncut x/y side 0 (no contact); beyond a cut side or the end of a non-periodic twist
     axis (walls, +inf there) the edge value is repeated, and the run stops with EDGE."""
@@ -64,7 +65,7 @@ def _node_energy(field: Field, grid: Grid, it, iy, ix):
     return field.padded[itw + PAD, clip(iy, ny, y_lo, y_hi), clip(ix, nx, x_lo, x_hi)]
 
 
-def potential_and_gradient(field: Field, grid: Grid, q):
+def potential_and_gradient(field: Field, grid: PoseGrid, q):
     """``(Phi(q), dPhi/dq)`` at fractional indices q (3,) = (it, iy, ix); J and J per index step.
 
     Phi is the landscape energy averaged over ``q +- 1`` grid step along each axis (see
@@ -101,6 +102,6 @@ def potential_and_gradient(field: Field, grid: Grid, q):
     return phi, grad
 
 
-def potential(field: Field, grid: Grid, q):
+def potential(field: Field, grid: PoseGrid, q):
     """Phi(q) in J (see :func:`potential_and_gradient`)."""
     return potential_and_gradient(field, grid, q)[0]

@@ -164,7 +164,7 @@ def flat_at(field, grid, flat, q) -> jax.Array:
 
 
 def finish(field, grid, state: RunState, max_steps: int) -> tuple[jax.Array, jax.Array]:
-    """(status, outcome index into OUTCOMES) of a run, on the landscape it ran on."""
+    """(status, outcome index into simulator.core.OUTCOMES) of a run, on the landscape it ran on."""
     status = ran_out(state.step, state.status, max_steps)
     # a dynamic run out of time, not steps, and creeping: a chip still carrying more kinetic
     # energy than the landscape resolves is passing through, not stopped (classify)

@@ -36,10 +36,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from simulator.core import OUTCOMES  # noqa: F401 - simulator.motion.OUTCOMES, as before
+from simulator.landscape import PoseGrid
 from simulator.motion._field import (
     Field,
-    Grid,
     at_cut_edge,
     clamp_start,
     gradient,
@@ -84,7 +83,7 @@ class GreedyState(NamedTuple):
     path_energy: jax.Array  # (max_steps + 1,), or (1,)
 
 
-def greedy(field: Field, grid: Grid, start, max_steps: int, record: bool = True) -> GreedyState:
+def greedy(field: Field, grid: PoseGrid, start, max_steps: int, record: bool = True) -> GreedyState:
     """Greedy descent (docs/physics.md §5.2): move to the lowest of the 27 neighbours.
 
     Args:
@@ -154,7 +153,7 @@ def greedy(field: Field, grid: Grid, start, max_steps: int, record: bool = True)
     return jax.lax.while_loop(cond, body, init)
 
 
-def on_plateau(field: Field, grid: Grid, idx) -> jax.Array:
+def on_plateau(field: Field, grid: PoseGrid, idx) -> jax.Array:
     """True where some greedy move leaves the energy unchanged (within the noise floor):
     the pose sits on a plateau (a flat direction), not in a strict local minimum."""
     e = neighbourhood(field, grid, jnp.asarray(idx, jnp.int32))
@@ -163,7 +162,7 @@ def on_plateau(field: Field, grid: Grid, idx) -> jax.Array:
 
 
 # ----------------------------------------------------------------- gradient
-def reference_gradient(field: Field, grid: Grid) -> jax.Array:
+def reference_gradient(field: Field, grid: PoseGrid) -> jax.Array:
     """Typical |dE/dx| (J per px): a chip edge of length 2 rg + 1 px sliding over a pad,
     at least the noise floor. The force scale of the gradient stepper and the dynamics."""
     return jnp.maximum(field.scale / (2.0 * grid.rg_px + 1.0), field.floor)
@@ -180,7 +179,12 @@ class GradientState(NamedTuple):
 
 
 def gradient_descent(
-    field: Field, grid: Grid, start, max_steps: int, record: bool = True, min_step_px: float = 1e-2
+    field: Field,
+    grid: PoseGrid,
+    start,
+    max_steps: int,
+    record: bool = True,
+    min_step_px: float = 1e-2,
 ) -> GradientState:
     """Steepest descent on the interpolated landscape with backtracking.
 
@@ -266,9 +270,9 @@ def gradient_descent(
 
 # ----------------------------------------------------------------- outcome
 def classify(
-    field: Field, grid: Grid, q, energy, status, flat, timed_out: bool | jax.Array = False
+    field: Field, grid: PoseGrid, q, energy, status, flat, timed_out: bool | jax.Array = False
 ) -> jax.Array:
-    """Outcome index into :data:`OUTCOMES` for a final pose q (fractional indices).
+    """Outcome index into :data:`simulator.core.OUTCOMES` for a final pose q (fractional indices).
 
     aligned: within ``field.align_tol`` (twist steps, px) of the global minimum, twist
     compared modulo the chip's symmetry period. no_contact: zero overlap (|E| at or

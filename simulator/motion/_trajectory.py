@@ -18,7 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from foundation import InputError, compiling, shows_wait, wait_line
-from simulator.core import DEFAULT_MAX_STEPS, DEG_TOL, METHODS, tiny
+from simulator.core import DEFAULT_MAX_STEPS, DEG_TOL, METHODS, OUTCOMES, tiny
 from simulator.landscape import (
     Landscape,
     PoseGrid,
@@ -43,7 +43,6 @@ from simulator.motion._stepping import (
     EDGE,
     EVENT,
     MAX_STEPS,
-    OUTCOMES,
     classify,
     reference_gradient,
 )

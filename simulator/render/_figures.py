@@ -325,7 +325,7 @@ def plot_forces(
 
 
 # --------------------------------------------------------------------- capture maps
-#: Outcome colours of capture maps, in the order of :data:`simulator.motion.OUTCOMES`.
+#: Outcome colours of capture maps, in the order of :data:`simulator.core.OUTCOMES`.
 OUTCOME_COLORS = ("#2ca02c", "#ff7f0e", "#d62728", "#7f7f7f", "#9467bd")
 MAX_PANELS = 16
 
@@ -340,7 +340,7 @@ def plot_capture_map(cmap: np.ndarray, grid, scene, path, title: str = "") -> No
     from matplotlib.colors import BoundaryNorm, ListedColormap
     from matplotlib.patches import Patch
 
-    from simulator.motion import OUTCOMES
+    from simulator.core import OUTCOMES
 
     plt = pyplot()
     t, ny, nx = cmap.shape

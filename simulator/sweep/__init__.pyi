@@ -24,9 +24,9 @@ from ._columns import (
 )
 from ._point import (
     assess_point as assess_point,
-    critical_volume_nl as critical_volume_nl,
     design_params as design_params,
     point_bytes as point_bytes,
+    point_critical_volume_nl as point_critical_volume_nl,
     point_geometry as point_geometry,
     point_scene as point_scene,
     price_point as price_point,
@@ -36,7 +36,7 @@ from ._report import (
     column_label as column_label,
 )
 from ._run import (
-    sweep as sweep,
+    run_sweep as run_sweep,
 )
 from ._spec import (
     DEFAULT_MAX_POINTS as DEFAULT_MAX_POINTS,

@@ -34,7 +34,7 @@ _END = object()
 
 #: Why spawned workers fail to start from a script, and the fix.
 MAIN_GUARD = (
-    "worker processes are spawned and import the main script, so a script that calls simulator.sweep must do so "
+    "worker processes are spawned and import the main script, so a script that calls simulator.run_sweep must do so "
     'under `if __name__ == "__main__":`'
 )
 
@@ -260,7 +260,7 @@ def dask_client(workers: int | None = None, scheduler: str | None = None) -> Ite
                 import multiprocessing
 
                 if getattr(multiprocessing.current_process(), "_inheriting", False):
-                    # A spawned worker is importing the script that called sweep(): the call lacks the main guard.
+                    # A spawned worker is importing the script that called run_sweep(): the call lacks the main guard.
                     raise SystemExit(f"selfalign sweep: error: {MAIN_GUARD}")
                 with (
                     _sigint_blocked()

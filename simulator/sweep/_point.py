@@ -25,10 +25,10 @@ from simulator.sweep._spec import _design_seed
 
 __all__ = [
     "assess_point",
-    "critical_volume_nl",
     "design_params",
-    "point_geometry",
     "point_bytes",
+    "point_critical_volume_nl",
+    "point_geometry",
     "point_scene",
     "price_point",
     "run_point",
@@ -140,7 +140,7 @@ def _critical_volume_nl(size_um: float, gap_um: float, pad_deg: float, sub_deg: 
         return None
 
 
-def critical_volume_nl(scene, task: dict) -> float | None:
+def point_critical_volume_nl(scene, task: dict) -> float | None:
     """The critical droplet volume (nl) of the point's pattern when it is a four-pad
     (docs/physics.md §8): from the generated design's exact size and gap, else from the four
     pads recognised in the raster; None for other patterns, or pads that do not wet better
@@ -166,7 +166,7 @@ def assess_point(task: dict) -> dict:
 
     The yield's placement noise is drawn with the point's ``point_seed``; ``settings`` also
     records ``source_um_per_px``, ``resolution_auto`` (as evaluate) and ``volume_nl``; a
-    four-pad pattern's ``critical_volume_nl`` (:func:`critical_volume_nl`) is added, to set
+    four-pad pattern's ``critical_volume_nl`` (:func:`point_critical_volume_nl`) is added, to set
     beside the droplet's volume.
     """
     from foundation import require_finite
@@ -200,7 +200,7 @@ def assess_point(task: dict) -> dict:
         "resolution_auto": bool(auto and scene.um_per_px != native),
         "volume_nl": scene.liquid.volume_nl,
     }
-    cv = critical_volume_nl(scene, task)
+    cv = point_critical_volume_nl(scene, task)
     if cv is not None:
         summary["critical_volume_nl"] = cv
     if "layout" in scene.pattern.params:

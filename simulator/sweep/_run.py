@@ -61,7 +61,7 @@ The plan (the file, its axes, its points and seeds, the hash) is :mod:`simulator
 (the axes :mod:`simulator.sweep`); the pictures and the page are :mod:`simulator.sweep`.
 One point is :mod:`simulator.sweep`, the table's columns :mod:`simulator.sweep`,
 the results directory :mod:`simulator.sweep`, the cluster :mod:`simulator.sweep`;
-this module is the entry :func:`sweep`, and their names are importable from here.
+this module is the entry :func:`run_sweep`.
 
 Columns carry their units: the axis values (``gap_um``, ``volume_nl``, ``method``), the
 point's ``point``, ``realization``, ``point_seed``, ``status`` ("ok" or "error"), ``error``,
@@ -102,7 +102,7 @@ from simulator.sweep._store import (
     _Store,
 )
 
-__all__ = ["sweep"]
+__all__ = ["run_sweep"]
 
 
 def _bar(show: bool, total: int):
@@ -152,7 +152,7 @@ def _price_workers(spec: SweepSpec, tasks: list[dict]) -> tuple[float | None, fl
     return peak, budget_bytes(spec.scene.get("memory_budget_mb"))
 
 
-def sweep(
+def run_sweep(
     spec: str | os.PathLike | dict,
     out: str | os.PathLike | None = None,
     *,

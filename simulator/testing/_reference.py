@@ -12,7 +12,7 @@ degrees, docs/physics.md §1), in float64:
   1e-3 degrees); :func:`force_N` and :func:`torque_Nm` are minus the energy gradient
   (docs/physics.md §3.4). At a kink (e.g. the V-shaped cusp of the twist well at 0,
   docs/physics.md C5) the central difference is the mean of the two one-sided slopes.
-* :func:`greedy` and :func:`gradient_descent` -- the steppers of
+* :func:`exact_greedy` and :func:`exact_gradient_descent` -- the steppers of
   :mod:`simulator.motion` on the exact overlap, with the grid spacing as parameters
   (``step_um``, ``step_deg``) so the reference matches a raster's pose grid. Slow (a few
   thousand overlaps per second) but exact up to float64 round-off: this is the
@@ -45,10 +45,10 @@ __all__ = [
     "ExactOverlap",
     "ReferenceRun",
     "energy_J",
+    "exact_gradient_descent",
+    "exact_greedy",
     "force_N",
-    "gradient_descent",
     "gradient_um2",
-    "greedy",
     "overlap_um2",
     "radius_of_gyration_um",
     "torque_Nm",
@@ -230,7 +230,7 @@ class ExactOverlap:
         return np.array([self.memo[k] for k in keys])
 
 
-def greedy(
+def exact_greedy(
     pattern: BaseGeometry,
     chip: BaseGeometry,
     start,
@@ -274,7 +274,7 @@ def greedy(
     )
 
 
-def gradient_descent(
+def exact_gradient_descent(
     pattern: BaseGeometry,
     chip: BaseGeometry,
     start,
