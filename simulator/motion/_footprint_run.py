@@ -227,6 +227,8 @@ def simulate_footprint(
     # all-wet state's energy is the stateless one)
     reference = None if path_src else planes.landscape(np.ones(n, bool))
     reached, within = (None, None) if path_src else footprint_relay(planes)
+    import jax.numpy as jnp  # after the planes' price and build (a refusal loads no JAX)
+
     wet = planes.next_state(dispensed, start)
     initial = wet.copy()
     pose = tuple(float(v) for v in start)
@@ -247,8 +249,6 @@ def simulate_footprint(
                 path=StateBoxes(*path_src, wet),
             )
         else:
-            import jax.numpy as jnp
-
             assert reached is not None and within is not None  # the planes' relay
             tr = simulate(
                 inner,
