@@ -23,6 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
+from simulator.core import UM
 from simulator.landscape import PoseGrid
 from simulator.motion._field import Field, at_cut_edge, interpolate, relay_changes
 from simulator.motion._pinning import pin_at, soft_threshold
@@ -45,9 +46,7 @@ class _Coeffs(NamedTuple):
 
 def _axis_scales(grid: PoseGrid) -> np.ndarray:
     """SI length of one index step along (it, iy, ix): radians, metres, metres."""
-    return np.array(
-        [math.radians(grid.twist_step_deg), grid.um_per_px * 1e-6, grid.um_per_px * 1e-6]
-    )
+    return np.array([math.radians(grid.twist_step_deg), grid.um_per_px * UM, grid.um_per_px * UM])
 
 
 def _reference_force(field: Field, grid: PoseGrid, dt) -> jax.Array:

@@ -25,6 +25,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from simulator.core import UM, UM2
+
 
 @functools.partial(
     jax.tree_util.register_dataclass,
@@ -132,10 +134,8 @@ def pin_at(field, grid, q):
     # outside the image: the ring's zeros (clipped indices land on the ring)
     col = jnp.clip(col, 0.0, ww - 1.0)
     row = jnp.clip(row, 0.0, hh - 1.0)
-    r0f, c0f = jnp.floor(row), jnp.floor(col)
-    fr, fc = row - r0f, col - c0f
-    r0 = jnp.clip(r0f.astype(jnp.int32), 0, hh - 2)
-    c0 = jnp.clip(c0f.astype(jnp.int32), 0, ww - 2)
+    r0 = jnp.clip(jnp.floor(row).astype(jnp.int32), 0, hh - 2)
+    c0 = jnp.clip(jnp.floor(col).astype(jnp.int32), 0, ww - 2)
     fr = row - r0
     fc = col - c0
     relay = field.relay
@@ -147,10 +147,10 @@ def pin_at(field, grid, q):
     )
     on = jnp.clip(v, 0.0, 1.0)
     f2 = lines.f2
-    step_m = s * 1e-6
-    p_x = f2 * jnp.sum(on * jnp.abs(nx) * lines.ds) * 1e-6 * step_m
-    p_y = f2 * jnp.sum(on * jnp.abs(ny) * lines.ds) * 1e-6 * step_m
-    p_t = f2 * jnp.sum(on * lines.wt) * 1e-12 * math.radians(grid.twist_step_deg)
+    step_m = s * UM
+    p_x = f2 * jnp.sum(on * jnp.abs(nx) * lines.ds) * UM * step_m
+    p_y = f2 * jnp.sum(on * jnp.abs(ny) * lines.ds) * UM * step_m
+    p_t = f2 * jnp.sum(on * lines.wt) * UM2 * math.radians(grid.twist_step_deg)
     if grid.shape[0] == 1:
         p_t = jnp.zeros_like(p_t)
     return jnp.stack([p_t, p_y, p_x]).astype(dt)

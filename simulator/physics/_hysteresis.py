@@ -60,6 +60,7 @@ import numpy as np
 
 from foundation import InputError
 from patterns.geometry import Mask
+from simulator.core import UM, UM2
 
 
 def parse_window(text: str, flag: str = "--hysteresis") -> tuple[float, float]:
@@ -221,7 +222,7 @@ def pinning(scene) -> tuple[float, float, float]:
         return 0.0, 0.0, 0.0
     f2 = pinning_force_scale(scene)
     sx, sy, st = contact_line_integrals_um(scene.chip)
-    return f2 * st * 1e-12, f2 * sy * 1e-6, f2 * sx * 1e-6
+    return f2 * st * UM2, f2 * sy * UM, f2 * sx * UM
 
 
 def line_reach_um(scene) -> float:
@@ -337,9 +338,9 @@ def sliding_pinning_at(scene, pose, wet=None) -> tuple[float, float, float]:
     ds = lines["ds"]
     f2 = lines["f2"]
     return (
-        f2 * float((on * lines["wt"]).sum()) * 1e-12,
-        f2 * float((on * np.abs(n[:, 1]) * ds).sum()) * 1e-6,
-        f2 * float((on * np.abs(n[:, 0]) * ds).sum()) * 1e-6,
+        f2 * float((on * lines["wt"]).sum()) * UM2,
+        f2 * float((on * np.abs(n[:, 1]) * ds).sum()) * UM,
+        f2 * float((on * np.abs(n[:, 0]) * ds).sum()) * UM,
     )
 
 
@@ -357,7 +358,7 @@ def pin_per_index(scene, um_per_px: float, twist_step_deg: float) -> tuple[float
     """Pinning work over one grid step along (twist, y, x), in J: the thresholds the
     steppers compare ``|dE/dq_k|`` (J per index step) with."""
     pt, py, px = sliding_pinning(scene)
-    return pt * math.radians(twist_step_deg), py * um_per_px * 1e-6, px * um_per_px * 1e-6
+    return pt * math.radians(twist_step_deg), py * um_per_px * UM, px * um_per_px * UM
 
 
 #: A pinned chip within this many predicted stop distances of the minimum counts as aligned.
