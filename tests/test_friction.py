@@ -30,6 +30,7 @@ from simulator.motion import (
     MOREAU_TOL,
     DynamicsParams,
     Relay,
+    dissipation,
     field_and_grid,
     inertial,
     make_field,
@@ -377,3 +378,18 @@ def test_each_damping_term_against_its_closed_form():
     )
     assert pinned.damping_N_s_m == pytest.approx(film["damping_N_s_m"], rel=1e-12)
     assert film["terms"]["wedge"] == film["terms"]["line"] == (0.0, 0.0)
+
+
+def test_a_scenes_terms_are_the_damping_its_dynamics_take():
+    # free lines: the film's terms and the outline's moving lines; pinned: the film's alone
+    for scene in (
+        _two_pad_scene(),
+        _two_pad_scene(hysteresis=False).replace(liquid=Liquid(height_um=10.0, pinned=True)),
+    ):
+        d = dissipation(scene)
+        p = DynamicsParams.from_scene(scene)
+        assert p.damping_N_s_m == d["damping_N_s_m"]
+        assert p.rot_damping_N_m_s == d["rot_damping_N_m_s"]
+        assert d["damping_N_s_m"] == pytest.approx(sum(v[0] for v in d["terms"].values()))
+        moving = d["terms"]["line"][0] > 0
+        assert moving == (not scene.liquid.pinned)

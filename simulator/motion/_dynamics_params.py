@@ -161,23 +161,19 @@ class DynamicsParams:
         else ``V / A``). The damping: ``scene.damping_calibration`` times Couette where one
         is given, else the terms (:func:`dissipation`).
         """
-        s = float(scene.um_per_px)
-        area = positive("chip footprint area", scene.chip.area_um2, "um^2")
-        j = area * (scene.chip_rg_px * s) ** 2  # um^4
-        rho_t = scene.chip_density_kg_m3 * scene.chip_thickness_um * UM  # kg/m^2
-        lines, across, angle = _scene_lines(scene)
+        b = _scene_body(scene)
         return cls._film(
-            rho_t * area * UM2,
-            rho_t * j * UM2 * UM2,
-            area,
-            j,
+            b["mass_kg"],
+            b["inertia_kg_m2"],
+            b["area_um2"],
+            b["polar_moment_um4"],
             scene.liquid_height_um,
             scene.liquid,
             scene.damping_calibration,
             t_max_s,
-            lines=lines,
-            across_um=across,
-            line_angle_deg=angle,
+            lines=b["lines"],
+            across_um=b["across_um"],
+            line_angle_deg=b["angle_deg"],
             line_friction_Pa_s=scene.line_friction_Pa_s,
         )
 
@@ -245,40 +241,47 @@ class DynamicsParams:
         return self.damping_N_s_m / (2.0 * math.sqrt(stiffness_N_m * self.mass_kg))
 
 
-def _scene_lines(scene) -> tuple[tuple[float, float, float] | None, float, float]:
-    """(the moving lines' integrals or None, oint |n_x| ds in um, their contact angle in deg)
-    of a scene: the chip's outline moves its lines with it where they are free (a finite
-    meniscus with free lines, or the overlap model's line at the chip's edge); a pinned
-    scene holds every line at an edge. The angle: the substrate's, where a free line stands
-    at rest (docs/physics.md §3.3)."""
+def _scene_body(scene) -> dict:
+    """The chip body and film of a scene, as :meth:`DynamicsParams.from_scene` documents them:
+    ``area_um2``, ``polar_moment_um4`` (J = A rg^2), ``mass_kg``, ``inertia_kg_m2``, and its
+    moving lines: ``lines`` (their integrals, or None where a pinned scene holds every line
+    at an edge; the chip's outline moves its lines with it where they are free, a finite
+    meniscus with free lines or the overlap model's line at the chip's edge), ``across_um``
+    (oint |n_x| ds) and ``angle_deg`` (the substrate's, where a free line stands at rest,
+    docs/physics.md §3.3)."""
     from simulator.physics import contact_line_integrals_um, line_dissipation_integrals_um
 
+    s = float(scene.um_per_px)
+    area = positive("chip footprint area", scene.chip.area_um2, "um^2")
+    j = area * (scene.chip_rg_px * s) ** 2  # um^4
+    rho_t = scene.chip_density_kg_m3 * scene.chip_thickness_um * UM  # kg/m^2
     across, _, _ = contact_line_integrals_um(scene.chip)
-    angle = scene.materials.substrate_angle_deg
-    if scene.liquid.pinned:
-        return None, across, angle
-    return line_dissipation_integrals_um(scene.chip), across, angle
+    return {
+        "area_um2": area,
+        "polar_moment_um4": j,
+        "mass_kg": rho_t * area * UM2,
+        "inertia_kg_m2": rho_t * j * UM2 * UM2,
+        "lines": None if scene.liquid.pinned else line_dissipation_integrals_um(scene.chip),
+        "across_um": across,
+        "angle_deg": scene.materials.substrate_angle_deg,
+    }
 
 
 def dissipation(scene) -> dict:
     """The scene's damping term by term (:func:`simulator.physics.dissipation_terms`): what
     :meth:`DynamicsParams.from_scene` sums where no ``damping_calibration`` is given."""
-    s = float(scene.um_per_px)
-    area = positive("chip footprint area", scene.chip.area_um2, "um^2")
-    j = area * (scene.chip_rg_px * s) ** 2
-    rho_t = scene.chip_density_kg_m3 * scene.chip_thickness_um * UM
-    lines, across, angle = _scene_lines(scene)
+    b = _scene_body(scene)
     return dissipation_terms(
         viscosity_Pa_s=scene.liquid.viscosity_Pa_s,
         density_kg_m3=scene.liquid.density_kg_m3,
         surface_tension_N_m=scene.liquid.surface_tension_N_m,
-        area_um2=area,
-        polar_moment_um4=j,
+        area_um2=b["area_um2"],
+        polar_moment_um4=b["polar_moment_um4"],
         h_um=scene.liquid_height_um,
-        mass_kg=rho_t * area * UM2,
-        line_um=lines,
-        across_um=across,
-        line_angle_deg=angle,
+        mass_kg=b["mass_kg"],
+        line_um=b["lines"],
+        across_um=b["across_um"],
+        line_angle_deg=b["angle_deg"],
         line_friction_Pa_s=scene.line_friction_Pa_s,
     )
 
