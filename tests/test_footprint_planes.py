@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from patterns.geometry import Mask
-from simulator.landscape import build_footprint_planes, build_landscape, pad_labels
+from patterns.geometry import Mask, pad_labels
+from simulator.landscape import build_footprint_planes, build_landscape
 from simulator.landscape._build import scene_extent
 from simulator.landscape._correlator import NOISE_FACTOR
 from simulator.landscape._footprint import _variant, footprint_pairs

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from foundation import InputError
-from patterns.geometry import Mask
-from simulator.landscape import build_footprint_planes, build_landscape, pad_labels
+from patterns.geometry import Mask, pad_labels
+from simulator.landscape import build_footprint_planes, build_landscape
 from simulator.liquid import dispensed_wet
 from simulator.motion import simulate
 from simulator.physics import FootprintRules, Liquid, Materials, WallProfile, cap_radius_um, relay

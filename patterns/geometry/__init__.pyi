@@ -18,6 +18,7 @@ from ._mask import (
     Mask as Mask,
     footprint_um as footprint_um,
     nonzero_box as nonzero_box,
+    pad_labels as pad_labels,
 )
 from ._raster import (
     canvas_shape as canvas_shape,

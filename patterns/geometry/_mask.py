@@ -111,3 +111,12 @@ def footprint_um(mask: Mask) -> tuple[float, float]:
     rows, cols = np.flatnonzero(d.any(axis=1)), np.flatnonzero(d.any(axis=0))
     s = mask.um_per_px
     return (cols[-1] + 1 - cols[0]) * s, (rows[-1] + 1 - rows[0]) * s
+
+
+def pad_labels(pattern: Mask) -> tuple[np.ndarray, int]:
+    """The pattern's pads: its connected wettable regions (every pixel above 0, so that the
+    pads' masks add up to the pattern exactly), labelled 1..n; (labels, n)."""
+    from scipy import ndimage
+
+    labels, n = ndimage.label(pattern.data > 0)
+    return labels, int(n)

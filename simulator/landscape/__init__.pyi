@@ -18,7 +18,6 @@ from ._footprint import (
     build_footprint_planes as build_footprint_planes,
     footprint_pairs as footprint_pairs,
     footprint_poses as footprint_poses,
-    pad_labels as pad_labels,
 )
 from ._landscape import (
     MAX_CURVE_SAMPLES as MAX_CURVE_SAMPLES,

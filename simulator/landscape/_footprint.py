@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from foundation import InputError, wait_line
-from patterns.geometry import Mask
+from patterns.geometry import Mask, pad_labels
 from simulator.core import UM2
 from simulator.scene import Scene
 
@@ -48,15 +48,6 @@ from ._landscape import Landscape
 
 if TYPE_CHECKING:
     from simulator.physics import FootprintRules
-
-
-def pad_labels(pattern: Mask) -> tuple[np.ndarray, int]:
-    """The pattern's pads: its connected wettable regions (every pixel above 0, so that the
-    pads' masks add up to the pattern exactly), labelled 1..n."""
-    from scipy import ndimage
-
-    labels, n = ndimage.label(pattern.data > 0)
-    return labels, int(n)
 
 
 def _variant(scene: Scene, pattern: Mask, profile) -> Scene:

@@ -84,7 +84,7 @@ def require_footprint_fits(scene, engine: str = "fft") -> None:
     """Refuse (InputError) a ``--dispense`` run whose pads' planes exceed the memory budget,
     before any of them is made (no JAX, no transform); with ``engine`` "path", whose
     footprint state's rotators do (:func:`simulator.landscape.footprint_path_bytes`)."""
-    from simulator.landscape import pad_labels
+    from patterns.geometry import pad_labels
 
     if engine == "path":
         from simulator.landscape import footprint_path_bytes

@@ -280,18 +280,18 @@ def pinning_lines(scene) -> dict | None:
     ``reach_um`` where a free line stands beyond the chip (:func:`line_reach_um`);
     ``f2`` the force per unit length of one sliding line, N/m (:func:`pinning_force_scale`);
     ``pattern`` (H, W) the pattern's values and ``labels`` (H, W) int32 its pads (1..n, 0
-    substrate: :func:`simulator.landscape.pad_labels`) at ``um_per_px``."""
+    substrate: :func:`patterns.geometry.pad_labels`) at ``um_per_px``."""
     if not scene.effects.hysteresis or scene.liquid.pinned:
         return None
     f2 = pinning_force_scale(scene)
     if not f2 > 0:
         return None
-    from scipy import ndimage
+    from patterns.geometry import pad_labels
 
     s = float(scene.um_per_px)
     mids, normals, wx, wy, wt = _outline_elements(scene.chip, piece_um=0.5 * s)
     pat = np.asarray(scene.pattern.data, float)
-    labels, _ = ndimage.label(pat > 0)  # as simulator.landscape.pad_labels
+    labels, _ = pad_labels(scene.pattern)
     return {
         "mids": mids,
         "normals": normals,

@@ -142,7 +142,7 @@ class TrajectoryAnimation:
         self._wet_now = None
         self.wet = None
         if traj.footprint is not None:
-            from simulator.landscape import pad_labels
+            from patterns.geometry import pad_labels
 
             self._labels = pad_labels(scene.pattern)[0]
             pat = scene.pattern

@@ -250,7 +250,7 @@ def point_bytes(task: dict) -> int:
     scene = auto_resolution(scene) if auto else scene
     require_landscape_fits(scene)
     if scene.dispense is not None:  # the pads' planes, built after the landscape is freed
-        from simulator.landscape import pad_labels
+        from patterns.geometry import pad_labels
         from simulator.motion import footprint_budget_bytes, require_footprint_fits
 
         require_footprint_fits(scene)
