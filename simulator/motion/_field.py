@@ -16,12 +16,16 @@ from __future__ import annotations
 import functools
 import itertools
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from simulator.landscape import Landscape, PoseGrid
+
+if TYPE_CHECKING:
+    from simulator.motion._pinning import PinLines
 
 
 def enable_float64() -> None:
@@ -104,7 +108,7 @@ class Field:
     relay: Relay | None = None
     pin: jax.Array = None  # type: ignore[assignment]  (set by make_field)
     align_lim: jax.Array = None  # type: ignore[assignment]
-    lines: object = None  # PinLines | None
+    lines: PinLines | None = None
     pinned: bool = False
     wide_tol: bool = False
 
