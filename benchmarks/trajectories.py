@@ -142,8 +142,7 @@ def cost_table(um_per_px: float | None = None) -> list[str]:
 
 LARGE_RUN = r"""
 import json, sys, time
-from patterns.geometry import four_pad, square
-from patterns.geometry import mask_from_geometry
+from patterns.geometry import four_pad, mask_from_geometry, square
 from simulator.motion import simulate
 from simulator.scene import Scene
 method, engine = sys.argv[1], sys.argv[2]
@@ -242,8 +241,7 @@ if which == "730":
     kw = {"effects": Effects(meniscus=True), "liquid": Liquid(volume_nl=volume, dispense="none")} if model == "meniscus" else {}
     scene = Scene.from_inputs(library_path("four_pad_730_50"), chip_size_um=730, resolution_um=res, **kw)
 else:
-    from patterns.geometry import four_pad, square
-    from patterns.geometry import mask_from_geometry
+    from patterns.geometry import four_pad, mask_from_geometry, square
     volume, start = 500.0, (1200.0, -800.0, 10.0)
     kw = {"effects": Effects(meniscus=True), "liquid": Liquid(volume_nl=volume, dispense="none")} if model == "meniscus" else {}
     scene = Scene(pattern=mask_from_geometry(four_pad(4000, 200), 1.0),

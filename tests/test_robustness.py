@@ -814,8 +814,7 @@ BIG_RUN = """
 import json, time
 t0 = time.perf_counter()
 import simulator
-from patterns.geometry import four_pad, square
-from patterns.geometry import mask_from_geometry
+from patterns.geometry import four_pad, mask_from_geometry, square
 from simulator.scene import Scene
 from simulator.motion import simulate
 s = Scene(pattern=mask_from_geometry(four_pad(4096, 96), 1.0), chip=mask_from_geometry(square(4000), 1.0))
