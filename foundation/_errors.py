@@ -3,7 +3,7 @@
 Every function that takes user input raises :class:`InputError` with a one-line
 message that names the input, shows the value and says what is allowed. The CLI
 prints that line and exits with code 2 (no traceback). Output files and directories
-live in :mod:`foundation`.
+are written by ``_outputs``.
 """
 
 from __future__ import annotations

@@ -15,7 +15,7 @@ on). The test reads stderr up to that line, then signals. Without the variable,
 Points (each named where it is called):
 
 * ``startup``: the CLI's signal handlers are installed, no command module is imported;
-* ``output``: a command's temporary output directory exists (:mod:`foundation`);
+* ``output``: a command's temporary output directory exists (``_outputs``: :func:`~foundation.output_directory`);
 * ``batch``: a Monte Carlo batch has run its first chunk of starts;
 * ``sweep-point``: a sweep point's row is in the journal (flushed);
 * ``search-trial``: a design search's trial row is in its journal (flushed).

@@ -1,6 +1,6 @@
 """Exact pattern geometry: shapely polygons in micrometres, centred on the nominal pattern.
 
-Conventions (see :mod:`patterns.geometry` for the image side):
+Conventions (``_mask`` has the image side, :class:`Mask`):
 
 * Units are micrometres. The origin is the centre of the *nominal* (ideal) pattern, x right,
   y up. For defect and jagged designs the origin is the centre of the nominal square, not the
@@ -11,16 +11,7 @@ Conventions (see :mod:`patterns.geometry` for the image side):
 * Quarter turns are applied with exact integer matrices, so rotated copies of an edge carry
   bit-identical coordinates (4-fold symmetry holds to machine precision).
 
-Jagged designs (docs/physics.md §10-10.3) are built edge by edge. Each edge has a *profile*
-``d(t)``: the outward offset of the edge line at position ``t`` along the edge, for
-``t`` in ``[-L/2, L/2]``, measured in the frame of the right edge (``t = y``; the edge runs
-from the bottom-right to the top-right corner, the direction of a counter-clockwise walk).
-The top, left and bottom edges are that construction turned by 90, 180 and 270 degrees
-counter-clockwise. The pattern is the set of points that lie inside all four jagged edge
-lines, each edge line being straight (the nominal line) beyond the ends of its edge. So teeth
-never cross at a corner: a tooth that would reach past a corner is clipped by the
-neighbouring edge's nominal line, and two inward teeth that meet at a corner simply both cut
-it.
+Jagged designs are built edge by edge: how, in ``_defects`` (docs/physics.md §10-10.3).
 
 The family's modules (their names are :mod:`patterns.geometry`'s): ``_shapes`` (the ideal
 shapes and the builders' shared helpers), ``_defects`` (defect and jagged designs); this

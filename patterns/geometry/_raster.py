@@ -7,7 +7,7 @@ whenever the geometry lies inside the canvas. Cost grows with the perimeter in
 pixels plus one cumulative sum over the canvas (about 25 ms for a 912 x 912 px
 canvas holding a rotated 730 px square).
 
-Frame conventions are those of :mod:`patterns.geometry`: the image centre is the
+Frame conventions are those of :class:`Mask` (``_mask``): the image centre is the
 physical origin, row 0 is the top (largest y), x grows with the column.
 """
 

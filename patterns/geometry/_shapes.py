@@ -1,7 +1,7 @@
 """The ideal pattern shapes as exact shapely geometry, and the helpers every builder shares.
 
 Squares, rectangles, equal-area circles, the four-pad pattern and any simple polygon, in
-micrometres, centred on the origin (see :mod:`patterns.geometry` for the conventions);
+micrometres, centred on the origin (``_designs`` states the conventions);
 the exact quarter turn (:func:`rotate_quarter`) and the final orientation and validity
 check of a builder's result.
 """

@@ -2,7 +2,7 @@
 
 A run ended by SIGTERM or Ctrl-C removes its temporaries itself; one killed outright (SIGKILL,
 the kernel's out-of-memory killer) cannot. Its leftovers carry the names the project's own
-writers give their temporaries (:mod:`foundation`), and only such names are removed:
+writers give their temporaries (:func:`foundation.atomic_output`), and only such names are removed:
 
 * a file written atomically: ``.NAME.XXXXXXXX.EXT`` beside ``NAME.EXT`` (``tempfile``'s eight
   random characters, then the target's own suffix), e.g. ``.history.png.k2j4_x9q.png`` in a

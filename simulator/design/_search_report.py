@@ -11,7 +11,7 @@
   baseline's, and with several objectives the whole front;
 * ``report.html``: the search, the best against the baseline, the pictures and the trials.
 
-Written atomically (:func:`simulator.render.save_figure`, :mod:`foundation`).
+Written atomically (:func:`simulator.render.save_figure`, :func:`foundation.atomic_output`).
 """
 
 from __future__ import annotations
