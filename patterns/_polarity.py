@@ -1,6 +1,6 @@
 """Whether a pattern image looks drawn the wrong way round (the pad in black).
 
-White marks the wettable pad (:mod:`patterns`). A drawing whose wettable area touches all
+White marks the wettable pad (``_io``, :func:`~patterns.read_mask`). A drawing whose wettable area touches all
 four borders of its image (the white is the background around dark pads), or covers more than
 :data:`MOST_OF_IMAGE` of it (an all-white image, a pad drawn in black on a small white frame),
 is most likely inverted: :func:`polarity_warning` says so in one line and suggests ``--invert``

@@ -1,6 +1,6 @@
 """One flattened layout cell (:class:`Layout`) and its outline rings merged into exact geometry.
 
-A reader (:mod:`patterns.layout`, :mod:`patterns.layout`) gives the closed rings of
+A reader (``_gds``, ``_dxf``) gives the closed rings of
 every layer; :meth:`Layout.geometry` turns one layer's rings into valid polygons (a GDS
 keyhole is a polygon with a hole, a polygon that crosses itself is refused) and merges
 them (DXF: an outline inside another is a hole, by nesting depth).

@@ -4,7 +4,7 @@ Owns the format of a file (from its content, else its extension: :data:`SUFFIXES
 constants the readers share (database unit, ``--dxf-units``, DXF ``$INSUNITS``, the memory
 prices of reading and flattening, the deepest nesting), layer keys as the flags spell them
 (``"L/D"`` for GDS/OASIS, a name for DXF), the 1 nm grid coordinates are snapped to, and
-the counts and lengths the messages print. See :mod:`patterns.layout` for the whole story.
+the counts and lengths the messages print. ``_read`` tells the whole story.
 """
 
 from __future__ import annotations

@@ -13,7 +13,7 @@ the same poses to round-off (tested). Below a pixel of meniscus the ``K_h`` blur
 pattern side, as in the build: its spectrum multiplies the pattern's.
 
 Conventions: the pattern ``w`` is (H, W) in image rows (row 0 at the top), its centre the
-physical origin (:mod:`patterns.geometry`); a plane is ``[y, x]`` with y up, plane index
+physical origin (:class:`patterns.geometry.Mask`); a plane is ``[y, x]`` with y up, plane index
 ``(Y + ry, X + rx)`` for a chip centre at ``(X, Y)`` px from the origin.
 """
 

@@ -2,7 +2,7 @@
 evaluator's check beside the baseline's, ``result.json`` and ``report.html``.
 
 The GDSII polygons are the written raster's pixels merged (exact, in um, the pattern frame
-of :mod:`patterns.geometry`) and simplified by half a pixel, well below the minimum feature
+of :class:`patterns.geometry.Mask`) and simplified by half a pixel, well below the minimum feature
 (at least two pixels). :func:`feature_check` measures, on the polygons read back from the
 file, what an opening and a closing by a disk of the minimum feature (its radius less one
 pixel of slack) change: a wettable part or a dry gap narrower than the feature would move by its
