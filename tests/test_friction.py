@@ -254,19 +254,6 @@ def two_pads():
     return sc, build_landscape(sc)
 
 
-def test_zero_window_gives_todays_paths_with_per_pose_pinning(two_pads):
-    _, ls = two_pads  # the landscape does not depend on the hysteresis window
-    for method in ("greedy", "gradient", "overdamped", "inertial"):
-        off = simulate(
-            _two_pad_scene(hysteresis=False), (52.0, 5.0, 2.0), method=method, landscape=ls
-        )
-        zero = simulate(
-            _two_pad_scene(window=(40.0, 40.0)), (52.0, 5.0, 2.0), method=method, landscape=ls
-        )
-        assert off.steps > 0
-        assert np.array_equal(off.path, zero.path) and off.outcome == zero.outcome, method
-
-
 def test_batch_equals_single_runs_with_per_pose_pinning(two_pads):
     from simulator.batch import run_batch
 
