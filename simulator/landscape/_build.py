@@ -374,6 +374,9 @@ def _layout(
         "canvas": (hc, wc),
         "pad": m,
         "landscape_bytes": b["landscape_bytes"],
+        # where pattern_up lies in the pattern (rows r0:r1, cols c0:c1, then flipped up and
+        # cut to ya:yb, xa:xb): another pattern of the same size on the same box is cut so
+        "crop": (r0, r1, c0, c1, ya, yb, xa, xb),
     }
     # The footprint (made once per chip, kept) and the rotations onto the canvas.
     make, kept = smooth_bytes(scene.chip, chip_blur, rot_margin, scene.wall_profile, parity)

@@ -227,6 +227,20 @@ def _pool(n: int) -> ThreadPoolExecutor:
     return ThreadPoolExecutor(n, thread_name_prefix="selfalign-fft")
 
 
+def _rfft_rows(sfft, pattern: np.ndarray, nx: int, workers: int) -> np.ndarray:
+    """The real transform along x (length ``nx``) of every row of ``pattern``: of the rows
+    between its first and last that hold pixels, the others' transforms being zero (a pad,
+    or a part of one, on its box: a fraction of the rows; the same numbers as the whole)."""
+    held = np.flatnonzero(pattern.any(axis=1))
+    if len(held) == 0 or held[-1] + 1 - held[0] == pattern.shape[0]:
+        return sfft.rfft(pattern, n=nx, axis=1, workers=workers)
+    r0, r1 = int(held[0]), int(held[-1]) + 1
+    part = sfft.rfft(pattern[r0:r1], n=nx, axis=1, workers=workers)
+    out = np.zeros((pattern.shape[0], part.shape[1]), part.dtype)
+    out[r0:r1] = part
+    return out
+
+
 class Correlator:
     """Linear cross-correlation of one fixed pattern with a stack of chips, windowed.
 
@@ -274,7 +288,7 @@ class Correlator:
 
         self._sfft = sfft
         spec = sfft.fft(
-            sfft.rfft(np.asarray(pattern, self.dtype), n=self.nx, axis=1, workers=self.workers),
+            _rfft_rows(sfft, np.asarray(pattern, self.dtype), self.nx, self.workers),
             n=self.ny,
             axis=0,
             workers=self.workers,

@@ -440,12 +440,28 @@ class _Part:
     the shared grid: its correlator, work space and where its box lies in the grid."""
 
     def __init__(
-        self, scene, data, profile, twists, extent, center, half, backend, chunk, twins, spaces
+        self,
+        scene,
+        data,
+        profile,
+        twists,
+        extent,
+        center,
+        half,
+        backend,
+        chunk,
+        twins,
+        spaces,
+        like: dict | None = None,
     ):
         from ._correlator import Correlator
 
-        s = _variant(scene, Mask(data, scene.um_per_px), profile)
-        lay = _layout(s, twists, center, half, check_budget=True, extent=extent)
+        if like is None:
+            s = _variant(scene, Mask(data, scene.um_per_px), profile)
+            lay = _layout(s, twists, center, half, check_budget=True, extent=extent)
+        else:  # the layout of another part of the same pattern's size on the same box
+            r0, r1, c0, c1, ya, yb, xa, xb = like["crop"]
+            lay = like | {"pattern_up": data[r0:r1, c0:c1][::-1][ya:yb, xa:xb]}
         self.lay = lay
         self.grid = lay["grid"]
         win = lay["window"]
@@ -505,7 +521,11 @@ class _PairBox:
     def __init__(self, scene, masks, data, key, profile, twists, extent, center, half, *rest):
         self._args = (scene, masks, data, key, profile, twists, extent, center, half, *rest)
         self._parts: dict = {}
+        self._like: dict | None = None
         first = self.part(None)
+        # every part of the pair lies on this one's box: its layout, made and priced once,
+        # serves them all (only the pattern's cut differs)
+        self._like = first.lay
         self.shape, self.fft, self.grid = first.shape, first.fft, first.grid
         self.offset = first.offset
 
@@ -530,6 +550,7 @@ class _PairBox:
                 rest[1],
                 {},
                 rest[2],
+                like=self._like,
             )
         return self._parts[r]
 
@@ -552,7 +573,7 @@ def build_footprint_planes(
     from simulator.physics import STEP_PX, TOUCH_PX2, FootprintRules
 
     from ._build import _check_build_arguments, energy_scale_J
-    from ._rotation import _chip_reach_px, mirror_twins
+    from ._rotation import _chip_reach_px, mirror_twins, rotate_footprints
 
     t0 = time.perf_counter()
     prof = scene.wall_profile
@@ -710,7 +731,10 @@ def build_footprint_planes(
     ]
     for pos, neg in groups:
         idx = pos + neg
-        raster = {nm: np.stack([rotators[nm](twists_deg[i]) for i in pos]) for nm in names}
+        # the six footprints at each twist, the canvas's points on the chip found once
+        turned = [rotate_footprints([rotators[nm] for nm in names], twists_deg[i]) for i in pos]
+        raster = {nm: np.stack([t[j] for t in turned]) for j, nm in enumerate(names)}
+        del turned
         zero = [i for i, t in enumerate(pos) if round(float(twists_deg[t]), 9) == 0]
         band = raster["band_in"] * w_in
         band += raster["band_out"] * w_out

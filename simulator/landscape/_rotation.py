@@ -46,6 +46,11 @@ _SMOOTH: dict = {}
 #: (the chip's id, canvas), a weak reference to the chip and the array (read only). The
 #: footprints of one chip (the wall profile and the footprint state's counts) share it.
 _SDF: dict = {}
+#: The exact chips' rotated half-extents (:func:`_rotated_extent_px`), by the chip's geometry
+#: (its WKB), pixel size and twists: a build lays out many boxes of one chip over the same
+#: twists (the footprint state's pads and pairs: about a thousand), each rotating the polygon
+#: once per twist otherwise. The 64 newest kept.
+_EXTENTS: dict = {}
 
 
 def _chip_reach_px(chip: Mask, twist: bool, um_per_px: float | None = None) -> tuple[float, float]:
@@ -73,13 +78,24 @@ def _chip_reach_px(chip: Mask, twist: bool, um_per_px: float | None = None) -> t
 def _rotated_extent_px(chip: Mask, twists: np.ndarray) -> tuple[float, float]:
     """Half-extent (x, y) in px of the chip's wettable area over the given twists."""
     if chip.geometry is not None:  # exact: no pass over the raster
-        bounds = (
-            np.array(
-                [affinity.rotate(chip.geometry, float(t), origin=(0, 0)).bounds for t in twists]
+        key = (chip.geometry.wkb, chip.um_per_px, np.asarray(twists, float).tobytes())
+        if key not in _EXTENTS:
+            bounds = (
+                np.array(
+                    [
+                        affinity.rotate(chip.geometry, float(t), origin=(0, 0)).bounds
+                        for t in twists
+                    ]
+                )
+                / chip.um_per_px
             )
-            / chip.um_per_px
-        )
-        return float(np.abs(bounds[:, [0, 2]]).max()), float(np.abs(bounds[:, [1, 3]]).max())
+            if len(_EXTENTS) >= 64:
+                _EXTENTS.pop(next(iter(_EXTENTS)))
+            _EXTENTS[key] = (
+                float(np.abs(bounds[:, [0, 2]]).max()),
+                float(np.abs(bounds[:, [1, 3]]).max()),
+            )
+        return _EXTENTS[key]
     h, w = chip.shape
     r0, r1, c0, c1 = nonzero_box(chip.data > 0)
     xs = np.array([c0, c1, c1, c0]) - w / 2
@@ -319,21 +335,13 @@ class ChipRotator:
         assert (
             self._blurred is not None and self._coeffs is not None
         )  # a smooth chip (_smooth_chip)
-        ho, wo = self.shape
         h, w = self._blurred.shape
-        if getattr(self, "_xy", None) is None:
-            v, u = np.mgrid[0:ho, 0:wo].astype(float)
-            self._xy = (
-                u - (wo / 2 - 0.5),
-                -(v - (ho / 2 - 0.5)),
-            )  # physical, y up, about the centre
         a = math.radians(twist_deg)
         ca, sa = math.cos(a), math.sin(a)
         f = self.sample_px
         if f > 1:
             return self._coarse_rotate(ca, sa, f)
-        x, y = self._xy
-        xi, yi = x * ca + y * sa, -x * sa + y * ca  # inverse rotation
+        xi, yi = self._unrotated(twist_deg)
         if self.profile is not None:
             return self.profile_at(xi, yi)
         # Only where the blurred chip is (its box, a margin beyond the chip): zero elsewhere.
@@ -345,6 +353,21 @@ class ChipRotator:
             self._coeffs, coords, order=SPLINE_ORDER, mode="constant", cval=0.0, prefilter=False
         )
         return out
+
+    def _unrotated(self, twist_deg: float) -> tuple[np.ndarray, np.ndarray]:
+        """(xi, yi) px: where each canvas pixel lies on the unrotated chip (about its centre,
+        y up), the chip turned by ``twist_deg``."""
+        if getattr(self, "_xy", None) is None:
+            ho, wo = self.shape
+            v, u = np.mgrid[0:ho, 0:wo].astype(float)
+            self._xy = (
+                u - (wo / 2 - 0.5),
+                -(v - (ho / 2 - 0.5)),
+            )  # physical, y up, about the centre
+        a = math.radians(twist_deg)
+        ca, sa = math.cos(a), math.sin(a)
+        x, y = self._xy
+        return x * ca + y * sa, -x * sa + y * ca  # inverse rotation
 
     @property
     def band_px(self) -> tuple[float, float]:
@@ -514,3 +537,31 @@ def mirror_twins(mirror: bool, twists_deg: np.ndarray) -> dict[int, int]:
         for i, t in enumerate(twists_deg)
         if t > 0 and round(-float(t), 9) in pos
     }
+
+
+def rotate_footprints(rotators: list[ChipRotator], twist_deg: float) -> list[np.ndarray]:
+    """Several free-contact-line footprints of one chip at ``twist_deg``, each exactly as its
+    rotator's own call gives it: where footprints share the canvas and the signed distance
+    (the footprint state's wall and counts, :mod:`simulator.landscape._footprint`), the
+    canvas's points on the unrotated chip and their distances are found once, not once per
+    footprint; any other rotator is called on its own."""
+    first = rotators[0]
+    shared = all(
+        r.profile is not None
+        and r.sample_px == 1
+        and r.shape == first.shape
+        and r._sdf is not None
+        and r._sdf is first._sdf
+        for r in rotators
+    )
+    if not shared:
+        return [r(twist_deg) for r in rotators]
+    xi, yi = first._unrotated(twist_deg)
+    near = first.distance_at(xi, yi, box=False)
+    ax, ay = np.abs(xi), np.abs(yi)
+    out = []
+    for r in rotators:
+        s = near.copy()
+        s[(ax > r._half[0]) | (ay > r._half[1])] = np.inf  # beyond its box: no footprint
+        out.append(r.profile_at(xi, yi, s)[::-1])
+    return out
