@@ -693,7 +693,7 @@ def test_equal_angles_with_allow_repulsive_print_no_nan(tmp_path, run_cli):
 
 def test_non_finite_result_is_refused_before_writing(tmp_path):
     from foundation import InputError
-    from simulator.commands._common import write_json
+    from simulator.commands._outputs import write_json
 
     with pytest.raises(InputError, match=r"a\.b\[1\] is nan"):
         write_json(tmp_path / "x.json", {"a": {"b": [1.0, float("nan")]}})

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from simulator.cli import main
-from simulator.design._calibrate import PROFILE_BASE
+from simulator.design._calibrate._fit import PROFILE_BASE
 
 # One xdist group for the whole module (make test: pytest -n 2 --dist loadgroup): its tests
 # share scenes whose steppers take seconds to compile; on one worker each compiles once.

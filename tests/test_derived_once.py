@@ -16,7 +16,7 @@ from patterns.geometry import four_pad, mask_from_geometry, square
 from patterns.library import library_path
 from simulator.batch import auto_resolution
 from simulator.cli import build_parser, main
-from simulator.commands._common import scene_from_args
+from simulator.commands._scene import scene_from_args
 from simulator.landscape import PoseGrid, build_landscape, estimate_bytes, plan
 from simulator.motion import DynamicsParams, field_and_grid
 from simulator.physics import Liquid, couette_damping, couette_torsional_damping, meniscus_height_um

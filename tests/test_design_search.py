@@ -439,7 +439,7 @@ def test_the_comparison_shows_what_the_constraints_read():
     import tomllib
     from pathlib import Path
 
-    from simulator.design._search_report import _compare_table
+    from simulator.design._search._report import _compare_table
 
     doc = tomllib.loads(
         (Path(__file__).resolve().parents[1] / "examples" / "design_fourpad_gap.toml").read_text()

@@ -20,7 +20,7 @@ import pytest
 
 from patterns.library import library_path
 from simulator.cli import build_parser
-from simulator.commands._common import scene_from_args
+from simulator.commands._scene import scene_from_args
 from simulator.core import DEFAULT_MAX_STEPS
 from simulator.landscape import build_landscape
 from simulator.motion import (

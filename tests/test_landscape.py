@@ -420,7 +420,7 @@ def test_packed_spectrum_is_opencvs(ny, nx):
     import cv2
     import scipy.fft as sfft
 
-    from simulator.landscape._correlator import _ccs
+    from simulator.landscape._spectra import _ccs
 
     x = np.random.default_rng(ny).random((ny, nx))
     half = sfft.fft(sfft.rfft(x, axis=1), axis=0)

@@ -399,7 +399,7 @@ def test_cli_refuses_bad_heights_in_one_line(flags, needle, capsys):
 
 def test_scene_file_means_what_the_flags_mean(tmp_path):
     from simulator.cli import build_parser
-    from simulator.commands._common import scene_from_args
+    from simulator.commands._scene import scene_from_args
     from simulator.commands.energy import register  # noqa: F401  (the energy parser has every scene flag)
 
     toml = tmp_path / "s.toml"

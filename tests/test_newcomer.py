@@ -236,7 +236,7 @@ def test_energy_takes_quiet(run_cli, monkeypatch):
 
 
 def test_freeform_report_shows_the_minimum_to_the_grid():
-    from simulator.design._freeform_report import _pose_text
+    from simulator.design._freeform._report import _pose_text
 
     noise = {"x_um": 4.934e-08, "y_um": 6.506e-08, "twist_deg": -3.183e-07, "refined": False}
     assert _pose_text({"global_minimum": noise, "grid": {"um": 2.0, "twist_deg": 1.0}}) == (

@@ -143,15 +143,71 @@ def test_the_tree_is_the_subpackages_and_the_command_line():
     assert top == sorted(["__init__.py", "__main__.py", "cli.py", *SUBPACKAGES])
 
 
+def _entries(folder: Path) -> list[str]:
+    """A folder's modules and packages (``.py`` files and folders with an ``__init__.py``)."""
+    return sorted(
+        p.name
+        for p in folder.iterdir()
+        if p.suffix == ".py" or (p.is_dir() and (p / "__init__.py").exists())
+    )
+
+
+def _check_internal(folder: Path) -> None:
+    """Every module in ``folder`` is an underscore module or its ``__init__.py``; a folder in
+    it is an internal family (``_search/``): underscore-named, with no face of its own (an
+    ``__init__.py`` of a docstring alone, no stub), and its modules internal in turn."""
+    entries = _entries(folder)
+    assert all(m == "__init__.py" or m.startswith("_") for m in entries), (folder, entries)
+    for family in (folder / m for m in entries if (folder / m).is_dir()):
+        init = ast.parse((family / "__init__.py").read_text())
+        assert ast.get_docstring(init) and len(init.body) == 1, family
+        assert not (family / "__init__.pyi").exists(), family
+        _check_internal(family)
+
+
 @pytest.mark.parametrize("package", [p for p in SUBPACKAGES if p != "commands"])
 def test_each_package_keeps_its_internals_in_underscore_modules(package):
-    modules = sorted(p.name for p in (PACKAGE / package).glob("*.py"))
-    assert modules[0] == "__init__.py"
-    assert all(m.startswith("_") for m in modules), modules
+    assert _entries(PACKAGE / package)[0] == "__init__.py"
+    _check_internal(PACKAGE / package)
+
+
+def test_the_design_families_are_folders():
+    """``simulator.design`` keeps its three families in internal folders behind its one face:
+    the search, the free-form design and the calibration (issue 40: folders for families)."""
+    design = PACKAGE / "design"
+    assert _entries(design) == [
+        "__init__.py",
+        "_calibrate",
+        "_freeform",
+        "_leftovers.py",
+        "_mode.py",
+        "_search",
+    ]
+    families = {
+        "_search": ["_report.py", "_run.py", "_spec.py"],
+        "_freeform": [
+            "_density.py",
+            "_energy.py",
+            "_objectives.py",
+            "_report.py",
+            "_run.py",
+            "_spec.py",
+        ],
+        "_calibrate": ["_fit.py", "_params.py", "_report.py", "_table.py"],
+    }
+    for family, modules in families.items():
+        assert _entries(design / family) == ["__init__.py", *modules]
+    stub = {node.module.partition(".")[0] for node, _ in _stub_imports(design / "__init__.pyi")}
+    assert stub == {*families, "_mode"}
 
 
 def _package(name: str) -> str:
-    return name if MODULES[name].name == "__init__.py" else name.rpartition(".")[0]
+    """The package a module belongs to: its folder, or the package that holds its folder when
+    that is an internal family (``simulator.design._search._run`` is ``simulator.design``'s)."""
+    package = name if MODULES[name].name == "__init__.py" else name.rpartition(".")[0]
+    while package.rpartition(".")[2].startswith("_"):
+        package = package.rpartition(".")[0]
+    return package
 
 
 def test_no_module_reaches_into_another_packages_internals():
@@ -328,7 +384,8 @@ def test_each_face_names_what_its_package_defines(package):
     for node, alias in _stub_imports(PACKAGE / package / "__init__.pyi"):
         assert node.level == 1 and node.module.startswith("_"), ast.unparse(node)
         assert alias.asname in (None, alias.name), ast.unparse(node)
-        defined, _ = _defined_names(PACKAGE / package / f"{node.module}.py")
+        module = PACKAGE / package / f"{node.module.replace('.', '/')}.py"
+        defined, _ = _defined_names(module)
         if alias.name not in defined:
             foreign.append(f"{node.module}.{alias.name}")
     assert foreign == []

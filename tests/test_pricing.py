@@ -529,7 +529,7 @@ def test_the_transform_sizes_are_scipys_without_importing_it():
     importing SciPy's FFT) are SciPy's: 11-smooth, 5-smooth for real transforms."""
     import scipy.fft
 
-    from simulator.landscape._correlator import next_fast_len
+    from simulator.landscape._fftsize import next_fast_len
 
     for real in (False, True):
         assert [next_fast_len(n, real) for n in range(1, 20_001)] == [

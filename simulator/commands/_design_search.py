@@ -7,7 +7,7 @@ import os
 import sys
 from pathlib import Path
 
-from simulator.commands._common import sigterm_says_what_was_kept
+from simulator.commands._signals import sigterm_says_what_was_kept
 
 #: The memory advice of the checks shared with other commands, and a search's own: its
 #: trials' budget is the file's (part of the search), not a flag.

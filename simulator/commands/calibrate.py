@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from simulator.commands._common import add_scene_args, finite_limit
+from simulator.commands._flags import add_scene_args, finite_limit
 from simulator.physics import LINE_FRICTION_PA_S
 
 
@@ -108,7 +108,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from foundation import InputError
-    from simulator.commands._common import parse_pose, scene_document, scene_document_from_args
+    from simulator.commands._flags import parse_pose
+    from simulator.commands._scene import scene_document, scene_document_from_args
     from simulator.commands.design import without_force
     from simulator.design import PROFILE, calibrate, read_trials
 

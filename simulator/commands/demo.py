@@ -94,7 +94,7 @@ def demo_scene() -> Scene:
 
 def write_trajectory_files(out: Path, scene: Scene, traj: Trajectory, quiet: bool) -> list[Path]:
     """trajectory.json, demo_energy.png and demo.gif; returns their paths."""
-    from simulator.commands._common import write_json
+    from simulator.commands._outputs import write_json
     from simulator.render import plot_energy_curve, write_trajectory_gif
 
     paths = [out / "trajectory.json", out / "demo_energy.png", out / "demo.gif"]

@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from simulator.commands._common import finite_limit
+from simulator.commands._flags import finite_limit
 from simulator.sweep import CONNECT_TIMEOUT_S
 
 

@@ -9,16 +9,9 @@ import sys
 import numpy as np
 
 from foundation import InputError, atomic_output
-from simulator.commands._common import (
-    accuracy_check,
-    add_force_arg,
-    add_scene_args,
-    check_outputs,
-    parse_pose,
-    scene_document,
-    scene_from_args,
-    write_json,
-)
+from simulator.commands._flags import add_scene_args, parse_pose
+from simulator.commands._outputs import add_force_arg, check_outputs, write_json
+from simulator.commands._scene import accuracy_check, scene_document, scene_from_args
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -95,7 +88,7 @@ def run(args: argparse.Namespace) -> int:
         and scene.liquid.volume_derived
         and scene.liquid.height_um is None
     ):
-        from simulator.commands._common import derived_volume_words
+        from simulator.commands._liquid import derived_volume_words
 
         print(f"note: {derived_volume_words(scene)}", file=sys.stderr)
     x, y, t = (np.array(v) for v in zip(*poses, strict=True))
@@ -216,7 +209,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _write_csv(path, ls, poses: list, cur: dict | None) -> None:
     """One row per pose, then one per curve sample, with the full force and torque at each."""
-    from simulator.commands._common import write_csv
+    from simulator.commands._outputs import write_csv
 
     x, y, t = (np.array(v, float) for v in zip(*poses, strict=True))
     kind = ["pose"] * len(x)

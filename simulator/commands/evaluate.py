@@ -6,14 +6,10 @@ import argparse
 from pathlib import Path
 
 from foundation import InputError, check_output_dir
-from simulator.commands._common import (
-    accuracy_check,
-    add_scene_args,
-    input_paths,
-    liquid_checks,
-    scene_document,
-    scene_from_args,
-)
+from simulator.commands._flags import add_scene_args
+from simulator.commands._liquid import liquid_checks
+from simulator.commands._outputs import input_paths
+from simulator.commands._scene import accuracy_check, scene_document, scene_from_args
 from simulator.core import AUTO_LANDSCAPE_MB, BATCH_METHODS, DYNAMIC_METHODS
 
 

@@ -205,7 +205,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "side) and, for protruding pads (--edge-angle) placed with a --bias, the overflow limit. Prints the volume "
         "a run without --volume takes (a film of 5 % of the chip's smallest side) or checks --volume. Units: nl, um, deg.",
     )
-    from simulator.commands._common import add_scene_args
+    from simulator.commands._flags import add_scene_args
 
     add_scene_args(w)
     w.add_argument(
@@ -248,7 +248,7 @@ def _finite(flag: str, value: float | None, positive: bool = True) -> float | No
 
 
 def _chip_size(text: str) -> tuple[float, float]:
-    from simulator.commands._common import parse_chip_size
+    from simulator.commands._flags import parse_chip_size
 
     return parse_chip_size(text)
 
@@ -433,7 +433,7 @@ def run_critical_volume(args: argparse.Namespace) -> int:
 
 # ----------------------------------------------------------------------- volume window
 def run_window(args: argparse.Namespace) -> int:
-    from simulator.commands._common import scene_document, scene_from_args
+    from simulator.commands._scene import scene_document, scene_from_args
     from simulator.liquid import volume_window, window_lines
 
     if args.json and args.json != "-":

@@ -12,16 +12,10 @@ import numpy as np
 
 from foundation import InputError, atomic_output, require_finite
 from simulator.batch import DISTRIBUTIONS, MAX_STARTS, StartGrid
-from simulator.commands._common import (
-    accuracy_check,
-    add_force_arg,
-    add_scene_args,
-    check_outputs,
-    liquid_checks,
-    parse_pose,
-    scene_document,
-    scene_from_args,
-)
+from simulator.commands._flags import add_scene_args, parse_pose
+from simulator.commands._liquid import liquid_checks
+from simulator.commands._outputs import add_force_arg, check_outputs
+from simulator.commands._scene import accuracy_check, scene_document, scene_from_args
 from simulator.core import (
     BATCH_METHODS as METHODS,
     DEFAULT_CHUNK,

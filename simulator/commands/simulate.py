@@ -8,17 +8,10 @@ import contextlib
 import numpy as np
 
 from foundation import InputError, atomic_output, compiling
-from simulator.commands._common import (
-    accuracy_check,
-    add_force_arg,
-    add_scene_args,
-    check_outputs,
-    liquid_checks,
-    parse_pose,
-    scene_document,
-    scene_from_args,
-    write_json,
-)
+from simulator.commands._flags import add_scene_args, parse_pose
+from simulator.commands._liquid import liquid_checks
+from simulator.commands._outputs import add_force_arg, check_outputs, write_json
+from simulator.commands._scene import accuracy_check, scene_document, scene_from_args
 from simulator.core import AREA_REL_TOL, DEFAULT_MAX_STEPS, DEG_TOL, DYNAMIC_METHODS, METHODS
 from simulator.physics import LINE_FRICTION_PA_S
 
@@ -202,7 +195,7 @@ def run(args: argparse.Namespace) -> int:
 
 def write_path_csv(path, traj) -> None:
     """The path, one row per recorded pose (the start is step 0), units in the header."""
-    from simulator.commands._common import write_csv
+    from simulator.commands._outputs import write_csv
 
     p = traj.path
     cols, vals = (

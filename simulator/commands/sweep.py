@@ -7,7 +7,7 @@ import os
 import sys
 from pathlib import Path
 
-from simulator.commands._common import sigterm_says_what_was_kept
+from simulator.commands._signals import sigterm_says_what_was_kept
 from simulator.sweep import CONNECT_TIMEOUT_S, DEFAULT_MAX_POINTS
 
 

@@ -1,6 +1,6 @@
 """Types of ``simulator.design``'s names, loaded on first use (SPEC 1 lazy loading)."""
 
-from ._calibrate import (
+from ._calibrate._fit import (
     DRAWS as DRAWS,
     PROFILE as PROFILE,
     TIME_SIGMA as TIME_SIGMA,
@@ -9,21 +9,42 @@ from ._calibrate import (
     log_likelihood as log_likelihood,
     synthetic_trials as synthetic_trials,
 )
-from ._calibrate_params import (
+from ._calibrate._params import (
     FITTABLE as FITTABLE,
     Fittable as Fittable,
     parse_bounds as parse_bounds,
     parse_fit as parse_fit,
 )
-from ._calibrate_report import (
+from ._calibrate._report import (
     scene_toml as scene_toml,
 )
-from ._calibrate_table import (
+from ._calibrate._table import (
     BenchTable as BenchTable,
     read_trials as read_trials,
     write_trials as write_trials,
 )
-from ._freeform import (
+from ._freeform._density import (
+    DensityMap as DensityMap,
+    density_map as density_map,
+    pattern_of as pattern_of,
+    project as project,
+)
+from ._freeform._energy import (
+    ChipSide as ChipSide,
+    chip_side as chip_side,
+    overlap_planes as overlap_planes,
+)
+from ._freeform._objectives import (
+    Objective as Objective,
+    make_objective as make_objective,
+    softmin as softmin,
+)
+from ._freeform._report import (
+    feature_check as feature_check,
+    pattern_polygons as pattern_polygons,
+    read_gds_polygons as read_gds_polygons,
+)
+from ._freeform._run import (
     FreeformResult as FreeformResult,
     Problem as Problem,
     clean_pattern as clean_pattern,
@@ -31,28 +52,7 @@ from ._freeform import (
     make_problem as make_problem,
     orientation_gaps as orientation_gaps,
 )
-from ._freeform_density import (
-    DensityMap as DensityMap,
-    density_map as density_map,
-    pattern_of as pattern_of,
-    project as project,
-)
-from ._freeform_energy import (
-    ChipSide as ChipSide,
-    chip_side as chip_side,
-    overlap_planes as overlap_planes,
-)
-from ._freeform_objectives import (
-    Objective as Objective,
-    make_objective as make_objective,
-    softmin as softmin,
-)
-from ._freeform_report import (
-    feature_check as feature_check,
-    pattern_polygons as pattern_polygons,
-    read_gds_polygons as read_gds_polygons,
-)
-from ._freeform_spec import (
+from ._freeform._spec import (
     FreeformSpec as FreeformSpec,
     load_freeform as load_freeform,
     price_freeform as price_freeform,
@@ -60,11 +60,11 @@ from ._freeform_spec import (
 from ._mode import (
     design_mode as design_mode,
 )
-from ._search import (
+from ._search._run import (
     best_trials as best_trials,
     search as search,
 )
-from ._search_spec import (
+from ._search._spec import (
     SAMPLERS as SAMPLERS,
     Constraint as Constraint,
     Expression as Expression,

@@ -9,9 +9,9 @@ from ._build import (
 )
 from ._correlator import (
     Correlator as Correlator,
+)
+from ._fftsize import (
     Window as Window,
-    chip_relations as chip_relations,
-    correlate_stack as correlate_stack,
 )
 from ._footprint import (
     FootprintPlanes as FootprintPlanes,
@@ -49,4 +49,8 @@ from ._posegrid import (
 from ._refine import (
     refine_minimum as refine_minimum,
     stiffness as stiffness,
+)
+from ._symmetry import (
+    chip_relations as chip_relations,
+    correlate_stack as correlate_stack,
 )

@@ -17,15 +17,8 @@ import numpy as np
 from foundation import RASTER_BYTES_PER_PX, InputError, progress_bar, wait_line
 from patterns.geometry import nonzero_box
 from simulator.core import UM2
-from simulator.landscape._correlator import (
-    NOISE_FACTOR,
-    SAME_CHIP_TOL,
-    Correlator,
-    Window,
-    correlate_planes,
-    fft_shape,
-    work_bytes,
-)
+from simulator.landscape._correlator import NOISE_FACTOR, Correlator
+from simulator.landscape._fftsize import Window, fft_shape, work_bytes
 from simulator.landscape._posegrid import (
     PoseGrid,
     _axis_box,
@@ -41,6 +34,7 @@ from simulator.landscape._rotation import (
     smooth_bytes,
     smooth_canvas,
 )
+from simulator.landscape._symmetry import SAME_CHIP_TOL, correlate_planes
 from simulator.physics import CHIP_BLUR_MIN_PX
 from simulator.scene import Scene, TwistAxis, resampled_extent
 

@@ -43,8 +43,8 @@ from ._build import (
     _plan_of,
     scene_extent,
 )
-from ._correlator import SAME_CHIP_TOL
 from ._landscape import Landscape
+from ._symmetry import SAME_CHIP_TOL
 
 if TYPE_CHECKING:
     from simulator.physics import FootprintRules

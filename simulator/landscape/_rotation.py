@@ -82,10 +82,7 @@ def _rotated_extent_px(chip: Mask, twists: np.ndarray) -> tuple[float, float]:
         if key not in _EXTENTS:
             bounds = (
                 np.array(
-                    [
-                        affinity.rotate(chip.geometry, float(t), origin=(0, 0)).bounds
-                        for t in twists
-                    ]
+                    [affinity.rotate(chip.geometry, float(t), origin=(0, 0)).bounds for t in twists]
                 )
                 / chip.um_per_px
             )

@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
 import jax.numpy as jnp
 import numpy as np
@@ -20,6 +21,7 @@ import numpy as np
 from foundation import InputError, compiling, shows_wait, wait_line
 from simulator.core import DEFAULT_MAX_STEPS, DEG_TOL, METHODS, OUTCOMES, tiny
 from simulator.landscape import (
+    GlobalMinimum,
     Landscape,
     PoseGrid,
     build_landscape,
@@ -197,18 +199,7 @@ def simulate(
             from :func:`simulator.motion.simulate_footprint`): the run steps on that state's
             energy in boxes that follow the chip, each with its relay, and stops at an event.
     """
-    if method not in METHODS:
-        raise InputError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
-    price_run(scene, method, max_steps)
-    if len(start) != 3 or not all(math.isfinite(v) for v in start):
-        raise InputError(f"start pose must be three finite numbers (um, um, deg), got {start}")
-    reach_um = MAX_START_PX * scene.um_per_px
-    if max(abs(start[0]), abs(start[1])) > reach_um or abs(start[2]) > MAX_START_TWIST_DEG:
-        raise InputError(
-            f"start pose {tuple(start)} is out of range: |x| and |y| must be at most {reach_um:g} um "
-            f"({MAX_START_PX} px) and |twist| at most {MAX_START_TWIST_DEG:g} deg"
-        )
-    dynamic = method in ("overdamped", "inertial")
+    _validate(scene, start, method, max_steps)
     if scene.dispense is not None and landscape is None:
         # The footprint as the run's state (docs/physics.md §3.5): on the pads' planes, or on
         # the path engine's boxes of each state.
@@ -227,6 +218,69 @@ def simulate(
                 engine=engine,
             )
         )
+    plan = _plan(scene, start, method, landscape, band_steps, band_px, dynamics, engine, path)
+    ran = _run(
+        scene,
+        start,
+        plan,
+        max_steps,
+        landscape,
+        band_steps,
+        band_px,
+        backend,
+        reference,
+        relay,
+        path,
+    )
+    return _package(scene, plan, ran, max_steps, landscape, backend, reference, relay, path)
+
+
+def _validate(scene: Scene, start: tuple[float, float, float], method: str, max_steps: int) -> None:
+    """The checks of :func:`simulate` before anything is decided: the method, the run's price
+    (:func:`simulator.motion.price_run`) and the start pose's numbers and range."""
+    if method not in METHODS:
+        raise InputError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+    price_run(scene, method, max_steps)
+    if len(start) != 3 or not all(math.isfinite(v) for v in start):
+        raise InputError(f"start pose must be three finite numbers (um, um, deg), got {start}")
+    reach_um = MAX_START_PX * scene.um_per_px
+    if max(abs(start[0]), abs(start[1])) > reach_um or abs(start[2]) > MAX_START_TWIST_DEG:
+        raise InputError(
+            f"start pose {tuple(start)} is out of range: |x| and |y| must be at most {reach_um:g} um "
+            f"({MAX_START_PX} px) and |twist| at most {MAX_START_TWIST_DEG:g} deg"
+        )
+
+
+@dataclass
+class _Plan:
+    """What a run of :func:`simulate` was decided to be before it steps."""
+
+    method: str
+    #: overdamped or inertial: the whole landscape, built once
+    dynamic: bool
+    #: the engine chosen for the boxes ("fft", "path", ...; :func:`_run` names the one that ran)
+    engine: str
+    #: the dynamics' parameters (None for greedy and gradient)
+    dynamics: Any
+    #: when the run started (``cost["total_s"]``)
+    t0: float
+
+
+def _plan(
+    scene: Scene,
+    start: tuple[float, float, float],
+    method: str,
+    landscape: Landscape | None,
+    band_steps: int,
+    band_px: int,
+    dynamics,
+    engine: str,
+    path,
+) -> _Plan:
+    """The engine (:func:`simulator.motion.choose_engine`), the run priced against the memory
+    budget and its start against the window, the dynamics' parameters, and the start twist
+    checked against the run's twist axis."""
+    dynamic = method in ("overdamped", "inertial")
     if path is not None:
         engine = "path"
     elif landscape is None and not dynamic:
@@ -257,6 +311,51 @@ def simulate(
             f"start twist {start[2]:g} deg: this scene has one twist ({axis[0]:g} deg, twist turned off), "
             f"so the start twist must be {axis[0]:g} deg; give that, or turn twist on"
         )
+    return _Plan(method, dynamic, engine, dynamics, t0)
+
+
+@dataclass
+class _Ran:
+    """What the stepping of :func:`_run` leaves for :func:`_package`."""
+
+    #: the pieces joined, cut at ``max_steps``
+    traj: Trajectory
+    #: the stop code (MAX_STEPS when the steps ran out)
+    status: int
+    #: the last piece's stepper state, its field, grid and landscape (None: the run stopped
+    #: where moving its box would not move the chip)
+    state: RunState
+    field: Any
+    grid: Any
+    ls: Landscape | None
+    #: the pinning per index step and the tolerance of "aligned" the field was made with
+    pin: tuple[float, float, float]
+    tol: Any
+    boxes: _BoxCost
+    #: the path engine (None for the FFT engine, a landscape given, or dynamics)
+    path_engine: Any
+    #: the global minimum, when the path engine found it first (else None)
+    opt: GlobalMinimum | None
+    #: the engine that ran ("fft", "path" or "landscape")
+    engine: str
+
+
+def _run(
+    scene: Scene,
+    start: tuple[float, float, float],
+    plan: _Plan,
+    max_steps: int,
+    landscape: Landscape | None,
+    band_steps: int,
+    band_px: int,
+    backend: str,
+    reference: Landscape | None,
+    relay,
+    path,
+) -> _Ran:
+    """The run: its boxes (or the whole landscape), the stepper on each until it stops away
+    from a box's side, the pieces joined and cut at ``max_steps``."""
+    method, dynamic, dynamics, engine = plan.method, plan.dynamic, plan.dynamics, plan.engine
     pose = np.asarray(start, float)
     boxes = _BoxCost()
     path_engine = None
@@ -343,6 +442,28 @@ def simulate(
             traj.time_s,
             None if traj.t_s is None else traj.t_s[: max_steps + 1],
         )
+    return _Ran(traj, status, state, field, grid, ls, pin, tol, boxes, path_engine, opt, engine)
+
+
+def _package(
+    scene: Scene,
+    plan: _Plan,
+    ran: _Ran,
+    max_steps: int,
+    landscape: Landscape | None,
+    backend: str,
+    reference: Landscape | None,
+    relay,
+    path,
+) -> Trajectory:
+    """The run's :class:`Trajectory`: its outcome (flatness where it ended, "aligned" against
+    the scene's global minimum), its cost, the final pose refined below the grid and what
+    limits its error."""
+    method, dynamic, engine = plan.method, plan.dynamic, ran.engine
+    traj, status, state = ran.traj, ran.status, ran.state
+    field, grid, ls = ran.field, ran.grid, ran.ls
+    pin, tol, boxes, path_engine, opt = ran.pin, ran.tol, ran.boxes, ran.path_engine, ran.opt
+    whole = landscape is not None or dynamic  # the run's landscape is the whole one
     # Outcome: flatness where the run ended; "aligned" against the scene's global minimum
     # (simulator.landscape: the same pose every command uses, found without the full landscape).
     q_end = grid.to_index(np.asarray(traj.final))
@@ -414,7 +535,7 @@ def simulate(
         "fraction_of_full": boxes.poses / full,
         "planes": boxes.planes,
         "landscape_s": boxes.seconds,
-        "total_s": time.perf_counter() - t0,
+        "total_s": time.perf_counter() - plan.t0,
         "minimum_poses": int(opt.poses),
         "minimum_s": opt.seconds,
         "minimum_how": opt.how,

@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from foundation import InputError, require
-from simulator.design._search_spec import MAX_TRIALS, SearchSpec, load_search
+from simulator.design._search._spec import MAX_TRIALS, SearchSpec, load_search
 from simulator.sweep import ResultStore
 
 __all__ = ["best_trials", "search"]
@@ -563,7 +563,7 @@ def search(
     if store.out is not None:
         store.write_tables(table)
         if pictures:
-            from simulator.design._search_report import write_search_report
+            from simulator.design._search._report import write_search_report
 
             write_search_report(store.out, spec, table, stats)
         store.write_marker()

@@ -71,16 +71,16 @@ class Problem:
 
 
 def _planes(problem: Problem, w, spectra):
-    from simulator.design._freeform_energy import overlap_planes
+    from simulator.design._freeform._energy import overlap_planes
 
     return overlap_planes(w, spectra, problem.side.index(), problem.side.fft)
 
 
 def make_problem(spec) -> Problem:
     """The problem of a :class:`simulator.design.FreeformSpec` (the chip's rasters made)."""
-    from simulator.design._freeform_density import density_map
-    from simulator.design._freeform_energy import chip_side, enable_float64
-    from simulator.design._freeform_objectives import make_objective
+    from simulator.design._freeform._density import density_map
+    from simulator.design._freeform._energy import chip_side, enable_float64
+    from simulator.design._freeform._objectives import make_objective
 
     enable_float64(spec.scene.dtype)  # a float64 scene stays float64
     s = spec.um_per_px
@@ -101,7 +101,7 @@ def _loss_fn(problem: Problem):
     import jax
     import jax.numpy as jnp
 
-    from simulator.design._freeform_density import noise_field, pattern_of
+    from simulator.design._freeform._density import noise_field, pattern_of
 
     dm, obj = problem.density, problem.objective
     shape, fft = dm.shape, dm.fft
@@ -219,14 +219,14 @@ def freeform(
         quiet: no progress bar.
         verify: assess both patterns with the evaluator (the slow part).
     """
-    from simulator.design._freeform_spec import FreeformSpec, load_freeform
+    from simulator.design._freeform._spec import FreeformSpec, load_freeform
 
     if not isinstance(spec, FreeformSpec):
         spec = load_freeform(spec)
     spec = spec.with_iterations(iterations)
     if out is None:
         return _run(spec, None, quiet, verify)
-    from simulator.design._freeform_report import check_out, output_context, write_outputs
+    from simulator.design._freeform._report import check_out, output_context, write_outputs
 
     check_out(out, spec)  # before any work
     with output_context(out, spec) as tmp:
@@ -242,7 +242,7 @@ def _run(spec, pictures: Path | None, quiet: bool, verify: bool) -> FreeformResu
     import optax
 
     from foundation import wait_line
-    from simulator.design._freeform_spec import SETUP_S_PER_PX
+    from simulator.design._freeform._spec import SETUP_S_PER_PX
 
     h, w = spec.shape
     wait_line(
@@ -287,7 +287,7 @@ def _run(spec, pictures: Path | None, quiet: bool, verify: bool) -> FreeformResu
             bar.set_postfix_str(f"objective {-val:.4g}, beta {bs[i]:.3g}", refresh=False)
     t_end = time.perf_counter()
     per_it = (t_end - t_first) / (n - 1) if n > 1 else t_end - t0
-    from simulator.design._freeform_density import pattern_of
+    from simulator.design._freeform._density import pattern_of
 
     dm = problem.density
     wait_line(

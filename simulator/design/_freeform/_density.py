@@ -78,7 +78,7 @@ class DensityMap:
         """The arrays the JAX maps take (as jnp arrays of ``dtype``)."""
         import jax.numpy as jnp
 
-        from simulator.design._freeform_energy import enable_float64
+        from simulator.design._freeform._energy import enable_float64
 
         enable_float64(dtype)
         cdt = jnp.complex128 if np.dtype(dtype) == np.float64 else jnp.complex64

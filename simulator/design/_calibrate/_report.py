@@ -11,7 +11,7 @@ import json
 import math
 from pathlib import Path
 
-from simulator.design._calibrate_params import FITTABLE, with_values
+from simulator.design._calibrate._params import FITTABLE, with_values
 
 __all__ = ["scene_toml", "write_outputs"]
 

@@ -52,7 +52,7 @@ import numpy as np
 
 from foundation import InputError, require
 from simulator.core import DYNAMIC_METHODS as DYNAMIC, METHODS
-from simulator.design._calibrate_params import (
+from simulator.design._calibrate._params import (
     FITTABLE,
     default_bounds,
     parse_bounds,
@@ -61,7 +61,7 @@ from simulator.design._calibrate_params import (
     scene_value,
     scene_with,
 )
-from simulator.design._calibrate_table import BenchTable, read_trials
+from simulator.design._calibrate._table import BenchTable, read_trials
 from simulator.sweep import ResultStore
 
 __all__ = [
@@ -512,7 +512,7 @@ def calibrate(
     result["seconds"] = round(time.perf_counter() - t_start, 3)
     result["run_s"] = round(run_s, 3)
     if store.out is not None:
-        from simulator.design._calibrate_report import write_outputs
+        from simulator.design._calibrate._report import write_outputs
 
         write_outputs(store.out, result, doc, pictures=pictures)
         store.write_tables()
