@@ -30,8 +30,8 @@ if TYPE_CHECKING:
     import jax
 
     from simulator.landscape import FootprintPlanes
+    from simulator.motion import Trajectory  # the face: _trajectory is being split
     from simulator.motion._dynamics_params import DynamicsParams
-    from simulator.motion._trajectory import Trajectory
     from simulator.scene import Scene
 
 #: The process itself, with NumPy, SciPy and JAX loaded (what a run holds besides its arrays).
