@@ -248,7 +248,7 @@ def validate_png_params(params: object, path: os.PathLike | str) -> dict:
     return dict(params)
 
 
-def parse_png_params(text: str, path: os.PathLike | str) -> dict:
+def parse_png_params(text: object, path: os.PathLike | str) -> dict:
     """The ``selfalign`` note of PNG ``path`` (JSON text) as a checked dict.
 
     Returns ``{}`` when ``text`` is not a string, not JSON, or JSON but not an object

@@ -218,6 +218,7 @@ def _index_markdown(index: list[dict[str, Any]]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
+    assert __doc__ is not None  # for the type checker: the module has its docstring
     parser = argparse.ArgumentParser(
         prog="python -m patterns.library", description=__doc__.splitlines()[0]
     )

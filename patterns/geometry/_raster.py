@@ -18,6 +18,7 @@ import math
 import numpy as np
 import shapely
 from shapely import affinity
+from shapely.geometry import Polygon
 from shapely.geometry.base import BaseGeometry
 
 from foundation import InputError, positive, price_raster
@@ -226,7 +227,7 @@ def rasterize(
 def _rectangle(geom: BaseGeometry) -> tuple[float, float, float, float] | None:
     """The bounds of ``geom`` when it is an axis-aligned rectangle (a polygon without holes
     whose vertices are all corners of its bounding box and whose area is the box's), else None."""
-    if geom.geom_type != "Polygon" or len(geom.interiors):
+    if not isinstance(geom, Polygon) or len(geom.interiors):
         return None
     x0, y0, x1, y1 = geom.bounds
     xy = shapely.get_coordinates(geom.exterior)

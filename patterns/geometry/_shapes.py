@@ -125,7 +125,7 @@ def polygon(points: Sequence[Sequence[float]]) -> Polygon:
         pts.ndim == 2 and pts.shape[1] == 2,
         f"points must be (x, y) pairs, got array of shape {pts.shape}",
     )
-    require(np.all(np.isfinite(pts)), "points must be finite numbers (um)")
+    require(bool(np.all(np.isfinite(pts))), "points must be finite numbers (um)")
     if len(pts) > 1 and np.array_equal(pts[0], pts[-1]):
         pts = pts[:-1]
     require(len(pts) >= 3, f"points: a polygon needs at least 3 distinct points, got {len(pts)}")

@@ -12,9 +12,10 @@ import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
+import numpy.typing as npt
 import shapely
 from shapely.geometry import Polygon
 from shapely.geometry.base import BaseGeometry
@@ -120,8 +121,11 @@ def _polygons(rings: list[np.ndarray], where: str) -> list[Polygon]:
         return []
     pick = np.isin(ring_of, use) & keep
     # linearrings closes every ring (the rings are stored without their closing vertex).
-    polys = shapely.polygons(
-        shapely.linearrings(coords[pick], indices=np.searchsorted(use, ring_of[pick]))
+    polys = cast(  # an array of polygons, one per ring in use
+        "npt.NDArray[np.object_]",
+        shapely.polygons(
+            shapely.linearrings(coords[pick], indices=np.searchsorted(use, ring_of[pick]))
+        ),
     )
     valid = shapely.is_valid(polys)
     if valid.all():
@@ -178,4 +182,4 @@ def _merge(polys: list[Polygon], nested: bool) -> BaseGeometry:
         (shapely.get_type_id(parts) == shapely.GeometryType.POLYGON) & (shapely.area(parts) > 0)
     ]
     geom = parts[0] if len(parts) == 1 else shapely.multipolygons(parts)
-    return shapely.orient_polygons(geom)
+    return cast(BaseGeometry, shapely.orient_polygons(geom))  # one geometry in, one out

@@ -42,12 +42,13 @@ def _read_dxf(
     budget_mb: float | None,
     max_polygons: int | None = None,
 ) -> Layout:
-    import ezdxf
+    from ezdxf import filemanagement
+    from ezdxf.lldxf.const import DXFError
 
     log = logging.getLogger("ezdxf")
     disabled, log.disabled = log.disabled, True  # ezdxf logs repairs; the result speaks for itself
     try:
-        doc = ezdxf.readfile(str(path))
+        doc = filemanagement.readfile(str(path))
     except Exception as err:  # noqa: BLE001 - any parser failure on user input is bad input
         raise InputError(
             f"{path}: not a readable DXF file ({type(err).__name__}: {' '.join(str(err).split())[:200]}); "
@@ -106,7 +107,7 @@ def _read_dxf(
                 problems.setdefault(layer, problem)
             else:
                 rings.setdefault(layer, []).extend(_on_grid(r) for r in ring)
-    except ezdxf.DXFError as err:
+    except DXFError as err:
         raise InputError(
             f"{path}: cannot flatten {cell_name} ({err}); explode the block references in the drawing program"
         ) from None

@@ -14,7 +14,7 @@ import os
 import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeGuard
 
 import numpy as np
 
@@ -86,7 +86,7 @@ def layout_format(path: str | os.PathLike) -> str | None:
     return SUFFIXES.get(path.suffix.lower())
 
 
-def is_layout(path: Any) -> bool:
+def is_layout(path: Any) -> TypeGuard[str | os.PathLike]:
     """True if ``path`` names a layout file (by content, else extension)."""
     return isinstance(path, str | os.PathLike) and layout_format(path) is not None
 

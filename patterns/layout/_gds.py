@@ -17,7 +17,7 @@ import warnings
 import zlib
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -198,9 +198,14 @@ def _read_gdstk(
     if abs(db_per_user - round(db_per_user)) < 1e-9 * db_per_user:
         db_per_user = float(round(db_per_user))
     rings: dict[Any, list[np.ndarray]] = {}
-    for p in top.get_polygons(apply_repetitions=True, include_paths=True, depth=None):
+    # read_gds and read_oas make Cells (a RawCell comes from read_rawcells only)
+    flat = cast("gdstk.Cell", top).get_polygons(
+        apply_repetitions=True, include_paths=True, depth=None
+    )
+    for p in flat:
         rings.setdefault((int(p.layer), int(p.datatype)), []).append(
-            np.round(p.points * db_per_user)
+            # points is an (n, 2) array; gdstk's stub says a list of pairs
+            np.round(p.points * db_per_user)  # pyright: ignore[reportOperatorIssue]
         )
     dbu_um, to_um = _db_to_um(lib.precision)
     rings = {k: [to_um(r) for r in v] for k, v in rings.items()}

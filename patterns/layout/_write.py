@@ -76,9 +76,10 @@ def _write_gdstk(tmp: Path, fmt: str, parts: list[Polygon], name: str) -> None:
     cell = lib.new_cell(name)
     layer, datatype = WRITE_LAYER
     for p in parts:
-        outer = gdstk.Polygon(_rounded(p.exterior), layer=layer, datatype=datatype)
+        # gdstk takes an (n, 2) array; its stub names sequences of pairs only
+        outer = gdstk.Polygon(_rounded(p.exterior), layer=layer, datatype=datatype)  # pyright: ignore[reportArgumentType]
         if p.interiors:
-            holes = [gdstk.Polygon(_rounded(r)) for r in p.interiors]
+            holes = [gdstk.Polygon(_rounded(r)) for r in p.interiors]  # pyright: ignore[reportArgumentType]
             cell.add(
                 *gdstk.boolean(
                     outer, holes, "not", precision=DBU_UM, layer=layer, datatype=datatype
@@ -95,9 +96,9 @@ def _write_gdstk(tmp: Path, fmt: str, parts: list[Polygon], name: str) -> None:
 
 
 def _write_dxf(tmp: Path, parts: list[Polygon]) -> None:
-    import ezdxf
+    from ezdxf import filemanagement
 
-    doc = ezdxf.new("R2010")
+    doc = filemanagement.new("R2010")
     doc.units = 13  # $INSUNITS micrometres
     doc.header["$MEASUREMENT"] = 1
     doc.layers.add(WRITE_DXF_LAYER)

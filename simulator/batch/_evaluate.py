@@ -397,7 +397,7 @@ def assess(
             )
     m = scene.materials
     extra = {}
-    if meniscus:
+    if meniscus and ls.meniscus_height_um is not None:  # (a meniscus landscape: both or neither)
         extra = {
             "meniscus_height_um": ls.meniscus_height_um,
             "pinned": scene.liquid.pinned,

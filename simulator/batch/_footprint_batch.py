@@ -214,6 +214,7 @@ def run_footprint_batch(
             final_q[left], outcome[left] = q[left], 4
             bar.update(int(left.size))
     dt = time.perf_counter() - t1
+    ox, oy, ot = (float(v) for v in opt.pose)
     return BatchResult(
         method=method,
         start=poses,
@@ -222,7 +223,7 @@ def run_footprint_batch(
         steps=np.minimum(steps, np.iinfo(np.int32).max).astype(np.int32),
         energy_J=energy,
         period_deg=float(reference.period_deg),
-        optimum=tuple(float(v) for v in opt.pose),
+        optimum=(ox, oy, ot),
         stats={
             "landscape_s": t_land,
             "run_s": dt,

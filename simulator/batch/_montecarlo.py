@@ -351,7 +351,7 @@ def run_realizations(
             steps=np.concatenate([p.steps for p in parts]),
             energy_J=np.concatenate([p.energy_J for p in parts]),
             period_deg=parts[0].period_deg,
-            optimum=(math.nan,) * 3,
+            optimum=(math.nan, math.nan, math.nan),
             time_s=None if parts[0].time_s is None else np.concatenate([p.time_s for p in parts]),
             # the loosest of the patterns' limits bounds the pooled errors
             error_limit=max((p.error_limit for p in parts), key=lambda e: e["um"]),

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any, cast
 
 import numpy as np
 
@@ -19,10 +20,10 @@ MAX_OFFSET_UM, MAX_TWIST_DEG = 1e7, 3600.0
 MAX_STARTS = 10**8
 
 
-def _axis(name: str, spec, unit: str) -> tuple[float, ...]:
+def _axis(name: str, spec: Any, unit: str) -> tuple[float, ...]:
     """A number, or (start, stop, step) with stop included, -> tuple of values."""
     if np.isscalar(spec):
-        v = float(spec)
+        v = float(cast(float, spec))  # a number (np.isscalar's guard names complex too)
         require(math.isfinite(v), f"{name} must be finite, got {spec!r} {unit}")
         return (v,)
     require(
@@ -84,7 +85,7 @@ class StartGrid:
 def _triple(name: str, v, unit: str) -> np.ndarray:
     a = np.asarray(v, dtype=float).reshape(-1)
     require(
-        a.size == 3 and np.all(np.isfinite(a)),
+        a.size == 3 and bool(np.all(np.isfinite(a))),
         f"{name} must be three finite numbers ({unit}), got {v!r}",
     )
     return a

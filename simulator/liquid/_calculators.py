@@ -289,7 +289,7 @@ def overflow_report(
         raise InputError(
             f"--chip-angle {lo:g}:{hi:g}: the range must go from the smaller angle to the larger"
         )
-    pieces = []
+    pieces: list[dict] = []
     if lo <= switch < hi:
         below = _verdict(edge, adv, switch, h, bias_um)  # at the switch itself condition 2 fails
         above = _verdict(edge, adv, hi, h, bias_um)

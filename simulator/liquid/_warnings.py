@@ -68,10 +68,11 @@ def _label(wet: np.ndarray) -> tuple[np.ndarray, int]:
     of the memory of a 16-megapixel pattern's default 64-bit-wide labels), else 32."""
     from scipy import ndimage
 
+    # scipy takes a dtype for ``output`` (and then returns the labels); its stub takes arrays only
     try:
-        labels, n = ndimage.label(wet, output=np.uint16)
+        labels, n = ndimage.label(wet, output=np.uint16)  # pyright: ignore[reportCallIssue, reportArgumentType]
     except RuntimeError:  # more regions than 16 bits can number
-        labels, n = ndimage.label(wet, output=np.int32)
+        labels, n = ndimage.label(wet, output=np.int32)  # pyright: ignore[reportCallIssue, reportArgumentType]
     return labels, int(n)
 
 

@@ -24,14 +24,19 @@ what bounds its error, as ``error_limit = {"by": ..., "um": ...}`` (:func:`error
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 from simulator.core import UM
+
+if TYPE_CHECKING:
+    from simulator.landscape import Landscape
+    from simulator.scene import Scene
 
 #: The names of ``error_limit["by"]``.
 LIMITS = ("grid", "floor", "refined")
 
 
-def floor_reach_um(ls) -> float:
+def floor_reach_um(ls: Landscape) -> float:
     """The largest distance (um) along x or y from the landscape's global minimum to the
     edge of its floor (:meth:`~simulator.landscape.Landscape.floor_range`); 0 for a
     single pose (a cusp or a smooth well)."""
@@ -41,13 +46,13 @@ def floor_reach_um(ls) -> float:
     return max(x - fr["x_um"][0], fr["x_um"][1] - x, y - fr["y_um"][0], fr["y_um"][1] - y, 0.0)
 
 
-def floats(scene, ls) -> bool:
+def floats(scene: Scene, ls: Landscape) -> bool:
     """The chip floats on ``ls``: free contact lines (the scene's wall profile) and a
     floor wider than one pose in x or y."""
     return scene.wall_profile is not None and floor_reach_um(ls) > 0
 
 
-def refined_limit_um(ls, pose) -> float | None:
+def refined_limit_um(ls: Landscape, pose: tuple[float, float, float]) -> float | None:
     """``sqrt(2 dE / k)`` (um) at ``pose`` (x_um, y_um, twist_deg): the distance at which the
     well's energy rises by the landscape's noise floor ``dE``, ``k`` the smaller of its
     stiffnesses along x and y (:func:`simulator.landscape.stiffness`); None where the well
@@ -61,7 +66,13 @@ def refined_limit_um(ls, pose) -> float | None:
     return math.sqrt(2.0 * ls.noise_floor_J / kk) / UM
 
 
-def error_limit(scene, ls=None, *, refined=None, pin=(0.0, 0.0, 0.0)) -> dict:
+def error_limit(
+    scene: Scene,
+    ls: Landscape | None = None,
+    *,
+    refined: tuple[float, float, float] | None = None,
+    pin: tuple[float, float, float] = (0.0, 0.0, 0.0),
+) -> dict:
     """``{"by": "grid" | "floor" | "refined", "um": ...}``: what limits the error of a final
     pose on the landscape ``ls`` (the one around the global minimum; None: a run that
     needs none of it, whose limit is the scene's grid step), refined to ``refined``

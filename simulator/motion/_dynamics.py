@@ -76,6 +76,7 @@ import diffrax
 import jax
 import jax.numpy as jnp
 import optimistix as optx
+from jax.typing import ArrayLike
 
 from foundation import InputError
 from simulator.landscape import PoseGrid
@@ -134,7 +135,16 @@ class DynamicsState(NamedTuple):
 
 # ----------------------------------------------------------------- steppers
 def _run(
-    field, grid, params, start, max_steps, record, inertial, rtol, atol, solver
+    field: Field,
+    grid: PoseGrid,
+    params: DynamicsParams,
+    start: ArrayLike,
+    max_steps: int,
+    record: bool,
+    inertial: bool,
+    rtol: float | None,
+    atol: float | None,
+    solver: diffrax.AbstractSolver | None,
 ) -> DynamicsState:
     if not isinstance(max_steps, int) or max_steps < 1:
         raise InputError(f"max_steps must be a positive integer (static), got {max_steps!r}")
@@ -267,7 +277,7 @@ def _run(
     if record:
         filled = jnp.arange(max_steps + 1) <= step
 
-        def buf(a):
+        def buf(a: jax.Array) -> jax.Array:
             a = a[: max_steps + 1]
             mask = filled.reshape((-1,) + (1,) * (a.ndim - 1))
             return jnp.where(mask, a, jnp.nan)
@@ -300,13 +310,13 @@ def overdamped(
     field: Field,
     grid: PoseGrid,
     params: DynamicsParams,
-    start,
+    start: ArrayLike,
     max_steps: int,
     record: bool = True,
     *,
     rtol: float | None = None,
     atol: float | None = None,
-    solver=None,
+    solver: diffrax.AbstractSolver | None = None,
 ) -> DynamicsState:
     """First-order (viscous) dynamics ``c v = F``, ``c_t w = tau`` from rest at ``start``.
 
@@ -332,13 +342,13 @@ def inertial(
     field: Field,
     grid: PoseGrid,
     params: DynamicsParams,
-    start,
+    start: ArrayLike,
     max_steps: int,
     record: bool = True,
     *,
     rtol: float | None = None,
     atol: float | None = None,
-    solver=None,
+    solver: diffrax.AbstractSolver | None = None,
 ) -> DynamicsState:
     """Second-order dynamics ``m a = F - c v``, ``I alpha = tau - c_t w`` from rest at ``start``.
 

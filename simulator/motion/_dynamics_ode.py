@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import diffrax
 import equinox as eqx
@@ -22,6 +22,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
+from jax.typing import ArrayLike, DTypeLike
 
 from simulator.core import UM
 from simulator.landscape import PoseGrid
@@ -44,23 +45,38 @@ class _Coeffs(NamedTuple):
     atol: jax.Array
 
 
+#: What the vector fields, saves and stop tests get as ``args``: the field, its (static)
+#: grid and the coefficients.
+_Args = tuple[Field, PoseGrid, _Coeffs]
+#: A solver state: ``(d, u)`` (displacement and velocity, index steps) for the inertial
+#: model, ``d`` alone for the overdamped one (:func:`_split` makes both a pair).
+_Y = Any
+
+
 def _axis_scales(grid: PoseGrid) -> np.ndarray:
     """SI length of one index step along (it, iy, ix): radians, metres, metres."""
     return np.array([math.radians(grid.twist_step_deg), grid.um_per_px * UM, grid.um_per_px * UM])
 
 
-def _reference_force(field: Field, grid: PoseGrid, dt) -> jax.Array:
+def _reference_force(field: Field, grid: PoseGrid, dt: DTypeLike) -> jax.Array:
     """Typical |dE/dq| per index step (J), as in stepping.gradient_descent: a chip edge of
     length 2 rg sliding over a pad, for x and y; times the arc per twist step for twist."""
     g = jnp.maximum(reference_gradient(field, grid), jnp.finfo(dt).tiny / jnp.finfo(dt).eps)
     return g * jnp.asarray([max(grid.twist_px_per_step, 1e-6), 1.0, 1.0], dt)
 
 
-def _active(grid: PoseGrid, dt) -> jax.Array:
+def _active(grid: PoseGrid, dt: DTypeLike) -> jax.Array:
     return jnp.asarray([grid.shape[0] > 1, True, True], dt)
 
 
-def _stop_flags(field: Field, grid: PoseGrid, co: _Coeffs, q, grad, kinetic):
+def _stop_flags(
+    field: Field,
+    grid: PoseGrid,
+    co: _Coeffs,
+    q: jax.Array,
+    grad: jax.Array,
+    kinetic: jax.Array,
+) -> tuple[jax.Array, jax.Array]:
     """(converged, at_edge) at pose q with Phi gradient ``grad`` and kinetic energy (J).
 
     converged: the force along every axis, as the energy change over one grid step
@@ -98,7 +114,7 @@ def _stop_flags(field: Field, grid: PoseGrid, co: _Coeffs, q, grad, kinetic):
 REST_TOL_STEPS = 0.05
 
 
-def _hessian(field: Field, grid: PoseGrid, q):
+def _hessian(field: Field, grid: PoseGrid, q: ArrayLike) -> jax.Array:
     """Phi's Hessian at q (J per index step squared), one-sided where it jumps.
 
     Phi is C1 and piecewise quadratic (:mod:`simulator.motion`): its second derivative
@@ -131,7 +147,7 @@ def _hessian(field: Field, grid: PoseGrid, q):
         field, grid, idx[0][:, None, None], idx[1][None, :, None], idx[2][None, None, :]
     )
 
-    def term(a, c):
+    def term(a: int, c: int) -> jax.Array:
         f = [ws[0], ws[1], ws[2]]
         if a == c:
             f[a] = d2s[a]
@@ -142,7 +158,9 @@ def _hessian(field: Field, grid: PoseGrid, q):
     return jnp.stack([jnp.stack([term(a, c) for c in range(3)]) for a in range(3)])
 
 
-def _near_rest(field: Field, grid: PoseGrid, q, grad, kinetic):
+def _near_rest(
+    field: Field, grid: PoseGrid, q: jax.Array, grad: jax.Array, kinetic: jax.Array
+) -> jax.Array:
     """True where the chip is at rest within :data:`REST_TOL_STEPS` of a stable rest point.
 
     Near a stable rest point the force falls linearly with the distance to it, so the
@@ -168,7 +186,7 @@ def _near_rest(field: Field, grid: PoseGrid, q, grad, kinetic):
 
 
 # ----------------------------------------------------------------- vector fields
-def _vf_overdamped(s, y, args):
+def _vf_overdamped(s: ArrayLike, y: jax.Array, args: _Args) -> jax.Array:
     field, grid, co = args  # grid arrives through args as a static (hashable) leaf
     q = co.q0 + y
     _, grad = potential_and_gradient(field, grid, q)
@@ -177,7 +195,9 @@ def _vf_overdamped(s, y, args):
     return -co.drive * grad
 
 
-def _vf_inertial(s, y, args):
+def _vf_inertial(
+    s: ArrayLike, y: tuple[jax.Array, jax.Array], args: _Args
+) -> tuple[jax.Array, jax.Array]:
     field, grid, co = args
     d, u = y
     _, grad = potential_and_gradient(field, grid, co.q0 + d)
@@ -194,7 +214,9 @@ def _vf_inertial(s, y, args):
 # vector field (Kvaerno5) stalled on those jumps, or oscillated across them, and each
 # failed solve rejected the step and cut it five-fold: the step-size collapse of the
 # calibrated (heavily damped) inertial runs.
-def _vf_force(s, y, args):
+def _vf_force(
+    s: ArrayLike, y: tuple[jax.Array, jax.Array], args: _Args
+) -> tuple[jax.Array, jax.Array]:
     """Explicit part of the split inertial model: ``(0, -drive * grad Phi)``."""
     field, grid, co = args
     d, u = y
@@ -202,7 +224,9 @@ def _vf_force(s, y, args):
     return jnp.zeros_like(u), -co.drive * grad
 
 
-def _vf_damping(s, y, args):
+def _vf_damping(
+    s: ArrayLike, y: tuple[jax.Array, jax.Array], args: _Args
+) -> tuple[jax.Array, jax.Array]:
     """Implicit part of the split inertial model: ``(u, -damp * u)``, linear in the state."""
     field, grid, co = args
     d, u = y
@@ -222,19 +246,19 @@ IMEX = (diffrax.KenCarp3, diffrax.KenCarp4, diffrax.KenCarp5)
 ROOT_TOL = 1e-2
 
 
-def stiff_solver():
+def stiff_solver() -> diffrax.KenCarp5:
     """The solver for heavily damped inertial runs: diffrax KenCarp5 (IMEX, 5th order) on
     the split model, with a Newton tolerance the implicit stages can meet (:data:`ROOT_TOL`)."""
     return diffrax.KenCarp5(root_finder=diffrax.VeryChord(rtol=ROOT_TOL, atol=ROOT_TOL))
 
 
-def _weighted_rms(weights, err):
+def _weighted_rms(weights: jax.Array, err: tuple[jax.Array, jax.Array]) -> jax.Array:
     """RMS norm of the scaled error ``(d, u)`` with the velocity errors weighted per axis."""
     d, u = err
     return optx.rms_norm((d, weights * u))
 
 
-def error_norm(co: _Coeffs):
+def error_norm(co: _Coeffs) -> jax.tree_util.Partial:
     """The step-size controller's norm for the inertial state ``(d, u)``.
 
     A velocity error matters through the distance it carries the chip before the damping
@@ -247,11 +271,11 @@ def error_norm(co: _Coeffs):
     return jax.tree_util.Partial(_weighted_rms, 1.0 / jnp.maximum(co.damp, 1.0))
 
 
-def _split(y, inertial: bool):
+def _split(y: _Y, inertial: bool) -> tuple[jax.Array, jax.Array]:
     return y if inertial else (y, jnp.zeros_like(y))
 
 
-def _energy(field: Field, grid: PoseGrid, q):
+def _energy(field: Field, grid: PoseGrid, q: jax.Array) -> jax.Array:
     """Landscape energy E (:func:`simulator.motion.interpolate`) at q, read at the nearest
     point of the grid where q has passed a wall (a cut side, an end of a bounded twist
     axis): the run stops there with EDGE and reports the edge value, as Phi repeats it,
@@ -264,7 +288,7 @@ def _energy(field: Field, grid: PoseGrid, q):
     return interpolate(field, grid, jnp.clip(q, jnp.asarray(lo, q.dtype), jnp.asarray(hi, q.dtype)))
 
 
-def _save(y, args, inertial: bool):
+def _save(y: _Y, args: _Args, inertial: bool) -> dict[str, jax.Array]:
     field, grid, co = args
     d, u = _split(y, inertial)
     q = co.q0 + d
@@ -278,7 +302,7 @@ def _save(y, args, inertial: bool):
     }
 
 
-def _stop(y, args, inertial: bool):
+def _stop(y: _Y, args: _Args, inertial: bool) -> jax.Array:
     field, grid, co = args
     d, u = _split(y, inertial)
     q = co.q0 + d
@@ -289,23 +313,23 @@ def _stop(y, args, inertial: bool):
 
 # Module-level functions (not closures made per call), so that eager calls hit
 # diffrax's compilation cache: it keys on function identity.
-def _save_overdamped(s, y, args):
+def _save_overdamped(s: ArrayLike, y: _Y, args: _Args) -> dict[str, jax.Array]:
     return _save(y, args, False)
 
 
-def _save_inertial(s, y, args):
+def _save_inertial(s: ArrayLike, y: _Y, args: _Args) -> dict[str, jax.Array]:
     return _save(y, args, True)
 
 
-def _stop_overdamped(s, y, args, **kwargs):
+def _stop_overdamped(s: ArrayLike, y: _Y, args: _Args, **kwargs: Any) -> jax.Array:
     return _stop(y, args, False)
 
 
-def _stop_inertial(s, y, args, **kwargs):
+def _stop_inertial(s: ArrayLike, y: _Y, args: _Args, **kwargs: Any) -> jax.Array:
     return _stop(y, args, True)
 
 
-def _mechanical(y, args, inertial: bool):
+def _mechanical(y: _Y, args: _Args, inertial: bool) -> jax.Array:
     """Mechanical energy Phi + kinetic (J) of a solver state."""
     field, grid, co = args
     d, u = _split(y, inertial)
@@ -333,6 +357,9 @@ class _GuardedController(diffrax.AbstractAdaptiveStepSizeController):
     atol: float
     norm: Callable
     inertial: bool = eqx.field(static=True)
+
+    # The overrides below keep diffrax's signatures unannotated: the type checker takes
+    # their parameter and return types from the base class (diffrax's own type aliases).
 
     def wrap(self, direction):
         return self
@@ -406,6 +433,8 @@ class MoreauJean(diffrax.AbstractAdaptiveSolver):
 
     term_structure = diffrax.AbstractTerm
     interpolation_cls = diffrax.LocalLinearInterpolation
+
+    # Unannotated overrides: their types are diffrax's, from the base class (as above).
 
     def order(self, terms):
         return 1

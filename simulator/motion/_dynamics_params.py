@@ -28,6 +28,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import jax
 import jax.numpy as jnp
@@ -43,6 +44,11 @@ from simulator.physics import (
     couette_torsional_damping,
     dissipation_terms,
 )
+
+if TYPE_CHECKING:
+    from jax.typing import DTypeLike
+
+    from simulator.scene import Scene
 
 #: Thinnest liquid film (um) the dynamics accept: 1e-6 nm. Real films are nm or more thick
 #: (the Couette model itself needs a continuum liquid); much below this the damping
@@ -148,7 +154,7 @@ class DynamicsParams:
         )
 
     @classmethod
-    def from_scene(cls, scene, t_max_s: float = 1.0) -> DynamicsParams:
+    def from_scene(cls, scene: Scene, t_max_s: float = 1.0) -> DynamicsParams:
         """From a :class:`simulator.scene.Scene`: its chip footprint, liquid and damping.
 
         The chip body is its wettable footprint (the mask, any shape, area coverage per
@@ -180,19 +186,19 @@ class DynamicsParams:
     @classmethod
     def _film(
         cls,
-        mass,
-        inertia,
-        area,
-        j,
-        h,
-        liquid,
-        calibration,
-        t_max_s,
+        mass: float,
+        inertia: float,
+        area: float,
+        j: float,
+        h: float,
+        liquid: Liquid,
+        calibration: float | None,
+        t_max_s: float,
         *,
-        lines=None,
-        across_um=0.0,
-        line_angle_deg=60.0,
-        line_friction_Pa_s=LINE_FRICTION_PA_S,
+        lines: tuple[float, float, float] | None = None,
+        across_um: float = 0.0,
+        line_angle_deg: float = 60.0,
+        line_friction_Pa_s: float = LINE_FRICTION_PA_S,
     ) -> DynamicsParams:
         mu = liquid.viscosity_Pa_s
         if not h >= MIN_FILM_UM:
@@ -241,7 +247,7 @@ class DynamicsParams:
         return self.damping_N_s_m / (2.0 * math.sqrt(stiffness_N_m * self.mass_kg))
 
 
-def _scene_body(scene) -> dict:
+def _scene_body(scene: Scene) -> dict:
     """The chip body and film of a scene, as :meth:`DynamicsParams.from_scene` documents them:
     ``area_um2``, ``polar_moment_um4`` (J = A rg^2), ``mass_kg``, ``inertia_kg_m2``, and its
     moving lines: ``lines`` (their integrals, or None where a pinned scene holds every line
@@ -267,7 +273,7 @@ def _scene_body(scene) -> dict:
     }
 
 
-def dissipation(scene) -> dict:
+def dissipation(scene: Scene) -> dict:
     """The scene's damping term by term (:func:`simulator.physics.dissipation_terms`): what
     :meth:`DynamicsParams.from_scene` sums where no ``damping_calibration`` is given."""
     b = _scene_body(scene)
@@ -286,7 +292,7 @@ def dissipation(scene) -> dict:
     )
 
 
-def default_tolerances(dtype) -> tuple[float, float]:
+def default_tolerances(dtype: DTypeLike) -> tuple[float, float]:
     """(rtol, atol in grid steps) for a dtype: ``sqrt(eps) / 30`` for both.
 
     float32: 1.2e-5, float64: 5e-10. Measured on the linear-spring tests: trajectory

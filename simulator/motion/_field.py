@@ -15,12 +15,14 @@ from __future__ import annotations
 
 import functools
 import itertools
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike, DTypeLike
 
 from simulator.landscape import Landscape, PoseGrid
 
@@ -113,7 +115,7 @@ class Field:
     wide_tol: bool = False
 
     @property
-    def dtype(self):
+    def dtype(self) -> np.dtype:
         return self.padded.dtype
 
     @property
@@ -122,7 +124,7 @@ class Field:
         lim = np.asarray(self.align_lim, np.float64)
         return (float(lim[0]) - 1e-6, float(lim[1]) - 1e-6)
 
-    def _replace(self, **changes) -> Field:
+    def _replace(self, **changes: Any) -> Field:
         """A copy with some fields changed (as a NamedTuple's ``_replace``); ``pin`` and
         ``align_tol`` are given as tuples (:func:`pinning_fields`)."""
         pin = changes.pop("pin", None)
@@ -140,7 +142,7 @@ class Field:
         return replace(self, **changes)
 
 
-def pinning_fields(pin, align_tol) -> dict:
+def pinning_fields(pin: Sequence[float], align_tol: Sequence[float]) -> dict:
     """The :class:`Field` entries of a pinning work per grid step (J, twist/y/x) and an
     align tolerance (twist steps, px): float64 arrays and the two static flags. The
     tolerance's 1e-6 round-off is added here, in float64, as the rule always did."""
@@ -154,7 +156,7 @@ def pinning_fields(pin, align_tol) -> dict:
     }
 
 
-def pad_energy(energy: np.ndarray, wrap: bool, cut) -> np.ndarray:
+def pad_energy(energy: np.ndarray, wrap: bool, cut: tuple[tuple[bool, bool], ...]) -> np.ndarray:
     """The landscape with PAD cells on every side holding what lies beyond it: past an
     uncut x/y side 0 (no contact); past a cut side, or the end of a non-periodic twist
     axis, +inf (a wall); a periodic twist axis wraps around. A corner is a wall when
@@ -177,14 +179,14 @@ def pad_energy(energy: np.ndarray, wrap: bool, cut) -> np.ndarray:
 
 
 def make_field(
-    energy,
+    energy: ArrayLike,
     grid: PoseGrid,
-    floor,
-    best,
+    floor: ArrayLike,
+    best: ArrayLike | Sequence[int],
     pin: tuple[float, float, float] = (0.0, 0.0, 0.0),
     align_tol: tuple[float, float] = (1.0, 1.0),
     scale: float | None = None,
-    lines=None,
+    lines: PinLines | None = None,
 ) -> Field:
     """A :class:`Field` from a (T, Ny, Nx) energy array (J) on ``grid``; ``scale``: its
     max |E| (default: the array's own; a box of a larger landscape passes the landscape's);
@@ -214,11 +216,11 @@ def make_field(
 def field_and_grid(
     ls: Landscape,
     rg_px: float | None = None,
-    dtype=None,
+    dtype: DTypeLike | None = None,
     pin: tuple[float, float, float] = (0.0, 0.0, 0.0),
     align_tol: tuple[float, float] = (1.0, 1.0),
     scale: float | None = None,
-    lines=None,
+    lines: PinLines | None = None,
 ) -> tuple[Field, PoseGrid]:
     """The stepper view of a landscape: its arrays and its pose grid. ``rg_px``: a radius of
     gyration in px other than the grid's own (a landscape's grid carries its scene's,
@@ -235,7 +237,7 @@ def field_and_grid(
     return make_field(e, grid, ls.noise_floor_J, [it, iy, ix], pin, align_tol, scale, lines), grid
 
 
-def relay_changes(field: Field, grid: PoseGrid, q) -> jax.Array:
+def relay_changes(field: Field, grid: PoseGrid, q: ArrayLike) -> jax.Array:
     """True where the footprint state would change at fractional indices q (the node
     round(q), the twist wrapped on a periodic axis, every index clipped to the grid):
     some pad reached that is dry, or some wet pad out of reach. False without a relay."""
@@ -251,7 +253,7 @@ def relay_changes(field: Field, grid: PoseGrid, q) -> jax.Array:
 
 
 # ----------------------------------------------------------------- look-ups
-def lookup(field: Field, grid: PoseGrid, it, iy, ix):
+def lookup(field: Field, grid: PoseGrid, it: ArrayLike, iy: ArrayLike, ix: ArrayLike) -> jax.Array:
     """Energy at integer grid indices (broadcasting). Beyond an uncut x/y side: 0 (no
     contact); beyond a cut side or the end of a non-periodic twist axis: +inf (a wall
     the steppers never cross; they stop at a cut side first). One gather from
@@ -264,7 +266,7 @@ def lookup(field: Field, grid: PoseGrid, it, iy, ix):
     ]
 
 
-def _cube(field: Field, grid: PoseGrid, b, side: int):
+def _cube(field: Field, grid: PoseGrid, b: jax.Array, side: int) -> jax.Array:
     """Energies at ``b + (i, j, k)``, i, j, k in -1 .. side - 2, as a (side, side, side)
     array equal to :func:`lookup`'s values.
 
@@ -277,7 +279,7 @@ def _cube(field: Field, grid: PoseGrid, b, side: int):
     itype = jnp.int32 if field.padded.size < 2**31 else jnp.int64
     lo, hi = PAD - 1, PAD - (side - 2)  # the cube reaches 1 cell below b, side - 2 above
 
-    def clip(i, n):
+    def clip(i: jax.Array, n: int) -> jax.Array:
         return jnp.clip(i, -lo, n - 1 + hi).astype(itype) + PAD
 
     itw = (jnp.mod(b[0], t).astype(itype) + PAD) if grid.wrap else clip(b[0], t)
@@ -290,13 +292,13 @@ def _cube(field: Field, grid: PoseGrid, b, side: int):
     )
 
 
-def neighbourhood(field: Field, grid: PoseGrid, idx):
+def neighbourhood(field: Field, grid: PoseGrid, idx: jax.Array) -> jax.Array:
     """Energies at the 27 nodes ``idx + BLOCK_MOVES`` (the (3, 3, 3) block around idx,
     ``(dt, dy, dx)`` lexicographic), exactly as :func:`lookup` gives them (:func:`_cube`)."""
     return _cube(field, grid, idx, 3).reshape(27)
 
 
-def at_cut_edge(grid: PoseGrid, q, margin: float = 0.0):
+def at_cut_edge(grid: PoseGrid, q: jax.Array, margin: float = 0.0) -> jax.Array:
     """True where fractional indices q lie within ``margin`` of a cut side of the grid."""
     out = False
     for k, n in enumerate(grid.shape):
@@ -308,7 +310,7 @@ def at_cut_edge(grid: PoseGrid, q, margin: float = 0.0):
     return jnp.asarray(out)
 
 
-def clamp_start(grid: PoseGrid, q):
+def clamp_start(grid: PoseGrid, q: jax.Array) -> jax.Array:
     """A start past the end of a bounded (non-periodic) twist axis, e.g. a twist within
     half a step of the range that greedy rounds outward, starts at that end: beyond it
     lies a wall (+inf), which no energy output may show."""
@@ -317,7 +319,9 @@ def clamp_start(grid: PoseGrid, q):
     return q.at[0].set(jnp.clip(q[0], 0, grid.shape[0] - 1))
 
 
-def _trilinear(f, corner_energy, dtype):
+def _trilinear(
+    f: jax.Array, corner_energy: Callable[[tuple[int, ...]], jax.Array], dtype: DTypeLike
+) -> jax.Array:
     """Sum over the 8 cell corners of weight * ``corner_energy(corner)`` for fractions
     f (..., 3); a corner of weight 0 adds 0 even at a wall (0 * inf)."""
     total = jnp.zeros(f.shape[:-1], dtype)
@@ -329,7 +333,7 @@ def _trilinear(f, corner_energy, dtype):
     return total
 
 
-def interpolate(field: Field, grid: PoseGrid, q):
+def interpolate(field: Field, grid: PoseGrid, q: ArrayLike) -> jax.Array:
     """Energy at fractional indices q = (it, iy, ix) by trilinear interpolation."""
     q = jnp.asarray(q, field.dtype)
     base = jnp.floor(q)
@@ -341,14 +345,14 @@ def interpolate(field: Field, grid: PoseGrid, q):
     )
 
 
-def block(field: Field, grid: PoseGrid, b):
+def block(field: Field, grid: PoseGrid, b: jax.Array) -> jax.Array:
     """Energies at ``b + (i, j, k)``, i, j, k in -1..2: the (4, 4, 4) block that holds
     every corner of the trilinear interpolations at q and q +- one step along any axis,
     for b = floor(q) (:func:`_cube`)."""
     return _cube(field, grid, b, 4)
 
 
-def gradient(field: Field, grid: PoseGrid, q):
+def gradient(field: Field, grid: PoseGrid, q: ArrayLike) -> jax.Array:
     """dE/dq (J per index unit) by central differences of one grid step; differences
     at or below the noise floor are 0, so plateaus are exactly flat. Next to a wall (the
     end of a bounded twist axis, a cut side) the one-sided difference away from the wall
@@ -363,7 +367,7 @@ def gradient(field: Field, grid: PoseGrid, q):
     f = q - base
     blk = block(field, grid, base.astype(jnp.int32))
 
-    def interp(o):  # :func:`interpolate` at q + o, from the block
+    def interp(o: tuple[int, ...]) -> jax.Array:  # :func:`interpolate` at q + o, from the block
         return _trilinear(f, lambda c: blk[1 + o[0] + c[0], 1 + o[1] + c[1], 1 + o[2] + c[2]], dt)
 
     e0 = interp((0, 0, 0))

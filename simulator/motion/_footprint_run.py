@@ -19,11 +19,20 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from typing import Any
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from foundation import InputError
+
+if TYPE_CHECKING:
+    import jax
+
+    from simulator.landscape import FootprintPlanes
+    from simulator.motion import Trajectory  # the face: _trajectory is being split
+    from simulator.motion._dynamics_params import DynamicsParams
+    from simulator.scene import Scene
 
 #: The process itself, with NumPy, SciPy and JAX loaded (what a run holds besides its arrays).
 PROCESS_BYTES = 512 * 2**20
@@ -33,7 +42,7 @@ PROCESS_BYTES = 512 * 2**20
 MAX_EVENTS = 64
 
 
-def _cut(tr, j: int):
+def _cut(tr: Trajectory, j: int) -> Trajectory:
     """The trajectory ``tr`` up to (not including) its pose ``j``."""
     t_s = None if tr.t_s is None else tr.t_s[:j]
     return dataclasses.replace(
@@ -41,7 +50,7 @@ def _cut(tr, j: int):
     )
 
 
-def footprint_budget_bytes(scene, n_pads: int, pairs: bool = True) -> int:
+def footprint_budget_bytes(scene: Scene, n_pads: int, pairs: bool = True) -> int:
     """What the footprint state's planes hold at their peak: per pose, each pad's wet energy
     and two relay flags, and the shadow rule's pair planes on their boxes
     (:func:`simulator.landscape._footprint.footprint_pairs`, laid out as the build does); per
@@ -75,12 +84,12 @@ def footprint_budget_bytes(scene, n_pads: int, pairs: bool = True) -> int:
     return int((held + work) * 1.15) + PROCESS_BYTES
 
 
-def _proto(scene) -> str:
+def _proto(scene: Scene) -> str:
     """The scene's protocol as its flag reads, saying when it is the default."""
     return f"{scene.dispense}" + (" (the default)" if scene.liquid.dispense is None else "")
 
 
-def require_footprint_fits(scene, engine: str = "fft") -> None:
+def require_footprint_fits(scene: Scene, engine: str = "fft") -> None:
     """Refuse (InputError) a ``--dispense`` run whose pads' planes exceed the memory budget,
     before any of them is made (no JAX, no transform); with ``engine`` "path", whose
     footprint state's rotators do (:func:`simulator.landscape.footprint_path_bytes`)."""
@@ -115,7 +124,7 @@ def require_footprint_fits(scene, engine: str = "fft") -> None:
 def footprint_words(fp: dict) -> str:
     """One line on where the liquid was: wet at release, the events, wet at the end."""
 
-    def pads(ids):
+    def pads(ids: Sequence[int]) -> str:
         return "none" if not ids else "pads " + ", ".join(str(i) for i in ids)
 
     ev = fp["events"]
@@ -131,7 +140,7 @@ def footprint_words(fp: dict) -> str:
     )
 
 
-def footprint_relay(planes) -> tuple:
+def footprint_relay(planes: FootprintPlanes) -> tuple[jax.Array, jax.Array]:
     """The pads' relay flags of ``planes`` (:class:`simulator.landscape.FootprintPlanes`)
     for the steppers: (reached, within) as (T, Ny, Nx, W) uint8 device arrays, pad ``k`` in
     bit ``k % 8`` of byte ``k // 8`` (:class:`simulator.motion.Relay`), as the planes hold
@@ -141,12 +150,12 @@ def footprint_relay(planes) -> tuple:
     return jnp.asarray(planes.reached_bits), jnp.asarray(planes.within_bits)
 
 
-def wet_bits(wet) -> np.ndarray:
+def wet_bits(wet: Sequence[bool] | np.ndarray) -> np.ndarray:
     """A footprint state ((pads,) booleans) as the relay's (W,) uint8 bits."""
     return np.packbits(np.asarray(wet, bool), bitorder="little")
 
 
-def remaining_params(dynamics, t_off: float):
+def remaining_params(dynamics: DynamicsParams | None, t_off: float) -> DynamicsParams | None:
     """The dynamics of a run's stretch that starts at ``t_off`` s: the time left to its
     ``t_max_s`` (a footprint run's time limit is the whole run's); None once none is left."""
     if dynamics is None or t_off == 0.0:
@@ -155,7 +164,9 @@ def remaining_params(dynamics, t_off: float):
     return None if left <= 0.0 else dataclasses.replace(dynamics, t_max_s=left)
 
 
-def footprint_engine(scene, start, method: str, engine: str, planes=None) -> str:
+def footprint_engine(
+    scene: Scene, start: Sequence[float], method: str, engine: str, planes: object = None
+) -> str:
     """Which engine gives a ``--dispense`` run its per-pose planes: "path" (the footprint
     state in the path engine's boxes that follow the chip,
     :class:`simulator.landscape.FootprintPath`) or "fft" (the pads' planes over the whole
@@ -175,13 +186,13 @@ def footprint_engine(scene, start, method: str, engine: str, planes=None) -> str
 
 
 def simulate_footprint(
-    scene,
-    start,
+    scene: Scene,
+    start: Sequence[float],
     method: str,
     max_steps: int,
-    dynamics,
+    dynamics: DynamicsParams | None,
     backend: str,
-    simulate,
+    simulate: Callable[..., Trajectory],
     planes: Any = None,
     engine: str = "fft",
 ) -> dict:

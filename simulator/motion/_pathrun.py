@@ -10,6 +10,9 @@ path on the whole landscape). Poses that boxes share are computed once.
 
 from __future__ import annotations
 
+from collections.abc import Generator, Sequence
+from typing import TYPE_CHECKING, Any, overload
+
 import numpy as np
 
 from foundation import counter_bar
@@ -21,6 +24,10 @@ from simulator.landscape import (
     path_engine_supported,
 )
 from simulator.scene import Scene
+
+if TYPE_CHECKING:
+    from simulator.landscape import FootprintPath
+    from simulator.motion._field import Relay
 
 ENGINES = ("auto", "fft", "path")
 #: Half-width (px) and twist half-band (steps) of the boxes that follow the chip. Greedy
@@ -50,7 +57,12 @@ def _chip_px(scene: Scene) -> int:
 
 
 def choose_engine(
-    scene: Scene, start, method: str, engine: str, band_steps: int, band_px: int
+    scene: Scene,
+    start: Sequence[float],
+    method: str,
+    engine: str,
+    band_steps: int,
+    band_px: int,
 ) -> str:
     """ "fft" or "path" for a greedy or gradient run without a landscape (``engine``: as asked;
     "auto": the path engine where it covers the scene, the run's outcome is classified the
@@ -79,18 +91,22 @@ class StateBoxes:
     engine of the scene, which the run's global minimum reads (the aligned pose, where every
     pad is covered and the all-wet state's energy is the stateless one)."""
 
-    def __init__(self, footprint, plain: PathEnergy, wet):
+    def __init__(
+        self, footprint: FootprintPath, plain: PathEnergy, wet: Sequence[bool] | np.ndarray
+    ) -> None:
         self.footprint, self.plain = footprint, plain
         self.wet = np.asarray(wet, bool)
         self.bits = np.packbits(self.wet, bitorder="little")
 
-    def box(self, twist_idx, center_px, half_px) -> Landscape:
+    def box(
+        self, twist_idx: Sequence[int], center_px: tuple[int, int], half_px: int | None
+    ) -> Landscape:
         pl = self.footprint.box(twist_idx, center_px, half_px)
         ls = pl.landscape(self.wet)
         ls.stats["relay"] = (pl.reached_bits, pl.within_bits)
         return ls
 
-    def relay(self, ls: Landscape):
+    def relay(self, ls: Landscape) -> Relay:
         """The steppers' :class:`simulator.motion.Relay` of a box made here."""
         import jax.numpy as jnp
 
@@ -99,7 +115,7 @@ class StateBoxes:
         reached, within = ls.stats["relay"]
         return Relay(jnp.asarray(reached), jnp.asarray(within), jnp.asarray(self.bits))
 
-    def drop_outlines(self, keep) -> None:
+    def drop_outlines(self, keep: set[int]) -> None:
         self.footprint.drop_outlines(keep)
 
     def prefetch(self, k: int) -> None:
@@ -121,7 +137,22 @@ class StateBoxes:
         return self.footprint.seconds
 
 
-def path_boxes(scene: Scene, method: str, cost, source=None):
+#: What :func:`path_boxes` yields: sent the chip's pose (x_um, y_um, twist_deg), the box
+#: around it, or None.
+_BoxGenerator = Generator[Landscape | None, np.ndarray, None]
+
+
+@overload
+def path_boxes(
+    scene: Scene, method: str, cost: object, source: None = None
+) -> tuple[_BoxGenerator, PathEnergy]: ...
+@overload
+def path_boxes(
+    scene: Scene, method: str, cost: object, source: StateBoxes
+) -> tuple[_BoxGenerator, StateBoxes]: ...
+def path_boxes(
+    scene: Scene, method: str, cost: object, source: StateBoxes | None = None
+) -> tuple[_BoxGenerator, PathEnergy | StateBoxes]:
     """(generator, engine): the generator is sent the chip's pose and yields the box around
     it (None when the box would be the last one again: the chip cannot move on), as
     :func:`simulator.motion._trajectory._box_landscapes` does. ``source``: a footprint
@@ -130,13 +161,13 @@ def path_boxes(scene: Scene, method: str, cost, source=None):
     pe = PathEnergy(scene) if source is None else source
     half, band = FOLLOW_BOX.get(method, FOLLOW_BOX["gradient"])
 
-    def gen():
+    def gen() -> _BoxGenerator:
         # A counter of the boxes, shown once the run has taken a few seconds (a 4000 px
         # chip's meniscus run takes tens): where the chip is and how far the run has come.
         with counter_bar(f"{method} run (path engine)", "box") as bar:
             yield from boxes(bar)
 
-    def boxes(bar):
+    def boxes(bar: Any) -> _BoxGenerator:
         ta = scene.twist_axis
         n, s = ta.count, scene.um_per_px
         last = None

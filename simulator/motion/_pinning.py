@@ -20,12 +20,19 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike, DTypeLike
 
 from simulator.core import UM, UM2
+
+if TYPE_CHECKING:
+    from simulator.landscape import PoseGrid
+    from simulator.motion._field import Field, Relay
+    from simulator.scene import Scene
 
 
 @functools.partial(
@@ -71,7 +78,7 @@ class PinLines:
     origin: jax.Array
 
 
-def pin_lines(scene, dtype) -> PinLines | None:
+def pin_lines(scene: Scene, dtype: DTypeLike) -> PinLines | None:
     """The scene's :class:`PinLines` in ``dtype``, or None where no line can slide
     (:func:`simulator.physics.pinning_lines`)."""
     from simulator.motion._field import enable_float64
@@ -97,7 +104,7 @@ def pin_lines(scene, dtype) -> PinLines | None:
     )
 
 
-def _wet_value(lines: PinLines, relay, r, c):
+def _wet_value(lines: PinLines, relay: Relay | None, r: jax.Array, c: jax.Array) -> jax.Array:
     """The pattern's value at integer (row, col) of the ringed arrays, 0 on a dry pad."""
     v = lines.pattern[r, c]
     if relay is None:
@@ -108,7 +115,7 @@ def _wet_value(lines: PinLines, relay, r, c):
     return jnp.where((lab > 0) & (bit > 0), v, jnp.zeros_like(v))
 
 
-def pin_at(field, grid, q):
+def pin_at(field: Field, grid: PoseGrid, q: ArrayLike) -> jax.Array:
     """(3,) pinning work over one grid step along (twist, y, x), J, at fractional indices q
     (module docstring; :func:`simulator.physics.sliding_pinning_at` is its NumPy reference).
     Without :attr:`Field.lines`, the field's constant ``pin``."""
@@ -156,6 +163,6 @@ def pin_at(field, grid, q):
     return jnp.stack([p_t, p_y, p_x]).astype(dt)
 
 
-def soft_threshold(g, p):
+def soft_threshold(g: ArrayLike, p: ArrayLike) -> jax.Array:
     """``sign(g) max(|g| - p, 0)``: the part of a force beyond its Coulomb bound ``p``."""
     return jnp.sign(g) * jnp.maximum(jnp.abs(g) - p, 0.0)

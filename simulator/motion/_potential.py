@@ -29,8 +29,10 @@ reproduced without interpolation error (tested against closed forms).
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike
 
 from simulator.landscape import PoseGrid
 from simulator.motion._field import PAD, Field
@@ -38,7 +40,7 @@ from simulator.motion._field import PAD, Field
 _OFFSETS = np.arange(-1, 3)  # the 4 nodes per axis in the support of Phi's kernel
 
 
-def _kernel(t):
+def _kernel(t: jax.Array) -> tuple[jax.Array, jax.Array]:
     """Phi's 1-D kernel: the hat function averaged over +-1, and its derivative.
 
     ``K(t) = (1/2) * integral_{t-1}^{t+1} hat(s) ds``: ``1/2 - t^2/4`` for ``|t| <= 1``,
@@ -51,7 +53,9 @@ def _kernel(t):
     return k, dk
 
 
-def _node_energy(field: Field, grid: PoseGrid, it, iy, ix):
+def _node_energy(
+    field: Field, grid: PoseGrid, it: jax.Array, iy: jax.Array, ix: jax.Array
+) -> jax.Array:
     """Node energies for Phi, as :func:`simulator.motion.lookup` but finite: beyond an
     uncut x/y side 0 (no contact); beyond a cut side or the end of a non-periodic twist
     axis (walls, +inf there) the edge value is repeated, and the run stops with EDGE."""
@@ -59,13 +63,17 @@ def _node_energy(field: Field, grid: PoseGrid, it, iy, ix):
     (_, _), (y_lo, y_hi), (x_lo, x_hi) = grid.cut
     itw = jnp.mod(it, t) if grid.wrap else jnp.clip(it, 0, t - 1)
 
-    def clip(i, n, lo_cut, hi_cut):  # a cut side repeats its edge; an uncut one reads the pad's 0
+    def clip(
+        i: jax.Array, n: int, lo_cut: bool, hi_cut: bool
+    ) -> jax.Array:  # a cut side repeats its edge; an uncut one reads the pad's 0
         return jnp.clip(i, 0 if lo_cut else -PAD, n - 1 if hi_cut else n - 1 + PAD) + PAD
 
     return field.padded[itw + PAD, clip(iy, ny, y_lo, y_hi), clip(ix, nx, x_lo, x_hi)]
 
 
-def potential_and_gradient(field: Field, grid: PoseGrid, q):
+def potential_and_gradient(
+    field: Field, grid: PoseGrid, q: ArrayLike
+) -> tuple[jax.Array, jax.Array]:
     """``(Phi(q), dPhi/dq)`` at fractional indices q (3,) = (it, iy, ix); J and J per index step.
 
     Phi is the landscape energy averaged over ``q +- 1`` grid step along each axis (see
@@ -102,6 +110,6 @@ def potential_and_gradient(field: Field, grid: PoseGrid, q):
     return phi, grad
 
 
-def potential(field: Field, grid: PoseGrid, q):
+def potential(field: Field, grid: PoseGrid, q: ArrayLike) -> jax.Array:
     """Phi(q) in J (see :func:`potential_and_gradient`)."""
     return potential_and_gradient(field, grid, q)[0]

@@ -11,12 +11,14 @@ a refusal costs neither its import time nor its memory.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 from foundation import InputError, require_fits
 from simulator.core import DYNAMIC_METHODS, MAX_STEPS_LIMIT
 from simulator.landscape import consecutive_runs
-from simulator.scene import Scene
+from simulator.scene import Scene, TwistAxis
 
 __all__ = [
     "BAND_PX",
@@ -55,7 +57,9 @@ def price_run(scene: Scene, method: str, max_steps: int) -> None:
     )
 
 
-def _fit_box(box, pose_px: np.ndarray, margin: int) -> tuple[tuple[int, int], int]:
+def _fit_box(
+    box: tuple[tuple[int, int], int] | None, pose_px: np.ndarray, margin: int
+) -> tuple[tuple[int, int], int]:
     """The square box (centre px, half-width px) holding the start, the aligned pose (0, 0),
     the old box and a margin."""
     pts = [(0, 0), tuple(pose_px)]
@@ -68,7 +72,7 @@ def _fit_box(box, pose_px: np.ndarray, margin: int) -> tuple[tuple[int, int], in
     return (int(center[0]), int(center[1])), int(np.ceil(((hi - lo) / 2).max()))
 
 
-def require_start_in_window(scene: Scene, start) -> None:
+def require_start_in_window(scene: Scene, start: Sequence[float]) -> None:
     """InputError for a start beyond the scene's translation window (``window_um``): the pose grid
     ends there, so there is no landscape to step on (the run would grow its box forever)."""
     w = scene.window_um
@@ -79,7 +83,7 @@ def require_start_in_window(scene: Scene, start) -> None:
         )
 
 
-def _twist_band(ta, twist_deg: float, band_steps: int) -> tuple[int, int]:
+def _twist_band(ta: TwistAxis, twist_deg: float, band_steps: int) -> tuple[int, int]:
     """(first, last) axis index of the band of +-``band_steps`` twists around ``twist_deg`` (may
     run past the ends of a periodic axis; the whole axis when the band covers it)."""
     n = ta.count
@@ -94,7 +98,7 @@ def _twist_band(ta, twist_deg: float, band_steps: int) -> tuple[int, int]:
 
 def require_run_fits(
     scene: Scene,
-    start,
+    start: Sequence[float],
     method: str,
     band_steps: int = BAND_STEPS,
     band_px: int = BAND_PX,

@@ -19,10 +19,12 @@ A batch is ``jax.vmap`` of the single run (:mod:`simulator.batch`).
 from __future__ import annotations
 
 import functools
-from typing import NamedTuple
+from collections.abc import Callable
+from typing import TYPE_CHECKING, NamedTuple
 
 import jax
 import jax.numpy as jnp
+from jax.typing import ArrayLike
 
 from simulator.core import DYNAMIC_METHODS, METHODS
 from simulator.motion._stepping import (
@@ -33,6 +35,14 @@ from simulator.motion._stepping import (
     greedy,
     on_plateau,
 )
+
+if TYPE_CHECKING:
+    import diffrax
+
+    from simulator.landscape import PoseGrid
+    from simulator.motion._dynamics import DynamicsState
+    from simulator.motion._dynamics_params import DynamicsParams
+    from simulator.motion._field import Field
 
 DYNAMIC = DYNAMIC_METHODS
 
@@ -57,7 +67,14 @@ class RunState(NamedTuple):
     kinetic: jax.Array  # kinetic energy at the end, J (0 for the steppers)
 
 
-def _greedy(field, grid, params, start, max_steps: int, record: bool = True) -> RunState:
+def _greedy(
+    field: Field,
+    grid: PoseGrid,
+    params: DynamicsParams | None,
+    start: ArrayLike,
+    max_steps: int,
+    record: bool = True,
+) -> RunState:
     s = greedy(field, grid, jnp.round(jnp.asarray(start)).astype(jnp.int32), max_steps, record)
     dt = field.dtype
     nan = jnp.full(s.path_energy.shape, jnp.nan, dt)
@@ -75,7 +92,14 @@ def _greedy(field, grid, params, start, max_steps: int, record: bool = True) -> 
     )
 
 
-def _gradient(field, grid, params, start, max_steps: int, record: bool = True) -> RunState:
+def _gradient(
+    field: Field,
+    grid: PoseGrid,
+    params: DynamicsParams | None,
+    start: ArrayLike,
+    max_steps: int,
+    record: bool = True,
+) -> RunState:
     s = gradient_descent(field, grid, jnp.asarray(start), max_steps, record)
     dt = field.dtype
     nan = jnp.full(s.path_energy.shape, jnp.nan, dt)
@@ -94,7 +118,14 @@ def _gradient(field, grid, params, start, max_steps: int, record: bool = True) -
 
 
 def _dynamic(
-    method: str, solver, field, grid, params, start, max_steps: int, record: bool = True
+    method: str,
+    solver: diffrax.AbstractSolver | None,
+    field: Field,
+    grid: PoseGrid,
+    params: DynamicsParams,
+    start: ArrayLike,
+    max_steps: int,
+    record: bool = True,
 ) -> RunState:
     from simulator.motion._dynamics import inertial, overdamped
 
@@ -114,7 +145,7 @@ def _dynamic(
     )
 
 
-def stepper(method: str, stiff: bool = False):
+def stepper(method: str, stiff: bool = False) -> Callable[..., RunState]:
     """The run function of ``method`` with the shared signature (not jitted).
 
     ``stiff`` (inertial only) selects the IMEX solver (:func:`simulator.motion.stiff_solver`).
@@ -133,13 +164,13 @@ def stepper(method: str, stiff: bool = False):
 
 
 @functools.cache
-def jitted(method: str, stiff: bool = False):
+def jitted(method: str, stiff: bool = False) -> Callable[..., RunState]:
     """:func:`stepper` under ``jax.jit`` (grid, max_steps and record static), made once."""
     return jax.jit(stepper(method, stiff), static_argnames=("grid", "max_steps", "record"))
 
 
 @functools.cache
-def dynamics_jitted(method: str, stiff: bool = False):
+def dynamics_jitted(method: str, stiff: bool = False) -> Callable[..., DynamicsState]:
     """The jitted dynamics function itself, returning its full
     :class:`simulator.motion.DynamicsState` (potential, kinetic energy, velocity), with
     the solver :func:`stepper` would choose; for diagnostics and tests."""
@@ -153,17 +184,19 @@ def dynamics_jitted(method: str, stiff: bool = False):
     )
 
 
-def ran_out(step, status, max_steps: int):
+def ran_out(step: jax.Array, status: jax.Array, max_steps: int) -> jax.Array:
     """The status with MAX_STEPS where a run used up its steps without converging."""
     return jnp.where((step >= max_steps) & (status != CONVERGED), MAX_STEPS, status)
 
 
-def flat_at(field, grid, flat, q) -> jax.Array:
+def flat_at(field: Field, grid: PoseGrid, flat: jax.Array, q: ArrayLike) -> jax.Array:
     """Stopped on a plateau: zero force (the stepper's flag) or a flat direction at round(q)."""
     return flat | on_plateau(field, grid, jnp.round(jnp.asarray(q)).astype(jnp.int32))
 
 
-def finish(field, grid, state: RunState, max_steps: int) -> tuple[jax.Array, jax.Array]:
+def finish(
+    field: Field, grid: PoseGrid, state: RunState, max_steps: int
+) -> tuple[jax.Array, jax.Array]:
     """(status, outcome index into simulator.core.OUTCOMES) of a run, on the landscape it ran on."""
     status = ran_out(state.step, state.status, max_steps)
     # a dynamic run out of time, not steps, and creeping: a chip still carrying more kinetic

@@ -35,6 +35,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike
 
 from simulator.landscape import PoseGrid
 from simulator.motion._field import (
@@ -83,7 +84,9 @@ class GreedyState(NamedTuple):
     path_energy: jax.Array  # (max_steps + 1,), or (1,)
 
 
-def greedy(field: Field, grid: PoseGrid, start, max_steps: int, record: bool = True) -> GreedyState:
+def greedy(
+    field: Field, grid: PoseGrid, start: ArrayLike, max_steps: int, record: bool = True
+) -> GreedyState:
     """Greedy descent (docs/physics.md §5.2): move to the lowest of the 27 neighbours.
 
     Args:
@@ -107,10 +110,10 @@ def greedy(field: Field, grid: PoseGrid, start, max_steps: int, record: bool = T
     path = jnp.zeros((n, 3), jnp.int32).at[0].set(start)
     path_e = jnp.full((n,), jnp.nan, field.dtype).at[0].set(e0)
 
-    def cond(s: GreedyState):
+    def cond(s: GreedyState) -> jax.Array:
         return s.status == RUNNING
 
-    def body(s: GreedyState):
+    def body(s: GreedyState) -> GreedyState:
         at_edge = at_cut_edge(grid, s.idx)
         e_true = neighbourhood(field, grid, s.idx)  # block order
         # Hysteresis: a move is worth its energy plus the pinning work it costs, with the
@@ -153,7 +156,7 @@ def greedy(field: Field, grid: PoseGrid, start, max_steps: int, record: bool = T
     return jax.lax.while_loop(cond, body, init)
 
 
-def on_plateau(field: Field, grid: PoseGrid, idx) -> jax.Array:
+def on_plateau(field: Field, grid: PoseGrid, idx: ArrayLike) -> jax.Array:
     """True where some greedy move leaves the energy unchanged (within the noise floor):
     the pose sits on a plateau (a flat direction), not in a strict local minimum."""
     e = neighbourhood(field, grid, jnp.asarray(idx, jnp.int32))
@@ -181,7 +184,7 @@ class GradientState(NamedTuple):
 def gradient_descent(
     field: Field,
     grid: PoseGrid,
-    start,
+    start: ArrayLike,
     max_steps: int,
     record: bool = True,
     min_step_px: float = 1e-2,
@@ -206,7 +209,7 @@ def gradient_descent(
     path = jnp.zeros((n, 3), dt).at[0].set(start)
     path_e = jnp.full((n,), jnp.nan, dt).at[0].set(e0)
 
-    def body(s: GradientState):
+    def body(s: GradientState) -> GradientState:
         # Central differences and interpolation reach 2 indices out: stop short of a cut side.
         edge = at_cut_edge(grid, s.q, margin=2.0)
         g_index = gradient(field, grid, s.q)  # J per index step
@@ -226,11 +229,11 @@ def gradient_descent(
         d = jnp.where(dlen > 1.0, d / jnp.maximum(dlen, 1e-30), d)
         dlen = jnp.minimum(dlen, 1.0)
 
-        def try_cond(c):
+        def try_cond(c: tuple[jax.Array, jax.Array]) -> jax.Array:
             scale, e_new = c
             return (e_new >= s.energy) & (scale * dlen >= min_step_px)
 
-        def try_body(c):
+        def try_body(c: tuple[jax.Array, jax.Array]) -> tuple[jax.Array, jax.Array]:
             scale, _ = c
             scale = scale / 2
             return scale, interpolate(field, grid, s.q + scale * d / metric)
@@ -270,7 +273,13 @@ def gradient_descent(
 
 # ----------------------------------------------------------------- outcome
 def classify(
-    field: Field, grid: PoseGrid, q, energy, status, flat, timed_out: bool | jax.Array = False
+    field: Field,
+    grid: PoseGrid,
+    q: ArrayLike,
+    energy: ArrayLike,
+    status: ArrayLike,
+    flat: ArrayLike,
+    timed_out: bool | jax.Array = False,
 ) -> jax.Array:
     """Outcome index into :data:`simulator.core.OUTCOMES` for a final pose q (fractional indices).
 

@@ -351,7 +351,8 @@ def sliding_pinning(scene) -> tuple[float, float, float]:
     if not any(full):
         return full
     shares = sliding_shares(scene)
-    return tuple(float(p * k) for p, k in zip(full, shares, strict=True))
+    p_t, p_y, p_x = (float(p * k) for p, k in zip(full, shares, strict=True))
+    return p_t, p_y, p_x
 
 
 def pin_per_index(scene, um_per_px: float, twist_step_deg: float) -> tuple[float, float, float]:

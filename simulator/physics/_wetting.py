@@ -132,7 +132,7 @@ class Materials:
             raise InputError(
                 "give the pad's receding and advancing angles together (--hysteresis RECEDING:ADVANCING)"
             )
-        if self.pad_receding_deg is not None:
+        if self.pad_receding_deg is not None and self.pad_advancing_deg is not None:  # both or none
             from simulator.physics._hysteresis import require_window
 
             r, a = require_window(self.pad_receding_deg, self.pad_advancing_deg)

@@ -211,16 +211,15 @@ class TrajectoryAnimation:
         ax.set_xlabel("x (µm)")
         ax.set_ylabel("y (µm)")
         ax.set_title("red: chip now · dashed: at start · blue: path of its centre", fontsize=9)
-        self.chip = ax.add_patch(
-            PathPatch(
-                Path(_place(self._verts, path[0]), self._codes),
-                fc=(0.91, 0.07, 0.18, 0.16),
-                ec=CHIP_COLOUR,
-                lw=2.0,
-                zorder=5,
-                animated=True,
-            )
+        self.chip = PathPatch(
+            Path(_place(self._verts, path[0]), self._codes),
+            fc=(0.91, 0.07, 0.18, 0.16),
+            ec=CHIP_COLOUR,
+            lw=2.0,
+            zorder=5,
+            animated=True,
         )
+        ax.add_patch(self.chip)
         (self.trail,) = ax.plot([], [], "-", color=PATH_COLOUR, lw=1.6, zorder=4, animated=True)
         (self.centre,) = ax.plot([], [], "o", color=PATH_COLOUR, ms=5, zorder=6, animated=True)
 
@@ -418,7 +417,9 @@ def _palette_frames(frames: np.ndarray, colours: int = 128) -> tuple[np.ndarray,
             for f in frames
         ]
     )
-    return index, bytes(pal.getpalette()[: 3 * colours])
+    palette = pal.getpalette()
+    assert palette is not None  # a quantized image has its palette
+    return index, bytes(palette[: 3 * colours])
 
 
 def _pattern_cmap():

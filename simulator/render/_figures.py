@@ -338,6 +338,7 @@ def plot_capture_map(cmap: np.ndarray, grid, scene, path, title: str = "") -> No
     atomically with :func:`simulator.render.save_figure`.
     """
     from matplotlib.colors import BoundaryNorm, ListedColormap
+    from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
 
     from simulator.core import OUTCOMES
@@ -397,13 +398,13 @@ def plot_capture_map(cmap: np.ndarray, grid, scene, path, title: str = "") -> No
         ax.set_xlabel("start x (µm)")
         ax.set_ylabel("start y (µm)")
     counts = np.bincount(cmap.ravel().astype(np.int64), minlength=len(OUTCOMES))
-    handles = [
+    handles: list[Patch | Line2D] = [
         Patch(color=OUTCOME_COLORS[k], label=f"{name} ({counts[k]:,})")
         for k, name in enumerate(OUTCOMES)
         if counts[k]
     ]
     if not line:
-        handles.append(plt.Line2D([], [], color="black", lw=0.7, alpha=0.6, label="pattern edge"))
+        handles.append(Line2D([], [], color="black", lw=0.7, alpha=0.6, label="pattern edge"))
     legend_title = "outcome (starts)" if t == 1 else f"outcome (starts,\nall {t} twists)"
     fig.legend(
         handles=handles,
@@ -421,7 +422,7 @@ def plot_capture_map(cmap: np.ndarray, grid, scene, path, title: str = "") -> No
 
 
 def plot_time_to_align(
-    hist: dict | None, st: dict, path: str | os.PathLike, title: str = ""
+    hist: dict | None, st: dict | None, path: str | os.PathLike, title: str = ""
 ) -> None:
     """Histogram of the time to align (ms) of a dynamics batch's aligned starts, with the
     median and the 90th percentile marked. ``hist`` and ``st`` are the batch's
@@ -432,6 +433,7 @@ def plot_time_to_align(
     if hist is None:
         ax.text(0.5, 0.5, "no start aligned", ha="center", va="center", transform=ax.transAxes)
     else:
+        assert st is not None  # the same times as hist: None together
         edges = 1e3 * np.asarray(hist["edges_s"])
         ax.bar(
             edges[:-1],

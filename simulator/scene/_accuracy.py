@@ -37,7 +37,7 @@ from __future__ import annotations
 import math
 import weakref
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import shapely
@@ -168,7 +168,7 @@ def _mask_outline(mask: Mask, budget_mb: float | None = None) -> BaseGeometry:
     if len(parts) == 1:
         return parts[0]
     # (point i, contour j): contour i's first vertex lies inside contour j (never its own)
-    shells = shapely.polygons(shapely.get_exterior_ring(parts))
+    shells = cast("np.ndarray", shapely.polygons(shapely.get_exterior_ring(parts)))  # one per part
     tree = shapely.STRtree(shells)
     pi, pj = tree.query(shapely.points(xy[first[of]]), predicate="within")
     keep = pi != pj
@@ -208,7 +208,7 @@ def _stretches(ring_xy: np.ndarray, corner_deg: float, merge: float) -> np.ndarr
         return np.array([perimeter / math.pi])  # no corners: a round shape, its diameter
     cum = np.concatenate([[0.0], np.cumsum(length)])
     at = cum[corners]  # outline position of each corner
-    gaps = np.diff(np.concatenate([at, [at[0] + perimeter]]))
+    gaps = cast("np.ndarray", np.diff(np.concatenate([at, [at[0] + perimeter]])))  # floats
     long = gaps[gaps >= merge]
     return long if long.size else np.array([perimeter / math.pi])
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 import os
 from pathlib import Path
-from typing import Any, Self
+from typing import TYPE_CHECKING, Any, Self
 
 import numpy as np
 from shapely.geometry import box
@@ -44,6 +44,14 @@ IMAGE_KEYS = (
 class SceneBuilders:
     """The classmethods that build a :class:`~simulator.scene.Scene` (its base class): from
     inputs (:meth:`from_inputs`), a TOML file (:meth:`from_toml`) or its table (:meth:`from_dict`)."""
+
+    if TYPE_CHECKING:  # for the type checker: what the builders call, defined by Scene
+
+        def __init__(self, **fields: Any) -> None: ...
+
+        def with_preset(
+            self, name: str | None = None, explicit: dict | None = None, check_scale: bool = True
+        ) -> Any: ...
 
     # ----------------------------------------------------------------- builders
     @classmethod
@@ -274,7 +282,7 @@ class SceneBuilders:
         # Without a volume the scene derives one from the chip (simulator.liquid.default_volume_nl).
         kw["liquid"] = Liquid(volume_nl=None)
         if "liquid" in doc:
-            liq = {"volume_nl": None} | dict(doc["liquid"])
+            liq: dict[str, Any] = {"volume_nl": None} | dict(doc["liquid"])
             if "surface_tension_mN_m" in liq:
                 where = "[liquid] surface_tension_mN_m"
                 liq["surface_tension_N_m"] = (
@@ -414,8 +422,9 @@ def resample_to_scale(mask: Mask, um_per_px: float, budget_mb: float | None = No
     import cv2
 
     f = mask.um_per_px / um_per_px  # new pixels per old pixel
+    h, w = mask.shape
     price_raster(
-        tuple(n * f for n in mask.shape),
+        (h * f, w * f),
         um_per_px,
         f"the image resampled to {um_per_px:g} um/px",
         budget_mb,

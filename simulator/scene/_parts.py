@@ -34,7 +34,7 @@ class TwistGrid:
         require(self.step_deg <= 90, f"twist step_deg must be <= 90 degrees, got {self.step_deg}")
         if (self.min_deg is None) != (self.max_deg is None):
             raise InputError("twist min_deg and max_deg must be given together (or neither)")
-        if self.min_deg is not None:
+        if self.min_deg is not None and self.max_deg is not None:  # both or neither (above)
             for name, v in (("min_deg", self.min_deg), ("max_deg", self.max_deg)):
                 require(
                     math.isfinite(v) and abs(v) <= 3600,

@@ -256,7 +256,7 @@ def _display(path: Any) -> str:
     return text if len(text) <= 300 else text[:297] + "..."
 
 
-def _one_line(text: str) -> str:
+def _one_line(text: object) -> str:
     return " ".join(str(text).split())
 
 

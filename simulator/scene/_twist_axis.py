@@ -109,7 +109,8 @@ class TwistAxis:
         if self.count == 1:
             return False, False
         if self.periodic:
-            return (count < self.count,) * 2
+            short = count < self.count
+            return short, short
         return first > 0, first + count < self.count
 
     def locate(self, twists) -> int | None:
@@ -133,15 +134,17 @@ class TwistAxis:
         period, mirror = chip_symmetry(chip)
         if not effects.twist:
             return cls(None, 1.0, 0, 1, False, period, mirror)
-        _require_twist_count(tg, period if tg.min_deg is None else tg.max_deg - tg.min_deg)
+        # the twist range's span, or None without one (TwistGrid gives both ends or neither)
+        span = None if tg.min_deg is None or tg.max_deg is None else tg.max_deg - tg.min_deg
+        _require_twist_count(tg, period if span is None else span)
         step = tg.step_deg
         n_period = period / step
         divides = is_whole(n_period)
-        if tg.min_deg is None or (divides and tg.max_deg - tg.min_deg + step >= period - DEG_TOL):
+        if span is None or (divides and span + step >= period - DEG_TOL):
             if divides:
                 n = round(n_period)  # one period, centred on and always containing 0
                 return cls(None, step, -(n // 2), n, True, period, mirror)
             n = floor_whole(period / step / 2)
             return cls(None, step, -n, 2 * n + 1, False, period, mirror)
-        n = floor_whole((tg.max_deg - tg.min_deg) / step) + 1
+        n = floor_whole(span / step) + 1
         return cls(tg.min_deg, step, 0, n, False, period, mirror)

@@ -15,7 +15,7 @@ import contextlib
 import os
 import time
 from collections.abc import Callable, Iterable, Iterator
-from typing import Any
+from typing import Any, cast
 
 from foundation import InputError, require
 from simulator.sweep._point import XLA_ONE_THREAD, _one_line, run_point
@@ -174,7 +174,7 @@ def _handshake(address: str, timeout_s: float = CONNECT_TIMEOUT_S) -> None:
     import asyncio
     import threading
 
-    from distributed.comm import connect
+    from distributed.comm.core import connect
     from distributed.security import Security
 
     tls = Security().get_connection_args(
@@ -225,7 +225,7 @@ def dask_client(workers: int | None = None, scheduler: str | None = None) -> Ite
     ``workers`` spawned single-threaded worker processes. Closed (cluster too) on exit."""
     import logging
 
-    import dask
+    import dask.config
     from distributed import Client, LocalCluster
 
     config = {
@@ -270,7 +270,7 @@ def dask_client(workers: int | None = None, scheduler: str | None = None) -> Ite
                             n_workers=int(workers or 1),
                             threads_per_worker=1,
                             processes=True,
-                            dashboard_address=None,
+                            dashboard_address=None,  # pyright: ignore[reportArgumentType]  (None: no dashboard; the stub says str)
                             # The scheduler's HTTP server (health routes) starts even without a
                             # dashboard, on port 8787 unless told: a second cluster on the machine
                             # (two sweeps, parallel tests) then warns that the port is taken. A
@@ -353,7 +353,7 @@ def _run_dask(
                 return
             else:
                 f = client.submit(run_point, t, pure=False)  # impure: no two points are merged
-                by_key[f.key] = t
+                by_key[f.key] = cast(dict, t)  # neither _END nor None: a task
                 ac.add(f)
 
     fill()

@@ -108,9 +108,9 @@ def flatten(summary: dict) -> dict[str, Any]:
         ),
     ):  # the smaller end along each axis: the bias from which both sides still align
         for axis in ("x", "y"):
-            ends = [b.get(f"+{axis}"), b.get(f"-{axis}")]
-            if all(isinstance(e, int | float) for e in ends):
-                out[f"{prefix}_{axis}_um"] = float(min(ends))
+            plus, minus = b.get(f"+{axis}"), b.get(f"-{axis}")
+            if isinstance(plus, int | float) and isinstance(minus, int | float):
+                out[f"{prefix}_{axis}_um"] = float(min(plus, minus))
     g = summary.get("global_minimum") or {}
     if isinstance(g.get("x_um"), int | float) and isinstance(g.get("y_um"), int | float):
         out["global_minimum_offset_um"] = float(math.hypot(g["x_um"], g["y_um"]))

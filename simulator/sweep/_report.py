@@ -158,6 +158,8 @@ def plot_one_axis(table, axis, path: Path, mets) -> None:
 
 
 def plot_heatmap(table, ax_x, ax_y, col: str, label: str, f: float, path: Path, grid: bool) -> None:
+    from matplotlib.patches import Rectangle
+
     from simulator.render import pyplot, save_figure
 
     plt = pyplot()
@@ -210,7 +212,7 @@ def plot_heatmap(table, ax_x, ax_y, col: str, label: str, f: float, path: Path, 
                 )
             elif failed[r, c]:
                 ax.add_patch(
-                    plt.Rectangle(
+                    Rectangle(
                         (c - 0.5, r - 0.5), 1, 1, fill=False, hatch="xx", edgecolor="tab:red", lw=0
                     )
                 )

@@ -153,7 +153,7 @@ def _price_workers(spec: SweepSpec, tasks: list[dict]) -> tuple[float | None, fl
 
 
 def run_sweep(
-    spec: str | os.PathLike | dict,
+    spec: str | os.PathLike | dict | SweepSpec,
     out: str | os.PathLike | None = None,
     *,
     workers: int | None = None,
@@ -264,7 +264,8 @@ def run_sweep(
         "points": n,
         "run_now": len(todo),
         "resumed": n - len(todo),
-        "failed": int((table["status"] != "ok").sum()) if len(table) else 0,
+        # table["status"] is one column (a Series), its sum a number: pandas types it wider
+        "failed": int((table["status"] != "ok").sum()) if len(table) else 0,  # pyright: ignore[reportArgumentType]
         "failed_now": failed[0],
         "seconds": time.perf_counter() - t0,
     }

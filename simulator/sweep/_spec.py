@@ -22,7 +22,7 @@ import tomllib
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -169,7 +169,8 @@ class SweepSpec:
 
     def _design_values(self) -> Iterator[dict]:
         if self.samples is None:
-            for combo in itertools.product(*(a.values for a in self.axes)):
+            # without samples every axis is discrete (its values given)
+            for combo in itertools.product(*(cast(tuple, a.values) for a in self.axes)):
                 yield {a.name: v for a, v in zip(self.axes, combo, strict=True)}
             return
         rng = np.random.default_rng(np.random.SeedSequence(entropy=self.seed, spawn_key=(2**31,)))
@@ -181,7 +182,9 @@ class SweepSpec:
             u = (rng.permutation(n) + rng.random(n)) / n
             if a.values is not None:
                 cols[a.name] = [a.values[min(int(x * a.size), a.size - 1)] for x in u]
-            elif a.kind == "int":
+                continue
+            assert a.lo is not None and a.hi is not None  # no values: a continuous range
+            if a.kind == "int":
                 span = int(a.hi) - int(a.lo) + 1
                 cols[a.name] = [int(a.lo) + min(int(x * span), span - 1) for x in u]
             else:

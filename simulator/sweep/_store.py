@@ -19,6 +19,7 @@ import re
 import time
 from collections.abc import Iterable
 from pathlib import Path
+from typing import TextIO
 
 from foundation import InputError, hold, require
 from simulator.sweep._columns import STATUS_COLUMNS, flatten
@@ -211,17 +212,16 @@ class ResultStore:
         in ``ROWS_DIR``. The lock file is removed when the run ends
         (:meth:`close`), so the lock taken is checked to be the file's that the path names now
         (a run that ended meanwhile removed it)."""
+        assert self.out is not None  # (a store with a directory)
         for _ in range(10):
-            self._lock_once()
+            lock = self._lock_once()
             try:
-                same = os.path.samestat(
-                    os.fstat(self._lock.fileno()), os.stat(self.out / self.LOCK)
-                )
+                same = os.path.samestat(os.fstat(lock.fileno()), os.stat(self.out / self.LOCK))
             except OSError:
                 same = False
             if same:
                 break
-            self._lock.close()
+            lock.close()
             self._lock = None
         else:
             raise InputError(
@@ -229,9 +229,10 @@ class ResultStore:
             )
         remove_dead_files(self.out, (self.ROWS_DIR,))
 
-    def _lock_once(self) -> None:
+    def _lock_once(self) -> TextIO:
         import fcntl
 
+        assert self.out is not None  # (a store with a directory)
         f = open(self.out / self.LOCK, "a+")  # noqa: SIM115 (held until close())
         try:
             fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -241,8 +242,10 @@ class ResultStore:
                 f"--out {self.out}: another selfalign {self.COMMAND} is writing into it; wait for it to end or choose another --out"
             ) from None
         self._lock = f
+        return f
 
     def _read_journal(self) -> None:
+        assert self.out is not None  # (a store with a directory)
         path = self.out / self.JOURNAL
         if not path.exists():
             return
@@ -272,6 +275,7 @@ class ResultStore:
                 self.out / self.ROWS_DIR / f"{i:0{width}d}.json",
                 json.dumps(doc, indent=1, allow_nan=False) + "\n",
             )
+            assert self._journal is not None  # opened with the directory
             self._journal.write(json.dumps(row, allow_nan=False) + "\n")
             self._journal.flush()
             hold(self.HOLD)
@@ -314,6 +318,7 @@ class ResultStore:
     def write_marker(self) -> None:
         from foundation import MARKER, tree_listing
 
+        assert self.out is not None  # (a store with a directory)
         files = [
             e
             for e in tree_listing(self.out)
@@ -340,6 +345,7 @@ class ResultStore:
             self._journal.close()
             self._journal = None
         if self._lock is not None:
+            assert self.out is not None  # the lock is a file in the directory
             with contextlib.suppress(OSError):
                 os.unlink(self.out / self.LOCK)  # while held: no other run holds this file
             self._lock.close()

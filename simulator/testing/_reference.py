@@ -196,7 +196,8 @@ class ReferenceRun:
 
     @property
     def final(self) -> tuple[float, float, float]:
-        return tuple(float(v) for v in self.path[-1])
+        x, y, t = (float(v) for v in self.path[-1])
+        return x, y, t
 
 
 class ExactOverlap:
@@ -212,7 +213,7 @@ class ExactOverlap:
         self.pattern, self.chip = pattern, chip
         self.step_um = positive("step_um", step_um, "um")
         self.step_deg = positive("step_deg", step_deg, "degrees")
-        self.memo: dict[tuple[int, int, int], float] = {}
+        self.memo: dict[tuple[int, ...], float] = {}  # (it, iy, ix) -> um^2
 
     def pose(self, idx) -> np.ndarray:
         idx = np.asarray(idx, dtype=np.float64)
