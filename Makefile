@@ -45,12 +45,15 @@ MKDOCS = NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict
 # The suite compiles far more than it computes (small landscapes; each stepper, grid and
 # method compiled once): XLA's CPU backend at optimisation level 0 compiles the diffrax
 # steppers about a fifth faster (tests/test_montecarlo_dynamics.py: 97 -> 77 s of CPU) and
-# runs them a little slower. The bounds come from the dtype's round-off and the quantity's
+# runs them a little slower; without LLVM's expensive passes (as JAX's own
+# jax_disable_most_optimizations sets) they compile another 13-15 % faster (the batch-equals-
+# single tests of test_friction.py and test_montecarlo_dynamics.py: 46.5 -> 39.5 and 59.2 ->
+# 51.6 s of CPU). The bounds come from the dtype's round-off and the quantity's
 # scale, which holds for any instruction selection (as on another CPU). The tests marked
 # `xla_exact` compare two compiled programs (a vmapped batch and single runs) bit for bit,
 # which holds for the same optimisation only: they run in a stage of their own as XLA
 # compiles for users. `make test TEST_XLA_FLAGS=` runs every stage that way.
-TEST_XLA_FLAGS ?= --xla_backend_optimization_level=0
+TEST_XLA_FLAGS ?= --xla_backend_optimization_level=0 --xla_llvm_disable_expensive_passes=true
 PYTEST_WORKERS ?= 2
 HYPOTHESIS_PROFILE ?= ci
 FFT_BACKENDS ?= scipy opencv jax
