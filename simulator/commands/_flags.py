@@ -8,9 +8,12 @@ from __future__ import annotations
 
 import argparse
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from foundation import InputError
+
+if TYPE_CHECKING:  # the registry is read when a parser is built, not at import
+    from simulator.scene import SceneParam
 
 
 def finite_limit(flag: str, unit: str) -> Any:
@@ -79,9 +82,10 @@ def add_dynamics_args(group: Any, helps: dict[str, str]) -> None:
         _add_flag(group, params[flag], text)
 
 
-def _add_flag(group: Any, param: Any, help: str) -> None:
+def _add_flag(group: Any, param: SceneParam, help: str) -> None:
     """One scene parameter's flag (:class:`simulator.scene.SceneParam`) in ``group``."""
     flag = param.flag
+    assert flag is not None, param
     kw: dict[str, Any] = {"help": help}
     if param.metavar is not None:
         kw["metavar"] = param.metavar
