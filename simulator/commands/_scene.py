@@ -70,79 +70,58 @@ def scene_document_from_args(
     changed)."""
     doc = copy.deepcopy(scene_document(args) if doc is None else doc)
     base = Path(args.scene).parent if args.scene else Path(".")
-    if args.pattern:
-        doc["pattern"] = str(Path(args.pattern).resolve())
-    chips = {
-        "chip": str(Path(args.chip).resolve()) if args.chip else None,
-        "chip_size_um": list(parse_chip_size(args.chip_size)) if args.chip_size else None,
-        "chip_layer": getattr(args, "chip_layer", None),
-    }
-    given = {k: v for k, v in chips.items() if v is not None}
-    if given:  # a chip on the command line replaces the scene file's (two on the command line: refused downstream)
-        for k in chips:
+    values = flag_values(args)  # (table, key) -> the flag's value, for the flags given
+    chips = [(None, k) for k in CHIP_KEYS]
+    if any(place in values for place in chips):
+        # a chip on the command line replaces the scene file's (two on the command line: refused downstream)
+        for k in CHIP_KEYS:
             doc.pop(k, None)
-        doc.update(given)
-    if "pattern" not in doc:
+    if "pattern" not in doc and (None, "pattern") not in values:
         raise InputError(
             "no pattern given: pass --pattern P.png or a layout P.gds (or a TOML scene with pattern = ...)"
         )
-    if not any(k in doc for k in chips):
+    if not any(k in doc for k in CHIP_KEYS) and not any(place in values for place in chips):
         raise InputError(
             "no chip given: pass --chip C.png, --chip-size W[xH] (um) or, for a layout, --chip-layer L/D"
         )
-    flags = {
-        ("materials", "surface_tension_mN_m"): args.surface_tension,
-        ("materials", "pad_angle_deg"): args.pad_angle,
-        ("materials", "substrate_angle_deg"): args.substrate_angle,
-        ("materials", "allow_repulsive"): True if args.allow_repulsive else None,
-        ("twist", "step_deg"): args.twist_step,
-        ("effects", "twist"): False if args.no_twist else None,
-        ("effects", "meniscus"): True
-        if (getattr(args, "meniscus", False) or getattr(args, "meniscus_height", None) is not None)
-        else None,
-        ("liquid", "meniscus_height_um"): getattr(args, "meniscus_height", None),
-        ("liquid", "pinned"): True if getattr(args, "pinned", False) else None,
-        ("liquid", "dispense"): getattr(args, "dispense", None),
-        ("liquid", "dispense_at_um"): getattr(args, "dispense_at", None),
-        ("effects", "hysteresis"): True if getattr(args, "hysteresis", None) else None,
-        (None, "um_per_px"): args.um_per_px,
-        (None, "pattern_um_per_px"): getattr(args, "pattern_um_per_px", None),
-        (None, "chip_um_per_px"): getattr(args, "chip_um_per_px", None),
-        (None, "override_scale"): True if getattr(args, "override_scale", False) else None,
-        (None, "invert"): True if getattr(args, "invert", False) else None,
-        (None, "invert_chip"): True if getattr(args, "invert_chip", False) else None,
-        (None, "channel"): getattr(args, "channel", None),
-        (None, "resolution_um"): args.resolution,
-        (None, "window_um"): args.window,
-        (None, "dtype"): args.dtype,
-        (None, "memory_budget_mb"): args.memory_budget,
-        (None, "max_image_mpx"): getattr(args, "max_image_mpx", None),
-        (None, "layer"): getattr(args, "layer", None),
-        (None, "cell"): getattr(args, "cell", None),
-        (None, "dxf_units"): getattr(args, "dxf_units", None),
-        (None, "max_polygons"): getattr(args, "max_polygons", None),
-        ("liquid", "volume_nl"): getattr(args, "volume", None),
-        ("topography", "edge_angle_deg"): getattr(args, "edge_angle", None),
-        ("topography", "pad_advancing_deg"): getattr(args, "pad_advancing", None),
-        ("topography", "chip_angle_deg"): getattr(args, "chip_angle", None),
-        # Liquid and chip body: only commands with dynamics define these flags.
-        ("liquid", "viscosity_mPa_s"): getattr(args, "viscosity", None),
-        (None, "chip_thickness_um"): getattr(args, "chip_thickness", None),
-        (None, "chip_density_kg_m3"): getattr(args, "chip_density", None),
-        (None, "damping_calibration"): getattr(args, "damping_calibration", None),
-        (None, "line_friction_Pa_s"): getattr(args, "line_friction", None),
-    }
-    if getattr(args, "hysteresis", None):
-        from simulator.physics import parse_window
-
-        r, a = parse_window(args.hysteresis)
-        flags[("materials", "pad_receding_deg")], flags[("materials", "pad_advancing_deg")] = r, a
-    for (table, key), value in flags.items():
-        if value is not None:
-            (doc.setdefault(table, {}) if table else doc)[key] = value
-    if getattr(args, "accuracy", None):
-        doc["accuracy"] = args.accuracy
+    for (table, key), value in values.items():
+        (doc.setdefault(table, {}) if table else doc)[key] = value
     return doc, base
+
+
+#: The top-level keys that give the chip: one of them on the command line replaces the file's.
+CHIP_KEYS = ("chip", "chip_size_um", "chip_layer")
+
+
+def flag_values(args: argparse.Namespace) -> dict[tuple[str | None, str], Any]:
+    """The scene document's values the flags give, by (table, key) (None: the top level):
+    each scene parameter of :data:`simulator.scene.SCENE_PARAMS` whose flag is on ``args``
+    and given (a command without the dynamics leaves their flags off its namespace)."""
+    from simulator.scene import SCENE_PARAMS
+
+    out: dict[tuple[str | None, str], Any] = {}
+    for p in SCENE_PARAMS:
+        given = getattr(args, p.dest, None) if p.flag else None
+        if p.merge == "meniscus" and getattr(args, "meniscus_height", None) is not None:
+            given = True  # --meniscus-height implies --meniscus
+        if given is None or given is False:  # not given (a switch left off is False)
+            continue
+        if given == "" and p.merge in ("path", "chip_size", "hysteresis"):
+            continue  # an empty path, size or window reads as not given
+        if p.merge == "hysteresis":  # R:A -> the pads' receding and advancing angles
+            from simulator.physics import parse_window
+
+            r, a = parse_window(given)
+            out[("materials", "pad_receding_deg")], out[("materials", "pad_advancing_deg")] = r, a
+            given = True
+        elif p.merge == "path":
+            given = str(Path(given).resolve())
+        elif p.merge == "chip_size":
+            given = list(parse_chip_size(given))
+        elif p.flag_type == "switch":
+            given = p.switch_value
+        out[(p.table, p.key)] = given
+    return out
 
 
 #: Python keyword spellings in the scene's messages: the command-line flag and the scene file's key.

@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from simulator.commands._flags import add_scene_args, finite_limit
+from simulator.commands._flags import add_dynamics_args, add_scene_args, finite_limit
 from simulator.physics import LINE_FRICTION_PA_S
 
 
@@ -80,21 +80,17 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="width of the log-time term (default 0.1: a 10 %% scatter of the median time)",
     )
     d = p.add_argument_group("dynamics")
-    d.add_argument("--viscosity", type=float, help="liquid viscosity in mPa s (default 1.0)")
-    d.add_argument("--chip-thickness", type=float, help="chip thickness in um (default 50)")
-    d.add_argument("--chip-density", type=float, help="chip density in kg/m^3 (default 1200)")
-    d.add_argument(
-        "--damping-calibration",
-        type=float,
-        help="override the damping: the Couette drag times this factor (default: none, the "
-        "damping's documented terms)",
-    )
-    d.add_argument(
-        "--line-friction",
-        type=float,
-        metavar="PA_S",
-        help=f"molecular-kinetic contact-line friction in Pa s (default {LINE_FRICTION_PA_S:g}, "
-        "fitted to the source's video; docs/physics.md §4)",
+    add_dynamics_args(
+        d,
+        {
+            "--viscosity": "liquid viscosity in mPa s (default 1.0)",
+            "--chip-thickness": "chip thickness in um (default 50)",
+            "--chip-density": "chip density in kg/m^3 (default 1200)",
+            "--damping-calibration": "override the damping: the Couette drag times this factor "
+            "(default: none, the damping's documented terms)",
+            "--line-friction": f"molecular-kinetic contact-line friction in Pa s (default "
+            f"{LINE_FRICTION_PA_S:g}, fitted to the source's video; docs/physics.md §4)",
+        },
     )
     p.add_argument(
         "--out",

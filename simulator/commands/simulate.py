@@ -8,7 +8,7 @@ import contextlib
 import numpy as np
 
 from foundation import InputError, atomic_output, compiling
-from simulator.commands._flags import add_scene_args, parse_pose
+from simulator.commands._flags import add_dynamics_args, add_scene_args, parse_pose
 from simulator.commands._liquid import liquid_checks
 from simulator.commands._outputs import add_force_arg, check_outputs, write_json
 from simulator.commands._scene import accuracy_check, scene_document, scene_from_args
@@ -52,24 +52,20 @@ def register(sub: argparse._SubParsersAction) -> None:
         "The JSON's cost.engine says which ran",
     )
     d = p.add_argument_group("liquid and chip body (dynamic methods)")
-    d.add_argument("--viscosity", type=float, help="liquid viscosity in mPa s (default 1.0, water)")
-    d.add_argument("--chip-thickness", type=float, help="chip thickness in um (default 50)")
-    d.add_argument("--chip-density", type=float, help="chip density in kg/m^3 (default 1200, SU-8)")
-    d.add_argument(
-        "--damping-calibration",
-        type=float,
-        help="override the damping: the film's Couette drag times this factor (600 was the fit "
-        "to the source's video before the damping's terms; default: none, the sum of the film's "
-        "Couette drag with its unsteady correction, the contact lines' wedges and their "
-        "molecular-kinetic friction, docs/physics.md section 4)",
-    )
-    d.add_argument(
-        "--line-friction",
-        type=float,
-        metavar="PA_S",
-        help=f"molecular-kinetic contact-line friction coefficient in Pa s (default "
-        f"{LINE_FRICTION_PA_S:g}, fitted to the source's video: 60 times the top of water "
-        f"on hydrophilic oxide's 0.01-0.1; docs/physics.md §4)",
+    add_dynamics_args(
+        d,
+        {
+            "--viscosity": "liquid viscosity in mPa s (default 1.0, water)",
+            "--chip-thickness": "chip thickness in um (default 50)",
+            "--chip-density": "chip density in kg/m^3 (default 1200, SU-8)",
+            "--damping-calibration": "override the damping: the film's Couette drag times this "
+            "factor (600 was the fit to the source's video before the damping's terms; default: "
+            "none, the sum of the film's Couette drag with its unsteady correction, the contact "
+            "lines' wedges and their molecular-kinetic friction, docs/physics.md section 4)",
+            "--line-friction": f"molecular-kinetic contact-line friction coefficient in Pa s "
+            f"(default {LINE_FRICTION_PA_S:g}, fitted to the source's video: 60 times the top of "
+            f"water on hydrophilic oxide's 0.01-0.1; docs/physics.md §4)",
+        },
     )
     o = p.add_argument_group("outputs")
     o.add_argument("--json", help="write the trajectory as JSON")

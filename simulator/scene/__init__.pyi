@@ -11,37 +11,42 @@ from ._accuracy import (
     smallest_feature_um as smallest_feature_um,
 )
 from ._build import (
-    LAYOUT_KEYS as LAYOUT_KEYS,
     resampled_extent as resampled_extent,
+)
+from ._params import (
+    FLAG_GROUPS as FLAG_GROUPS,
+    LAYOUT_KEYS as LAYOUT_KEYS,
+    SCENE_PARAMS as SCENE_PARAMS,
+    SceneParam as SceneParam,
+    sweep_places as sweep_places,
 )
 from ._parts import (
     Effects as Effects,
     TwistGrid as TwistGrid,
 )
 from ._scene import (
-    DTYPES as DTYPES,
     Scene as Scene,
     chip_radius_of_gyration_px as chip_radius_of_gyration_px,
 )
 from ._schema import (
     SCHEMA as SCHEMA,
-    number as number,
     read_scene_file as read_scene_file,
     validate_scene as validate_scene,
 )
 from ._schema_kinds import (
     ACCURACY_PRESETS as ACCURACY_PRESETS,
+    DTYPES as DTYPES,
     DXF_UNITS as DXF_UNITS,
     MAX_ARRAY_ITEMS as MAX_ARRAY_ITEMS,
     MAX_DEPTH as MAX_DEPTH,
     MAX_SCENE_BYTES as MAX_SCENE_BYTES,
-    MONTECARLO_METHODS as MONTECARLO_METHODS,
     Bool as Bool,
     Bounds as Bounds,
     FilePath as FilePath,
     Number as Number,
     Pose as Pose,
     Size as Size,
+    number as number,
 )
 from ._twist_axis import (
     MAX_TWISTS as MAX_TWISTS,

@@ -6,7 +6,8 @@ simulation resolution, every raster priced against the budget),
 :meth:`~SceneBuilders.from_toml` and :meth:`~SceneBuilders.from_dict` (a scene file, keys
 in the :mod:`simulator.scene` docstring, with its accuracy preset), as the classmethods of
 :class:`SceneBuilders`, which :class:`~simulator.scene.Scene` inherits; the scene keys of
-layout patterns and images (:data:`LAYOUT_KEYS`, :data:`IMAGE_KEYS`); and
+layout patterns and images (:data:`LAYOUT_KEYS`, :data:`IMAGE_KEYS`, declared with every
+scene key in :mod:`simulator.scene._params`); and
 :func:`resample_to_scale`, a mask at another pixel size. Every name is importable from
 :mod:`simulator.scene` as before.
 """
@@ -25,20 +26,9 @@ from foundation import InputError, check_budget_mb, positive, price_raster, requ
 from patterns.geometry import Mask, footprint_um, mask_from_geometry
 from simulator.liquid import Topography, check_surface_tension_mN_m
 from simulator.physics import Liquid, Materials
+from simulator.scene._params import IMAGE_KEYS, LAYOUT_KEYS, SCENE_FIELD_KEYS, known_keys
 from simulator.scene._parts import Effects, TwistGrid
 from simulator.scene._plausible import check_scales
-
-#: Scene keys that choose what to read from a layout pattern (:class:`patterns.layout.LayoutSelection`).
-LAYOUT_KEYS = ("layer", "cell", "chip_layer", "dxf_units", "max_polygons")
-#: Scene keys on how the pattern and chip images are read (:meth:`Scene.from_inputs`).
-IMAGE_KEYS = (
-    "pattern_um_per_px",
-    "chip_um_per_px",
-    "override_scale",
-    "invert",
-    "invert_chip",
-    "channel",
-)
 
 
 class SceneBuilders:
@@ -225,28 +215,7 @@ class SceneBuilders:
     def from_dict(
         cls, doc: dict, base: Path = Path("."), check_scale: bool = True, **overrides: Any
     ) -> Self:
-        known = {
-            "pattern",
-            "chip",
-            "chip_size_um",
-            "um_per_px",
-            "resolution_um",
-            "dtype",
-            "window_um",
-            "memory_budget_mb",
-            "materials",
-            "twist",
-            "effects",
-            "liquid",
-            "chip_thickness_um",
-            "chip_density_kg_m3",
-            "damping_calibration",
-            "line_friction_Pa_s",
-            "max_image_mpx",
-            "topography",
-            *LAYOUT_KEYS,
-            *IMAGE_KEYS,
-        }
+        known = known_keys() - {"accuracy"}  # the preset is allowed, not listed (below)
         unknown = set(doc) - known - {"simulate", "montecarlo", "accuracy"}
         require(not unknown, f"unknown scene keys {sorted(unknown)}; allowed: {sorted(known)}")
         require("pattern" in doc, "scene needs a 'pattern' (PNG or layout path)")
@@ -308,15 +277,7 @@ class SceneBuilders:
                 "([topography] edge_angle_deg; 90 = vertical wall) with --pad-advancing / --chip-angle",
             )
             kw["topography"] = Topography(**doc["topography"])
-        for key in (
-            "dtype",
-            "window_um",
-            "memory_budget_mb",
-            "chip_thickness_um",
-            "chip_density_kg_m3",
-            "damping_calibration",
-            "line_friction_Pa_s",
-        ):
+        for key in SCENE_FIELD_KEYS:
             if key in doc:
                 kw[key] = doc[key]
         kw.update({k: v for k, v in overrides.items() if v is not None})  # check_scale among them

@@ -68,9 +68,8 @@ from simulator.liquid import Topography
 from simulator.physics import LINE_FRICTION_PA_S, Liquid, Materials
 from simulator.scene._build import SceneBuilders, resample_to_scale
 from simulator.scene._parts import Effects, TwistGrid
+from simulator.scene._schema_kinds import DTYPES
 from simulator.scene._twist_axis import TwistAxis
-
-DTYPES = ("float32", "float64")
 
 
 def default_memory_budget_mb() -> float:

@@ -17,16 +17,19 @@ thousands deep, a dotted key with thousands of parts, which parses in quadratic 
 and data nested deeper than :data:`MAX_DEPTH` or with more than
 :data:`MAX_ARRAY_ITEMS` elements in one array become one-line errors too.
 
-Adding a key is one line in :data:`SCHEMA` (e.g. ``"meniscus": BOOL`` under
-``"effects"``); adding a section is one more entry. The ranges are meant to be no
+The scene's own keys (every section but ``[simulate]`` and ``[montecarlo]``) are its
+parameters' (:data:`simulator.scene._params.SCENE_PARAMS`): adding one is one record there,
+which gives it its flag too. Adding a key of ``[simulate]`` or ``[montecarlo]`` is one line
+in :data:`SCHEMA`; adding a section is one more entry. The ranges are meant to be no
 stricter than what the code downstream accepts (the dataclass validators and the
 command parsers), but finite: they stop nonsense early, with the key's name, and the
 downstream checks still apply. Checks across keys (``min_deg`` <= ``max_deg``, one of
 ``chip`` / ``chip_size_um``, repulsive pads, ...) stay downstream.
 
-The choices are copies of :data:`simulator.motion.METHODS` and friends, kept here
-so this module imports nothing heavy (and no import cycle with :mod:`simulator.scene`);
-``tests/test_schema.py`` checks that they agree.
+The methods and the limits of steps and chunks are :mod:`simulator.core`'s and the dispense
+protocols :mod:`simulator.physics`', imported, not copied; the Monte Carlo distributions and
+the most starts stay copies of :mod:`simulator.batch`'s (a package above this one), which
+``tests/test_schema.py`` checks agree.
 """
 
 from __future__ import annotations
@@ -39,129 +42,53 @@ import tomllib
 from typing import Any
 
 from foundation import InputError
-from patterns import CHANNELS, check_nesting, show_key, show_value
+from patterns import check_nesting, show_key, show_value
 
 __all__ = ["SCHEMA", "read_scene_file", "validate_scene"]
 
+from simulator.core import (
+    BATCH_METHODS as MONTECARLO_METHODS,
+    MAX_CHUNK as MAX_CHUNK,
+    MAX_STEPS_LIMIT as MAX_STEPS,
+    METHODS as SIMULATE_METHODS,
+)
+from simulator.physics import DISPENSE_CHOICES as DISPENSE  # noqa: F401 (as the tests read it)
+from simulator.scene._params import scene_tables
 from simulator.scene._schema_kinds import (
-    ACCURACY_PRESETS,
-    DISPENSE,
+    ACCURACY_PRESETS as ACCURACY_PRESETS,  # the choices the tests compare with the code's
     DISTRIBUTIONS,
-    DTYPES,
-    DXF_UNITS,
+    DTYPES as DTYPES,
+    DXF_UNITS as DXF_UNITS,
     MAX_ARRAY_ITEMS,
-    MAX_CHUNK,
     MAX_DEPTH,
     MAX_SCENE_BYTES,
     MAX_SEED,
     MAX_STARTS,
-    MAX_STEPS,
     MAX_TWIST_DEG,
     MAX_UM,
-    MONTECARLO_METHODS,
-    SIMULATE_METHODS,
-    Bool,
-    Bounds,
+    POSITION_UM,
+    TWIST_DEG,
+    Bool as Bool,  # the kinds, on this module as the tests read them
+    Bounds as Bounds,
     Choice,
-    FilePath,
-    Integer,
+    FilePath as FilePath,
+    Integer as Integer,
     Kind,
-    Number,
+    Number as Number,
     Pose,
-    Size,
+    Size as Size,
     StartRanges,
-    Text,
+    Text as Text,
+    integer,
+    number,
 )
 
-
-# ----------------------------------------------------------------------- the table
-def number(interval: str, unit: str = "") -> Number:
-    """``number("(0, 1e4]", "mN/m")``: a finite number in that interval."""
-    return Number(Bounds.parse(interval), unit)
-
-
-def integer(interval: str, unit: str = "", whole_floats: bool = False) -> Integer:
-    return Integer(Bounds.parse(interval), unit, whole_floats)
-
-
-BOOL = Bool()
-LENGTH_UM = number(f"(0, {MAX_UM:g}]", "um")
-POSITION_UM = number(f"[-{MAX_UM:g}, {MAX_UM:g}]", "um")
-TWIST_DEG = number(f"[-{MAX_TWIST_DEG}, {MAX_TWIST_DEG}]", "deg")
-CONTACT_ANGLE_DEG = number("[0, 180]", "deg")
-SURFACE_TENSION_MN_M = number("(0, 1e4]", "mN/m")  # water 72.8, mercury 485
 MAX_STEPS_KIND = integer(f"[1, {MAX_STEPS}]")
 START_POSE = Pose((("x", POSITION_UM), ("y", POSITION_UM), ("twist", TWIST_DEG)))
 
 #: Every key of a scene file, per section (None = top level): what its value must be.
 SCHEMA: dict[str | None, dict[str, Kind]] = {
-    None: {
-        "pattern": FilePath("the pattern image (PNG) or layout (.gds, .oas, .dxf)"),
-        "chip": FilePath("the chip footprint image (PNG) or layout"),
-        "layer": Text(
-            200
-        ),  # layout pattern layer "L/D" (DXF: the layer name); checked by patterns.layout
-        "cell": Text(200),
-        "chip_layer": Text(200),
-        "dxf_units": Choice(DXF_UNITS),
-        "max_polygons": integer(
-            "[1, 1e9]", "polygons"
-        ),  # a layout cell's flattened polygons (patterns.layout)
-        "chip_size_um": Size(LENGTH_UM),
-        "um_per_px": number(f"(0, {MAX_UM:g}]", "um per px"),  # as write_mask's pHYs range
-        "pattern_um_per_px": number(f"(0, {MAX_UM:g}]", "um per px"),
-        "chip_um_per_px": number(f"(0, {MAX_UM:g}]", "um per px"),
-        "override_scale": BOOL,
-        "invert": BOOL,
-        "invert_chip": BOOL,
-        "channel": Choice(CHANNELS),
-        "resolution_um": number(f"(0, {MAX_UM:g}]", "um per px"),
-        "dtype": Choice(DTYPES),
-        "window_um": LENGTH_UM,
-        "memory_budget_mb": number(
-            "(0, 1e9]", "MB"
-        ),  # downstream also caps it at the machine's memory
-        "max_image_mpx": number("(0, 1e6]", "megapixels"),
-        "accuracy": Choice(ACCURACY_PRESETS),
-        "chip_thickness_um": LENGTH_UM,
-        "chip_density_kg_m3": number("(0, 1e6]", "kg/m^3"),  # osmium 22590
-        "damping_calibration": number("(0, 1e9]"),  # default: none, the damping's terms
-        "line_friction_Pa_s": number("(0, 100]", "Pa s"),  # default 6 (LINE_FRICTION_PA_S)
-    },
-    "materials": {
-        "surface_tension_mN_m": SURFACE_TENSION_MN_M,
-        "pad_angle_deg": CONTACT_ANGLE_DEG,
-        "substrate_angle_deg": CONTACT_ANGLE_DEG,
-        "allow_repulsive": BOOL,
-        "pad_receding_deg": CONTACT_ANGLE_DEG,
-        "pad_advancing_deg": CONTACT_ANGLE_DEG,
-    },
-    "twist": {
-        "step_deg": number("(0, 90]", "deg"),
-        "min_deg": TWIST_DEG,
-        "max_deg": TWIST_DEG,
-    },
-    "effects": {
-        "twist": BOOL,
-        "meniscus": BOOL,
-        "hysteresis": BOOL,
-    },
-    "liquid": {
-        "name": Text(200),
-        "surface_tension_mN_m": SURFACE_TENSION_MN_M,
-        "viscosity_mPa_s": number("(0, 1e9]", "mPa s"),  # water 1, glycerol 1400
-        "density_kg_m3": number("(0, 1e6]", "kg/m^3"),
-        "volume_nl": number("(0, 1e9]", "nl"),  # 1e9 nl = 1 litre
-        "meniscus_height_um": LENGTH_UM,
-        "pinned": BOOL,
-        "dispense": Choice(DISPENSE),
-        "dispense_at_um": Pose((("x", POSITION_UM), ("y", POSITION_UM)), text_ok=True),
-    },
-    "topography": {  # a protruding pad (simulator.liquid.Topography): the overflow check
-        "edge_angle_deg": number("(0, 180]", "deg"),  # a solid wedge: 0 is no solid
-        "pad_advancing_deg": CONTACT_ANGLE_DEG,
-        "chip_angle_deg": CONTACT_ANGLE_DEG,
-    },
+    **scene_tables(),  # the scene's keys, one declaration each (simulator.scene._params)
     "simulate": {
         "start": START_POSE,
         "method": Choice(SIMULATE_METHODS),

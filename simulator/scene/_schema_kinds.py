@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from patterns import show_value
+from patterns.layout import DXF_UNITS as LAYOUT_DXF_UNITS
 
 # ----------------------------------------------------------------------- limits
 #: Largest scene file read (bytes); real scenes are under 2 KB.
@@ -27,23 +28,26 @@ MAX_PATH_CHARS = 4096
 MAX_UM = 1e6
 #: Largest |twist| (degrees), as :class:`simulator.scene.TwistGrid` and the start checks.
 MAX_TWIST_DEG = 3600
-#: Largest max_steps (:data:`simulator.motion.MAX_STEPS_LIMIT`: int32 step counters).
-MAX_STEPS = 2**31 - 2
 #: Most Monte Carlo starts (:data:`simulator.batch.MAX_STARTS`).
 MAX_STARTS = 10**8
-#: Largest Monte Carlo chunk (:data:`simulator.batch.MAX_CHUNK`).
-MAX_CHUNK = 2**20
 #: Largest seed (numpy's default_rng takes any int >= 0; 64 bits is plenty).
 MAX_SEED = 2**63 - 1
 
-# Copies of the choices downstream (tests/test_schema.py checks they agree).
-DTYPES = ("float32", "float64")  # simulator.scene.DTYPES
-ACCURACY_PRESETS = ("fast", "balanced", "precise")  # simulator.scene.PRESETS
-SIMULATE_METHODS = ("greedy", "gradient", "overdamped", "inertial")  # simulator.motion.METHODS
-MONTECARLO_METHODS = ("greedy", "gradient", "overdamped", "inertial")  # simulator.batch.METHODS
-DISTRIBUTIONS = ("normal", "uniform")  # simulator.batch.DISTRIBUTIONS
-DISPENSE = ("pattern", "chip", "none")  # simulator.physics.DISPENSE_CHOICES
-DXF_UNITS = ("um", "mm", "nm")  # patterns.layout.DXF_UNITS
+# ----------------------------------------------------------------------- choices
+#: The landscape's precisions (:attr:`simulator.scene.Scene.dtype`).
+DTYPES = ("float32", "float64")
+#: The accuracy presets, by name (the keys of :data:`simulator.scene.PRESETS`, which needs
+#: numpy and shapely; tests/test_schema.py checks they agree).
+ACCURACY_PRESETS = ("fast", "balanced", "precise")
+#: A DXF file's units, as ``--dxf-units`` takes them (the keys of :data:`patterns.layout.DXF_UNITS`).
+DXF_UNITS = tuple(LAYOUT_DXF_UNITS)
+#: The Monte Carlo placements' distributions (:data:`simulator.batch.DISTRIBUTIONS`: the batch
+#: package sits above the scene's; tests/test_schema.py checks they agree).
+DISTRIBUTIONS = ("normal", "uniform")
+# The trajectory and batch methods, the step and chunk limits are simulator.core's
+# (METHODS, BATCH_METHODS, MAX_STEPS_LIMIT, MAX_CHUNK) and the dispense protocols
+# simulator.physics' (DISPENSE_CHOICES): the schema and the scene's parameters import them
+# from there, no copy is kept here.
 
 
 # ----------------------------------------------------------------------- helpers
@@ -361,3 +365,22 @@ class StartRanges(Kind):
             if problem:
                 return problem
         return None
+
+
+# ----------------------------------------------------------------------- shared kinds
+def number(interval: str, unit: str = "") -> Number:
+    """``number("(0, 1e4]", "mN/m")``: a finite number in that interval."""
+    return Number(Bounds.parse(interval), unit)
+
+
+def integer(interval: str, unit: str = "", whole_floats: bool = False) -> Integer:
+    """``integer("[1, 1e9]")``: a whole number in that interval."""
+    return Integer(Bounds.parse(interval), unit, whole_floats)
+
+
+BOOL = Bool()
+LENGTH_UM = number(f"(0, {MAX_UM:g}]", "um")
+POSITION_UM = number(f"[-{MAX_UM:g}, {MAX_UM:g}]", "um")
+TWIST_DEG = number(f"[-{MAX_TWIST_DEG}, {MAX_TWIST_DEG}]", "deg")
+CONTACT_ANGLE_DEG = number("[0, 180]", "deg")
+SURFACE_TENSION_MN_M = number("(0, 1e4]", "mN/m")  # water 72.8, mercury 485

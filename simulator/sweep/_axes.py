@@ -64,39 +64,13 @@ def _path_check(v: Any) -> str | None:
 
 
 def _scene_axes() -> dict[str, AxisKind]:
-    from simulator.scene import MONTECARLO_METHODS as METHODS
+    """The axes every sweep has, by name in :data:`AXES`' order: the scene's sweepable
+    parameters (:data:`simulator.scene.SCENE_PARAMS`: their ranges and helps) and the
+    assessment's placement noise and stepper."""
+    from simulator.core import BATCH_METHODS as METHODS
+    from simulator.scene import SCENE_PARAMS, Number, Size
 
-    return {
-        "pattern": AxisKind(
-            "pattern",
-            "path",
-            "pattern files (PNG or layout), relative to the sweep file",
-            _path_check,
-        ),
-        "chip_size_um": AxisKind(
-            "chip_size_um", "number", "side of a square chip (um)", _interval("(0, 1e6]", "um")
-        ),
-        "volume_nl": AxisKind(
-            "volume_nl", "number", "droplet volume (nl)", _interval("(0, 1e9]", "nl")
-        ),
-        "pad_angle_deg": AxisKind(
-            "pad_angle_deg",
-            "number",
-            "contact angle on the pads (deg)",
-            _interval("[0, 180]", "deg"),
-        ),
-        "substrate_angle_deg": AxisKind(
-            "substrate_angle_deg",
-            "number",
-            "contact angle on the substrate (deg)",
-            _interval("[0, 180]", "deg"),
-        ),
-        "surface_tension_mN_m": AxisKind(
-            "surface_tension_mN_m",
-            "number",
-            "surface tension (mN/m)",
-            _interval("(0, 1e4]", "mN/m"),
-        ),
+    kinds = {
         "placement_sigma_um": AxisKind(
             "placement_sigma_um",
             "number",
@@ -116,16 +90,16 @@ def _scene_axes() -> dict[str, AxisKind]:
             _choice_check(METHODS),
             METHODS,
         ),
-        "resolution_um": AxisKind(
-            "resolution_um",
-            "number",
-            "pixel size simulated at (um)",
-            _interval("(0, 1e6]", "um per px"),
-        ),
-        "twist_step_deg": AxisKind(
-            "twist_step_deg", "number", "twist grid step (deg)", _interval("(0, 90]", "deg")
-        ),
     }
+    for p in SCENE_PARAMS:
+        if not p.sweepable:
+            continue
+        kind = p.kind.side if isinstance(p.kind, Size) else p.kind  # a chip size: a square's side
+        if isinstance(kind, Number):
+            kinds[p.axis] = AxisKind(p.axis, "number", p.sweep, kind.check)
+        else:  # the pattern: a file, relative to the sweep file
+            kinds[p.axis] = AxisKind(p.axis, "path", p.sweep, _path_check)
+    return {name: kinds[name] for name in AXES}
 
 
 #: Axes that every sweep has (design parameters come on top, see :func:`axis_kinds`).

@@ -80,7 +80,7 @@ def point_geometry(task: dict):
 def point_scene(task: dict):
     """The scene of one point, built as ``selfalign evaluate`` builds it; also whether to coarsen automatically."""
     from patterns.geometry import mask_from_geometry
-    from simulator.scene import Scene
+    from simulator.scene import Scene, sweep_places
 
     doc = copy.deepcopy(task["scene"])
     v = task["values"]
@@ -88,19 +88,10 @@ def point_scene(task: dict):
     if "chip_size_um" in v:
         for k in ("chip", "chip_layer"):
             doc.pop(k, None)
-        doc["chip_size_um"] = v["chip_size_um"]
-    for key, table, name in (
-        ("volume_nl", "liquid", "volume_nl"),
-        ("pad_angle_deg", "materials", "pad_angle_deg"),
-        ("substrate_angle_deg", "materials", "substrate_angle_deg"),
-        ("surface_tension_mN_m", "materials", "surface_tension_mN_m"),
-        ("twist_step_deg", "twist", "step_deg"),
-    ):
-        if key in v:
-            doc.setdefault(table, {})[name] = v[key]
-    if "resolution_um" in v:
-        doc["resolution_um"] = v["resolution_um"]
-    if "pattern" in v:
+    for axis, (table, key) in sweep_places().items():  # the scene's axes, where its file keeps them
+        if axis in v:
+            (doc.setdefault(table, {}) if table else doc)[key] = v[axis]
+    if "pattern" in v:  # relative to the sweep file
         doc["pattern"] = str((Path(task["base"]) / v["pattern"]).resolve())
     if design is not None:
         geometry, record = point_geometry(task)

@@ -404,13 +404,16 @@ class SearchSpec:
 
     def baseline_settings(self) -> dict:
         """The baseline's value of each searched axis where the file gives one (by axis name)."""
+        from simulator.scene import sweep_places
+
         design, scene = self.sweep.design, self.sweep.scene
+        places = sweep_places()  # where the scene file keeps a scene axis's value
         out = {}
         for a in self.searched:
             if design is not None and a.name in design["params"]:
                 out[a.name] = design["params"][a.name]
-            elif a.name in _SCENE_KEYS:
-                table, key = _SCENE_KEYS[a.name]
+            elif a.name in places:
+                table, key = places[a.name]
                 v = (scene.get(table) or {}).get(key) if table else scene.get(key)
                 if isinstance(v, int | float) and not isinstance(v, bool):
                     out[a.name] = v
@@ -429,18 +432,6 @@ class SearchSpec:
             "searched": [a.record() | {"column": a.column} for a in self.searched],
             "sweep": self.sweep.describe() | {"hash": self.sweep.digest},
         }
-
-
-#: Where the scene keeps the value of a scene axis: (table, key); "" for the top level.
-_SCENE_KEYS = {
-    "volume_nl": ("liquid", "volume_nl"),
-    "pad_angle_deg": ("materials", "pad_angle_deg"),
-    "substrate_angle_deg": ("materials", "substrate_angle_deg"),
-    "surface_tension_mN_m": ("materials", "surface_tension_mN_m"),
-    "twist_step_deg": ("twist", "step_deg"),
-    "resolution_um": ("", "resolution_um"),
-    "chip_size_um": ("", "chip_size_um"),
-}
 
 
 def _design_keys(design: dict) -> tuple[str, ...]:
