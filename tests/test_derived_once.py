@@ -7,7 +7,9 @@ and the scene file (read once per command)."""
 from __future__ import annotations
 
 import math
+import re
 import tomllib
+from pathlib import Path
 
 import pytest
 
@@ -265,3 +267,32 @@ def test_the_smallest_feature_of_a_pattern_image_is_measured_once(monkeypatch):
     first = smallest_feature_um(mask)
     assert smallest_feature_um(mask) == first and len(calls) == 1
     assert first == pytest.approx(50, abs=2 * mask.um_per_px)  # the gap
+
+
+# ---------------------------------------------------------------- the method names
+SIMULATOR = Path(__file__).resolve().parents[1] / "simulator"
+
+
+def _sources_matching(pattern: str) -> set[str]:
+    """The modules under simulator/ (paths relative to it) whose text matches ``pattern``."""
+    rx = re.compile(pattern)
+    return {
+        p.relative_to(SIMULATOR).as_posix()
+        for p in SIMULATOR.rglob("*.py")
+        if rx.search(p.read_text(encoding="utf-8"))
+    }
+
+
+def test_the_method_names_are_written_once():
+    """The dynamic methods are simulator.core.DYNAMIC_METHODS and the methods METHODS,
+    written out in core alone (the scene schema's value kinds still list the methods: its
+    own registry, which may take them from core)."""
+    from simulator.core import DYNAMIC_METHODS, METHODS
+
+    assert DYNAMIC_METHODS == METHODS[-2:] == ("overdamped", "inertial")
+    assert _sources_matching(r'\(\s*"overdamped",\s*"inertial",?\s*\)') == {"core/_defaults.py"}
+    assert _sources_matching(r'"greedy",\s*"gradient",\s*"overdamped",\s*"inertial"') <= {
+        "core/_defaults.py",
+        "scene/_schema_kinds.py",
+    }
+    assert _sources_matching(r"\bDYNAMIC\s*=|DYNAMIC_METHODS as ") == set()

@@ -110,12 +110,12 @@ def run(args: argparse.Namespace) -> int:
     scene = scene_from_args(args, doc=doc, warn=False)
     price_run(scene, method, max_steps)
     require_start_in_window(scene, start)
-    if args.engine == "path" and method in ("overdamped", "inertial"):
+    if args.engine == "path" and method in DYNAMIC_METHODS:
         raise InputError(
             f"--engine path runs greedy and gradient; {method} builds the whole landscape (leave --engine out)"
         )
     engine = args.engine
-    if method not in ("overdamped", "inertial"):
+    if method not in DYNAMIC_METHODS:
         from simulator.motion import choose_engine
 
         engine = choose_engine(scene, start, method, args.engine, 3, 48)
@@ -127,7 +127,7 @@ def run(args: argparse.Namespace) -> int:
         from simulator.motion import require_footprint_fits
 
         require_footprint_fits(scene, engine)
-    if method in ("overdamped", "inertial"):
+    if method in DYNAMIC_METHODS:
         from simulator.motion import DynamicsParams  # JAX: once the run is priced
 
         DynamicsParams.from_scene(scene)  # a liquid the model cannot take fails before compiling

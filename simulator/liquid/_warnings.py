@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from foundation import InputError
-from simulator.core import UM3_PER_NL
+from simulator.core import DYNAMIC_METHODS, UM3_PER_NL
 from simulator.liquid._calculators import THIN_FILM_FRACTION, height_report, overflow_conditions
 from simulator.physics import meniscus_height_um
 
@@ -121,7 +121,7 @@ def volume_note(scene, method: str) -> str | None:
             f"--volume {scene.liquid.volume_nl:g} nl is not used by the {method} method: --meniscus-height gives the "
             "liquid's height (the meniscus's and the dynamics' damping's); it is used here only for the liquid checks"
         )
-    if method in ("overdamped", "inertial") or getattr(scene.effects, "meniscus", False):
+    if method in DYNAMIC_METHODS or getattr(scene.effects, "meniscus", False):
         return None
     return (
         f"--volume {scene.liquid.volume_nl:g} nl is not used by the {method} method (only overdamped and inertial "

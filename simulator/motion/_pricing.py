@@ -44,9 +44,7 @@ def price_run(scene: Scene, method: str, max_steps: int) -> None:
         raise InputError(
             f"max steps must be at most {MAX_STEPS_LIMIT:,} (the step counter is 32-bit), got {max_steps:,}"
         )
-    per_step = PATH_BYTES_PER_STEP[
-        "dynamics" if method in ("overdamped", "inertial") else "stepping"
-    ]
+    per_step = PATH_BYTES_PER_STEP["dynamics" if method in DYNAMIC_METHODS else "stepping"]
     require_fits(
         f"the path of up to {max_steps:,} steps",
         float(max_steps + 1) * per_step,

@@ -34,8 +34,6 @@ from simulator.motion._stepping import (
     on_plateau,
 )
 
-DYNAMIC = DYNAMIC_METHODS
-
 
 class RunState(NamedTuple):
     """The end of one run, the same fields for every method.
@@ -123,7 +121,7 @@ def stepper(method: str, stiff: bool = False):
         return _greedy
     if method == "gradient":
         return _gradient
-    if method in DYNAMIC:
+    if method in DYNAMIC_METHODS:
         from simulator.motion._dynamics_ode import stiff_solver
 
         return functools.partial(

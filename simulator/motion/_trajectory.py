@@ -19,7 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from foundation import InputError, compiling, shows_wait, wait_line
-from simulator.core import DEFAULT_MAX_STEPS, DEG_TOL, METHODS, OUTCOMES, tiny
+from simulator.core import DEFAULT_MAX_STEPS, DEG_TOL, DYNAMIC_METHODS, METHODS, OUTCOMES, tiny
 from simulator.landscape import (
     GlobalMinimum,
     Landscape,
@@ -39,7 +39,7 @@ from simulator.motion._pricing import (
     require_run_fits,
     require_start_in_window,
 )
-from simulator.motion._steppers import DYNAMIC, RunState, flat_at, jitted
+from simulator.motion._steppers import RunState, flat_at, jitted
 from simulator.motion._stepping import (
     CONVERGED,
     EDGE,
@@ -280,7 +280,7 @@ def _plan(
     """The engine (:func:`simulator.motion.choose_engine`), the run priced against the memory
     budget and its start against the window, the dynamics' parameters, and the start twist
     checked against the run's twist axis."""
-    dynamic = method in ("overdamped", "inertial")
+    dynamic = method in DYNAMIC_METHODS
     if path is not None:
         engine = "path"
     elif landscape is None and not dynamic:
@@ -714,7 +714,7 @@ def _to_trajectory(method: str, state: RunState, grid) -> Trajectory:
     n = int(state.step) + 1
     idx = np.asarray(state.path)[:n]
     energy = np.asarray(state.path_energy)[:n].astype(float)
-    dynamic = method in DYNAMIC
+    dynamic = method in DYNAMIC_METHODS
     t_s = np.asarray(state.path_t)[:n].astype(float) if dynamic else None
     time_s = float(state.time_s) if dynamic else None
     return Trajectory(method, "", grid.to_pose(idx), energy, n - 1, time_s, t_s)
