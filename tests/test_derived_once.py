@@ -13,6 +13,7 @@ from pathlib import Path
 
 import pytest
 
+from foundation import InputError
 from patterns import read_mask
 from patterns.geometry import four_pad, mask_from_geometry, square
 from patterns.library import library_path
@@ -296,3 +297,49 @@ def test_the_method_names_are_written_once():
         "scene/_schema_kinds.py",
     }
     assert _sources_matching(r"\bDYNAMIC\s*=|DYNAMIC_METHODS as ") == set()
+
+
+# ---------------------------------------------------------------- simulate's plan
+def test_simulate_chooses_its_engine_with_the_bands_of_the_run():
+    """One plan (simulator.motion.plan_run) chooses the engine and prices the first
+    landscape; choose_engine is called with the run's own bands, never with numbers."""
+    assert _sources_matching(r"\bchoose_engine\(") == {
+        "motion/_pathrun.py",  # its definition
+        "motion/_pricing.py",  # plan_run
+        "motion/_footprint_run.py",  # a --dispense run's engine
+    }
+    rx = re.compile(r"\bchoose_engine\(([^)]*)\)")
+    for name in ("_pricing.py", "_footprint_run.py"):
+        for args in rx.findall((SIMULATOR / "motion" / name).read_text()):
+            assert args.split(",")[-2:] in (
+                [" band_steps", " band_px"],
+                [" BAND_STEPS", " BAND_PX"],
+            ), (name, args)
+
+
+@pytest.mark.parametrize("engine", ["auto", "fft", "path"])
+def test_the_simulate_command_runs_on_the_library_plans_engine(engine, monkeypatch, capsys):
+    import simulator.motion as face
+    import simulator.motion._pricing as pricing
+    import simulator.motion._trajectory as trajectory
+
+    planned, ran = [], []
+    real = pricing.plan_run
+
+    def plan_run(*a, **k):
+        planned.append(real(*a, **k))
+        return planned[-1]
+
+    def fake_simulate(scene, start, **kw):  # the run stops here, once planned
+        ran.append(kw["engine"])
+        raise InputError("stopped before the run")
+
+    for module in (face, pricing, trajectory):  # the face may hold a name it loaded before
+        monkeypatch.setattr(module, "plan_run", plan_run, raising=module is pricing)
+        monkeypatch.setattr(module, "simulate", fake_simulate, raising=module is trajectory)
+    argv = ["simulate", "--pattern", str(library_path("square_200")), "--chip-size", "200"]
+    argv += ["--resolution", "4", "--no-twist", "--start", "12,0,0", "--engine", engine]
+    assert main([*argv, "--quiet"]) == 2
+    assert "stopped before the run" in capsys.readouterr().err
+    assert len(planned) == 1 and ran == planned and planned[0] in ("fft", "path")
+    assert planned[0] == (engine if engine != "auto" else "fft")  # a 50 px chip: the FFT engine

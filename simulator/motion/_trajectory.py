@@ -35,9 +35,8 @@ from simulator.motion._pricing import (
     BAND_STEPS,
     _fit_box,
     _twist_band,
+    plan_run,
     price_run,
-    require_run_fits,
-    require_start_in_window,
 )
 from simulator.motion._steppers import RunState, flat_at, jitted
 from simulator.motion._stepping import (
@@ -277,19 +276,14 @@ def _plan(
     engine: str,
     path,
 ) -> _Plan:
-    """The engine (:func:`simulator.motion.choose_engine`), the run priced against the memory
-    budget and its start against the window, the dynamics' parameters, and the start twist
+    """The engine, the run priced against the memory budget and its start against the window
+    (:func:`simulator.motion.plan_run`), the dynamics' parameters, and the start twist
     checked against the run's twist axis."""
     dynamic = method in DYNAMIC_METHODS
-    if path is not None:
-        engine = "path"
-    elif landscape is None and not dynamic:
-        from simulator.motion._pathrun import choose_engine
-
-        engine = choose_engine(scene, start, method, engine, band_steps, band_px)
     if landscape is None:
-        require_start_in_window(scene, start)
-        require_run_fits(scene, start, method, band_steps, band_px, engine)
+        engine = plan_run(scene, start, method, engine, band_steps, band_px, path is not None)
+    elif path is not None:
+        engine = "path"
     if dynamic and dynamics is None:
         from simulator.motion._dynamics_params import DynamicsParams
 
