@@ -343,3 +343,63 @@ def test_the_simulate_command_runs_on_the_library_plans_engine(engine, monkeypat
     assert "stopped before the run" in capsys.readouterr().err
     assert len(planned) == 1 and ran == planned and planned[0] in ("fft", "path")
     assert planned[0] == (engine if engine != "auto" else "fft")  # a 50 px chip: the FFT engine
+
+
+# ---------------------------------------------------------------- the default chip
+def test_evaluate_and_a_sweep_point_take_the_same_default_chip(tmp_path):
+    """Without a chip, evaluate and a sweep's point take the pattern's wettable bounding box
+    (patterns.geometry.default_chip_um), to the last bit."""
+    from patterns.geometry import default_chip_um
+    from simulator.commands._flags import parse_chip_size
+    from simulator.commands.evaluate import _bbox_chip
+    from simulator.sweep._point import point_scene
+
+    png = str(library_path("four_pad_730_50"))
+    out = ["--out", str(tmp_path / "o")]
+    odd = ["--pattern-um-per-px", "0.7654321", "--override-scale"]
+    args = build_parser().parse_args(["evaluate", "--pattern", png, *out, *odd])
+    assert parse_chip_size(_bbox_chip(args)) == default_chip_um(read_mask(png, um_per_px=0.7654321))
+    args = build_parser().parse_args(["evaluate", "--pattern", png, *out])
+    task = {"scene": {"pattern": png}, "values": {}, "design": None, "base": str(tmp_path)}
+    chip = point_scene(task)[0].chip.geometry.bounds
+    assert parse_chip_size(_bbox_chip(args)) == (chip[2] - chip[0], chip[3] - chip[1])
+    # a generated design's point: the bounds of its exact geometry
+    assert default_chip_um(four_pad(400, 40)) == (400, 400)
+    # every other default chip is this rule's
+    rx = re.compile(r'chip_size_um"\]\s*=\s*(.*)')
+    for path in ("sweep/_point.py", "commands/evaluate.py"):
+        for rhs in rx.findall((SIMULATOR / path).read_text()):
+            assert rhs.startswith(('v["chip_size_um"]', "list(default_chip_um(")), (path, rhs)
+
+
+# ---------------------------------------------------------------- the critical volume
+def test_the_critical_volume_of_a_scenes_four_pad_has_one_home(monkeypatch):
+    """The warnings, the volume window and a sweep's point take the critical volume of a
+    scene's four-pad from simulator.liquid.scene_critical_volume, computed once."""
+    import simulator.liquid._critical_volume as cv_module
+    from simulator.liquid import scene_critical_volume, scene_warnings, volume_window
+    from simulator.liquid._warnings import _critical_volume
+    from simulator.sweep._point import point_critical_volume_nl
+
+    calls = []
+    real = cv_module.critical_volume
+    monkeypatch.setattr(cv_module, "critical_volume", lambda *a: calls.append(a) or real(*a))
+    _critical_volume.cache_clear()
+    pattern = read_mask(library_path("four_pad_730_50"))
+    scene = Scene.from_inputs(
+        pattern,
+        chip=mask_from_geometry(square(730), pattern.um_per_px),
+        liquid=Liquid(volume_nl=0.001),
+    )
+    cv = scene_critical_volume(scene).critical_volume_nl
+    assert volume_window(scene)["critical_volume_nl"] == cv
+    assert point_critical_volume_nl(scene, {"design": None}) == cv
+    assert any(f"critical volume {cv:.3g} nl" in w for w in scene_warnings(scene))
+    assert len(calls) == 1
+    _critical_volume.cache_clear()
+    assert _sources_matching(r"(?<![_\w])critical_volume\(") == {
+        "liquid/_critical_volume.py",  # its definition
+        "liquid/_warnings.py",  # scene_critical_volume
+        "liquid/_dispense.py",  # the dispensed drop's split
+        "commands/liquid.py",  # selfalign liquid critical-volume: the user's L and g
+    }
