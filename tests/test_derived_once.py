@@ -403,3 +403,15 @@ def test_the_critical_volume_of_a_scenes_four_pad_has_one_home(monkeypatch):
         "liquid/_dispense.py",  # the dispensed drop's split
         "commands/liquid.py",  # selfalign liquid critical-volume: the user's L and g
     }
+
+
+# ---------------------------------------------------------------- the units
+def test_the_unit_factors_are_cores():
+    """um -> m, um^2 -> m^2 and nl -> um^3 are simulator.core's UM, UM2 and UM3_PER_NL,
+    defined there alone and never multiplied in as literals."""
+    from simulator.core import UM, UM2, UM3_PER_NL
+
+    assert (UM, UM2, UM3_PER_NL) == (1e-6, 1e-12, 1e6)
+    assert _sources_matching(r"(?m)^\s*(UM|UM2|UM3_PER_NL)\s*=") == {"core/_constants.py"}
+    assert _sources_matching(r"[*/]\s*1(\.0)?e-(0?6|12)\b") == set()
+    assert _sources_matching(r"volume_nl\s*[*/]\s*1(\.0)?e\+?0?6\b") == set()

@@ -19,7 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from foundation import InputError, compiling, shows_wait, wait_line
-from simulator.core import DEFAULT_MAX_STEPS, DEG_TOL, DYNAMIC_METHODS, METHODS, OUTCOMES, tiny
+from simulator.core import DEFAULT_MAX_STEPS, DEG_TOL, DYNAMIC_METHODS, METHODS, OUTCOMES, UM, tiny
 from simulator.landscape import (
     GlobalMinimum,
     Landscape,
@@ -148,10 +148,10 @@ def is_stiff(method: str, field, grid, params) -> bool:
     if method != "inertial" or field.pinned:
         return False
     f_ref = float(reference_gradient(field, grid)) / (
-        grid.um_per_px * 1e-6
+        grid.um_per_px * UM
     )  # N (J per px -> J per m)
     tau_m = params.mass_kg / params.damping_N_s_m
-    tau_c = params.damping_N_s_m * grid.um_per_px * 1e-6 / max(f_ref, tiny())
+    tau_c = params.damping_N_s_m * grid.um_per_px * UM / max(f_ref, tiny())
     return tau_m < 0.1 * tau_c
 
 
