@@ -415,3 +415,46 @@ def test_the_unit_factors_are_cores():
     assert _sources_matching(r"(?m)^\s*(UM|UM2|UM3_PER_NL)\s*=") == {"core/_constants.py"}
     assert _sources_matching(r"[*/]\s*1(\.0)?e-(0?6|12)\b") == set()
     assert _sources_matching(r"volume_nl\s*[*/]\s*1(\.0)?e\+?0?6\b") == set()
+
+
+# ---------------------------------------------------------------- the packages
+ROOT = SIMULATOR.parent
+
+
+def _tree_packages() -> set[str]:
+    """Every package of the three floors, by its folder's ``__init__.py``."""
+    return {
+        ".".join(p.parent.relative_to(ROOT).parts)
+        for floor in ("foundation", "patterns", "simulator")
+        for p in (ROOT / floor).rglob("__init__.py")
+    }
+
+
+def _faces() -> list[str]:
+    """simulator's packages (its folders with an ``__init__.py``), the tree's one list."""
+    return sorted(p.parent.name for p in SIMULATOR.glob("*/__init__.py"))
+
+
+def test_every_list_of_the_packages_is_the_tree():
+    """The packages are the folders: the build's list (pyproject.toml), the architecture's
+    table, the API reference's index and the manual's navigation name exactly those."""
+    faces = _faces()
+    assert {"core", "design", "commands"} <= set(faces)
+    built = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"]
+    # patterns.library: the bundled PNGs' folder, declared so that setuptools installs them
+    assert sorted(built) == sorted(_tree_packages() | {"patterns.library"})
+
+    arch = (ROOT / "docs" / "architecture.md").read_text()
+    table = arch.split("\n`simulator/`:\n", 1)[1].split("\n`foundation/`", 1)[0]
+    rows = [r.split("|")[1] for r in table.splitlines() if r.startswith("| `")]
+    assert sorted(n for r in rows for n in re.findall(r"`(\w+)`", r)) == sorted([*faces, "cli"])
+
+    index = (ROOT / "docs" / "api" / "index.md").read_text()
+    listed = re.findall(r"^\| \[`simulator\.(\w+)`", index, re.M)
+    pages = sorted(n if n != "commands" else "cli" for n in faces)  # one page: cli, commands
+    assert sorted(listed) == pages
+    assert "[`simulator.cli`, `simulator.commands`](cli.md)" in index
+    nav = (ROOT / "mkdocs.yml").read_text()
+    assert sorted([*re.findall(r"- simulator\.(\w+): api/\w+\.md", nav), "cli"]) == pages
+    assert "(cli, commands): api/cli.md" in nav
+    assert all((ROOT / "docs" / "api" / f"{page}.md").is_file() for page in pages)
