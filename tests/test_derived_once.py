@@ -458,3 +458,22 @@ def test_every_list_of_the_packages_is_the_tree():
     assert sorted([*re.findall(r"- simulator\.(\w+): api/\w+\.md", nav), "cli"]) == pages
     assert "(cli, commands): api/cli.md" in nav
     assert all((ROOT / "docs" / "api" / f"{page}.md").is_file() for page in pages)
+
+
+# ---------------------------------------------------------------- the Dask start
+def test_a_sweep_and_a_search_start_their_workers_in_one_place():
+    """simulator.sweep.start_workers caps, starts and names the workers of a sweep and of a
+    design search; nothing else starts a Dask client or caps its workers."""
+    import contextlib
+
+    from simulator.sweep import start_workers
+
+    assert _sources_matching(r"\bdask_client\(|\bworker_cap\(|\bLocalCluster\(") == {
+        "sweep/_cluster.py"
+    }
+    asked = []
+    with contextlib.ExitStack() as stack:
+        for workers, points in ((0, 5), (None, 0), (3, 0)):
+            client, _, where = start_workers(stack, workers, None, points, lambda: asked.append(1))
+            assert client is None and where == "this process"
+    assert asked == []  # no workers start: nothing priced

@@ -14,6 +14,7 @@ from ._cluster import (
     dask_client as dask_client,
     release_semaphores as release_semaphores,
     run_tasks as run_tasks,
+    start_workers as start_workers,
     worker_cap as worker_cap,
 )
 from ._columns import (
