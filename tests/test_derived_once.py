@@ -477,3 +477,24 @@ def test_a_sweep_and_a_search_start_their_workers_in_one_place():
             client, _, where = start_workers(stack, workers, None, points, lambda: asked.append(1))
             assert client is None and where == "this process"
     assert asked == []  # no workers start: nothing priced
+
+
+# ---------------------------------------------------------------- the metrics' labels
+def test_each_metric_has_one_label():
+    """The sweep's pictures and a search's comparison label a metric alike: from
+    simulator.sweep.METRIC_LABELS, whose columns are the assessment's."""
+    from simulator.design._search._report import COMPARED, PROTOCOL_COMPARED
+    from simulator.sweep import METRIC_LABELS, metric
+    from simulator.sweep._columns import _metric_columns
+    from simulator.sweep._report import METRICS
+
+    for row in (*METRICS, *COMPARED):
+        assert row == metric(row[0]) and row[0] in METRIC_LABELS, row
+    for column, label, factor in PROTOCOL_COMPARED:
+        name, base = column.removeprefix("protocols_").split("_", 1)
+        assert (label, factor) == (f"--dispense {name}: {metric(base)[1]}", metric(base)[2])
+    every = _metric_columns(twist=True, meniscus=True, free=True, dynamics=True, dispense=True)
+    assert set(METRIC_LABELS) - set(every) == {"volume_nl", "critical_volume_nl"}  # not assess's
+    for label, _ in METRIC_LABELS.values():  # written in one place (an axis's help aside)
+        found = _sources_matching(re.escape(f'"{label}"')) - {"sweep/_axes.py"}
+        assert found == {"sweep/_columns.py"}, label
