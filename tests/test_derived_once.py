@@ -498,3 +498,20 @@ def test_each_metric_has_one_label():
     for label, _ in METRIC_LABELS.values():  # written in one place (an axis's help aside)
         found = _sources_matching(re.escape(f'"{label}"')) - {"sweep/_axes.py"}
         assert found == {"sweep/_columns.py"}, label
+
+
+# ---------------------------------------------------------------- the result files' JSON
+def test_every_result_json_is_written_by_one_helper():
+    """summary.json, fit.json, result.json, best.json, a sweep's point files and journal, and
+    every command's --json: foundation.json_text, the same bytes as before, no NaN."""
+    import json
+
+    from foundation import json_text
+
+    doc = {"x_um": 1.5, "n": [1, 2], "name": "a", "nested": {"ok": True}}
+    assert json_text(doc) == json.dumps(doc, indent=2, allow_nan=False) + "\n"
+    assert json_text(doc, indent=1) == json.dumps(doc, indent=1, allow_nan=False) + "\n"
+    assert json_text(doc, indent=None) == json.dumps(doc, allow_nan=False) + "\n"
+    with pytest.raises(ValueError):
+        json_text({"x": math.nan})
+    assert _sources_matching(r"allow_nan\s*=") == set()

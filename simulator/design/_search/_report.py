@@ -285,7 +285,7 @@ def _values(spec, row: dict) -> dict:
 
 def write_best(out: Path, spec, table, best: list[int]) -> list[str]:
     """``best.json`` (always), and with a best design ``best.png`` and ``best.gds``."""
-    from foundation import atomic_output
+    from foundation import atomic_output, json_text
 
     written = []
     base = _json_row(_row(table, 0))
@@ -351,7 +351,7 @@ def write_best(out: Path, spec, table, best: list[int]) -> list[str]:
             written.append("best.gds")
             doc["best"]["gds_area_um2"] = geometry.area
     with atomic_output(out / "best.json") as tmp:
-        tmp.write_text(json.dumps(doc, indent=1, allow_nan=False, default=str) + "\n")
+        tmp.write_text(json_text(doc, indent=1, default=str))
     return ["best.json", *written]
 
 
