@@ -18,6 +18,7 @@ from ._outputs import (
     check_distinct as check_distinct,
     check_output_dir as check_output_dir,
     check_output_file as check_output_file,
+    json_text as json_text,
     output_directory as output_directory,
     remove_pending as remove_pending,
     require_new_file as require_new_file,

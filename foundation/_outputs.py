@@ -42,6 +42,13 @@ MARKER = ".selfalign-output.json"
 _PENDING: set[Path] = set()
 
 
+def json_text(obj, indent: int | None = 2, default=None) -> str:
+    """The text of a result file in JSON, the one format of every JSON file selfalign writes:
+    ``indent`` spaces (None: one line, a journal's row), no NaN or infinity (ValueError: a
+    result's numbers are finite), and a final newline. ``default``: as :func:`json.dumps`."""
+    return json.dumps(obj, indent=indent, allow_nan=False, default=default) + "\n"
+
+
 def remove_pending() -> None:
     """Remove every temporary output that exists now: for a signal handler that must end
     the process at once (SIGTERM), where unwinding through ``finally`` could deadlock."""

@@ -4,9 +4,8 @@ The names users call are importable from here (``from simulator import Scene,
 build_landscape, simulate``); each is loaded on first use, so ``import simulator``
 is fast and imports neither JAX nor matplotlib. ``simulator/__init__.pyi`` declares their
 types for editors and is their one list: each name is loaded from the package its stub line
-names (:func:`_exports`). The packages behind them (``simulator.core``, ``.scene``, ``.physics``,
-``.liquid``, ``.landscape``, ``.motion``, ``.batch``, ``.sweep``, ``.render``, ``.testing``)
-are described in ``docs/architecture.md``; each package's ``__init__`` is its public face.
+names (:func:`_exports`). The packages behind them are the folders of ``simulator/``,
+described in ``docs/architecture.md``; each package's ``__init__`` is its public face.
 
 JAX: importing this package, or any of its modules, changes no JAX setting. The
 first stepper run (:func:`simulator.motion.make_field`, which every trajectory and

@@ -7,10 +7,13 @@ and the scene file (read once per command)."""
 from __future__ import annotations
 
 import math
+import re
 import tomllib
+from pathlib import Path
 
 import pytest
 
+from foundation import InputError
 from patterns import read_mask
 from patterns.geometry import four_pad, mask_from_geometry, square
 from patterns.library import library_path
@@ -265,3 +268,250 @@ def test_the_smallest_feature_of_a_pattern_image_is_measured_once(monkeypatch):
     first = smallest_feature_um(mask)
     assert smallest_feature_um(mask) == first and len(calls) == 1
     assert first == pytest.approx(50, abs=2 * mask.um_per_px)  # the gap
+
+
+# ---------------------------------------------------------------- the method names
+SIMULATOR = Path(__file__).resolve().parents[1] / "simulator"
+
+
+def _sources_matching(pattern: str) -> set[str]:
+    """The modules under simulator/ (paths relative to it) whose text matches ``pattern``."""
+    rx = re.compile(pattern)
+    return {
+        p.relative_to(SIMULATOR).as_posix()
+        for p in SIMULATOR.rglob("*.py")
+        if rx.search(p.read_text(encoding="utf-8"))
+    }
+
+
+def test_the_method_names_are_written_once():
+    """The dynamic methods are simulator.core.DYNAMIC_METHODS and the methods METHODS,
+    written out in core alone (the scene schema's value kinds still list the methods: its
+    own registry, which may take them from core)."""
+    from simulator.core import DYNAMIC_METHODS, METHODS
+
+    assert DYNAMIC_METHODS == METHODS[-2:] == ("overdamped", "inertial")
+    assert _sources_matching(r'\(\s*"overdamped",\s*"inertial",?\s*\)') == {"core/_defaults.py"}
+    assert _sources_matching(r'"greedy",\s*"gradient",\s*"overdamped",\s*"inertial"') <= {
+        "core/_defaults.py",
+        "scene/_schema_kinds.py",
+    }
+    assert _sources_matching(r"\bDYNAMIC\s*=|DYNAMIC_METHODS as ") == set()
+
+
+# ---------------------------------------------------------------- simulate's plan
+def test_simulate_chooses_its_engine_with_the_bands_of_the_run():
+    """One plan (simulator.motion.plan_run) chooses the engine and prices the first
+    landscape; choose_engine is called with the run's own bands, never with numbers."""
+    assert _sources_matching(r"\bchoose_engine\(") == {
+        "motion/_pathrun.py",  # its definition
+        "motion/_pricing.py",  # plan_run
+        "motion/_footprint_run.py",  # a --dispense run's engine
+    }
+    rx = re.compile(r"\bchoose_engine\(([^)]*)\)")
+    for name in ("_pricing.py", "_footprint_run.py"):
+        for args in rx.findall((SIMULATOR / "motion" / name).read_text()):
+            assert args.split(",")[-2:] in (
+                [" band_steps", " band_px"],
+                [" BAND_STEPS", " BAND_PX"],
+            ), (name, args)
+
+
+@pytest.mark.parametrize("engine", ["auto", "fft", "path"])
+def test_the_simulate_command_runs_on_the_library_plans_engine(engine, monkeypatch, capsys):
+    import simulator.motion as face
+    import simulator.motion._pricing as pricing
+    import simulator.motion._trajectory as trajectory
+
+    planned, ran = [], []
+    real = pricing.plan_run
+
+    def plan_run(*a, **k):
+        planned.append(real(*a, **k))
+        return planned[-1]
+
+    def fake_simulate(scene, start, **kw):  # the run stops here, once planned
+        ran.append(kw["engine"])
+        raise InputError("stopped before the run")
+
+    for module in (face, pricing, trajectory):  # the face may hold a name it loaded before
+        monkeypatch.setattr(module, "plan_run", plan_run, raising=module is pricing)
+        monkeypatch.setattr(module, "simulate", fake_simulate, raising=module is trajectory)
+    argv = ["simulate", "--pattern", str(library_path("square_200")), "--chip-size", "200"]
+    argv += ["--resolution", "4", "--no-twist", "--start", "12,0,0", "--engine", engine]
+    assert main([*argv, "--quiet"]) == 2
+    assert "stopped before the run" in capsys.readouterr().err
+    assert len(planned) == 1 and ran == planned and planned[0] in ("fft", "path")
+    assert planned[0] == (engine if engine != "auto" else "fft")  # a 50 px chip: the FFT engine
+
+
+# ---------------------------------------------------------------- the default chip
+def test_evaluate_and_a_sweep_point_take_the_same_default_chip(tmp_path):
+    """Without a chip, evaluate and a sweep's point take the pattern's wettable bounding box
+    (patterns.geometry.default_chip_um), to the last bit."""
+    from patterns.geometry import default_chip_um
+    from simulator.commands._flags import parse_chip_size
+    from simulator.commands.evaluate import _bbox_chip
+    from simulator.sweep._point import point_scene
+
+    png = str(library_path("four_pad_730_50"))
+    out = ["--out", str(tmp_path / "o")]
+    odd = ["--pattern-um-per-px", "0.7654321", "--override-scale"]
+    args = build_parser().parse_args(["evaluate", "--pattern", png, *out, *odd])
+    assert parse_chip_size(_bbox_chip(args)) == default_chip_um(read_mask(png, um_per_px=0.7654321))
+    args = build_parser().parse_args(["evaluate", "--pattern", png, *out])
+    task = {"scene": {"pattern": png}, "values": {}, "design": None, "base": str(tmp_path)}
+    chip = point_scene(task)[0].chip.geometry.bounds
+    assert parse_chip_size(_bbox_chip(args)) == (chip[2] - chip[0], chip[3] - chip[1])
+    # a generated design's point: the bounds of its exact geometry
+    assert default_chip_um(four_pad(400, 40)) == (400, 400)
+    # every other default chip is this rule's
+    rx = re.compile(r'chip_size_um"\]\s*=\s*(.*)')
+    for path in ("sweep/_point.py", "commands/evaluate.py"):
+        for rhs in rx.findall((SIMULATOR / path).read_text()):
+            assert rhs.startswith(('v["chip_size_um"]', "list(default_chip_um(")), (path, rhs)
+
+
+# ---------------------------------------------------------------- the critical volume
+def test_the_critical_volume_of_a_scenes_four_pad_has_one_home(monkeypatch):
+    """The warnings, the volume window and a sweep's point take the critical volume of a
+    scene's four-pad from simulator.liquid.scene_critical_volume, computed once."""
+    import simulator.liquid._critical_volume as cv_module
+    from simulator.liquid import scene_critical_volume, scene_warnings, volume_window
+    from simulator.liquid._warnings import _critical_volume
+    from simulator.sweep._point import point_critical_volume_nl
+
+    calls = []
+    real = cv_module.critical_volume
+    monkeypatch.setattr(cv_module, "critical_volume", lambda *a: calls.append(a) or real(*a))
+    _critical_volume.cache_clear()
+    pattern = read_mask(library_path("four_pad_730_50"))
+    scene = Scene.from_inputs(
+        pattern,
+        chip=mask_from_geometry(square(730), pattern.um_per_px),
+        liquid=Liquid(volume_nl=0.001),
+    )
+    cv = scene_critical_volume(scene).critical_volume_nl
+    assert volume_window(scene)["critical_volume_nl"] == cv
+    assert point_critical_volume_nl(scene, {"design": None}) == cv
+    assert any(f"critical volume {cv:.3g} nl" in w for w in scene_warnings(scene))
+    assert len(calls) == 1
+    _critical_volume.cache_clear()
+    assert _sources_matching(r"(?<![_\w])critical_volume\(") == {
+        "liquid/_critical_volume.py",  # its definition
+        "liquid/_warnings.py",  # scene_critical_volume
+        "liquid/_dispense.py",  # the dispensed drop's split
+        "commands/liquid.py",  # selfalign liquid critical-volume: the user's L and g
+    }
+
+
+# ---------------------------------------------------------------- the units
+def test_the_unit_factors_are_cores():
+    """um -> m, um^2 -> m^2 and nl -> um^3 are simulator.core's UM, UM2 and UM3_PER_NL,
+    defined there alone and never multiplied in as literals."""
+    from simulator.core import UM, UM2, UM3_PER_NL
+
+    assert (UM, UM2, UM3_PER_NL) == (1e-6, 1e-12, 1e6)
+    assert _sources_matching(r"(?m)^\s*(UM|UM2|UM3_PER_NL)\s*=") == {"core/_constants.py"}
+    assert _sources_matching(r"[*/]\s*1(\.0)?e-(0?6|12)\b") == set()
+    assert _sources_matching(r"volume_nl\s*[*/]\s*1(\.0)?e\+?0?6\b") == set()
+
+
+# ---------------------------------------------------------------- the packages
+ROOT = SIMULATOR.parent
+
+
+def _tree_packages() -> set[str]:
+    """Every package of the three floors, by its folder's ``__init__.py``."""
+    return {
+        ".".join(p.parent.relative_to(ROOT).parts)
+        for floor in ("foundation", "patterns", "simulator")
+        for p in (ROOT / floor).rglob("__init__.py")
+    }
+
+
+def _faces() -> list[str]:
+    """simulator's packages (its folders with an ``__init__.py``), the tree's one list."""
+    return sorted(p.parent.name for p in SIMULATOR.glob("*/__init__.py"))
+
+
+def test_every_list_of_the_packages_is_the_tree():
+    """The packages are the folders: the build's list (pyproject.toml), the architecture's
+    table, the API reference's index and the manual's navigation name exactly those."""
+    faces = _faces()
+    assert {"core", "design", "commands"} <= set(faces)
+    built = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"]
+    # patterns.library: the bundled PNGs' folder, declared so that setuptools installs them
+    assert sorted(built) == sorted(_tree_packages() | {"patterns.library"})
+
+    arch = (ROOT / "docs" / "architecture.md").read_text()
+    table = arch.split("\n`simulator/`:\n", 1)[1].split("\n`foundation/`", 1)[0]
+    rows = [r.split("|")[1] for r in table.splitlines() if r.startswith("| `")]
+    assert sorted(n for r in rows for n in re.findall(r"`(\w+)`", r)) == sorted([*faces, "cli"])
+
+    index = (ROOT / "docs" / "api" / "index.md").read_text()
+    listed = re.findall(r"^\| \[`simulator\.(\w+)`", index, re.M)
+    pages = sorted(n if n != "commands" else "cli" for n in faces)  # one page: cli, commands
+    assert sorted(listed) == pages
+    assert "[`simulator.cli`, `simulator.commands`](cli.md)" in index
+    nav = (ROOT / "mkdocs.yml").read_text()
+    assert sorted([*re.findall(r"- simulator\.(\w+): api/\w+\.md", nav), "cli"]) == pages
+    assert "(cli, commands): api/cli.md" in nav
+    assert all((ROOT / "docs" / "api" / f"{page}.md").is_file() for page in pages)
+
+
+# ---------------------------------------------------------------- the Dask start
+def test_a_sweep_and_a_search_start_their_workers_in_one_place():
+    """simulator.sweep.start_workers caps, starts and names the workers of a sweep and of a
+    design search; nothing else starts a Dask client or caps its workers."""
+    import contextlib
+
+    from simulator.sweep import start_workers
+
+    assert _sources_matching(r"\bdask_client\(|\bworker_cap\(|\bLocalCluster\(") == {
+        "sweep/_cluster.py"
+    }
+    asked = []
+    with contextlib.ExitStack() as stack:
+        for workers, points in ((0, 5), (None, 0), (3, 0)):
+            client, _, where = start_workers(stack, workers, None, points, lambda: asked.append(1))
+            assert client is None and where == "this process"
+    assert asked == []  # no workers start: nothing priced
+
+
+# ---------------------------------------------------------------- the metrics' labels
+def test_each_metric_has_one_label():
+    """The sweep's pictures and a search's comparison label a metric alike: from
+    simulator.sweep.METRIC_LABELS, whose columns are the assessment's."""
+    from simulator.design._search._report import COMPARED, PROTOCOL_COMPARED
+    from simulator.sweep import METRIC_LABELS, metric
+    from simulator.sweep._columns import _metric_columns
+    from simulator.sweep._report import METRICS
+
+    for row in (*METRICS, *COMPARED):
+        assert row == metric(row[0]) and row[0] in METRIC_LABELS, row
+    for column, label, factor in PROTOCOL_COMPARED:
+        name, base = column.removeprefix("protocols_").split("_", 1)
+        assert (label, factor) == (f"--dispense {name}: {metric(base)[1]}", metric(base)[2])
+    every = _metric_columns(twist=True, meniscus=True, free=True, dynamics=True, dispense=True)
+    assert set(METRIC_LABELS) - set(every) == {"volume_nl", "critical_volume_nl"}  # not assess's
+    for label, _ in METRIC_LABELS.values():  # written in one place (an axis's help aside)
+        found = _sources_matching(re.escape(f'"{label}"')) - {"sweep/_axes.py"}
+        assert found == {"sweep/_columns.py"}, label
+
+
+# ---------------------------------------------------------------- the result files' JSON
+def test_every_result_json_is_written_by_one_helper():
+    """summary.json, fit.json, result.json, best.json, a sweep's point files and journal, and
+    every command's --json: foundation.json_text, the same bytes as before, no NaN."""
+    import json
+
+    from foundation import json_text
+
+    doc = {"x_um": 1.5, "n": [1, 2], "name": "a", "nested": {"ok": True}}
+    assert json_text(doc) == json.dumps(doc, indent=2, allow_nan=False) + "\n"
+    assert json_text(doc, indent=1) == json.dumps(doc, indent=1, allow_nan=False) + "\n"
+    assert json_text(doc, indent=None) == json.dumps(doc, allow_nan=False) + "\n"
+    with pytest.raises(ValueError):
+        json_text({"x": math.nan})
+    assert _sources_matching(r"allow_nan\s*=") == set()

@@ -16,6 +16,7 @@ from ._designs import (
 )
 from ._mask import (
     Mask as Mask,
+    default_chip_um as default_chip_um,
     footprint_um as footprint_um,
     nonzero_box as nonzero_box,
     pad_labels as pad_labels,

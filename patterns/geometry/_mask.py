@@ -113,6 +113,17 @@ def footprint_um(mask: Mask) -> tuple[float, float]:
     return (cols[-1] + 1 - cols[0]) * s, (rows[-1] + 1 - rows[0]) * s
 
 
+def default_chip_um(pattern) -> tuple[float, float]:
+    """Width and height (um) of the chip a scene takes when none is given (``selfalign
+    evaluate``, a sweep's point): a rectangle the size of the pattern's wettable bounding box,
+    :func:`footprint_um` of the pattern's mask, or the bounds of its exact geometry (a layout
+    or a generated design read before it is rasterized)."""
+    if isinstance(pattern, Mask):
+        return footprint_um(pattern)
+    x0, y0, x1, y1 = pattern.bounds
+    return x1 - x0, y1 - y0
+
+
 def pad_labels(pattern: Mask) -> tuple[np.ndarray, int]:
     """The pattern's pads: its connected wettable regions (every pixel above 0, so that the
     pads' masks add up to the pattern exactly), labelled 1..n; (labels, n)."""

@@ -31,7 +31,6 @@ asked): one point of a design sweep (:mod:`simulator.sweep`).
 from __future__ import annotations
 
 import html
-import json
 import math
 import os
 import time
@@ -39,7 +38,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from foundation import check_output_dir, output_directory, require_finite, wait_line
+from foundation import check_output_dir, json_text, output_directory, require_finite, wait_line
 from patterns.geometry import footprint_um
 from simulator.batch._montecarlo import run_batch
 from simulator.batch._starts import StartGrid, random_starts
@@ -199,7 +198,7 @@ def evaluate(
         summary["volume_window"] = _volume_window(given, summary)
         summary["seconds"] = round(time.perf_counter() - t_start, 2)
         require_finite(summary, "evaluate summary")
-        (tmp / "summary.json").write_text(json.dumps(summary, indent=2, allow_nan=False) + "\n")
+        (tmp / "summary.json").write_text(json_text(summary))
         (tmp / "report.html").write_text(_html(summary, source))
     return summary
 

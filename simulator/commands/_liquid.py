@@ -8,6 +8,7 @@ import sys
 from typing import Any
 
 from simulator.commands._scene import scene_document
+from simulator.core import DYNAMIC_METHODS
 from simulator.scene import Scene
 
 
@@ -31,7 +32,7 @@ def liquid_checks(
         bool(args.scene)
         and "volume_nl" in ((scene_document(args) if doc is None else doc).get("liquid") or {})
     )
-    used = method in ("overdamped", "inertial") or bool(getattr(scene.effects, "meniscus", False))
+    used = method in DYNAMIC_METHODS or bool(getattr(scene.effects, "meniscus", False))
     if (
         not given
         and used

@@ -5,12 +5,11 @@ writers (every number finite)."""
 from __future__ import annotations
 
 import argparse
-import json
 import os
 from pathlib import Path
 from typing import Any
 
-from foundation import InputError, atomic_output
+from foundation import InputError, atomic_output, json_text
 from simulator.commands._scene import read_toml
 
 
@@ -68,7 +67,7 @@ def write_json(path: str | os.PathLike, obj: Any) -> None:
 
     require_finite(obj, f"output {path}")
     with atomic_output(path) as tmp:
-        tmp.write_text(json.dumps(obj, indent=2, allow_nan=False) + "\n")
+        tmp.write_text(json_text(obj))
 
 
 def write_csv(path: str | os.PathLike, columns: list[str], values: list) -> None:

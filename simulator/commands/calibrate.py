@@ -7,6 +7,7 @@ import argparse
 import sys
 
 from simulator.commands._flags import add_dynamics_args, add_scene_args, finite_limit
+from simulator.core import METHODS
 from simulator.physics import LINE_FRICTION_PA_S
 
 
@@ -71,7 +72,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     f.add_argument("--seed", type=int, help="seed of the draws and of the sampler (default 0)")
     f.add_argument(
         "--method",
-        choices=("greedy", "gradient", "overdamped", "inertial"),
+        choices=METHODS,
         help="stepper (default: overdamped when the table gives time_s, else greedy)",
     )
     f.add_argument(

@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING
 
 from foundation import announce, atomic_output, check_output_dir, compiling, output_directory
 from patterns.library import library_path
+from simulator.core import UM2
 from simulator.scene import Scene
 
 if TYPE_CHECKING:
@@ -110,7 +111,7 @@ def write_summary(
 ) -> Path:
     """A short text summary of the scene, the run and the comparison run."""
     m = scene.materials
-    um2 = m.delta_gamma_N_m * 1e-12  # J per um^2 of overlap
+    um2 = m.delta_gamma_N_m * UM2  # J per um^2 of overlap
     gap = scene.pattern.params.get("parameters", {}).get("gap", {}).get("value", 50.0)
     pad = (CHIP_UM - gap) / 2
     p0, p1 = traj.path[0], traj.path[-1]

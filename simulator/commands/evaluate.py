@@ -185,9 +185,10 @@ def _noise_biases(scene):
 
 
 def _bbox_chip(args: argparse.Namespace) -> str:
-    """Default chip: the size of the pattern's wettable bounding box (W x H um)."""
+    """Default chip: the size of the pattern's wettable bounding box (W x H um,
+    :func:`patterns.geometry.default_chip_um`)."""
     from patterns import read_mask
-    from patterns.geometry import footprint_um
+    from patterns.geometry import default_chip_um
     from patterns.layout import LayoutSelection, is_layout, layout_geometry
 
     if is_layout(args.pattern):
@@ -197,8 +198,8 @@ def _bbox_chip(args: argparse.Namespace) -> str:
             dxf_units=args.dxf_units,
             max_polygons=args.max_polygons,
         )
-        x0, y0, x1, y1 = layout_geometry(args.pattern, sel, args.memory_budget)[0].bounds
-        return f"{x1 - x0:.12g}x{y1 - y0:.12g}"
+        geometry = layout_geometry(args.pattern, sel, args.memory_budget)[0]
+        return _chip_text(default_chip_um(geometry))
     own = (
         args.pattern_um_per_px is not None
     )  # the scale rule of Scene.from_inputs: a file's own scale wins
@@ -222,5 +223,10 @@ def _bbox_chip(args: argparse.Namespace) -> str:
         **kw,
     )
     m.require_nonempty(f"pattern {args.pattern}")
-    w, h = footprint_um(m)
-    return f"{w:g}x{h:g}"
+    return _chip_text(default_chip_um(m))
+
+
+def _chip_text(size: tuple[float, float]) -> str:
+    """``--chip-size`` text that reads back as exactly ``size`` (the numbers a sweep's point
+    takes for the same pattern), not rounded."""
+    return f"{float(size[0])!r}x{float(size[1])!r}"

@@ -15,12 +15,11 @@ landscape either). ``--json`` alone prints the JSON
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 from typing import NoReturn
 
-from foundation import InputError
+from foundation import InputError, json_text
 from simulator.cli import OneLineParser, unknown_options_message
 
 
@@ -279,7 +278,7 @@ def _emit(args: argparse.Namespace, doc: dict, lines: list[str]) -> int:
     from foundation import require_finite
 
     require_finite(doc, "the answer")
-    text = json.dumps(doc, indent=2, allow_nan=False) + "\n"
+    text = json_text(doc)
     if args.json == "-":
         sys.stdout.write(text)
         return 0

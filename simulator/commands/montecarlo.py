@@ -4,13 +4,12 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import json
 import math
 from pathlib import Path
 
 import numpy as np
 
-from foundation import InputError, atomic_output, require_finite
+from foundation import InputError, atomic_output, json_text, require_finite
 from simulator.batch import DISTRIBUTIONS, MAX_STARTS, StartGrid
 from simulator.commands._flags import add_scene_args, parse_pose
 from simulator.commands._liquid import liquid_checks
@@ -397,9 +396,7 @@ def run(args: argparse.Namespace) -> int:
         if args.csv:
             write_csv(stack.enter_context(atomic_output(args.csv)), result, OUTCOMES)
         if args.json:
-            stack.enter_context(atomic_output(args.json)).write_text(
-                json.dumps(doc, indent=2, allow_nan=False) + "\n"
-            )
+            stack.enter_context(atomic_output(args.json)).write_text(json_text(doc))
         if args.time_plot:  # moved into place with the files above, when every output is ready
             from simulator.batch import time_histogram, time_stats
             from simulator.render import plot_time_to_align

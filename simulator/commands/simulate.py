@@ -90,7 +90,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     # Priced before JAX is imported: a refusal costs neither its import time nor its memory.
-    from simulator.motion import price_run, require_run_fits, require_start_in_window
+    from simulator.motion import plan_run, price_run
 
     doc = scene_document(args)  # the scene file, read and validated once for the whole command
     sim = doc.get("simulate", {})
@@ -105,25 +105,20 @@ def run(args: argparse.Namespace) -> int:
     _check_outputs(args, doc)
     scene = scene_from_args(args, doc=doc, warn=False)
     price_run(scene, method, max_steps)
-    require_start_in_window(scene, start)
-    if args.engine == "path" and method in ("overdamped", "inertial"):
+    if args.engine == "path" and method in DYNAMIC_METHODS:
         raise InputError(
             f"--engine path runs greedy and gradient; {method} builds the whole landscape (leave --engine out)"
         )
-    engine = args.engine
-    if method not in ("overdamped", "inertial"):
-        from simulator.motion import choose_engine
-
-        engine = choose_engine(scene, start, method, args.engine, 3, 48)
-    # the first landscape (and footprint), or what the path engine needs, priced before any work
-    require_run_fits(scene, start, method, engine=engine)
+    # the library's plan: the engine, the start in the window, the first landscape (or what
+    # the path engine needs) priced before any work; the run takes the engine chosen here
+    engine = plan_run(scene, start, method, args.engine)
     if scene.dispense is not None:
         # the pads' planes over the whole grid, or the path engine's rotators (it computes
         # the visited poses only)
         from simulator.motion import require_footprint_fits
 
         require_footprint_fits(scene, engine)
-    if method in ("overdamped", "inertial"):
+    if method in DYNAMIC_METHODS:
         from simulator.motion import DynamicsParams  # JAX: once the run is priced
 
         DynamicsParams.from_scene(scene)  # a liquid the model cannot take fails before compiling
@@ -138,7 +133,7 @@ def run(args: argparse.Namespace) -> int:
 
     if method not in DYNAMIC_METHODS:  # a dynamic run says it after its landscape
         compiling(method, args.quiet)
-    traj = simulate(scene, start, method=method, max_steps=max_steps, engine=args.engine)
+    traj = simulate(scene, start, method=method, max_steps=max_steps, engine=engine)
     print(end_line(scene, traj))
     if traj.footprint is not None:
         from simulator.motion import footprint_words

@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from foundation import InputError, fmt_bytes
-from simulator.core import UM2, WHOLE_TOL, floor_whole
+from simulator.core import UM, UM2, WHOLE_TOL, floor_whole
 from simulator.landscape._correlator import NOISE_FACTOR
 from simulator.landscape._posegrid import PoseGrid
 
@@ -180,8 +180,8 @@ class Landscape:
             d = a - b
             return np.where(np.abs(d) <= floor, 0.0, d) / h
 
-        gx = diff(e(x + s, y, t), e(x - s, y, t), 2 * s * 1e-6)
-        gy = diff(e(x, y + s, t), e(x, y - s, t), 2 * s * 1e-6)
+        gx = diff(e(x + s, y, t), e(x - s, y, t), 2 * s * UM)
+        gy = diff(e(x, y + s, t), e(x, y - s, t), 2 * s * UM)
         if len(self.twist_deg) > 1:
             gt = diff(e(x, y, t + dt), e(x, y, t - dt), 2 * math.radians(dt))
         else:

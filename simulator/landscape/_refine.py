@@ -20,6 +20,8 @@ import math
 
 import numpy as np
 
+from simulator.core import UM
+
 #: Half-size (grid steps) of the block interpolated around a pose: translations, twists.
 BLOCK_XY, BLOCK_T = 4, 3
 #: The refined pose stays within this many grid steps of the grid pose it started from.
@@ -130,7 +132,7 @@ def stiffness(ls, x_um: float, y_um: float, twist_deg: float) -> dict:
     "twist_Nm_per_rad"}`` (twist None on a twist-free grid)."""
     it, iy, ix = _grid_index(ls, x_um, y_um, twist_deg)
     f = _Local(ls, it, iy, ix)
-    s_m = ls.um_per_px * 1e-6
+    s_m = ls.um_per_px * UM
     dt = twist_deg - float(ls.twist_deg[it])
     if ls.wrap:
         dt = (dt + ls.period_deg / 2) % ls.period_deg - ls.period_deg / 2

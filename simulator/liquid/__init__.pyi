@@ -39,6 +39,7 @@ from ._warnings import (
     pad_count as pad_count,
     placement_biases as placement_biases,
     require_film as require_film,
+    scene_critical_volume as scene_critical_volume,
     scene_warnings as scene_warnings,
     volume_note as volume_note,
 )

@@ -40,8 +40,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from foundation import InputError, positive
+from simulator.core import UM2, UM3_PER_NL
 
-UM3_PER_NL = 1e6
 #: Volume-grid points of the final pass (the split is exact on this grid).
 GRID_POINTS = 1200
 #: Footprint-grid points before the golden-section refinement.
@@ -365,7 +365,7 @@ class CriticalVolume:
             "split_below_critical_volume": self.split_drops(),
             "energy_at_critical_volume_J": self._at(self.energies.middle)
             * surface_tension_N_m
-            * 1e-12,
+            * UM2,
             "method": METHOD,
             "assumptions": list(ASSUMPTIONS),
             "validity": validity,

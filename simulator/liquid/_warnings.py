@@ -10,10 +10,12 @@ The numbers come from :mod:`simulator.liquid`.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from foundation import InputError
-from simulator.core import UM3_PER_NL
+from simulator.core import DYNAMIC_METHODS, UM3_PER_NL
 from simulator.liquid._calculators import THIN_FILM_FRACTION, height_report, overflow_conditions
 from simulator.physics import meniscus_height_um
 
@@ -56,6 +58,38 @@ def four_pad_geometry(mask) -> tuple[float, float] | None:
         ):
             return None
     return L, g
+
+
+def scene_critical_volume(scene, four_pad: tuple[float, float] | None = None):
+    """The critical volume (:func:`simulator.liquid.critical_volume`'s result) of a scene's
+    four-pad pattern (docs/physics.md §8) with the scene's pad and substrate angles: None when
+    the pads do not wet better than the substrate (no drop prefers them) or the pattern is not
+    a four-pad. ``four_pad``: its ``(L, g)`` in um when known exactly (a generated design),
+    else recognised in the raster (:func:`four_pad_geometry`). InputError when the angles give
+    no critical volume. Computed once per pattern and angles in a process (a sweep's points)."""
+    m = scene.materials
+    if m.pad_angle_deg >= m.substrate_angle_deg:
+        return None
+    fp = four_pad if four_pad is not None else four_pad_geometry(scene.pattern)
+    if fp is None:
+        return None
+    cv = _critical_volume(
+        float(fp[0]), float(fp[1]), float(m.pad_angle_deg), float(m.substrate_angle_deg)
+    )
+    if isinstance(cv, InputError):
+        raise InputError(str(cv))
+    return cv
+
+
+@functools.lru_cache(maxsize=256)
+def _critical_volume(size_um: float, gap_um: float, pad_deg: float, sub_deg: float):
+    """:func:`simulator.liquid.critical_volume`, or its InputError (no crossing found)."""
+    from simulator.liquid._critical_volume import critical_volume
+
+    try:
+        return critical_volume(size_um, gap_um, pad_deg, sub_deg)
+    except InputError as err:
+        return err
 
 
 def pad_count(mask) -> int:
@@ -122,7 +156,7 @@ def volume_note(scene, method: str) -> str | None:
             f"--volume {scene.liquid.volume_nl:g} nl is not used by the {method} method: --meniscus-height gives the "
             "liquid's height (the meniscus's and the dynamics' damping's); it is used here only for the liquid checks"
         )
-    if method in ("overdamped", "inertial") or getattr(scene.effects, "meniscus", False):
+    if method in DYNAMIC_METHODS or getattr(scene.effects, "meniscus", False):
         return None
     return (
         f"--volume {scene.liquid.volume_nl:g} nl is not used by the {method} method (only overdamped and inertial "
@@ -155,14 +189,12 @@ def scene_warnings(scene, biases_um=None, placed: str = "the start") -> list[str
       only when needed) at or beyond the overflow bias
       of docs/physics.md §9, unless condition (1) or (2) rules overflow out.
     """
-    from simulator.liquid._critical_volume import critical_volume
-
     out = []
     m, v = scene.materials, scene.liquid.volume_nl
     fp = four_pad_geometry(scene.pattern)
-    if fp is not None and m.pad_angle_deg < m.substrate_angle_deg:
+    if fp is not None:
         try:
-            cv = critical_volume(fp[0], fp[1], m.pad_angle_deg, m.substrate_angle_deg)
+            cv = scene_critical_volume(scene, fp)
         except InputError as err:
             cv = None
             out.append(f"critical volume of this four-pad pattern not found ({err})")

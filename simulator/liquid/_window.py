@@ -56,8 +56,7 @@ def volume_window(scene, bias_um: float | None = None, biased: str = "the placem
     from foundation import InputError
     from patterns.geometry import footprint_um
     from simulator.liquid._calculators import overflow_bias_um
-    from simulator.liquid._critical_volume import critical_volume
-    from simulator.liquid._warnings import four_pad_geometry, pad_count
+    from simulator.liquid._warnings import four_pad_geometry, pad_count, scene_critical_volume
 
     m = scene.materials
     area = float(scene.chip.area_um2)
@@ -72,9 +71,7 @@ def volume_window(scene, bias_um: float | None = None, biased: str = "the placem
     if fp is not None:
         if m.pad_angle_deg < m.substrate_angle_deg:
             try:
-                cv = critical_volume(
-                    fp[0], fp[1], m.pad_angle_deg, m.substrate_angle_deg
-                ).critical_volume_nl
+                cv = scene_critical_volume(scene, fp).critical_volume_nl
                 cv_note = (
                     f"a four-pad pattern (L {fp[0]:g} um, gap {fp[1]:g} um, pad/substrate angles "
                     f"{m.pad_angle_deg:g}/{m.substrate_angle_deg:g} deg): below the critical volume the drop may split "

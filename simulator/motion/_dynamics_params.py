@@ -35,7 +35,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from foundation import InputError, positive
-from simulator.core import UM, UM2
+from simulator.core import UM, UM2, UM3_PER_NL
 from simulator.physics import (
     LINE_FRICTION_PA_S,
     Chip,
@@ -210,7 +210,7 @@ class DynamicsParams:
             raise InputError(
                 f"droplet volume {liquid.volume_nl:g} nl spreads to a film {h:.3g} um thick under the chip "
                 f"({area:,.0f} um^2), thinner than {MIN_FILM_UM * 1e3:g} nm, where the damping overflows the solver (and no real film is that thin); "
-                f"use at least {MIN_FILM_UM * area * 1e-6:.3g} nl (--volume)"
+                f"use at least {MIN_FILM_UM * area / UM3_PER_NL:.3g} nl (--volume)"
             )
         if calibration is not None:
             cal = positive("damping calibration", calibration)

@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from foundation import InputError
+from simulator.core import DYNAMIC_METHODS
 
 if TYPE_CHECKING:
     import jax
@@ -228,7 +229,7 @@ def simulate_footprint(
         planes = build_footprint_planes(scene, backend=backend)
     n = planes.n_pads  # the planes' own labelling: the pattern is not labelled again
     dispensed, why = dispensed_footprint(scene, planes.labels, n)
-    if method in ("overdamped", "inertial") and dynamics is None:
+    if method in DYNAMIC_METHODS and dynamics is None:
         from simulator.motion._dynamics_params import DynamicsParams
 
         dynamics = DynamicsParams.from_scene(scene)

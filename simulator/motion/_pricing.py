@@ -24,6 +24,7 @@ __all__ = [
     "BAND_PX",
     "BAND_STEPS",
     "PATH_BYTES_PER_STEP",
+    "plan_run",
     "price_run",
     "require_run_fits",
     "require_start_in_window",
@@ -46,15 +47,41 @@ def price_run(scene: Scene, method: str, max_steps: int) -> None:
         raise InputError(
             f"max steps must be at most {MAX_STEPS_LIMIT:,} (the step counter is 32-bit), got {max_steps:,}"
         )
-    per_step = PATH_BYTES_PER_STEP[
-        "dynamics" if method in ("overdamped", "inertial") else "stepping"
-    ]
+    per_step = PATH_BYTES_PER_STEP["dynamics" if method in DYNAMIC_METHODS else "stepping"]
     require_fits(
         f"the path of up to {max_steps:,} steps",
         float(max_steps + 1) * per_step,
         "use a smaller --max-steps",
         scene.memory_budget_mb,
     )
+
+
+def plan_run(
+    scene: Scene,
+    start,
+    method: str,
+    engine: str = "auto",
+    band_steps: int = BAND_STEPS,
+    band_px: int = BAND_PX,
+    path: bool = False,
+) -> str:
+    """The engine of a run of :func:`simulate` without a landscape, its start checked against
+    the window and its first landscape priced (:func:`require_run_fits`), before JAX is
+    imported: the one plan of the library's run and of ``selfalign simulate``.
+
+    Greedy and gradient take :func:`simulator.motion.choose_engine`'s engine (``engine``:
+    "auto", "fft" or "path"), the dynamics ``engine`` unchanged (they build the whole
+    landscape); ``path``: a footprint state's boxes, on the path engine. Returns the engine.
+    """
+    if path:
+        engine = "path"
+    elif method not in DYNAMIC_METHODS:
+        from simulator.motion._pathrun import choose_engine
+
+        engine = choose_engine(scene, start, method, engine, band_steps, band_px)
+    require_start_in_window(scene, start)
+    require_run_fits(scene, start, method, band_steps, band_px, engine)
+    return engine
 
 
 def _fit_box(

@@ -44,8 +44,6 @@ if TYPE_CHECKING:
     from simulator.motion._dynamics_params import DynamicsParams
     from simulator.motion._field import Field
 
-DYNAMIC = DYNAMIC_METHODS
-
 
 class RunState(NamedTuple):
     """The end of one run, the same fields for every method.
@@ -154,7 +152,7 @@ def stepper(method: str, stiff: bool = False) -> Callable[..., RunState]:
         return _greedy
     if method == "gradient":
         return _gradient
-    if method in DYNAMIC:
+    if method in DYNAMIC_METHODS:
         from simulator.motion._dynamics_ode import stiff_solver
 
         return functools.partial(

@@ -19,7 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from foundation import InputError, compiling, shows_wait, wait_line
-from simulator.core import DEFAULT_MAX_STEPS, DEG_TOL, METHODS, OUTCOMES, tiny
+from simulator.core import DEFAULT_MAX_STEPS, DEG_TOL, DYNAMIC_METHODS, METHODS, OUTCOMES, UM, tiny
 from simulator.landscape import (
     GlobalMinimum,
     Landscape,
@@ -35,11 +35,10 @@ from simulator.motion._pricing import (
     BAND_STEPS,
     _fit_box,
     _twist_band,
+    plan_run,
     price_run,
-    require_run_fits,
-    require_start_in_window,
 )
-from simulator.motion._steppers import DYNAMIC, RunState, flat_at, jitted
+from simulator.motion._steppers import RunState, flat_at, jitted
 from simulator.motion._stepping import (
     CONVERGED,
     EDGE,
@@ -149,10 +148,10 @@ def is_stiff(method: str, field, grid, params) -> bool:
     if method != "inertial" or field.pinned:
         return False
     f_ref = float(reference_gradient(field, grid)) / (
-        grid.um_per_px * 1e-6
+        grid.um_per_px * UM
     )  # N (J per px -> J per m)
     tau_m = params.mass_kg / params.damping_N_s_m
-    tau_c = params.damping_N_s_m * grid.um_per_px * 1e-6 / max(f_ref, tiny())
+    tau_c = params.damping_N_s_m * grid.um_per_px * UM / max(f_ref, tiny())
     return tau_m < 0.1 * tau_c
 
 
@@ -277,19 +276,14 @@ def _plan(
     engine: str,
     path,
 ) -> _Plan:
-    """The engine (:func:`simulator.motion.choose_engine`), the run priced against the memory
-    budget and its start against the window, the dynamics' parameters, and the start twist
+    """The engine, the run priced against the memory budget and its start against the window
+    (:func:`simulator.motion.plan_run`), the dynamics' parameters, and the start twist
     checked against the run's twist axis."""
-    dynamic = method in ("overdamped", "inertial")
-    if path is not None:
-        engine = "path"
-    elif landscape is None and not dynamic:
-        from simulator.motion._pathrun import choose_engine
-
-        engine = choose_engine(scene, start, method, engine, band_steps, band_px)
+    dynamic = method in DYNAMIC_METHODS
     if landscape is None:
-        require_start_in_window(scene, start)
-        require_run_fits(scene, start, method, band_steps, band_px, engine)
+        engine = plan_run(scene, start, method, engine, band_steps, band_px, path is not None)
+    elif path is not None:
+        engine = "path"
     if dynamic and dynamics is None:
         from simulator.motion._dynamics_params import DynamicsParams
 
@@ -714,7 +708,7 @@ def _to_trajectory(method: str, state: RunState, grid) -> Trajectory:
     n = int(state.step) + 1
     idx = np.asarray(state.path)[:n]
     energy = np.asarray(state.path_energy)[:n].astype(float)
-    dynamic = method in DYNAMIC
+    dynamic = method in DYNAMIC_METHODS
     t_s = np.asarray(state.path_t)[:n].astype(float) if dynamic else None
     time_s = float(state.time_s) if dynamic else None
     return Trajectory(method, "", grid.to_pose(idx), energy, n - 1, time_s, t_s)

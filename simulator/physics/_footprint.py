@@ -64,6 +64,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from simulator.core import UM3_PER_NL
 from simulator.physics._meniscus import WallProfile
 
 #: The two protocols of ``--dispense`` (scene key ``dispense``): the droplet on the pattern
@@ -260,4 +261,4 @@ def cap_radius_um(volume_nl: float, angle_deg: float) -> float:
     angle ``angle_deg``: ``V = pi R^3 (2 - 3 cos t + cos^3 t) / (3 sin^3 t)``."""
     t = math.radians(angle_deg)
     shape = math.pi * (2 - 3 * math.cos(t) + math.cos(t) ** 3) / (3 * math.sin(t) ** 3)
-    return (volume_nl * 1e6 / shape) ** (1.0 / 3.0)
+    return (volume_nl * UM3_PER_NL / shape) ** (1.0 / 3.0)

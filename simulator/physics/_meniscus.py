@@ -132,6 +132,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from foundation import InputError
+from simulator.core import UM2
 
 #: From this height (px) up the blur is applied to the chip, which is then rotated as a
 #: smooth image; below it to the pattern (exact chip rasters; the h -> 0 limit to round-off).
@@ -307,7 +308,7 @@ def flat_wall_energy_J(x_um, edge_um: float, h_um: float, gamma_N_m: float) -> n
     """Flat-wall energy of a shift ``x`` across two straight edges of length ``edge_um``:
     ``2 gamma L (sqrt(x^2 + h^2) - h)`` in J (um in, J out)."""
     x = np.asarray(x_um, float)
-    return 2 * gamma_N_m * edge_um * (np.sqrt(x * x + h_um * h_um) - h_um) * 1e-12
+    return 2 * gamma_N_m * edge_um * (np.sqrt(x * x + h_um * h_um) - h_um) * UM2
 
 
 def flat_wall_stiffness_N_m(edge_um: float, h_um: float, gamma_N_m: float) -> float:
@@ -320,4 +321,4 @@ def flat_wall_stiffness_N_m(edge_um: float, h_um: float, gamma_N_m: float) -> fl
 
 def flat_wall_twist_stiffness_Nm(side_um: float, h_um: float, gamma_N_m: float) -> float:
     """Twist stiffness ``gamma L^3 / (3 h)`` (N m/rad) of a square of side L."""
-    return gamma_N_m * side_um**3 / (3 * h_um) * 1e-12
+    return gamma_N_m * side_um**3 / (3 * h_um) * UM2

@@ -162,7 +162,7 @@ class Materials:
 
     @property
     def joules_per_um2(self) -> float:
-        """Energy of one um^2 of overlap, ``Delta_gamma * 1e-12`` J (E = this * A_ol[um^2])."""
+        """Energy of one um^2 of overlap, ``Delta_gamma * UM2`` J (E = this * A_ol[um^2])."""
         return self.delta_gamma_N_m * UM2
 
     def weight(self, v: float | np.ndarray) -> float | np.ndarray:

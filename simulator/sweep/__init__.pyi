@@ -14,13 +14,18 @@ from ._cluster import (
     dask_client as dask_client,
     release_semaphores as release_semaphores,
     run_tasks as run_tasks,
+    start_workers as start_workers,
     worker_cap as worker_cap,
 )
 from ._columns import (
+    METRIC_LABELS as METRIC_LABELS,
     STATUS_COLUMNS as STATUS_COLUMNS,
+    UNIT_TEXT as UNIT_TEXT,
     UNITS as UNITS,
+    column_label as column_label,
     expected_columns as expected_columns,
     flatten as flatten,
+    metric as metric,
 )
 from ._point import (
     assess_point as assess_point,
@@ -31,9 +36,6 @@ from ._point import (
     point_scene as point_scene,
     price_point as price_point,
     run_point as run_point,
-)
-from ._report import (
-    column_label as column_label,
 )
 from ._run import (
     run_sweep as run_sweep,

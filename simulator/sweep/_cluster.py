@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import sys
 import time
 from collections.abc import Callable, Iterable, Iterator
 from typing import Any, cast
@@ -20,7 +21,7 @@ from typing import Any, cast
 from foundation import InputError, require
 from simulator.sweep._point import XLA_ONE_THREAD, _one_line, run_point
 
-__all__ = ["CONNECT_TIMEOUT_S", "check_where", "dask_client", "run_tasks"]
+__all__ = ["CONNECT_TIMEOUT_S", "check_where", "dask_client", "run_tasks", "start_workers"]
 
 #: Seconds to wait for a Dask scheduler given with ``scheduler``.
 CONNECT_TIMEOUT_S = 3.0
@@ -305,6 +306,45 @@ def check_where(workers: int | None, scheduler: str | None) -> None:
             not scheduler,
             "give --workers or --scheduler, not both (the cluster at --scheduler has its own workers)",
         )
+
+
+def start_workers(
+    stack: contextlib.ExitStack,
+    workers: int | None,
+    scheduler: str | None,
+    points: int,
+    price: Callable[[], tuple[float | None, float | None]] | None = None,
+) -> tuple[Any, float, str]:
+    """Where ``points`` points run, started once for a sweep and a search alike: on the cluster
+    at ``scheduler``, else on local workers (``workers``, default one per core, capped by
+    :func:`worker_cap`, whose note is printed when ``workers`` was given; ``price()``: the
+    largest point's peak bytes and the budget of all the workers, asked only when workers
+    start), else in this process (no points to run, or ``workers`` 0). The client enters
+    ``stack`` (closed with it). Returns the client (None: this process), the seconds its
+    start took, and where the points run in words."""
+    n_workers, capped = (
+        (None, None)
+        if scheduler
+        else worker_cap(
+            workers or os.cpu_count() or 1,
+            points,
+            *(price() if price is not None and points and workers != 0 else (None, None)),
+        )
+    )
+    if capped and workers and points:
+        print(f"note: {capped}", file=sys.stderr, flush=True)
+    t0 = time.perf_counter()
+    client = (
+        stack.enter_context(dask_client(n_workers, scheduler)) if points and workers != 0 else None
+    )
+    where = (
+        f"the Dask cluster at {scheduler}"
+        if scheduler
+        else "this process"
+        if client is None
+        else f"{n_workers} local Dask workers"
+    )
+    return client, time.perf_counter() - t0, where
 
 
 def run_tasks(

@@ -14,7 +14,16 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["STATUS_COLUMNS", "UNITS", "expected_columns", "flatten"]
+__all__ = [
+    "METRIC_LABELS",
+    "STATUS_COLUMNS",
+    "UNITS",
+    "UNIT_TEXT",
+    "column_label",
+    "expected_columns",
+    "flatten",
+    "metric",
+]
 
 STATUS_COLUMNS = ("status", "error", "seconds")
 
@@ -43,6 +52,64 @@ UNITS = (
 )
 #: Names of list components, by key (default x, y, twist).
 COMPONENTS = {"pattern_px": ("rows", "cols"), "chip_um": ("width", "height")}
+
+
+#: How units in column names are written on the pictures and pages.
+UNIT_TEXT = {
+    "um": "um",
+    "nl": "nl",
+    "deg": "deg",
+    "mN_m": "mN/m",
+    "N_m": "N/m",
+    "N_per_m": "N/m",
+    "Nm_per_rad": "N m/rad",
+    "N": "N",
+    "Nm": "N m",
+    "J": "J",
+    "um2": "um^2",
+    "s": "s",
+}
+
+#: The assessment's numbers as the pictures and pages show them, one label each: column ->
+#: (label, factor to the unit shown). The sweep's pictures (:data:`simulator.sweep`'s
+#: metrics) and a design search's comparison of the best design with the baseline take
+#: theirs from here (:func:`metric`); other columns are labelled from their names
+#: (:func:`column_label`).
+METRIC_LABELS = {
+    "max_bias_x_um": ("max bias along x (um)", 1.0),
+    "max_bias_y_um": ("max bias along y (um)", 1.0),
+    "capture_fraction": ("capture fraction (%)", 100.0),
+    "yield_fraction": ("yield under placement noise (%)", 100.0),
+    "stiffness_x_N_per_m": ("stiffness k_x (N/m)", 1.0),
+    "stiffness_y_N_per_m": ("stiffness k_y (N/m)", 1.0),
+    "restoring_force_plus_x_x_N": ("restoring force -F_x at the +x bias (uN)", -1e6),
+    "restoring_force_bias_um": (
+        "the bias the force is probed at (um; beyond the floor when the chip floats)",
+        1.0,
+    ),
+    "error_limit_um": ("what limits the final-pose error (um: grid step or floor)", 1.0),
+    "global_minimum_offset_um": ("offset of the global minimum (um)", 1.0),
+    "floating_half_width_um": ("the chip floats within +- (um)", 1.0),
+    "yield_error_x_mean_abs_um": ("aligned placements: mean |error| in x (um)", 1.0),
+    "yield_time_to_align_median_s": ("time to align, median (ms)", 1e3),
+    "yield_time_to_align_p90_s": ("time to align, 90th percentile (ms)", 1e3),
+    "volume_nl": ("droplet volume (nl)", 1.0),
+    "critical_volume_nl": ("critical volume of the four-pad (nl)", 1.0),
+}
+
+
+def column_label(column: str) -> str:
+    """``stiffness_twist_Nm_per_rad`` -> ``stiffness twist (N m/rad)``."""
+    name, unit = _split_unit(column)
+    text = name.replace("_", " ")
+    return f"{text} ({UNIT_TEXT.get(unit, unit.replace('_', ' '))})" if unit else text
+
+
+def metric(column: str) -> tuple[str, str, float]:
+    """``(column, label, factor to the unit shown)`` of a column: its :data:`METRIC_LABELS`
+    entry, else the label of its name (:func:`column_label`) unscaled."""
+    label, factor = METRIC_LABELS.get(column) or (column_label(column), 1.0)
+    return column, label, factor
 
 
 def _split_unit(key: str) -> tuple[str, str | None]:

@@ -12,7 +12,6 @@ and JAX are imported only when a point runs.
 from __future__ import annotations
 
 import copy
-import functools
 import os
 import sys
 import time
@@ -79,7 +78,7 @@ def point_geometry(task: dict):
 
 def point_scene(task: dict):
     """The scene of one point, built as ``selfalign evaluate`` builds it; also whether to coarsen automatically."""
-    from patterns.geometry import mask_from_geometry
+    from patterns.geometry import default_chip_um, mask_from_geometry
     from simulator.scene import Scene, sweep_places
 
     doc = copy.deepcopy(task["scene"])
@@ -105,51 +104,35 @@ def point_scene(task: dict):
             what="the pattern raster",
         )
         if not any(k in doc for k in ("chip", "chip_size_um", "chip_layer")):
-            x0, y0, x1, y1 = (
-                geometry.bounds
-            )  # evaluate's default chip: the pattern's wettable bounding box
-            doc["chip_size_um"] = [x1 - x0, y1 - y0]
+            doc["chip_size_um"] = list(default_chip_um(geometry))  # evaluate's default chip
     elif not any(k in doc for k in ("chip", "chip_size_um", "chip_layer")):
-        # evaluate's default chip: the pattern's wettable bounding box (the pattern read once with a stand-in chip)
-        from patterns.geometry import footprint_um
-
+        # evaluate's default chip (the pattern read once with a stand-in chip)
         probe = Scene.from_dict(
             doc | {"chip_size_um": [1.0, 1.0]}, base=Path(task["base"]), check_scale=False
         )
-        doc["chip_size_um"] = list(footprint_um(probe.pattern))
+        doc["chip_size_um"] = list(default_chip_um(probe.pattern))
     auto = "resolution_um" not in doc
     return Scene.from_dict(doc, base=Path(task["base"])), auto
-
-
-@functools.lru_cache(maxsize=256)
-def _critical_volume_nl(size_um: float, gap_um: float, pad_deg: float, sub_deg: float):
-    from simulator.liquid import critical_volume
-
-    try:
-        return critical_volume(size_um, gap_um, pad_deg, sub_deg).critical_volume_nl
-    except InputError:  # no crossing found: the angles give no critical volume
-        return None
 
 
 def point_critical_volume_nl(scene, task: dict) -> float | None:
     """The critical droplet volume (nl) of the point's pattern when it is a four-pad
     (docs/physics.md §8): from the generated design's exact size and gap, else from the four
     pads recognised in the raster; None for other patterns, or pads that do not wet better
-    than the substrate (no drop prefers them)."""
-    from simulator.liquid import four_pad_geometry
+    than the substrate (no drop prefers them), or angles that give no critical volume
+    (:func:`simulator.liquid.scene_critical_volume`)."""
+    from simulator.liquid import scene_critical_volume
 
-    m = scene.materials
-    if m.pad_angle_deg >= m.substrate_angle_deg:
-        return None
     design = task.get("design")
+    fp = None
     if design is not None and design["name"] == "four-pad":
         params = design_params(task)
         fp = (float(params["size"]), float(params["gap"]))
-    else:
-        fp = four_pad_geometry(scene.pattern)
-    if fp is None:
+    try:
+        cv = scene_critical_volume(scene, fp)
+    except InputError:  # no crossing found: the angles give no critical volume
         return None
-    return _critical_volume_nl(fp[0], fp[1], float(m.pad_angle_deg), float(m.substrate_angle_deg))
+    return None if cv is None else cv.critical_volume_nl
 
 
 def assess_point(task: dict) -> dict:

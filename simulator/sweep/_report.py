@@ -21,17 +21,23 @@ from pathlib import Path
 
 import numpy as np
 
-#: Metrics drawn, when the table has them: column, label, factor to the plotted unit.
-METRICS = (
-    ("max_bias_x_um", "max bias along x (um)", 1.0),
-    ("max_bias_y_um", "max bias along y (um)", 1.0),
-    ("capture_fraction", "capture fraction (%)", 100.0),
-    ("yield_fraction", "yield under placement noise (%)", 100.0),
-    ("restoring_force_plus_x_x_N", "restoring force -Fx at the +x bias (uN)", -1e6),
-    ("global_minimum_offset_um", "offset of the global minimum (um)", 1.0),
-    ("floating_half_width_um", "the chip floats within +- (um)", 1.0),
-    ("yield_time_to_align_median_s", "time to align, median (ms)", 1e3),
-    ("yield_time_to_align_p90_s", "time to align, 90th percentile (ms)", 1e3),
+from simulator.sweep._columns import column_label, metric
+
+#: Metrics drawn, when the table has them: column, label, factor to the plotted unit
+#: (:func:`simulator.sweep.metric`).
+METRICS = tuple(
+    metric(c)
+    for c in (
+        "max_bias_x_um",
+        "max_bias_y_um",
+        "capture_fraction",
+        "yield_fraction",
+        "restoring_force_plus_x_x_N",
+        "global_minimum_offset_um",
+        "floating_half_width_um",
+        "yield_time_to_align_median_s",
+        "yield_time_to_align_p90_s",
+    )
 )
 #: The most point rows the HTML table shows (the CSV has them all).
 MAX_ROWS = 1000
@@ -41,38 +47,12 @@ def metrics(table) -> list[tuple[str, str, float]]:
     """The metrics to draw: :data:`METRICS` present with a finite value, and any stiffness column."""
     out = [m for m in METRICS if m[0] in table.columns]
     out += [
-        (c, column_label(c), 1.0)
+        metric(c)
         for c in table.columns
         if c.startswith("stiffness") and c not in {m[0] for m in out}
     ]
     ok = table[table["status"] == "ok"] if len(table) else table
     return [m for m in out if len(ok) and np.isfinite(np.asarray(ok[m[0]], float)).any()]
-
-
-#: How units in column names are written on the pictures.
-UNIT_TEXT = {
-    "um": "um",
-    "nl": "nl",
-    "deg": "deg",
-    "mN_m": "mN/m",
-    "N_m": "N/m",
-    "N_per_m": "N/m",
-    "Nm_per_rad": "N m/rad",
-    "N": "N",
-    "Nm": "N m",
-    "J": "J",
-    "um2": "um^2",
-    "s": "s",
-}
-
-
-def column_label(column: str) -> str:
-    """``stiffness_x_N_per_m`` -> ``stiffness x (N/m)``."""
-    from simulator.sweep._columns import _split_unit
-
-    name, unit = _split_unit(column)
-    text = name.replace("_", " ")
-    return f"{text} ({UNIT_TEXT.get(unit, unit.replace('_', ' '))})" if unit else text
 
 
 def _levels(values) -> tuple[list, bool]:

@@ -86,12 +86,7 @@ from pathlib import Path
 
 from foundation import require
 from simulator.sweep._axes import HARD_MAX_POINTS
-from simulator.sweep._cluster import (
-    check_where,
-    dask_client,
-    run_tasks,
-    worker_cap,
-)
+from simulator.sweep._cluster import check_where, run_tasks, start_workers
 from simulator.sweep._spec import (
     DEFAULT_MAX_POINTS,
     SweepSpec,
@@ -207,34 +202,12 @@ def run_sweep(
     try:
         done = store.done(retry_failed)
         todo = [spec.task(p) for p in spec.points() if p["point"] not in done]
-        n_workers, capped = (
-            (None, None)
-            if scheduler
-            else worker_cap(
-                workers or os.cpu_count() or 1,
-                len(todo),
-                *(_price_workers(spec, todo) if todo and workers != 0 else (None, None)),
-            )
-        )
-        if capped and workers and todo:
-            print(f"note: {capped}", file=sys.stderr, flush=True)
         with contextlib.ExitStack() as stack:
-            t_cluster = time.perf_counter()
-            client = (
-                stack.enter_context(dask_client(n_workers, scheduler))
-                if todo and workers != 0
-                else None
+            client, t_cluster, where = start_workers(
+                stack, workers, scheduler, len(todo), lambda: _price_workers(spec, todo)
             )
-            t_cluster = time.perf_counter() - t_cluster
             store.open()  # only now: a scheduler that cannot be reached leaves no directory
             if todo and not quiet:
-                where = (
-                    f"the Dask cluster at {scheduler}"
-                    if scheduler
-                    else "this process"
-                    if client is None
-                    else f"{n_workers} local Dask workers"
-                )
                 print(
                     f"sweep {spec.digest[:12]}: {n} points ({spec.shape_text()}), {n - len(todo)} done before; running {len(todo)} on {where}",
                     file=sys.stderr,

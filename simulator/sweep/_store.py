@@ -21,7 +21,7 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import TextIO
 
-from foundation import InputError, hold, require
+from foundation import InputError, hold, json_text, require
 from simulator.sweep._columns import STATUS_COLUMNS, flatten
 from simulator.sweep._spec import SweepSpec
 
@@ -273,10 +273,10 @@ class ResultStore:
             width = max(5, len(str((self.n or 1) - 1)))
             _write_text(
                 self.out / self.ROWS_DIR / f"{i:0{width}d}.json",
-                json.dumps(doc, indent=1, allow_nan=False) + "\n",
+                json_text(doc, indent=1),
             )
             assert self._journal is not None  # opened with the directory
-            self._journal.write(json.dumps(row, allow_nan=False) + "\n")
+            self._journal.write(json_text(row, indent=None))
             self._journal.flush()
             hold(self.HOLD)
             if time.monotonic() >= self._next_flush:

@@ -37,7 +37,7 @@ import shapely
 from shapely.geometry.base import BaseGeometry
 
 from foundation import InputError, positive
-from simulator.core import UM2
+from simulator.core import UM, UM2
 from simulator.motion import GREEDY_MOVES
 from simulator.physics import Materials
 
@@ -153,7 +153,7 @@ def force_N(
     """(N, 2) restoring force (Fx, Fy) in N: F = -grad E (docs/physics.md §3.4)."""
     dg = (materials or Materials()).delta_gamma_N_m
     g = gradient_um2(pattern, chip, poses, **steps)
-    return -dg * g[:, :2] * UM2 / 1e-6
+    return -dg * g[:, :2] * UM2 / UM
 
 
 def torque_Nm(

@@ -51,7 +51,7 @@ from pathlib import Path
 import numpy as np
 
 from foundation import InputError, require
-from simulator.core import DYNAMIC_METHODS as DYNAMIC, METHODS
+from simulator.core import DYNAMIC_METHODS, METHODS
 from simulator.design._calibrate._params import (
     FITTABLE,
     default_bounds,
@@ -322,12 +322,12 @@ def calibrate(
     )
     method = method or ("overdamped" if tab.has_times else "greedy")
     require(method in METHODS, f"--method must be one of {', '.join(METHODS)}, got {method!r}")
-    if tab.has_times and method not in DYNAMIC:
+    if tab.has_times and method not in DYNAMIC_METHODS:
         raise InputError(
             f"{tab.source}: the table gives time_s, which only the dynamics have: use --method overdamped "
             f"or inertial (not {method}), or drop the time_s column"
         )
-    if "damping" in names and method not in DYNAMIC:
+    if "damping" in names and method not in DYNAMIC_METHODS:
         raise InputError(
             "--fit damping: the damping sets only the times of the dynamics; give --method overdamped "
             "(and the bench's time_s) or fit something else"
@@ -358,7 +358,7 @@ def calibrate(
             continue
         require_landscape_fits(s)
     lanes = tab.n * draws
-    if method in DYNAMIC:
+    if method in DYNAMIC_METHODS:
         from simulator.batch import price_dynamics_lanes
         from simulator.core import DEFAULT_DYNAMICS_CHUNK, threads
 
@@ -759,7 +759,7 @@ def synthetic_trials(
             "sigma_y_um": float(spread[1]),
             "sigma_twist_deg": float(spread[2]),
         }
-        if method in DYNAMIC and math.isfinite(t[j]):
+        if method in DYNAMIC_METHODS and math.isfinite(t[j]):
             row["time_s"] = float(t[j])
         rows.append(row)
     return rows

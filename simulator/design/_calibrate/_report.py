@@ -189,7 +189,7 @@ Best: trial {result["best_trial"]}, log-likelihood {result["log_likelihood"]:.3f
 def write_outputs(out: Path, result: dict, doc: dict, *, pictures: bool = True) -> list[str]:
     """``fitted.toml``, ``fit.json`` and (``pictures``) ``bench.png`` and ``report.html``
     into ``out``, all or none."""
-    from foundation import atomic_output, require_finite
+    from foundation import atomic_output, json_text, require_finite
 
     fitted = with_values(doc, result["best"])
     head = (
@@ -204,7 +204,7 @@ def write_outputs(out: Path, result: dict, doc: dict, *, pictures: bool = True) 
     with contextlib.ExitStack() as stack:
         tmp = {n: stack.enter_context(atomic_output(out / n)) for n in names}
         Path(tmp["fitted.toml"]).write_text(scene_toml(fitted, head))
-        Path(tmp["fit.json"]).write_text(json.dumps(result, indent=2, allow_nan=False) + "\n")
+        Path(tmp["fit.json"]).write_text(json_text(result))
         if pictures:
             _plot(result, Path(tmp["bench.png"]))
             Path(tmp["report.html"]).write_text(_page(result))

@@ -32,6 +32,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from simulator.core import UM, UM2
+
 __all__ = ["Objective", "make_objective", "softmin"]
 
 
@@ -125,8 +127,8 @@ def make_objective(terms: dict, side, scene) -> Objective:
     area = side.chip_area_px2
     length = float(np.sqrt(area))
     dg = abs(scene.delta_gamma_N_m)
-    e_unit = dg * area * s * s * 1e-12  # J per normalised energy
-    f_unit = dg * length * s * 1e-6  # N per normalised force
+    e_unit = dg * area * s * s * UM2  # J per normalised energy
+    f_unit = dg * length * s * UM  # N per normalised force
     k_unit = dg * length  # N/m per normalised stiffness (overlap px^2 per px^2 is N/m / |dg|)
     weights = {k: v["weight"] for k, v in terms.items()}
     temps = {

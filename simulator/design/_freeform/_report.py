@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from foundation import MARKER, InputError, check_output_dir, output_directory
+from foundation import MARKER, InputError, check_output_dir, json_text, output_directory
 
 __all__ = [
     "COMMAND",
@@ -193,7 +193,7 @@ def write_outputs(result, tmp: Path, quiet: bool = True):
     from foundation import require_finite
 
     require_finite(doc, "free-form result")
-    (tmp / "result.json").write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n")
+    (tmp / "result.json").write_text(json_text(doc))
     (tmp / "report.html").write_text(_html(doc))
     files = sorted(p.relative_to(tmp).as_posix() for p in tmp.rglob("*") if p.is_file())
     return replace(result, files=files)

@@ -24,41 +24,34 @@ from pathlib import Path
 
 import numpy as np
 
+from simulator.sweep import metric
+
 #: The evaluator's numbers set side by side for the best design and the baseline: column,
-#: label, factor to the unit shown.
-COMPARED = (
-    ("max_bias_x_um", "max bias along x (um)", 1.0),
-    ("max_bias_y_um", "max bias along y (um)", 1.0),
-    ("capture_fraction", "capture fraction (%)", 100.0),
-    ("yield_fraction", "yield under placement noise (%)", 100.0),
-    ("stiffness_x_N_per_m", "stiffness k_x (N/m)", 1.0),
-    ("stiffness_y_N_per_m", "stiffness k_y (N/m)", 1.0),
-    ("restoring_force_plus_x_x_N", "restoring force -F_x at the +x bias (uN)", -1e6),
-    (
+#: label, factor to the unit shown (:func:`simulator.sweep.metric`).
+COMPARED = tuple(
+    metric(c)
+    for c in (
+        "max_bias_x_um",
+        "max_bias_y_um",
+        "capture_fraction",
+        "yield_fraction",
+        "stiffness_x_N_per_m",
+        "stiffness_y_N_per_m",
+        "restoring_force_plus_x_x_N",
         "restoring_force_bias_um",
-        "the bias the force is probed at (um; beyond the floor when the chip floats)",
-        1.0,
-    ),
-    ("error_limit_um", "what limits the final-pose error (um: grid step or floor)", 1.0),
-    ("global_minimum_offset_um", "offset of the global minimum (um)", 1.0),
-    ("floating_half_width_um", "the chip floats within +- (um)", 1.0),
-    ("yield_error_x_mean_abs_um", "aligned placements: mean |error| in x (um)", 1.0),
-    ("volume_nl", "droplet volume (nl)", 1.0),
-    ("critical_volume_nl", "critical volume of the four-pad (nl)", 1.0),
+        "error_limit_um",
+        "global_minimum_offset_um",
+        "floating_half_width_um",
+        "yield_error_x_mean_abs_um",
+        "volume_nl",
+        "critical_volume_nl",
+    )
 )
 #: The same per footprint protocol, for a scene with ``dispense`` (docs/physics.md §3.5).
 PROTOCOL_COMPARED = tuple(
-    row
+    (f"protocols_{name}_{c}", f"--dispense {name}: {label}", factor)
     for name in ("pattern", "chip")
-    for row in (
-        (f"protocols_{name}_max_bias_x_um", f"--dispense {name}: max bias along x (um)", 1.0),
-        (f"protocols_{name}_capture_fraction", f"--dispense {name}: capture fraction (%)", 100.0),
-        (
-            f"protocols_{name}_yield_fraction",
-            f"--dispense {name}: yield under placement noise (%)",
-            100.0,
-        ),
-    )
+    for c, label, factor in map(metric, ("max_bias_x_um", "capture_fraction", "yield_fraction"))
 )
 #: The most trial rows the HTML table shows (the CSV has them all).
 MAX_ROWS = 1000
@@ -292,7 +285,7 @@ def _values(spec, row: dict) -> dict:
 
 def write_best(out: Path, spec, table, best: list[int]) -> list[str]:
     """``best.json`` (always), and with a best design ``best.png`` and ``best.gds``."""
-    from foundation import atomic_output
+    from foundation import atomic_output, json_text
 
     written = []
     base = _json_row(_row(table, 0))
@@ -358,7 +351,7 @@ def write_best(out: Path, spec, table, best: list[int]) -> list[str]:
             written.append("best.gds")
             doc["best"]["gds_area_um2"] = geometry.area
     with atomic_output(out / "best.json") as tmp:
-        tmp.write_text(json.dumps(doc, indent=1, allow_nan=False, default=str) + "\n")
+        tmp.write_text(json_text(doc, indent=1, default=str))
     return ["best.json", *written]
 
 

@@ -468,7 +468,7 @@ def search(
     and the times.
     """
     from foundation import budget_bytes
-    from simulator.sweep import check_where, dask_client, run_tasks, worker_cap
+    from simulator.sweep import check_where, run_tasks, start_workers
 
     spec = spec if isinstance(spec, SearchSpec) else load_search(spec, base)
     n = spec.trials if trials is None else trials
@@ -493,34 +493,12 @@ def search(
         todo = (0 if run.exhausted else len(run.free)) + run.baseline
         points = todo * sw.realizations
         with contextlib.ExitStack() as stack:
-            n_workers, capped = (
-                (None, None)
-                if scheduler
-                else worker_cap(
-                    workers or os.cpu_count() or 1,
-                    points,
-                    peak,
-                    budget_bytes(sw.scene.get("memory_budget_mb")),
-                )
+            budget = budget_bytes(sw.scene.get("memory_budget_mb"))
+            client, t_cluster, where = start_workers(
+                stack, workers, scheduler, points, lambda: (peak, budget)
             )
-            if capped and workers and todo:
-                print(f"note: {capped}", file=sys.stderr, flush=True)
-            t_cluster = time.perf_counter()
-            client = (
-                stack.enter_context(dask_client(n_workers, scheduler))
-                if todo and workers != 0
-                else None
-            )
-            t_cluster = time.perf_counter() - t_cluster
             store.open()  # only now: a scheduler that cannot be reached leaves no directory
             if todo and not quiet:
-                where = (
-                    f"the Dask cluster at {scheduler}"
-                    if scheduler
-                    else "this process"
-                    if client is None
-                    else f"{n_workers} local Dask workers"
-                )
                 print(
                     f"search {spec.digest[:12]}: {n} trials ({spec.sampler}) over "
                     f"{', '.join(a.name for a in spec.searched)}, {len(store.rows)} done before; "
