@@ -246,6 +246,13 @@ def _finite(flag: str, value: float | None, positive: bool = True) -> float | No
     return float(value)
 
 
+def _given(flag: str, value: float, positive: bool = True) -> float:
+    """:func:`_finite` of a flag that is given (required, defaulted or checked present)."""
+    v = _finite(flag, value, positive)
+    assert v is not None
+    return v
+
+
 def _chip_size(text: str) -> tuple[float, float]:
     from simulator.commands._flags import parse_chip_size
 
@@ -270,7 +277,7 @@ def _liquid(args: argparse.Namespace) -> tuple[float, float]:
     from simulator.liquid import check_surface_tension_mN_m
 
     gamma = check_surface_tension_mN_m(args.surface_tension, "--surface-tension") / 1000
-    rho = _finite("--density", args.density)
+    rho = _given("--density", args.density)
     return gamma, rho
 
 
@@ -300,11 +307,11 @@ def run_height(args: argparse.Namespace) -> int:
     from simulator.liquid import height_report
 
     gamma, rho = _liquid(args)
-    v = _finite("--volume", args.volume)
+    v = _given("--volume", args.volume)
     if (args.chip_size is None) == (args.area is None):
         raise InputError("give the wetted area once: --chip-size W[xH] (um) or --area UM2")
     sides = _chip_size(args.chip_size) if args.chip_size else None
-    area = sides[0] * sides[1] if sides else _finite("--area", args.area)
+    area = sides[0] * sides[1] if sides else _given("--area", args.area)
     bias = _finite("--bias", args.bias, positive=False)
     if bias is not None and sides is None:
         raise InputError(
@@ -354,7 +361,7 @@ def run_overflow(args: argparse.Namespace) -> int:
             raise InputError(
                 "give the liquid height once: --meniscus-height UM, or --volume NL with --chip-size W[xH]"
             )
-        h = _finite("--meniscus-height", args.meniscus_height)
+        h = _given("--meniscus-height", args.meniscus_height)
     else:
         if args.volume is None or args.chip_size is None:
             raise InputError(
@@ -364,7 +371,7 @@ def run_overflow(args: argparse.Namespace) -> int:
 
         w, ht = _chip_size(args.chip_size)
         # As `liquid height`, simulate and evaluate: h = V / A, a film thicker than the chip refused.
-        h = require_film(_finite("--volume", args.volume), w, ht)
+        h = require_film(_given("--volume", args.volume), w, ht)
     r = overflow_report(
         args.pad_advancing, chip, args.edge_angle, h, _finite("--bias", args.bias, positive=False)
     )
@@ -407,12 +414,12 @@ def run_critical_volume(args: argparse.Namespace) -> int:
     from simulator.liquid import critical_volume
 
     gamma, rho = _liquid(args)
-    size, gap = _finite("--size", args.size), _finite("--gap", args.gap)
+    size, gap = _given("--size", args.size), _given("--gap", args.gap)
     cv = critical_volume(
         size,
         gap,
-        _finite("--pad-angle", args.pad_angle),
-        _finite("--substrate-angle", args.substrate_angle),
+        _given("--pad-angle", args.pad_angle),
+        _given("--substrate-angle", args.substrate_angle),
     )
     doc = cv.to_json(gamma, rho)
     mid, split = doc["middle_drop"], doc["split_below_critical_volume"]

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import math
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -134,7 +135,7 @@ def parse_grid(text: str) -> StartGrid:
     names = ("--grid x", "--grid y", "--grid twist")
     axes = [_range(v.strip(), n) for v, n in zip(parts, names, strict=False)]
     try:
-        return StartGrid.from_ranges(*axes)
+        return StartGrid.from_ranges(*axes)  # pyright: ignore[reportArgumentType]  (twist_deg unannotated, taken as float from its default; it takes a range too)
     except InputError as err:
         raise InputError(f"--grid {text!r}: {err}") from None
 
@@ -269,7 +270,7 @@ def _starts(opt: dict):
     return poses, desc, seed
 
 
-def _axis_doc(values: tuple[float, ...]) -> dict:
+def _axis_doc(values: Sequence[float]) -> dict:
     step = axis_step(np.asarray(values)) if len(values) > 1 else None
     return {"from": values[0], "to": values[-1], "step": step, "count": len(values)}
 
@@ -317,7 +318,7 @@ def run(args: argparse.Namespace) -> int:
 
     require_landscape_fits(scene)
     if opt["method"] in DYNAMIC_METHODS:
-        n = starts.size if grid is not None else len(starts)
+        n = starts.size if isinstance(starts, StartGrid) else len(starts)  # as grid is not None
         price_dynamics_lanes(
             min(opt["chunk"], n) * max(1, min(threads(), -(-n // opt["chunk"]))),
             scene.memory_budget_mb,
@@ -409,6 +410,7 @@ def run(args: argparse.Namespace) -> int:
                 title=_time_title(args, summary),
             )
         if args.map:
+            assert grid is not None  # _check_outputs refuses --map without --grid
             plot_capture_map(
                 capture_map(result, grid), grid, scene, args.map, title=_map_title(args, summary)
             )

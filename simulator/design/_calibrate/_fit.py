@@ -100,6 +100,7 @@ class _FitStore(ResultStore):
     MANIFEST, JOURNAL, ROWS_DIR = "calibrate.json", "trials.jsonl", "trials"
     LOCK, TABLES = ".calibrate.lock", ("trials.parquet", "trials.csv")
     HOLD = "calibrate-trial"
+    details: dict[int, dict]  # made by record (an instance attribute, absent before it)
 
     def _other(self, doc: dict) -> str:
         return f"{doc.get('source', '?')}, fitting {', '.join(doc.get('fit', [])) or '?'}"
@@ -429,10 +430,12 @@ def calibrate(
             r = {"trial": 0, "kind": "baseline", **baseline_values, **row0}
             store.record(0, r, {"trial": 0, "row": r, **det0})
         with _quiet_optuna() as optuna:
-            from optuna.distributions import FloatDistribution
+            from optuna.distributions import BaseDistribution, FloatDistribution
             from optuna.trial import create_trial
 
-            dists = {k: FloatDistribution(bnd[k][0], bnd[k][1], log=FITTABLE[k].log) for k in names}
+            dists: dict[str, BaseDistribution] = {
+                k: FloatDistribution(bnd[k][0], bnd[k][1], log=FITTABLE[k].log) for k in names
+            }
             sampler = optuna.samplers.TPESampler(
                 seed=seed, n_startup_trials=max(4, min(10, n // 4))
             )
@@ -636,7 +639,7 @@ def _detail(store: _FitStore, i: int) -> dict:
 def _result(store, tab: BenchTable, names, bnd, describe, digest, draws, sigma, n) -> dict:
     rows = [store.rows[i] for i in sorted(store.rows)]
     ok = [r for r in rows if r.get("state") == "complete"]
-    require(ok, "no trial of the fit completed; see the trials' errors in trials.csv")
+    require(bool(ok), "no trial of the fit completed; see the trials' errors in trials.csv")
     best = max(ok, key=lambda r: (r["log_likelihood"], -r["trial"]))
     near = [r for r in ok if r["log_likelihood"] >= best["log_likelihood"] - DELTA_LOG_L]
     rng = {}

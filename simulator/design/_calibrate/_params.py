@@ -159,11 +159,14 @@ def default_bounds(name: str, scene) -> tuple[float, float]:
     if f.rel is not None:
         v = float(scene.liquid.volume_nl)
         return (f.rel[0] * v, f.rel[1] * v)
+    assert f.lo is not None  # only the relative parameters (rel) lack a lower bound
     if name == "receding_angle_deg" and scene.materials.pad_advancing_deg is not None:
+        assert f.hi is not None
         return (f.lo, min(f.hi, scene.materials.pad_advancing_deg))
     if name == "pad_angle_deg":
         hi = 175.0 if scene.materials.allow_repulsive else scene.materials.substrate_angle_deg - 1.0
         return (f.lo, max(hi, f.lo + 1.0))
+    assert f.hi is not None  # pad_angle_deg's upper bound alone comes from the scene
     return (f.lo, f.hi)
 
 

@@ -82,6 +82,7 @@ class Objective:
         if wt["depth"] > 0:
             out["depth"] = at / self.area_px2
         if wt["capture"] > 0:
+            assert self.ring is not None  # made whenever capture is weighted (make_objective)
             iy, ix, ux, uy = self.ring
             gx = 0.5 * (a0[iy, ix + 1] - a0[iy, ix - 1])
             gy = 0.5 * (a0[iy + 1, ix] - a0[iy - 1, ix])

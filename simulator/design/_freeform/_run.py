@@ -17,10 +17,17 @@ import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from patterns.geometry import Mask
+
+if TYPE_CHECKING:
+    from simulator.design._freeform._density import DensityMap
+    from simulator.design._freeform._energy import ChipSide
+    from simulator.design._freeform._objectives import Objective
+    from simulator.design._freeform._spec import FreeformSpec
 
 __all__ = [
     "FreeformResult",
@@ -37,10 +44,10 @@ class Problem:
     """A spec made ready for JAX: the parametrisation, the chip side and the objective, and
     the jit-compiled functions of the design variables (:func:`make_problem`)."""
 
-    spec: object
-    density: object
-    side: object
-    objective: object
+    spec: FreeformSpec
+    density: DensityMap
+    side: ChipSide
+    objective: Objective
     dtype: str
 
     def arrays(self) -> dict:

@@ -425,7 +425,7 @@ def load_freeform(
         f"{w}: keep_in and keep_out overlap on {int(np.sum(keep_in & keep_out)):,} px; a pixel cannot be both",
     )
     require(
-        np.any(~keep_in & ~keep_out),
+        bool(np.any(~keep_in & ~keep_out)),
         f"{w}: keep_in and keep_out cover the whole canvas; nothing is left to design",
     )
     terms = _terms(w, ff.get("objective", {}), s)
@@ -447,7 +447,7 @@ def load_freeform(
     )
     if bl.get("keep_in", False) is True and len(bl) == 1:
         require(
-            keep_in.any(),
+            bool(keep_in.any()),
             f"{w} [baseline]: the baseline is the keep-in pads by default, but there are none; "
             'give [freeform.baseline] design = "..." or pattern = "file.png"',
         )
@@ -466,7 +466,7 @@ def load_freeform(
             f'{w} [baseline]: give design = "..." (with its parameters), pattern = "file.png" or keep_in = true'
         )
     require(
-        np.any(base_img > 0),
+        bool(np.any(base_img > 0)),
         f"{w} [baseline]: the baseline pattern has no wettable pixel; give one with pads",
     )
     baseline = Mask(base_img, s, params={"baseline": str(label)})
