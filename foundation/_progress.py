@@ -91,6 +91,9 @@ def compiling(method: str, quiet: bool = False) -> None:
 class NoBar:
     """Stands in for a progress bar that is not shown."""
 
+    n: int = 0
+    total: int = 0
+
     def __enter__(self):
         return self
 
@@ -101,6 +104,9 @@ class NoBar:
         return None
 
     def set_postfix_str(self, text: str, refresh: bool = True) -> None:
+        return None
+
+    def refresh(self) -> None:
         return None
 
 

@@ -101,7 +101,7 @@ def flag_values(args: argparse.Namespace) -> dict[tuple[str | None, str], Any]:
 
     out: dict[tuple[str | None, str], Any] = {}
     for p in SCENE_PARAMS:
-        given = getattr(args, p.dest, None) if p.flag else None
+        given: Any = getattr(args, p.dest, None) if p.flag else None
         if p.merge == "meniscus" and getattr(args, "meniscus_height", None) is not None:
             given = True  # --meniscus-height implies --meniscus
         if given is None or given is False:  # not given (a switch left off is False)

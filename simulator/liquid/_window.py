@@ -71,7 +71,9 @@ def volume_window(scene, bias_um: float | None = None, biased: str = "the placem
     if fp is not None:
         if m.pad_angle_deg < m.substrate_angle_deg:
             try:
-                cv = scene_critical_volume(scene, fp).critical_volume_nl
+                found = scene_critical_volume(scene, fp)
+                assert found is not None  # a four-pad whose pads wet better than the substrate
+                cv = found.critical_volume_nl
                 cv_note = (
                     f"a four-pad pattern (L {fp[0]:g} um, gap {fp[1]:g} um, pad/substrate angles "
                     f"{m.pad_angle_deg:g}/{m.substrate_angle_deg:g} deg): below the critical volume the drop may split "

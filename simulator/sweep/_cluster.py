@@ -349,7 +349,7 @@ def start_workers(
 
 def run_tasks(
     client: Any,
-    tasks: Iterable[dict],
+    tasks: Iterable[dict | None],
     handle: Callable[[dict, dict], None],
     per_thread: int = 2,
 ) -> dict:
@@ -369,7 +369,10 @@ def run_tasks(
 
 
 def _run_dask(
-    client: Any, tasks: Iterable[dict], handle: Callable[[dict, dict], None], per_thread: int = 2
+    client: Any,
+    tasks: Iterable[dict | None],
+    handle: Callable[[dict, dict], None],
+    per_thread: int = 2,
 ) -> dict:
     """Every task on ``client``'s cluster, at most ``per_thread`` per worker thread in flight, results handled as they come."""
     from distributed import as_completed
@@ -419,7 +422,7 @@ def _run_dask(
     }
 
 
-def _run_here(tasks: Iterable[dict], handle: Callable[[dict, dict], None]) -> dict:
+def _run_here(tasks: Iterable[dict | None], handle: Callable[[dict, dict], None]) -> dict:
     t0 = time.perf_counter()
     for t in tasks:
         if t is not None:  # None: nothing to run now (nothing is in flight here: ask again)

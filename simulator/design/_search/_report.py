@@ -73,6 +73,13 @@ def _row(table, trial: int) -> dict | None:
     return None if not len(sel) else sel.iloc[0].to_dict()
 
 
+def _row_of(table, trial: int) -> dict:
+    """The row of a trial the table holds (a best trial, a member of the front)."""
+    row = _row(table, trial)
+    assert row is not None, f"trial {trial} is not in the table"
+    return row
+
+
 def _labels(spec) -> list[str]:
     return [f"{o.direction} {o.expression.text}" for o in spec.objectives]
 
@@ -242,6 +249,7 @@ def plot_best(spec, best_values: dict, base_values: dict | None, title: str, pat
         ax.plot([0], [0], "+", color="C3", ms=10, mew=1.5)
         ax.set(xlabel="x (µm)", ylabel="y (µm)")
         ax.set_title(f"{label}\n({mask.um_per_px:g} µm/px)", fontsize=9)
+    assert im is not None  # one panel at least
     fig.colorbar(im, ax=list(axes[0]), shrink=0.8, label="wettability (1 = pad)")
     save_figure(fig, path)
 
@@ -271,6 +279,13 @@ def _json_row(row: dict | None) -> dict | None:
             v = None
         out[k] = v
     return out
+
+
+def _row_json(table, trial: int) -> dict:
+    """:func:`_row_of` as the JSON holds it (:func:`_json_row`)."""
+    row = _json_row(_row_of(table, trial))
+    assert row is not None
+    return row
 
 
 def _values(spec, row: dict) -> dict:
@@ -305,7 +320,8 @@ def write_best(out: Path, spec, table, best: list[int]) -> list[str]:
             top = int(
                 sub.sort_values(["objective_1", "trial"], ascending=[asc, True]).iloc[0]["trial"]
             )
-        row = _json_row(_row(table, top))
+        row = _json_row(_row_of(table, top))
+        assert row is not None
         values = _values(spec, row)
         doc["best"] = {
             "trial": top,
@@ -329,9 +345,9 @@ def write_best(out: Path, spec, table, best: list[int]) -> list[str]:
             doc["pareto_front"] = [
                 {
                     "trial": t,
-                    "values": _values(spec, _row(table, t)),
+                    "values": _values(spec, _row_of(table, t)),
                     "objectives": [
-                        _json_row(_row(table, t))[f"objective_{j + 1}"]
+                        _row_json(table, t)[f"objective_{j + 1}"]
                         for j in range(len(spec.objectives))
                     ],
                 }
@@ -477,7 +493,7 @@ def write_search_report(out: Path, spec, table, stats: dict) -> list[str]:
         and b.get("feasible")
     ):
         o = spec.objectives[0]
-        bv, tv = b["objective_1"], _row(table, top)["objective_1"]
+        bv, tv = b["objective_1"], _row_of(table, top)["objective_1"]
         if (bv > tv) if o.direction == "maximize" else (bv < tv):
             note = "<p class='err'>The baseline does better on the first objective than every trial.</p>"
     imgs = "".join(

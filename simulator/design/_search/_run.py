@@ -31,6 +31,7 @@ import sys
 import time
 import warnings
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -98,9 +99,8 @@ def _study(spec: SearchSpec, trials: int):
             sampler = s.NSGAIISampler(seed=spec.seed, population_size=max(4, min(50, trials // 4)))
         else:
             sampler = s.TPESampler(seed=spec.seed, constant_liar=True)
-        return optuna.create_study(
-            sampler=sampler, directions=[o.direction for o in spec.objectives]
-        )
+        directions: list[Any] = [o.direction for o in spec.objectives]  # "minimize" | "maximize"
+        return optuna.create_study(sampler=sampler, directions=directions)
 
 
 def _key(values: dict) -> str:
@@ -138,7 +138,8 @@ def _price(spec: SearchSpec) -> int | None:
     from simulator.sweep import point_bytes
 
     sw = spec.sweep
-    candidates = [spec.baseline_values()] if spec.baseline_values() is not None else []
+    base = spec.baseline_values()
+    candidates = [base] if base is not None else []
     peak = None
     for values in candidates + _corners(spec):
         task = sw.task(sw.point(values, 0, 0))
@@ -198,7 +199,7 @@ class _Run:
         self.by_key: dict[str, int] = {}  # a design -> the trial that evaluates it
         self.waiting: dict[int, list] = {}  # a trial in flight -> trials that reuse it
         self.evaluated = self.reused = self.failed_now = 0
-        self.best: tuple | None = None  # (signed value, trial, value) of the bar
+        self.best: tuple[float, int, float] | None = None  # (signed value, trial, value) of the bar
         self._state, self._create = TrialState, create_trial
         # Replay what a previous run finished: the study learns it, the designs are known.
         for i in sorted(store.rows):
@@ -254,7 +255,9 @@ class _Run:
     def tasks(self):
         """The points to run, decided one at a time: the baseline's, then each new trial's."""
         if self.baseline:
-            self._start(0, "baseline", self.spec.baseline_values(), None)
+            base = self.spec.baseline_values()
+            assert base is not None  # a baseline is run only where there is one
+            self._start(0, "baseline", base, None)
             yield from self._points(0)
         for i in self.free:
             if self.exhausted:
@@ -382,9 +385,10 @@ class _Run:
     def _progress(self, row: dict) -> None:
         """The bar one trial on, with the best feasible objective so far (one objective)."""
         self.bar.update(1)
+        first = self.spec.objectives[0]  # a search has one objective at least
         if len(self.spec.objectives) > 1 or row["kind"] != "search" or not row["feasible"]:
             return
-        v = row["objective_1"] * (1 if self.spec.objectives[0].direction == "maximize" else -1)
+        v = row["objective_1"] * (1 if first.direction == "maximize" else -1)
         if self.best is None or v > self.best[0]:
             self.best = (v, row["trial"], row["objective_1"])
             self.bar.set_postfix_str(
@@ -527,11 +531,11 @@ def search(
     stats |= {
         "hash": spec.digest,
         "trials": n,
-        "done": int((table["kind"] == "search").sum()) if len(table) else 0,
+        "done": int(np.count_nonzero(table["kind"] == "search")) if len(table) else 0,
         "baseline": bool(len(table) and (table["trial"] == 0).any()),
         "evaluated_now": run.evaluated if run else 0,
         "reused_now": run.reused if run else 0,
-        "failed": int((table["state"] != "complete").sum()) if len(table) else 0,
+        "failed": int(np.count_nonzero(table["state"] != "complete")) if len(table) else 0,
         "failed_now": run.failed_now if run else 0,
         "exhausted": bool(run and run.exhausted),
         "space_size": spec.space_size,

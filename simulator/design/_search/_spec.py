@@ -35,7 +35,7 @@ import os
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -81,7 +81,7 @@ def _walk_check(node: ast.AST, where: str, known: tuple[str, ...]) -> None:
         ok = isinstance(node.value, int | float) and not isinstance(node.value, bool)
         require(ok, f"{where}: {show_value(node.value)} is not a number")
         try:
-            finite = math.isfinite(node.value)
+            finite = math.isfinite(cast(float, node.value))  # a number (required above)
         except OverflowError:  # an integer literal beyond a float's range
             finite = False
         require(finite, f"{where}: {show_value(node.value)} is not a finite number")
@@ -105,7 +105,7 @@ def _walk_check(node: ast.AST, where: str, known: tuple[str, ...]) -> None:
         )
         require(not node.keywords, f"{where}: {name}() takes no keyword arguments")
         require(
-            node.args and not any(isinstance(a, ast.Starred) for a in node.args),
+            bool(node.args) and not any(isinstance(a, ast.Starred) for a in node.args),
             f"{where}: {name}() needs an expression to work on",
         )
         require(
@@ -125,7 +125,7 @@ def _walk_check(node: ast.AST, where: str, known: tuple[str, ...]) -> None:
 def _value(node: ast.AST, data: Mapping[str, Any]) -> np.ndarray:
     """The node's value: a number, or an array over the realizations."""
     if isinstance(node, ast.Constant):
-        return np.asarray(float(node.value))
+        return np.asarray(float(cast(float, node.value)))  # a number (checked when parsed)
     if isinstance(node, ast.Name):
         return np.asarray(data[node.id], dtype=float)
     if isinstance(node, ast.BinOp):
@@ -164,7 +164,7 @@ class Expression:
 
 def _parse(text: Any, where: str) -> ast.expr:
     require(
-        isinstance(text, str) and text.strip(),
+        isinstance(text, str) and bool(text.strip()),
         f"{where}: {show_value(text)}: must be an expression in quotes",
     )
     require(len(text) <= MAX_EXPRESSION, f"{where}: longer than {MAX_EXPRESSION} characters")
@@ -244,6 +244,7 @@ def parse_constraints(text: Any, known, where: str = "constraint") -> list[Const
         f"{where}: {show_value(text, 80)} is not a comparison; write e.g. "
         '"capture_fraction >= 0.99" (with >=, <=, > or <)',
     )
+    assert isinstance(tree, ast.Compare)  # required above
     sides = [tree.left, *tree.comparators]
     out = []
     for k, op in enumerate(tree.ops):
@@ -398,7 +399,9 @@ class SearchSpec:
         design = self.sweep.design
         keys = _design_keys(design) if design is not None else ()
         for a in self.searched:
-            if a.name == "pattern" or (a.name in keys and a.name not in design["params"]):
+            if a.name == "pattern" or (
+                design is not None and a.name in keys and a.name not in design["params"]
+            ):
                 return None
         return dict(self.fixed)
 
@@ -455,7 +458,7 @@ def _texts(v: Any, where: str) -> list:
     if isinstance(v, str):
         return [v]
     require(
-        isinstance(v, list) and v and all(isinstance(t, str) for t in v),
+        isinstance(v, list) and bool(v) and all(isinstance(t, str) for t in v),
         f"{where} = {show_value(v, 60)}: must be an expression in quotes or a list of them",
     )
     return list(v)
@@ -504,7 +507,7 @@ def load_search(
         f"{src}: [search] {bad[0] if bad else ''}: unknown key; [search] takes {', '.join(SEARCH_KEYS)}",
     )
     require(
-        sw.swept,
+        bool(sw.swept),
         f"{src}: [axes] gives nothing to search; give an axis a range {{from = A, to = B}} or a list",
     )
 
@@ -532,7 +535,7 @@ def load_search(
                 where = f"{src}: [search] {direction}" + (f"[{k}]" if k else "")
                 objectives.append(Objective(direction, parse_expression(text, known, where)))
     require(
-        objectives,
+        bool(objectives),
         f'{src}: [search] needs an objective: maximize = "..." or minimize = "..." (an expression '
         'over the columns, e.g. maximize = "min(max_bias_x_um, max_bias_y_um)")',
     )
