@@ -11,6 +11,7 @@ import re
 import tomllib
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from foundation import InputError
@@ -327,11 +328,12 @@ def test_the_simulate_command_runs_on_the_library_plans_engine(engine, monkeypat
     real = pricing.plan_run
 
     def plan_run(*a, **k):
-        planned.append(real(*a, **k))
-        return planned[-1]
+        plan = real(*a, **k)
+        planned.append(plan.engine)
+        return plan
 
     def fake_simulate(scene, start, **kw):  # the run stops here, once planned
-        ran.append(kw["engine"])
+        ran.append(kw["plan"].engine)
         raise InputError("stopped before the run")
 
     for module in (face, pricing, trajectory):  # the face may hold a name it loaded before
@@ -343,6 +345,71 @@ def test_the_simulate_command_runs_on_the_library_plans_engine(engine, monkeypat
     assert "stopped before the run" in capsys.readouterr().err
     assert len(planned) == 1 and ran == planned and planned[0] in ("fft", "path")
     assert planned[0] == (engine if engine != "auto" else "fft")  # a 50 px chip: the FFT engine
+
+
+def _count_pricing(monkeypatch) -> list[int]:
+    """Count the first landscape's pricings (simulator.motion.require_run_fits, which
+    plan_run calls from its own module); returns the list each call appends to."""
+    import simulator.motion._pricing as pricing
+
+    calls: list[int] = []
+    real = pricing.require_run_fits
+
+    def require_run_fits(*a, **k):
+        calls.append(1)
+        return real(*a, **k)
+
+    monkeypatch.setattr(pricing, "require_run_fits", require_run_fits)
+    return calls
+
+
+def test_the_simulate_command_plans_once(monkeypatch, capsys):
+    """selfalign simulate makes the run's plan once and the library runs on it: one pricing
+    of the first landscape for the whole command (the run was priced twice before)."""
+    calls = _count_pricing(monkeypatch)
+    argv = ["simulate", "--pattern", str(library_path("square_200")), "--chip-size", "200"]
+    argv += ["--resolution", "4", "--no-twist", "--start", "12,0,0", "--quiet"]
+    assert main(argv) == 0
+    assert "greedy: aligned" in capsys.readouterr().out
+    assert len(calls) == 1
+
+
+def test_a_run_given_its_plan_does_not_plan_again(monkeypatch):
+    """simulate(..., plan=) takes the plan's engine and prices nothing again; without a plan
+    it plans as before; the plan carries what was decided, with its units."""
+    from simulator.motion import RunPlan, plan_run, simulate
+
+    scene, start = small_scene(), (12.0, 0.0, 0.0)
+    plan = plan_run(scene, start, "greedy")
+    assert isinstance(plan, RunPlan) and plan.engine == "fft" and plan.landscape_bytes > 0
+    assert (plan.method, plan.start, plan.path) == ("greedy", start, False)
+    with pytest.raises(AttributeError):
+        plan.engine = "path"  # type: ignore[misc]  # frozen
+    calls = _count_pricing(monkeypatch)
+    given = simulate(scene, start, plan=plan)
+    assert calls == [] and given.cost["engine"] == "fft"
+    planned = simulate(scene, start)
+    assert calls == [1]
+    np.testing.assert_array_equal(given.path, planned.path)
+
+
+def test_a_plan_for_another_run_is_refused():
+    """A plan is the run's it was made for: another scene (even an equal one), start or
+    method is refused in one line, and so is a plan with a landscape."""
+    from simulator.motion import plan_run, simulate
+
+    scene, start = small_scene(), (12.0, 0.0, 0.0)
+    plan = plan_run(scene, start, "greedy")
+    with pytest.raises(InputError, match="made for another scene") as err:
+        simulate(small_scene(), start, plan=plan)
+    assert "\n" not in str(err.value)
+    with pytest.raises(InputError, match="made for another start"):
+        simulate(scene, (8.0, 0.0, 0.0), plan=plan)
+    with pytest.raises(InputError, match="made for another method"):
+        simulate(scene, start, method="gradient", plan=plan)
+    ls = build_landscape(scene)
+    with pytest.raises(InputError, match="give plan or landscape, not both"):
+        simulate(scene, start, landscape=ls, plan=plan)
 
 
 # ---------------------------------------------------------------- the default chip

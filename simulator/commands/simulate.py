@@ -110,14 +110,14 @@ def run(args: argparse.Namespace) -> int:
             f"--engine path runs greedy and gradient; {method} builds the whole landscape (leave --engine out)"
         )
     # the library's plan: the engine, the start in the window, the first landscape (or what
-    # the path engine needs) priced before any work; the run takes the engine chosen here
-    engine = plan_run(scene, start, method, args.engine)
+    # the path engine needs) priced before any work, once; the run takes this plan
+    plan = plan_run(scene, start, method, args.engine)
     if scene.dispense is not None:
         # the pads' planes over the whole grid, or the path engine's rotators (it computes
         # the visited poses only)
         from simulator.motion import require_footprint_fits
 
-        require_footprint_fits(scene, engine)
+        require_footprint_fits(scene, plan.engine)
     if method in DYNAMIC_METHODS:
         from simulator.motion import DynamicsParams  # JAX: once the run is priced
 
@@ -133,7 +133,7 @@ def run(args: argparse.Namespace) -> int:
 
     if method not in DYNAMIC_METHODS:  # a dynamic run says it after its landscape
         compiling(method, args.quiet)
-    traj = simulate(scene, start, method=method, max_steps=max_steps, engine=engine)
+    traj = simulate(scene, start, method=method, max_steps=max_steps, plan=plan)
     print(end_line(scene, traj))
     if traj.footprint is not None:
         from simulator.motion import footprint_words

@@ -234,15 +234,16 @@ def require_landscape_fits(
     twists: np.ndarray | None = None,
     center_px: tuple[int, int] = (0, 0),
     half_px: int | None = None,
-) -> None:
+) -> int:
     """Refuse (InputError) a landscape over the memory budget or with too many twists, cheaply
     (no rotation, no allocation): for commands to call before announcing a long run.
 
     Prices what :func:`build_landscape` of the same arguments would hold at its peak, in
     its smallest chunk of twists: the energy array, the transforms' work space, and with a
-    meniscus the chip's footprint (made once per chip) and its rotations.
+    meniscus the chip's footprint (made once per chip) and its rotations. Returns the bytes
+    of the landscape's energy array (the plan's ``landscape_bytes``).
     """
-    _layout(scene, twists, center_px, half_px, check_budget=True)
+    return int(_layout(scene, twists, center_px, half_px, check_budget=True)["landscape_bytes"])
 
 
 @dataclass(frozen=True, eq=False)

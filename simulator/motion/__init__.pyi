@@ -61,6 +61,7 @@ from ._potential import (
     potential_and_gradient as potential_and_gradient,
 )
 from ._pricing import (
+    RunPlan as RunPlan,
     plan_run as plan_run,
     price_run as price_run,
     require_run_fits as require_run_fits,

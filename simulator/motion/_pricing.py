@@ -5,13 +5,16 @@ is compiled, rotated or transformed: the recorded path (:func:`price_run`), the 
 inside the translation window (:func:`require_start_in_window`), and the first landscape,
 the meniscus footprint and the global minimum's proof (:func:`require_run_fits`), with
 the boxes' geometry they share with the run (the box around the start and the aligned pose,
-the band of twists around the chip's). The command prices a run before it imports JAX, so
-a refusal costs neither its import time nor its memory.
+the band of twists around the chip's). :func:`plan_run` decides and prices a run once and
+returns its :class:`RunPlan`, which :func:`simulator.motion.simulate` takes (``plan=``)
+instead of planning again. The command prices a run before it imports JAX, so a refusal
+costs neither its import time nor its memory.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -24,6 +27,7 @@ __all__ = [
     "BAND_PX",
     "BAND_STEPS",
     "PATH_BYTES_PER_STEP",
+    "RunPlan",
     "plan_run",
     "price_run",
     "require_run_fits",
@@ -56,6 +60,66 @@ def price_run(scene: Scene, method: str, max_steps: int) -> None:
     )
 
 
+@dataclass(frozen=True)
+class RunPlan:
+    """A run of :func:`simulator.motion.simulate` without a landscape, decided and priced
+    before any work (:func:`plan_run`): ``selfalign simulate`` prints its refusals and hands
+    it to the run, which then neither chooses its engine nor prices its first landscape again.
+
+    A plan belongs to the scene, start, method and bands it was made for: :meth:`check`
+    refuses it with any other (the scene by identity: ``scene.replace(...)`` is another scene).
+    """
+
+    #: the engine the boxes are computed with: "fft" or "path" for greedy and gradient
+    #: (:func:`simulator.motion.choose_engine`), the engine asked for the dynamics (they
+    #: build the whole landscape)
+    engine: str
+    #: "greedy", "gradient", "overdamped" or "inertial"
+    method: str
+    #: the start pose (x_um, y_um, twist_deg), inside the translation window
+    start: tuple[float, float, float]
+    #: the run's boxes: twists within ``band_steps`` steps of the chip's, translations
+    #: ``band_px`` px beyond the start and the aligned pose
+    band_steps: int
+    band_px: int
+    #: the bytes of the first landscape's energy array (the first box and band of twists, or
+    #: the whole landscape of the dynamics; 0 on the path engine, which builds no FFT box)
+    landscape_bytes: int
+    #: a footprint state's boxes on the path engine (:func:`plan_run`'s ``path``)
+    path: bool = False
+    #: the scene planned for (compared by identity, not shown)
+    scene: Scene | None = field(default=None, compare=False, repr=False)
+
+    def check(
+        self,
+        scene: Scene,
+        start: Sequence[float],
+        method: str,
+        band_steps: int,
+        band_px: int,
+        path: bool,
+    ) -> None:
+        """InputError (one line) unless this plan was made for this run: the same scene
+        object, start, method, bands and ``path``."""
+        made = (self.start, self.method, self.band_steps, self.band_px, self.path)
+        asked = (_pose(start), method, band_steps, band_px, path)
+        if self.scene is not scene or made != asked:
+            what = "scene" if self.scene is not scene else _differs(made, asked)
+            raise InputError(
+                f"the run plan was made for another {what}: call plan_run with the scene, start, "
+                "method and bands the run is given (or leave plan out)"
+            )
+
+
+def _pose(start: Sequence[float]) -> tuple[float, float, float]:
+    return float(start[0]), float(start[1]), float(start[2])
+
+
+def _differs(made: tuple, asked: tuple) -> str:
+    names = ("start", "method", "band_steps", "band_px", "path")
+    return next(n for n, a, b in zip(names, made, asked, strict=True) if a != b)
+
+
 def plan_run(
     scene: Scene,
     start,
@@ -64,14 +128,16 @@ def plan_run(
     band_steps: int = BAND_STEPS,
     band_px: int = BAND_PX,
     path: bool = False,
-) -> str:
-    """The engine of a run of :func:`simulate` without a landscape, its start checked against
-    the window and its first landscape priced (:func:`require_run_fits`), before JAX is
-    imported: the one plan of the library's run and of ``selfalign simulate``.
+) -> RunPlan:
+    """The plan of a run of :func:`simulate` without a landscape: its engine, its start
+    checked against the window and its first landscape priced (:func:`require_run_fits`),
+    before JAX is imported: the one plan of the library's run and of ``selfalign simulate``,
+    made once (``simulate(..., plan=)`` takes it).
 
     Greedy and gradient take :func:`simulator.motion.choose_engine`'s engine (``engine``:
     "auto", "fft" or "path"), the dynamics ``engine`` unchanged (they build the whole
-    landscape); ``path``: a footprint state's boxes, on the path engine. Returns the engine.
+    landscape); ``path``: a footprint state's boxes, on the path engine. Returns the
+    :class:`RunPlan`.
     """
     if path:
         engine = "path"
@@ -80,8 +146,8 @@ def plan_run(
 
         engine = choose_engine(scene, start, method, engine, band_steps, band_px)
     require_start_in_window(scene, start)
-    require_run_fits(scene, start, method, band_steps, band_px, engine)
-    return engine
+    nbytes = require_run_fits(scene, start, method, band_steps, band_px, engine)
+    return RunPlan(engine, method, _pose(start), band_steps, band_px, nbytes, path, scene)
 
 
 def _fit_box(
@@ -130,7 +196,7 @@ def require_run_fits(
     band_steps: int = BAND_STEPS,
     band_px: int = BAND_PX,
     engine: str = "fft",
-) -> None:
+) -> int:
     """Refuse (InputError), before anything is compiled, rotated or transformed, a run whose
     first landscape does not fit the memory budget: the first box and band of twists of a
     greedy or gradient run (:func:`simulate`), the whole landscape of the dynamics, each with
@@ -138,24 +204,25 @@ def require_run_fits(
     gradient run needs at least. Boxes built later are priced as they come (in chunks of
     twists that fit). ``engine`` "path" (:func:`simulator.motion.choose_engine`): no FFT box;
     the chip's footprint and the global minimum's bound, which then takes the footprint from
-    the engine."""
+    the engine. Returns the bytes of the first landscape's energy array (0 on the path engine)."""
     from simulator.landscape import require_landscape_fits, require_minimum_fits
 
     if method in DYNAMIC_METHODS:
-        require_landscape_fits(scene)
-        return
+        return require_landscape_fits(scene)
     if engine == "path":
         require_minimum_fits(scene, path_engine=True)  # the footprint priced there first
-        return
+        return 0
     ta = scene.twist_axis
     (cx, cy), half = _fit_box(
         None, np.round(np.asarray(start[:2], float) / scene.um_per_px), band_px
     )
     lo, hi = _twist_band(ta, float(start[2]), band_steps)
     runs = consecutive_runs({j % ta.count for j in range(lo, hi + 1)})
+    nbytes = 0
     if runs:  # else a start twist beyond the axis: refused by simulate with its own message
         longest = max(runs, key=len)
-        require_landscape_fits(
+        nbytes = require_landscape_fits(
             scene, twists=ta.values_at(np.asarray(longest)), center_px=(cx, cy), half_px=half
         )
     require_minimum_fits(scene)
+    return nbytes

@@ -33,6 +33,7 @@ from simulator.motion._pinning import pin_lines
 from simulator.motion._pricing import (
     BAND_PX,
     BAND_STEPS,
+    RunPlan,
     _fit_box,
     _twist_band,
     plan_run,
@@ -170,6 +171,7 @@ def simulate(
     relay=None,
     planes=None,
     path=None,
+    plan: RunPlan | None = None,
 ) -> Trajectory:
     """Run one trajectory from ``start`` = (x_um, y_um, twist_deg).
 
@@ -197,8 +199,20 @@ def simulate(
         path: a footprint state's boxes for the path engine (:class:`simulator.motion.StateBoxes`,
             from :func:`simulator.motion.simulate_footprint`): the run steps on that state's
             energy in boxes that follow the chip, each with its relay, and stops at an event.
+        plan: the run's :class:`simulator.motion.RunPlan` when the caller has made it
+            (:func:`simulator.motion.plan_run` with this scene, start, method and bands):
+            the run takes its engine and does not choose or price again (``engine`` is then
+            not read). Refused (InputError) when made for another run, or with ``landscape``.
+            Default: planned here.
     """
     _validate(scene, start, method, max_steps)
+    if plan is not None:
+        if landscape is not None:
+            raise InputError(
+                "a run plan is for a run without a landscape: give plan or landscape, not both"
+            )
+        plan.check(scene, start, method, band_steps, band_px, path is not None)
+        engine = plan.engine
     if scene.dispense is not None and landscape is None:
         # The footprint as the run's state (docs/physics.md §3.5): on the pads' planes, or on
         # the path engine's boxes of each state.
@@ -217,11 +231,13 @@ def simulate(
                 engine=engine,
             )
         )
-    plan = _plan(scene, start, method, landscape, band_steps, band_px, dynamics, engine, path)
+    decided = _plan(
+        scene, start, method, landscape, band_steps, band_px, dynamics, engine, path, plan
+    )
     ran = _run(
         scene,
         start,
-        plan,
+        decided,
         max_steps,
         landscape,
         band_steps,
@@ -231,7 +247,7 @@ def simulate(
         relay,
         path,
     )
-    return _package(scene, plan, ran, max_steps, landscape, backend, reference, relay, path)
+    return _package(scene, decided, ran, max_steps, landscape, backend, reference, relay, path)
 
 
 def _validate(scene: Scene, start: tuple[float, float, float], method: str, max_steps: int) -> None:
@@ -275,13 +291,18 @@ def _plan(
     dynamics,
     engine: str,
     path,
+    plan: RunPlan | None = None,
 ) -> _Plan:
     """The engine, the run priced against the memory budget and its start against the window
-    (:func:`simulator.motion.plan_run`), the dynamics' parameters, and the start twist
-    checked against the run's twist axis."""
+    (:func:`simulator.motion.plan_run`, or the caller's ``plan``, checked by :func:`simulate`),
+    the dynamics' parameters, and the start twist checked against the run's twist axis."""
     dynamic = method in DYNAMIC_METHODS
-    if landscape is None:
-        engine = plan_run(scene, start, method, engine, band_steps, band_px, path is not None)
+    if plan is not None:
+        engine = plan.engine
+    elif landscape is None:
+        engine = plan_run(
+            scene, start, method, engine, band_steps, band_px, path is not None
+        ).engine
     elif path is not None:
         engine = "path"
     if dynamic and dynamics is None:
