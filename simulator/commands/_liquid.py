@@ -7,13 +7,14 @@ import argparse
 import sys
 from typing import Any
 
+from simulator.commands._request import SceneRequest
 from simulator.commands._scene import scene_document
 from simulator.core import DYNAMIC_METHODS
 from simulator.scene import Scene
 
 
 def liquid_checks(
-    args: argparse.Namespace,
+    args: SceneRequest | argparse.Namespace,
     scene: Scene,
     method: str,
     biases_um: Any = None,
@@ -25,13 +26,17 @@ def liquid_checks(
     chip): a note when ``method`` does not use the volume, and the warnings of
     :func:`simulator.liquid.scene_warnings` (``biases_um``: per start, the larger of |x|, |y|),
     each printed as one line on stderr and returned for the JSON (``liquid_warnings``).
-    ``doc``: the scene file's document (:func:`scene_document`; default: read here)."""
+    ``args``: the command's :class:`SceneRequest`, or its namespace (``doc``: then the scene
+    file's document, :func:`scene_document`; default: read here)."""
     from simulator.liquid import scene_warnings, volume_note
 
-    given = getattr(args, "volume", None) is not None or (
-        bool(args.scene)
-        and "volume_nl" in ((scene_document(args) if doc is None else doc).get("liquid") or {})
-    )
+    if isinstance(args, SceneRequest):
+        given = args.volume_given()
+    else:
+        given = getattr(args, "volume", None) is not None or (
+            bool(args.scene)
+            and "volume_nl" in ((scene_document(args) if doc is None else doc).get("liquid") or {})
+        )
     used = method in DYNAMIC_METHODS or bool(getattr(scene.effects, "meniscus", False))
     if (
         not given

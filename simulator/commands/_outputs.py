@@ -9,45 +9,46 @@ import os
 from pathlib import Path
 from typing import Any
 
-from foundation import InputError, atomic_output, json_text
+from foundation import atomic_output, json_text
+from simulator.commands._request import SceneRequest, _input_paths
 from simulator.commands._scene import read_toml
 
 
-def input_paths(args: argparse.Namespace, doc: dict[str, Any] | None = None) -> list[Path]:
-    """The files this run reads (pattern, chip, scene and the scene's own pattern/chip).
-    ``doc``: the scene file's document (:func:`scene_document`; default: read here)."""
-    paths = [getattr(args, k, None) for k in ("scene", "pattern", "chip", "image")]
-    scene = getattr(args, "scene", None)
-    if scene:
-        if doc is None:
-            try:
-                doc = read_toml(scene)
-            except InputError:
-                doc = {}
-        for key in ("pattern", "chip"):
-            if isinstance(doc.get(key), str):
-                paths.append(str(Path(scene).parent / doc[key]))
-    return [Path(p) for p in paths if isinstance(p, str) and p]
+def input_paths(
+    args: SceneRequest | argparse.Namespace, doc: dict[str, Any] | None = None
+) -> list[Path]:
+    """The files this run reads (pattern, chip, scene and the scene's own pattern/chip): a
+    :class:`SceneRequest`'s ``inputs``, or those of a namespace (``doc``: its scene file's
+    document, :func:`scene_document`; default: read here, {} when it cannot be read)."""
+    if isinstance(args, SceneRequest):
+        return list(args.inputs)
+    from foundation import InputError
+
+    scene = getattr(args, "scene", None) or None
+    if scene and doc is None:
+        try:
+            doc = read_toml(scene)
+        except InputError:
+            doc = {}
+    return _input_paths(args, scene, doc or {})
 
 
-def check_outputs(
-    args: argparse.Namespace, flags: tuple[str, ...], doc: dict[str, Any] | None = None
-) -> None:
-    """Fail before any work when an output file cannot or must not be written.
+def check_outputs(request: SceneRequest) -> None:
+    """Fail before any work when an output file of ``request``'s output plan cannot or must
+    not be written.
 
-    ``flags`` are attribute names (``json`` for ``--json``). An output may not be an
-    input, a link, a device or a directory, and two outputs may not name one file; one that
-    exists is refused unless ``args.force`` (:func:`add_force_arg`).
-    ``doc``: the scene file's document (:func:`scene_document`; default: read here).
+    An output may not be an input, a link, a device or a directory, and two outputs may not
+    name one file; one that exists is refused unless ``--force`` (:func:`add_force_arg`,
+    ``request.force``).
     """
     from foundation import check_distinct, check_output_file, require_new_file
 
-    inputs = input_paths(args, doc)
-    named = {f"--{f.replace('_', '-')}": getattr(args, f, None) for f in flags}
+    inputs = list(request.inputs)
+    named: dict[str, str | os.PathLike | None] = dict(request.outputs)
     for flag, path in named.items():
         if path:
             check_output_file(path, flag, inputs)
-            require_new_file(path, flag, bool(getattr(args, "force", False)))
+            require_new_file(path, flag, request.force)
     check_distinct(named)
 
 

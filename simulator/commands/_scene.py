@@ -12,19 +12,19 @@ from pathlib import Path
 from typing import Any
 
 from foundation import InputError
-from simulator.commands._flags import parse_chip_size
+from simulator.commands._request import SceneRequest, as_request
 from simulator.scene import Scene
 
 
 def scene_document(args: argparse.Namespace) -> dict[str, Any]:
     """The scene file's document (``args.scene``, read and validated by :func:`read_toml`),
-    or {} without one. A command reads it once and passes it on (``doc=``) to
-    :func:`scene_from_args`, :func:`liquid_checks` and :func:`check_outputs`."""
+    or {} without one. A command reads it once: its :class:`SceneRequest` holds it
+    (a command still on the namespace passes it on, ``doc=``)."""
     return read_toml(args.scene) if args.scene else {}
 
 
 def scene_from_args(
-    args: argparse.Namespace,
+    args: SceneRequest | argparse.Namespace,
     note_frame: bool = True,
     doc: dict[str, Any] | None = None,
     warn: bool = True,
@@ -33,19 +33,21 @@ def scene_from_args(
 
     Flags are merged into the TOML document under the TOML keys (see
     :mod:`simulator.scene`), so a file and the command line mean the same thing.
-    ``doc``: the scene file's document when the command has read it
-    (:func:`scene_document`; it is not changed), else it is read here.
+    ``args``: the command's :class:`SceneRequest` (or its namespace, made into one here;
+    ``doc``: then the scene file's document when the command has read it,
+    :func:`scene_document`, else it is read here).
     For a layout pattern, ``note_frame`` prints on stderr where the poses' origin is.
     ``warn=False`` leaves the accuracy warning (:func:`accuracy_check`) to the command, which
     prints it once its run is priced.
     """
-    doc, base = scene_document_from_args(args, doc)
+    request = as_request(args, doc)
+    doc, base = scene_document_from_args(request)
     try:
         scene = Scene.from_dict(
             doc, base=base
         )  # the accuracy preset applies here, as for Scene.from_toml
     except InputError as err:
-        raise InputError(_cli_spelling(str(err), bool(args.scene))) from None
+        raise InputError(_cli_spelling(str(err), bool(request.scene_file))) from None
     if "volume_nl" in (
         doc.get("liquid") or {}
     ):  # a volume as typed: a film thicker than the chip is refused
@@ -62,15 +64,16 @@ def scene_from_args(
 
 
 def scene_document_from_args(
-    args: argparse.Namespace, doc: dict[str, Any] | None = None
+    args: SceneRequest | argparse.Namespace, doc: dict[str, Any] | None = None
 ) -> tuple[dict[str, Any], Path]:
     """The scene document the flags and an optional TOML file make (flags win, under the
     TOML keys), and the directory its relative paths are read against: what
-    :func:`scene_from_args` builds its scene from (``doc``: the scene file's document, not
-    changed)."""
-    doc = copy.deepcopy(scene_document(args) if doc is None else doc)
-    base = Path(args.scene).parent if args.scene else Path(".")
-    values = flag_values(args)  # (table, key) -> the flag's value, for the flags given
+    :func:`scene_from_args` builds its scene from (``args``: the :class:`SceneRequest`, whose
+    document is not changed, or a namespace with ``doc``, its scene file's document)."""
+    request = as_request(args, doc)
+    doc = copy.deepcopy(request.document)
+    base = request.base
+    values = request.overrides  # (table, key) -> the flag's value, for the flags given
     chips = [(None, k) for k in CHIP_KEYS]
     if any(place in values for place in chips):
         # a chip on the command line replaces the scene file's (two on the command line: refused downstream)
@@ -91,37 +94,6 @@ def scene_document_from_args(
 
 #: The top-level keys that give the chip: one of them on the command line replaces the file's.
 CHIP_KEYS = ("chip", "chip_size_um", "chip_layer")
-
-
-def flag_values(args: argparse.Namespace) -> dict[tuple[str | None, str], Any]:
-    """The scene document's values the flags give, by (table, key) (None: the top level):
-    each scene parameter of :data:`simulator.scene.SCENE_PARAMS` whose flag is on ``args``
-    and given (a command without the dynamics leaves their flags off its namespace)."""
-    from simulator.scene import SCENE_PARAMS
-
-    out: dict[tuple[str | None, str], Any] = {}
-    for p in SCENE_PARAMS:
-        given: Any = getattr(args, p.dest, None) if p.flag else None
-        if p.merge == "meniscus" and getattr(args, "meniscus_height", None) is not None:
-            given = True  # --meniscus-height implies --meniscus
-        if given is None or given is False:  # not given (a switch left off is False)
-            continue
-        if given == "" and p.merge in ("path", "chip_size", "hysteresis"):
-            continue  # an empty path, size or window reads as not given
-        if p.merge == "hysteresis":  # R:A -> the pads' receding and advancing angles
-            from simulator.physics import parse_window
-
-            r, a = parse_window(given)
-            out[("materials", "pad_receding_deg")], out[("materials", "pad_advancing_deg")] = r, a
-            given = True
-        elif p.merge == "path":
-            given = str(Path(given).resolve())
-        elif p.merge == "chip_size":
-            given = list(parse_chip_size(given))
-        elif p.flag_type == "switch":
-            given = p.switch_value
-        out[(p.table, p.key)] = given
-    return out
 
 
 #: Python keyword spellings in the scene's messages: the command-line flag and the scene file's key.

@@ -12,7 +12,8 @@ import numpy as np
 from foundation import InputError, atomic_output
 from simulator.commands._flags import add_scene_args, parse_pose
 from simulator.commands._outputs import add_force_arg, check_outputs, write_json
-from simulator.commands._scene import accuracy_check, scene_document, scene_from_args
+from simulator.commands._request import SceneRequest
+from simulator.commands._scene import accuracy_check, scene_from_args
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -68,9 +69,10 @@ def run(args: argparse.Namespace) -> int:
         )
     if args.curve and (args.start is None or args.stop is None):
         raise InputError("--curve needs --from A --to B (um for x/y, degrees for twist)")
-    doc = scene_document(args)  # the scene file, read and validated once for the whole command
-    check_outputs(args, ("json", "csv"), doc)
-    scene = scene_from_args(args, doc=doc, warn=False)
+    # the scene file read and validated, the flags, inputs and outputs: once for the whole command
+    request = SceneRequest.from_args(args, ("json", "csv"))
+    check_outputs(request)
+    scene = scene_from_args(request, warn=False)
     twists = [p[2] for p in poses]
     if args.curve == "twist":
         twists += [args.start, args.stop]

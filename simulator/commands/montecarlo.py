@@ -15,6 +15,7 @@ from simulator.batch import DISTRIBUTIONS, MAX_STARTS, StartGrid
 from simulator.commands._flags import add_scene_args, parse_pose
 from simulator.commands._liquid import liquid_checks
 from simulator.commands._outputs import add_force_arg, check_outputs
+from simulator.commands._request import SceneRequest
 from simulator.commands._scene import accuracy_check, scene_document, scene_from_args
 from simulator.core import (
     BATCH_METHODS as METHODS,
@@ -275,11 +276,15 @@ def _axis_doc(values: Sequence[float]) -> dict:
     return {"from": values[0], "to": values[-1], "step": step, "count": len(values)}
 
 
+#: The command's output flags (attribute names), its request's output plan.
+OUTPUTS = ("json", "csv", "map", "time_plot")
+
+
 def _check_outputs(
-    args: argparse.Namespace, is_grid: bool, method: str, doc: dict | None = None
+    args: argparse.Namespace, request: SceneRequest, is_grid: bool, method: str
 ) -> None:
     """Fail before any work when an output cannot or must not be written."""
-    check_outputs(args, ("json", "csv", "map", "time_plot"), doc)
+    check_outputs(request)
     if args.map:
         if not is_grid:
             raise InputError(
@@ -305,14 +310,13 @@ def run(args: argparse.Namespace) -> int:
     from simulator.batch import capture_map, price_dynamics_lanes, summarize, time_histogram
     from simulator.core import OUTCOMES, threads
 
-    scene_doc = scene_document(
-        args
-    )  # the scene file, read and validated once for the whole command
-    opt = _options(args, scene_doc)
+    # the scene file read and validated, the flags, inputs and outputs: once for the whole command
+    request = SceneRequest.from_args(args, OUTPUTS)
+    opt = _options(args, request.document)
     starts, desc, seed = _starts(opt)
     grid = starts if isinstance(starts, StartGrid) else None
-    _check_outputs(args, grid is not None, opt["method"], scene_doc)
-    scene = scene_from_args(args, doc=scene_doc, warn=False)
+    _check_outputs(args, request, grid is not None, opt["method"])
+    scene = scene_from_args(request, warn=False)
     from foundation import compiling
     from simulator.landscape import require_landscape_fits
 
@@ -331,7 +335,7 @@ def run(args: argparse.Namespace) -> int:
     from simulator.liquid import placement_biases
 
     liquid_warnings = liquid_checks(
-        args, scene, opt["method"], lambda: placement_biases(starts), "the starts", doc=scene_doc
+        request, scene, opt["method"], lambda: placement_biases(starts), "the starts"
     )
 
     from simulator.batch import run_batch
@@ -352,7 +356,7 @@ def run(args: argparse.Namespace) -> int:
         "starts": desc,
         "max_steps": opt["max_steps"],
         "scene": {
-            "pattern": str(args.pattern or scene_doc.get("pattern")),
+            "pattern": str(args.pattern or request.document.get("pattern")),
             "um_per_px": scene.um_per_px,
             "chip_area_um2": scene.chip.area_um2,
             "twist_step_deg": scene.twist.step_deg if scene.effects.twist else None,

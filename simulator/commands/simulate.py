@@ -11,7 +11,8 @@ from foundation import InputError, atomic_output, compiling
 from simulator.commands._flags import add_dynamics_args, add_scene_args, parse_pose
 from simulator.commands._liquid import liquid_checks
 from simulator.commands._outputs import add_force_arg, check_outputs, write_json
-from simulator.commands._scene import accuracy_check, scene_document, scene_from_args
+from simulator.commands._request import SceneRequest
+from simulator.commands._scene import accuracy_check, scene_from_args
 from simulator.core import AREA_REL_TOL, DEFAULT_MAX_STEPS, DEG_TOL, DYNAMIC_METHODS, METHODS
 from simulator.physics import LINE_FRICTION_PA_S
 
@@ -92,8 +93,9 @@ def run(args: argparse.Namespace) -> int:
     # Priced before JAX is imported: a refusal costs neither its import time nor its memory.
     from simulator.motion import plan_run, price_run
 
-    doc = scene_document(args)  # the scene file, read and validated once for the whole command
-    sim = doc.get("simulate", {})
+    # the scene file read and validated, the flags, inputs and outputs: once for the whole command
+    request = SceneRequest.from_args(args, OUTPUTS)
+    sim = request.document.get("simulate", {})
     start_text = args.start or (",".join(str(v) for v in sim["start"]) if "start" in sim else None)
     if start_text is None:
         raise InputError("give the start pose with --start X,Y,TWIST (um, um, degrees)")
@@ -102,8 +104,8 @@ def run(args: argparse.Namespace) -> int:
     max_steps = (
         args.max_steps if args.max_steps is not None else sim.get("max_steps", DEFAULT_MAX_STEPS)
     )
-    _check_outputs(args, doc)
-    scene = scene_from_args(args, doc=doc, warn=False)
+    _check_outputs(request)
+    scene = scene_from_args(request, warn=False)
     price_run(scene, method, max_steps)
     if args.engine == "path" and method in DYNAMIC_METHODS:
         raise InputError(
@@ -126,9 +128,7 @@ def run(args: argparse.Namespace) -> int:
     accuracy_check(scene)
     from simulator.liquid import placement_biases
 
-    liquid_warnings = liquid_checks(
-        args, scene, method, placement_biases(start), "the start", doc=doc
-    )
+    liquid_warnings = liquid_checks(request, scene, method, placement_biases(start), "the start")
     from simulator.motion import simulate  # JAX, imported when the run goes ahead
 
     if method not in DYNAMIC_METHODS:  # a dynamic run says it after its landscape
@@ -254,10 +254,15 @@ def chip_symmetry_words(scene, period: float) -> str:
     return f"a chip with {period:g}-degree symmetry"
 
 
-def _check_outputs(args: argparse.Namespace, doc: dict | None = None) -> None:
+#: The command's output flags (attribute names), its request's output plan.
+OUTPUTS = ("json", "csv", "plot", "gif")
+
+
+def _check_outputs(request: SceneRequest) -> None:
     """Fail before any work when an output cannot or must not be written."""
-    check_outputs(args, ("json", "csv", "plot", "gif"), doc)
-    if args.gif and not args.gif.lower().endswith(".gif"):
-        raise InputError(f"--gif {args.gif}: the animation must end in .gif")
-    if args.plot and not args.plot.lower().endswith((".png", ".svg", ".pdf")):
-        raise InputError(f"--plot {args.plot}: the picture must end in .png, .svg or .pdf")
+    check_outputs(request)
+    gif, plot = request.output("--gif"), request.output("--plot")
+    if gif and not gif.lower().endswith(".gif"):
+        raise InputError(f"--gif {gif}: the animation must end in .gif")
+    if plot and not plot.lower().endswith((".png", ".svg", ".pdf")):
+        raise InputError(f"--plot {plot}: the picture must end in .png, .svg or .pdf")
