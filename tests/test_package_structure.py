@@ -181,6 +181,7 @@ def test_the_design_families_are_folders():
         "_freeform",
         "_leftovers.py",
         "_mode.py",
+        "_optuna.py",
         "_search",
     ]
     families = {

@@ -62,6 +62,7 @@ from simulator.design._calibrate._params import (
     scene_with,
 )
 from simulator.design._calibrate._table import BenchTable, read_trials
+from simulator.design._optuna import quiet_optuna
 from simulator.sweep import ResultStore
 
 __all__ = [
@@ -200,18 +201,6 @@ class _Model:
 
 
 # ----------------------------------------------------------------------- Optuna
-@contextlib.contextmanager
-def _quiet_optuna():
-    import optuna
-
-    before = optuna.logging.get_verbosity()
-    optuna.logging.set_verbosity(optuna.logging.WARNING)
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
-            yield optuna
-    finally:
-        optuna.logging.set_verbosity(before)
 
 
 def _scene_document(scene, base, name: str | None = None) -> tuple[dict, Path, str]:
@@ -429,7 +418,7 @@ def calibrate(
         if 0 not in store.rows:
             r = {"trial": 0, "kind": "baseline", **baseline_values, **row0}
             store.record(0, r, {"trial": 0, "row": r, **det0})
-        with _quiet_optuna() as optuna:
+        with quiet_optuna() as optuna:
             from optuna.distributions import BaseDistribution, FloatDistribution
             from optuna.trial import create_trial
 

@@ -29,13 +29,13 @@ import math
 import os
 import sys
 import time
-import warnings
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from foundation import InputError, require
+from simulator.design._optuna import quiet_optuna
 from simulator.design._search._spec import MAX_TRIALS, SearchSpec, load_search
 from simulator.sweep import ResultStore
 
@@ -64,25 +64,12 @@ class _TrialStore(ResultStore):
 
 
 # ----------------------------------------------------------------------- Optuna
-@contextlib.contextmanager
-def _quiet_optuna():
-    """Optuna without its per-trial INFO lines and its experimental-feature warnings."""
-    import optuna
-
-    before = optuna.logging.get_verbosity()
-    optuna.logging.set_verbosity(optuna.logging.WARNING)
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", optuna.exceptions.ExperimentalWarning)
-            yield optuna
-    finally:
-        optuna.logging.set_verbosity(before)
 
 
 def _study(spec: SearchSpec, trials: int):
     """A new in-memory study with the spec's sampler and directions (InputError when the
     sampler's package is missing)."""
-    with _quiet_optuna() as optuna:
+    with quiet_optuna() as optuna:
         s = optuna.samplers
         if spec.sampler == "cmaes":
             try:
@@ -223,7 +210,7 @@ class _Run:
             return
         k = len(self.spec.objectives)
         cons = len(self.spec.constraints) if self.spec.sampler != "cmaes" else 0
-        with _quiet_optuna():
+        with quiet_optuna():
             self.study.add_trial(
                 self._create(
                     values=[row[f"objective_{j + 1}"] for j in range(k)],
@@ -235,7 +222,7 @@ class _Run:
 
     def _tell(self, ot, row: dict) -> None:
         k = len(self.spec.objectives)
-        with _quiet_optuna():
+        with quiet_optuna():
             if row["state"] != "complete":
                 self.study.tell(ot, state=self._state.FAIL)
                 return
@@ -262,7 +249,7 @@ class _Run:
         for i in self.free:
             if self.exhausted:
                 return
-            with _quiet_optuna():
+            with quiet_optuna():
                 ot = self.study.ask(self.dists)
             values = self.spec.values(ot.params)
             key = _key(values)
