@@ -2,9 +2,8 @@
 
 The command modules (:mod:`simulator.commands`) register their flags with these values
 without importing JAX, the landscape engine or matplotlib, so that ``selfalign --help``
-and ``selfalign pattern`` start at once; :mod:`simulator.motion`,
-:mod:`simulator.batch` and :mod:`simulator.batch` re-export them under their old
-names. ``tests/test_cli_usage.py`` checks that every default a help text quotes is the
+and ``selfalign pattern`` start at once; the library reads them from here too (one import
+path each). ``tests/test_cli_usage.py`` checks that every default a help text quotes is the
 code's.
 """
 
