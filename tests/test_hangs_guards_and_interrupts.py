@@ -562,6 +562,7 @@ def test_critical_volume_of_a_1e300_um_pattern_is_refused_without_a_numpy_warnin
 
 def test_sweep_workers_are_capped_by_cores_and_memory_and_say_so(monkeypatch, tmp_path, capsys):
     import foundation as resources  # the face worker_cap reads the memory from
+    import simulator.sweep._cluster as cluster  # start_workers starts the client from there
     import simulator.sweep._run as sw
     from simulator.sweep import WORKER_MEMORY_MB, worker_cap
 
@@ -585,7 +586,7 @@ def test_sweep_workers_are_capped_by_cores_and_memory_and_say_so(monkeypatch, tm
         started.append(workers)
         raise Stop
 
-    monkeypatch.setattr(sw, "dask_client", fake_client)
+    monkeypatch.setattr(cluster, "dask_client", fake_client)
     with pytest.raises(Stop):
         sw.run_sweep(SWEEP, tmp_path / "out", workers=1000)
     assert started == [2]  # a process per point (24) on a 2-core machine before
