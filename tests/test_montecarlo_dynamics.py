@@ -363,7 +363,8 @@ def test_sweep_file_method_axis_runs_the_dynamics(tmp_path, capsys):
     assert main(["sweep", str(f), "--out", str(tmp_path / "out"), "--workers", "0", "--quiet"]) == 0
     import pandas as pd
 
-    table: Any = pd.read_csv(tmp_path / "out" / "results.csv")  # pandas' selections: unions
+    # pandas' selections are unions of frames, series and arrays: Any
+    table: Any = pd.read_csv(tmp_path / "out" / "results.csv")
     assert list(table["method"]) == ["greedy", "inertial"] and (table["status"] == "ok").all()
     greedy, inertial = table.iloc[0], table.iloc[1]
     assert (
