@@ -41,6 +41,7 @@ import os
 import shutil
 import tempfile
 from collections.abc import Callable, Sequence
+from typing import cast
 
 import pytest
 from hypothesis import settings
@@ -135,7 +136,7 @@ def run_cli(capsys) -> Callable[[Sequence], tuple[int, str, str]]:
         try:
             rc = main([str(a) for a in args])
         except SystemExit as exc:  # argparse exits on a usage error
-            rc = exc.code
+            rc = cast(int, exc.code)  # argparse exits with a status number
         out, err = capsys.readouterr()
         return rc, out, err
 

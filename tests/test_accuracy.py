@@ -260,4 +260,4 @@ def test_smallest_feature_of_geometry_and_png():
         100.0, abs=1.0
     )  # no geometry: outline
     with pytest.raises(InputError, match="geometry or a patterns.geometry.Mask"):
-        smallest_feature_um(np.ones((4, 4)))
+        smallest_feature_um(np.ones((4, 4)))  # pyright: ignore[reportArgumentType] - the test's point

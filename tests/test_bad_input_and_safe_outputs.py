@@ -643,9 +643,9 @@ def test_python_api_refuses_string_booleans():
     from simulator.scene import Effects
 
     with pytest.raises(InputError, match="true or false"):
-        Materials(allow_repulsive="false")
+        Materials(allow_repulsive="false")  # pyright: ignore[reportArgumentType] - the test's point
     with pytest.raises(InputError, match="true or false"):
-        Effects(twist="no")
+        Effects(twist="no")  # pyright: ignore[reportArgumentType] - the test's point
 
 
 # ======================================================= 5. finite outputs
@@ -773,6 +773,7 @@ def held_run(args: list[str], point: str, cwd: Path, env: dict | None = None) ->
         text=True,
         env=env,
     )
+    assert proc.stderr is not None
     seen = []
     for (
         line

@@ -64,6 +64,7 @@ def test_an_explicit_meniscus_height_is_the_height_of_the_energy_and_of_the_damp
     scene = cli_scene("--meniscus-height", "8", "--volume", "0.5", "--damping-calibration", "600")
     p = DynamicsParams.from_scene(scene)
     area, mu, cal = scene.chip.area_um2, scene.liquid.viscosity_Pa_s, scene.damping_calibration
+    assert cal is not None
     assert scene.meniscus_height_um == scene.liquid_height_um == 8.0
     assert build_landscape(scene).meniscus_height_um == 8.0
     assert p.damping_N_s_m == pytest.approx(cal * couette_damping(mu, area, 8.0), rel=1e-12)
@@ -81,6 +82,7 @@ def test_without_a_given_height_energy_and_damping_take_the_volume_over_the_area
     h = meniscus_height_um(0.5, scene.chip.area_um2)
     assert scene.meniscus_height_um == scene.liquid_height_um == h == pytest.approx(12.5)
     p = DynamicsParams.from_scene(scene)
+    assert scene.damping_calibration is not None
     assert p.damping_N_s_m == pytest.approx(
         scene.damping_calibration
         * couette_damping(scene.liquid.viscosity_Pa_s, scene.chip.area_um2, h),
@@ -126,6 +128,7 @@ def test_one_radius_of_gyration_for_the_pose_grid_the_steppers_and_the_dynamics(
     assert p.inertia_kg_m2 == pytest.approx(rho_t * j * 1e-24, rel=1e-12)
     assert p.mass_kg == pytest.approx(rho_t * area * 1e-12, rel=1e-12)
     h = scene.liquid_height_um
+    assert scene.damping_calibration is not None
     assert p.rot_damping_N_m_s == pytest.approx(
         scene.damping_calibration * couette_torsional_damping(scene.liquid.viscosity_Pa_s, j, h),
         rel=1e-12,
@@ -458,7 +461,9 @@ def test_the_critical_volume_of_a_scenes_four_pad_has_one_home(monkeypatch):
         chip=mask_from_geometry(square(730), pattern.um_per_px),
         liquid=Liquid(volume_nl=0.001),
     )
-    cv = scene_critical_volume(scene).critical_volume_nl
+    critical = scene_critical_volume(scene)
+    assert critical is not None
+    cv = critical.critical_volume_nl
     assert volume_window(scene)["critical_volume_nl"] == cv
     assert point_critical_volume_nl(scene, {"design": None}) == cv
     assert any(f"critical volume {cv:.3g} nl" in w for w in scene_warnings(scene))
@@ -539,9 +544,14 @@ def test_a_sweep_and_a_search_start_their_workers_in_one_place():
         "sweep/_cluster.py"
     }
     asked = []
+
+    def price() -> tuple[float | None, float | None]:
+        asked.append(1)
+        return None, None
+
     with contextlib.ExitStack() as stack:
         for workers, points in ((0, 5), (None, 0), (3, 0)):
-            client, _, where = start_workers(stack, workers, None, points, lambda: asked.append(1))
+            client, _, where = start_workers(stack, workers, None, points, price)
             assert client is None and where == "this process"
     assert asked == []  # no workers start: nothing priced
 

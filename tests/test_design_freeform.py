@@ -199,6 +199,7 @@ def test_the_written_gdsii_respects_the_minimum_feature(tmp_path):
     spec = load_freeform(doc, base=tmp_path)
     r = freeform(spec, tmp_path / "out", verify=False)
     geom = read_gds_polygons(tmp_path / "out" / "pattern.gds")
+    assert r.layout is not None
     assert not geom.is_empty and r.layout["ok"], r.layout
     keep_in = shapely.box(-6, -2, -2, 2)
     assert feature_check(geom, 4.0, 1.0, keep_in=keep_in)["ok"]

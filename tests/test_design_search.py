@@ -11,6 +11,7 @@ from __future__ import annotations
 import copy
 import json
 import math
+from typing import Any
 
 import gdstk
 import numpy as np
@@ -30,6 +31,9 @@ from simulator.design import (
 )
 from simulator.sweep import expected_columns, run_sweep
 
+# pandas' own annotations make a frame's selections unions of frames, series and arrays:
+# the tables whose selections the tests read are typed Any.
+#
 # One xdist group for the whole module (make test: pytest -n 2 --dist loadgroup): its tests
 # share scenes whose steppers take seconds to compile; on one worker each compiles once.
 pytestmark = pytest.mark.xdist_group("design_search")
@@ -163,6 +167,7 @@ def test_outputs_and_the_gds_is_the_best_design(run):
     assert doc["best"]["design"]["params"] == {"size": 200, "gap": gap}
     assert doc["baseline"]["design"]["params"] == {"size": 200, "gap": 20}
     (cell,) = gdstk.read_gds(str(out / "best.gds")).top_level()
+    assert isinstance(cell, gdstk.Cell)
     polys = [Polygon(p.points) for p in cell.polygons]
     design = four_pad(200, gap)
     got = shapely.union_all(polys)
@@ -203,7 +208,7 @@ def test_an_interrupted_search_resumes(tmp_path, monkeypatch, run_cli):
     kept = [json.loads(line) for line in (out / "trials.jsonl").read_text().splitlines()]
     assert [r["trial"] for r in kept] == [0, 1, 2]
     monkeypatch.undo()
-    table = search(SPEC, out, workers=0)
+    table: Any = search(SPEC, out, workers=0)
     st = table.attrs["search"]
     # The kept trials are replayed, not rerun: every gap is evaluated once over both runs.
     fresh = table[(table["kind"] == "search") & table["same_as"].isna()]
@@ -228,7 +233,7 @@ def test_two_objectives_give_a_non_dominated_front(tmp_path):
         "maximize": ["gap_um", "yield_fraction"],
         "constraints": ["capture_fraction >= 0.2"],
     }
-    table = search(doc, tmp_path / "out", workers=0)
+    table: Any = search(doc, tmp_path / "out", workers=0)
     front = table.attrs["search"]["best"]
     ok = table[(table["kind"] == "search") & (table["state"] == "complete") & table["feasible"]]
     v = ok[["objective_1", "objective_2"]].to_numpy()
@@ -385,7 +390,7 @@ def test_realizations_are_averaged_and_min_takes_the_worst(tmp_path):
         "sweep": {"seed": 1, "realizations": 2, "yield_starts": 200, "capture_grid": 9},
         "search": {"trials": 10, "seed": 0, "maximize": "min(max_bias_plus_x_um)"},
     }
-    table = search(doc, tmp_path / "out", workers=0)
+    table: Any = search(doc, tmp_path / "out", workers=0)
     assert set(table[table["kind"] == "search"]["sigma_um"]) == {2, 8}
     seeds, spread = set(), False
     for _, row in table[table["same_as"].isna()].iterrows():
@@ -412,7 +417,7 @@ def test_cmaes_searches_a_continuous_range(tmp_path):
         "maximize": "gap_um",
         "constraints": ["yield_fraction >= 0.9"],
     }
-    table = search(doc, tmp_path / "out", workers=0)
+    table: Any = search(doc, tmp_path / "out", workers=0)
     gaps = table[table["kind"] == "search"]["gap_um"]
     assert len(gaps) == 6 and gaps.between(10, 80).all() and gaps.nunique() == 6
     best = table[table["best"]]
@@ -425,7 +430,7 @@ def test_a_failing_trial_is_its_error_row_and_the_search_goes_on(tmp_path):
     doc = copy.deepcopy(SPEC)
     doc["axes"]["gap"] = [20, 250]  # 250 um: wider than the 200 um pattern
     doc["search"]["trials"] = 6
-    table = search(doc, tmp_path / "out", workers=0)
+    table: Any = search(doc, tmp_path / "out", workers=0)
     bad = table[table["gap_um"] == 250]
     assert len(bad) >= 1 and (bad["state"] == "fail").all() and not bad["best"].any()
     assert all("gap=250 um must be smaller than size=200 um" in e for e in bad["error"])

@@ -92,6 +92,7 @@ def _chain(text: str, pos: int) -> tuple[list[tuple], int]:
     section = None
     while True:
         m = _SEP.match(text, pos)
+        assert m is not None  # _SEP matches the empty string
         sep_end = m.end()
         t = _TOKEN.match(text, sep_end)
         if not t or t.end() == sep_end:
@@ -293,6 +294,7 @@ def _hooks():
     import importlib.util
 
     spec = importlib.util.spec_from_file_location("docs_hooks", ROOT / "docs" / "hooks.py")
+    assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module

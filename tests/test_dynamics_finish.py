@@ -64,6 +64,7 @@ def test_inertial_run_from_500_um_finishes_within_the_default_budget(scene):
     # the meniscus's flat part at 382-434 um), or alignment; never out of steps or time.
     assert t.outcome in ("plateau", "aligned"), t.outcome
     assert t.steps < DEFAULT_MAX_STEPS // 10  # measured 138 (overlap), 208 (meniscus)
+    assert t.time_s is not None
     assert t.time_s < 1.0  # the default t_max_s
     assert (
         380.0 <= t.final[0] <= 440.0 and abs(t.final[1]) < 0.05 and t.final[2] == 0.0

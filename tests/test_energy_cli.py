@@ -74,6 +74,7 @@ def test_poses_and_json_keys(fourpad_png, tmp_path, capsys):
         dg * (180 - 25) * 1e-6, abs=floor_J / (doc["um_per_px"] * 1e-6)
     )  # C4 with y-bias
     printed = re.search(r"overlap ([\d,.]+) um\^2", capsys.readouterr().out)
+    assert printed is not None
     assert float(printed[1].replace(",", "")) == pytest.approx(21700, abs=floor_um2 + 0.05)
 
 

@@ -8,7 +8,9 @@ Tolerances below are stated from the stored data, with some margin.
 import csv
 import math
 from collections import defaultdict
+from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -46,10 +48,12 @@ def _num(value):
     return None if value == "" else float(value)
 
 
-def _load(path):
+def _load(path) -> tuple[Sequence[str], list[dict[str, Any]]]:
+    """The header and the rows (``family`` a string, the other columns numbers or None)."""
     with open(path, newline="") as fh:
         reader = csv.DictReader(fh)
         header = reader.fieldnames
+        assert header is not None, path  # an empty file has none
         rows = [{k: (v if k == "family" else _num(v)) for k, v in r.items()} for r in reader]
     return header, rows
 

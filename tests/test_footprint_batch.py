@@ -74,7 +74,8 @@ def test_a_relayed_run_stops_where_the_state_first_changes(scene_planes):
         inner,
         start,
         landscape=fp.landscape(wet),
-        relay=Relay(reached, within, np.asarray(wet_bits(wet))),
+        # a numpy array where the relay is typed jax's: jax takes one as its own
+        relay=Relay(reached, within, np.asarray(wet_bits(wet))),  # pyright: ignore[reportArgumentType]
     )
     assert stopped.outcome == "event" and stopped.steps == first
     np.testing.assert_array_equal(stopped.path, free.path[: first + 1])
@@ -90,6 +91,7 @@ def test_batch_lanes_carry_their_own_footprint_and_equal_single_runs(method, sce
     events = 0
     for i, start in enumerate(starts):
         t = simulate(s, tuple(start), method=method, planes=fp)
+        assert t.footprint is not None
         events += len(t.footprint["events"])
         assert OUTCOMES[r.outcome[i]] == t.outcome, (start, t.outcome)
         assert r.steps[i] == t.steps, start
@@ -109,14 +111,17 @@ def test_a_footprint_run_never_passes_its_time_limit(scene_planes):
     # classify's rule), single run and batch alike
     s, fp = scene_planes
     free = simulate(s, (80.0, 0.0, 0.0), method="overdamped", planes=fp)
+    assert free.footprint is not None
     (ev,) = free.footprint["events"]
     assert free.outcome == "aligned" and ev["x_um"] > 15
     d = dataclasses.replace(DynamicsParams.from_scene(s), t_max_s=ev["t_s"] + 1e-3)
     t = simulate(s, (80.0, 0.0, 0.0), method="overdamped", dynamics=d, planes=fp)
+    assert t.footprint is not None and t.time_s is not None and t.t_s is not None
     assert [e["step"] for e in t.footprint["events"]] == [ev["step"]]
     assert t.outcome != "aligned" and t.time_s <= d.t_max_s and t.final[0] > 13
     assert np.all(np.diff(t.t_s) >= 0) and t.t_s[-1] <= d.t_max_s
     r = run_batch(s, STARTS[:1], "overdamped", progress=False, dynamics=d, planes=fp)
+    assert r.time_s is not None
     assert OUTCOMES[r.outcome[0]] == t.outcome and r.time_s[0] <= d.t_max_s
     assert r.time_s[0] == pytest.approx(t.time_s, rel=4 * float(np.finfo(np.float32).eps))
 

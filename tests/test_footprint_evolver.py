@@ -197,22 +197,29 @@ def test_released_force_lies_between_the_free_and_the_held_bounds(gap, x, y, rec
 
 
 # ------------------------------------------------------------------ the curved wall's reaches
+def _arc(h: float, kappa: float, deg: float):
+    """arc_wall's wall where the test's angle and curvature have one (asserted)."""
+    w = arc_wall(h, kappa, deg)
+    assert w is not None
+    return w
+
+
 def test_an_arc_of_vanishing_curvature_is_the_flat_wall_and_an_arc_is_a_circle():
     h = 20.0
-    w = arc_wall(h, 0.0, 30.0)
+    w = _arc(h, 0.0, 30.0)
     assert w.reach_um == pytest.approx(h / math.tan(math.radians(30)), rel=1e-12)
     assert w.area_um2 == pytest.approx(0.5 * h * w.reach_um, rel=1e-12)
     # a small curvature: the series' next term, c = h cot(t) + kappa h^2 / (2 sin^3 t)
     k = 1e-5
     t = math.radians(30)
     c1 = h / math.tan(t) + k * h**2 / (2 * math.sin(t) ** 3)
-    assert arc_wall(h, k, 30.0).reach_um == pytest.approx(c1, rel=1e-6)
+    assert _arc(h, k, 30.0).reach_um == pytest.approx(c1, rel=1e-6)
     # a finite curvature: both ends on the circle of radius 1/kappa whose centre lies on the
     # normal at the foot; the area is the quadrature of x(z) along the arc
     from scipy.integrate import quad
 
     k = 0.004
-    w = arc_wall(h, k, 60.0)
+    w = _arc(h, k, 60.0)
     t, p, R = math.radians(60), math.radians(w.top_deg), 1 / k
     centre = (-w.reach_um + R * math.sin(t), -R * math.cos(t))  # inside the liquid
     assert math.dist(centre, (-w.reach_um, 0.0)) == pytest.approx(R, rel=1e-12)
@@ -224,14 +231,14 @@ def test_an_arc_of_vanishing_curvature_is_the_flat_wall_and_an_arc_is_a_circle()
     # a bridged pad's walls pull gamma (cos(phi_p) - cos(phi_s)) per unit length of edge: the
     # overlap model's cos(theta_p) - cos(theta_s) at any pressure (the arc makes no dip)
     for k in (0.0, 0.002, 0.0035):
-        top = {t: math.radians(arc_wall(h, k, t).top_deg) for t in (30.0, 60.0)}
+        top = {t: math.radians(_arc(h, k, t).top_deg) for t in (30.0, 60.0)}
         pull = math.cos(top[30.0]) - math.cos(top[60.0])
         assert pull == pytest.approx(math.cos(math.radians(30)) - 0.5, rel=1e-12)
 
 
 def test_free_bridge_conserves_the_volume_and_balances_the_chip():
     b = free_bridge(V, L * L, [(4 * L, 60.0)])
-    w = arc_wall(b.h_um, b.curvature_per_um, 60.0)
+    w = _arc(b.h_um, b.curvature_per_um, 60.0)
     assert L * L * b.h_um + 4 * L * w.area_um2 == pytest.approx(V, rel=1e-10)
     assert b.curvature_per_um * L * L == pytest.approx(4 * L * math.sin(math.radians(w.top_deg)))
     assert b.h_um < V / (L * L)  # the bulging walls hold some of the liquid
@@ -309,4 +316,5 @@ def test_below_the_bridges_flattest_wall_no_receding_wall_exists():
     _, r30 = curved_reaches(V, L, L - 50, 30.0, 60.0)
     _, r29 = curved_reaches(V, L, L - 50, 30.0, 60.0, receding_deg=29.0)
     _, r10 = curved_reaches(V, L, L - 50, 30.0, 60.0, receding_deg=10.0)
+    assert r29 is not None and r30 is not None
     assert r29 > r30 > 0 and r10 is None

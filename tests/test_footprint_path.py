@@ -19,7 +19,7 @@ from tests.test_footprint_planes import fourpad, two_pads
 pytestmark = pytest.mark.xdist_group("footprint_path")
 
 
-def _floor(planes) -> float:
+def _floor(planes) -> np.floating:
     """The noise floor: 32 eps (float32) times the planes' largest |E|."""
     return NOISE_FACTOR * np.finfo(np.float32).eps * float(np.abs(planes.wet_energy).max())
 
@@ -132,6 +132,7 @@ def test_greedy_run_on_the_path_engine_takes_the_planes_run():
     a = simulate(s, start, "greedy", planes=planes)
     b = simulate(s, start, "greedy", engine="path")
     assert a.cost["engine"] == "footprint planes" and b.cost["engine"] == "footprint path"
+    assert a.footprint is not None and b.footprint is not None
     assert [(e["pad"], e["state"], e["step"]) for e in a.footprint["events"]] == [
         (e["pad"], e["state"], e["step"]) for e in b.footprint["events"]
     ]

@@ -202,9 +202,13 @@ def test_bench_pairs_are_the_row_and_column_neighbours(bench):
     assert got == want and len(got) == 8
 
 
-def _reference(scene: Scene, twists=None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _reference(
+    scene: Scene, twists=None
+) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]]:
     """The planes built pad by pad, one build_landscape per pad and footprint (the planes'
-    definition, docs/physics.md §3.5): wet energy, reached, within, and the covered count."""
+    definition, docs/physics.md §3.5): per pad, wet energy, reached, within, the covered count
+    and the band's offset c."""
+    assert scene.wall_profile is not None
     rules = FootprintRules.of(scene.wall_profile, scene.materials.pad_receding_deg)
     counts = rules.count_profiles()
     extent = scene_extent(_variant(scene, scene.pattern, counts["band_out"]))

@@ -8,6 +8,7 @@ import csv
 import json
 import math
 from pathlib import Path
+from typing import Any, cast
 
 import numpy as np
 import pytest
@@ -30,7 +31,7 @@ LIB = ROOT / "patterns" / "library"
 VALIDATION = ROOT / "validation"
 
 
-def fourpad(gap: int, res: float = 5.0, dtype: str = "float32", **liquid) -> Scene:
+def fourpad(gap: int, res: float = 5.0, dtype: str = "float32", **liquid: Any) -> Scene:
     return Scene.from_inputs(
         LIB / f"four_pad_730_{gap}.png",
         chip_size_um=730,
@@ -40,7 +41,7 @@ def fourpad(gap: int, res: float = 5.0, dtype: str = "float32", **liquid) -> Sce
         materials=Materials(pad_receding_deg=liquid.pop("receding"), pad_advancing_deg=35.0)
         if "receding" in liquid
         else Materials(),
-        liquid=Liquid(**({"volume_nl": 20.0} | liquid)),
+        liquid=Liquid(**(cast("dict[str, Any]", {"volume_nl": 20.0}) | liquid)),
     )
 
 
@@ -132,7 +133,9 @@ def test_the_droplet_on_the_pattern_is_the_default_wherever_the_footprint_is_fre
     """Without ``dispense`` a scene with the free contact lines' meniscus starts from the
     droplet dispensed on the pattern; ``none`` keeps the stateless footprint; the overlap
     model, pinned lines and a meniscus below a pixel have no footprint to keep."""
-    free = dict(chip_size_um=730, resolution_um=10.0, effects=Effects(twist=False, meniscus=True))
+    free: dict[str, Any] = dict(
+        chip_size_um=730, resolution_um=10.0, effects=Effects(twist=False, meniscus=True)
+    )
     path = LIB / "four_pad_730_100.png"
     assert Scene.from_inputs(path, **free, liquid=Liquid(volume_nl=20)).dispense == "pattern"
     for proto in ("pattern", "chip"):
@@ -198,10 +201,8 @@ def test_pads_planes_add_up_to_the_stateless_landscape_where_the_chip_covers_eve
     xs = (g1.x_first_px + np.arange(g1.shape[2])) * s.um_per_px
     ys = (g1.y_first_px + np.arange(g1.shape[1])) * s.um_per_px
     inside = (np.abs(ys)[:, None] <= 300) & (np.abs(xs)[None, :] <= 300)
-    assert (
-        inside.sum() > 1000
-        and fp.reached.all(axis=0)[0, dy:, dx:][: g1.shape[1], : g1.shape[2]][inside].all()
-    )
+    reached = cast(np.ndarray, fp.reached.all(axis=0))  # numpy's stubs: a bool or an array
+    assert inside.sum() > 1000 and reached[0, dy:, dx:][: g1.shape[1], : g1.shape[2]][inside].all()
     scale = float(np.abs(plain.energy).max())
     # float64 correlations: round-off of order 1e-15 of the scale per transform, 24 transforms
     assert np.abs(sub - plain.energy)[0][inside].max() <= 1e-12 * scale
@@ -227,9 +228,11 @@ def test_far_pads_that_stay_wet_align_the_bench_start_and_pads_that_dry_stop_it(
     # angle the far pads lie beyond h cot(30 deg) = 65 um and dry at release: the chip stops on
     # the cross; with a receding angle of 10 deg (reach 213 um) they stay wet and it aligns
     wet = simulate(fourpad(100, dispense="pattern", receding=10.0), (500, 5, 0), method="gradient")
+    assert wet.footprint is not None
     assert wet.outcome == "aligned" and wet.footprint["initial"] == [1, 2, 3, 4]
     assert abs(wet.final[0]) < 25 and wet.footprint["events"] == []
     dry = simulate(fourpad(100, dispense="pattern"), (500, 5, 0), method="gradient")
+    assert dry.footprint is not None
     assert dry.footprint["dispensed"] == [1, 2, 3, 4] and dry.footprint["initial"] == [2, 4]
     assert dry.outcome == "plateau" and dry.final[0] > 400
 
@@ -256,6 +259,7 @@ def test_a_wet_pad_the_chip_leaves_dries_during_the_run(method):
     # chip aligns on A.
     t = simulate(two_pads("pattern"), (80, 0, 0), method=method)
     fp = t.footprint
+    assert fp is not None
     assert fp["initial"] == [1, 2] and fp["final"] == [1], fp
     assert [(e["pad"], e["state"]) for e in fp["events"]] == [(2, "dry")], fp
     ev = fp["events"][0]

@@ -17,6 +17,7 @@ import tempfile
 import tracemalloc
 import zlib
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 from hypothesis import HealthCheck, given, settings, strategies as st
@@ -88,7 +89,7 @@ def run_traced(args: list[str], workdir: Path) -> tuple[int, str, int]:
             try:
                 rc = main(args)
             except SystemExit as e:  # argparse usage errors
-                rc = e.code
+                rc = cast(int, e.code)  # argparse exits with a status number
         peak = tracemalloc.get_traced_memory()[1]
     finally:
         tracemalloc.stop()

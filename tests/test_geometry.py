@@ -278,7 +278,10 @@ def test_random_jagged_polyline_profile_goes_peak_to_peak():
             r"sigma=40 um with seed=0 cuts the 200 um pattern apart",
         ),
         (lambda: random_jagged(200, sigma=2, seed=-1), r"seed must be an integer >= 0"),
-        (lambda: random_jagged(200, sigma=2, seed=1.5), r"seed must be an integer >= 0"),
+        (
+            lambda: random_jagged(200, sigma=2, seed=1.5),  # pyright: ignore[reportArgumentType] - on purpose
+            r"seed must be an integer >= 0",
+        ),
         (lambda: polygon([(0, 0), (1, 0)]), r"at least 3 distinct points, got 2"),
         (
             lambda: polygon([(0, 0), (10, 0), (0, 10), (10, 10)]),

@@ -271,9 +271,9 @@ def test_image_limit_refuses_nan_in_the_api():
 
 
 def _dxf(path: Path, points: list[tuple[float, float, float]]) -> Path:
-    import ezdxf
+    from ezdxf import filemanagement
 
-    doc = ezdxf.new()
+    doc = filemanagement.new()
     doc.header["$INSUNITS"] = 13  # um
     doc.modelspace().add_lwpolyline(points, format="xyb", close=True, dxfattribs={"layer": "PADS"})
     doc.saveas(path)
@@ -391,6 +391,7 @@ def _interrupted_sweep(tmp_path: Path, sig: signal.Signals) -> tuple[int, list[s
         start_new_session=True,
         env=os.environ | {"SELFALIGN_HOLD_AT": "sweep-point:1"},
     )
+    assert proc.stderr is not None
     seen = b""
     try:
         while b"selfalign: holding at sweep-point" not in seen:
@@ -486,9 +487,8 @@ def test_oasis_completeness_check_accepts_validated_files_and_refuses_a_changed_
         if scheme:
             changed = bytearray(data)
             changed[20] ^= 1
-            assert "does not match" in _oasis_incomplete(
-                _write(tmp_path / "bad.oas", bytes(changed))
-            )
+            message = _oasis_incomplete(_write(tmp_path / "bad.oas", bytes(changed)))
+            assert message is not None and "does not match" in message
 
 
 def _write(p: Path, data: bytes) -> Path:
@@ -569,10 +569,12 @@ def test_sweep_workers_are_capped_by_cores_and_memory_and_say_so(monkeypatch, tm
     monkeypatch.setattr(os, "cpu_count", lambda: 2)
     monkeypatch.setattr(resources, "available_memory_bytes", lambda: 64 * 2**30)
     n, note = worker_cap(1000, 24)
+    assert note is not None
     assert n == 2 and "--workers 1000 capped at 2" in note and "2 cores" in note
     monkeypatch.setattr(os, "cpu_count", lambda: 64)
     monkeypatch.setattr(resources, "available_memory_bytes", lambda: 3.5 * WORKER_MEMORY_MB * 2**20)
     n, note = worker_cap(1000, 24)
+    assert note is not None
     assert n == 3 and "holds 3 workers" in note
     monkeypatch.setattr(resources, "available_memory_bytes", lambda: 64 * 2**30)
     assert worker_cap(10, 4) == (4, None)  # bounded by the points only: nothing to say

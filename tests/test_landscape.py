@@ -329,7 +329,7 @@ def test_png_chip_rotation_keeps_area():
         dtype="float64",
     )
     ls = build_landscape(sc)
-    a = ls.overlap_um2(ls.energy)
+    a = np.asarray(ls.overlap_um2(ls.energy))  # an array for an array (typed array | float)
     rot_area = a.sum(axis=(1, 2)) / 200**2  # sum rule: sum = |P| |C_rot|
     np.testing.assert_allclose(rot_area, chip_geom.area, rtol=0.005)
     assert ls.period_deg == 180.0

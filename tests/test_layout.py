@@ -13,13 +13,14 @@ import json
 import math
 import struct
 from pathlib import Path
+from typing import Any
 
-import ezdxf
 import gdstk
 import numpy as np
 import pytest
 import shapely
-from shapely.geometry import box
+from ezdxf import filemanagement
+from shapely.geometry import Polygon, box
 
 from foundation import InputError
 from patterns.geometry import DESIGNS, build
@@ -64,19 +65,20 @@ def one_line_error(rc, err, *needles):
         assert n in err, err
 
 
-def gds(path: Path, cells: dict, unit=1e-6, precision=1e-9) -> Path:
+def gds(path: Path, cells: dict[str, list[Any]], unit=1e-6, precision=1e-9) -> Path:
     """Write a library of ``{name: [elements]}`` (cells created first, then filled)."""
     lib = gdstk.Library(unit=unit, precision=precision)
     made = {name: lib.new_cell(name) for name in cells}
     for name, elements in cells.items():
         for e in elements:
-            made[name].add(e(made) if callable(e) else e)
+            element: Any = e(made) if callable(e) else e  # an element, or one made of the cells
+            made[name].add(element)
     lib.write_gds(str(path))
     return path
 
 
 def dxf(path: Path, entities, insunits: int | None = 13, layers=()) -> Path:
-    doc = ezdxf.new("R2010")
+    doc = filemanagement.new("R2010")
     for name in layers:
         doc.layers.add(name)
     msp = doc.modelspace()
@@ -137,8 +139,12 @@ def test_pattern_command_writes_gds_and_dxf(tmp_path, run_cli):
     assert (lib.unit, lib.precision) == (1e-6, 1e-9) and [c.name for c in lib.top_level()] == [
         "four_pad"
     ]
-    assert {(p.layer, p.datatype) for p in lib.cells[0].polygons} == {(1, 0)}
-    assert ezdxf.readfile(tmp_path / "fourpad.dxf").header["$INSUNITS"] == 13  # micrometres
+    (cell,) = lib.cells
+    assert isinstance(cell, gdstk.Cell)
+    assert {(p.layer, p.datatype) for p in cell.polygons} == {(1, 0)}
+    assert (
+        filemanagement.readfile(tmp_path / "fourpad.dxf").header["$INSUNITS"] == 13
+    )  # micrometres
     rc, _, err = run_cli(["pattern", "square", "--size", "10", "-o", tmp_path / "x.txt"])
     one_line_error(rc, err, ".gds, .oas or .dxf")
     assert not (tmp_path / "x.txt").exists()
@@ -150,6 +156,7 @@ def test_polygon_with_a_hole_survives_as_a_keyhole_and_as_nested_dxf(tmp_path):
         back = read_layout(write_layout(tmp_path / f"r{suffix}", ring)).geometry(
             (1, 0) if suffix == ".gds" else "PATTERN"
         )
+        assert isinstance(back, Polygon)
         assert back.geom_type == "Polygon" and len(back.interiors) == 1
         assert back.area == 200 * 200 - 80 * 60 and back.symmetric_difference(ring).area == 0
 
@@ -330,7 +337,7 @@ def test_dxf_units_from_the_header_or_the_flag(tmp_path, capsys):
 
 
 def test_dxf_blocks_inherit_the_insert_layer_and_arrays_flatten(tmp_path):
-    doc = ezdxf.new("R2010")
+    doc = filemanagement.new("R2010")
     doc.units = 13
     pad = doc.blocks.new("PAD")
     pad.add_lwpolyline([(0, 0), (10, 0), (10, 10), (0, 10)], close=True, dxfattribs={"layer": "0"})
@@ -366,6 +373,7 @@ def test_dxf_blocks_inherit_the_insert_layer_and_arrays_flatten(tmp_path):
         (-200, -5, -190, 5), abs=1.5e-3
     )  # chords within 1 nm, then snapped to 1 nm
     outline = lay.geometry("OUTLINE")
+    assert isinstance(outline, Polygon)
     assert outline.area == 100 * 100 - 20 * 20 and len(outline.interiors) == 1
     with pytest.raises(InputError, match=r"no block named 'X'; blocks present: PAD \(1 entity\)"):
         read_layout(tmp_path / "b.dxf", cell="X")
@@ -389,6 +397,7 @@ def offset_site(tmp_path: Path) -> Path:
 def test_chip_layer_keeps_the_pattern_placement_relative_to_the_chip(tmp_path):
     path = offset_site(tmp_path)
     pattern, chip, record = layout_geometry(path, LayoutSelection(layer="1/0", chip_layer="2/0"))
+    assert chip is not None
     assert chip.bounds == (-100, -100, 100, 100) and pattern.bounds == (-70, -120, 130, 80)
     assert record["origin_um"] == [1000, 500] and "chip outline on layer 2/0" in record["origin"]
     pattern, chip, record = layout_geometry(path, LayoutSelection(layer="1/0"))
@@ -537,6 +546,7 @@ def test_example_site_is_what_its_script_writes(tmp_path):
     mod["main"](str(tmp_path / "site.gds"))
     assert (tmp_path / "site.gds").read_bytes() == SITE.read_bytes()
     cells = {c.name: c for c in gdstk.read_gds(str(SITE)).cells}
+    assert isinstance(cells["SITE"], gdstk.Cell)
     assert len(cells["SITE"].references) == 4 and {
         r.cell.name for r in cells["SITE"].references
     } == {"PAD"}
@@ -626,7 +636,12 @@ BAD = {
         lambda t: [
             gds(
                 t / "ghost.gds",
-                {"TOP": [gdstk.Reference("GHOST", (0, 0)), gdstk.rectangle((0, 0), (9, 9))]},
+                {
+                    "TOP": [
+                        gdstk.Reference("GHOST", (0, 0)),  # pyright: ignore[reportArgumentType] - a cell's name, as gdstk takes
+                        gdstk.rectangle((0, 0), (9, 9)),
+                    ]
+                },
             )
         ],
         ["cell TOP references cell GHOST, which the file does not hold"],

@@ -194,7 +194,7 @@ def test_parallelepiped_force_c13():
     assert parallelepiped_stiffness(h, L, g) == pytest.approx(-slope, rel=1e-9)
     assert round(scale * 1e6) == 106  # "water, L = 730 um gives 2 gamma L ~ 106 uN"
     xs = np.linspace(-100, 100, 11)
-    f = parallelepiped_force(xs, h, L, g)
+    f = np.asarray(parallelepiped_force(xs, h, L, g))  # an array for an array (typed float | array)
     assert f.shape == xs.shape and np.all(np.diff(f) < 0)
     np.testing.assert_array_equal(f, -f[::-1])
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -45,11 +46,12 @@ def _scene(
     s=1.0,
 ):
     pat = mask_from_geometry(pattern_geom, s, margin_um=2)
-    kw = (
-        {"chip_size_um": chip_size}
-        if chip_size is not None
-        else {"chip": mask_from_geometry(chip_geom, s)}
-    )
+    kw: dict[str, Any]
+    if chip_size is not None:
+        kw = {"chip_size_um": chip_size}
+    else:
+        assert chip_geom is not None
+        kw = {"chip": mask_from_geometry(chip_geom, s)}
     tw = TwistGrid(*twist) if twist else TwistGrid()
     return Scene.from_inputs(
         pat,
@@ -214,6 +216,7 @@ def test_free_contact_lines_float_the_chip_within_the_substrate_reach(sx, sy):
         window=20,
     )
     ds = h / math.tan(math.radians(sc.materials.substrate_angle_deg))
+    assert sc.wall_profile is not None
     assert sc.wall_profile.substrate_reach_px * sc.um_per_px == pytest.approx(ds)
     ls = build_landscape(sc)
     fl = ls.floor_range()

@@ -8,6 +8,7 @@ from __future__ import annotations
 import csv
 import functools
 from pathlib import Path
+from typing import Any
 
 import pytest
 from shapely.geometry import box
@@ -30,7 +31,7 @@ with CSV.open() as _f:
 @functools.cache
 def _landscape(family: str, a: float, b: float, h: float, gamma: float):
     pat = mask_from_geometry(box(-a / 2, -b / 2, a / 2, b / 2), 1.0, margin_um=2)
-    kw = dict(
+    kw: dict[str, Any] = dict(
         chip_size_um=(a, b),
         materials=Materials(surface_tension_N_m=gamma),
         liquid=Liquid(height_um=h, pinned=True),

@@ -76,6 +76,7 @@ def same_run(scene: Scene, start, method: str, full) -> None:
         # landscapes and the float64 path sums round differently), so the two within two.
         assert abs(t.energy_J[-1] - ref.energy_J[-1]) <= 2 * full.noise_floor_J
     assert t.outcome == ref.outcome
+    assert t.optimum is not None and ref.optimum is not None
     np.testing.assert_allclose(t.optimum, ref.optimum, atol=1e-9)
 
 

@@ -6,6 +6,7 @@ Coarse pixels and few starts: each case compiles the solver once per method."""
 
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -111,6 +112,7 @@ def test_batch_dynamics_equal_single_runs_start_by_start(request, case, method):
     # the start at the aligned pose: aligned at once; the time to align is the aligned runs' time, NaN elsewhere
     assert r.outcome_names()[0] == "aligned" and r.time_s[0] == 0.0
     ok = r.outcome == OUTCOMES.index("aligned")
+    assert r.time_to_align_s is not None
     assert (
         np.array_equal(r.time_to_align_s[ok], r.time_s[ok])
         and np.isnan(r.time_to_align_s[~ok]).all()
@@ -125,6 +127,7 @@ def test_time_to_align_distribution_in_the_summary(overlap):
     scene, ls, starts = overlap
     r = run_batch(scene, starts, "overdamped", landscape=ls, chunk=4, progress=False)
     t = summarize(r)["time_to_align_s"]
+    assert r.time_s is not None
     aligned = r.time_s[r.outcome == OUTCOMES.index("aligned")]
     assert t["n"] == len(aligned) == 7
     assert t["median"] == pytest.approx(np.median(aligned)) and t["p90"] == pytest.approx(
@@ -136,6 +139,7 @@ def test_time_to_align_distribution_in_the_summary(overlap):
         and t["min"] <= t["median"] <= t["p90"] <= t["max"]
     )
     h = time_histogram(r.time_to_align_s, bins=5)
+    assert h is not None
     assert (
         sum(h["counts"]) == 7
         and h["edges_s"][0] == 0.0
@@ -156,11 +160,13 @@ def test_dynamics_parameters_are_the_scenes_unless_given(overlap):
     a = run_batch(scene, starts[:4], "overdamped", landscape=ls, progress=False)
     p = DynamicsParams.from_scene(scene)
     b = run_batch(scene, starts[:4], "overdamped", landscape=ls, progress=False, dynamics=p)
+    assert a.time_s is not None and b.time_s is not None
     assert a.time_s.tobytes() == b.time_s.tobytes() and a.final.tobytes() == b.final.tobytes()
     slow = DynamicsParams(
         p.mass_kg, p.inertia_kg_m2, 2 * p.damping_N_s_m, 2 * p.rot_damping_N_m_s, p.t_max_s
     )
     c = run_batch(scene, starts[:4], "overdamped", landscape=ls, progress=False, dynamics=slow)
+    assert c.time_s is not None
     moved = a.time_s > 0
     assert np.allclose(
         c.time_s[moved], 2 * a.time_s[moved], rtol=0.05
@@ -357,7 +363,8 @@ def test_sweep_file_method_axis_runs_the_dynamics(tmp_path, capsys):
     assert main(["sweep", str(f), "--out", str(tmp_path / "out"), "--workers", "0", "--quiet"]) == 0
     import pandas as pd
 
-    table = pd.read_csv(tmp_path / "out" / "results.csv")
+    # pandas' selections are unions of frames, series and arrays: Any
+    table: Any = pd.read_csv(tmp_path / "out" / "results.csv")
     assert list(table["method"]) == ["greedy", "inertial"] and (table["status"] == "ok").all()
     greedy, inertial = table.iloc[0], table.iloc[1]
     assert (

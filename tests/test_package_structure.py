@@ -17,6 +17,8 @@ import inspect
 import subprocess
 import sys
 from pathlib import Path
+from types import ModuleType
+from typing import cast
 
 import pytest
 
@@ -198,7 +200,9 @@ def test_the_design_families_are_folders():
     }
     for family, modules in families.items():
         assert _entries(design / family) == ["__init__.py", *modules]
-    stub = {node.module.partition(".")[0] for node, _ in _stub_imports(design / "__init__.pyi")}
+    modules = [node.module for node, _ in _stub_imports(design / "__init__.pyi")]
+    assert None not in modules
+    stub = {cast(str, m).partition(".")[0] for m in modules}
     assert stub == {*families, "_mode"}
 
 
@@ -288,16 +292,21 @@ def test_no_module_but_the_top_keeps_a_lazy_getattr():
 def test_the_top_level_names_are_the_package_faces_names():
     import simulator
 
+    exports = _exports(simulator)
     for name in simulator.__all__:
-        module = simulator._EXPORTS[name].partition(":")[0]
+        module = exports[name].partition(":")[0]
         assert module.count(".") == 1 and module.split(".")[1] in SUBPACKAGES, (name, module)
-        value = getattr(
-            importlib.import_module(module), simulator._EXPORTS[name].partition(":")[2] or name
-        )
+        value = getattr(importlib.import_module(module), exports[name].partition(":")[2] or name)
         assert getattr(simulator, name) is value, name
 
 
 # ----------------------------------------------------------------- one import path per name
+def _exports(simulator: ModuleType) -> dict[str, str]:
+    """The top-level package's ``_EXPORTS`` (its module ``__getattr__`` reads the stub; the stub
+    does not name it)."""
+    return simulator._EXPORTS
+
+
 def _stub_imports(stub: Path) -> list[tuple[ast.ImportFrom, ast.alias]]:
     """The ``from X import name [as alias]`` lines of a stub (``__future__`` left out)."""
     tree = ast.parse(stub.read_text())
@@ -317,7 +326,7 @@ def _stub_all(stub: Path) -> list[str]:
 
 
 #: Each package face's public names (its stub's), by package.
-FACES = {
+FACE_NAMES = {
     package: sorted(
         a.asname or a.name for _, a in _stub_imports(PACKAGE / package / "__init__.pyi")
     )
@@ -336,10 +345,11 @@ def test_the_top_level_names_are_read_from_the_stub():
     expected = {}
     for node, alias in _stub_imports(stub):
         name = alias.asname or alias.name
+        assert node.module is not None, ast.unparse(node)
         assert node.level == 0 and node.module.startswith("simulator."), ast.unparse(node)
         expected[name] = node.module if name == alias.name else f"{node.module}:{alias.name}"
     assert expected["exact_overlap_um2"] == "simulator.testing:overlap_um2"
-    assert simulator._EXPORTS == expected
+    assert _exports(simulator) == expected
     assert simulator.__all__ == sorted(expected) == _stub_all(stub)
     code = (
         "import sys, simulator; "
@@ -353,7 +363,7 @@ def test_the_top_level_names_are_read_from_the_stub():
 
 def test_no_public_name_is_in_two_package_faces():
     homes: dict[str, list[str]] = {}
-    for package, names in FACES.items():
+    for package, names in FACE_NAMES.items():
         for name in names:
             homes.setdefault(name, []).append(package)
     assert {name: where for name, where in homes.items() if len(where) > 1} == {}
@@ -377,12 +387,13 @@ def _defined_names(path: Path) -> tuple[set[str], set[str]]:
     return defined, imported
 
 
-@pytest.mark.parametrize("package", sorted(FACES))
+@pytest.mark.parametrize("package", sorted(FACE_NAMES))
 def test_each_face_names_what_its_package_defines(package):
     """A face re-exports only its own package's underscore modules, and each name there is
     defined in that module, not imported from another package (no second import path)."""
     foreign = []
     for node, alias in _stub_imports(PACKAGE / package / "__init__.pyi"):
+        assert node.module is not None, ast.unparse(node)
         assert node.level == 1 and node.module.startswith("_"), ast.unparse(node)
         assert alias.asname in (None, alias.name), ast.unparse(node)
         module = PACKAGE / package / f"{node.module.replace('.', '/')}.py"

@@ -23,6 +23,7 @@ import pytest
 import shapely
 from cli_helpers import one_line_error, python_m  # tests/cli_helpers.py
 from shapely.geometry import Polygon
+from shapely.geometry.base import BaseMultipartGeometry
 
 from foundation import InputError
 from patterns.geometry import Mask
@@ -140,6 +141,7 @@ def test_outline_of_ten_thousand_tiny_pads_is_quick():
     with pytest.raises(InputError, match="no area to measure"):
         smallest_feature_um(m)
     assert time.perf_counter() - t0 < 30.0
+    assert isinstance(g, BaseMultipartGeometry)
     assert len(g.geoms) == 10_000 and g.area == pytest.approx(10_000 * 0.5)
 
 
@@ -312,6 +314,7 @@ def test_sigterm_on_design_says_how_many_trials_were_kept(tmp_path):
         start_new_session=True,
         env=os.environ | {"SELFALIGN_HOLD_AT": "search-trial:2", "PYTHONPATH": str(ROOT)},
     )
+    assert proc.stderr is not None
     seen = b""
     try:
         while b"selfalign: holding at search-trial" not in seen:
@@ -445,6 +448,7 @@ def test_workers_are_capped_by_their_priced_peaks_together(monkeypatch):
 
     monkeypatch.setattr(os, "cpu_count", lambda: 8)
     n, note = worker_cap(4, 10, 600 * MB, 1300 * MB)  # 2 x 600 MB fit 1,300 MB, 3 do not
+    assert note is not None
     assert n == 2 and "memory budget of 1.27 GB for all the workers together" in note
     assert "600 MB" in note and "--workers 4 capped at 2" in note
     assert worker_cap(4, 10, 600 * MB, 10_000 * MB) == (4, None)
@@ -537,7 +541,7 @@ def test_the_smallest_feature_of_many_polygons_is_vectorised(monkeypatch):
         xs = np.arange(n) * 3.0
         return shapely.MultiPolygon(
             list(
-                shapely.box(*np.meshgrid(xs, xs), *(np.meshgrid(xs, xs) + np.float64(2.0))).ravel()
+                shapely.box(*np.meshgrid(xs, xs), *(np.meshgrid(xs, xs) + np.float64(2.0))).ravel()  # pyright: ignore[reportOperatorIssue] - numpy adds to the two grids
             )
         )
 

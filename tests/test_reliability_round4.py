@@ -9,10 +9,10 @@ import subprocess
 import sys
 from pathlib import Path
 
-import ezdxf
 import numpy as np
 import pytest
 from cli_helpers import listing, one_line_error  # tests/cli_helpers.py
+from ezdxf import filemanagement
 
 from foundation import InputError
 
@@ -70,7 +70,7 @@ def test_search_constraint_with_a_huge_integer_names_its_index(tmp_path):
 def _dxf_with_scaled_insert(tmp_path: Path, xscale: str) -> Path:
     """A DXF whose model space inserts block PAD (a 10 um square) with the x-scale ``xscale``
     as written in the file (ezdxf itself would never write a zero scale)."""
-    doc = ezdxf.new("R2010")
+    doc = filemanagement.new("R2010")
     doc.header["$INSUNITS"] = 13
     pad = doc.blocks.new("PAD")
     pad.add_lwpolyline([(0, 0), (10, 0), (10, 10), (0, 10)], close=True, dxfattribs={"layer": "0"})
@@ -136,10 +136,14 @@ def test_build_landscape_still_takes_whole_numbers_of_any_type(small_scene):
     from simulator.landscape import build_landscape
 
     ls = build_landscape(
-        small_scene, twists=[0.0], center_px=(np.int64(1), 2.0), half_px=np.int64(3)
+        small_scene,
+        twists=[0.0],  # pyright: ignore[reportArgumentType] - a list, as callers pass
+        center_px=(np.int64(1), 2.0),  # pyright: ignore[reportArgumentType] - the test's point
+        half_px=np.int64(3),  # pyright: ignore[reportArgumentType] - the test's point
     )
     assert ls.energy.shape == (1, 7, 7)
-    assert build_landscape(small_scene, twists=[0.0], half_px=0).energy.shape == (1, 1, 1)
+    one = build_landscape(small_scene, twists=[0.0], half_px=0)  # pyright: ignore[reportArgumentType] - a list
+    assert one.energy.shape == (1, 1, 1)
 
 
 @pytest.mark.parametrize("size", [(1, 2, 3), (100,), [[1, 2]], True, "100x50", (100, None)])
@@ -157,7 +161,8 @@ def test_scene_chip_size_of_one_or_two_numbers_still_makes_the_chip():
 
     pattern = mask_from_geometry(square(100), 5)
     assert Scene.from_inputs(pattern=pattern, chip_size_um=50).chip.area_um2 == pytest.approx(2500)
-    rect = Scene.from_inputs(pattern=pattern, chip_size_um=np.array([100, 50.0])).chip
+    # an array where the annotation says numbers: the test's point
+    rect = Scene.from_inputs(pattern=pattern, chip_size_um=np.array([100, 50.0])).chip  # pyright: ignore[reportArgumentType]
     assert rect.area_um2 == pytest.approx(5000)
 
 

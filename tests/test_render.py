@@ -7,6 +7,7 @@ import imageio.v3 as iio
 import numpy as np
 import pytest
 from matplotlib.colors import to_rgb
+from shapely.geometry import Polygon
 
 from foundation import InputError, announce_once
 from patterns.geometry import Mask, build, mask_from_geometry
@@ -79,6 +80,7 @@ def test_chip_outline_of_a_png_keeps_its_area_and_hole():
     data[10:50, 10:70] = 1
     data[20:30, 20:40] = 0  # a hole, left of and above the centre
     geom = chip_outline(Mask(data, 2.0))
+    assert isinstance(geom, Polygon)
     assert geom.area == pytest.approx(data.sum() * 4.0, rel=0.03)
     assert len(geom.interiors) == 1
     hole = geom.interiors[0].centroid  # rows 20..30, cols 20..40: x = (30 - 40) 2, y = (30 - 25) 2

@@ -524,6 +524,7 @@ def test_extreme_volume(fp100, volume_nl):
     for m in ("overdamped", "inertial"):
         t = simulate(s, START, method=m, landscape=ls)
         assert_finite(t)
+        assert t.time_s is not None
         assert 0 < t.time_s <= 1.0 + 1e-6 and t.energy_J[-1] <= t.energy_J[0]
 
 
@@ -902,6 +903,7 @@ def test_regression_dynamics_coefficients_underflowed_in_float32(fp100):
     s, ls = fp100["float32"]
     t = simulate(s.replace(damping_calibration=1e-30), START, method="overdamped", landscape=ls)
     assert_finite(t)
+    assert t.time_s is not None
     assert t.steps > 0 and t.outcome == "aligned" and 0 < t.time_s < 1e-20
 
 

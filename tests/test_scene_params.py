@@ -11,6 +11,7 @@ import ast
 import dataclasses
 import inspect
 from pathlib import Path
+from typing import TypeVar
 
 import numpy as np
 import pytest
@@ -20,7 +21,7 @@ from foundation import InputError
 from simulator.cli import build_parser
 from simulator.commands._scene import scene_document_from_args
 from simulator.scene import FLAG_GROUPS, SCENE_PARAMS, SCHEMA, Scene, Size, sweep_places
-from simulator.scene._schema_kinds import Choice
+from simulator.scene._schema_kinds import Choice, Integer, Kind
 
 #: Sections of a scene file that are not the scene's parameters (a command's own).
 COMMAND_SECTIONS = ("simulate", "montecarlo")
@@ -145,6 +146,7 @@ def test_every_flag_reaches_its_document_key(pattern_png):
     }
     flagged = [p for p in SCENE_PARAMS if p.flag]
     for p in flagged:
+        assert p.flag is not None
         text = texts[p.flag] if p.flag in texts else ROUND_TRIP.get(p.flag, (None,))[0]
         doc = _document([*base, p.flag] + ([text] if text is not None else []))
         where = doc.get(p.table, {}) if p.table else doc
@@ -250,6 +252,16 @@ def test_the_search_baseline_reads_the_scene_where_the_registry_says():
 
 
 # ----------------------------------------------------------------------- choices and limits
+K = TypeVar("K", bound=Kind)
+
+
+def _kind(table: str | None, key: str, cls: type[K]) -> K:
+    """``SCHEMA[table][key]``, asserted to be a ``cls``."""
+    kind = SCHEMA[table][key]
+    assert isinstance(kind, cls), kind
+    return kind
+
+
 def test_no_choice_or_limit_of_the_schema_is_a_copy():
     """The schema quotes the choices and limits of their homes (simulator.core, the physics,
     the layout reader, the scene's own): the same objects, not copies that may drift."""
@@ -260,14 +272,14 @@ def test_no_choice_or_limit_of_the_schema_is_a_copy():
     from simulator.physics import DISPENSE_CHOICES
     from simulator.scene import DTYPES, PRESETS
 
-    assert SCHEMA["simulate"]["method"].choices is METHODS
-    assert SCHEMA["montecarlo"]["method"].choices is BATCH_METHODS
-    assert SCHEMA["simulate"]["max_steps"].bounds.hi == MAX_STEPS_LIMIT
-    assert SCHEMA["montecarlo"]["max_steps"].bounds.hi == MAX_STEPS_LIMIT
-    assert SCHEMA["montecarlo"]["chunk"].bounds.hi == MAX_CHUNK
-    assert SCHEMA["liquid"]["dispense"].choices is DISPENSE_CHOICES
-    assert SCHEMA[None]["channel"].choices is CHANNELS
-    assert SCHEMA[None]["dtype"].choices is DTYPES
+    assert _kind("simulate", "method", Choice).choices is METHODS
+    assert _kind("montecarlo", "method", Choice).choices is BATCH_METHODS
+    assert _kind("simulate", "max_steps", Integer).bounds.hi == MAX_STEPS_LIMIT
+    assert _kind("montecarlo", "max_steps", Integer).bounds.hi == MAX_STEPS_LIMIT
+    assert _kind("montecarlo", "chunk", Integer).bounds.hi == MAX_CHUNK
+    assert _kind("liquid", "dispense", Choice).choices is DISPENSE_CHOICES
+    assert _kind(None, "channel", Choice).choices is CHANNELS
+    assert _kind(None, "dtype", Choice).choices is DTYPES
     homes = {
         METHODS,
         BATCH_METHODS,

@@ -526,10 +526,14 @@ def test_show_value_and_check_nesting_are_bounded():
         node.append([])
         node = node[0]
     assert len(show_value(deep)) <= 60
-    where, problem = check_nesting({"a": deep}, 8, 10)
+    found = check_nesting({"a": deep}, 8, 10)
+    assert found is not None
+    where, problem = found
     assert where.startswith("a[0]") and "levels deep" in problem
     assert check_nesting({"a": [1, 2]}, 8, 10) is None
-    assert check_nesting([0] * 11, 8, 10)[1] == "has 11 elements; at most 10"
+    found = check_nesting([0] * 11, 8, 10)
+    assert found is not None
+    assert found[1] == "has 11 elements; at most 10"
 
 
 def test_bounds_parse():

@@ -8,6 +8,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -170,7 +171,8 @@ def test_rerun_skips_the_points_done(tiny, cluster, tmp_path):
     lines = journal.splitlines(keepends=True)
     (out / "points.jsonl").write_text("".join(lines[:4]))
     kept = {json.loads(x)["point"] for x in lines[:4]}
-    third = run_sweep(d / "tiny.toml", out, scheduler=cluster, pictures=False)
+    # pandas' selections are unions of frames, series and arrays: Any
+    third: Any = run_sweep(d / "tiny.toml", out, scheduler=cluster, pictures=False)
     assert third.attrs["sweep"]["run_now"] == 2 and len(third) == 6 and third["point"].is_unique
     same = third[third["point"].isin(kept)].reset_index(drop=True)
     pd.testing.assert_frame_equal(same, table[table["point"].isin(kept)].reset_index(drop=True))
@@ -206,6 +208,7 @@ def test_killed_run_resumes_to_the_full_table(tmp_path, cluster):
         stderr=subprocess.PIPE,
     )
     journal = out / "points.jsonl"
+    assert proc.stderr is not None
     for line in proc.stderr:  # blocks until the hold line, or the end of a run that never held
         if b"selfalign: holding at sweep-point" in line:
             proc.send_signal(signal.SIGKILL)  # a crash: no handler runs
@@ -214,7 +217,8 @@ def test_killed_run_resumes_to_the_full_table(tmp_path, cluster):
     assert proc.returncode == -signal.SIGKILL, err.decode()[-2000:]
     done = [json.loads(x) for x in journal.read_text().splitlines() if x.endswith("}")]
     assert len(done) == 2
-    table = run_sweep(tmp_path / "s.toml", out, scheduler=cluster)
+    # pandas' selections are unions of frames, series and arrays: Any
+    table: Any = run_sweep(tmp_path / "s.toml", out, scheduler=cluster)
     assert table.attrs["sweep"]["run_now"] == 30 - len(done)
     assert (
         len(table) == 30
@@ -273,7 +277,8 @@ def test_python_api_latin_hypercube_realizations_one_axis_picture(tmp_path):
             "capture_grid": 5,
         },
     }
-    table = simulator.run_sweep(spec, tmp_path / "lhs", workers=0)
+    # pandas' selections are unions of frames, series and arrays: Any
+    table: Any = simulator.run_sweep(spec, tmp_path / "lhs", workers=0)
     assert len(table) == 8 and (table["status"] == "ok").all()
     sig = table["sigma_um"].to_numpy()[::2]
     assert sorted(np.floor((sig - 1) / 1.0).astype(int)) == [
@@ -377,6 +382,7 @@ def test_out_holding_another_sweep_or_other_files_is_refused(tiny, tmp_path, cap
 def test_example_sweep_file_is_the_readme_sweep():
     spec = load_sweep(ROOT / "examples" / "sweep_fourpad.toml")
     assert spec.n_points == 24 and [a.name for a in spec.swept] == ["gap", "volume_nl"]
+    assert spec.design is not None
     assert (
         spec.design["name"] == "four-pad"
         and spec.design["params"]["size"] == 730

@@ -55,7 +55,12 @@ class StartGrid:
     twist_deg: tuple[float, ...] = (0.0,)
 
     @classmethod
-    def from_ranges(cls, x_um, y_um, twist_deg=0.0) -> StartGrid:
+    def from_ranges(
+        cls,
+        x_um: float | tuple[float, ...],
+        y_um: float | tuple[float, ...],
+        twist_deg: float | tuple[float, ...] = 0.0,
+    ) -> StartGrid:
         """Each axis one value or (start, stop, step), stop included (um, um, degrees)."""
         g = cls(
             _axis("grid x", x_um, "um"),

@@ -136,7 +136,7 @@ def parse_grid(text: str) -> StartGrid:
     names = ("--grid x", "--grid y", "--grid twist")
     axes = [_range(v.strip(), n) for v, n in zip(parts, names, strict=False)]
     try:
-        return StartGrid.from_ranges(*axes)  # pyright: ignore[reportArgumentType]  (twist_deg unannotated, taken as float from its default; it takes a range too)
+        return StartGrid.from_ranges(*axes)
     except InputError as err:
         raise InputError(f"--grid {text!r}: {err}") from None
 
