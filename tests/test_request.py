@@ -114,3 +114,70 @@ def test_each_command_builds_its_request_once(command, monkeypatch, capsys, tmp_
     assert "stopped at the scene" in capsys.readouterr().err
     assert len(built) == 1 and given == built
     assert built[0].output("--json") == str(tmp_path / "o.json")
+
+
+def _record_requests(monkeypatch, module, name: str) -> tuple[list, list]:
+    """``SceneRequest.from_args`` counted, and the helper ``name`` of ``module`` (the module
+    the command imports it from) replaced by one that records what it is given and stops."""
+    import simulator.commands._request as request_module
+
+    built, given = [], []
+    real = request_module.SceneRequest.from_args
+
+    def from_args(*a, **k):
+        built.append(real(*a, **k))
+        return built[-1]
+
+    def stop(request, *a, **k):
+        given.append(request)
+        raise InputError("stopped at the scene")
+
+    monkeypatch.setattr(request_module.SceneRequest, "from_args", from_args)
+    monkeypatch.setattr(module, name, stop)
+    return built, given
+
+
+@pytest.mark.parametrize("chip", [["--chip-size", "200"], []])
+def test_evaluate_builds_its_request_once(chip, monkeypatch, capsys, tmp_path):
+    """evaluate hands its one request to the scene (stopped there); without a chip, the chip
+    from the pattern's bounding box is added to that request, not read from the namespace."""
+    import simulator.commands.evaluate as evaluate
+
+    built, given = _record_requests(monkeypatch, evaluate, "scene_from_args")
+    argv = ["evaluate", PATTERN, *chip, "--resolution", "4", "--out", str(tmp_path / "o")]
+    assert main([*argv, "--quiet"]) == 2
+    assert "stopped at the scene" in capsys.readouterr().err
+    assert len(built) == 1 and len(given) == 1 and type(given[0]) is SceneRequest
+    assert given[0].inputs == built[0].inputs and set(given[0].inputs) == {Path(PATTERN)}
+    if chip:
+        assert given == built and given[0].overrides[(None, "chip_size_um")] == [200.0, 200.0]
+    else:
+        assert (None, "chip_size_um") not in built[0].overrides
+        assert given[0].overrides[(None, "chip_size_um")][0] > 0
+
+
+def test_calibrate_builds_its_request_once(monkeypatch, capsys, tmp_path):
+    """calibrate reads its scene file once, into the request its merged document is made of."""
+    import simulator.commands._scene as scene_module
+
+    built, given = _record_requests(monkeypatch, scene_module, "scene_document_from_args")
+    csv = tmp_path / "t.csv"
+    csv.write_text("x_um,y_um,twist_deg,trials,aligned\n0,0,0,10,5\n")
+    toml = scene_file(tmp_path)
+    out = str(tmp_path / "o")
+    assert main(["calibrate", str(csv), str(toml), "--fit", "volume_nl", "--out", out]) == 2
+    assert "stopped at the scene" in capsys.readouterr().err
+    assert len(built) == 1 and given == built and type(given[0]) is SceneRequest
+    assert given[0].scene_file == str(toml) and given[0].document["resolution_um"] == 4
+
+
+def test_liquid_window_builds_its_request_once(monkeypatch, capsys, tmp_path):
+    """liquid window hands its one request to the scene (stopped there)."""
+    import simulator.commands._scene as scene_module
+
+    built, given = _record_requests(monkeypatch, scene_module, "scene_from_args")
+    argv = ["liquid", "window", "--pattern", PATTERN, "--chip-size", "200", "--volume", "3"]
+    assert main(argv) == 2
+    assert "stopped at the scene" in capsys.readouterr().err
+    assert len(built) == 1 and given == built and type(given[0]) is SceneRequest
+    assert given[0].volume_given() and given[0].overrides[(None, "chip_size_um")] == [200.0, 200.0]

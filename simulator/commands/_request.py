@@ -10,6 +10,7 @@ The namespace stops at the command layer: no helper fishes for an optional attri
 from __future__ import annotations
 
 import argparse
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -73,6 +74,12 @@ class SceneRequest:
     def output(self, flag: str) -> str | None:
         """The path the output ``flag`` ("--json") names, or None."""
         return dict(self.outputs).get(flag)
+
+    def with_chip_size(self, size: str) -> SceneRequest:
+        """This request with the chip ``size`` (W[xH] um) as ``--chip-size`` gives it: the
+        chip ``evaluate`` takes from the pattern's bounding box when none is given."""
+        overrides = {**self.overrides, (None, "chip_size_um"): list(parse_chip_size(size))}
+        return dataclasses.replace(self, overrides=overrides)
 
     def volume_given(self) -> bool:
         """A droplet volume the user gave: ``--volume`` or ``[liquid] volume_nl``."""

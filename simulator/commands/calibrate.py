@@ -106,7 +106,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from foundation import InputError
     from simulator.commands._flags import parse_pose
-    from simulator.commands._scene import scene_document, scene_document_from_args
+    from simulator.commands._request import SceneRequest
+    from simulator.commands._scene import scene_document_from_args
     from simulator.commands.design import without_force
     from simulator.design import PROFILE, calibrate, read_trials
 
@@ -117,7 +118,9 @@ def run(args: argparse.Namespace) -> int:
             spread = parse_pose(args.spread, "--spread")
             if min(spread) < 0:
                 raise InputError(f"--spread must be >= 0 (um, um, degrees), got {args.spread!r}")
-        doc, base = scene_document_from_args(args, scene_document(args))
+        # the scene file read and validated and the flags over it: once for the whole command
+        request = SceneRequest.from_args(args)
+        doc, base = scene_document_from_args(request)
         result = calibrate(
             table,
             doc,

@@ -8,8 +8,8 @@ from pathlib import Path
 from foundation import InputError, check_output_dir
 from simulator.commands._flags import add_scene_args
 from simulator.commands._liquid import liquid_checks
-from simulator.commands._outputs import input_paths
-from simulator.commands._scene import accuracy_check, scene_document, scene_from_args
+from simulator.commands._request import SceneRequest
+from simulator.commands._scene import accuracy_check, scene_from_args
 from simulator.core import AUTO_LANDSCAPE_MB, BATCH_METHODS, DYNAMIC_METHODS
 
 
@@ -67,12 +67,13 @@ def run(args: argparse.Namespace) -> int:
         args.pattern = args.image
     if not (args.pattern or args.scene):
         raise InputError("give the pattern PNG or layout: selfalign evaluate PATTERN.png --out DIR")
-    doc = scene_document(args)  # the scene file, read and validated once for the whole command
-    inputs = input_paths(args, doc)
+    # the scene file read and validated, the flags and inputs: once for the whole command
+    request = SceneRequest.from_args(args)
+    inputs = list(request.inputs)
     check_output_dir(args.out, "--out", args.force, inputs)  # before any work
     if not (args.chip or args.chip_size or args.chip_layer or args.scene):
-        args.chip_size = _bbox_chip(args)
-    scene = scene_from_args(args, note_frame=False, doc=doc, warn=False)
+        request = request.with_chip_size(_bbox_chip(args))
+    scene = scene_from_args(request, note_frame=False, warn=False)
     layout = scene.pattern.params.get("layout")
     if layout:
         from patterns.layout import frame_note
@@ -94,7 +95,7 @@ def run(args: argparse.Namespace) -> int:
     # The accuracy and droplet warnings once a given pixel size is priced: a refusal does not wait for them.
     accuracy_check(scene)
     liquid_warnings = liquid_checks(
-        args, scene, args.method, _noise_biases(scene), "the placement-noise starts", doc=doc
+        request, scene, args.method, _noise_biases(scene), "the placement-noise starts"
     )
     # JAX, the engine, matplotlib: imported when a run needs them.
     from simulator.batch import evaluate

@@ -439,7 +439,8 @@ def run_critical_volume(args: argparse.Namespace) -> int:
 
 # ----------------------------------------------------------------------- volume window
 def run_window(args: argparse.Namespace) -> int:
-    from simulator.commands._scene import scene_document, scene_from_args
+    from simulator.commands._request import SceneRequest
+    from simulator.commands._scene import scene_from_args
     from simulator.liquid import volume_window, window_lines
 
     if args.json and args.json != "-":
@@ -449,8 +450,9 @@ def run_window(args: argparse.Namespace) -> int:
         require_new_file(args.json, "--json", args.force)
     bias = _finite("--bias", args.bias, positive=False)
     rho = _finite("--density", args.density)
-    doc = scene_document(args)
-    scene = scene_from_args(args, doc=doc, warn=False)
+    # the scene file read and validated and the flags over it, once
+    request = SceneRequest.from_args(args)
+    scene = scene_from_args(request, warn=False)
     if rho is not None and rho != scene.liquid.density_kg_m3:
         import dataclasses
 
