@@ -20,6 +20,7 @@ from patterns.geometry import four_pad, mask_from_geometry, square
 from patterns.library import library_path
 from simulator.batch import auto_resolution
 from simulator.cli import build_parser, main
+from simulator.commands._request import SceneRequest
 from simulator.commands._scene import scene_from_args
 from simulator.landscape import PoseGrid, build_landscape, estimate_bytes, plan
 from simulator.motion import DynamicsParams, field_and_grid
@@ -54,7 +55,7 @@ def cli_scene(*flags: str) -> Scene:
         "--no-twist",
         *flags,
     ]
-    return scene_from_args(build_parser().parse_args(argv))
+    return scene_from_args(SceneRequest.from_args(build_parser().parse_args(argv)))
 
 
 # ---------------------------------------------------------------- the liquid's height

@@ -20,6 +20,7 @@ import pytest
 
 from patterns.library import library_path
 from simulator.cli import build_parser
+from simulator.commands._request import SceneRequest
 from simulator.commands._scene import scene_from_args
 from simulator.core import DEFAULT_MAX_STEPS
 from simulator.landscape import build_landscape
@@ -50,7 +51,7 @@ def four_pad_scene(meniscus: bool):
         "10",
         "--no-twist",
     ] + (["--meniscus"] if meniscus else [])
-    return scene_from_args(build_parser().parse_args(argv))
+    return scene_from_args(SceneRequest.from_args(build_parser().parse_args(argv)))
 
 
 @pytest.fixture(scope="module", params=[False, True], ids=["overlap", "meniscus"])
@@ -126,7 +127,7 @@ def test_with_twists_the_run_that_creeps_on_the_plateau_until_its_time_is_up_is_
         "--damping-calibration",  # the former fit: the chip creeps (the damping's terms let it run)
         "600",
     ]
-    sc = scene_from_args(build_parser().parse_args(argv))
+    sc = scene_from_args(SceneRequest.from_args(build_parser().parse_args(argv)))
     t = simulate(sc, (500.0, 0.0, 0.0), method="inertial")
     assert t.steps < DEFAULT_MAX_STEPS  # not out of steps: out of time
     assert t.time_s == pytest.approx(1.0)  # the default t_max_s

@@ -402,6 +402,7 @@ def test_cli_refuses_bad_heights_in_one_line(flags, needle, capsys):
 
 def test_scene_file_means_what_the_flags_mean(tmp_path):
     from simulator.cli import build_parser
+    from simulator.commands._request import SceneRequest
     from simulator.commands._scene import scene_from_args
     from simulator.commands.energy import register  # noqa: F401  (the energy parser has every scene flag)
 
@@ -430,7 +431,7 @@ def test_scene_file_means_what_the_flags_mean(tmp_path):
             "0,0,0",
         ]
     )
-    b = scene_from_args(args)
+    b = scene_from_args(SceneRequest.from_args(args))
     for s in (a, b):
         assert (
             s.meniscus_height_um == 12.5

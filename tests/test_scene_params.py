@@ -19,6 +19,7 @@ from PIL import Image
 
 from foundation import InputError
 from simulator.cli import build_parser
+from simulator.commands._request import SceneRequest
 from simulator.commands._scene import scene_document_from_args
 from simulator.scene import FLAG_GROUPS, SCENE_PARAMS, SCHEMA, Scene, Size, sweep_places
 from simulator.scene._schema_kinds import Choice, Integer, Kind
@@ -111,7 +112,7 @@ ROUND_TRIP = {
 
 def _document(argv):
     args = build_parser("simulate").parse_args(["simulate", *argv])
-    return scene_document_from_args(args, {})[0]
+    return scene_document_from_args(SceneRequest.from_args(args, doc={}))[0]
 
 
 def _expected_document_value(p, text):

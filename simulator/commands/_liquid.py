@@ -3,40 +3,30 @@ of a volume derived from the chip, and the warnings of a volume given."""
 
 from __future__ import annotations
 
-import argparse
 import sys
 from typing import Any
 
 from simulator.commands._request import SceneRequest
-from simulator.commands._scene import scene_document
 from simulator.core import DYNAMIC_METHODS
 from simulator.scene import Scene
 
 
 def liquid_checks(
-    args: SceneRequest | argparse.Namespace,
+    request: SceneRequest,
     scene: Scene,
     method: str,
     biases_um: Any = None,
     placed: str = "the start",
-    doc: dict[str, Any] | None = None,
 ) -> list[str]:
     """The droplet checks of :mod:`simulator.liquid` for a volume the user gave (``--volume``
     or ``[liquid] volume_nl``; :func:`scene_from_args` has refused a film thicker than the
     chip): a note when ``method`` does not use the volume, and the warnings of
     :func:`simulator.liquid.scene_warnings` (``biases_um``: per start, the larger of |x|, |y|),
     each printed as one line on stderr and returned for the JSON (``liquid_warnings``).
-    ``args``: the command's :class:`SceneRequest`, or its namespace (``doc``: then the scene
-    file's document, :func:`scene_document`; default: read here)."""
+    ``request``: the command's :class:`SceneRequest`."""
     from simulator.liquid import scene_warnings, volume_note
 
-    if isinstance(args, SceneRequest):
-        given = args.volume_given()
-    else:
-        given = getattr(args, "volume", None) is not None or (
-            bool(args.scene)
-            and "volume_nl" in ((scene_document(args) if doc is None else doc).get("liquid") or {})
-        )
+    given = request.volume_given()
     used = method in DYNAMIC_METHODS or bool(getattr(scene.effects, "meniscus", False))
     if (
         not given

@@ -10,27 +10,13 @@ from pathlib import Path
 from typing import Any
 
 from foundation import atomic_output, json_text
-from simulator.commands._request import SceneRequest, _input_paths
-from simulator.commands._scene import read_toml
+from simulator.commands._request import SceneRequest
 
 
-def input_paths(
-    args: SceneRequest | argparse.Namespace, doc: dict[str, Any] | None = None
-) -> list[Path]:
-    """The files this run reads (pattern, chip, scene and the scene's own pattern/chip): a
-    :class:`SceneRequest`'s ``inputs``, or those of a namespace (``doc``: its scene file's
-    document, :func:`scene_document`; default: read here, {} when it cannot be read)."""
-    if isinstance(args, SceneRequest):
-        return list(args.inputs)
-    from foundation import InputError
-
-    scene = getattr(args, "scene", None) or None
-    if scene and doc is None:
-        try:
-            doc = read_toml(scene)
-        except InputError:
-            doc = {}
-    return _input_paths(args, scene, doc or {})
+def input_paths(request: SceneRequest) -> list[Path]:
+    """The files this run reads (pattern, chip, scene and the scene's own pattern/chip):
+    ``request``'s ``inputs``."""
+    return list(request.inputs)
 
 
 def check_outputs(request: SceneRequest) -> None:

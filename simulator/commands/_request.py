@@ -1,9 +1,11 @@
 """A command's request: what the command line asks for, read once and frozen.
 
-``selfalign simulate``, ``energy`` and ``montecarlo`` turn argparse's namespace into one
+The commands that read a scene (``selfalign simulate``, ``energy``, ``montecarlo``,
+``evaluate``, ``calibrate`` and ``liquid window``) turn argparse's namespace into one
 :class:`SceneRequest` at the start of their ``run`` and hand that, not the namespace, to the
-shared helpers (the scene, :mod:`~simulator.commands._scene`; the outputs' checks,
-:mod:`~simulator.commands._outputs`; the droplet checks, :mod:`~simulator.commands._liquid`).
+shared helpers, which take a request only (the scene, :mod:`~simulator.commands._scene`; the
+outputs' checks, :mod:`~simulator.commands._outputs`; the droplet checks,
+:mod:`~simulator.commands._liquid`).
 The namespace stops at the command layer: no helper fishes for an optional attribute.
 """
 
@@ -127,9 +129,3 @@ def _input_paths(args: argparse.Namespace, scene_file: str | None, doc: dict) ->
             if isinstance(doc.get(key), str):
                 paths.append(str(Path(scene_file).parent / doc[key]))
     return [Path(p) for p in paths if isinstance(p, str) and p]
-
-
-def as_request(args: SceneRequest | argparse.Namespace, doc: dict | None = None) -> SceneRequest:
-    """``args`` itself when it is a request; a namespace (a command not yet converted, a
-    test) made into its request (``doc``: its scene file's document, read here when None)."""
-    return args if isinstance(args, SceneRequest) else SceneRequest.from_args(args, doc=doc)

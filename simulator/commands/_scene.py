@@ -4,7 +4,6 @@ spelled as flags, and its accuracy warning."""
 
 from __future__ import annotations
 
-import argparse
 import copy
 import os
 import sys
@@ -12,35 +11,20 @@ from pathlib import Path
 from typing import Any
 
 from foundation import InputError
-from simulator.commands._request import SceneRequest, as_request
+from simulator.commands._request import SceneRequest
 from simulator.scene import Scene
 
 
-def scene_document(args: argparse.Namespace) -> dict[str, Any]:
-    """The scene file's document (``args.scene``, read and validated by :func:`read_toml`),
-    or {} without one. A command reads it once: its :class:`SceneRequest` holds it
-    (a command still on the namespace passes it on, ``doc=``)."""
-    return read_toml(args.scene) if args.scene else {}
-
-
-def scene_from_args(
-    args: SceneRequest | argparse.Namespace,
-    note_frame: bool = True,
-    doc: dict[str, Any] | None = None,
-    warn: bool = True,
-) -> Scene:
+def scene_from_args(request: SceneRequest, note_frame: bool = True, warn: bool = True) -> Scene:
     """Build the scene from an optional TOML file and the flags (flags win).
 
     Flags are merged into the TOML document under the TOML keys (see
     :mod:`simulator.scene`), so a file and the command line mean the same thing.
-    ``args``: the command's :class:`SceneRequest` (or its namespace, made into one here;
-    ``doc``: then the scene file's document when the command has read it,
-    :func:`scene_document`, else it is read here).
+    ``request``: the command's :class:`SceneRequest` (its scene file read once, the flags).
     For a layout pattern, ``note_frame`` prints on stderr where the poses' origin is.
     ``warn=False`` leaves the accuracy warning (:func:`accuracy_check`) to the command, which
     prints it once its run is priced.
     """
-    request = as_request(args, doc)
     doc, base = scene_document_from_args(request)
     try:
         scene = Scene.from_dict(
@@ -63,14 +47,11 @@ def scene_from_args(
     return scene
 
 
-def scene_document_from_args(
-    args: SceneRequest | argparse.Namespace, doc: dict[str, Any] | None = None
-) -> tuple[dict[str, Any], Path]:
+def scene_document_from_args(request: SceneRequest) -> tuple[dict[str, Any], Path]:
     """The scene document the flags and an optional TOML file make (flags win, under the
     TOML keys), and the directory its relative paths are read against: what
-    :func:`scene_from_args` builds its scene from (``args``: the :class:`SceneRequest`, whose
-    document is not changed, or a namespace with ``doc``, its scene file's document)."""
-    request = as_request(args, doc)
+    :func:`scene_from_args` builds its scene from (``request``: the command's
+    :class:`SceneRequest`, whose document is not changed)."""
     doc = copy.deepcopy(request.document)
     base = request.base
     values = request.overrides  # (table, key) -> the flag's value, for the flags given

@@ -16,7 +16,7 @@ from simulator.commands._flags import add_scene_args, parse_pose
 from simulator.commands._liquid import liquid_checks
 from simulator.commands._outputs import add_force_arg, check_outputs
 from simulator.commands._request import SceneRequest
-from simulator.commands._scene import accuracy_check, scene_document, scene_from_args
+from simulator.commands._scene import accuracy_check, scene_from_args
 from simulator.core import (
     BATCH_METHODS as METHODS,
     DEFAULT_CHUNK,
@@ -161,10 +161,10 @@ def parse_spread(text: str) -> tuple[float, float, float]:
     return sx, sy, st
 
 
-def _options(args: argparse.Namespace, doc: dict | None = None) -> dict:
+def _options(args: argparse.Namespace, doc: dict) -> dict:
     """Flags over the TOML scene's [montecarlo] table (``doc``: the scene file's document,
-    :func:`scene_document`; default: read here)."""
-    table = (scene_document(args) if doc is None else doc).get("montecarlo", {})
+    the request's)."""
+    table = doc.get("montecarlo", {})
     if not isinstance(table, dict):
         raise InputError("[montecarlo] in the scene file must be a table")
     allowed = {
