@@ -304,6 +304,24 @@ def test_the_method_names_are_written_once():
     assert _sources_matching(r"\bDYNAMIC\s*=|DYNAMIC_METHODS as ") == set()
 
 
+def test_the_start_limits_and_distributions_are_written_once():
+    """The largest |twist| (ten turns), the most starts and the placements' distributions
+    are simulator.core's: the schema, the twist grid, a run's and a batch's start checks and
+    the sweep's axes import them, and no module writes the numbers or the pair again."""
+    from simulator.core import DISTRIBUTIONS, MAX_STARTS, MAX_TWIST_DEG
+    from simulator.scene import TwistGrid, _schema as schema
+
+    assert (MAX_TWIST_DEG, MAX_STARTS, DISTRIBUTIONS) == (3600, 10**8, ("normal", "uniform"))
+    assert (schema.MAX_TWIST_DEG, schema.MAX_STARTS) == (MAX_TWIST_DEG, MAX_STARTS)
+    assert schema.DISTRIBUTIONS is DISTRIBUTIONS
+    assert _sources_matching(r"(?<![\w.])3600(?![\w.])") == {"core/_defaults.py"}
+    assert _sources_matching(r"10\s*\*\*\s*8\b") == {"core/_defaults.py"}
+    assert _sources_matching(r'\(\s*"normal",\s*"uniform",?\s*\)') == {"core/_defaults.py"}
+    TwistGrid(1.0, -MAX_TWIST_DEG, MAX_TWIST_DEG)  # the grid takes the limit itself
+    with pytest.raises(InputError, match=f"within \\+-{MAX_TWIST_DEG} degrees"):
+        TwistGrid(1.0, -MAX_TWIST_DEG - 1.0, 0.0)
+
+
 # ---------------------------------------------------------------- simulate's plan
 def test_simulate_chooses_its_engine_with_the_bands_of_the_run():
     """One plan (simulator.motion.plan_run) chooses the engine and prices the first

@@ -268,8 +268,7 @@ def test_no_choice_or_limit_of_the_schema_is_a_copy():
     the layout reader, the scene's own): the same objects, not copies that may drift."""
     from patterns import CHANNELS
     from patterns.layout import DXF_UNITS
-    from simulator.batch import DISTRIBUTIONS
-    from simulator.core import BATCH_METHODS, MAX_CHUNK, MAX_STEPS_LIMIT, METHODS
+    from simulator.core import BATCH_METHODS, DISTRIBUTIONS, MAX_CHUNK, MAX_STEPS_LIMIT, METHODS
     from simulator.physics import DISPENSE_CHOICES
     from simulator.scene import DTYPES, PRESETS
 

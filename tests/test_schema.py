@@ -148,9 +148,15 @@ def test_scenes_written_by_tests_and_docs_validate(tmp_path, text):
 
 
 def test_choices_and_limits_match_the_code_downstream():
-    from simulator.batch import DISTRIBUTIONS, MAX_STARTS, MAX_TWIST_DEG
-    from simulator.core import BATCH_METHODS, MAX_CHUNK, MAX_STEPS_LIMIT, METHODS
-    from simulator.motion import MAX_START_TWIST_DEG
+    from simulator.core import (
+        BATCH_METHODS,
+        DISTRIBUTIONS,
+        MAX_CHUNK,
+        MAX_STARTS,
+        MAX_STEPS_LIMIT,
+        MAX_TWIST_DEG,
+        METHODS,
+    )
     from simulator.scene import DTYPES, PRESETS
 
     assert schema.DTYPES == DTYPES
@@ -164,7 +170,7 @@ def test_choices_and_limits_match_the_code_downstream():
     assert schema.MAX_STARTS == MAX_STARTS
     assert schema.MAX_STEPS == MAX_STEPS_LIMIT
     assert schema.MAX_CHUNK == MAX_CHUNK
-    assert schema.MAX_TWIST_DEG == MAX_START_TWIST_DEG == MAX_TWIST_DEG
+    assert schema.MAX_TWIST_DEG == MAX_TWIST_DEG
 
 
 def test_sections_cover_the_dataclass_fields():

@@ -18,9 +18,6 @@ from ._pricing import (
     price_dynamics_lanes as price_dynamics_lanes,
 )
 from ._starts import (
-    DISTRIBUTIONS as DISTRIBUTIONS,
-    MAX_STARTS as MAX_STARTS,
-    MAX_TWIST_DEG as MAX_TWIST_DEG,
     StartGrid as StartGrid,
     random_starts as random_starts,
 )

@@ -10,14 +10,11 @@ from typing import Any, cast
 import numpy as np
 
 from foundation import InputError, require, require_fits
-from simulator.core import floor_whole
+from simulator.core import DISTRIBUTIONS, MAX_STARTS, MAX_TWIST_DEG, floor_whole
 
-DISTRIBUTIONS = ("normal", "uniform")
-
-#: Largest |x|, |y| (um) and |twist| (degrees) of a start: keeps grid indices in int32.
-MAX_OFFSET_UM, MAX_TWIST_DEG = 1e7, 3600.0
-
-MAX_STARTS = 10**8
+#: Largest |x|, |y| of a start (um): keeps grid indices in int32 (|twist|: simulator.core's
+#: MAX_TWIST_DEG).
+MAX_OFFSET_UM = 1e7
 
 
 def _axis(name: str, spec: Any, unit: str) -> tuple[float, ...]:

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from foundation import InputError, atomic_output, json_text, require_finite
-from simulator.batch import DISTRIBUTIONS, MAX_STARTS, StartGrid
+from simulator.batch import StartGrid
 from simulator.commands._flags import add_scene_args, parse_pose
 from simulator.commands._liquid import liquid_checks
 from simulator.commands._outputs import add_force_arg, check_outputs
@@ -22,7 +22,9 @@ from simulator.core import (
     DEFAULT_CHUNK,
     DEFAULT_DYNAMICS_CHUNK,
     DEFAULT_MAX_STEPS,
+    DISTRIBUTIONS,
     DYNAMIC_METHODS,
+    MAX_STARTS,
     MAX_STEPS_LIMIT,
 )
 from simulator.landscape import axis_step

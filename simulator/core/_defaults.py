@@ -30,6 +30,13 @@ def threads() -> int:
 
 #: Trajectory methods (:func:`simulator.motion.simulate`).
 METHODS = ("greedy", "gradient", "overdamped", "inertial")
+#: Largest |twist| of a start or of the twist grid (degrees: ten turns), as the scene's
+#: schema, :class:`simulator.scene.TwistGrid` and the start checks of a run and a batch take it.
+MAX_TWIST_DEG = 3600
+#: Most starts of one Monte Carlo batch (``--random``, a start grid, a table of poses).
+MAX_STARTS = 10**8
+#: The Monte Carlo placements' distributions (:func:`simulator.batch.random_starts`).
+DISTRIBUTIONS = ("normal", "uniform")
 #: Default bound on moves or solver steps of one run.
 DEFAULT_MAX_STEPS = 5000
 #: Largest max_steps: step counters are int32.

@@ -88,7 +88,6 @@ from ._stepping import (
     reference_gradient as reference_gradient,
 )
 from ._trajectory import (
-    MAX_START_TWIST_DEG as MAX_START_TWIST_DEG,
     Trajectory as Trajectory,
     is_stiff as is_stiff,
     radius_of_gyration_px as radius_of_gyration_px,

@@ -19,7 +19,16 @@ import jax.numpy as jnp
 import numpy as np
 
 from foundation import InputError, compiling, shows_wait, wait_line
-from simulator.core import DEFAULT_MAX_STEPS, DEG_TOL, DYNAMIC_METHODS, METHODS, OUTCOMES, UM, tiny
+from simulator.core import (
+    DEFAULT_MAX_STEPS,
+    DEG_TOL,
+    DYNAMIC_METHODS,
+    MAX_TWIST_DEG,
+    METHODS,
+    OUTCOMES,
+    UM,
+    tiny,
+)
 from simulator.landscape import (
     GlobalMinimum,
     Landscape,
@@ -52,8 +61,8 @@ from simulator.physics import align_tolerance, pin_per_index
 from simulator.scene import Scene
 
 #: Largest |x|, |y| of a start in pixels (float32 holds every whole pixel up to 2**24, and
-#: int32 grid indices have room) and largest |twist| in degrees (as TwistGrid's range).
-MAX_START_PX, MAX_START_TWIST_DEG = 2**24, 3600.0
+#: int32 grid indices have room); its largest |twist| is simulator.core's MAX_TWIST_DEG.
+MAX_START_PX = 2**24
 #: Seconds per landscape pose of the steps after a whole landscape is built (a dynamic run, or
 #: a landscape given), for their waiting lines (:func:`simulator.core.wait_line`): the well's
 #: floor labelled around the global minimum, the stepper's field (its padded copy of the
@@ -259,10 +268,10 @@ def _validate(scene: Scene, start: tuple[float, float, float], method: str, max_
     if len(start) != 3 or not all(math.isfinite(v) for v in start):
         raise InputError(f"start pose must be three finite numbers (um, um, deg), got {start}")
     reach_um = MAX_START_PX * scene.um_per_px
-    if max(abs(start[0]), abs(start[1])) > reach_um or abs(start[2]) > MAX_START_TWIST_DEG:
+    if max(abs(start[0]), abs(start[1])) > reach_um or abs(start[2]) > MAX_TWIST_DEG:
         raise InputError(
             f"start pose {tuple(start)} is out of range: |x| and |y| must be at most {reach_um:g} um "
-            f"({MAX_START_PX} px) and |twist| at most {MAX_START_TWIST_DEG:g} deg"
+            f"({MAX_START_PX} px) and |twist| at most {MAX_TWIST_DEG:g} deg"
         )
 
 

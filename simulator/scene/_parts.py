@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from foundation import InputError, positive, require
+from simulator.core import MAX_TWIST_DEG
 
 
 @dataclass(frozen=True)
@@ -37,8 +38,8 @@ class TwistGrid:
         if self.min_deg is not None and self.max_deg is not None:  # both or neither (above)
             for name, v in (("min_deg", self.min_deg), ("max_deg", self.max_deg)):
                 require(
-                    math.isfinite(v) and abs(v) <= 3600,
-                    f"twist {name} must be a finite angle within +-3600 degrees, got {v}",
+                    math.isfinite(v) and abs(v) <= MAX_TWIST_DEG,
+                    f"twist {name} must be a finite angle within +-{MAX_TWIST_DEG} degrees, got {v}",
                 )
             require(
                 self.max_deg >= self.min_deg,

@@ -48,23 +48,23 @@ __all__ = ["SCHEMA", "read_scene_file", "validate_scene"]
 
 from simulator.core import (
     BATCH_METHODS as MONTECARLO_METHODS,
+    DISTRIBUTIONS as DISTRIBUTIONS,
     MAX_CHUNK as MAX_CHUNK,
+    MAX_STARTS as MAX_STARTS,
     MAX_STEPS_LIMIT as MAX_STEPS,
+    MAX_TWIST_DEG as MAX_TWIST_DEG,
     METHODS as SIMULATE_METHODS,
 )
 from simulator.physics import DISPENSE_CHOICES as DISPENSE  # noqa: F401 (as the tests read it)
 from simulator.scene._params import scene_tables
 from simulator.scene._schema_kinds import (
     ACCURACY_PRESETS as ACCURACY_PRESETS,  # the choices the tests compare with the code's
-    DISTRIBUTIONS,
     DTYPES as DTYPES,
     DXF_UNITS as DXF_UNITS,
     MAX_ARRAY_ITEMS,
     MAX_DEPTH,
     MAX_SCENE_BYTES,
     MAX_SEED,
-    MAX_STARTS,
-    MAX_TWIST_DEG,
     MAX_UM,
     POSITION_UM,
     TWIST_DEG,

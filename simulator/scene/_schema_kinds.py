@@ -12,6 +12,7 @@ from typing import Any
 
 from patterns import show_value
 from patterns.layout import DXF_UNITS as LAYOUT_DXF_UNITS
+from simulator.core import MAX_TWIST_DEG
 
 # ----------------------------------------------------------------------- limits
 #: Largest scene file read (bytes); real scenes are under 2 KB.
@@ -26,10 +27,6 @@ MAX_PATH_CHARS = 4096
 
 #: Largest length and |position| (um): one metre.
 MAX_UM = 1e6
-#: Largest |twist| (degrees), as :class:`simulator.scene.TwistGrid` and the start checks.
-MAX_TWIST_DEG = 3600
-#: Most Monte Carlo starts (:data:`simulator.batch.MAX_STARTS`).
-MAX_STARTS = 10**8
 #: Largest seed (numpy's default_rng takes any int >= 0; 64 bits is plenty).
 MAX_SEED = 2**63 - 1
 
@@ -41,11 +38,9 @@ DTYPES = ("float32", "float64")
 ACCURACY_PRESETS = ("fast", "balanced", "precise")
 #: A DXF file's units, as ``--dxf-units`` takes them (the keys of :data:`patterns.layout.DXF_UNITS`).
 DXF_UNITS = tuple(LAYOUT_DXF_UNITS)
-#: The Monte Carlo placements' distributions (:data:`simulator.batch.DISTRIBUTIONS`: the batch
-#: package sits above the scene's; tests/test_schema.py checks they agree).
-DISTRIBUTIONS = ("normal", "uniform")
-# The trajectory and batch methods, the step and chunk limits are simulator.core's
-# (METHODS, BATCH_METHODS, MAX_STEPS_LIMIT, MAX_CHUNK) and the dispense protocols
+# The trajectory and batch methods, the placements' distributions, the step, chunk, start
+# and twist limits are simulator.core's (METHODS, BATCH_METHODS, DISTRIBUTIONS,
+# MAX_STEPS_LIMIT, MAX_CHUNK, MAX_STARTS, MAX_TWIST_DEG) and the dispense protocols
 # simulator.physics' (DISPENSE_CHOICES): the schema and the scene's parameters import them
 # from there, no copy is kept here.
 

@@ -19,6 +19,7 @@ import numpy as np
 
 from foundation import InputError, require
 from patterns import show_value
+from simulator.core import MAX_TWIST_DEG
 
 __all__ = ["AXES", "HARD_MAX_POINTS", "Axis", "AxisKind", "axis_kinds"]
 
@@ -81,7 +82,7 @@ def _scene_axes() -> dict[str, AxisKind]:
             "placement_sigma_deg",
             "number",
             "placement noise in twist, standard deviation (deg); default 2",
-            _interval("[0, 3600]", "deg"),
+            _interval(f"[0, {MAX_TWIST_DEG}]", "deg"),
         ),
         "method": AxisKind(
             "method",
