@@ -75,7 +75,7 @@ def test_a_relayed_run_stops_where_the_state_first_changes(scene_planes):
         start,
         landscape=fp.landscape(wet),
         # a numpy array where the relay is typed jax's: jax takes one as its own
-        relay=Relay(reached, within, np.asarray(wet_bits(wet))),  # pyright: ignore[reportArgumentType]
+        relay=Relay(reached, within, np.asarray(wet_bits(wet))),
     )
     assert stopped.outcome == "event" and stopped.steps == first
     np.testing.assert_array_equal(stopped.path, free.path[: first + 1])

@@ -73,11 +73,11 @@ def test_a_run_of_the_axis_is_located_on_it_and_a_box_is_cut():
 def test_twists_must_be_one_evenly_spaced_axis():
     s = scene()
     with pytest.raises(InputError, match="evenly spaced"):
-        build_landscape(s, twists=[0.0, 5.0, 15.0])  # pyright: ignore[reportArgumentType] - a list, as callers pass
+        build_landscape(s, twists=[0.0, 5.0, 15.0])
     with pytest.raises(InputError, match="evenly spaced"):
-        build_landscape(s, twists=[10.0, 5.0, 0.0])  # pyright: ignore[reportArgumentType] - a list, as callers pass
+        build_landscape(s, twists=[10.0, 5.0, 0.0])
     # Evenly spaced twists off the scene's axis get an axis of their own.
-    ls = build_landscape(s, twists=[1.0, 3.0, 5.0])  # pyright: ignore[reportArgumentType] - a list, as callers pass
+    ls = build_landscape(s, twists=[1.0, 3.0, 5.0])
     assert ls.grid.twist is not s.twist_axis and ls.twist_step_deg == pytest.approx(2.0)
     np.testing.assert_allclose(ls.twist_deg, [1.0, 3.0, 5.0], rtol=0, atol=1e-12)
 

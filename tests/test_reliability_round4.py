@@ -137,12 +137,12 @@ def test_build_landscape_still_takes_whole_numbers_of_any_type(small_scene):
 
     ls = build_landscape(
         small_scene,
-        twists=[0.0],  # pyright: ignore[reportArgumentType] - a list, as callers pass
+        twists=[0.0],
         center_px=(np.int64(1), 2.0),  # pyright: ignore[reportArgumentType] - the test's point
         half_px=np.int64(3),  # pyright: ignore[reportArgumentType] - the test's point
     )
     assert ls.energy.shape == (1, 7, 7)
-    one = build_landscape(small_scene, twists=[0.0], half_px=0)  # pyright: ignore[reportArgumentType] - a list
+    one = build_landscape(small_scene, twists=[0.0], half_px=0)
     assert one.energy.shape == (1, 1, 1)
 
 
@@ -162,7 +162,7 @@ def test_scene_chip_size_of_one_or_two_numbers_still_makes_the_chip():
     pattern = mask_from_geometry(square(100), 5)
     assert Scene.from_inputs(pattern=pattern, chip_size_um=50).chip.area_um2 == pytest.approx(2500)
     # an array where the annotation says numbers: the test's point
-    rect = Scene.from_inputs(pattern=pattern, chip_size_um=np.array([100, 50.0])).chip  # pyright: ignore[reportArgumentType]
+    rect = Scene.from_inputs(pattern=pattern, chip_size_um=np.array([100, 50.0])).chip
     assert rect.area_um2 == pytest.approx(5000)
 
 

@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import sys
-from typing import cast
 
 import numpy as np
 
@@ -121,7 +120,7 @@ def run(args: argparse.Namespace) -> int:
         energy = ls.energy_at(x, y, t)
         fx, fy = ls.force_at(x, y, t)
         torque = ls.torque_at(x, y, t)
-    area = cast(np.ndarray, ls.overlap_um2(energy))  # an array of energies gives an array
+    area = ls.overlap_um2(energy)
     fx, fy, torque = fx + 0.0, fy + 0.0, torque + 0.0  # no "-0" in the output
     rows = []
     for i, (px, py, pt) in enumerate(poses):
@@ -173,7 +172,7 @@ def run(args: argparse.Namespace) -> int:
             "axis": args.curve,
             f"values_{unit}": cur["values"].tolist(),
             "energy_J": cur["energy_J"].tolist(),
-            "overlap_um2": cast(np.ndarray, ls.overlap_um2(cur["energy_J"])).tolist(),
+            "overlap_um2": ls.overlap_um2(cur["energy_J"]).tolist(),
             f"force_{funit}": cur["force"].tolist(),
             f"plateaus_{unit}": cur["plateaus"],
             f"no_contact_{unit}": cur["no_contact"],

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from foundation import RASTER_BYTES_PER_PX, InputError, progress_bar, wait_line
 from patterns.geometry import nonzero_box
@@ -83,7 +84,7 @@ def _check_energy_range(scene: Scene) -> None:
 
 
 def estimate_bytes(
-    scene: Scene, twists: np.ndarray | None = None, um_per_px: float | None = None
+    scene: Scene, twists: ArrayLike | None = None, um_per_px: float | None = None
 ) -> int:
     """Bytes the landscape array of ``scene`` would take (before building it; nothing is rotated).
 
@@ -231,7 +232,7 @@ def scene_extent(scene: Scene) -> dict:
 
 def require_landscape_fits(
     scene: Scene,
-    twists: np.ndarray | None = None,
+    twists: ArrayLike | None = None,
     center_px: tuple[int, int] = (0, 0),
     half_px: int | None = None,
 ) -> int:
@@ -273,7 +274,7 @@ class Plan:
 
 def plan(
     scene: Scene,
-    twists: np.ndarray | None = None,
+    twists: ArrayLike | None = None,
     center_px: tuple[int, int] = (0, 0),
     half_px: int | None = None,
     check_budget: bool = True,
@@ -463,7 +464,7 @@ def _check_build_arguments(twists, center_px, half_px) -> None:
 
 def build_landscape(
     scene: Scene,
-    twists: np.ndarray | None = None,
+    twists: ArrayLike | None = None,
     center_px: tuple[int, int] = (0, 0),
     half_px: int | None = None,
     backend: str = "auto",

@@ -33,6 +33,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from foundation import InputError, fmt_bytes
 from simulator.core import UM, UM2, WHOLE_TOL, floor_whole
@@ -142,8 +143,9 @@ class Landscape:
         scale = self.energy_scale_J or float(np.abs(self.energy).max())
         return float(NOISE_FACTOR * eps * max(scale, np.finfo(float).tiny))
 
-    def overlap_um2(self, energy_J: np.ndarray | float) -> np.ndarray | float:
-        """Overlap area (um^2) for an energy (J): A = E / Delta_gamma."""
+    def overlap_um2(self, energy_J: ArrayLike) -> np.ndarray:
+        """Overlap area (um^2) for an energy (J): A = E / Delta_gamma (an array of the
+        energy's shape, 0-d for one energy)."""
         return np.asarray(energy_J) / (self.delta_gamma * UM2)
 
     # -- grid coordinates

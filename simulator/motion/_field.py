@@ -53,7 +53,8 @@ class Relay:
     reached, within: (T, Ny, Nx, W) uint8, the pads reached by the liquid's foot and the
         pads within the reach of the chip's wall at each node, bit ``k % 8`` of byte
         ``k // 8`` for pad ``k`` (:func:`simulator.motion.footprint_relay`).
-    wet: (W,) uint8, the state the run is on (the landscape it steps on is that state's).
+    wet: (W,) uint8, the state the run is on (the landscape it steps on is that state's);
+        a NumPy array works as well (the run moves it to the device).
 
     A run on a field with a relay stops (status EVENT) at the first pose whose node would
     change the state: ``reached | (wet & within) != wet`` (:func:`relay_changes`).
@@ -61,7 +62,7 @@ class Relay:
 
     reached: jax.Array
     within: jax.Array
-    wet: jax.Array
+    wet: jax.Array | np.ndarray
 
 
 @functools.partial(

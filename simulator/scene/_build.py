@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Self
 
 import numpy as np
+from numpy.typing import ArrayLike
 from shapely.geometry import box
 
 from foundation import InputError, check_budget_mb, positive, price_raster, require
@@ -49,7 +50,7 @@ class SceneBuilders:
         cls,
         pattern: Mask | str | os.PathLike,
         chip: Mask | str | os.PathLike | None = None,
-        chip_size_um: tuple[float, float] | float | None = None,
+        chip_size_um: ArrayLike | None = None,
         um_per_px: float | None = None,
         resolution_um: float | None = None,
         max_image_mpx: float | None = None,
