@@ -1,7 +1,8 @@
 """The footprint state in the path engine (docs/physics.md §3.5): each pad's energies, relay
 flags and the shadow pairs' corrections at the poses of a box equal the FFT planes' at the
 same grid nodes (a two-pad pattern, the 730/100 four-pad at large twists), and a greedy
-``--dispense`` run on the path engine takes the FFT planes' run's path, events and end."""
+``--dispense`` run on the path engine takes the FFT planes' run's path, events and end, a
+gradient run with dry pads its steps."""
 
 from __future__ import annotations
 
@@ -117,17 +118,23 @@ def test_four_pad_large_twists_equal_the_planes(four):
     assert paired > 0
 
 
-def test_greedy_run_on_the_path_engine_takes_the_planes_run():
-    """A chip-dispensed greedy run with an event (a far pad wets), from a large twist: the
-    same path, events, outcome and final pose on the path engine as on the FFT planes."""
+@pytest.fixture(scope="module")
+def chip_dispensed():
+    """The 730/100 four-pad at 10 um/px, 3 deg twists, ``--dispense chip``, and its planes."""
     s = fourpad(10.0, twist=True)
     s = s.replace(
         liquid=dataclasses.replace(s.liquid, dispense="chip"),
         twist=TwistGrid(3.0, s.twist.min_deg, s.twist.max_deg),
     )
+    return s, build_footprint_planes(s)
+
+
+def test_greedy_run_on_the_path_engine_takes_the_planes_run(chip_dispensed):
+    """A chip-dispensed greedy run with an event (a far pad wets), from a large twist: the
+    same path, events, outcome and final pose on the path engine as on the FFT planes."""
+    s, planes = chip_dispensed
     from simulator.motion import simulate
 
-    planes = build_footprint_planes(s)
     start = (450.0, 100.0, 30.0)
     a = simulate(s, start, "greedy", planes=planes)
     b = simulate(s, start, "greedy", engine="path")
@@ -140,6 +147,49 @@ def test_greedy_run_on_the_path_engine_takes_the_planes_run():
     assert a.outcome == b.outcome
     np.testing.assert_array_equal(a.path, b.path)
     assert a.footprint["final"] == b.footprint["final"]
+
+
+@pytest.mark.parametrize("start", [(450.0, 100.0, 30.0), (-430.0, 60.0, -10.0)])
+def test_gradient_run_with_dry_pads_steps_as_on_the_planes(chip_dispensed, start):
+    """A chip-dispensed gradient run, its far pads dry (one wets on the way from the first
+    start): the force scale of a gradient step is the scene's, every pad wet, on either
+    engine (not the current state's own largest |E|, about half of it with two pads dry), so
+    the two engines take the same steps and differ by their energies' round-off only.
+    (Before, the planes' run stepped on its state's scale: 38 um off the path engine's.)"""
+    s, planes = chip_dispensed
+    from simulator.motion import simulate
+
+    a = simulate(s, start, "gradient", planes=planes)
+    b = simulate(s, start, "gradient", engine="path")
+    assert a.footprint is not None and b.footprint is not None
+    assert len(a.footprint["initial"]) < 4  # pads dry at the start
+    assert [(e["pad"], e["state"], e["step"]) for e in a.footprint["events"]] == [
+        (e["pad"], e["state"], e["step"]) for e in b.footprint["events"]
+    ]
+    assert a.outcome == b.outcome and a.floor == b.floor
+    # the energies agree to the noise floor (above), which moves a gradient step by a
+    # fraction of a pixel's round-off (measured: 2e-4 px and 0.002 twist steps on these
+    # paths), up to the well's flat floor, where the energy is flat to round-off and where
+    # the creeping chip stops is round-off's choice: there both runs end on the floor
+    step = np.array([s.um_per_px, s.um_per_px, s.twist.step_deg])
+    n = min(_until_floor(a), _until_floor(b))
+    off = np.abs(np.asarray(a.path[:n]) - np.asarray(b.path[:n])).max(axis=0) / step
+    assert n > 10 and (off < 0.01).all(), (n, off)
+    on_floor = [_until_floor(t) < len(t.path) for t in (a, b)]
+    assert on_floor[0] == on_floor[1]
+    if not on_floor[0]:  # stopped before the floor (a plateau): the same steps to the end
+        assert len(a.path) == len(b.path)
+        assert (np.abs(np.subtract(a.final, b.final)) / step < 0.01).all(), (a.final, b.final)
+
+
+def _until_floor(tr) -> int:
+    """The index of the first pose of ``tr`` on its well's flat floor (len(path): none)."""
+    if tr.floor is None:
+        return len(tr.path)
+    (x0, x1), (y0, y1) = tr.floor["x_um"], tr.floor["y_um"]
+    p = np.asarray(tr.path)
+    on = (p[:, 0] >= x0) & (p[:, 0] <= x1) & (p[:, 1] >= y0) & (p[:, 1] <= y1)
+    return int(np.argmax(on)) if on.any() else len(p)
 
 
 def test_auto_takes_the_path_engine_for_a_greedy_dispense_run():

@@ -103,6 +103,9 @@ def run_footprint_batch(
     lines = pin_lines(scene, reference.energy.dtype)
     tol = align_tolerance(reference, pin, floats=scene.wall_profile is not None)
     opt = global_minimum(scene, landscape=reference)  # "aligned": every pad wet
+    # the force scale of every state's field: the scene's (every pad wet), as a single run's
+    e_min = float(reference.energy.min())
+    scale = -e_min if e_min < 0 else None
     grid = reference.grid
     best = grid.to_index(np.asarray(opt.pose))
 
@@ -132,7 +135,7 @@ def run_footprint_batch(
                 members = lanes[group.ravel() == g]
                 state = wet[members[0]]
                 fld, _ = field_and_grid(
-                    planes.landscape(state), pin=pin, align_tol=tol, lines=lines
+                    planes.landscape(state), pin=pin, align_tol=tol, scale=scale, lines=lines
                 )
                 fld = fld._replace(
                     best=jnp.asarray(best, fld.dtype),

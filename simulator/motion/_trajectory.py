@@ -404,6 +404,12 @@ def _run(
             scene, evaluated=nominal_box(scene, plain), backend=backend, engine=plain
         )
         scale = -opt.energy_J if opt.energy_J < 0 else None
+    elif reference is not None:
+        # A footprint state's landscape: the force scale is the scene's (every pad wet, as
+        # the path engine's global minimum gives it), not the state's own largest |E|, so
+        # that a state with dry pads steps and stops as on the path engine.
+        e_min = float(reference.energy.min())
+        scale = -e_min if e_min < 0 else None
     next(around)
     pieces = []
     whole = landscape is not None or dynamic  # the run's landscape is the whole one
