@@ -433,8 +433,8 @@ class Assessment(_Part):
 # ----------------------------------------------------------------------- the shape
 def _shape_of(tp: Any, effects: frozenset[str]) -> Any:
     """A placeholder value of type ``tp``: a part's shape, a fixed tuple's numbers, 1 for a
-    number, True for a flag; None for what the summary gives no column (text, a list of any
-    length, an untyped record)."""
+    number, True for a flag, "" for text, [] for a list of any length, None for an untyped
+    record (what the summary gives no column)."""
     args = [a for a in typing.get_args(tp) if a not in (type(None), Literal[Absent.ABSENT])]
     if isinstance(tp, types.UnionType) or typing.get_origin(tp) is typing.Union:
         return _shape_of(args[0], effects) if len(args) == 1 else None
@@ -442,15 +442,18 @@ def _shape_of(tp: Any, effects: frozenset[str]) -> Any:
         return summary_shape(effects, tp)
     if typing.get_origin(tp) is tuple:
         return [_shape_of(a, effects) for a in typing.get_args(tp)]
-    return {bool: True, int: 1, float: 1.0}.get(tp)
+    if typing.get_origin(tp) is list:
+        return []
+    return {bool: True, int: 1, float: 1.0, str: ""}.get(tp)
 
 
 def summary_shape(effects=(), part: type = Assessment) -> dict[str, Any]:
     """The summary (:meth:`Assessment.to_dict`) a scene with ``effects`` (names of
-    :data:`EFFECTS`) may have, every number a placeholder: the keys of ``part``'s fields
-    whose ``when`` holds, in order, a table keyed by name with its ``keys``, the keys a
-    caller adds (evaluate's, a sweep point's settings) included. What the sweep's columns
-    are derived from (:func:`simulator.sweep.expected_columns`)."""
+    :data:`EFFECTS`) may have, every number a placeholder: the keys of ``part``'s fields in
+    order (a field whose ``when`` does not hold: null, or left out when the summary leaves it
+    out), a table keyed by name with its ``keys``, the keys a caller adds (evaluate's, a
+    sweep point's settings) included. What the sweep's columns are derived from
+    (:func:`simulator.sweep.expected_columns`)."""
     effects = frozenset(effects)
     unknown = effects - set(EFFECTS)
     if unknown:
@@ -460,6 +463,8 @@ def summary_shape(effects=(), part: type = Assessment) -> dict[str, Any]:
     for f in dataclasses.fields(part):
         meta = f.metadata
         if meta.get("when") and meta["when"] not in effects:
+            if not (meta.get("omit") or meta.get("inline") or f.default is ABSENT):
+                out[meta.get("key", f.name)] = None  # the key is there, null
             continue
         tp = hints[f.name]
         if meta.get("keys"):
@@ -469,6 +474,6 @@ def summary_shape(effects=(), part: type = Assessment) -> dict[str, Any]:
             value = _shape_of(tp, effects)
         if meta.get("inline"):
             out |= value or {}
-        elif value is not None:
+        else:
             out[meta.get("key", f.name)] = value
     return out

@@ -3,8 +3,11 @@
 Owns :func:`flatten` (every number and boolean of a nested assessment summary as one
 column, ``max_bias_plus_x_um``, ``global_minimum_offset_um``, ...), the unit suffixes it
 recognises (:data:`UNITS`, ``_split_unit``, also what the sweep's pictures label axes
-with), the names of list components and the status columns of every row. A point's
-identity columns are :data:`simulator.sweep.ID_COLUMNS`.
+with), the names of list components, the status columns of every row, and the columns a
+sweep expects (:func:`expected_columns`): not a list kept by hand, but :func:`flatten` of
+the summary the assessment's types give a scene of the sweep's effects
+(:func:`simulator.batch.summary_shape`). A point's identity columns are
+:data:`simulator.sweep.ID_COLUMNS`.
 """
 
 from __future__ import annotations
@@ -74,7 +77,8 @@ UNIT_TEXT = {
 #: (label, factor to the unit shown). The sweep's pictures (:data:`simulator.sweep`'s
 #: metrics) and a design search's comparison of the best design with the baseline take
 #: theirs from here (:func:`metric`); other columns are labelled from their names
-#: (:func:`column_label`).
+#: (:func:`column_label`). Each labelled column is one the assessment's types make
+#: (tests/test_assessment.py): a renamed field fails there, not silently on a page.
 METRIC_LABELS = {
     "max_bias_x_um": ("max bias along x (um)", 1.0),
     "max_bias_y_um": ("max bias along y (um)", 1.0),
