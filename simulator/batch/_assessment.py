@@ -22,6 +22,7 @@ import dataclasses
 import enum
 import types
 import typing
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -101,13 +102,14 @@ def _plain(v: Any) -> Any:
     return v
 
 
+@dataclass(frozen=True, kw_only=True)
 class _Part:
     """What every part shares: its summary dict, key by key in field order."""
 
     def to_dict(self) -> dict[str, Any]:
         """The part as the summary writes it (the keys of the JSON, in order)."""
         out: dict[str, Any] = {}
-        for f in dataclasses.fields(self):  # type: ignore[arg-type]
+        for f in dataclasses.fields(self):
             v = getattr(self, f.name)
             if v is ABSENT or (v is None and f.metadata.get("omit")):
                 continue
@@ -447,7 +449,7 @@ def _shape_of(tp: Any, effects: frozenset[str]) -> Any:
     return {bool: True, int: 1, float: 1.0, str: ""}.get(tp)
 
 
-def summary_shape(effects=(), part: type = Assessment) -> dict[str, Any]:
+def summary_shape(effects: Iterable[str] = (), part: type[_Part] = Assessment) -> dict[str, Any]:
     """The summary (:meth:`Assessment.to_dict`) a scene with ``effects`` (names of
     :data:`EFFECTS`) may have, every number a placeholder: the keys of ``part``'s fields in
     order (a field whose ``when`` does not hold: null, or left out when the summary leaves it

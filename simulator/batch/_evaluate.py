@@ -37,6 +37,7 @@ import math
 import os
 import time
 from dataclasses import replace
+from typing import Literal
 
 import numpy as np
 
@@ -44,6 +45,7 @@ from foundation import check_output_dir, json_text, output_directory, require_fi
 from patterns.geometry import footprint_um
 from simulator.batch._assessment import (
     ABSENT,
+    Absent,
     AssessedMinimum,
     Assessment,
     AssessmentSettings,
@@ -528,7 +530,7 @@ def _max_bias(b: dict) -> MaxBias:
     return MaxBias(plus_x=b["+x"], minus_x=b["-x"], plus_y=b["+y"], minus_y=b["-y"])
 
 
-def _time_stats(batch: dict):
+def _time_stats(batch: dict) -> TimeStats | None | Literal[Absent.ABSENT]:
     """A batch summary's time to align (:func:`simulator.batch.summarize`): ABSENT for the
     steppers, None when no start aligned."""
     if "time_to_align_s" not in batch:
