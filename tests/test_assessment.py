@@ -65,23 +65,37 @@ def floating():
     return assess(s, yield_starts=20, grid_cells=5)
 
 
-@pytest.mark.parametrize(
-    "case, effects",
-    [("plain", set()), ("floating", {"twist", "meniscus", "free"})],
-)
+@pytest.fixture(scope="module")
+def dispensed():
+    """No twist, a floating meniscus, both dispense protocols, overdamped starts."""
+    s = _scene(
+        effects={"twist": False, "meniscus": True}, liquid={"volume_nl": 0.4, "dispense": "chip"}
+    )
+    return assess(s, method="overdamped", yield_starts=20, grid_cells=5)
+
+
+#: The fixtures' effects (simulator.batch.EFFECTS).
+CASES = {
+    "plain": set(),
+    "floating": {"twist", "meniscus", "free"},
+    "dispensed": {"meniscus", "free", "dynamics", "dispense"},
+}
+
+
+@pytest.mark.parametrize("case, effects", CASES.items())
 def test_the_columns_derived_from_the_types_are_a_real_point_s(case, effects, request):
     # The sweep's expected columns (from the types, simulator.sweep.expected_columns) are
     # those a real point's summary flattens to, in its order
     a = request.getfixturevalue(case)
-    flags = {k: k in effects for k in ("twist", "meniscus", "free", "dynamics")}
-    assert list(flatten(_as_point(a))) == _metric_columns(**flags)
+    flags = {k: k in effects for k in ("twist", "meniscus", "free", "dynamics", "dispense")}
+    real = [c for c in flatten(_as_point(a)) if "wet_at_dispense" not in c]  # pads by number
+    assert real == _metric_columns(**flags)
 
 
-@pytest.mark.parametrize("case", ["plain", "floating"])
-def test_the_shape_of_the_types_is_the_summary_s_keys(case, request):
+@pytest.mark.parametrize("case, effects", CASES.items())
+def test_the_shape_of_the_types_is_the_summary_s_keys(case, effects, request):
     # summary_shape: the keys and their order of a real summary, the types' `when` included
     a = request.getfixturevalue(case)
-    effects = {"twist", "meniscus", "free"} if case == "floating" else set()
     shape = summary_shape(effects)
     shape["settings"] = {k: v for k, v in shape["settings"].items() if k not in POINT_SETTINGS}
     del shape["layout"]  # a layout pattern's record (these are generated patterns)
