@@ -296,7 +296,7 @@ def measure_point(case: str, knobs: dict, settings: dict) -> dict:
         "landscape_bytes": int(ls.energy.nbytes),
         "trajectory_s": traj_s,
         "trajectory_mb": traj_mb,
-        "trajectory_poses": traj.cost.get("poses_computed"),
+        "trajectory_poses": traj.cost.poses_computed if traj.cost else None,
         "mc_s": mc_s,
         "mc_mb": mc_mb,
         "mc_warmup_s": warm_s,

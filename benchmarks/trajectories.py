@@ -133,8 +133,8 @@ def cost_table(um_per_px: float | None = None) -> list[str]:
         "| | landscape poses | twist planes | landscape time (s) | peak landscape memory (MB) |",
         "|---|---:|---:|---:|---:|",
         f"| full landscape | {ls.energy.size:,} | {ls.energy.shape[0]} | {full_s:.2f} | {ls.energy.nbytes / 2**20:,.0f} |",
-        f"| greedy run (300, 200, 10 deg), {t.outcome} in {t.steps} steps | {c['poses_computed']:,} | {c['planes']} | {c['landscape_s']:.2f} | {c['poses_computed'] * 4 / 2**20:,.0f} |",
-        f"| ratio | {c['poses_computed'] / ls.energy.size:.1%} | {c['planes'] / ls.energy.shape[0]:.0%} | {c['landscape_s'] / full_s:.0%} | |",
+        f"| greedy run (300, 200, 10 deg), {t.outcome} in {t.steps} steps | {c.poses_computed:,} | {c.planes} | {c.landscape_s:.2f} | {c.poses_computed * 4 / 2**20:,.0f} |",
+        f"| ratio | {c.poses_computed / ls.energy.size:.1%} | {c.planes / ls.energy.shape[0]:.0%} | {c.landscape_s / full_s:.0%} | |",
         "",
         f"(whole run including stepping: {run_s:.2f} s)",
     ]
@@ -153,7 +153,7 @@ t = simulate(scene, (0.3 * size, -0.2 * size, 10.0), method=method, engine=engin
 wall = time.perf_counter() - t0
 peak = [int(line.split()[1]) for line in open("/proc/self/status") if line.startswith("VmHWM:")][0] / 1024
 print(json.dumps({"wall_s": wall, "peak_mb": peak, "outcome": t.outcome, "steps": t.steps, "final": t.final,
-                  "poses": t.cost["poses_computed"], "engine": t.cost["engine"], "path": t.path.tolist()}))
+                  "poses": t.cost.poses_computed, "engine": t.cost.engine, "path": t.path.tolist()}))
 """
 
 
@@ -252,9 +252,9 @@ wall = time.perf_counter() - t0
 peak = [int(line.split()[1]) for line in open("/proc/self/status") if line.startswith("VmHWM:")][0] / 1024
 c = t.cost
 print(json.dumps({"simulate_s": wall, "process_s": time.perf_counter() - t_start, "peak_mb": peak,
-                  "outcome": t.outcome, "steps": t.steps, "final": list(t.final), "engine": c["engine"],
-                  "poses": c["poses_computed"], "planes": c["planes"], "landscape_s": c["landscape_s"],
-                  "minimum_how": c["minimum_how"], "minimum_s": c["minimum_s"],
+                  "outcome": t.outcome, "steps": t.steps, "final": list(t.final), "engine": c.engine,
+                  "poses": c.poses_computed, "planes": c.planes, "landscape_s": c.landscape_s,
+                  "minimum_how": c.minimum_how, "minimum_s": c.minimum_s,
                   "meniscus_height_um": scene.meniscus_height_um}))
 """
 MENISCUS_SCENES = {

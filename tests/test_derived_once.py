@@ -409,7 +409,8 @@ def test_a_run_given_its_plan_does_not_plan_again(monkeypatch):
         plan.engine = "path"  # type: ignore[misc]  # frozen
     calls = _count_pricing(monkeypatch)
     given = simulate(scene, start, plan=plan)
-    assert calls == [] and given.cost["engine"] == "fft"
+    assert given.cost is not None  # a packaged run has its cost
+    assert calls == [] and given.cost.engine == "fft"
     planned = simulate(scene, start)
     assert calls == [1]
     np.testing.assert_array_equal(given.path, planned.path)

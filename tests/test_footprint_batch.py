@@ -158,7 +158,7 @@ def test_evaluate_reports_each_protocol(tmp_path):
     from tests.test_footprint_state import fourpad
 
     s = fourpad(100, res=10.0, dispense="chip")
-    summary = assess(s, yield_starts=20, grid_cells=7)
+    summary = assess(s, yield_starts=20, grid_cells=7).to_dict()
     p = summary["protocols"]
     assert p["dispense"] == "chip" and p["pattern"]["wet_at_dispense"] == [1, 2, 3, 4]
     assert p["chip"]["wet_at_dispense"] == []

@@ -138,7 +138,8 @@ def test_greedy_run_on_the_path_engine_takes_the_planes_run(chip_dispensed):
     start = (450.0, 100.0, 30.0)
     a = simulate(s, start, "greedy", planes=planes)
     b = simulate(s, start, "greedy", engine="path")
-    assert a.cost["engine"] == "footprint planes" and b.cost["engine"] == "footprint path"
+    assert a.cost is not None and b.cost is not None  # packaged runs have their costs
+    assert a.cost.engine == "footprint planes" and b.cost.engine == "footprint path"
     assert a.footprint is not None and b.footprint is not None
     assert [(e["pad"], e["state"], e["step"]) for e in a.footprint["events"]] == [
         (e["pad"], e["state"], e["step"]) for e in b.footprint["events"]

@@ -822,7 +822,7 @@ s = Scene(pattern=mask_from_geometry(four_pad(4096, 96), 1.0), chip=mask_from_ge
 t = simulate(s, (90, -70, 1), method="greedy", max_steps=100)
 print(json.dumps({"shape": s.pattern.shape, "final": t.final, "steps": t.steps, "outcome": t.outcome,
                   "finite": bool((abs(t.path) < 1e300).all() and (abs(t.energy_J) < 1e300).all()),
-                  "planes": t.cost["planes"], "seconds": time.perf_counter() - t0,
+                  "planes": t.cost.planes, "seconds": time.perf_counter() - t0,
                   "peak_rss_mb": [int(l.split()[1]) for l in open("/proc/self/status") if l.startswith("VmHWM:")][0] / 1024}))
 """
 

@@ -25,7 +25,9 @@ so a failure leaves no partial directory; an existing directory is never replace
 unless asked (``force``) and only when it holds a previous selfalign output.
 
 :func:`assess` computes the same numbers without writing anything (pictures only when
-asked): one point of a design sweep (:mod:`simulator.sweep`).
+asked): one point of a design sweep (:mod:`simulator.sweep`). Both return a typed
+:class:`simulator.batch.Assessment` (its parts in ``_assessment``), whose ``to_dict()`` is the
+summary.
 """
 
 from __future__ import annotations
@@ -35,11 +37,40 @@ import math
 import os
 import time
 from dataclasses import replace
+from typing import Literal
 
 import numpy as np
 
 from foundation import check_output_dir, json_text, output_directory, require_finite, wait_line
 from patterns.geometry import footprint_um
+from simulator.batch._assessment import (
+    ABSENT,
+    Absent,
+    AssessedMinimum,
+    Assessment,
+    AssessmentSettings,
+    AxisErrors,
+    CaptureCentre,
+    CaptureGrid,
+    CaptureSummary,
+    CentreOffset,
+    ContactLineReach,
+    ErrorLimit,
+    ErrorStats,
+    FloatingRange,
+    MaxBias,
+    MeniscusSummary,
+    PlacementSigma,
+    Plateaus,
+    Protocols,
+    ProtocolSummary,
+    RestoringForce,
+    RestoringTorque,
+    Stiffness,
+    TimeStats,
+    TwistErrors,
+    YieldSummary,
+)
 from simulator.batch._montecarlo import run_batch
 from simulator.batch._starts import StartGrid, random_starts
 from simulator.batch._stats import capture_map, summarize, time_histogram, time_stats
@@ -159,8 +190,11 @@ def evaluate(
     inputs: tuple = (),
     liquid_warnings: list[str] | None = None,
     method: str = "greedy",
-) -> dict:
-    """Assess ``scene`` and write the report into ``out_dir``.
+) -> Assessment:
+    """Assess ``scene``, write the report into ``out_dir`` and return the :class:`Assessment`
+    (with evaluate's additions: the pixel size read and whether it was coarsened, a layout's
+    record, the droplet's warnings and volume window, the seconds); ``summary.json`` is its
+    :meth:`~simulator.batch.Assessment.to_dict`.
 
     ``method``: how the capture and yield starts run (:data:`simulator.batch.METHODS`;
     default greedy); the dynamics add ``time_to_align.png`` and the times to the report.
@@ -185,22 +219,25 @@ def evaluate(
 
         require_footprint_fits(scene)
     with output_directory(out_dir, "--out", force, inputs, command="evaluate") as tmp:
-        summary = assess(scene, quiet=quiet, pictures=tmp, method=method)
-        summary["settings"] |= {
-            "source_um_per_px": native,
-            "resolution_auto": bool(auto and scene.um_per_px != native),
-        }
-        if (
-            "layout" in scene.pattern.params
-        ):  # a layout pattern: file, cell, layers, units, and where the origin is
-            summary["layout"] = scene.pattern.params["layout"]
-        summary["liquid_warnings"] = list(liquid_warnings or [])
-        summary["volume_window"] = _volume_window(given, summary)
-        summary["seconds"] = round(time.perf_counter() - t_start, 2)
+        a = assess(scene, quiet=quiet, pictures=tmp, method=method)
+        a = replace(
+            a,
+            settings=replace(
+                a.settings,
+                source_um_per_px=native,
+                resolution_auto=bool(auto and scene.um_per_px != native),
+            ),
+            # a layout pattern: file, cell, layers, units, and where the origin is
+            layout=scene.pattern.params.get("layout"),
+            liquid_warnings=list(liquid_warnings or []),
+        )
+        a = replace(a, volume_window=_volume_window(given, a))
+        a = replace(a, seconds=round(time.perf_counter() - t_start, 2))
+        summary = a.to_dict()
         require_finite(summary, "evaluate summary")
         (tmp / "summary.json").write_text(json_text(summary))
         (tmp / "report.html").write_text(_html(summary, source))
-    return summary
+    return a
 
 
 #: The placement bias the report's overflow limit is computed for, in placement-noise
@@ -208,7 +245,7 @@ def evaluate(
 OVERFLOW_BIAS_SIGMAS = 2.0
 
 
-def _volume_window(scene: Scene, summary: dict) -> dict:
+def _volume_window(scene: Scene, assessment: Assessment) -> dict:
     """The droplet's volume window (:func:`simulator.liquid.volume_window`) for the report, the
     overflow limit at :data:`OVERFLOW_BIAS_SIGMAS` of the placement noise; ``volume_given``
     says whether the volume was typed or derived from the chip. ``scene`` is the one given,
@@ -217,8 +254,8 @@ def _volume_window(scene: Scene, summary: dict) -> dict:
     3 um/px read as L 732, gap 48 um: a critical volume of 8.89 nl against 9)."""
     from simulator.liquid import volume_window
 
-    ps = summary["yield"]["placement_sigma"]
-    bias = OVERFLOW_BIAS_SIGMAS * max(ps["x_um"], ps["y_um"])
+    ps = assessment.yield_.placement_sigma
+    bias = OVERFLOW_BIAS_SIGMAS * max(ps.x_um, ps.y_um)
     win = volume_window(
         scene, bias, f"a placement at {OVERFLOW_BIAS_SIGMAS:g} sigma of the placement noise"
     )
@@ -235,9 +272,9 @@ def assess(
     placement_sigma: tuple[float, float, float] | None = None,
     yield_starts: int = YIELD_STARTS,
     grid_cells: int = GRID_CELLS,
-) -> dict:
-    """The numbers of :func:`evaluate` for ``scene`` (no resolution change, nothing written
-    unless ``pictures`` names a directory for the four pictures).
+) -> Assessment:
+    """The numbers of :func:`evaluate` for ``scene`` as an :class:`Assessment` (no resolution
+    change, nothing written unless ``pictures`` names a directory for the four pictures).
 
     The defaults are evaluate's: greedy steps, the yield's placement noise (sigma x, y in um
     and twist in degrees; default 10 % of the chip size and 2 degrees) drawn with ``seed``
@@ -307,7 +344,7 @@ def assess(
     forces = {}
     for label, dx, dy in (("+x", near, 0), ("-x", -near, 0), ("+y", 0, near), ("-y", 0, -near)):
         fx, fy = ls.force_at(xm + dx, ym + dy, tm)
-        forces[label] = [float(fx) + 0.0, float(fy) + 0.0]  # no -0.0
+        forces[label] = (float(fx) + 0.0, float(fy) + 0.0)  # no -0.0
     torques = {}
     if near_deg:
         for label, d in (("+", near_deg), ("-", -near_deg)):
@@ -395,83 +432,116 @@ def assess(
                 title=f"time to align ({method}): {yl_sum['outcomes']['aligned']:,} of {yl_sum['n']:,} placement-noise starts aligned",
             )
     m = scene.materials
-    extra = {}
+    rows, cols = scene.pattern.shape
+    men = None
     if meniscus and ls.meniscus_height_um is not None:  # (a meniscus landscape: both or neither)
-        extra = {
-            "meniscus_height_um": ls.meniscus_height_um,
-            "pinned": scene.liquid.pinned,
-            "stiffness": meniscus["stiffness"],
-            "offset_from_centre": {
-                "x_um": round(xm, 1) + 0.0,
-                "y_um": round(ym, 1) + 0.0,
-                "twist_deg": round(tm, 1) + 0.0,
-                "distance_um": round(math.hypot(xm, ym), 1),
-            },
-            "meniscus_warning": regime_warning(ls.meniscus_height_um, scene.chip_min_side_um),
-            "contact_lines": "pinned" if scene.liquid.pinned else "free",
-            "floating_range": floating,
-        }
         prof = scene.wall_profile
-        if prof is not None:
-            extra["contact_line_reach_um"] = {
-                "substrate": prof.substrate_reach_px * s,
-                "pad": prof.pad_reach_px * s,
-            }
-    return extra | {
-        "global_minimum": {
-            "x_um": xm,
-            "y_um": ym,
-            "twist_deg": tm,
-            "energy_J": em,
-            "overlap_um2": float(ls.overlap_um2(em)),
-            "refined": meniscus is not None and floating is None,
-        },
-        "error_limit": yl_sum["error_limit"],
-        "restoring_force_N": {"bias_um": near, **forces},
-        "restoring_torque_Nm": {"twist_deg": near_deg, **torques} if torques else None,
-        "plateaus_um": {a: curves[a]["plateaus"] for a in ("x", "y")},
-        "max_bias_um": biases,
-        **({"protocols": protocols} if protocols is not None else {}),
-        "capture": {
-            "fraction": cap_sum["yield"],
-            "n": cap_sum["n"],
-            "outcomes": cap_sum["outcomes"],
-            "grid_um": {"from": -n * step, "to": n * step, "step": step},  # about the centre
-            "center": {"x_um": gx, "y_um": gy},
-            "twist_deg": gt,
-        }
-        | ({"time_to_align_s": cap_sum["time_to_align_s"]} if "time_to_align_s" in cap_sum else {}),
-        "yield": {
-            "fraction": yl_sum["yield"],
-            "n": yl_sum["n"],
-            "outcomes": yl_sum["outcomes"],
-            "placement_sigma": {"x_um": noise[0], "y_um": noise[1], "twist_deg": noise[2]},
-            "seed": seed,
-            "error_um": yl_sum.get("aligned_error_um"),
-            "error_deg": yl_sum.get("aligned_error_deg"),
-        }
-        | ({"time_to_align_s": yl_sum["time_to_align_s"]} if "time_to_align_s" in yl_sum else {}),
-        "settings": {
-            "um_per_px": s,
-            "pattern_px": list(scene.pattern.shape),
-            "chip_um": [w, h],
-            "twist_step_deg": ls.twist_step_deg if len(ls.twist_deg) > 1 else None,
-            "twists": len(ls.twist_deg),
-            "dtype": scene.dtype,
-            "method": method,
-            "surface_tension_N_m": m.surface_tension_N_m,
-            "pad_angle_deg": m.pad_angle_deg,
-            "substrate_angle_deg": m.substrate_angle_deg,
-            "delta_gamma_N_m": scene.delta_gamma_N_m,
-            "landscape_MB": round(ls.energy.nbytes / 2**20, 1),
-            "landscape_s": round(ls.stats["seconds"], 2),
-        },
-    }
+        men = MeniscusSummary(
+            meniscus_height_um=ls.meniscus_height_um,
+            pinned=scene.liquid.pinned,
+            stiffness=Stiffness(**meniscus["stiffness"]),
+            offset_from_centre=CentreOffset(
+                x_um=round(xm, 1) + 0.0,
+                y_um=round(ym, 1) + 0.0,
+                twist_deg=round(tm, 1) + 0.0,
+                distance_um=round(math.hypot(xm, ym), 1),
+            ),
+            meniscus_warning=regime_warning(ls.meniscus_height_um, scene.chip_min_side_um),
+            contact_lines="pinned" if scene.liquid.pinned else "free",
+            floating_range=None if floating is None else FloatingRange(**floating),
+            contact_line_reach_um=None
+            if prof is None
+            else ContactLineReach(substrate=prof.substrate_reach_px * s, pad=prof.pad_reach_px * s),
+        )
+    return Assessment(
+        meniscus=men,
+        global_minimum=AssessedMinimum(
+            x_um=xm,
+            y_um=ym,
+            twist_deg=tm,
+            energy_J=em,
+            overlap_um2=float(ls.overlap_um2(em)),
+            refined=meniscus is not None and floating is None,
+        ),
+        error_limit=_error_limit(yl_sum["error_limit"]),
+        restoring_force_N=RestoringForce(
+            bias_um=near,
+            plus_x=forces["+x"],
+            minus_x=forces["-x"],
+            plus_y=forces["+y"],
+            minus_y=forces["-y"],
+        ),
+        restoring_torque_Nm=RestoringTorque(
+            twist_deg=near_deg, plus=torques["+"], minus=torques["-"]
+        )
+        if torques
+        else None,
+        plateaus_um=Plateaus(x=curves["x"]["plateaus"], y=curves["y"]["plateaus"]),
+        max_bias_um=_max_bias(biases),
+        protocols=protocols,
+        capture=CaptureSummary(
+            fraction=cap_sum["yield"],
+            n=cap_sum["n"],
+            outcomes=cap_sum["outcomes"],
+            grid_um=CaptureGrid(from_=-n * step, to=n * step, step=step),  # about the centre
+            center=CaptureCentre(x_um=gx, y_um=gy),
+            twist_deg=gt,
+            time_to_align_s=_time_stats(cap_sum),
+        ),
+        yield_=YieldSummary(
+            fraction=yl_sum["yield"],
+            n=yl_sum["n"],
+            outcomes=yl_sum["outcomes"],
+            placement_sigma=PlacementSigma(x_um=noise[0], y_um=noise[1], twist_deg=noise[2]),
+            seed=seed,
+            error_um=AxisErrors(
+                **{k: _error_stats(v) for k, v in yl_sum["aligned_error_um"].items()}
+            ),
+            error_deg=TwistErrors(twist=_error_stats(yl_sum["aligned_error_deg"]["twist"])),
+            time_to_align_s=_time_stats(yl_sum),
+        ),
+        settings=AssessmentSettings(
+            um_per_px=s,
+            pattern_px=(rows, cols),
+            chip_um=(w, h),
+            twist_step_deg=ls.twist_step_deg if len(ls.twist_deg) > 1 else None,
+            twists=len(ls.twist_deg),
+            dtype=scene.dtype,
+            method=method,
+            surface_tension_N_m=m.surface_tension_N_m,
+            pad_angle_deg=m.pad_angle_deg,
+            substrate_angle_deg=m.substrate_angle_deg,
+            delta_gamma_N_m=scene.delta_gamma_N_m,
+            landscape_MB=round(ls.energy.nbytes / 2**20, 1),
+            landscape_s=round(ls.stats["seconds"], 2),
+        ),
+    )
+
+
+def _error_limit(d: dict | None) -> ErrorLimit | None:
+    return None if d is None else ErrorLimit(**d)
+
+
+def _error_stats(d: dict | None) -> ErrorStats | None:
+    return None if d is None else ErrorStats(**d)
+
+
+def _max_bias(b: dict) -> MaxBias:
+    return MaxBias(plus_x=b["+x"], minus_x=b["-x"], plus_y=b["+y"], minus_y=b["-y"])
+
+
+def _time_stats(batch: dict) -> TimeStats | None | Literal[Absent.ABSENT]:
+    """A batch summary's time to align (:func:`simulator.batch.summarize`): ABSENT for the
+    steppers, None when no start aligned."""
+    if "time_to_align_s" not in batch:
+        return ABSENT
+    t = batch["time_to_align_s"]
+    return None if t is None else TimeStats(**t)
 
 
 def footprint_protocols(
     scene: Scene, through, spans: dict, floating, grid, starts, method: str, quiet: bool
-) -> dict:
+) -> Protocols:
     """The maximum bias, the capture fraction and the yield of ``scene`` under each protocol
     of ``--dispense`` (docs/physics.md §3.5), from one build of the pads' planes: ``pattern``
     (the droplet on the pattern first) and ``chip`` (the liquid comes in under the chip).
@@ -485,9 +555,10 @@ def footprint_protocols(
     from simulator.motion import require_footprint_fits
     from simulator.physics import DISPENSE
 
+    assert scene.dispense is not None  # called for a scene with --dispense only
     require_footprint_fits(scene)
     planes = build_footprint_planes(scene, progress=not quiet)
-    out = {}
+    out: dict[str, ProtocolSummary] = {}
     for proto in DISPENSE:
         at = scene.liquid.dispense_at_um if proto == "pattern" else None
         sc = scene.replace(liquid=replace(scene.liquid, dispense=proto, dispense_at_um=at))
@@ -507,22 +578,24 @@ def footprint_protocols(
         yl = summarize(
             run_batch(sc, starts, method, progress=not quiet, planes=planes, lanes=lanes)
         )
-        out[proto] = {
-            "why": why,
-            "wet_at_dispense": [int(k + 1) for k in np.flatnonzero(dispensed)],
-            "max_bias_um": biases,
-            "capture_fraction": cap["yield"],
-            "capture_outcomes": cap["outcomes"],
-            "yield_fraction": yl["yield"],
-            "yield_outcomes": yl["outcomes"],
-        } | ({"time_to_align_s": yl["time_to_align_s"]} if "time_to_align_s" in yl else {})
-    return {
-        "dispense": scene.dispense,
-        "substrate_reach_um": planes.rules.d_s * scene.um_per_px,
-        "wet_reach_um": planes.rules.d_r * scene.um_per_px,
-        "receding_deg": planes.rules.receding_deg,
-        "planes_s": planes.seconds,
-    } | out
+        out[proto] = ProtocolSummary(
+            why=why,
+            wet_at_dispense=[int(k + 1) for k in np.flatnonzero(dispensed)],
+            max_bias_um=_max_bias(biases),
+            capture_fraction=cap["yield"],
+            capture_outcomes=cap["outcomes"],
+            yield_fraction=yl["yield"],
+            yield_outcomes=yl["outcomes"],
+            time_to_align_s=_time_stats(yl),
+        )
+    return Protocols(
+        dispense=scene.dispense,
+        substrate_reach_um=planes.rules.d_s * scene.um_per_px,
+        wet_reach_um=planes.rules.d_r * scene.um_per_px,
+        receding_deg=planes.rules.receding_deg,
+        planes_s=planes.seconds,
+        by_protocol=out,
+    )
 
 
 def _fmt(v, unit: str, digits: int = 4) -> str:

@@ -117,6 +117,7 @@ def write_summary(
     p0, p1 = traj.path[0], traj.path[-1]
     e0, e1 = traj.energy_J[0], traj.energy_J[-1]
     c = traj.cost
+    assert c is not None  # a packaged run has its cost
     h, w = scene.pattern.shape
     s = stuck.final
     lines = [
@@ -134,8 +135,8 @@ def write_summary(
         f"final pose   x = {p1[0] + 0.0:.2f} um, y = {p1[1] + 0.0:.2f} um, twist = {p1[2] + 0.0:.2f} deg",
         f"largest turn {float(abs(traj.path[:, 2]).max()):g} deg on the way (the twist that lets it leave the plateau)",
         f"energy       {e0 * 1e9:.4g} nJ -> {e1 * 1e9:.4g} nJ (overlap {e0 / um2:,.0f} -> {e1 / um2:,.0f} um^2)",
-        f"landscape    {c['poses_computed']:,} of {c['poses_full']:,} poses computed ({100 * c['fraction_of_full']:.2g} %), "
-        f"{c['landscape_s']:.2f} s",
+        f"landscape    {c.poses_computed:,} of {c.poses_full:,} poses computed ({100 * c.fraction_of_full:.2g} %), "
+        f"{c.landscape_s:.2f} s",
         f"comparison   from ({STUCK_START[0]:g} um, {STUCK_START[1]:g} um, {STUCK_START[2]:g} deg), no y-bias and no twist: "
         f"{stuck.outcome} at ({s[0] + 0.0:.2f} um, {s[1] + 0.0:.2f} um, {s[2] + 0.0:.2f} deg) after {stuck.steps} steps",
         f"run time     {seconds:.1f} s",

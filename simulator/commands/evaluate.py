@@ -101,7 +101,7 @@ def run(args: argparse.Namespace) -> int:
     from simulator.batch import evaluate
 
     compiling(args.method, args.quiet)
-    summary = evaluate(
+    a = evaluate(
         scene,
         args.out,
         quiet=args.quiet,
@@ -112,63 +112,66 @@ def run(args: argparse.Namespace) -> int:
         liquid_warnings=liquid_warnings,
         method=args.method,
     )
-    g, cap, yl = summary["global_minimum"], summary["capture"], summary["yield"]
-    b = summary["max_bias_um"]
-    if g.get("refined"):  # below the grid (finite meniscus): to 0.1 um and 0.1 degree
-        x, y, t = (round(g[k], 1) + 0.0 for k in ("x_um", "y_um", "twist_deg"))
-        k = summary["stiffness"]
-        tw = "" if k["twist_Nm_per_rad"] is None else f", twist {k['twist_Nm_per_rad']:.3g} N m/rad"
+    g, cap, yl, men = a.global_minimum, a.capture, a.yield_, a.meniscus
+    b = a.max_bias_um
+    if g.refined and men is not None:  # below the grid (finite meniscus): to 0.1 um and 0.1 degree
+        x, y, t = (round(v, 1) + 0.0 for v in (g.x_um, g.y_um, g.twist_deg))
+        k = men.stiffness
+        tw = "" if k.twist_Nm_per_rad is None else f", twist {k.twist_Nm_per_rad:.3g} N m/rad"
         print(
             f"global minimum at ({x:.1f} um, {y:.1f} um, {t:.1f} deg), refined below the grid "
-            f"(meniscus {summary['meniscus_height_um']:.3g} um)"
+            f"(meniscus {men.meniscus_height_um:.3g} um)"
         )
-        print(f"stiffness at alignment: x {k['x_N_per_m']:.3g} N/m, y {k['y_N_per_m']:.3g} N/m{tw}")
+        print(f"stiffness at alignment: x {k.x_N_per_m:.3g} N/m, y {k.y_N_per_m:.3g} N/m{tw}")
     else:
-        print(f"global minimum at ({g['x_um']:g} um, {g['y_um']:g} um, {g['twist_deg']:g} deg)")
-    fl = summary.get("floating_range")
+        print(f"global minimum at ({g.x_um:g} um, {g.y_um:g} um, {g.twist_deg:g} deg)")
+    fl = men.floating_range if men is not None else None
     if fl:
-        r = summary["contact_line_reach_um"]
+        r = men.contact_line_reach_um if men is not None else None
+        assert r is not None  # a chip floats on free contact lines, whose reach is known
         print(
-            f"the chip floats on the well's floor: x {fl['x_from_um']:g} to {fl['x_to_um']:g} um, y {fl['y_from_um']:g} to "
-            f"{fl['y_to_um']:g} um, twist {fl['twist_from_deg']:g} to {fl['twist_to_deg']:g} deg (free contact lines "
-            f"{r['substrate']:.3g} um beyond the chip on the substrate, {r['pad']:.3g} um on a pad)"
+            f"the chip floats on the well's floor: x {fl.x_from_um:g} to {fl.x_to_um:g} um, y {fl.y_from_um:g} to "
+            f"{fl.y_to_um:g} um, twist {fl.twist_from_deg:g} to {fl.twist_to_deg:g} deg (free contact lines "
+            f"{r.substrate:.3g} um beyond the chip on the substrate, {r.pad:.3g} um on a pad)"
         )
-    print(f"max bias: +x {b['+x']:g} um, -x {b['-x']:g} um, +y {b['+y']:g} um, -y {b['-y']:g} um")
-    sg = yl["placement_sigma"]
     print(
-        f"capture fraction {100 * cap['fraction']:.1f} % of {cap['n']} grid starts; yield {100 * yl['fraction']:.1f} % "
-        f"of {yl['n']} starts under placement noise sigma {sg['x_um']:g} um, {sg['y_um']:g} um, {sg['twist_deg']:g} deg "
+        f"max bias: +x {b.plus_x:g} um, -x {b.minus_x:g} um, +y {b.plus_y:g} um, -y {b.minus_y:g} um"
+    )
+    sg = yl.placement_sigma
+    print(
+        f"capture fraction {100 * cap.fraction:.1f} % of {cap.n} grid starts; yield {100 * yl.fraction:.1f} % "
+        f"of {yl.n} starts under placement noise sigma {sg.x_um:g} um, {sg.y_um:g} um, {sg.twist_deg:g} deg "
         f"({args.method})"
     )
-    for name, r in (summary.get("protocols") or {}).items():
-        if isinstance(r, dict):
-            pb = r["max_bias_um"]
-            print(
-                f"--dispense {name}{' (this scene)' if name == scene.dispense else ''}: max bias +x {pb['+x']:g} um, "
-                f"-x {pb['-x']:g} um, +y {pb['+y']:g} um, -y {pb['-y']:g} um; capture {100 * r['capture_fraction']:.1f} %, "
-                f"yield {100 * r['yield_fraction']:.1f} % (each start released onto that protocol's footprint)"
-            )
+    for name, r in (a.protocols.by_protocol if a.protocols else {}).items():
+        pb = r.max_bias_um
+        print(
+            f"--dispense {name}{' (this scene)' if name == scene.dispense else ''}: max bias +x {pb.plus_x:g} um, "
+            f"-x {pb.minus_x:g} um, +y {pb.plus_y:g} um, -y {pb.minus_y:g} um; capture {100 * r.capture_fraction:.1f} %, "
+            f"yield {100 * r.yield_fraction:.1f} % (each start released onto that protocol's footprint)"
+        )
+    from simulator.batch import ABSENT
     from simulator.motion import error_limit_words
 
+    limit = None if a.error_limit is None else a.error_limit.to_dict()
+    print(f"final-pose error of the aligned placement-noise starts {error_limit_words(limit)}")
+    f = a.restoring_force_N
     print(
-        f"final-pose error of the aligned placement-noise starts {error_limit_words(summary['error_limit'])}"
-    )
-    f = summary["restoring_force_N"]
-    print(
-        f"restoring force probed at {f['bias_um']:.3g} um from the minimum"
+        f"restoring force probed at {f.bias_um:.3g} um from the minimum"
         + (" (one grid step beyond the floor)" if fl else "")
-        + f": +x F_x {f['+x'][0] * 1e6:.3g} uN, +y F_y {f['+y'][1] * 1e6:.3g} uN"
+        + f": +x F_x {f.plus_x[0] * 1e6:.3g} uN, +y F_y {f.plus_y[1] * 1e6:.3g} uN"
     )
-    if summary.get("volume_window"):
+    if a.volume_window:
         from simulator.liquid import window_lines
 
-        w = summary["volume_window"]
+        w = a.volume_window
         print(window_lines(w, w.get("volume_given"))[0])
     pics = "landscape.png, force.png, capture.png, pattern.png"
-    if "time_to_align_s" in yl:
+    if yl.time_to_align_s is not ABSENT:
         from simulator.commands.montecarlo import time_line
 
-        print(f"{time_line(yl['time_to_align_s'])} (placement-noise starts)")
+        t = yl.time_to_align_s
+        print(f"{time_line(None if t is None else t.to_dict())} (placement-noise starts)")
         pics += ", time_to_align.png"
     print(f"wrote {Path(args.out) / 'report.html'} (and summary.json, {pics})")
     return 0

@@ -147,10 +147,10 @@ def run(args: argparse.Namespace) -> int:
     for line in accuracy_lines(traj):
         print(line)
     c = traj.cost
-    if c.get("poses_computed"):
+    if c is not None and c.poses_computed:
         print(
-            f"landscape computed: {c['poses_computed']:,} of {c['poses_full']:,} poses ({100 * c['fraction_of_full']:.3g} %), {c['landscape_s']:.2f} s"
-            + (" (path engine)" if c.get("engine") == "path" else "")
+            f"landscape computed: {c.poses_computed:,} of {c.poses_full:,} poses ({100 * c.fraction_of_full:.3g} %), {c.landscape_s:.2f} s"
+            + (" (path engine)" if c.engine == "path" else "")
         )
     written = []
     with contextlib.ExitStack() as stack:  # every output, or none: each is moved into place

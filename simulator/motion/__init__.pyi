@@ -8,6 +8,9 @@ from ._accuracy import (
     floor_reach_um as floor_reach_um,
     refined_limit_um as refined_limit_um,
 )
+from ._cost import (
+    RunCost as RunCost,
+)
 from ._dynamics import (
     DynamicsState as DynamicsState,
     inertial as inertial,

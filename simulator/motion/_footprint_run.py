@@ -339,12 +339,14 @@ def simulate_footprint(
         "receding_deg": rules.receding_deg,
     }
     ref = pieces[-1][0] if last is None else last
-    cost = dict(ref.cost) | {
-        "engine": "footprint path" if path_src is not None else "footprint planes",
-        "footprint_planes_s": planes.seconds,
-        "footprint_pieces": len(pieces),
-        "total_s": time.perf_counter() - t0,
-    }
+    assert ref.cost is not None  # every piece is a packaged run
+    cost = dataclasses.replace(
+        ref.cost,
+        engine="footprint path" if path_src is not None else "footprint planes",
+        footprint_planes_s=planes.seconds,
+        footprint_pieces=len(pieces),
+        total_s=time.perf_counter() - t0,
+    )
     return {
         "method": method,
         "outcome": outcome,

@@ -5,7 +5,7 @@
 stops with status EDGE when it reaches a side, and resumes from where it stopped
 once the band (or box) has moved. Greedy and gradient stepping are memoryless, so the path
 equals a run on the full landscape (tested), at a fraction of the cost
-(``Trajectory.cost``).
+(``Trajectory.cost``, a :class:`~simulator.motion.RunCost`).
 """
 
 from __future__ import annotations
@@ -37,6 +37,7 @@ from simulator.landscape import (
     consecutive_runs,
     global_minimum,
 )
+from simulator.motion._cost import RunCost
 from simulator.motion._field import field_and_grid
 from simulator.motion._pinning import pin_lines
 from simulator.motion._pricing import (
@@ -81,7 +82,8 @@ class Trajectory:
     path: (N, 3) poses (x_um, y_um, twist_deg), start first; twist unwrapped.
     energy_J: (N,) energy per recorded pose. t_s: (N,) times for dynamics, else None.
     steps: moves (stepping) or accepted solver steps (dynamics). time_s: final time
-    (dynamics) or None. cost: landscape twists computed vs the full axis, seconds.
+    (dynamics) or None. cost: the landscape computed against the full one, and the seconds
+    (:class:`~simulator.motion.RunCost`; None for a run piece not yet packaged).
     """
 
     method: str
@@ -91,7 +93,7 @@ class Trajectory:
     steps: int
     time_s: float | None = None
     t_s: np.ndarray | None = None
-    cost: dict = field(default_factory=dict)
+    cost: RunCost | None = None
     #: The scene's global minimum (x_um, y_um, twist_deg) the outcome was measured against.
     optimum: tuple[float, float, float] | None = None
     #: With a finite meniscus, the final pose of a gradient or dynamic run refined below the
@@ -135,7 +137,7 @@ class Trajectory:
             "steps": int(self.steps),
             "time_s": self.time_s,
             "path": path,
-            "cost": self.cost,
+            "cost": {} if self.cost is None else self.cost.to_dict(),
             "optimum": None if self.optimum is None else pose(self.optimum),
             "final_refined": None if self.refined is None else pose(self.refined),
             "error_limit": self.error_limit,
@@ -201,7 +203,7 @@ def simulate(
             (small boxes that follow the chip, pose by pose at the cost of the chip's
             outline, :class:`simulator.landscape.PathEnergy`) or "auto" (the path engine for
             chips large enough for it to be the faster, else the FFT engine,
-            :func:`simulator.motion.choose_engine`). ``cost["engine"]`` says which ran.
+            :func:`simulator.motion.choose_engine`). ``cost.engine`` says which ran.
         reference: with ``landscape``, the landscape whose global minimum and floor "aligned"
             is measured against, when that is not ``landscape`` itself (a footprint state's
             landscape, whose own minimum need not be the aligned pose).
@@ -286,7 +288,7 @@ class _Plan:
     engine: str
     #: the dynamics' parameters (None for greedy and gradient)
     dynamics: Any
-    #: when the run started (``cost["total_s"]``)
+    #: when the run started (``cost.total_s``)
     t0: float
 
 
@@ -558,18 +560,18 @@ def _package(
         timed_out,
     )
     full = full_landscape_poses(scene) if landscape is None else landscape.energy.size
-    cost = {
-        "engine": engine,
-        "poses_computed": int(boxes.poses),
-        "poses_full": int(full),
-        "fraction_of_full": boxes.poses / full,
-        "planes": boxes.planes,
-        "landscape_s": boxes.seconds,
-        "total_s": time.perf_counter() - plan.t0,
-        "minimum_poses": int(opt.poses),
-        "minimum_s": opt.seconds,
-        "minimum_how": opt.how,
-    }
+    cost = RunCost(
+        engine=engine,
+        poses_computed=int(boxes.poses),
+        poses_full=int(full),
+        fraction_of_full=boxes.poses / full,
+        planes=boxes.planes,
+        landscape_s=boxes.seconds,
+        total_s=time.perf_counter() - plan.t0,
+        minimum_poses=int(opt.poses),
+        minimum_s=opt.seconds,
+        minimum_how=opt.how,
+    )
     refined = None
     outcome = OUTCOMES[int(out)]
     if (relay is not None or path is not None) and status == EVENT:

@@ -3,8 +3,11 @@
 Owns :func:`flatten` (every number and boolean of a nested assessment summary as one
 column, ``max_bias_plus_x_um``, ``global_minimum_offset_um``, ...), the unit suffixes it
 recognises (:data:`UNITS`, ``_split_unit``, also what the sweep's pictures label axes
-with), the names of list components and the status columns of every row. A point's
-identity columns are :data:`simulator.sweep.ID_COLUMNS`.
+with), the names of list components, the status columns of every row, and the columns a
+sweep expects (:func:`expected_columns`): not a list kept by hand, but :func:`flatten` of
+the summary the assessment's types give a scene of the sweep's effects
+(:func:`simulator.batch.summary_shape`). A point's identity columns are
+:data:`simulator.sweep.ID_COLUMNS`.
 """
 
 from __future__ import annotations
@@ -74,7 +77,8 @@ UNIT_TEXT = {
 #: (label, factor to the unit shown). The sweep's pictures (:data:`simulator.sweep`'s
 #: metrics) and a design search's comparison of the best design with the baseline take
 #: theirs from here (:func:`metric`); other columns are labelled from their names
-#: (:func:`column_label`).
+#: (:func:`column_label`). Each labelled column is one the assessment's types make
+#: (tests/test_assessment.py): a renamed field fails there, not silently on a page.
 METRIC_LABELS = {
     "max_bias_x_um": ("max bias along x (um)", 1.0),
     "max_bias_y_um": ("max bias along y (um)", 1.0),
@@ -126,15 +130,18 @@ def _name(key: str) -> str:
     return key.replace(" ", "_")
 
 
-def flatten(summary: dict) -> dict[str, Any]:
+def flatten(summary: Any) -> dict[str, Any]:
     """Every number (and boolean) of a nested summary as one column, the unit at the end.
 
     ``{"max_bias_um": {"+x": 90}}`` gives ``max_bias_plus_x_um``; ``{"global_minimum":
     {"x_um": 0}}`` gives ``global_minimum_x_um``; ``{"restoring_force_N": {"+x": [fx, fy]}}``
     gives ``restoring_force_plus_x_x_N`` and ``..._y_N``; a new key such as
     ``{"stiffness": {"x_N_per_m": k}}`` gives ``stiffness_x_N_per_m``. Strings, None and
-    lists of lists (plateaus) are left out.
+    lists of lists (plateaus) are left out. ``summary`` may be the
+    :class:`simulator.batch.Assessment` itself (its dict is flattened).
     """
+    if not isinstance(summary, dict):
+        summary = summary.to_dict()
     out: dict[str, Any] = {}
 
     def emit(parts: tuple[str, ...], unit: str | None, v: Any) -> None:
@@ -190,75 +197,29 @@ def flatten(summary: dict) -> dict[str, Any]:
 
 
 # ----------------------------------------------------------------------- the columns to expect
-def _product(*parts: tuple[str, ...]) -> list[str]:
-    import itertools
-
-    return ["_".join(p for p in combo if p) for combo in itertools.product(*parts)]
-
-
 def _metric_columns(
-    twist: bool, meniscus: bool, free: bool, dynamics: bool, dispense: bool = False
+    twist: bool,
+    meniscus: bool,
+    free: bool,
+    dynamics: bool,
+    dispense: bool = False,
+    four_pad: bool = False,
 ) -> list[str]:
-    """The columns :func:`flatten` makes of :func:`simulator.batch.assess`'s summary for a
-    scene of these effects (kept equal to a real row's by the tests)."""
-    outcomes = ("aligned", "plateau", "local_minimum", "no_contact", "max_steps")
-    cols = [f"global_minimum_{k}" for k in ("x_um", "y_um", "twist_deg", "energy_J")]
-    cols += ["global_minimum_overlap_um2", "global_minimum_refined", "restoring_force_bias_um"]
-    cols += ["error_limit_um"]
-    cols += _product(
-        ("restoring_force",), ("plus_x", "minus_x", "plus_y", "minus_y"), ("x_N", "y_N")
-    )
-    cols += _product(("max_bias",), ("plus_x_um", "minus_x_um", "plus_y_um", "minus_y_um"))
-    cols += ["capture_fraction", "capture_n", *_product(("capture_outcomes",), outcomes)]
-    cols += ["capture_grid_from_um", "capture_grid_to_um", "capture_grid_step_um"]
-    cols += ["capture_center_x_um", "capture_center_y_um", "capture_twist_deg"]
-    cols += ["yield_fraction", "yield_n", *_product(("yield_outcomes",), outcomes)]
-    cols += ["yield_placement_sigma_x_um", "yield_placement_sigma_y_um"]
-    cols += ["yield_placement_sigma_twist_deg", "yield_seed"]
-    stats = ("mean", "mean_abs", "std", "max_abs")
-    cols += _product(("yield_error",), ("x", "y"), stats, ("um",))
-    cols += _product(("yield_error_twist",), stats, ("deg",))
-    cols += ["settings_um_per_px", "settings_pattern_rows_px", "settings_pattern_cols_px"]
-    cols += ["settings_chip_width_um", "settings_chip_height_um", "settings_twists"]
-    cols += ["settings_surface_tension_N_m", "settings_pad_angle_deg"]
-    cols += ["settings_substrate_angle_deg", "settings_delta_gamma_N_m", "settings_landscape_MB"]
-    cols += ["settings_landscape_s", "settings_source_um_per_px", "settings_resolution_auto"]
-    cols += ["settings_volume_nl", "max_bias_x_um", "max_bias_y_um", "global_minimum_offset_um"]
-    if twist:
-        cols += ["restoring_torque_twist_deg", "restoring_torque_plus_Nm"]
-        cols += ["restoring_torque_minus_Nm", "settings_twist_step_deg"]
-    if meniscus:
-        cols += ["meniscus_height_um", "pinned", "stiffness_x_N_per_m", "stiffness_y_N_per_m"]
-        cols += ["stiffness_twist_Nm_per_rad"] if twist else []
-        cols += _product(("offset_from_centre",), ("x_um", "y_um", "twist_deg", "distance_um"))
-    if meniscus and free:
-        cols += ["contact_line_reach_substrate_um", "contact_line_reach_pad_um"]
-        cols += _product(("floating_range",), ("x", "y"), ("from_um", "to_um"))
-        cols += ["floating_range_twist_from_deg", "floating_range_twist_to_deg"]
-        cols += ["floating_half_width_um"]
-    if dynamics:
-        cols += _product(
-            ("capture", "yield"),
-            ("time_to_align",),
-            ("median", "p90", "mean", "min", "max", "n"),
-            ("s",),
-        )
-    if dispense:  # each protocol's numbers (simulator.batch footprint_protocols)
-        cols += ["protocols_substrate_reach_um", "protocols_wet_reach_um"]
-        cols += ["protocols_receding_deg", "protocols_planes_s"]
-        for name in ("pattern", "chip"):
-            pre = f"protocols_{name}"
-            cols += _product(
-                (f"{pre}_max_bias",), ("plus_x_um", "minus_x_um", "plus_y_um", "minus_y_um")
-            )
-            cols += [f"{pre}_capture_fraction", f"{pre}_yield_fraction"]
-            cols += _product((f"{pre}_capture_outcomes", f"{pre}_yield_outcomes"), outcomes)
-            cols += [f"{pre}_max_bias_x_um", f"{pre}_max_bias_y_um"]
-            if dynamics:
-                cols += _product(
-                    (f"{pre}_time_to_align",), ("median", "p90", "mean", "min", "max", "n"), ("s",)
-                )
-    return cols
+    """The columns :func:`flatten` makes of a sweep point's summary (:func:`simulator.batch.assess`'s,
+    with the point's settings) for a scene of these effects: derived from the assessment's
+    types (:func:`simulator.batch.summary_shape`), in the summary's order. ``free`` counts
+    only with a ``meniscus``; ``four_pad`` adds the pattern's critical volume."""
+    from simulator.batch import summary_shape
+
+    flags = {
+        "twist": twist,
+        "meniscus": meniscus,
+        "free": meniscus and free,
+        "dynamics": dynamics,
+        "dispense": dispense,
+        "four_pad": four_pad,
+    }
+    return list(flatten(summary_shape(k for k, on in flags.items() if on)))
 
 
 def expected_columns(spec) -> list[str]:
@@ -277,6 +238,7 @@ def expected_columns(spec) -> list[str]:
     liquid = scene.get("liquid") or {}
     methods = next((a.values or () for a in spec.axes if a.name == "method"), ())
     cols = _metric_columns(
+        four_pad=spec.design is None or spec.design["name"] == "four-pad",
         twist=bool(effects.get("twist", True)),
         meniscus=bool(effects.get("meniscus", False)),
         free=not liquid.get("pinned", False),
@@ -288,6 +250,4 @@ def expected_columns(spec) -> list[str]:
             and not liquid.get("pinned", False)
         ),
     )
-    if spec.design is None or spec.design["name"] == "four-pad":
-        cols.append("critical_volume_nl")
     return list(dict.fromkeys([*ident, *STATUS_COLUMNS, *cols]))

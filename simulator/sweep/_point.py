@@ -15,6 +15,7 @@ import copy
 import os
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 from foundation import InputError
@@ -136,7 +137,8 @@ def point_critical_volume_nl(scene, task: dict) -> float | None:
 
 
 def assess_point(task: dict) -> dict:
-    """The summary of one point: :func:`simulator.batch.assess` on its scene, as ``evaluate`` runs it.
+    """The summary of one point: :func:`simulator.batch.assess` on its scene, as ``evaluate``
+    runs it (the :class:`simulator.batch.Assessment`'s dict).
 
     The yield's placement noise is drawn with the point's ``point_seed``; ``settings`` also
     records ``source_um_per_px``, ``resolution_auto`` (as evaluate) and ``volume_nl``; a
@@ -160,7 +162,7 @@ def assess_point(task: dict) -> dict:
             else (NOISE_FRACTION * w, NOISE_FRACTION * h)
         )
         sigma = (sx, sy, v.get("placement_sigma_deg", NOISE_TWIST_DEG))
-    summary = assess(
+    a = assess(
         scene,
         quiet=True,
         method=v.get("method", "greedy"),
@@ -169,16 +171,18 @@ def assess_point(task: dict) -> dict:
         yield_starts=task["yield_starts"],
         grid_cells=task["capture_grid"],
     )
-    summary["settings"] |= {
-        "source_um_per_px": native,
-        "resolution_auto": bool(auto and scene.um_per_px != native),
-        "volume_nl": scene.liquid.volume_nl,
-    }
-    cv = point_critical_volume_nl(scene, task)
-    if cv is not None:
-        summary["critical_volume_nl"] = cv
-    if "layout" in scene.pattern.params:
-        summary["layout"] = scene.pattern.params["layout"]
+    a = replace(
+        a,
+        settings=replace(
+            a.settings,
+            source_um_per_px=native,
+            resolution_auto=bool(auto and scene.um_per_px != native),
+            volume_nl=scene.liquid.volume_nl,
+        ),
+        critical_volume_nl=point_critical_volume_nl(scene, task),
+        layout=scene.pattern.params.get("layout"),
+    )
+    summary = a.to_dict()
     return require_finite(summary, f"point {task['point']}")
 
 

@@ -371,7 +371,7 @@ def _verify(spec, pattern: Mask, quiet: bool, pictures: Path | None = None) -> d
             yield_starts=v["yield_starts"],
             grid_cells=v["capture_grid"],
             pictures=pics,
-        )
+        ).to_dict()
         summary["orientation"] = orientation_gaps(scene, twists) if twists else None
         summary["seconds"] = round(time.perf_counter() - t0, 2)
         out[name] = summary
