@@ -62,7 +62,8 @@ def case(smoke: bool, small: bool = False, batch: bool = False) -> list[str]:
         return args + ["--resolution", "10", "--no-twist", "--method", "greedy", "--start=500,5,0"]
     if small:
         return args + ["--resolution", "5", "--method", "inertial", "--start=500,5,1"]
-    # priced 8,422 MB with the state: over the default budget of 8 GiB, so raised for both
+    # priced 8,032 MB with the state: near the default budget of 8 GiB (half the free memory
+    # where less than 16 GiB is free), so raised for both
     return (
         args
         + ["--resolution", "2", "--method", "inertial", "--start=500,5,1"]

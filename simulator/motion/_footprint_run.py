@@ -65,7 +65,8 @@ def footprint_budget_bytes(scene: Scene, n_pads: int, pairs: bool = True) -> int
     poses, priced 8,370 MB, of which the pairs' planes 1,795 MB, peaked at 6,923 MB with the
     flags a bit per pad, 8,138 MB with a byte; with the shadow cast along the chip side's
     normal at each twist, 32 pairs on the twists where each exists and the poses that cover
-    its near pad, priced 8,422 MB, of which the pairs' planes 1,911 MB, peaked at 7,537 MB).
+    its near pad, priced 8,422 MB, of which the pairs' planes 1,911 MB, peaked at 7,537 MB;
+    measured again with the pads at 10:35 deg, priced 8,032 MB, peaked at 7,040 MB).
     A pair's part is made, used and dropped in turn, so one pair's correlator is counted.
     ``pairs`` False: without the shadow rule's pairs (whose boxes take a pass over the
     twists to find), a lower bound that refuses an oversize scene at once."""
