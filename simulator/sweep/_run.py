@@ -83,6 +83,7 @@ import os
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 from foundation import require
 from simulator.sweep._axes import HARD_MAX_POINTS
@@ -122,7 +123,7 @@ def _priced_points(tasks: list[PointTask]) -> list[PointTask]:
     picks = {0, len(tasks) - 1}
     names = dict.fromkeys(k for t in tasks for k in t.values)
     for name in names:
-        vals = [t.values.get(name) for t in tasks]
+        vals: list[Any] = [t.values.get(name) for t in tasks]  # an axis's values, any kind
         nums = [
             i for i, v in enumerate(vals) if isinstance(v, int | float) and not isinstance(v, bool)
         ]
