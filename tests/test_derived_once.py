@@ -442,6 +442,7 @@ def test_evaluate_and_a_sweep_point_take_the_same_default_chip(tmp_path):
     from patterns.geometry import default_chip_um
     from simulator.commands._flags import parse_chip_size
     from simulator.commands.evaluate import _bbox_chip
+    from simulator.sweep import PointTask
     from simulator.sweep._point import point_scene
 
     png = str(library_path("four_pad_730_50"))
@@ -450,7 +451,7 @@ def test_evaluate_and_a_sweep_point_take_the_same_default_chip(tmp_path):
     args = build_parser().parse_args(["evaluate", "--pattern", png, *out, *odd])
     assert parse_chip_size(_bbox_chip(args)) == default_chip_um(read_mask(png, um_per_px=0.7654321))
     args = build_parser().parse_args(["evaluate", "--pattern", png, *out])
-    task = {"scene": {"pattern": png}, "values": {}, "design": None, "base": str(tmp_path)}
+    task = PointTask(0, 0, 0, {}, {"pattern": png}, None, tmp_path, 2000, 25)
     chip = point_scene(task)[0].chip.geometry.bounds
     assert parse_chip_size(_bbox_chip(args)) == (chip[2] - chip[0], chip[3] - chip[1])
     # a generated design's point: the bounds of its exact geometry
@@ -469,6 +470,7 @@ def test_the_critical_volume_of_a_scenes_four_pad_has_one_home(monkeypatch):
     import simulator.liquid._critical_volume as cv_module
     from simulator.liquid import scene_critical_volume, scene_warnings, volume_window
     from simulator.liquid._warnings import _critical_volume
+    from simulator.sweep import PointTask
     from simulator.sweep._point import point_critical_volume_nl
 
     calls = []
@@ -485,7 +487,8 @@ def test_the_critical_volume_of_a_scenes_four_pad_has_one_home(monkeypatch):
     assert critical is not None
     cv = critical.critical_volume_nl
     assert volume_window(scene)["critical_volume_nl"] == cv
-    assert point_critical_volume_nl(scene, {"design": None}) == cv
+    task = PointTask(0, 0, 0, {}, {}, None, Path("."), 2000, 25)
+    assert point_critical_volume_nl(scene, task) == cv
     assert any(f"critical volume {cv:.3g} nl" in w for w in scene_warnings(scene))
     assert len(calls) == 1
     _critical_volume.cache_clear()

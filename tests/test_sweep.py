@@ -295,7 +295,7 @@ def test_python_api_latin_hypercube_realizations_one_axis_picture(tmp_path):
         and table["point_seed"].nunique() == 2
     )
     spec["sweep"]["independent_noise"] = True
-    assert len({p["point_seed"] for p in load_sweep(spec).points()}) == 8
+    assert len({p.point_seed for p in load_sweep(spec).points()}) == 8
     assert (tmp_path / "lhs" / "sweep_sigma.png").exists()
     # The same spec again, as a SweepSpec: the same plan and hash.
     a, b = load_sweep(spec), load_sweep(spec)
@@ -392,7 +392,7 @@ def test_example_sweep_file_is_the_readme_sweep():
     assert spec.columns(p) == {
         "point": 5,
         "realization": 0,
-        "point_seed": p["point_seed"],
+        "point_seed": p.point_seed,
         "gap_um": 50,
         "volume_nl": 10,
         "placement_sigma_um": 150,

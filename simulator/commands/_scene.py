@@ -12,7 +12,7 @@ from typing import Any
 
 from foundation import InputError
 from simulator.commands._request import SceneRequest
-from simulator.scene import Scene
+from simulator.scene import CHIP_KEYS, Scene, merge_values
 
 
 def scene_from_args(request: SceneRequest, note_frame: bool = True, warn: bool = True) -> Scene:
@@ -56,10 +56,6 @@ def scene_document_from_args(request: SceneRequest) -> tuple[dict[str, Any], Pat
     base = request.base
     values = request.overrides  # (table, key) -> the flag's value, for the flags given
     chips = [(None, k) for k in CHIP_KEYS]
-    if any(place in values for place in chips):
-        # a chip on the command line replaces the scene file's (two on the command line: refused downstream)
-        for k in CHIP_KEYS:
-            doc.pop(k, None)
     if "pattern" not in doc and (None, "pattern") not in values:
         raise InputError(
             "no pattern given: pass --pattern P.png or a layout P.gds (or a TOML scene with pattern = ...)"
@@ -68,13 +64,9 @@ def scene_document_from_args(request: SceneRequest) -> tuple[dict[str, Any], Pat
         raise InputError(
             "no chip given: pass --chip C.png, --chip-size W[xH] (um) or, for a layout, --chip-layer L/D"
         )
-    for (table, key), value in values.items():
-        (doc.setdefault(table, {}) if table else doc)[key] = value
+    # a chip on the command line replaces the scene file's (two on the command line: refused downstream)
+    merge_values(doc, values)
     return doc, base
-
-
-#: The top-level keys that give the chip: one of them on the command line replaces the file's.
-CHIP_KEYS = ("chip", "chip_size_um", "chip_layer")
 
 
 #: Python keyword spellings in the scene's messages: the command-line flag and the scene file's key.

@@ -14,10 +14,12 @@ from ._build import (
     resampled_extent as resampled_extent,
 )
 from ._params import (
+    CHIP_KEYS as CHIP_KEYS,
     FLAG_GROUPS as FLAG_GROUPS,
     LAYOUT_KEYS as LAYOUT_KEYS,
     SCENE_PARAMS as SCENE_PARAMS,
     SceneParam as SceneParam,
+    merge_values as merge_values,
     sweep_places as sweep_places,
 )
 from ._parts import (

@@ -13,7 +13,9 @@ live there), and whether a design sweep may vary it. Generated from it:
 - the scene's flags of the commands and their merge into the scene document
   (:mod:`simulator.commands`: ``add_scene_args``, ``scene_document_from_args``);
 - the sweep's scene axes and where a point puts their values (:func:`sweep_places`), which
-  the design search reads its baseline from.
+  the design search reads its baseline from;
+- the merge of values by place into a scene document (:func:`merge_values`: a chip given
+  replaces the document's, :data:`CHIP_KEYS`), the commands' flags' and a sweep point's.
 
 The order of :data:`SCENE_PARAMS` is the order of the flags in each group of ``--help``
 and of the keys in each table of the schema. Nothing heavy is imported here: the commands
@@ -22,9 +24,9 @@ read it for ``--help``.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 from patterns import CHANNELS
 from simulator.physics import DISPENSE_CHOICES
@@ -51,6 +53,7 @@ from simulator.scene._schema_kinds import (
 )
 
 __all__ = [
+    "CHIP_KEYS",
     "FLAG_GROUPS",
     "IMAGE_KEYS",
     "LAYOUT_KEYS",
@@ -58,6 +61,7 @@ __all__ = [
     "SCENE_PARAMS",
     "SceneParam",
     "known_keys",
+    "merge_values",
     "scene_tables",
     "sweep_places",
 ]
@@ -648,3 +652,21 @@ def sweep_places() -> dict[str, tuple[str | None, str]]:
     """Where a sweep point puts each scene axis's value: axis name -> (table, key), None for
     the top level; in the registry's order."""
     return {p.axis: (p.table, p.key) for p in SCENE_PARAMS if p.sweepable}
+
+
+#: The top-level keys that give the chip (a file, a size, a layout's layer): one of them
+#: given over a document replaces the document's (:func:`merge_values`).
+CHIP_KEYS = ("chip", "chip_size_um", "chip_layer")
+
+
+def merge_values(doc: dict[str, Any], values: Mapping[tuple[str | None, str], Any]) -> None:
+    """Put ``values`` (by place: (table, key), None for the top level) into the scene
+    document ``doc``, in place: a chip among them (a key of :data:`CHIP_KEYS`) replaces the
+    document's chip, whichever key gave it; each value goes to its place, a table made when
+    missing. The one merge of the commands' flags (flags win over the scene file) and of a
+    sweep point's axes (the point's values over the base scene); docs/guide/scenes.md."""
+    if any((None, k) in values for k in CHIP_KEYS):
+        for k in CHIP_KEYS:
+            doc.pop(k, None)
+    for (table, key), value in values.items():
+        (doc.setdefault(table, {}) if table else doc)[key] = value

@@ -1,5 +1,6 @@
-"""Design sweeps: the sweep file (spec and axes), one point's evaluation, the Dask cluster,
-the resumable result store, its columns, and the report; :func:`run_sweep` runs one.
+"""Design sweeps: the sweep file (spec and axes), a point and its task (frozen), one point's
+evaluation, the Dask cluster, the resumable result store, its columns, and the report;
+:func:`run_sweep` runs one.
 """
 
 import lazy_loader as lazy

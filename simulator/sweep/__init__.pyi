@@ -50,3 +50,8 @@ from ._store import (
     ResultStore as ResultStore,
     kept_points as kept_points,
 )
+from ._task import (
+    ID_COLUMNS as ID_COLUMNS,
+    PointTask as PointTask,
+    SweepPoint as SweepPoint,
+)

@@ -20,6 +20,7 @@ from typing import Any, cast
 
 from foundation import InputError, require
 from simulator.sweep._point import XLA_ONE_THREAD, _one_line, run_point
+from simulator.sweep._task import PointTask
 
 __all__ = ["CONNECT_TIMEOUT_S", "check_where", "dask_client", "run_tasks", "start_workers"]
 
@@ -349,8 +350,8 @@ def start_workers(
 
 def run_tasks(
     client: Any,
-    tasks: Iterable[dict | None],
-    handle: Callable[[dict, dict], None],
+    tasks: Iterable[PointTask | None],
+    handle: Callable[[PointTask, dict], None],
     per_thread: int = 2,
 ) -> dict:
     """Run every task of ``tasks`` (:func:`run_point`'s, one point each) and hand each result to
@@ -370,8 +371,8 @@ def run_tasks(
 
 def _run_dask(
     client: Any,
-    tasks: Iterable[dict | None],
-    handle: Callable[[dict, dict], None],
+    tasks: Iterable[PointTask | None],
+    handle: Callable[[PointTask, dict], None],
     per_thread: int = 2,
 ) -> dict:
     """Every task on ``client``'s cluster, at most ``per_thread`` per worker thread in flight, results handled as they come."""
@@ -381,7 +382,7 @@ def _run_dask(
     threads = max(1, sum(client.nthreads().values()))
     capacity = max(1, per_thread) * threads
     pending = iter(tasks)
-    by_key: dict[str, dict] = {}  # the tasks in flight
+    by_key: dict[str, PointTask] = {}  # the tasks in flight
     ac = as_completed(loop=client.loop)
     ended = False
 
@@ -396,7 +397,7 @@ def _run_dask(
                 return
             else:
                 f = client.submit(run_point, t, pure=False)  # impure: no two points are merged
-                by_key[f.key] = cast(dict, t)  # neither _END nor None: a task
+                by_key[f.key] = cast(PointTask, t)  # neither _END nor None: a task
                 ac.add(f)
 
     fill()
@@ -406,7 +407,7 @@ def _run_dask(
             result = f.result()
         except Exception as err:  # the worker died (memory, a crash): the point's error row
             result = {
-                "point": t["point"],
+                "point": t.point,
                 "status": "error",
                 "error": _one_line(err),
                 "seconds": None,
@@ -422,7 +423,7 @@ def _run_dask(
     }
 
 
-def _run_here(tasks: Iterable[dict | None], handle: Callable[[dict, dict], None]) -> dict:
+def _run_here(tasks: Iterable[PointTask | None], handle: Callable[[PointTask, dict], None]) -> dict:
     t0 = time.perf_counter()
     for t in tasks:
         if t is not None:  # None: nothing to run now (nothing is in flight here: ask again)

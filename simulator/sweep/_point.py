@@ -16,12 +16,11 @@ import os
 import sys
 import time
 from dataclasses import replace
-from pathlib import Path
 
 from foundation import InputError
 from simulator.core import THREADS_ENV
 from simulator.sweep._axes import AXES, _design_axes
-from simulator.sweep._spec import _design_seed
+from simulator.sweep._task import PointTask
 
 __all__ = [
     "assess_point",
@@ -53,23 +52,25 @@ def _cap_threads() -> None:
     os.environ[THREADS_ENV] = "1"
 
 
-def design_params(task: dict) -> dict:
+def design_params(task: PointTask) -> dict:
     """The generated design's parameters at one point: the sweep's ``[design]`` values with
     the point's design axes on top and, for a seeded design, the realization's seed."""
-    design = task["design"]
+    design = task.design
+    assert design is not None, "a point of a sweep without a [design] has no design parameters"
     params = dict(design["params"])
-    params.update({k: x for k, x in task["values"].items() if k not in AXES})
+    params.update({k: x for k, x in task.values.items() if k not in AXES})
     if "seed" in _design_axes(design["name"]):
-        params["seed"] = _design_seed(design, task)
+        params["seed"] = task.design_seed(design)
     return params
 
 
-def point_geometry(task: dict):
+def point_geometry(task: PointTask):
     """The exact geometry (um, shapely) of a point's generated design and its record (the
     parameters a pattern file keeps), as :func:`point_scene` rasterizes it."""
     from patterns.geometry import build, design_record
 
-    design = task["design"]
+    design = task.design
+    assert design is not None, "a point of a sweep without a [design] has no geometry"
     params = design_params(task)
     geometry = build(design["name"], **params)
     record = design_record(design["name"], **params)
@@ -77,22 +78,23 @@ def point_geometry(task: dict):
     return geometry, record
 
 
-def point_scene(task: dict):
-    """The scene of one point, built as ``selfalign evaluate`` builds it; also whether to coarsen automatically."""
-    from patterns.geometry import default_chip_um, mask_from_geometry
-    from simulator.scene import Scene, sweep_places
+def point_scene(task: PointTask):
+    """The scene of one point, built as ``selfalign evaluate`` builds it; also whether to coarsen automatically.
 
-    doc = copy.deepcopy(task["scene"])
-    v = task["values"]
-    design = task["design"]
-    if "chip_size_um" in v:
-        for k in ("chip", "chip_layer"):
-            doc.pop(k, None)
-    for axis, (table, key) in sweep_places().items():  # the scene's axes, where its file keeps them
-        if axis in v:
-            (doc.setdefault(table, {}) if table else doc)[key] = v[axis]
+    The point's scene axes go onto the base scene as the commands' flags go onto a scene
+    file (:func:`simulator.scene.merge_values`, at the places :func:`simulator.scene.sweep_places`
+    gives: a ``chip_size_um`` axis replaces the base scene's chip); a ``pattern`` axis's file
+    is read relative to the sweep file (docs/guide/sweeps.md)."""
+    from patterns.geometry import default_chip_um, mask_from_geometry
+    from simulator.scene import CHIP_KEYS, Scene, merge_values, sweep_places
+
+    doc = copy.deepcopy(dict(task.scene))
+    v = task.values
+    design = task.design
+    places = {place: v[axis] for axis, place in sweep_places().items() if axis in v}
     if "pattern" in v:  # relative to the sweep file
-        doc["pattern"] = str((Path(task["base"]) / v["pattern"]).resolve())
+        places[(None, "pattern")] = str((task.base / v["pattern"]).resolve())
+    merge_values(doc, places)
     if design is not None:
         geometry, record = point_geometry(task)
         um = doc.get("resolution_um") or doc.get("um_per_px") or 1.0
@@ -104,19 +106,19 @@ def point_scene(task: dict):
             budget_mb=doc.get("memory_budget_mb"),
             what="the pattern raster",
         )
-        if not any(k in doc for k in ("chip", "chip_size_um", "chip_layer")):
+        if not any(k in doc for k in CHIP_KEYS):
             doc["chip_size_um"] = list(default_chip_um(geometry))  # evaluate's default chip
-    elif not any(k in doc for k in ("chip", "chip_size_um", "chip_layer")):
+    elif not any(k in doc for k in CHIP_KEYS):
         # evaluate's default chip (the pattern read once with a stand-in chip)
         probe = Scene.from_dict(
-            doc | {"chip_size_um": [1.0, 1.0]}, base=Path(task["base"]), check_scale=False
+            doc | {"chip_size_um": [1.0, 1.0]}, base=task.base, check_scale=False
         )
         doc["chip_size_um"] = list(default_chip_um(probe.pattern))
     auto = "resolution_um" not in doc
-    return Scene.from_dict(doc, base=Path(task["base"])), auto
+    return Scene.from_dict(doc, base=task.base), auto
 
 
-def point_critical_volume_nl(scene, task: dict) -> float | None:
+def point_critical_volume_nl(scene, task: PointTask) -> float | None:
     """The critical droplet volume (nl) of the point's pattern when it is a four-pad
     (docs/physics.md §8): from the generated design's exact size and gap, else from the four
     pads recognised in the raster; None for other patterns, or pads that do not wet better
@@ -124,7 +126,7 @@ def point_critical_volume_nl(scene, task: dict) -> float | None:
     (:func:`simulator.liquid.scene_critical_volume`)."""
     from simulator.liquid import scene_critical_volume
 
-    design = task.get("design")
+    design = task.design
     fp = None
     if design is not None and design["name"] == "four-pad":
         params = design_params(task)
@@ -136,7 +138,7 @@ def point_critical_volume_nl(scene, task: dict) -> float | None:
     return None if cv is None else cv.critical_volume_nl
 
 
-def assess_point(task: dict) -> dict:
+def assess_point(task: PointTask) -> dict:
     """The summary of one point: :func:`simulator.batch.assess` on its scene, as ``evaluate``
     runs it (the :class:`simulator.batch.Assessment`'s dict).
 
@@ -152,7 +154,7 @@ def assess_point(task: dict) -> dict:
     native = scene.um_per_px
     if auto:
         scene = auto_resolution(scene)
-    v = task["values"]
+    v = task.values
     sigma = None
     if "placement_sigma_um" in v or "placement_sigma_deg" in v:
         w, h = chip_size(scene)
@@ -166,10 +168,10 @@ def assess_point(task: dict) -> dict:
         scene,
         quiet=True,
         method=v.get("method", "greedy"),
-        seed=task["point_seed"],
+        seed=task.point_seed,
         placement_sigma=sigma,
-        yield_starts=task["yield_starts"],
-        grid_cells=task["capture_grid"],
+        yield_starts=task.yield_starts,
+        grid_cells=task.capture_grid,
     )
     a = replace(
         a,
@@ -183,10 +185,10 @@ def assess_point(task: dict) -> dict:
         layout=scene.pattern.params.get("layout"),
     )
     summary = a.to_dict()
-    return require_finite(summary, f"point {task['point']}")
+    return require_finite(summary, f"point {task.point}")
 
 
-def price_point(task: dict) -> None:
+def price_point(task: PointTask) -> None:
     """Refuse (InputError, one line) a point whose landscape would not fit the memory budget:
     its scene built as :func:`assess_point` builds it (the pattern rasterized, coarsened as
     evaluate coarsens) and priced by :func:`simulator.landscape.require_landscape_fits`,
@@ -215,7 +217,7 @@ ASSESS_LANDSCAPES = 5.0
 WORKER_BASE_BYTES = 460 * 2**20
 
 
-def point_bytes(task: dict) -> int:
+def point_bytes(task: PointTask) -> int:
     """The peak bytes one point's run holds in its process (priced, nothing allocated): the
     imports (:data:`WORKER_BASE_BYTES`) and :data:`ASSESS_LANDSCAPES` times its landscape
     array (:func:`simulator.landscape.estimate_bytes` of the scene :func:`price_point`
@@ -242,7 +244,7 @@ def _one_line(err: BaseException) -> str:
     return (text if isinstance(err, InputError) else f"{type(err).__name__}: {text}")[:500]
 
 
-def run_point(task: dict) -> dict:
+def run_point(task: PointTask) -> dict:
     """Run one point; never raises for the point's own failure: ``status`` "ok" with the
     ``summary``, or "error" with the one-line ``error``. What each Dask task runs."""
     _cap_threads()
@@ -254,14 +256,14 @@ def run_point(task: dict) -> dict:
             summary = assess_point(task)
     except Exception as err:  # the point's failure is its row; the sweep goes on
         return {
-            "point": task["point"],
+            "point": task.point,
             "status": "error",
             "error": _one_line(err),
             "seconds": round(time.perf_counter() - t0, 3),
             "summary": None,
         }
     return {
-        "point": task["point"],
+        "point": task.point,
         "status": "ok",
         "error": None,
         "seconds": round(time.perf_counter() - t0, 3),

@@ -83,6 +83,7 @@ import os
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 from foundation import require
 from simulator.sweep._axes import HARD_MAX_POINTS
@@ -96,6 +97,7 @@ from simulator.sweep._store import (
     FLUSH_S,
     _Store,
 )
+from simulator.sweep._task import PointTask
 
 __all__ = ["run_sweep"]
 
@@ -115,13 +117,13 @@ def _bar(show: bool, total: int):
 MAX_PRICED = 16
 
 
-def _priced_points(tasks: list[dict]) -> list[dict]:
+def _priced_points(tasks: list[PointTask]) -> list[PointTask]:
     """The tasks whose memory bounds the sweep's: the first and the last, and for each axis
     the points of its smallest and largest value (numbers; others by their first and last)."""
     picks = {0, len(tasks) - 1}
-    names = dict.fromkeys(k for t in tasks for k in t["values"])
+    names = dict.fromkeys(k for t in tasks for k in t.values)
     for name in names:
-        vals = [t["values"].get(name) for t in tasks]
+        vals: list[Any] = [t.values.get(name) for t in tasks]  # an axis's values, any kind
         nums = [
             i for i, v in enumerate(vals) if isinstance(v, int | float) and not isinstance(v, bool)
         ]
@@ -130,7 +132,7 @@ def _priced_points(tasks: list[dict]) -> list[dict]:
     return [tasks[i] for i in sorted(picks)[:MAX_PRICED]]
 
 
-def _price_workers(spec: SweepSpec, tasks: list[dict]) -> tuple[float | None, float]:
+def _price_workers(spec: SweepSpec, tasks: list[PointTask]) -> tuple[float | None, float]:
     """(the largest priced peak of one point with a worker's imports, the sweep's memory
     budget in bytes) for :func:`worker_cap`: its workers together must fit the budget. A
     point that cannot be built or priced here is left to its run (its error row)."""
@@ -201,7 +203,7 @@ def run_sweep(
     failed = [0]
     try:
         done = store.done(retry_failed)
-        todo = [spec.task(p) for p in spec.points() if p["point"] not in done]
+        todo = [spec.task(p) for p in spec.points() if p.point not in done]
         with contextlib.ExitStack() as stack:
             client, t_cluster, where = start_workers(
                 stack, workers, scheduler, len(todo), lambda: _price_workers(spec, todo)
@@ -215,7 +217,7 @@ def run_sweep(
                 )
             with _bar(not quiet and bool(todo), len(todo)) as bar:
 
-                def handle(task: dict, result: dict) -> None:
+                def handle(task: PointTask, result: dict) -> None:
                     store.add(task, result)
                     failed[0] += result["status"] != "ok"
                     bar.set_postfix_str(f"failed {failed[0]}", refresh=False)

@@ -4,7 +4,8 @@
 into a :class:`SweepSpec`: the base scene, the design, the axes (:data:`AXES` and the
 design's parameters, each an :class:`Axis`) and how points are drawn (a grid, or a Latin
 hypercube of ``samples``; ``realizations``; the seeds). :meth:`SweepSpec.points` lists
-every point with its explicit ``point_seed``; :attr:`SweepSpec.digest` identifies the
+every point (a :class:`SweepPoint`) with its explicit ``point_seed``, :meth:`SweepSpec.task`
+the :class:`PointTask` a worker runs; :attr:`SweepSpec.digest` identifies the
 sweep (what a results directory is checked against). The axes (:data:`AXES`, :class:`Axis`
 and their parsing) are :mod:`simulator.sweep`, importable from here. Nothing heavy is
 imported here.
@@ -36,6 +37,7 @@ from simulator.sweep._axes import (
     _parse_axis,
     axis_kinds,
 )
+from simulator.sweep._task import PointTask, SweepPoint
 
 __all__ = ["DEFAULT_MAX_POINTS", "SweepSpec", "load_sweep", "read_toml_file"]
 
@@ -55,8 +57,6 @@ SWEEP_KEYS = (
     "capture_grid",
     "independent_noise",
 )
-#: The point's own columns, first in every table.
-ID_COLUMNS = ("point", "realization", "point_seed")
 
 
 # ----------------------------------------------------------------------- the spec
@@ -192,17 +192,17 @@ class SweepSpec:
         for i in range(n):
             yield {k: v[i] for k, v in cols.items()}
 
-    def point(self, values: dict, index: int, realization: int) -> dict:
+    def point(self, values: dict, index: int, realization: int) -> SweepPoint:
         """The point of axis ``values`` (by axis name) as the ``index``-th point, realization
         ``realization``: its explicit ``point_seed`` drawn as :meth:`points` draws it."""
-        return {
-            "point": index,
-            "realization": realization,
-            "point_seed": _point_seed(self.seed, realization, index, self.independent_noise),
-            "values": values,
-        }
+        return SweepPoint(
+            point=index,
+            realization=realization,
+            point_seed=_point_seed(self.seed, realization, index, self.independent_noise),
+            values=values,
+        )
 
-    def points(self) -> list[dict]:
+    def points(self) -> list[SweepPoint]:
         """Every point, in order: ``point`` (index), ``realization``, ``point_seed``, ``values`` by axis."""
         out = []
         for values in self._design_values():
@@ -210,22 +210,25 @@ class SweepSpec:
                 out.append(self.point(values, len(out), r))
         return out
 
-    def task(self, point: dict) -> dict:
+    def task(self, point: SweepPoint) -> PointTask:
         """What a worker needs to run ``point`` (:func:`run_point`): plain data, no paths relative to here."""
-        return {
-            **point,
-            "scene": self.scene,
-            "design": self.design,
-            "base": str(self.base_dir),
-            "yield_starts": self.yield_starts,
-            "capture_grid": self.capture_grid,
-        }
+        return PointTask(
+            point=point.point,
+            realization=point.realization,
+            point_seed=point.point_seed,
+            values=point.values,
+            scene=self.scene,
+            design=self.design,
+            base=self.base_dir,
+            yield_starts=self.yield_starts,
+            capture_grid=self.capture_grid,
+        )
 
-    def columns(self, point: dict) -> dict:
+    def columns(self, point: SweepPoint) -> dict:
         """The point's identity and settings as table columns (units in the names)."""
-        row = {k: point[k] for k in ID_COLUMNS}
+        row: dict = point.columns()
         kinds = {a.name: a for a in self.axes}
-        for name, v in point["values"].items():
+        for name, v in point.values.items():
             row[kinds[name].column] = v
         if self.design is not None:
             row["design"] = self.design["name"]
@@ -233,7 +236,7 @@ class SweepSpec:
             for k, v in self.design["params"].items():
                 row.setdefault(dk[k].column if k in dk else k, v)
             if "seed" in dk:
-                row["seed"] = _design_seed(self.design, point)
+                row["seed"] = point.design_seed(self.design)
         return row
 
     def describe(self) -> dict:
@@ -253,13 +256,6 @@ class SweepSpec:
             "axes": [a.record() | {"column": a.column} for a in self.axes],
             "files": self.files,
         }
-
-
-def _design_seed(design: dict, point: dict) -> int:
-    """A seeded design's (random-jagged) seed at this point: the given seed (default 0) plus the realization."""
-    return int(point["values"].get("seed", design["params"].get("seed", 0))) + int(
-        point["realization"]
-    )
 
 
 def load_sweep(

@@ -24,6 +24,7 @@ from typing import TextIO
 from foundation import InputError, hold, json_text, require
 from simulator.sweep._columns import STATUS_COLUMNS, flatten
 from simulator.sweep._spec import SweepSpec
+from simulator.sweep._task import SweepPoint
 
 #: Seconds between rewrites of results.parquet / results.csv while a sweep runs.
 FLUSH_S = 2.0
@@ -370,14 +371,14 @@ class _Store(ResultStore):
     def done(self, retry_failed: bool) -> set[int]:
         return {i for i, r in self.rows.items() if r.get("status") == "ok" or not retry_failed}
 
-    def add(self, point: dict, result: dict) -> dict:
+    def add(self, point: SweepPoint, result: dict) -> dict:
         row = self.spec.columns(point) | {k: result.get(k) for k in STATUS_COLUMNS}
         if result.get("summary") is not None:
             row |= flatten(result["summary"])
-        i = point["point"]
+        i = point.point
         doc = {
             "point": i,
-            "settings": point["values"],
+            "settings": dict(point.values),
             "row": row,
             "summary": result.get("summary"),
         }

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from simulator.sweep import metric
+from simulator.sweep import PointTask, metric
 
 #: The evaluator's numbers set side by side for the best design and the baseline: column,
 #: label, factor to the unit shown (:func:`simulator.sweep.metric`).
@@ -223,7 +223,8 @@ def plot_pareto(table, spec, best: list[int], path: Path) -> None:
     save_figure(fig, path)
 
 
-def _task(spec, values: dict) -> dict:
+def _task(spec, values: dict) -> PointTask:
+    """The task of the design of search ``values`` (its first realization), as a trial runs it."""
     sw = spec.sweep
     return sw.task(sw.point(values, 0, 0))
 

@@ -29,6 +29,7 @@ import math
 import os
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -37,7 +38,7 @@ import numpy as np
 from foundation import InputError, require
 from simulator.design._optuna import quiet_optuna
 from simulator.design._search._spec import MAX_TRIALS, SearchSpec, load_search
-from simulator.sweep import ResultStore
+from simulator.sweep import ID_COLUMNS, PointTask, ResultStore
 
 __all__ = ["best_trials", "search"]
 
@@ -45,8 +46,6 @@ __all__ = ["best_trials", "search"]
 FLUSH_S = 2.0
 #: Points of the search space priced before a search runs (its corners, at most).
 MAX_PRICED = 64
-#: The sweep's identity columns, left out of a trial's row (a trial has several points).
-POINT_ID = ("point", "realization", "point_seed")
 
 
 class _TrialStore(ResultStore):
@@ -269,17 +268,19 @@ class _Run:
     def _start(self, i: int, kind: str, values: dict, ot) -> None:
         self.pending[i] = {"kind": kind, "values": values, "optuna": ot, "results": {}}
 
-    def _points(self, i: int):
+    def _points(self, i: int) -> Iterator[PointTask]:
+        """Trial ``i``'s points, one per realization ``r``: the sweep's point ``i * R + r``
+        (so a point's trial is its index // R, :meth:`handle`)."""
         sw, values = self.spec.sweep, self.pending[i]["values"]
         for r in range(self.R):
             point = sw.point(values, i * self.R + r, r)
             self.pending[i].setdefault("points", []).append(point)
-            yield sw.task(point) | {"trial": i}
+            yield sw.task(point)
 
-    def handle(self, task: dict, result: dict) -> None:
-        i = task["trial"]
+    def handle(self, task: PointTask, result: dict) -> None:
+        i = task.point // self.R  # the trial whose point it is (_points)
         p = self.pending[i]
-        p["results"][task["realization"]] = result
+        p["results"][task.realization] = result
         if len(p["results"]) == self.R:
             self._finish(i)
 
@@ -289,7 +290,7 @@ class _Run:
 
         spec = self.spec
         results = [p["results"][r] for r in range(self.R)]
-        ident = {k: v for k, v in spec.sweep.columns(p["points"][0]).items() if k not in POINT_ID}
+        ident = {k: v for k, v in spec.sweep.columns(p["points"][0]).items() if k not in ID_COLUMNS}
         row = {"trial": i, "kind": p["kind"], **ident, "realizations": self.R}
         errors = [
             (f"realization {r}: " if self.R > 1 else "") + str(res["error"])
@@ -345,7 +346,7 @@ class _Run:
             "values": p["values"],
             "row": row,
             "realizations": [
-                {k: pt[k] for k in ("realization", "point_seed")}
+                {"realization": pt.realization, "point_seed": pt.point_seed}
                 | {k: res.get(k) for k in ("status", "error", "seconds", "summary")}
                 for pt, res in zip(p["points"], results, strict=True)
             ],
