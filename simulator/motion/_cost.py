@@ -42,12 +42,15 @@ class RunCost:
     #: (None, and left out of :meth:`to_dict`, for any other run)
     footprint_planes_s: float | None = None
     footprint_pieces: int | None = None
+    #: a footprint run on the FFT planes: the twists its planes were made over (a window
+    #: around its start and the aligned pose, docs/physics.md §3.5)
+    footprint_twists: int | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """The trajectory JSON's ``cost``: every field in order, a footprint run's own only
         for a footprint run."""
         out = dataclasses.asdict(self)
-        for k in ("footprint_planes_s", "footprint_pieces"):
+        for k in ("footprint_planes_s", "footprint_pieces", "footprint_twists"):
             if out[k] is None:
                 del out[k]
         return out

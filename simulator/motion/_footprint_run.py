@@ -13,6 +13,10 @@ the stepper on a landscape summed from the pads' planes, no transform.
 A dynamic run restarts from rest at each event: the film's damping makes the motion
 overdamped near alignment (docs/physics.md §4), and the chip's speed at an event is
 what it gains over about a pixel; the events are listed with their times.
+
+A run that builds the FFT planes itself builds them over a window of twists around its
+start and the aligned pose (:func:`twist_window`), and runs again on a wider one while its
+path comes near the window's side (docs/physics.md §3.5).
 """
 
 from __future__ import annotations
@@ -41,6 +45,16 @@ PROCESS_BYTES = 512 * 2**20
 #: Events a run may take before it stops (a pad's state changes a few times a run; many
 #: more means the chip is chattering on a relay's threshold).
 MAX_EVENTS = 64
+
+#: A run on the pads' FFT planes makes them over the twists within this much (degrees) of
+#: its start's twist and of the aligned pose's (:func:`twist_window`), not over the whole
+#: axis: a run turns little, and each twist's planes cost about twenty correlations.
+WINDOW_DEG = 10.0
+#: Twist steps between a run's path and its window's side: the steppers' interpolation reads
+#: a block of 4 cells around a pose (:data:`simulator.motion.PAD`), so a path this far inside
+#: reads only the window's planes, as it would the whole axis's. A path that comes nearer is
+#: run again on a window reaching :data:`WINDOW_DEG` beyond where it went.
+WINDOW_MARGIN_STEPS = 6
 
 
 def _cut(tr: Trajectory, j: int) -> Trajectory:
@@ -187,6 +201,36 @@ def footprint_engine(
     return choose_engine(scene, start, method, engine, BAND_STEPS, BAND_PX)
 
 
+def twist_window(scene: Scene, twists_deg: Sequence[float], half_deg: float) -> np.ndarray | None:
+    """The twists of the scene's axis within ``half_deg`` of zero and of every twist in
+    ``twists_deg`` (degrees): one run of the axis, symmetric about zero where the axis
+    allows (a mirror-symmetric chip's twins, +alpha and -alpha, are then both in it, made
+    from one transform as on the whole axis). None: the whole axis (no twist, or a window
+    that would hold nearly all of it)."""
+    axis = scene.twist_axis
+    if axis.count == 1:
+        return None
+    vals = axis.values()
+    reach = max(abs(float(t)) for t in (0.0, *twists_deg)) + float(half_deg)
+    window = vals[np.abs(vals) <= reach + 1e-9 * max(1.0, reach)]
+    if len(window) + 2 * WINDOW_MARGIN_STEPS >= axis.count:
+        return None
+    return window
+
+
+def _near_side(scene: Scene, window: np.ndarray, path: np.ndarray) -> bool:
+    """Whether the twists of ``path`` ((n, 3) um, um, deg) come within
+    :data:`WINDOW_MARGIN_STEPS` steps of a side of ``window`` that is not the axis's own end."""
+    vals = scene.twist_axis.values()
+    margin = WINDOW_MARGIN_STEPS * float(scene.twist_axis.step_deg)
+    tw = np.asarray(path, float)[:, 2]
+    low = window[0] > vals[0] or scene.twist_axis.periodic
+    high = window[-1] < vals[-1] or scene.twist_axis.periodic
+    return bool(
+        (low and tw.min() < window[0] + margin) or (high and tw.max() > window[-1] - margin)
+    )
+
+
 def simulate_footprint(
     scene: Scene,
     start: Sequence[float],
@@ -208,16 +252,12 @@ def simulate_footprint(
     runs on the path engine's boxes of the current state (:class:`simulator.motion.StateBoxes`),
     the state's events and relay the same."""
     from simulator.landscape import build_footprint_planes
-    from simulator.liquid import dispensed_footprint
-    from simulator.motion._field import Relay
 
     t0 = time.perf_counter()
-    proto = scene.dispense
     engine = footprint_engine(scene, start, method, engine, planes)
     inner = scene.replace(
         liquid=dataclasses.replace(scene.liquid, dispense="none", dispense_at_um=None)
     )
-    path_src = None
     if engine == "path":
         from simulator.landscape import FootprintPath, PathEnergy
 
@@ -225,9 +265,70 @@ def simulate_footprint(
         # engine for the global minimum's proof (the aligned pose, every pad wet)
         planes = FootprintPath(scene)
         path_src = (planes, PathEnergy(inner))
-    elif planes is None:
-        require_footprint_fits(scene)
-        planes = build_footprint_planes(scene, backend=backend)
+        return _run_states(
+            scene,
+            inner,
+            start,
+            method,
+            max_steps,
+            dynamics,
+            backend,
+            simulate,
+            planes,
+            path_src,
+            t0,
+        )
+    if planes is not None:
+        return _run_states(
+            scene, inner, start, method, max_steps, dynamics, backend, simulate, planes, None, t0
+        )
+    # The planes over a window of twists around the start and the aligned pose (priced for
+    # the whole axis first: a window that must widen is never refused mid-run), widened and
+    # the run made again while its path comes near the window's side.
+    require_footprint_fits(scene)
+    from simulator.landscape import global_minimum
+
+    aligned = global_minimum(inner, backend=backend).twist_deg
+    centre = [float(start[2]), aligned]
+    built = 0.0
+    while True:
+        window = twist_window(scene, centre, WINDOW_DEG)
+        planes = build_footprint_planes(scene, backend=backend, twists=window)
+        built += planes.seconds
+        out = _run_states(
+            scene, inner, start, method, max_steps, dynamics, backend, simulate, planes, None, t0
+        )
+        if window is None or not _near_side(scene, window, out["path"]):
+            break
+        # WINDOW_DEG beyond where the path went (it stopped at the window's side)
+        centre += [float(out["path"][:, 2].min()), float(out["path"][:, 2].max())]
+    out["cost"] = dataclasses.replace(
+        out["cost"],
+        footprint_planes_s=built,
+        footprint_twists=scene.twist_axis.count if window is None else len(window),
+    )
+    return out
+
+
+def _run_states(
+    scene: Scene,
+    inner: Scene,
+    start: Sequence[float],
+    method: str,
+    max_steps: int,
+    dynamics: DynamicsParams | None,
+    backend: str,
+    simulate: Callable[..., Trajectory],
+    planes: Any,
+    path_src: Any,
+    t0: float,
+) -> dict:
+    """The run of :func:`simulate_footprint` on the pads' ``planes`` (FFT planes, or the
+    path engine's :class:`~simulator.landscape.FootprintPath` with ``path_src``)."""
+    from simulator.liquid import dispensed_footprint
+    from simulator.motion._field import Relay
+
+    proto = scene.dispense
     n = planes.n_pads  # the planes' own labelling: the pattern is not labelled again
     dispensed, why = dispensed_footprint(scene, planes.labels, n)
     if method in DYNAMIC_METHODS and dynamics is None:

@@ -1,0 +1,101 @@
+"""A ``--dispense`` run on the pads' FFT planes makes them over a window of twists around its
+start and the aligned pose, not over the whole axis, and makes the run again on a wider one
+while its path comes near the window's side (docs/physics.md §3.5): the same run as on the
+whole axis's planes, which agree with the window's to round-off (the transforms' sizes
+follow the twists' extent)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+import simulator.motion._footprint_run as footprint_run
+from simulator.landscape import build_footprint_planes
+from simulator.motion import simulate
+from simulator.motion._footprint_run import WINDOW_MARGIN_STEPS, twist_window
+from tests.test_footprint_planes import fourpad
+
+pytestmark = pytest.mark.xdist_group("footprint_window")
+
+
+@pytest.fixture(scope="module")
+def chip_dispensed():
+    """The 730/100 four-pad at 10 um/px, 1 deg twists over [-45, 45), pads 10:35 deg, the
+    liquid coming in under the chip (far pads wet on the way in), and its planes on every
+    twist."""
+    s = fourpad(10.0, twist=True)
+    s = s.replace(liquid=dataclasses.replace(s.liquid, dispense="chip"))
+    return s, build_footprint_planes(s)
+
+
+def test_the_window_is_symmetric_about_zero_and_holds_each_twist_with_its_margin():
+    s = fourpad(10.0, twist=True)
+    axis = s.twist_axis
+    assert (axis.count, axis.step_deg, axis.periodic) == (90, 1.0, True)
+    w = twist_window(s, [7.0, -2.0], 10.0)
+    assert w is not None
+    np.testing.assert_array_equal(w, np.arange(-17.0, 18.0))  # |7| + 10 either way
+    one = twist_window(s, [0.0], 0.0)
+    assert one is not None and list(one) == [0.0]
+    # a window within 2 margins of the whole axis is the whole axis
+    assert twist_window(s, [45.0 - WINDOW_MARGIN_STEPS], 0.0) is None
+    assert (
+        twist_window(s.replace(effects=dataclasses.replace(s.effects, twist=False)), [0.0], 10.0)
+        is None
+    )
+
+
+def _same_run(s, a, b, method: str) -> None:
+    """``b`` (on its window) is ``a`` (on every twist's planes): the same events, outcome and
+    path (greedy, node to node: the planes' round-off decides no move), or the same end."""
+    assert a.footprint and b.footprint and a.footprint["events"], "the case has events"
+    ea, eb = a.footprint["events"], b.footprint["events"]
+    assert [(e["pad"], e["state"]) for e in ea] == [(e["pad"], e["state"]) for e in eb]
+    assert a.outcome == b.outcome == "aligned"
+    if method == "greedy":
+        assert [e["step"] for e in ea] == [e["step"] for e in eb]
+        np.testing.assert_array_equal(a.path, b.path)
+    else:
+        # the planes agree to 1e-6 of their scale (10 float32 eps, within the noise floor of
+        # 32 eps); the solver's step control carries that along, and a pose near a relay's
+        # threshold may cross it a step apart: measured 0 or 1 step, and at the end of the
+        # 1 s run 0.004 um (4e-4 px) and 8e-4 deg
+        assert all(abs(x["step"] - y["step"]) <= 1 for x, y in zip(ea, eb, strict=True))
+        step = np.array([s.um_per_px, s.um_per_px, s.twist_axis.step_deg])
+        assert (np.abs(np.subtract(a.final, b.final)) / step < 0.05).all(), (a.final, b.final)
+
+
+@pytest.mark.parametrize("method", ["greedy", "inertial"])
+def test_a_run_on_its_twist_window_is_the_run_on_every_twist(chip_dispensed, method, monkeypatch):
+    """From (400, 150 um, 8 deg), the far pads wetting on the way in: with a 20 deg window
+    the planes are made over [-28, 28] deg (57 of the 90 twists), the path turns up to 19.4
+    deg (inertial) and stays inside."""
+    s, full = chip_dispensed
+    monkeypatch.setattr(footprint_run, "WINDOW_DEG", 20.0)
+    start = (400.0, 150.0, 8.0)
+    a = simulate(s, start, method, planes=full, engine="fft")
+    b = simulate(s, start, method, engine="fft")
+    assert a.cost is not None and b.cost is not None
+    assert a.cost.footprint_twists is None  # planes given: the caller's
+    assert b.cost.footprint_twists == len(np.arange(-28.0, 29.0))
+    _same_run(s, a, b, method)
+
+
+def test_a_path_near_the_window_side_runs_again_on_a_wider_window(chip_dispensed, monkeypatch):
+    """The same start with the default 10 deg window: [-18, 18] deg first, which the path
+    leaves (it turns to 18 deg, within the margin of the side); the run is made again on
+    [-28, 28] (10 deg beyond where it went) and is the whole axis's run."""
+    s, full = chip_dispensed
+    assert footprint_run.WINDOW_DEG == 10.0
+    made = []
+    real = footprint_run.twist_window
+    monkeypatch.setattr(footprint_run, "twist_window", lambda *a: made.append(real(*a)) or made[-1])
+    start = (400.0, 150.0, 8.0)
+    a = simulate(s, start, "greedy", planes=full, engine="fft")
+    b = simulate(s, start, "greedy", engine="fft")
+    assert [(w[0], w[-1]) for w in made] == [(-18.0, 18.0), (-28.0, 28.0)]
+    assert b.cost is not None and b.cost.footprint_twists == 57
+    assert np.asarray(b.path)[:, 2].max() <= 28.0 - WINDOW_MARGIN_STEPS
+    _same_run(s, a, b, "greedy")
