@@ -22,6 +22,7 @@ path comes near the window's side (docs/physics.md §3.5).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import time
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
@@ -258,6 +259,9 @@ def simulate_footprint(
     inner = scene.replace(
         liquid=dataclasses.replace(scene.liquid, dispense="none", dispense_at_um=None)
     )
+    run = functools.partial(
+        _run_states, scene, inner, start, method, max_steps, dynamics, backend, simulate, t0=t0
+    )
     if engine == "path":
         from simulator.landscape import FootprintPath, PathEnergy
 
@@ -265,23 +269,9 @@ def simulate_footprint(
         # engine for the global minimum's proof (the aligned pose, every pad wet)
         planes = FootprintPath(scene)
         path_src = (planes, PathEnergy(inner))
-        return _run_states(
-            scene,
-            inner,
-            start,
-            method,
-            max_steps,
-            dynamics,
-            backend,
-            simulate,
-            planes,
-            path_src,
-            t0,
-        )
+        return run(planes, path_src)
     if planes is not None:
-        return _run_states(
-            scene, inner, start, method, max_steps, dynamics, backend, simulate, planes, None, t0
-        )
+        return run(planes, None)
     # The planes over a window of twists around the start and the aligned pose (priced for
     # the whole axis first: a window that must widen is never refused mid-run), widened and
     # the run made again while its path comes near the window's side.
@@ -295,9 +285,7 @@ def simulate_footprint(
         window = twist_window(scene, centre, WINDOW_DEG)
         planes = build_footprint_planes(scene, backend=backend, twists=window)
         built += planes.seconds
-        out = _run_states(
-            scene, inner, start, method, max_steps, dynamics, backend, simulate, planes, None, t0
-        )
+        out = run(planes, None)
         if window is None or not _near_side(scene, window, out["path"]):
             break
         # WINDOW_DEG beyond where the path went (it stopped at the window's side)
@@ -321,6 +309,7 @@ def _run_states(
     simulate: Callable[..., Trajectory],
     planes: Any,
     path_src: Any,
+    *,
     t0: float,
 ) -> dict:
     """The run of :func:`simulate_footprint` on the pads' ``planes`` (FFT planes, or the
