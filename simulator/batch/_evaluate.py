@@ -230,9 +230,9 @@ def evaluate(
             # a layout pattern: file, cell, layers, units, and where the origin is
             layout=scene.pattern.params.get("layout"),
             liquid_warnings=list(liquid_warnings or []),
+            volume_window=_volume_window(given, a),  # from the yield's noise, unchanged here
+            seconds=round(time.perf_counter() - t_start, 2),
         )
-        a = replace(a, volume_window=_volume_window(given, a))
-        a = replace(a, seconds=round(time.perf_counter() - t_start, 2))
         summary = a.to_dict()
         require_finite(summary, "evaluate summary")
         (tmp / "summary.json").write_text(json_text(summary))
