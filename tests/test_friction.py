@@ -15,6 +15,7 @@ on the index (eps times the largest index).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import jax
@@ -226,17 +227,22 @@ def test_pinning_changes_with_the_pose_and_the_footprint():
     z = np.zeros((1, 1, 1, 1), np.uint8)
     seen = set()
     for wet in (None, (True, False), (False, True), (False, False)):
+        fields = [field]
         if wet is not None:
             bits = np.packbits(np.asarray(wet, bool), bitorder="little")
-            f = field._replace(relay=Relay(jnp.asarray(z), jnp.asarray(z), jnp.asarray(bits)))
-        else:
-            f = field
-        for pose in poses:
-            ref = np.asarray(sliding_pinning_at(sc, pose, wet)) * scale
-            got = np.asarray(pin_at(f, grid, jnp.asarray(grid.to_index(np.asarray(pose)))))
-            # float64 sums of about 1,600 elements: round-off far below 1e-9 of the value
-            assert np.allclose(got, ref, rtol=1e-9, atol=1e-30), (wet, pose)
-            seen.add(tuple(np.round(ref / scale, 15)))
+            relay = Relay(jnp.asarray(z), jnp.asarray(z), jnp.asarray(bits))
+            # the state's pattern made once as the relay is set, and (a relay set without
+            # it) the pads' labels read at each pose: the same pinning
+            f = field._replace(relay=relay)
+            assert f.relay is not None and f.relay.lines_pattern is not None
+            fields = [f, dataclasses.replace(field, relay=relay)]
+        for f in fields:
+            for pose in poses:
+                ref = np.asarray(sliding_pinning_at(sc, pose, wet)) * scale
+                got = np.asarray(pin_at(f, grid, jnp.asarray(grid.to_index(np.asarray(pose)))))
+                # float64 sums of about 1,600 elements: round-off far below 1e-9 of the value
+                assert np.allclose(got, ref, rtol=1e-9, atol=1e-30), (wet, pose)
+                seen.add(tuple(np.round(ref / scale, 15)))
     # the pinning changes with the pose and with which pads are wet; none wet, none pins
     assert len(seen) >= 8
     assert sliding_pinning_at(sc, (0, 0, 0), (False, False)) == (0.0, 0.0, 0.0)

@@ -44,7 +44,9 @@ PAD = 4
 
 
 @functools.partial(
-    jax.tree_util.register_dataclass, data_fields=["reached", "within", "wet"], meta_fields=[]
+    jax.tree_util.register_dataclass,
+    data_fields=["reached", "within", "wet", "twist_span", "lines_pattern"],
+    meta_fields=[],
 )
 @dataclass(frozen=True)
 class Relay:
@@ -56,13 +58,24 @@ class Relay:
     wet: (W,) uint8, the state the run is on (the landscape it steps on is that state's);
         a NumPy array works as well (the run moves it to the device).
 
+    twist_span: (2,) int32, the first and last twist index a run may stand on, or None (any):
+        on planes made over a window of the twist axis, the twists whose steppers read only
+        the window's planes (:func:`simulator.motion.twist_window`).
+
+    lines_pattern: the field's pinning lines' pattern with the dry pads' values zeroed,
+        made once by :meth:`Field._replace` (a run's pinning then reads one array per line,
+        not the pattern and its labels); None: read from the labels at each pose.
+
     A run on a field with a relay stops (status EVENT) at the first pose whose node would
-    change the state: ``reached | (wet & within) != wet`` (:func:`relay_changes`).
+    change the state: ``reached | (wet & within) != wet`` (:func:`relay_changes`), or whose
+    twist index lies outside ``twist_span`` (the caller runs it again on a wider window).
     """
 
     reached: jax.Array
     within: jax.Array
     wet: jax.Array | np.ndarray
+    twist_span: jax.Array | np.ndarray | None = None
+    lines_pattern: jax.Array | None = None
 
 
 @functools.partial(
@@ -140,6 +153,12 @@ class Field:
                 if "pinned" in changes
                 else np.any(np.asarray(self.pin, np.float64))
             )
+        relay = changes.get("relay", self.relay)
+        lines = changes.get("lines", self.lines)
+        if relay is not None and lines is not None and ("relay" in changes or "lines" in changes):
+            from simulator.motion._pinning import wet_pattern
+
+            changes["relay"] = replace(relay, lines_pattern=wet_pattern(lines, relay.wet))
         return replace(self, **changes)
 
 
@@ -241,7 +260,9 @@ def field_and_grid(
 def relay_changes(field: Field, grid: PoseGrid, q: ArrayLike) -> jax.Array:
     """True where the footprint state would change at fractional indices q (the node
     round(q), the twist wrapped on a periodic axis, every index clipped to the grid):
-    some pad reached that is dry, or some wet pad out of reach. False without a relay."""
+    some pad reached that is dry, or some wet pad out of reach; or where the node's twist
+    index (neither wrapped nor clipped) lies outside the relay's ``twist_span``. False
+    without a relay."""
     r = field.relay
     if r is None:
         return jnp.asarray(False)
@@ -250,7 +271,10 @@ def relay_changes(field: Field, grid: PoseGrid, q: ArrayLike) -> jax.Array:
     it = jnp.mod(i[0], n_t) if grid.wrap else jnp.clip(i[0], 0, n_t - 1)
     iy, ix = jnp.clip(i[1], 0, ny - 1), jnp.clip(i[2], 0, nx - 1)
     new = r.reached[it, iy, ix] | (r.wet & r.within[it, iy, ix])
-    return jnp.any(new != r.wet)
+    changes = jnp.any(new != r.wet)
+    if r.twist_span is None:
+        return changes
+    return changes | (i[0] < r.twist_span[0]) | (i[0] > r.twist_span[1])
 
 
 # ----------------------------------------------------------------- look-ups
