@@ -37,8 +37,15 @@ def test_the_window_is_symmetric_about_zero_and_holds_each_twist_with_its_margin
     w = twist_window(s, [7.0, -2.0], 10.0)
     assert w is not None
     np.testing.assert_array_equal(w, np.arange(-17.0, 18.0))  # |7| + 10 either way
+    # at least the margin and the steppers' 4 cells either side of each twist, whatever
+    # the half-width asked: a run starts clear of the side on any axis
     one = twist_window(s, [0.0], 0.0)
-    assert one is not None and list(one) == [0.0]
+    assert one is not None and list(one) == list(np.arange(-10.0, 11.0))
+    assert WINDOW_MARGIN_STEPS + 4 == 10
+    coarse = s.replace(twist=dataclasses.replace(s.twist, step_deg=2.0))
+    assert (coarse.twist_axis.count, coarse.twist_axis.step_deg) == (45, 2.0)
+    w2 = twist_window(coarse, [4.0], 10.0)
+    assert w2 is not None and list(w2) == list(np.arange(-24.0, 25.0, 2.0))  # 4 + 10 steps
     # a window within 2 margins of the whole axis is the whole axis
     assert twist_window(s, [45.0 - WINDOW_MARGIN_STEPS], 0.0) is None
     assert (
@@ -99,3 +106,36 @@ def test_a_path_near_the_window_side_runs_again_on_a_wider_window(chip_dispensed
     assert b.cost is not None and b.cost.footprint_twists == 57
     assert np.asarray(b.path)[:, 2].max() <= 28.0 - WINDOW_MARGIN_STEPS
     _same_run(s, a, b, "greedy")
+
+
+@pytest.mark.parametrize("method", ["greedy", "gradient"])
+def test_a_batch_on_its_twist_window_is_the_batch_on_every_twist(
+    chip_dispensed, method, monkeypatch
+):
+    """A batch that makes its own planes makes them over a window around its starts' twists
+    and the aligned pose's: from (400, 150 um, 8 deg) the path turns to 18 deg, inside the
+    margin of [-18, 18] deg (the first window, 8 + 10 deg), so that lane stops there and runs
+    again from its start on [-28, 28] (10 deg beyond the side); the lanes that stayed clear
+    keep their ends. Every lane ends as on the whole axis's planes."""
+    from simulator.batch import run_batch
+
+    s, full = chip_dispensed
+    made = []
+    real = footprint_run.twist_window
+    monkeypatch.setattr(
+        "simulator.motion.twist_window", lambda *a: made.append(real(*a)) or made[-1]
+    )
+    starts = np.array([(400.0, 150.0, 8.0), (250.0, -40.0, 3.0), (-300.0, 60.0, -5.0)])
+    a = run_batch(s, starts, method, progress=False, planes=full)
+    b = run_batch(s, starts, method, progress=False)
+    assert a.stats["footprint_twists"] == 90
+    assert [(w[0], w[-1]) for w in made] == [(-18.0, 18.0), (-28.0, 28.0)]
+    assert b.stats["footprint_twists"] == 57
+    np.testing.assert_array_equal(a.outcome, b.outcome)
+    assert a.stats["footprint_events"] == b.stats["footprint_events"] > 0
+    if method == "greedy":  # node for node: the planes' round-off decides no move
+        np.testing.assert_array_equal(a.steps, b.steps)
+        np.testing.assert_array_equal(a.final, b.final)
+    # gradient: where it stops on the aligned floor (pinned within the pads' 10:35 deg
+    # window) follows the planes' round-off, as a single run's does on a window (measured
+    # 0.05-0.17 px apart, 2-3 steps; the batch equals the single run on the same planes)

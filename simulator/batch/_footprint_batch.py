@@ -25,6 +25,7 @@ import time
 import numpy as np
 
 from foundation import progress_bar
+from simulator.batch._stats import BatchResult
 
 
 def _nodes(grid, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -60,17 +61,159 @@ def run_footprint_batch(
     docstring). The checks and the pricing of the starts are the caller's; the pads'
     planes are priced here before any is made, or given (``planes``, of this scene: one
     build serves both protocols). ``dispense``: the protocol, default the scene's. Returns a :class:`BatchResult` whose
-    ``stats`` add ``footprint_events`` (events per lane, summed), ``footprint_rounds``
-    and ``footprint_planes_s``."""
+    ``stats`` add ``footprint_events`` (events per lane, summed), ``footprint_rounds``,
+    ``footprint_planes_s`` and ``footprint_twists`` (the twists the planes held).
+
+    Planes made here hold a window of twists around the starts' twists and the aligned
+    pose's, as a single run's do (:func:`simulator.motion.twist_window`): each lane's
+    relay stops it where it comes within :data:`simulator.motion.WINDOW_MARGIN_STEPS` of
+    the window's side, and those lanes run again from their start on a window reaching
+    :data:`simulator.motion.WINDOW_DEG` beyond it (the whole axis at most)."""
+    from simulator.landscape import build_footprint_planes, global_minimum
+    from simulator.motion import WINDOW_DEG, require_footprint_fits, twist_window
+
+    t0 = time.perf_counter()
+    if dispense is not None and dispense != scene.dispense:
+        at = scene.liquid.dispense_at_um if dispense == "pattern" else None
+        scene = scene.replace(
+            liquid=dataclasses.replace(scene.liquid, dispense=dispense, dispense_at_um=at)
+        )
+    given = planes is not None
+    centre: list[float] = []
+    if not given:
+        # priced for the whole axis first: a window that must widen is never refused later
+        require_footprint_fits(scene)
+        inner = scene.replace(
+            liquid=dataclasses.replace(scene.liquid, dispense="none", dispense_at_um=None)
+        )
+        aligned = global_minimum(inner).twist_deg  # every pad wet: the stateless minimum
+        centre = [float(poses[:, 2].min()), float(poses[:, 2].max()), aligned]
+    n = len(poses)
+    final = np.empty((n, 3))
+    outcome = np.empty(n, np.int8)
+    steps = np.zeros(n, np.int64)
+    energy = np.empty(n)
+    time_s = np.full(n, np.nan)
+    events = np.zeros(n, np.int64)
+    todo = np.arange(n)
+    first = None
+    rounds, planes_s, run_s, n_twists, t_land = 0, 0.0, 0.0, 0, 0.0
+    shape: tuple[int, ...] = ()
+    window = None if given else twist_window(scene, centre, WINDOW_DEG)
+    if not given:
+        planes = build_footprint_planes(scene, progress=progress, twists=window)
+    with progress_bar(progress, n, f"{method} (footprint)", "start") as bar:
+        while True:
+            n_twists = int(planes.template.energy.shape[0])
+            part = _lanes_on(
+                scene,
+                planes,
+                poses[todo],
+                method,
+                chunk,
+                max_steps,
+                workers,
+                dynamics,
+                bar,
+                windowed=window is not None,
+            )
+            if first is None:
+                first = part
+                t_land = time.perf_counter() - t0 - part.run_s
+            else:
+                t_land += planes.seconds  # the wider window's build
+            shape = part.shape
+            planes_s += planes.seconds
+            run_s += part.run_s
+            rounds += part.rounds
+            ok = ~part.escaped
+            done = todo[ok]
+            final[done], outcome[done], steps[done] = (
+                part.final[ok],
+                part.outcome[ok],
+                part.steps[ok],
+            )
+            energy[done], time_s[done], events[done] = (
+                part.energy[ok],
+                part.time_s[ok],
+                part.events[ok],
+            )
+            if ok.all():
+                break
+            todo = todo[~ok]
+            # WINDOW_DEG beyond the window's sides, where those lanes went (rare: no
+            # progress of its own inside the lanes' bar)
+            assert window is not None  # only a window's margins are left
+            centre += [float(window[0]), float(window[-1])]
+            window = twist_window(scene, centre, WINDOW_DEG)
+            planes = None  # dropped before the wider one is made: the price holds one
+            planes = build_footprint_planes(scene, twists=window)
+    assert first is not None
+    dynamic = dynamics is not None
+    return BatchResult(
+        method=method,
+        start=poses,
+        final=final,
+        outcome=outcome,
+        steps=np.minimum(steps, np.iinfo(np.int32).max).astype(np.int32),
+        energy_J=energy,
+        period_deg=first.period_deg,
+        optimum=first.optimum,
+        stats={
+            "landscape_s": t_land,
+            "run_s": run_s,
+            "starts_per_s": n / run_s,
+            "steps_per_s": float(steps.sum()) / run_s,
+            "chunk": chunk,
+            "landscape_shape": shape,  # the last window's: every twist a lane stood on
+            "stiff": False,
+            "footprint_events": int(events.sum()),
+            "footprint_rounds": rounds,
+            "footprint_planes_s": planes_s,
+            "footprint_twists": n_twists,
+        },
+        time_s=time_s if dynamic else None,
+        error_limit=first.error_limit,
+    )
+
+
+@dataclasses.dataclass(frozen=True)
+class _Part:
+    """The lanes of one set of planes (:func:`_lanes_on`): per lane its end (final pose, um
+    and deg), outcome, steps, energy (J), time (s, NaN for the steppers), events, and
+    whether it left the planes' window of twists (its other values then unset); the
+    reference landscape's shape, period, optimum and error limit; rounds and run time."""
+
+    final: np.ndarray
+    outcome: np.ndarray
+    steps: np.ndarray
+    energy: np.ndarray
+    time_s: np.ndarray
+    events: np.ndarray
+    escaped: np.ndarray
+    shape: tuple[int, ...]
+    period_deg: float
+    optimum: tuple[float, float, float]
+    error_limit: dict | None
+    rounds: int
+    run_s: float
+
+
+def _lanes_on(
+    scene, planes, poses, method, chunk, max_steps, workers, dynamics, bar, *, windowed: bool
+) -> _Part:
+    """Every start of ``poses`` run in rounds on ``planes`` (module docstring). ``windowed``:
+    the planes hold a window of the twist axis, whose margins (``WINDOW_MARGIN_STEPS`` at
+    each side that is not the axis's end) a lane may not enter: it stops there, escaped."""
     import jax.numpy as jnp
 
     from simulator.batch._lanes import _check_starts_fit, _run_order, run_lanes
-    from simulator.batch._stats import BatchResult
-    from simulator.landscape import build_footprint_planes, global_minimum
+    from simulator.landscape import global_minimum
     from simulator.liquid import dispensed_footprint
     from simulator.motion import (
         EVENT,
         MAX_EVENTS,
+        WINDOW_MARGIN_STEPS,
         Relay,
         error_limit,
         field_and_grid,
@@ -78,25 +221,14 @@ def run_footprint_batch(
         is_stiff,
         pin_lines,
         remaining_params,
-        require_footprint_fits,
         wet_bits,
     )
     from simulator.physics import align_tolerance, pin_per_index
 
     dynamic = dynamics is not None
-    t0 = time.perf_counter()
-    if planes is None:
-        require_footprint_fits(scene)
-        planes = build_footprint_planes(scene, progress=progress)
     n_pads = planes.n_pads
-    if dispense is not None and dispense != scene.dispense:
-        at = scene.liquid.dispense_at_um if dispense == "pattern" else None
-        scene = scene.replace(
-            liquid=dataclasses.replace(scene.liquid, dispense=dispense, dispense_at_um=at)
-        )
     dispensed, _ = dispensed_footprint(scene, planes.labels, n_pads)
     reference = planes.landscape(np.ones(n_pads, bool))
-    t_land = time.perf_counter() - t0
     _check_starts_fit(reference, poses)
     reached, within = footprint_relay(planes)
     pin = pin_per_index(scene, reference.um_per_px, reference.twist_step_deg)
@@ -108,6 +240,20 @@ def run_footprint_batch(
     scale = -e_min if e_min < 0 else None
     grid = reference.grid
     best = grid.to_index(np.asarray(opt.pose))
+    # the twist indices a lane may stand on: clear of the window's sides by the margin
+    # (a side at the axis's own end is a wall the whole axis has as well)
+    n_t = grid.shape[0]
+    span = None
+    if windowed:
+        axis = scene.twist_axis.values()
+        tw = reference.twist_deg
+        lo = WINDOW_MARGIN_STEPS if (tw[0] > axis[0] or scene.twist_axis.periodic) else -(2**30)
+        hi = (
+            n_t - 1 - WINDOW_MARGIN_STEPS
+            if (tw[-1] < axis[-1] or scene.twist_axis.periodic)
+            else 2**30
+        )
+        span = np.array([lo, hi], np.int32)
 
     n = len(poses)
     q = grid.to_index(poses)
@@ -116,130 +262,131 @@ def run_footprint_batch(
     t_off = np.zeros(n)
     steps = np.zeros(n, np.int64)
     events = np.zeros(n, np.int64)
-    final_q = np.empty((n, 3))
+    final_q = np.zeros((n, 3))
     outcome = np.empty(n, np.int8)
     energy = np.empty(n)
     time_s = np.full(n, np.nan)
+    escaped = np.zeros(n, bool)
     active = np.ones(n, bool)
     rounds = 0
     t1 = time.perf_counter()
-    with progress_bar(progress, n, f"{method} (footprint)", "start") as bar:
-        for _ in range(MAX_EVENTS + 1):
-            lanes = np.flatnonzero(active)
-            if not lanes.size:
-                break
-            rounds += 1
-            keys = np.packbits(wet[lanes], axis=1, bitorder="little")
-            states, group = np.unique(keys, axis=0, return_inverse=True)
-            for g in range(len(states)):
-                members = lanes[group.ravel() == g]
-                state = wet[members[0]]
-                fld, _ = field_and_grid(
-                    planes.landscape(state), pin=pin, align_tol=tol, scale=scale, lines=lines
-                )
-                fld = fld._replace(
-                    best=jnp.asarray(best, fld.dtype),
-                    relay=Relay(reached, within, jnp.asarray(wet_bits(state))),
-                )
-                stiff = bool(is_stiff(method, fld, grid, dynamics)) if dynamic else False
-                params, per_lane = None, False
-                if dynamic:
-                    # each lane has the time left to its own run (its stretches' sum)
-                    left = [remaining_params(dynamics, float(t)) for t in t_off[members]]
-                    params = type(dynamics)(
-                        *(
-                            np.asarray([getattr(p, f) for p in left], np.float64)
-                            for f in (
-                                "mass_kg",
-                                "inertia_kg_m2",
-                                "damping_N_s_m",
-                                "rot_damping_N_m_s",
-                                "t_max_s",
-                            )
+    for _ in range(MAX_EVENTS + 1):
+        lanes = np.flatnonzero(active)
+        if not lanes.size:
+            break
+        rounds += 1
+        keys = np.packbits(wet[lanes], axis=1, bitorder="little")
+        states, group = np.unique(keys, axis=0, return_inverse=True)
+        for g in range(len(states)):
+            members = lanes[group.ravel() == g]
+            state = wet[members[0]]
+            fld, _ = field_and_grid(
+                planes.landscape(state), pin=pin, align_tol=tol, scale=scale, lines=lines
+            )
+            fld = fld._replace(
+                best=jnp.asarray(best, fld.dtype),
+                relay=Relay(
+                    reached,
+                    within,
+                    jnp.asarray(wet_bits(state)),
+                    None if span is None else jnp.asarray(span),
+                ),
+            )
+            stiff = bool(is_stiff(method, fld, grid, dynamics)) if dynamic else False
+            params, per_lane = None, False
+            if dynamic:
+                # each lane has the time left to its own run (its stretches' sum)
+                left = [remaining_params(dynamics, float(t)) for t in t_off[members]]
+                params = type(dynamics)(
+                    *(
+                        np.asarray([getattr(p, f) for p in left], np.float64)
+                        for f in (
+                            "mass_kg",
+                            "inertia_kg_m2",
+                            "damping_N_s_m",
+                            "rot_damping_N_m_s",
+                            "t_max_s",
                         )
                     )
-                    per_lane = True
-                order = _run_order(q[members], np.asarray(best), grid)
-                run = members[order]
-                # a group's lanes padded to a power of two (at least 8, at most a chunk):
-                # the rounds' shrinking groups share a few compiled shapes instead of
-                # compiling one per group size (each compile takes seconds)
-                lanes_min = min(chunk, max(8, 1 << (len(run) - 1).bit_length()))
-                got = run_lanes(
-                    fld,
-                    grid,
-                    params,
-                    q[run],
-                    method,
-                    max_steps,
-                    stiff,
-                    chunk,
-                    workers,
-                    None,
-                    per_lane,
-                    lanes_min,
                 )
-                q_end, st, status, out, e, ts = got
-                steps[run] += st
-                energy[run] = e  # a lane's energy where its latest stretch ended
-                moved = status == EVENT
-                new = _next_states(planes, wet[run], q_end, grid)
-                changed = moved & (new != wet[run]).any(axis=1)
-                t_end = t_off[run] + (ts if dynamic else 0.0)
-                # an event: the lane goes on from that pose, from rest, on its new state
-                ev = run[changed]
-                events[ev] += 1
-                wet[ev] = new[changed]
-                q[ev] = np.round(q_end[changed]) if method == "greedy" else q_end[changed]
-                t_off[ev] = t_end[changed]
-                # an event with no change (the host's node and the device's disagree on a
-                # half-integer index): the lane goes on from there on the same state
-                same = run[moved & ~changed]
-                q[same] = (
-                    np.round(q_end[moved & ~changed])
-                    if method == "greedy"
-                    else q_end[moved & ~changed]
-                )
-                t_off[same] = t_end[moved & ~changed]
-                done = ~moved
-                if dynamic:  # a run whose time is up at an event ends there
-                    up = moved & (t_end >= float(dynamics.t_max_s))
-                    done |= up
-                    out = np.where(up, 4, out)
-                end = run[done]
-                final_q[end], outcome[end] = q_end[done], out[done]
-                if dynamic:
-                    time_s[end] = np.minimum(t_end[done], float(dynamics.t_max_s))
-                active[end] = False
-                bar.update(int(done.sum()))
-        left = np.flatnonzero(active)  # still changing state after MAX_EVENTS: ran out
-        if left.size:
-            final_q[left], outcome[left] = q[left], 4
-            bar.update(int(left.size))
-    dt = time.perf_counter() - t1
+                per_lane = True
+            order = _run_order(q[members], np.asarray(best), grid)
+            run = members[order]
+            # a group's lanes padded to a power of two (at least 32, at most a chunk):
+            # the rounds' shrinking groups share a few compiled shapes instead of
+            # compiling one per group size (each compile takes about a second)
+            lanes_min = min(chunk, max(32, 1 << (len(run) - 1).bit_length()))
+            got = run_lanes(
+                fld,
+                grid,
+                params,
+                q[run],
+                method,
+                max_steps,
+                stiff,
+                chunk,
+                workers,
+                None,
+                per_lane,
+                lanes_min,
+            )
+            q_end, st, status, out, e, ts = got
+            steps[run] += st
+            energy[run] = e  # a lane's energy where its latest stretch ended
+            moved = status == EVENT
+            if span is not None:  # stopped at the window's margin: run again on a wider one
+                it_end = np.round(q_end[:, 0])
+                away = moved & ((it_end < span[0]) | (it_end > span[1]))
+                escaped[run[away]] = True
+                active[run[away]] = False
+                moved &= ~away
+            else:
+                away = np.zeros(len(run), bool)
+            new = _next_states(planes, wet[run], q_end, grid)
+            changed = moved & (new != wet[run]).any(axis=1)
+            t_end = t_off[run] + (ts if dynamic else 0.0)
+            # an event: the lane goes on from that pose, from rest, on its new state
+            ev = run[changed]
+            events[ev] += 1
+            wet[ev] = new[changed]
+            q[ev] = np.round(q_end[changed]) if method == "greedy" else q_end[changed]
+            t_off[ev] = t_end[changed]
+            # an event with no change (the host's node and the device's disagree on a
+            # half-integer index): the lane goes on from there on the same state
+            same = run[moved & ~changed]
+            q[same] = (
+                np.round(q_end[moved & ~changed]) if method == "greedy" else q_end[moved & ~changed]
+            )
+            t_off[same] = t_end[moved & ~changed]
+            done = ~moved & ~away
+            if dynamic:  # a run whose time is up at an event ends there
+                up = moved & (t_end >= float(dynamics.t_max_s))
+                done |= up
+                out = np.where(up, 4, out)
+            end = run[done]
+            final_q[end], outcome[end] = q_end[done], out[done]
+            if dynamic:
+                time_s[end] = np.minimum(t_end[done], float(dynamics.t_max_s))
+            active[end] = False
+            bar.update(int(done.sum()))
+    left = np.flatnonzero(active)  # still changing state after MAX_EVENTS: ran out
+    if left.size:
+        final_q[left], outcome[left] = q[left], 4
+        bar.update(int(left.size))
     ox, oy, ot = (float(v) for v in opt.pose)
-    return BatchResult(
-        method=method,
-        start=poses,
+    return _Part(
         final=grid.to_pose(final_q),
         outcome=outcome,
-        steps=np.minimum(steps, np.iinfo(np.int32).max).astype(np.int32),
-        energy_J=energy,
+        steps=steps,
+        energy=energy,
+        time_s=time_s,
+        events=events,
+        escaped=escaped,
+        shape=tuple(int(v) for v in reference.energy.shape),
         period_deg=float(reference.period_deg),
         optimum=(ox, oy, ot),
-        stats={
-            "landscape_s": t_land,
-            "run_s": dt,
-            "starts_per_s": n / dt,
-            "steps_per_s": float(steps.sum()) / dt,
-            "chunk": chunk,
-            "landscape_shape": tuple(int(v) for v in reference.energy.shape),
-            "stiff": False,
-            "footprint_events": int(events.sum()),
-            "footprint_rounds": rounds,
-            "footprint_planes_s": planes.seconds,
-        },
-        time_s=time_s if dynamic else None,
         # around the aligned pose every pad is wet: the reference landscape's floor and grid
         error_limit=error_limit(scene, reference, pin=pin),
+        rounds=rounds,
+        run_s=time.perf_counter() - t1,
     )

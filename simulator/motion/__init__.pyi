@@ -40,12 +40,15 @@ from ._field import (
 )
 from ._footprint_run import (
     MAX_EVENTS as MAX_EVENTS,
+    WINDOW_DEG as WINDOW_DEG,
+    WINDOW_MARGIN_STEPS as WINDOW_MARGIN_STEPS,
     footprint_budget_bytes as footprint_budget_bytes,
     footprint_engine as footprint_engine,
     footprint_relay as footprint_relay,
     footprint_words as footprint_words,
     remaining_params as remaining_params,
     require_footprint_fits as require_footprint_fits,
+    twist_window as twist_window,
     wet_bits as wet_bits,
 )
 from ._pathrun import (

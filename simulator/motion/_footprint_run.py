@@ -206,13 +206,16 @@ def twist_window(scene: Scene, twists_deg: Sequence[float], half_deg: float) -> 
     """The twists of the scene's axis within ``half_deg`` of zero and of every twist in
     ``twists_deg`` (degrees): one run of the axis, symmetric about zero where the axis
     allows (a mirror-symmetric chip's twins, +alpha and -alpha, are then both in it, made
-    from one transform as on the whole axis). None: the whole axis (no twist, or a window
-    that would hold nearly all of it)."""
+    from one transform as on the whole axis). ``half_deg`` is at least
+    :data:`WINDOW_MARGIN_STEPS` + 4 twist steps, so that a run starting at one of
+    ``twists_deg`` starts clear of the margin at the window's side on any axis. None: the
+    whole axis (no twist, or a window that would hold nearly all of it)."""
     axis = scene.twist_axis
     if axis.count == 1:
         return None
     vals = axis.values()
-    reach = max(abs(float(t)) for t in (0.0, *twists_deg)) + float(half_deg)
+    half = max(float(half_deg), (WINDOW_MARGIN_STEPS + 4) * float(axis.step_deg))
+    reach = max(abs(float(t)) for t in (0.0, *twists_deg)) + half
     window = vals[np.abs(vals) <= reach + 1e-9 * max(1.0, reach)]
     if len(window) + 2 * WINDOW_MARGIN_STEPS >= axis.count:
         return None
@@ -283,6 +286,7 @@ def simulate_footprint(
     built = 0.0
     while True:
         window = twist_window(scene, centre, WINDOW_DEG)
+        planes = None  # a narrower window's planes dropped first: the price holds one
         planes = build_footprint_planes(scene, backend=backend, twists=window)
         built += planes.seconds
         out = run(planes, None)
