@@ -156,10 +156,21 @@ class Field:
         relay = changes.get("relay", self.relay)
         lines = changes.get("lines", self.lines)
         if relay is not None and lines is not None and ("relay" in changes or "lines" in changes):
-            from simulator.motion._pinning import wet_pattern
-
-            changes["relay"] = replace(relay, lines_pattern=wet_pattern(lines, relay.wet))
+            changes["relay"] = replace(
+                relay, lines_pattern=wet_pattern(lines.pattern, lines.labels, relay.wet)
+            )
         return replace(self, **changes)
+
+
+def wet_pattern(pattern: ArrayLike, labels: ArrayLike, wet: ArrayLike) -> jax.Array:
+    """The pinning lines' ``pattern`` with the values of the pads that are dry in ``wet``
+    zeroed (``labels``: the pads' labels 1..n on the same pixels, 0 the substrate; ``wet``:
+    the relay's (W,) uint8 bits, pad ``k`` in bit ``k % 8`` of byte ``k // 8``): what the
+    per-pose pinning reads on that footprint state (:attr:`Relay.lines_pattern`)."""
+    pattern, labels, wet = jnp.asarray(pattern), jnp.asarray(labels), jnp.asarray(wet)
+    k = jnp.maximum(labels - 1, 0)
+    bit = (wet[k // 8] >> (k % 8).astype(wet.dtype)) & 1
+    return jnp.where((labels > 0) & (bit > 0), pattern, jnp.zeros_like(pattern))
 
 
 def pinning_fields(pin: Sequence[float], align_tol: Sequence[float]) -> dict:

@@ -104,16 +104,6 @@ def pin_lines(scene: Scene, dtype: DTypeLike) -> PinLines | None:
     )
 
 
-def wet_pattern(lines: PinLines, wet: ArrayLike) -> jax.Array:
-    """``lines.pattern`` with the values of the pads that are dry in ``wet`` (the relay's
-    (W,) uint8 bits, pad ``k`` in bit ``k % 8`` of byte ``k // 8``) zeroed: what
-    :func:`pin_at` reads on that footprint state (:attr:`Relay.lines_pattern`)."""
-    wet = jnp.asarray(wet)
-    k = jnp.maximum(lines.labels - 1, 0)
-    bit = (wet[k // 8] >> (k % 8).astype(wet.dtype)) & 1
-    return jnp.where((lines.labels > 0) & (bit > 0), lines.pattern, jnp.zeros_like(lines.pattern))
-
-
 def _wet_value(lines: PinLines, relay: Relay | None, r: jax.Array, c: jax.Array) -> jax.Array:
     """The pattern's value at integer (row, col) of the ringed arrays, 0 on a dry pad."""
     if relay is None:
