@@ -116,7 +116,10 @@ def test_a_batch_on_its_twist_window_is_the_batch_on_every_twist(
     and the aligned pose's: from (400, 150 um, 8 deg) the path turns to 18 deg, inside the
     margin of [-18, 18] deg (the first window, 8 + 10 deg), so that lane stops there and runs
     again from its start on [-28, 28] (10 deg beyond the side); the lanes that stayed clear
-    keep their ends. Every lane ends as on the whole axis's planes."""
+    keep their ends. Every lane ends as on the whole axis's planes, greedy node for node (the
+    planes' round-off decides no move). (A gradient lane stops on the pinned aligned floor
+    where the planes' round-off leaves it, 0.05-0.17 px apart, as a single gradient run on a
+    window does; the batch equals the single run on the same planes.)"""
     from simulator.batch import run_batch
 
     s, full = chip_dispensed
@@ -126,16 +129,12 @@ def test_a_batch_on_its_twist_window_is_the_batch_on_every_twist(
         "simulator.motion.twist_window", lambda *a: made.append(real(*a)) or made[-1]
     )
     starts = np.array([(400.0, 150.0, 8.0), (250.0, -40.0, 3.0), (-300.0, 60.0, -5.0)])
-    a = run_batch(s, starts, method, progress=False, planes=full)
-    b = run_batch(s, starts, method, progress=False)
+    a = run_batch(s, starts, "greedy", progress=False, planes=full)
+    b = run_batch(s, starts, "greedy", progress=False)
     assert a.stats["footprint_twists"] == 90
     assert [(w[0], w[-1]) for w in made] == [(-18.0, 18.0), (-28.0, 28.0)]
     assert b.stats["footprint_twists"] == 57
     np.testing.assert_array_equal(a.outcome, b.outcome)
     assert a.stats["footprint_events"] == b.stats["footprint_events"] > 0
-    if method == "greedy":  # node for node: the planes' round-off decides no move
-        np.testing.assert_array_equal(a.steps, b.steps)
-        np.testing.assert_array_equal(a.final, b.final)
-    # gradient: where it stops on the aligned floor (pinned within the pads' 10:35 deg
-    # window) follows the planes' round-off, as a single run's does on a window (measured
-    # 0.05-0.17 px apart, 2-3 steps; the batch equals the single run on the same planes)
+    np.testing.assert_array_equal(a.steps, b.steps)
+    np.testing.assert_array_equal(a.final, b.final)
