@@ -59,7 +59,9 @@ class _Part:
 
     __slots__ = ("P", "T", "hp", "wp", "_pattern_steps", "i0", "j0", "rows", "cols", "empty")
 
-    def __init__(self, pat: np.ndarray):
+    def __init__(self, pat: np.ndarray, origin: tuple[int, int] = (0, 0)):
+        """``pat``: the part's values; ``origin``: the engine's crop row and column of
+        ``pat[0, 0]`` (a part given on a box of the crop holding it)."""
         rr, cc = np.nonzero(pat)
         self.empty = rr.size == 0
         if self.empty:
@@ -73,6 +75,8 @@ class _Part:
         self.T = self.P[: hs + 1, ws].copy()
         self.hp, self.wp = hs, ws
         self._pattern_steps = pattern_outline(sub)
+        if not self.empty:
+            i0, i1, j0, j1 = i0 + origin[0], i1 + origin[0], j0 + origin[1], j1 + origin[1]
         self.i0, self.j0 = i0, j0
         self.rows, self.cols = (i0, i1 - 1), (j0, j1 - 1)
 
@@ -256,12 +260,21 @@ class FootprintPath:
     def _part(self, key):
         p = self.parts.get(key)
         if p is None:  # a pair's part: the near pad's pixels upstream of the far pad
+            # the crop's rows upside down (row r at r1 - 1 - r), as the pads' parts; laid out
+            # on the part's own bounding box, not on the whole crop
             a, b, ax, r = key
             r0, r1, c0, c1 = self._crop
-            m = np.zeros(self._data.shape, bool)
             rr, cc = self._upstream(a, b, ax * 90.0 + r)
-            m[rr, cc] = True
-            p = self.parts[key] = _Part(np.where(m, self._data, 0.0)[r0:r1, c0:c1][::-1])
+            inside = (rr >= r0) & (rr < r1) & (cc >= c0) & (cc < c1)
+            rr, cc = rr[inside], cc[inside]
+            if rr.size == 0:
+                p = self.parts[key] = _Part(np.zeros((1, 1)))
+            else:
+                i, j = r1 - 1 - rr, cc - c0
+                oi, oj = int(i.min()), int(j.min())
+                sub = np.zeros((int(i.max()) - oi + 1, int(j.max()) - oj + 1))
+                sub[i - oi, j - oj] = self._data[rr, cc]
+                p = self.parts[key] = _Part(sub, origin=(oi, oj))
         return p
 
     def _pixels(self, k: int) -> tuple[np.ndarray, np.ndarray]:

@@ -62,9 +62,12 @@ class Relay:
         on planes made over a window of the twist axis, the twists whose steppers read only
         the window's planes (:func:`simulator.motion.twist_window`).
 
-    lines_pattern: the field's pinning lines' pattern with the dry pads' values zeroed,
-        made once by :meth:`Field._replace` (a run's pinning then reads one array per line,
-        not the pattern and its labels); None: read from the labels at each pose.
+    lines_pattern: the field's pinning lines' pattern with the dry pads' values zeroed
+        (:func:`wet_pattern`), made by :meth:`Field._replace` as the relay is set unless
+        given (a caller that sets one state's relay on many fields makes it once); a run's
+        pinning then reads one array per line, not the pattern and its labels. None
+        without lines, or where a relay is set other than by ``_replace``: the labels are
+        read at each pose.
 
     A run on a field with a relay stops (status EVENT) at the first pose whose node would
     change the state: ``reached | (wet & within) != wet`` (:func:`relay_changes`), or whose
@@ -155,7 +158,11 @@ class Field:
             )
         relay = changes.get("relay", self.relay)
         lines = changes.get("lines", self.lines)
-        if relay is not None and lines is not None and ("relay" in changes or "lines" in changes):
+        if (
+            relay is not None
+            and lines is not None
+            and ("lines" in changes or ("relay" in changes and relay.lines_pattern is None))
+        ):
             changes["relay"] = replace(
                 relay, lines_pattern=wet_pattern(lines.pattern, lines.labels, relay.wet)
             )

@@ -28,6 +28,7 @@ from simulator.scene import Scene
 if TYPE_CHECKING:
     from simulator.landscape import FootprintPath
     from simulator.motion._field import Relay
+    from simulator.motion._pinning import PinLines
 
 ENGINES = ("auto", "fft", "path")
 #: Half-width (px) and twist half-band (steps) of the boxes that follow the chip. Greedy
@@ -97,6 +98,7 @@ class StateBoxes:
         self.footprint, self.plain = footprint, plain
         self.wet = np.asarray(wet, bool)
         self.bits = np.packbits(self.wet, bitorder="little")
+        self._lines_pattern = None  # the state's pinning pattern, made on the first box
 
     def box(
         self, twist_idx: Sequence[int], center_px: tuple[int, int], half_px: int | None
@@ -106,14 +108,24 @@ class StateBoxes:
         ls.stats["relay"] = (pl.reached_bits, pl.within_bits)
         return ls
 
-    def relay(self, ls: Landscape) -> Relay:
-        """The steppers' :class:`simulator.motion.Relay` of a box made here."""
+    def relay(self, ls: Landscape, lines: PinLines | None = None) -> Relay:
+        """The steppers' :class:`simulator.motion.Relay` of a box made here; with the run's
+        pinning ``lines``, their pattern on this state made once for all its boxes
+        (:attr:`Relay.lines_pattern`: a 4000 um chip's run sets the relay on hundreds of
+        boxes, and the pattern is millions of pixels)."""
         import jax.numpy as jnp
 
-        from simulator.motion._field import Relay
+        from simulator.motion._field import Relay, wet_pattern
 
         reached, within = ls.stats["relay"]
-        return Relay(jnp.asarray(reached), jnp.asarray(within), jnp.asarray(self.bits))
+        if lines is not None and self._lines_pattern is None:
+            self._lines_pattern = wet_pattern(lines.pattern, lines.labels, self.bits)
+        return Relay(
+            jnp.asarray(reached),
+            jnp.asarray(within),
+            jnp.asarray(self.bits),
+            lines_pattern=None if lines is None else self._lines_pattern,
+        )
 
     def drop_outlines(self, keep: set[int]) -> None:
         self.footprint.drop_outlines(keep)

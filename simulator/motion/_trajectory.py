@@ -415,6 +415,10 @@ def _run(
     next(around)
     pieces = []
     whole = landscape is not None or dynamic  # the run's landscape is the whole one
+    # the pinning lines, made once for all the run's boxes (each box's dtype is the scene's;
+    # a path-engine run on a 4000 um chip sets a field on 150 boxes, and the lines' pattern
+    # and pad labels are millions of pixels)
+    lines_of: dict = {}
     while True:
         if landscape is not None:
             ls = landscape
@@ -441,13 +445,14 @@ def _run(
                 f"the {method} stepper's field on the landscape ({ls.energy.size:,} poses)",
                 ls.energy.size * FIELD_S_PER_POSE,
             )
-        field, grid = field_and_grid(
-            ls, pin=pin, align_tol=tol, scale=scale, lines=pin_lines(scene, ls.energy.dtype)
-        )
+        dt = np.dtype(ls.energy.dtype)
+        if dt not in lines_of:
+            lines_of[dt] = pin_lines(scene, dt)
+        field, grid = field_and_grid(ls, pin=pin, align_tol=tol, scale=scale, lines=lines_of[dt])
         if relay is not None:
             field = field._replace(relay=relay)
         elif path is not None:  # the state's relay on this box
-            field = field._replace(relay=path.relay(ls))
+            field = field._replace(relay=path.relay(ls, field.lines))
         if dynamic:  # said here, not before the landscape: the compile comes now
             compiling(method, quiet=not shows_wait(math.inf))
         run = jitted(method, is_stiff(method, field, grid, dynamics))
