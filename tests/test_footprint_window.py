@@ -114,12 +114,14 @@ def test_a_batch_on_its_twist_window_is_the_batch_on_every_twist(
 ):
     """A batch that makes its own planes makes them over a window around its starts' twists
     and the aligned pose's: from (400, 150 um, 8 deg) the path turns to 18 deg, inside the
-    margin of [-18, 18] deg (the first window, 8 + 10 deg), so that lane stops there and runs
+    margin of [-18, 18] deg (the first window, 8 + 10 deg with the batch's reach set to a
+    single run's), so that lane stops there and runs
     again from its start on [-28, 28] (10 deg beyond the side); the lanes that stayed clear
     keep their ends. Every lane ends as on the whole axis's planes, greedy node for node (the
     planes' round-off decides no move). (A gradient lane stops on the pinned aligned floor
     where the planes' round-off leaves it, 0.05-0.17 px apart, as a single gradient run on a
     window does; the batch equals the single run on the same planes.)"""
+    import simulator.batch._footprint_batch as footprint_batch
     from simulator.batch import run_batch
 
     s, full = chip_dispensed
@@ -128,6 +130,10 @@ def test_a_batch_on_its_twist_window_is_the_batch_on_every_twist(
     monkeypatch.setattr(
         "simulator.motion.twist_window", lambda *a: made.append(real(*a)) or made[-1]
     )
+    # a batch's first window reaches 20 deg (its lanes share it); a single run's 10, which
+    # this lane leaves
+    assert footprint_batch.BATCH_WINDOW_DEG == 2 * footprint_run.WINDOW_DEG == 20.0
+    monkeypatch.setattr(footprint_batch, "BATCH_WINDOW_DEG", 10.0)
     starts = np.array([(400.0, 150.0, 8.0), (250.0, -40.0, 3.0), (-300.0, 60.0, -5.0)])
     a = run_batch(s, starts, "greedy", progress=False, planes=full)
     b = run_batch(s, starts, "greedy", progress=False)

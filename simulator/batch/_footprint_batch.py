@@ -27,6 +27,14 @@ import numpy as np
 from foundation import progress_bar
 from simulator.batch._stats import BatchResult
 
+#: The first window's reach (degrees) beyond the starts' twists and the aligned pose's: twice
+#: a single run's (:data:`simulator.motion.WINDOW_DEG`). A batch's lanes share one window, so
+#: one lane that turns further makes the whole batch's planes again: of the benchmark's
+#: 2,000 placements (``benchmarks/footprint.py --batch``) 26 came into the margin of a 10 deg
+#: reach's window (43 twists) and none into that of a 20 deg reach's (63), and the second
+#: build cost more than the first's 20 extra twists.
+BATCH_WINDOW_DEG = 20.0
+
 
 def _nodes(grid, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The grid nodes of fractional indices q (N, 3), as the steppers' relay test takes them
@@ -65,7 +73,8 @@ def run_footprint_batch(
     ``footprint_planes_s`` and ``footprint_twists`` (the twists the planes held).
 
     Planes made here hold a window of twists around the starts' twists and the aligned
-    pose's, as a single run's do (:func:`simulator.motion.twist_window`): each lane's
+    pose's (:data:`BATCH_WINDOW_DEG`), as a single run's do
+    (:func:`simulator.motion.twist_window`): each lane's
     relay stops it where it comes within :data:`simulator.motion.WINDOW_MARGIN_STEPS` of
     the window's side, and those lanes run again from their start on a window reaching
     :data:`simulator.motion.WINDOW_DEG` beyond it (the whole axis at most)."""
@@ -99,7 +108,7 @@ def run_footprint_batch(
     first = None
     rounds, planes_s, run_s, n_twists, t_land = 0, 0.0, 0.0, 0, 0.0
     shape: tuple[int, ...] = ()
-    window = None if given else twist_window(scene, centre, WINDOW_DEG)
+    window = None if given else twist_window(scene, centre, BATCH_WINDOW_DEG)
     if not given:
         planes = build_footprint_planes(scene, progress=progress, twists=window)
     with progress_bar(progress, n, f"{method} (footprint)", "start") as bar:
