@@ -116,13 +116,11 @@ class FootprintPath:
         self._crop = (r0, r1, c0, c1)
         data = scene.pattern.data
         self._data = data
-        self.parts: dict = {
-            k: _Part(np.where(mk, data, 0.0)[r0:r1, c0:c1][::-1]) for k, mk in enumerate(masks)
-        }
+        self.parts: dict = {k: self._part_at(*self._pixels(k)) for k in range(len(masks))}
         s, (h, w) = scene.um_per_px, data.shape
         areas, centres = [], []
-        for mk in masks:
-            rr, cc = np.nonzero(mk)
+        for k in range(len(masks)):
+            rr, cc = self._pixels(k)
             wk = data[rr, cc]
             areas.append(float(wk.sum()) * s * s)
             centres.append(
@@ -260,22 +258,24 @@ class FootprintPath:
     def _part(self, key):
         p = self.parts.get(key)
         if p is None:  # a pair's part: the near pad's pixels upstream of the far pad
-            # the crop's rows upside down (row r at r1 - 1 - r), as the pads' parts; laid out
-            # on the part's own bounding box, not on the whole crop
             a, b, ax, r = key
-            r0, r1, c0, c1 = self._crop
-            rr, cc = self._upstream(a, b, ax * 90.0 + r)
-            inside = (rr >= r0) & (rr < r1) & (cc >= c0) & (cc < c1)
-            rr, cc = rr[inside], cc[inside]
-            if rr.size == 0:
-                p = self.parts[key] = _Part(np.zeros((1, 1)))
-            else:
-                i, j = r1 - 1 - rr, cc - c0
-                oi, oj = int(i.min()), int(j.min())
-                sub = np.zeros((int(i.max()) - oi + 1, int(j.max()) - oj + 1))
-                sub[i - oi, j - oj] = self._data[rr, cc]
-                p = self.parts[key] = _Part(sub, origin=(oi, oj))
+            p = self.parts[key] = self._part_at(*self._upstream(a, b, ax * 90.0 + r))
         return p
+
+    def _part_at(self, rr: np.ndarray, cc: np.ndarray) -> _Part:
+        """The :class:`_Part` of the pattern's values at pixels (``rr``, ``cc``) of the
+        image: on the engine's crop, its rows upside down (image row r at crop row
+        r1 - 1 - r), laid out on the part's own bounding box, not on the whole crop."""
+        r0, r1, c0, c1 = self._crop
+        inside = (rr >= r0) & (rr < r1) & (cc >= c0) & (cc < c1)
+        rr, cc = rr[inside], cc[inside]
+        if rr.size == 0:
+            return _Part(np.zeros((1, 1)))
+        i, j = r1 - 1 - rr, cc - c0
+        oi, oj = int(i.min()), int(j.min())
+        sub = np.zeros((int(i.max()) - oi + 1, int(j.max()) - oj + 1))
+        sub[i - oi, j - oj] = self._data[rr, cc]
+        return _Part(sub, origin=(oi, oj))
 
     def _pixels(self, k: int) -> tuple[np.ndarray, np.ndarray]:
         if not hasattr(self, "_pix"):
