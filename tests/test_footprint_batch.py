@@ -144,6 +144,7 @@ def test_montecarlo_cli_carries_the_footprint(run_cli, tmp_path):
     assert d["scene"]["dispense"] == "chip" and d["footprint"]["dispense"] == "chip"
     assert d["outcomes"]["aligned"] == 1 and d["outcomes"]["plateau"] == 2, d["outcomes"]
     assert d["footprint"]["events"] == 0  # each start's pads wet at release, or never reached
+    assert d["footprint"]["twists"] == 1  # --no-twist: the planes' one twist
     rc, _, err = run_cli([*args, "--dispense", "none", "--json", tmp_path / "stateless.json"])
     assert rc == 0, err
     d = json.loads((tmp_path / "stateless.json").read_text())

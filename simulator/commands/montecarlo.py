@@ -389,6 +389,7 @@ def run(args: argparse.Namespace) -> int:
             "events": st["footprint_events"],
             "rounds": st["footprint_rounds"],
             "planes_s": st["footprint_planes_s"],
+            "twists": st["footprint_twists"],  # the twists the pads' planes were made over
         }
     require_finite(doc, "montecarlo summary")
     require_finite({"start": result.start, "final": result.final}, "montecarlo starts")
@@ -397,7 +398,8 @@ def run(args: argparse.Namespace) -> int:
         fp = doc["footprint"]
         print(
             f"footprint (--dispense {fp['dispense']}): each start carries its own wet pads; "
-            f"{fp['events']:,} state changes over {fp['rounds']} rounds; pads' planes built in {fp['planes_s']:.1f} s"
+            f"{fp['events']:,} state changes over {fp['rounds']} rounds; pads' planes built in {fp['planes_s']:.1f} s "
+            f"over {fp['twists']} of the {scene.twist_axis.count} twists"
         )
     with contextlib.ExitStack() as stack:  # every output, or none
         if args.csv:
