@@ -231,6 +231,7 @@ def _lanes_on(
         pin_lines,
         remaining_params,
         wet_bits,
+        window_sides,
     )
     from simulator.physics import align_tolerance, pin_per_index
 
@@ -254,14 +255,9 @@ def _lanes_on(
     n_t = grid.shape[0]
     span = None
     if windowed:
-        axis = scene.twist_axis.values()
-        tw = reference.twist_deg
-        lo = WINDOW_MARGIN_STEPS if (tw[0] > axis[0] or scene.twist_axis.periodic) else -(2**30)
-        hi = (
-            n_t - 1 - WINDOW_MARGIN_STEPS
-            if (tw[-1] < axis[-1] or scene.twist_axis.periodic)
-            else 2**30
-        )
+        low, high = window_sides(scene, reference.twist_deg)
+        lo = WINDOW_MARGIN_STEPS if low else -(2**30)
+        hi = n_t - 1 - WINDOW_MARGIN_STEPS if high else 2**30
         span = np.array([lo, hi], np.int32)
 
     n = len(poses)

@@ -50,6 +50,7 @@ from ._footprint_run import (
     require_footprint_fits as require_footprint_fits,
     twist_window as twist_window,
     wet_bits as wet_bits,
+    window_sides as window_sides,
 )
 from ._pathrun import (
     ENGINES as ENGINES,

@@ -170,10 +170,10 @@ class Field:
 
 
 def wet_pattern(pattern: ArrayLike, labels: ArrayLike, wet: ArrayLike) -> jax.Array:
-    """The pinning lines' ``pattern`` with the values of the pads that are dry in ``wet``
+    """The pinning lines' ``pattern`` values with those of the pads that are dry in ``wet``
     zeroed (``labels``: the pads' labels 1..n on the same pixels, 0 the substrate; ``wet``:
-    the relay's (W,) uint8 bits, pad ``k`` in bit ``k % 8`` of byte ``k // 8``): what the
-    per-pose pinning reads on that footprint state (:attr:`Relay.lines_pattern`)."""
+    the relay's (W,) uint8 bits, pad ``k`` in bit ``k % 8`` of byte ``k // 8``), element by
+    element: the whole pattern (:attr:`Relay.lines_pattern`) or the pixels a pose reads."""
     pattern, labels, wet = jnp.asarray(pattern), jnp.asarray(labels), jnp.asarray(wet)
     k = jnp.maximum(labels - 1, 0)
     bit = (wet[k // 8] >> (k % 8).astype(wet.dtype)) & 1

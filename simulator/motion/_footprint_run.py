@@ -222,14 +222,20 @@ def twist_window(scene: Scene, twists_deg: Sequence[float], half_deg: float) -> 
     return window
 
 
+def window_sides(scene: Scene, window: np.ndarray) -> tuple[bool, bool]:
+    """Whether the low and the high side of ``window`` (its twists, degrees, ascending) cut
+    the scene's twist axis: a side at the end of a bounded axis is a wall the whole axis has
+    as well, which a run may come near."""
+    vals, periodic = scene.twist_axis.values(), scene.twist_axis.periodic
+    return bool(window[0] > vals[0] or periodic), bool(window[-1] < vals[-1] or periodic)
+
+
 def _near_side(scene: Scene, window: np.ndarray, path: np.ndarray) -> bool:
     """Whether the twists of ``path`` ((n, 3) um, um, deg) come within
     :data:`WINDOW_MARGIN_STEPS` steps of a side of ``window`` that is not the axis's own end."""
-    vals = scene.twist_axis.values()
     margin = WINDOW_MARGIN_STEPS * float(scene.twist_axis.step_deg)
     tw = np.asarray(path, float)[:, 2]
-    low = window[0] > vals[0] or scene.twist_axis.periodic
-    high = window[-1] < vals[-1] or scene.twist_axis.periodic
+    low, high = window_sides(scene, window)
     return bool(
         (low and tw.min() < window[0] + margin) or (high and tw.max() > window[-1] - margin)
     )

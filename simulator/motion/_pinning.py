@@ -28,6 +28,7 @@ import numpy as np
 from jax.typing import ArrayLike, DTypeLike
 
 from simulator.core import UM, UM2
+from simulator.motion._field import wet_pattern
 
 if TYPE_CHECKING:
     from simulator.landscape import PoseGrid
@@ -110,11 +111,7 @@ def _wet_value(lines: PinLines, relay: Relay | None, r: jax.Array, c: jax.Array)
         return lines.pattern[r, c]
     if relay.lines_pattern is not None:  # the state's pattern, made once (Field._replace)
         return relay.lines_pattern[r, c]
-    v = lines.pattern[r, c]
-    lab = lines.labels[r, c]
-    k = jnp.maximum(lab - 1, 0)
-    bit = (relay.wet[k // 8] >> (k % 8).astype(relay.wet.dtype)) & 1
-    return jnp.where((lab > 0) & (bit > 0), v, jnp.zeros_like(v))
+    return wet_pattern(lines.pattern[r, c], lines.labels[r, c], relay.wet)
 
 
 def pin_at(field: Field, grid: PoseGrid, q: ArrayLike) -> jax.Array:
