@@ -118,6 +118,58 @@ def test_four_pad_large_twists_equal_the_planes(four):
     assert paired > 0
 
 
+def _ragged_pads() -> np.ndarray:
+    """Three pads of uneven outline, one with a hole and one graded (0.6), 1 um/px: the
+    shapes where a ray's furthest pad pixel is not a corner."""
+    n = 160
+    y, x = np.mgrid[0:n, 0:n] + 0.5
+    d = np.zeros((n, n))
+    t = np.arctan2(y - 45, x - 45)
+    d[np.hypot(y - 45, x - 45) < 28 * (1 + 0.25 * np.sin(5 * t))] = 1.0
+    ring = np.hypot(y - 45, x - 115)
+    d[(ring < 30) & (ring >= 9)] = 1.0  # a pad with a hole
+    d[np.hypot(y - 118, x - 80) < 26 * (1 + 0.2 * np.cos(3 * np.arctan2(y - 118, x - 80)))] = 0.6
+    d[::7, ::5] *= np.hypot(y[::7, ::5] - 45, x[::7, ::5] - 45) > 24  # a ragged first pad
+    return d
+
+
+def test_pair_parts_are_the_fft_builds_on_ragged_pads():
+    # the near pad's part upstream of the far one, made on the two pads' boxes (the far
+    # pad's edge pixels only), is the FFT build's masks[a] & upstream_along(masks[b]) on the
+    # whole image, pixel for pixel, at any angle (exact: the same rays, the same values)
+    from patterns.geometry import Mask
+    from simulator.physics import Liquid, Materials
+    from simulator.physics._footprint import upstream_along
+    from simulator.scene import Effects, Scene
+
+    d = _ragged_pads()
+    s = Scene.from_inputs(
+        Mask(d, 1.0),
+        chip_size_um=120,
+        effects=Effects(twist=True, meniscus=True),
+        materials=Materials(),
+        liquid=Liquid(volume_nl=0.4, dispense="pattern"),
+    )
+    fp = FootprintPath(s)
+    assert fp.n_pads == 3
+    angles = [0.0, 90.0, -90.0, 180.0, 45.0, -45.0, 135.0, 7.3, -33.1, 61.7, 101.9, -158.4]
+    for a in range(3):
+        for b in range(3):
+            if a == b:
+                continue
+            cut = 0  # angles where the shadow's side runs through pad a
+            for ang in angles:
+                up = fp.masks[a] & upstream_along(fp.masks[b], ang)
+                ref, got = fp._part_box(np.where(up, d, 0.0), 0, 0), fp._upstream(a, b, ang)
+                assert ref.empty == got.empty, (a, b, ang)
+                if ref.empty:
+                    continue
+                cut += bool(up.sum() < fp.masks[a].sum())
+                assert (ref.i0, ref.j0) == (got.i0, got.j0), (a, b, ang)
+                assert np.array_equal(ref.P, got.P), (a, b, ang)
+            assert cut > 0, (a, b)  # each pair's part is cut somewhere among these angles
+
+
 @pytest.fixture(scope="module")
 def chip_dispensed():
     """The 730/100 four-pad at 10 um/px, 3 deg twists, ``--dispense chip``, and its planes."""

@@ -94,6 +94,17 @@ def _pads_of(scene: Scene, rules) -> tuple[np.ndarray, int, list, list]:
     return labels, n, masks, deep
 
 
+def _area_centre(values, rows, cols, shape, um_per_px: float) -> tuple[float, tuple[float, float]]:
+    """A pad's area (um^2) and centroid (x, y um from the image's centre, y up), weighted by
+    the pattern's ``values`` at its pixels (``rows``, ``cols`` of an image of ``shape``)."""
+    h, w = shape
+    s, total = um_per_px, values.sum()
+    return float(total) * s * s, (
+        float(((cols + 0.5 - w / 2) * values).sum() / total) * s,
+        float(((h / 2 - rows - 0.5) * values).sum() / total) * s,
+    )
+
+
 def _shadowed(masks: list, deep: list, residuals) -> list[tuple[int, int, int, dict]]:
     """The shadow rule's pairs (near, far, axis, {residual deg: pixel box of the near pad's
     part upstream of the far one}), for every far pad on its bridged term (a narrow one keeps
@@ -648,14 +659,9 @@ def build_footprint_planes(
             parts[nm] = by_box[key]
         pads.append(parts)
         rr, cc = np.nonzero(mask)
-        wk = data[rr, cc]
-        areas.append(float(wk.sum()) * s * s)
-        centres.append(
-            (
-                float(((cc + 0.5 - w / 2) * wk).sum() / wk.sum()) * s,
-                float(((h / 2 - rr - 0.5) * wk).sum() / wk.sum()) * s,
-            )
-        )
+        area, centre = _area_centre(data[rr, cc], rr, cc, (h, w), s)
+        areas.append(area)
+        centres.append(centre)
     # The shadow rule's pairs: the part of pad A upstream of pad B along the normal of the
     # chip's side facing an axis, on the poses where that side can reach it (its box, grown by
     # the reach of the side's strip out to the band), at the twists where the part is not empty.

@@ -155,6 +155,21 @@ def _band_pixels(
     return kk[band], ll[band], rot.profile_at(xi[band], yi[band], s[band])
 
 
+def _inverse(rot, twist_deg: float):
+    """Canvas pixel (row k y up, column) -> the unrotated chip's coordinates (px, y up) at
+    ``twist_deg``: the same arithmetic as the rotator's whole-canvas rotation."""
+    hc, wc = rot.shape
+    a = math.radians(twist_deg)
+    ca, sa = math.cos(a), math.sin(a)
+    cx, cy = wc / 2 - 0.5, hc / 2 - 0.5
+
+    def inverse(k, col):
+        x, y = col - cx, k - cy
+        return x * ca + y * sa, -x * sa + y * ca
+
+    return inverse
+
+
 def footprint_band(
     rot, twist_deg: float, dtype, values=None, span=None, inside_value: float = 1.0
 ) -> tuple:
@@ -168,19 +183,20 @@ def footprint_band(
     corrections, :mod:`simulator.landscape._pathfoot`): ``values(xi, yi, s)`` gives (its
     values, which pixels to keep) at band pixels (unrotated chip coordinates, px; their
     signed distance), ``span`` the signed distances (lo, hi) of its band (default the
-    rotator's), and ``inside_value`` what it is below ``lo`` (0 beyond ``hi``)."""
+    rotator's), and ``inside_value`` what it is below ``lo`` (0 beyond ``hi``).
+
+    :func:`band_samples` then :func:`band_outline`: a caller that splits one band's pixels
+    into several footprints evaluates them once."""
+    bk, bl, f = band_samples(rot, twist_deg, values, span)
+    return band_outline(rot, twist_deg, bk, bl, f, dtype, span, inside_value)
+
+
+def band_samples(rot, twist_deg: float, values=None, span=None) -> tuple:
+    """(rows, columns, values) of the band's pixels at ``twist_deg``, row by row (canvas
+    coordinates, y up): :func:`footprint_band`'s first half."""
     hc, wc = rot.shape
     lo, hi = rot.band_px if span is None else span
-    a = math.radians(twist_deg)
-    ca, sa = math.cos(a), math.sin(a)
-    cx, cy = wc / 2 - 0.5, hc / 2 - 0.5
-
-    def inverse(k, col):
-        # Canvas pixel (row k y up, column) -> the unrotated chip's coordinates (px, y up),
-        # the same arithmetic as the rotator's whole-canvas rotation.
-        x, y = col - cx, k - cy
-        return x * ca + y * sa, -x * sa + y * ca
-
+    inverse = _inverse(rot, twist_deg)
     # Tiles that may hold band pixels.
     t = TILE_PX
     kt = np.arange(-(-hc // t)) * t + (t - 1) / 2
@@ -211,6 +227,17 @@ def footprint_band(
     else:
         bk = bl = np.zeros(0, np.int64)
         f = np.zeros(0)
+    return bk, bl, f
+
+
+def band_outline(
+    rot, twist_deg: float, bk, bl, f, dtype, span=None, inside_value: float = 1.0
+) -> tuple:
+    """:func:`footprint_band`'s second half: the row differences and the :class:`Band` of
+    the band pixels (``bk``, ``bl``, row by row) whose values are ``f``."""
+    hc, wc = rot.shape
+    lo = (rot.band_px if span is None else span)[0]
+    inverse = _inverse(rot, twist_deg)
     f = np.asarray(f.astype(dtype), np.float64)  # the FFT engine correlates the scene's dtype
     # Segments: runs of consecutive band columns in a row.
     nb = len(bk)

@@ -43,7 +43,14 @@ from simulator.scene import Scene
 
 from ._build import _box, _grid_of, energy_scale_J
 from ._landscape import Landscape
-from ._pathband import SEGMENT_PAD, footprint_band, pattern_outline
+from ._pathband import (
+    SEGMENT_PAD,
+    _inverse,
+    band_outline,
+    band_samples,
+    footprint_band,
+    pattern_outline,
+)
 from ._pathcost import PathEnergy, _Outline, keep_rows, read_rows, rows_to_compute
 from ._rotation import ChipRotator
 
@@ -62,11 +69,11 @@ class _Part:
     def __init__(self, pat: np.ndarray, origin: tuple[int, int] = (0, 0)):
         """``pat``: the part's values; ``origin``: the engine's crop row and column of
         ``pat[0, 0]`` (a part given on a box of the crop holding it)."""
-        rr, cc = np.nonzero(pat)
+        rr, cc = np.flatnonzero(pat.any(axis=1)), np.flatnonzero(pat.any(axis=0))
         self.empty = rr.size == 0
         if self.empty:
             rr = cc = np.zeros(1, np.int64)
-        i0, i1, j0, j1 = int(rr.min()), int(rr.max()) + 1, int(cc.min()), int(cc.max()) + 1
+        i0, i1, j0, j1 = int(rr[0]), int(rr[-1]) + 1, int(cc[0]), int(cc[-1]) + 1
         sub = np.ascontiguousarray(pat[i0:i1, j0:j1], np.float64)
         hs, ws = sub.shape
         # zero rows beyond (never read) so that a read of SEGMENT_PAD columns fits in P
@@ -81,14 +88,20 @@ class _Part:
         self.rows, self.cols = (i0, i1 - 1), (j0, j1 - 1)
 
 
+#: The part of a pair whose far pad no ray from the near one reaches (kept as any part is).
+_NO_PART = _Part(np.zeros((1, 1)))
+
+
 class FootprintPath:
     """The footprint state's planes of ``scene`` at any pose of its planes' grid, computed
     on demand at the cost of the chip's outline (module docstring)."""
 
     def __init__(self, scene: Scene):
+        from scipy import ndimage
+
         from simulator.physics import STEP_PX, FootprintRules
 
-        from ._footprint import _pads_of, _Sides, _variant
+        from ._footprint import _area_centre, _pads_of, _Sides, _variant
 
         prof = scene.wall_profile
         if prof is None:
@@ -116,19 +129,26 @@ class FootprintPath:
         self._crop = (r0, r1, c0, c1)
         data = scene.pattern.data
         self._data = data
-        self.parts: dict = {k: self._part_at(*self._pixels(k)) for k in range(len(masks))}
-        s, (h, w) = scene.um_per_px, data.shape
+        # Each pad on its bounding box (image rows, columns): its mask and its values there.
+        self._boxes = [(b[0].start, b[1].start) for b in ndimage.find_objects(self.labels)]
+        self._edges: dict = {}
+        self._bmask = [
+            m[b[0], b[1]] for m, b in zip(masks, ndimage.find_objects(self.labels), strict=True)
+        ]
+        self.parts: dict = {
+            k: self._part_box(np.where(self._bmask[k], self._box_values(k), 0.0), *self._boxes[k])
+            for k in range(len(masks))
+        }
+        s = scene.um_per_px
         areas, centres = [], []
         for k in range(len(masks)):
-            rr, cc = self._pixels(k)
-            wk = data[rr, cc]
-            areas.append(float(wk.sum()) * s * s)
-            centres.append(
-                (
-                    float(((cc + 0.5 - w / 2) * wk).sum() / wk.sum()) * s,
-                    float(((h / 2 - rr - 0.5) * wk).sum() / wk.sum()) * s,
-                )
+            (i0, j0), bm = self._boxes[k], self._bmask[k]
+            rr, cc = np.nonzero(bm)
+            area, centre = _area_centre(
+                self._box_values(k)[rr, cc], rr + i0, cc + j0, data.shape, s
             )
+            areas.append(area)
+            centres.append(centre)
         self.pad_area_um2, self.pad_centre_um = np.asarray(areas), np.asarray(centres)
         # One rotator per footprint on the whole axis's canvas (its smooth chip made once;
         # a footprint at one twist is then made at its band's pixels only).
@@ -152,6 +172,7 @@ class FootprintPath:
         self.dtype = np.dtype(scene.dtype)
         self.energy_scale = energy_scale_J(scene)
         self._outlines: dict = {}
+        self._strip_samples: tuple | None = None
         self._support: dict = {}
         self._cache: dict = {}
         self.poses = 0
@@ -201,19 +222,11 @@ class FootprintPath:
             )
         else:  # strip<side>: N_b - f on one side of the chip
             side = int(name[len("strip") :])
-            rot, rin, wall = rots["band_out"], rots["band_in"], rots["wall"]
-
-            def side_values(xi, yi, s):
-                keep = self._side_at(xi, yi) == side
-                f = np.zeros(len(xi))
-                xk, yk = xi[keep], yi[keep]
-                f[keep] = 0.5 * (rin.profile_at(xk, yk) + rot.profile_at(xk, yk))
-                f[keep] -= wall.profile_at(xk, yk)
-                return f, keep
-
-            r, c, v, band = footprint_band(
-                rot, tw, self.dtype, side_values, self._span("wall", "band_in", "band_out"), 0.0
-            )
+            rot = rots["band_out"]
+            span = self._span("wall", "band_in", "band_out")
+            bk, bl, f, sides = self._strips(k, tw, span)
+            on = sides == side
+            r, c, v, band = band_outline(rot, tw, bk[on], bl[on], f[on], self.dtype, span, 0.0)
         hc, wc = rot.shape
         origin = self.pe.origin
         oy, ox = origin[1] - hc / 2, origin[0] - wc / 2
@@ -244,6 +257,27 @@ class FootprintPath:
         self.rotations += 1
         return o
 
+    def _strips(self, k: int, tw: float, span) -> tuple:
+        """The shadow rule's ``N_b - f`` at every pixel of its band at twist index ``k``
+        (``tw`` deg), with the chip's side each pixel lies on (``_Sides``): (rows, columns,
+        values, sides), evaluated once for the four strips of that twist (each keeps its
+        side's pixels; every value is the one a strip alone would evaluate there)."""
+        kept = self._strip_samples
+        if kept is not None and kept[0] == k:
+            return kept[1]
+        rot, rin, wall = self._rots["band_out"], self._rots["band_in"], self._rots["wall"]
+
+        def values(xi, yi, s):
+            f = 0.5 * (rin.profile_at(xi, yi) + rot.profile_at(xi, yi))
+            f -= wall.profile_at(xi, yi)
+            return f, np.ones(len(f), bool)
+
+        bk, bl, f = band_samples(rot, tw, values, span)
+        xi, yi = _inverse(rot, tw)(bk.astype(float), bl.astype(float))
+        out = (bk, bl, f, self._side_at(xi, yi))
+        self._strip_samples = (k, out)
+        return out
+
     def drop_outlines(self, keep: set[int]) -> None:
         """Forget the footprints of twists not in ``keep`` (and their rows), as
         :meth:`PathEnergy.drop_outlines` (a run's boxes keep a band of twists)."""
@@ -253,53 +287,85 @@ class FootprintPath:
             del self._outlines[key]
         for key in [key for key in self._cache if key[2] not in keep]:
             del self._cache[key]
+        # the pairs' parts at the shadow residuals of the twists kept (a part of a pad on
+        # a 4000 um chip at 2 um/px holds 6.5 MB of row sums)
+        from simulator.physics import shadow_residual_deg
+
+        twists = self.axis.values_at(np.asarray(sorted(keep), np.intp))
+        residuals = {float(r) for r in np.atleast_1d(shadow_residual_deg(twists))}
+        for key in [key for key in self.parts if isinstance(key, tuple)]:
+            if key[3] not in residuals:
+                del self.parts[key]
 
     # -- sums
     def _part(self, key):
         p = self.parts.get(key)
         if p is None:  # a pair's part: the near pad's pixels upstream of the far pad
             a, b, ax, r = key
-            p = self.parts[key] = self._part_at(*self._upstream(a, b, ax * 90.0 + r))
+            angle = ax * 90.0 + r
+            p = self._upstream(a, b, angle) if self._may_shadow(a, b, angle) else _NO_PART
+            self.parts[key] = p
         return p
 
-    def _part_at(self, rr: np.ndarray, cc: np.ndarray) -> _Part:
-        """The :class:`_Part` of the pattern's values at pixels (``rr``, ``cc``) of the
-        image: on the engine's crop, its rows upside down (image row r at crop row
+    def _box_values(self, k: int) -> np.ndarray:
+        """The pattern's values on pad ``k``'s bounding box (image rows and columns)."""
+        (i0, j0), (hb, wb) = self._boxes[k], self._bmask[k].shape
+        return self._data[i0 : i0 + hb, j0 : j0 + wb]
+
+    def _part_box(self, values: np.ndarray, i0: int, j0: int) -> _Part:
+        """The :class:`_Part` of ``values``, a box of the image whose first row and column are
+        ``i0``, ``j0``: on the engine's crop, its rows upside down (image row r at crop row
         r1 - 1 - r), laid out on the part's own bounding box, not on the whole crop."""
         r0, r1, c0, c1 = self._crop
-        inside = (rr >= r0) & (rr < r1) & (cc >= c0) & (cc < c1)
-        rr, cc = rr[inside], cc[inside]
-        if rr.size == 0:
+        hb, wb = values.shape
+        a0, a1 = max(i0, r0), min(i0 + hb, r1)  # the box's image rows inside the crop
+        b0, b1 = max(j0, c0), min(j0 + wb, c1)
+        if a0 >= a1 or b0 >= b1:
             return _Part(np.zeros((1, 1)))
-        i, j = r1 - 1 - rr, cc - c0
-        oi, oj = int(i.min()), int(j.min())
-        sub = np.zeros((int(i.max()) - oi + 1, int(j.max()) - oj + 1))
-        sub[i - oi, j - oj] = self._data[rr, cc]
-        return _Part(sub, origin=(oi, oj))
+        sub = values[a0 - i0 : a1 - i0, b0 - j0 : b1 - j0][::-1]
+        return _Part(sub, origin=(r1 - a1, b0 - c0))
 
-    def _pixels(self, k: int) -> tuple[np.ndarray, np.ndarray]:
-        if not hasattr(self, "_pix"):
-            self._pix = {}
-        if k not in self._pix:
-            self._pix[k] = np.nonzero(self.masks[k])
-        return self._pix[k]
-
-    def _upstream(self, a: int, b: int, angle_deg: float) -> tuple[np.ndarray, np.ndarray]:
-        """(rows, cols) of pad ``a``'s pixels from which a ray at ``angle_deg`` reaches pad
-        ``b`` beyond them: ``masks[a] & upstream_along(masks[b], angle_deg)`` (the FFT build's
-        part, :func:`simulator.physics.upstream_along`), on the two pads' pixels only."""
+    def _rays(self, k: int, angle_deg: float) -> tuple[np.ndarray, np.ndarray]:
+        """(ray index, distance along it) at every pixel of pad ``k``'s bounding box:
+        :func:`simulator.physics.ray_coordinates` of its rows and columns broadcast (the same
+        arithmetic, element by element, as for the pixels listed one by one)."""
         from simulator.physics import ray_coordinates
 
-        shape = self._data.shape
-        rb, cb = self._pixels(b)
-        ra, ca = self._pixels(a)
-        ray_b, along_b = ray_coordinates(rb, cb, shape, angle_deg)
-        ray_a, along_a = ray_coordinates(ra, ca, shape, angle_deg)
+        (i0, j0), (hb, wb) = self._boxes[k], self._bmask[k].shape
+        rows, cols = np.arange(i0, i0 + hb)[:, None], np.arange(j0, j0 + wb)[None, :]
+        return ray_coordinates(rows, cols, self._data.shape, angle_deg)
+
+    def _edge(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """(rows, cols) of pad ``k``'s edge pixels: those with one of their eight neighbours
+        outside the pad (or beyond the image). The furthest pixel of a pad along any ray of
+        :func:`simulator.physics.ray_coordinates` is one of them: a ray's pixels, in their
+        order along it, go column by column (row by row beyond 45 deg), each next to the one
+        before, one of its eight neighbours, so the pad's last pixel on a ray has a
+        neighbour outside it (docs/physics.md §3.5)."""
+        e = self._edges.get(k)
+        if e is None:
+            from scipy import ndimage
+
+            m = self._bmask[k]
+            inner = ndimage.binary_erosion(m, np.ones((3, 3), bool), border_value=0)
+            rr, cc = np.nonzero(m & ~inner)
+            e = self._edges[k] = (rr + self._boxes[k][0], cc + self._boxes[k][1])
+        return e
+
+    def _upstream(self, a: int, b: int, angle_deg: float) -> _Part:
+        """The part of pad ``a`` from which a ray at ``angle_deg`` reaches pad ``b`` beyond
+        it: ``masks[a] & upstream_along(masks[b], angle_deg)`` (the FFT build's part,
+        :func:`simulator.physics.upstream_along`), on the two pads' bounding boxes only."""
+        from simulator.physics import ray_coordinates
+
+        ray_b, along_b = ray_coordinates(*self._edge(b), self._data.shape, angle_deg)
+        ray_a, along_a = self._rays(a, angle_deg)
         lo = min(int(ray_b.min()), int(ray_a.min()))
         far = np.full(max(int(ray_b.max()), int(ray_a.max())) - lo + 1, -np.inf)
         np.maximum.at(far, ray_b - lo, along_b)
-        up = along_a < far[ray_a - lo]
-        return ra[up], ca[up]
+        ray_a -= lo
+        up = self._bmask[a] & (along_a < far[ray_a])
+        return self._part_box(np.where(up, self._box_values(a), 0.0), *self._boxes[a])
 
     def _may_shadow(self, a: int, b: int, angle_deg: float) -> bool:
         """False where pad ``b`` lies wholly behind pad ``a`` or beside it along ``angle_deg``
@@ -308,9 +374,9 @@ class FootprintPath:
             h, w = self._data.shape
             self._corners = {}
             for k in range(self.n):
-                rr, cc = self._pixels(k)
-                xs = np.array([cc.min(), cc.max() + 1]) - w / 2
-                ys = h / 2 - np.array([rr.max() + 1, rr.min()])
+                (i0, j0), (hb, wb) = self._boxes[k], self._bmask[k].shape
+                xs = np.array([j0, j0 + wb]) - w / 2
+                ys = h / 2 - np.array([i0 + hb, i0])
                 self._corners[k] = np.array([(x, y) for x in xs for y in ys])
         t = np.radians(angle_deg)
         d = np.array([np.cos(t), np.sin(t)])
@@ -427,8 +493,6 @@ class FootprintPath:
                     if not keep.any():
                         continue
                     for ax in range(4):
-                        if not self._may_shadow(a, bb, ax * 90.0 + res):
-                            continue
                         if self._part((a, bb, ax, res)).empty:
                             continue
                         face = (ax - nearest) % 4
