@@ -164,7 +164,7 @@ class Field:
             and ("lines" in changes or ("relay" in changes and relay.lines_pattern is None))
         ):
             changes["relay"] = replace(
-                relay, lines_pattern=wet_pattern(lines.pattern, lines.labels, relay.wet)
+                relay, lines_pattern=wet_pattern_jit(lines.pattern, lines.labels, relay.wet)
             )
         return replace(self, **changes)
 
@@ -178,6 +178,12 @@ def wet_pattern(pattern: ArrayLike, labels: ArrayLike, wet: ArrayLike) -> jax.Ar
     k = jnp.maximum(labels - 1, 0)
     bit = (wet[k // 8] >> (k % 8).astype(wet.dtype)) & 1
     return jnp.where((labels > 0) & (bit > 0), pattern, jnp.zeros_like(pattern))
+
+
+#: :func:`wet_pattern` compiled whole, for the state's pattern made on the host as a relay is
+#: set (:meth:`Field._replace`, the path engine's boxes): one program instead of each of its
+#: operations compiled on its own the first time (0.86 s against 0.05 s, measured).
+wet_pattern_jit = jax.jit(wet_pattern)
 
 
 def pinning_fields(pin: Sequence[float], align_tol: Sequence[float]) -> dict:

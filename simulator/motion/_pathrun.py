@@ -115,11 +115,11 @@ class StateBoxes:
         boxes, and the pattern is millions of pixels)."""
         import jax.numpy as jnp
 
-        from simulator.motion._field import Relay, wet_pattern
+        from simulator.motion._field import Relay, wet_pattern_jit
 
         reached, within = ls.stats["relay"]
         if lines is not None and self._lines_pattern is None:
-            self._lines_pattern = wet_pattern(lines.pattern, lines.labels, self.bits)
+            self._lines_pattern = wet_pattern_jit(lines.pattern, lines.labels, self.bits)
         return Relay(
             jnp.asarray(reached),
             jnp.asarray(within),
