@@ -118,6 +118,36 @@ def test_four_pad_large_twists_equal_the_planes(four):
     assert paired > 0
 
 
+def test_a_pad_covered_throughout_a_box_skips_its_count_and_nothing_changes(four, monkeypatch):
+    # where the chip covers a pad's anchor pixel at every pose of a box the covered count
+    # is not summed (FootprintPath._covered_throughout); the box is the same, bit for bit,
+    # as the one that sums it, and the summed count is above TOUCH_PX2 wherever it is skipped
+    s, _, fp, idx = four
+    fired = []
+    real = FootprintPath._covered_throughout
+
+    def checked(self, p, k, tw, y0, ny, x0, nx):
+        skip = real(self, p, k, tw, y0, ny, x0, nx)
+        if skip:
+            counts = self.sums("covered", p, k, y0, ny, x0, nx)
+            assert counts.min() >= TOUCH_PX2, (p, k, counts.min())
+            fired.append(p)
+        return skip
+
+    fresh = FootprintPath(s)
+    boxes = [([k], centre, 3) for k in idx[::3] for centre in ((40, 3), (4, 41), (0, 0))]
+    monkeypatch.setattr(FootprintPath, "_covered_throughout", checked)
+    skipped = [fp.box(*b) for b in boxes]
+    monkeypatch.setattr(FootprintPath, "_covered_throughout", lambda *a: False)
+    summed = [fresh.box(*b) for b in boxes]
+    assert len(set(fired)) == 4  # each pad's count skipped somewhere
+    for a, b in zip(skipped, summed, strict=True):
+        for name in ("wet_energy", "reached_bits", "within_bits"):
+            assert np.array_equal(getattr(a, name), getattr(b, name)), name
+        for wet in (np.ones(4, bool), np.array([1, 1, 0, 0], bool)):
+            assert np.array_equal(a.energy(wet), b.energy(wet))
+
+
 def _ragged_pads() -> np.ndarray:
     """Three pads of uneven outline, one with a hole and one graded (0.6), 1 um/px: the
     shapes where a ray's furthest pad pixel is not a corner."""

@@ -52,7 +52,7 @@ from ._pathband import (
     pattern_outline,
 )
 from ._pathcost import PathEnergy, _Outline, keep_rows, read_rows, rows_to_compute
-from ._rotation import ChipRotator
+from ._rotation import ChipRotator, footprint_band_px
 
 #: The footprints of the state by name (module docstring); the strips' names end in the side.
 COUNTS = ("covered", "reached", "within")
@@ -88,8 +88,24 @@ class _Part:
         self.rows, self.cols = (i0, i1 - 1), (j0, j1 - 1)
 
 
+#: The least pattern value of a pad's anchor pixel (:meth:`FootprintPath._anchor`): above
+#: TOUCH_PX2 by far more than a float64 sum's round-off.
+ANCHOR_VALUE = 0.75
+
 #: The part of a pair whose far pad no ray from the near one reaches (kept as any part is).
 _NO_PART = _Part(np.zeros((1, 1)))
+
+
+class _Rotators(dict):
+    """The footprints' rotators by name, each made on first use by ``make(name)``."""
+
+    def __init__(self, make):
+        super().__init__()
+        self._make = make
+
+    def __missing__(self, name: str):
+        rot = self[name] = self._make(name)
+        return rot
 
 
 class FootprintPath:
@@ -153,18 +169,20 @@ class FootprintPath:
         # One rotator per footprint on the whole axis's canvas (its smooth chip made once;
         # a footprint at one twist is then made at its band's pixels only).
         profiles = {"wall": prof} | {k: counts[k] for k in (*COUNTS, "band_in", "band_out")}
+        # Each made when a footprint first needs it (a run whose chip covers every pad
+        # throughout never counts the reach, :meth:`_covered_throughout`).
         twists = self.axis.values()
-        self._rots = {
-            k: ChipRotator(
+        self._profiles = profiles
+        self._rots = _Rotators(
+            lambda p: ChipRotator(
                 scene.chip,
                 twists,
                 self.pe.parity,
                 self.pe.chip_blur,
                 self.pe.margin if self.pe.chip_blur else 0,
-                p,
+                profiles[p],
             )
-            for k, p in profiles.items()
-        }
+        )
         self._sides = _Sides(self._rots["wall"])
         c_band = (rules.band_px - rules.f_inf) / STEP_PX
         self._w = (0.5 + c_band, 0.5 - c_band)
@@ -173,6 +191,7 @@ class FootprintPath:
         self.energy_scale = energy_scale_J(scene)
         self._outlines: dict = {}
         self._strip_samples: tuple | None = None
+        self._anchors: dict = {}
         self._support: dict = {}
         self._cache: dict = {}
         self.poses = 0
@@ -227,11 +246,7 @@ class FootprintPath:
             bk, bl, f, sides = self._strips(k, tw, span)
             on = sides == side
             r, c, v, band = band_outline(rot, tw, bk[on], bl[on], f[on], self.dtype, span, 0.0)
-        hc, wc = rot.shape
-        origin = self.pe.origin
-        oy, ox = origin[1] - hc / 2, origin[0] - wc / 2
-        assert oy == int(oy) and ox == int(ox), "pixel grids of chip and pattern must coincide"
-        oy, ox = int(oy), int(ox)
+        oy, ox = self._offset(rot)
         order = np.argsort(r, kind="stable")
         o = _Outline(
             r[order].astype(np.int64) + oy,
@@ -256,6 +271,16 @@ class FootprintPath:
         self._outlines[key] = o
         self.rotations += 1
         return o
+
+    def _offset(self, rot) -> tuple[int, int]:
+        """The rotator's canvas's place at pose 0 in pattern coordinates (row, column): canvas
+        row r lies on crop row r + oy at a pose's row 0 (every rotator of the chip has the
+        same canvas)."""
+        hc, wc = rot.shape
+        origin = self.pe.origin
+        oy, ox = origin[1] - hc / 2, origin[0] - wc / 2
+        assert oy == int(oy) and ox == int(ox), "pixel grids of chip and pattern must coincide"
+        return int(oy), int(ox)
 
     def _strips(self, k: int, tw: float, span) -> tuple:
         """The shadow rule's ``N_b - f`` at every pixel of its band at twist index ``k``
@@ -386,6 +411,48 @@ class FootprintPath:
             return False  # b lies behind a
         return (pb @ n).max() + 1 >= (pa @ n).min() and (pa @ n).max() + 1 >= (pb @ n).min()
 
+    def _anchor(self, p: int) -> tuple[int, int] | None:
+        """Pad ``p``'s deepest pixel of value at least :data:`ANCHOR_VALUE` (crop row and
+        column; its largest distance from the pad's outside), or None (no such pixel)."""
+        if p not in self._anchors:
+            from scipy import ndimage
+
+            vals = np.where(self._bmask[p], self._box_values(p), 0.0)
+            depth = ndimage.distance_transform_cdt(np.pad(vals >= ANCHOR_VALUE, 1))[1:-1, 1:-1]
+            a = None
+            if depth.max() > 0:
+                r, c = np.unravel_index(int(np.argmax(depth)), depth.shape)
+                i0, j0 = self._boxes[p]
+                # crop coordinates: rows upside down (as _part_box lays the parts out)
+                r0, r1, c0, _ = self._crop
+                a = (r1 - 1 - (i0 + int(r)), j0 + int(c) - c0)
+            self._anchors[p] = a
+        return self._anchors[p]
+
+    def _covered_throughout(
+        self, p: int, k: int, tw: float, y0: int, ny: int, x0: int, nx: int
+    ) -> bool:
+        """Whether the chip covers pad ``p`` (its covered count at least TOUCH_PX2) at every
+        pose of the box, known without the count: the pad's anchor pixel (:meth:`_anchor`,
+        value >= ANCHOR_VALUE > TOUCH_PX2) lies where the covered footprint is exactly 1
+        (signed distance below its band, :attr:`ChipRotator.band_px`) at each of them, and the
+        rest of the count is not negative. The count, summed, would say the same (in
+        float64, far from the threshold)."""
+        a = self._anchor(p)
+        r0, r1, c0, c1 = self._crop
+        if a is None or not (0 <= a[0] < r1 - r0 and 0 <= a[1] < c1 - c0):
+            return False
+        rot = self._rots["wall"]  # the chip's signed distance, shared by every footprint
+        (oy, ox), (hc, wc) = self._offset(rot), rot.shape
+        lo = footprint_band_px(self._profiles["covered"])[0]
+        # the anchor's canvas pixel at each pose: crop row = canvas row + oy + pose row
+        kr = a[0] - oy - np.arange(y0, y0 + ny)
+        kc = a[1] - ox - np.arange(x0, x0 + nx)
+        if kr.min() < 0 or kr.max() >= hc or kc.min() < 0 or kc.max() >= wc:
+            return False
+        xi, yi = _inverse(rot, tw)(kr[:, None].astype(float), kc[None, :].astype(float))
+        return bool((rot.distance_at(xi.ravel(), yi.ravel()) < lo).all())
+
     def _reaches(self, name: str, key, k: int, y0: int, ny: int, x0: int, nx: int) -> bool:
         """Whether the footprint ``name`` at twist index ``k`` can touch the part ``key`` from
         some pose of the box (its rows and columns at pose 0, shifted by the box's)."""
@@ -458,7 +525,10 @@ class FootprintPath:
                 bit, byte = np.uint8(1 << (p % 8)), p // 8
                 # every pad's covered count: the pairs read the near pads' (the FFT build
                 # makes it for the deep pads and the near ones; it is the same count)
-                cov = covered[p] = self.sums("covered", p, k, *box) >= TOUCH_PX2
+                if self._covered_throughout(p, k, tw, *box):
+                    cov = covered[p] = np.ones((ny, nx), bool)
+                else:
+                    cov = covered[p] = self.sums("covered", p, k, *box) >= TOUCH_PX2
                 if cov.all():
                     r_, w_ = cov, cov
                 else:
@@ -493,10 +563,15 @@ class FootprintPath:
                     if not keep.any():
                         continue
                     for ax in range(4):
+                        strip = f"strip{(ax - nearest) % 4}"
+                        # the part lies in pad a: where the strip cannot reach the pad from
+                        # any pose of the box, it cannot reach the part (its sums are zero),
+                        # which is then not made
+                        if not self._reaches(strip, a, k, *box):
+                            continue
                         if self._part((a, bb, ax, res)).empty:
                             continue
-                        face = (ax - nearest) % 4
-                        c = self._energy(f"strip{face}", (a, bb, ax, res), k, *box)
+                        c = self._energy(strip, (a, bb, ax, res), k, *box)
                         c[~keep] = 0
                         pair_planes.setdefault((a, bb, ax), []).append((i, c))
         template = Landscape(

@@ -161,6 +161,13 @@ def smooth_bytes(
     return int(make), int(kept)
 
 
+def footprint_band_px(profile) -> tuple[float, float]:
+    """:attr:`ChipRotator.band_px` of a rotator of ``profile`` (a wall profile or count):
+    it depends on the profile alone."""
+    d_s = profile.substrate_reach_px
+    return max(min(d_s, 0.0) - 3.0, d_s - 4.0), profile.pad_reach_px + 3.0
+
+
 class ChipRotator:
     """Rotated chip rasters on one fixed canvas, y-up, with the pattern's pixel parity.
 
@@ -374,10 +381,8 @@ class ChipRotator:
         when that lies further out) for the splines' ringing about its kinks, which decays by
         0.17 a pixel (1e-5 of the footprint, at most, is left 4 px from ``d_s``: together 0.5 %
         of the noise floor on the 730 um chip at 1 um/px)."""
-        prof = self.profile
-        assert prof is not None  # the free contact lines' footprint
-        d_s = prof.substrate_reach_px
-        return max(min(d_s, 0.0) - 3.0, d_s - 4.0), prof.pad_reach_px + 3.0
+        assert self.profile is not None  # the free contact lines' footprint
+        return footprint_band_px(self.profile)
 
     def distance_at(self, xi: np.ndarray, yi: np.ndarray, box: bool = True) -> np.ndarray:
         """The signed distance (px) from the chip's outline that the footprint of the free
