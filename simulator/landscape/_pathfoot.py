@@ -146,11 +146,10 @@ class FootprintPath:
         data = scene.pattern.data
         self._data = data
         # Each pad on its bounding box (image rows, columns): its mask and its values there.
-        self._boxes = [(b[0].start, b[1].start) for b in ndimage.find_objects(self.labels)]
+        boxes = ndimage.find_objects(self.labels)
+        self._boxes = [(b[0].start, b[1].start) for b in boxes]
+        self._bmask = [m[b[0], b[1]] for m, b in zip(masks, boxes, strict=True)]
         self._edges: dict = {}
-        self._bmask = [
-            m[b[0], b[1]] for m, b in zip(masks, ndimage.find_objects(self.labels), strict=True)
-        ]
         self.parts: dict = {
             k: self._part_box(np.where(self._bmask[k], self._box_values(k), 0.0), *self._boxes[k])
             for k in range(len(masks))
@@ -192,6 +191,7 @@ class FootprintPath:
         self._outlines: dict = {}
         self._strip_samples: tuple | None = None
         self._anchors: dict = {}
+        self._shadows: dict = {}
         self._support: dict = {}
         self._cache: dict = {}
         self.poses = 0
@@ -346,7 +346,7 @@ class FootprintPath:
         a0, a1 = max(i0, r0), min(i0 + hb, r1)  # the box's image rows inside the crop
         b0, b1 = max(j0, c0), min(j0 + wb, c1)
         if a0 >= a1 or b0 >= b1:
-            return _Part(np.zeros((1, 1)))
+            return _NO_PART
         sub = values[a0 - i0 : a1 - i0, b0 - j0 : b1 - j0][::-1]
         return _Part(sub, origin=(r1 - a1, b0 - c0))
 
@@ -394,7 +394,15 @@ class FootprintPath:
 
     def _may_shadow(self, a: int, b: int, angle_deg: float) -> bool:
         """False where pad ``b`` lies wholly behind pad ``a`` or beside it along ``angle_deg``
-        (their bounding boxes: no ray from ``a`` reaches ``b``), so the part is empty."""
+        (their bounding boxes: no ray from ``a`` reaches ``b``), so the part is empty (kept:
+        a run asks again at every box)."""
+        key = (a, b, angle_deg)
+        if key not in self._shadows:
+            self._shadows[key] = self._boxes_shadow(a, b, angle_deg)
+        return self._shadows[key]
+
+    def _boxes_shadow(self, a: int, b: int, angle_deg: float) -> bool:
+        """:meth:`_may_shadow`, from the pads' bounding boxes' corners."""
         if not hasattr(self, "_corners"):
             h, w = self._data.shape
             self._corners = {}
@@ -563,6 +571,8 @@ class FootprintPath:
                     if not keep.any():
                         continue
                     for ax in range(4):
+                        if not self._may_shadow(a, bb, ax * 90.0 + res):
+                            continue
                         strip = f"strip{(ax - nearest) % 4}"
                         # the part lies in pad a: where the strip cannot reach the pad from
                         # any pose of the box, it cannot reach the part (its sums are zero),
