@@ -262,8 +262,10 @@ def test_gradient_run_with_dry_pads_steps_as_on_the_planes(chip_dispensed, start
     assert n > 10 and (off < 0.01).all(), (n, off)
     on_floor = [_until_floor(t) < len(t.path) for t in (a, b)]
     assert on_floor[0] == on_floor[1]
-    if not on_floor[0]:  # stopped before the floor (a plateau): the same steps to the end
-        assert len(a.path) == len(b.path)
+    if not on_floor[0]:  # stopped before the floor (a plateau): the same steps to the end,
+        # but where the chip creeps (steps of a thousandth of a pixel), which creeping step no
+        # halving can lower is round-off's choice: 179 against 180 steps on a CPU where OpenCV's
+        # IPP takes its AVX-512 code path; so the ends are held together, not the step counts
         assert (np.abs(np.subtract(a.final, b.final)) / step < 0.01).all(), (a.final, b.final)
 
 
