@@ -157,6 +157,18 @@ def test_gif_of_dynamics_titles_time_and_holds_the_last_frame(run, tmp_path):
     anim.close()
 
 
+def test_gif_of_a_run_that_never_moved_is_one_held_frame(run, tmp_path):
+    # A chip released where it stops (aligned already, or on a flat part where its far pads
+    # dried at release) has a path of one pose: one frame, held for hold_s. (Before, Pillow's
+    # single-frame writer was handed the list of delays and the run failed, losing its JSON.)
+    scene, _ = run
+    traj = Trajectory("greedy", "aligned", np.zeros((1, 3)), np.array([-1e-9]), 0)
+    out = tmp_path / "one.gif"
+    assert write_trajectory_gif(scene, traj, out, hold_s=1.0) == 1
+    assert len(iio.imread(out, index=None)) == 1
+    assert iio.immeta(out, index=0)["duration"] == 1000
+
+
 @pytest.mark.parametrize(
     "kwargs, message", [({"fps": 0}, "fps"), ({"max_frames": 1}, "max_frames")]
 )

@@ -180,7 +180,10 @@ def run(args: argparse.Namespace) -> int:
 
             frames = write_trajectory_gif(scene, traj, into(args.gif), quiet=args.quiet)
     for path in written:
-        print(f"wrote {path}" + (f" ({frames} frames)" if path == args.gif else ""))
+        print(
+            f"wrote {path}"
+            + (f" ({frames} frame{'s' if frames != 1 else ''})" if path == args.gif else "")
+        )
     return 0
 
 

@@ -386,7 +386,9 @@ def write_trajectory_gif(
         mode="P",
         palette=palette,
         optimize=True,
-        duration=durations,
+        # one frame (a run that stopped where it was released): one delay, as Pillow's
+        # single-frame writer takes no list
+        duration=durations if len(frames) > 1 else durations[0],
         loop=0,
     )
     with atomic_output(path) as tmp:
