@@ -152,6 +152,30 @@ def test_montecarlo_cli_carries_the_footprint(run_cli, tmp_path):
     assert d["outcomes"]["aligned"] == 2 and d["outcomes"]["plateau"] == 1, d["outcomes"]
 
 
+@pytest.mark.parametrize("receding", [None, 10.0])
+def test_the_max_bias_is_the_farthest_release_that_comes_back(receding):
+    # 730/50 at 10 um/px along +x, each protocol: a greedy run released at the reported
+    # bias aligns, one released a grid step further does not. Without hysteresis the far
+    # pads of a pattern-dispensed chip dry from 406 um, and the dry pads' state is flat
+    # short of that (the inward branch's flat part): released beyond, the chip stops there.
+    # Read as each sample's fresh release (the curve's force points back at every sample),
+    # this case gave 795 um (the issue's design baseline), where every release from 410 um
+    # stops.
+    from simulator.batch._evaluate import released_max_bias
+    from tests.test_footprint_state import fourpad
+
+    liquid = {} if receding is None else {"receding": receding}
+    s = fourpad(50, res=10.0, dispense="pattern", **liquid)
+    planes = build_footprint_planes(s)
+    for proto in ("pattern", "chip"):
+        sc = s.replace(liquid=dataclasses.replace(s.liquid, dispense=proto))
+        dispensed, _ = dispensed_footprint(sc, planes.labels, planes.n_pads)
+        bias, _ = released_max_bias(planes, dispensed, "x", (0.0, 0.0, 0.0), -800, 800, [-20, 20])
+        assert 300 < bias < 795, (proto, bias)
+        ends = [simulate(sc, (b, 0.0, 0.0), "greedy", planes=planes) for b in (bias, bias + 10)]
+        assert [t.outcome for t in ends] == ["aligned", "plateau"], (proto, bias)
+
+
 def test_evaluate_reports_each_protocol(tmp_path):
     # The four-pad 730/100 at 10 um/px without hysteresis: released with the far pads wet
     # (pattern), the chip is pulled back from further than with them dry (chip), whose

@@ -155,6 +155,71 @@ def max_bias_along(
     return out[0], out[1]
 
 
+def released_max_bias(
+    planes, dispensed, axis: str, through, start: float, stop: float, floor=None
+) -> tuple[float, float]:
+    """(+, -) largest |v - v0| along ``axis`` through ``through`` (v0 its value there) from
+    which a chip released onto the footprint ``dispensed`` comes back: released at a sample,
+    it takes its state there (:meth:`simulator.landscape.FootprintPlanes.next_state`) and
+    walks the samples back to v0, its state passed on through each
+    (a dry pad wets where it is reached, a wet one dries out of reach), with the force of its
+    state pointing back at every sample it stands on; every sample between v0 and the bias
+    must come back so. ``floor``: [first, last] of a flat floor around v0, whose samples
+    count as arrived (as :func:`max_bias_along`).
+
+    Not :func:`max_bias_along` on :meth:`~simulator.landscape.FootprintPlanes.released_curve`,
+    whose samples are each a fresh release: a chip released just beyond where the far pads
+    dry pulls back on the dry pads' state, which is flat short of the sample before it (on
+    730/50 at 5 um/px, released at 410 um it stops there, where the curve's force points
+    back at every sample: a bias of 795 um read off it)."""
+    c = planes.released_curve(dispensed, axis, through, start, stop)
+    v = np.asarray(c["values"], float)
+    k = {"x": 0, "y": 1, "twist": 2}[axis]
+    v0 = float(through[k])
+    poses = np.tile(np.asarray(through, float), (len(v), 1))
+    poses[:, k] = v
+    arrived = np.abs(v - v0) < 0.01 * (float(np.min(np.diff(v))) if len(v) > 1 else 0.0)
+    if floor is not None:
+        arrived |= (v >= floor[0] - 1e-9) & (v <= floor[1] + 1e-9)
+    forces: dict[bytes, np.ndarray] = {}  # each state's force along the curve
+
+    def force(state: np.ndarray) -> np.ndarray:
+        key = state.tobytes()
+        if key not in forces:
+            forces[key] = planes.landscape(state).curve(axis, through, start, stop)["force"]
+        return forces[key]
+
+    out = []
+    for sign in (1, -1):
+        ahead = np.flatnonzero(((v - v0) * sign > 0) & ~arrived)
+        ahead = ahead[np.argsort((v[ahead] - v0) * sign)]  # outward from v0
+        back: dict[tuple[int, bytes], bool] = {}  # (step outward, state): comes back from there
+        best = 0.0
+        for j, i in enumerate(ahead):
+            state = planes.next_state(dispensed, poses[i])
+            m, seen = j, []
+            while True:
+                key = (m, state.tobytes())
+                if key in back:
+                    ok = back[key]
+                    break
+                seen.append(key)
+                if force(state)[ahead[m]] * sign >= 0:  # zero (flat) or pushing away
+                    ok = False
+                    break
+                if m == 0:  # the next sample is v0 or the floor
+                    ok = True
+                    break
+                m -= 1
+                state = planes.next_state(state, poses[ahead[m]])
+            back.update(dict.fromkeys(seen, ok))
+            if not ok:
+                break
+            best = float((v[i] - v0) * sign)
+        out.append(best)
+    return out[0], out[1]
+
+
 def probe_distances(ls, chip_um, at, floating: dict | None) -> tuple[float, float]:
     """(bias um, twist deg) at which the restoring force and torque are probed: 2 % of the
     chip's smaller side (at least two grid steps) and one twist step (at least 1 deg; 0
@@ -546,9 +611,8 @@ def footprint_protocols(
     of ``--dispense`` (docs/physics.md §3.5), from one build of the pads' planes: ``pattern``
     (the droplet on the pattern first) and ``chip`` (the liquid comes in under the chip).
 
-    Each sample of a bias curve is a chip released at that pose onto the protocol's
-    footprint (:meth:`simulator.landscape.FootprintPlanes.released_curve`), not a
-    continuation along the curve; capture and yield run the same starts as the stateless
+    The maximum bias is the farthest release from which the chip comes back along the axis,
+    its state passed on as it goes (:func:`released_max_bias`); capture and yield run the same starts as the stateless
     ones (``grid``, ``starts``), each carrying its own footprint state."""
     from simulator.landscape import build_footprint_planes
     from simulator.liquid import dispensed_footprint
@@ -565,11 +629,9 @@ def footprint_protocols(
         dispensed, why = dispensed_footprint(sc, planes.labels, planes.n_pads)
         biases = {}
         for axis, (lo, hi) in spans.items():
-            c = planes.released_curve(dispensed, axis, through, lo, hi)
-            x0 = through[0] if axis == "x" else through[1]
             floor = [floating[f"{axis}_from_um"], floating[f"{axis}_to_um"]] if floating else None
-            biases[f"+{axis}"], biases[f"-{axis}"] = max_bias_along(
-                c["values"], c["force"], x0, floor=floor
+            biases[f"+{axis}"], biases[f"-{axis}"] = released_max_bias(
+                planes, dispensed, axis, through, lo, hi, floor=floor
             )
         lanes = max(grid.size, len(starts))  # one compiled batch, as above
         cap = summarize(
