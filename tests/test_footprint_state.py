@@ -113,6 +113,38 @@ def test_pattern_dispense_on_a_single_pad_and_on_an_arbitrary_png():
     assert wet.tolist() == [True, False] and "1 of 2 pads" in why
 
 
+def test_pattern_dispense_on_an_arbitrary_png_file_from_the_command_line(run_cli, tmp_path):
+    # The two pads above drawn in a PNG file (no scale stored: --um-per-px 2), run as a user
+    # runs it: the 0.1 nl cap at the centre touches no pad, refused in one line by every
+    # command, before any work and before the droplet's warnings (before, each built the
+    # pads' planes first, and simulate, montecarlo and evaluate printed a warning line
+    # above the error); dispensed at the left pad's centre it wets that pad alone (pad 1).
+    import imageio.v3 as iio
+
+    a = np.zeros((200, 200), np.uint8)
+    a[50:150, 10:60] = 255
+    a[50:150, 140:190] = 255
+    png = tmp_path / "two_pads.png"
+    iio.imwrite(png, a)
+    scene = ["--um-per-px", "2", "--chip-size", "100", "--meniscus", "--volume", "0.1"]
+    scene += ["--no-twist", "--quiet"]
+    out = tmp_path / "run.json"
+    for cmd in (
+        ["simulate", "--pattern", png, "--start=-130,0,0", "--json", out],
+        ["energy", "--pattern", png, "--at=-130,0,0", "--json", out],
+        ["montecarlo", "--pattern", png, "--grid=-130:-100:10,0,0", "--json", out],
+        ["evaluate", png, "--dispense", "pattern", "--out", tmp_path / "ev"],
+    ):
+        rc, _, err = run_cli([*cmd, *scene])
+        one_line_error(rc, err, "touches no pad", "--dispense-at")
+    assert list(tmp_path.iterdir()) == [png]  # nothing written but the PNG
+    args = ["simulate", "--pattern", png, "--start=-130,0,0", *scene]
+    rc, stdout, err = run_cli([*args, "--dispense-at=-130,0", "--json", out])
+    assert rc == 0, err
+    assert "1 of 2 pads" in stdout
+    assert json.loads(out.read_text())["footprint"]["initial"] == [1]
+
+
 def test_dispense_needs_the_free_line_meniscus():
     with pytest.raises(InputError, match="--meniscus"):
         Scene.from_inputs(LIB / "square_200.png", chip_size_um=200, liquid=Liquid(dispense="chip"))

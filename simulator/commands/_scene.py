@@ -38,6 +38,13 @@ def scene_from_args(request: SceneRequest, note_frame: bool = True, warn: bool =
         from simulator.liquid import check_scene_volume
 
         check_scene_volume(scene)
+    if scene.dispense == "pattern":
+        # a drop that touches no pad is refused here, before any work or warning (the pads
+        # are labelled again, cheaply, where the run takes its initial state)
+        from patterns.geometry import pad_labels
+        from simulator.liquid import dispensed_footprint
+
+        dispensed_footprint(scene, *pad_labels(scene.pattern))
     if warn:
         accuracy_check(scene)
     if note_frame and "layout" in scene.pattern.params:
