@@ -119,3 +119,36 @@ def test_report_page_shows_a_refined_minimum_to_a_thousandth():
     from simulator.batch._evaluate import _at
 
     assert [_at(v) for v in (-0.000102256, 1.23456, -2.5e-07, 12.0)] == ["0", "1.235", "0", "12"]
+
+
+def test_a_flat_stretch_one_sample_long_ends_the_max_bias():
+    # The 730/50 four-pad at 5 um/px with free contact lines (20 nl, no footprint state):
+    # its flat part (406-410 um at 2 um/px) is one 5 um step here, 405-410 um, equal to the
+    # noise floor, which the central-difference force straddles (it points back at every
+    # sample). The greedy steps see it: released at 410 um the chip stops, at 405 um it
+    # aligns. The max bias is where they stop, 405 um, not 795 um.
+    from simulator.batch._evaluate import max_bias_along
+    from simulator.landscape import build_landscape
+    from simulator.motion import simulate
+    from simulator.physics import Liquid
+    from simulator.scene import Effects, Scene
+
+    scene = Scene.from_inputs(
+        library_path("four_pad_730_50"),
+        chip_size_um=730,
+        resolution_um=5.0,
+        effects=Effects(twist=False, meniscus=True),
+        liquid=Liquid(volume_nl=20.0),
+    )
+    scene = scene.replace(liquid=Liquid(volume_nl=20.0, dispense="none"))
+    assert scene.dispense is None  # the stateless landscape
+    ls = build_landscape(scene)
+    c = ls.curve("x", (0.0, 0.0, 0.0), -800, 800)
+    floor = [-20.0, 20.0]
+    plus, minus = max_bias_along(
+        c["values"], c["force"], 0.0, floor, c["energy_J"], ls.noise_floor_J
+    )
+    assert plus == minus == 405.0
+    assert max_bias_along(c["values"], c["force"], 0.0, floor) == (795.0, 795.0)  # force alone
+    ends = [simulate(scene, (b, 0.0, 0.0), "greedy", landscape=ls).outcome for b in (405, 410)]
+    assert ends == ["aligned", "plateau"]

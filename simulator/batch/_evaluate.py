@@ -125,33 +125,47 @@ def chip_size(scene: Scene) -> tuple[float, float]:
 
 
 def max_bias_along(
-    values: np.ndarray, force: np.ndarray, x0: float, floor: list[float] | None = None
+    values: np.ndarray,
+    force: np.ndarray,
+    x0: float,
+    floor: list[float] | None = None,
+    energy: np.ndarray | None = None,
+    floor_J: float = 0.0,
 ) -> tuple[float, float]:
     """(+, -) largest |v - x0| with the force pointing back to x0 at every sample in between.
 
     ``floor``: [first, last] of a flat floor around x0 (a chip floating within free contact
-    lines' reach): its samples count as arrived, whatever their force.
+    lines' reach): its samples count as arrived, whatever their force. ``energy`` (J, with
+    the landscape's noise floor ``floor_J``): a sample also stops the chip where its
+    neighbour towards x0 is not lower by more than the noise floor, as the steppers see a
+    flat stretch one sample long, which the central-difference force straddles (730/50 at
+    5 um/px, free lines: the flat part's 405-410 um, where a greedy run released beyond
+    stops, read as a bias of 795 um without it).
     """
-    out = []
-    if floor is not None:
-        keep = (
-            (values < floor[0] - 1e-9) | (values > floor[1] + 1e-9) | (np.abs(values - x0) < 1e-9)
-        )
-        values, force = values[keep], force[keep]
+    values = np.asarray(values, float)
+    force = np.asarray(force, float)
     # Samples within a hundredth of a step of x0 are x0 itself (a refined minimum sits
     # a round-off away from the samples through it).
     tiny = 0.01 * float(np.min(np.diff(values))) if len(values) > 1 else 0.0
+    arrived = np.abs(values - x0) <= tiny
+    if floor is not None:
+        arrived |= (values >= floor[0] - 1e-9) & (values <= floor[1] + 1e-9)
+    out = []
     for sign in (1, -1):
-        sel = (values - x0) * sign > tiny
-        v, f = (values[sel] - x0) * sign, force[sel] * sign
-        order = np.argsort(v)
-        v, f = v[order], f[order]
-        bad = np.flatnonzero(f >= 0)  # zero force (plateau) or pushing away
-        out.append(
-            float(v[bad[0] - 1])
-            if bad.size and bad[0] > 0
-            else (0.0 if bad.size else float(v[-1]) if v.size else 0.0)
-        )
+        d = (values - x0) * sign
+        side = np.flatnonzero((d > tiny) | arrived)
+        side = side[np.argsort(d[side], kind="stable")]  # outward, the arrived ones first
+        best = 0.0
+        for p, i in enumerate(side):
+            if arrived[i]:
+                continue
+            stuck = force[i] * sign >= 0  # zero force (plateau) or pushing away
+            if energy is not None and p > 0:
+                stuck |= bool(energy[side[p - 1]] >= energy[i] - floor_J)
+            if stuck:
+                break
+            best = float(d[i])
+        out.append(best)
     return out[0], out[1]
 
 
@@ -161,38 +175,45 @@ def released_max_bias(
     """(+, -) largest |v - v0| along ``axis`` through ``through`` (v0 its value there) from
     which a chip released onto the footprint ``dispensed`` comes back: released at a sample,
     it takes its state there (:meth:`simulator.landscape.FootprintPlanes.next_state`) and
-    walks the samples back to v0, its state passed on through each
-    (a dry pad wets where it is reached, a wet one dries out of reach), with the force of its
-    state pointing back at every sample it stands on; every sample between v0 and the bias
-    must come back so. ``floor``: [first, last] of a flat floor around v0, whose samples
-    count as arrived (as :func:`max_bias_along`).
+    walks the samples back to v0, its state passed on through each (a dry pad wets where it
+    is reached, a wet one dries out of reach), moving on at every sample as
+    :func:`max_bias_along` asks of its state's landscape (the force points back, and the
+    next sample in is lower by more than the noise floor); every sample between v0 and the
+    bias must come back so. ``floor``: [first, last] of a flat floor around v0, whose
+    samples count as arrived.
 
     Not :func:`max_bias_along` on :meth:`~simulator.landscape.FootprintPlanes.released_curve`,
     whose samples are each a fresh release: a chip released just beyond where the far pads
-    dry pulls back on the dry pads' state, which is flat short of the sample before it (on
-    730/50 at 5 um/px, released at 410 um it stops there, where the curve's force points
-    back at every sample: a bias of 795 um read off it)."""
+    dry pulls back on the dry pads' state, which is flat short of that point (on 730/50 at
+    5 um/px, released at 410 um it stops there, where the curve's force points back at
+    every sample: a bias of 795 um read off it)."""
     c = planes.released_curve(dispensed, axis, through, start, stop)
     v = np.asarray(c["values"], float)
     k = {"x": 0, "y": 1, "twist": 2}[axis]
     v0 = float(through[k])
     poses = np.tile(np.asarray(through, float), (len(v), 1))
     poses[:, k] = v
-    arrived = np.abs(v - v0) < 0.01 * (float(np.min(np.diff(v))) if len(v) > 1 else 0.0)
+    arrived = np.abs(v - v0) <= 0.01 * (float(np.min(np.diff(v))) if len(v) > 1 else 0.0)
     if floor is not None:
         arrived |= (v >= floor[0] - 1e-9) & (v <= floor[1] + 1e-9)
-    forces: dict[bytes, np.ndarray] = {}  # each state's force along the curve
+    curves: dict[bytes, tuple] = {}  # each state's (energy, force, noise floor) along the curve
 
-    def force(state: np.ndarray) -> np.ndarray:
+    def curve(state: np.ndarray) -> tuple:
         key = state.tobytes()
-        if key not in forces:
-            forces[key] = planes.landscape(state).curve(axis, through, start, stop)["force"]
-        return forces[key]
+        if key not in curves:
+            ls = planes.landscape(state)
+            cs = ls.curve(axis, through, start, stop)
+            curves[key] = (cs["energy_J"], cs["force"], ls.noise_floor_J)
+        return curves[key]
 
     out = []
     for sign in (1, -1):
-        ahead = np.flatnonzero(((v - v0) * sign > 0) & ~arrived)
-        ahead = ahead[np.argsort((v[ahead] - v0) * sign)]  # outward from v0
+        d = (v - v0) * sign
+        side = np.flatnonzero((d > 0) | arrived)
+        side = side[np.argsort(d[side], kind="stable")]  # outward, the arrived ones first
+        first = int(np.argmin(arrived[side])) if not arrived[side].all() else len(side)
+        ahead = side[first:]
+        inner = side[first - 1] if first > 0 else None  # where a walk back arrives
         back: dict[tuple[int, bytes], bool] = {}  # (step outward, state): comes back from there
         best = 0.0
         for j, i in enumerate(ahead):
@@ -204,8 +225,10 @@ def released_max_bias(
                     ok = back[key]
                     break
                 seen.append(key)
-                if force(state)[ahead[m]] * sign >= 0:  # zero (flat) or pushing away
-                    ok = False
+                e, f, noise = curve(state)
+                at, nxt = ahead[m], ahead[m - 1] if m > 0 else inner
+                if f[at] * sign >= 0 or (nxt is not None and e[nxt] >= e[at] - noise):
+                    ok = False  # zero force, pushing away, or the next sample in no lower
                     break
                 if m == 0:  # the next sample is v0 or the floor
                     ok = True
@@ -215,7 +238,7 @@ def released_max_bias(
             back.update(dict.fromkeys(seen, ok))
             if not ok:
                 break
-            best = float((v[i] - v0) * sign)
+            best = float(d[i])
         out.append(best)
     return out[0], out[1]
 
@@ -420,7 +443,9 @@ def assess(
         c = ls.curve(axis, (xm, ym, tm), lo, hi)
         x0 = xm if axis == "x" else ym
         floor = [floating[f"{axis}_from_um"], floating[f"{axis}_to_um"]] if floating else None
-        plus, minus = max_bias_along(c["values"], c["force"], x0, floor=floor)
+        plus, minus = max_bias_along(
+            c["values"], c["force"], x0, floor, c["energy_J"], ls.noise_floor_J
+        )
         curves[axis] = c
         biases[f"+{axis}"], biases[f"-{axis}"] = plus, minus
     # Capture fraction over a grid of starts around the global minimum (at its twist), and the
