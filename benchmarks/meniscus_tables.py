@@ -34,6 +34,7 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 from _smoke import add_smoke_arg, smoke_out, tee_stdout  # noqa: E402
 
 from simulator.landscape import (  # noqa: E402
+    build_footprint_planes,
     build_landscape,
     refine_minimum,
     stiffness,
@@ -120,9 +121,9 @@ def evolver_figure(out: Path, um_per_px: float = 2.0, x_step_um: float = 2.0) ->
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.6), layout="constrained", sharey=True)
     print(
         "| gap (um) | x (um) | Surface Evolver inward, level 1 (uN) | Surface Evolver outward, level 2 (uN) | meniscus model (uN) "
-        "| overlap model (uN) |"
+        "| `chip`, inward (uN) | `pattern`, outward (uN) | overlap model (uN) |"
     )
-    print("|---:|---:|---:|---:|---:|---:|")
+    print("|---:|---:|---:|---:|---:|---:|---:|---:|")
     for ax, gap in zip(axes, (50, 100), strict=True):
         base = Scene.from_inputs(
             LIB / f"four_pad_730_{gap}.png",
@@ -138,6 +139,34 @@ def evolver_figure(out: Path, um_per_px: float = 2.0, x_step_um: float = 2.0) ->
         xs = np.arange(0.0, 510.0, x_step_um)
         f_over = np.array([float(over.force_at(x, 0.0, 0.0)[0]) for x in xs]) * 1e6
         f_men = np.array([float(mls.force_at(x, 0.0, 0.0)[0]) for x in xs]) * 1e6
+        # the footprint state (docs/physics.md §3.5), carried pose by pose along each path:
+        # `pattern` outward from alignment (every pad wet), `chip` inward from 500 um (none)
+        fp = build_footprint_planes(men.replace(liquid=replace(men.liquid, dispense="chip")))
+        branch = {}
+        for name, order, wet in (
+            ("pattern", xs, np.ones(fp.n_pads, bool)),
+            ("chip", xs[::-1], np.zeros(fp.n_pads, bool)),
+        ):
+            f = {}
+            for x in order:
+                wet = fp.next_state(wet, (x, 0.0, 0.0))
+                f[float(x)] = -float(fp.landscape(wet).force_at(x, 0.0, 0.0)[0]) * 1e6
+            branch[name] = f
+        ax.plot(
+            xs,
+            [branch["pattern"][float(x)] for x in xs],
+            color="tab:green",
+            lw=1.2,
+            label="footprint state, dispense pattern, outward",
+        )
+        ax.plot(
+            xs,
+            [branch["chip"][float(x)] for x in xs],
+            ":",
+            color="black",
+            lw=1.4,
+            label="footprint state, dispense chip, inward",
+        )
         se = sorted(paths.get(gap, []), key=lambda r: float(r["x_um"]))
         sx = np.array([float(r["x_um"]) for r in se])
         sf = np.array([float(r["force_x_N"]) for r in se]) * 1e6
@@ -191,9 +220,10 @@ def evolver_figure(out: Path, um_per_px: float = 2.0, x_step_um: float = 2.0) ->
         out_f = {float(r["x_um"]): -float(r["force_x_N"]) * 1e6 for r in se}
         for x in sorted(set(out_f) | set(inw)):
             i, o = (f"{d[x]:.2f}" if x in d else "" for d in (inw, out_f))
+            ci, po = (f"{branch[k][x]:.2f}" if x in branch[k] else "" for k in ("chip", "pattern"))
             print(
                 f"| {gap} | {x:g} | {i} | {o} | {-float(mls.force_at(x, 0.0, 0.0)[0]) * 1e6:.2f} | "
-                f"{-float(over.force_at(x, 0.0, 0.0)[0]) * 1e6:.2f} |"
+                f"{ci} | {po} | {-float(over.force_at(x, 0.0, 0.0)[0]) * 1e6:.2f} |"
             )
     axes[0].set_ylabel("restoring force -F_x (uN)")
     fig.legend(*axes[0].get_legend_handles_labels(), loc="outside lower center", ncol=3, fontsize=8)
