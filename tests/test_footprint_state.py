@@ -553,3 +553,37 @@ def test_chip_without_hysteresis_keeps_todays_model_wherever_evolver_agreed_with
                 assert abs(chip[0] - today[0]) <= tol and abs(chip[1] - today[1]) <= tol
                 same += 1
     assert agreed >= 20 and same >= 15  # most of each path
+
+
+def test_pad_distances_from_the_edge_pixels_are_the_minimum_over_every_pixel():
+    # Random pads (ragged, with holes and lone pixels, at three pixel sizes) and dispense
+    # points anywhere, on pixel edges too: the nearest pixel found among the pads' edge
+    # pixels and the one holding the point is the minimum over all the pad's pixels, bit for
+    # bit (the same float64 distances of the same pixel centres).
+    from scipy import ndimage
+
+    from simulator.liquid._dispense import pad_distances_um
+
+    rng = np.random.default_rng(7)
+    checked = 0
+    for trial in range(120):
+        a = rng.random((40, 50)) < 0.4
+        if trial % 2:
+            a = ndimage.binary_opening(a)
+        s = float(rng.choice([0.7, 1.0, 2.0]))
+        labels, n = pad_labels(Mask(a.astype(float), s))
+        if n == 0:
+            continue
+        h, w = labels.shape
+        rr, cc = np.nonzero(labels)
+        for _ in range(4):
+            if trial % 3 == 0:  # on pixel edges and corners
+                at = (float(rng.integers(-26, 26)) * s, float(rng.integers(-21, 21)) * s)
+            else:
+                at = (rng.uniform(-30, 30) * s, rng.uniform(-25, 25) * s)
+            d = np.hypot((cc + 0.5 - w / 2) * s - at[0], (h / 2 - rr - 0.5) * s - at[1])
+            brute = np.full(n, np.inf)
+            np.minimum.at(brute, labels[rr, cc] - 1, d)
+            np.testing.assert_array_equal(pad_distances_um(labels, n, s, at), brute)
+            checked += 1
+    assert checked > 400

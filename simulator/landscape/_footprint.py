@@ -403,17 +403,23 @@ class _Sides:
         gr, gc = np.gradient(sdf)
         phi = np.arctan2(-gr, gc)  # rows run down: y = -row
         self.bins = (np.rint(phi / (np.pi / 2)).astype(np.int64) % 4).astype(np.int8)
-        ho, wo = rot.shape
-        v, u = np.mgrid[0:ho, 0:wo].astype(float)
-        self.x, self.y = u - (wo / 2 - 0.5), -(v - (ho / 2 - 0.5))
+        self.shape = rot.shape
         self.half = rot._half
+        self._xy: tuple[np.ndarray, np.ndarray] | None = None  # the canvas's pixel centres
 
     def __call__(self, twist_deg: float) -> np.ndarray:
         """(H, W) int8 sides on the canvas at ``twist_deg``, y up (as the rotator's rasters)."""
+        if self._xy is None:  # made on first use: the path engine reads ``bins`` alone
+            ho, wo = self.shape
+            self._xy = (
+                np.arange(wo, dtype=float)[None, :] - (wo / 2 - 0.5),
+                -(np.arange(ho, dtype=float)[:, None] - (ho / 2 - 0.5)),
+            )
+        x, y = self._xy
         a = math.radians(twist_deg)
         ca, sa = math.cos(a), math.sin(a)
-        xi = self.x * ca + self.y * sa
-        yi = -self.x * sa + self.y * ca
+        xi = x * ca + y * sa
+        yi = -x * sa + y * ca
         h, w = self.bins.shape
         r = np.clip(np.rint(-yi + (h / 2 - 0.5)), 0, h - 1).astype(np.intp)
         c = np.clip(np.rint(xi + (w / 2 - 0.5)), 0, w - 1).astype(np.intp)

@@ -26,9 +26,41 @@ of the chip's wall dry at once.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from foundation import InputError
+
+
+def pad_distances_um(labels: np.ndarray, n_pads: int, um_per_px: float, at_um) -> np.ndarray:
+    """(n_pads,) um: each pad's nearest pixel (its centre) to the point ``at_um`` (x, y um
+    from the pattern's centre, y up), pads labelled 1..n in ``labels``.
+
+    The nearest is the pixel holding the point, or a pixel on the pad's edge (one with a
+    4-neighbour outside it): an inner pixel has a neighbour in the pad one pixel nearer
+    along the axis where the point lies more than half a pixel off. Only those few pixels'
+    distances are computed (the 4000 um four-pad at 2 um/px: 0.46 -> 0.05 s), and their
+    minimum is the one over every pixel of the pad, bit for bit (tested)."""
+    h, w = labels.shape
+    s = um_per_px
+    x0, y0 = float(at_um[0]), float(at_um[1])
+    out = np.pad(labels, 1)
+    edge = (
+        (out[:-2, 1:-1] != labels)
+        | (out[2:, 1:-1] != labels)
+        | (out[1:-1, :-2] != labels)
+        | (out[1:-1, 2:] != labels)
+    )
+    edge &= labels > 0
+    r_at, c_at = math.floor(h / 2 - y0 / s), math.floor(x0 / s + w / 2)
+    if 0 <= r_at < h and 0 <= c_at < w:
+        edge[r_at, c_at] = labels[r_at, c_at] > 0
+    rr, cc = np.nonzero(edge)
+    d = np.hypot((cc + 0.5 - w / 2) * s - x0, (h / 2 - rr - 0.5) * s - y0)
+    nearest = np.full(n_pads, np.inf)
+    np.minimum.at(nearest, labels[rr, cc] - 1, d)
+    return nearest
 
 
 def dispensed_wet(scene, labels: np.ndarray, n_pads: int, at_um=None) -> tuple[np.ndarray, str]:
@@ -40,15 +72,8 @@ def dispensed_wet(scene, labels: np.ndarray, n_pads: int, at_um=None) -> tuple[n
 
     m = scene.materials
     v = scene.liquid.volume_nl
-    s = scene.um_per_px
-    h, w = labels.shape
     x0, y0 = (0.0, 0.0) if at_um is None else (float(at_um[0]), float(at_um[1]))
-    # each pad's nearest pixel to the dispense point (um)
-    rr, cc = np.nonzero(labels)
-    lab = labels[rr, cc]
-    d = np.hypot((cc + 0.5 - w / 2) * s - x0, (h / 2 - rr - 0.5) * s - y0)
-    nearest = np.full(n_pads, np.inf)
-    np.minimum.at(nearest, lab - 1, d)
+    nearest = pad_distances_um(labels, n_pads, scene.um_per_px, (x0, y0))
     four = four_pad_geometry(scene.pattern) if n_pads == 4 else None
     if four is not None:
         L, g = four
