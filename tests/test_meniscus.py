@@ -484,3 +484,34 @@ def test_boxes_of_a_run_share_the_chips_footprint(monkeypatch):
         )
     )
     assert len(calls) == 2
+
+
+@pytest.mark.parametrize(
+    "geometry, um_per_px",
+    [
+        (box(-500, -300, 500, 300), 2.0),  # a rectangle
+        (affinity.rotate(box(-60, -40, 60, 40), 17, origin=(0, 0)), 1.0),  # turned: ragged
+        (box(-50, -50, 50, 50).difference(box(-10, -20, 15, 5)), 1.0),  # with a hole
+    ],
+)
+def test_a_chips_distance_cut_from_a_wider_canvas_is_the_transform_there(geometry, um_per_px):
+    # The footprint state's rotators and the stateless one differ in margin: the signed
+    # distance made on the widest canvas is cut for the others, which is the transform made
+    # there bit for bit; where it could not be (an odd difference of sizes, a canvas that
+    # cuts the chip), no cut is offered and the transform is made.
+    from patterns.geometry import rasterize
+    from simulator.landscape._rotation import _cropped_distance
+    from simulator.physics import signed_distance_px
+
+    x0, y0, x1, y1 = geometry.bounds
+    w = 2 * math.ceil(max(abs(x0), abs(x1)) / um_per_px) + 2
+    h = 2 * math.ceil(max(abs(y0), abs(y1)) / um_per_px) + 2
+    img = rasterize(geometry, um_per_px, shape=(h + 20, w + 30))
+    big = signed_distance_px(rasterize(geometry, um_per_px, shape=(h + 120, w + 90)))
+    cut = _cropped_distance(big, img)
+    assert cut is not None
+    np.testing.assert_array_equal(cut, signed_distance_px(img))
+    odd = rasterize(geometry, um_per_px, shape=(h + 21, w + 30))
+    assert _cropped_distance(big, odd) is None
+    tight = rasterize(geometry, um_per_px, shape=(h - 6, w + 30))  # the chip cut by it
+    assert _cropped_distance(big, tight) is None

@@ -168,6 +168,34 @@ def footprint_band_px(profile) -> tuple[float, float]:
     return max(min(d_s, 0.0) - 3.0, d_s - 4.0), profile.pad_reach_px + 3.0
 
 
+def _cropped_distance(big: np.ndarray, img: np.ndarray) -> np.ndarray | None:
+    """The signed distance of ``img``'s chip (:func:`simulator.physics.signed_distance_px`)
+    cut from ``big``, the same chip's on a larger canvas, where the cut is that distance
+    exactly, else None: the canvases centred alike (an even difference of sizes), every
+    pixel of the chip inside the cut and none on its edge, the cut's inside (negative
+    distance) the image's, and the distances below the exact transform's limit. Then each
+    pixel's nearest pixel across the outline lies in the cut on both canvases (beyond it a
+    pixel is no nearer than the cut's edge, outside the chip), so the two transforms agree
+    bit for bit. The footprint state's rotators and the stateless one differ in margin
+    only: one distance transform serves them all (0.5 s on the 4000 um chip at 2 um/px)."""
+    from simulator.physics import EDT_EXACT_PX
+
+    (hb, wb), (h, w) = big.shape, img.shape
+    dh, dw = hb - h, wb - w
+    if dh < 0 or dw < 0 or dh % 2 or dw % 2:
+        return None
+    cut = big[dh // 2 : dh // 2 + h, dw // 2 : dw // 2 + w]
+    inside = img >= 0.5
+    edge = inside[0].any() or inside[-1].any() or inside[:, 0].any() or inside[:, -1].any()
+    if edge or not inside.any() or not np.array_equal(cut < 0, inside):
+        return None
+    if np.count_nonzero(big < 0) != np.count_nonzero(inside):  # none beyond the cut
+        return None
+    if not np.abs(cut).max() < EDT_EXACT_PX:
+        return None
+    return cut.copy()
+
+
 class ChipRotator:
     """Rotated chip rasters on one fixed canvas, y-up, with the pattern's pixel parity.
 
@@ -287,9 +315,10 @@ class ChipRotator:
             # of it (the footprint state's rotators, one per count, share it)
             key = (id(c), ho, wo)
             kept = _SDF.get("entry")
-            if kept is not None and kept[0] == key and kept[1]() is c:
-                sdf = kept[2]
-            else:
+            sdf = None
+            if kept is not None and kept[1]() is c:
+                sdf = kept[2] if kept[0] == key else _cropped_distance(kept[2], img)
+            if sdf is None:
                 sdf = signed_distance_px(img)
                 _SDF["entry"] = (key, weakref.ref(c), sdf)
             out = self.profile(sdf)

@@ -48,6 +48,7 @@ from ._mechanics import (
 )
 from ._meniscus import (
     CHIP_BLUR_MIN_PX as CHIP_BLUR_MIN_PX,
+    EDT_EXACT_PX as EDT_EXACT_PX,
     WallProfile as WallProfile,
     flat_wall_energy_J as flat_wall_energy_J,
     flat_wall_stiffness_N_m as flat_wall_stiffness_N_m,
