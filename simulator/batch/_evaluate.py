@@ -838,7 +838,7 @@ def _protocol_rows(p: dict | None) -> str:
 (<code>pattern</code>: the droplet on the pattern first; <code>chip</code>: the liquid comes in under the
 chip). A dry pad wets when the liquid's foot reaches it (within {p["substrate_reach_um"]:.3g} um of the chip),
 a wet pad dries beyond the reach of the chip's wall ({p["wet_reach_um"]:.3g} um, {p["receding_deg"]:.3g} deg receding).
-Each bias sample is a chip released there; capture and yield run the starts above, each carrying its own wet pads.</p>
+The maximum bias is the farthest release along an axis from which the chip comes back, its wet pads carried as it goes; capture and yield run the starts above, each carrying its own wet pads.</p>
 <table><tr><th>protocol</th><th>wet at release</th><th>maximum bias</th><th>capture</th><th>yield</th></tr>{rows}</table>"""
 
 
