@@ -412,6 +412,38 @@ def test_chip_dispense_follows_the_evolver_inward_branch(gap):
 
 
 @pytest.mark.parametrize("gap", [50, 100])
+def test_chip_dispense_flat_part_onset_and_width_within_10_um_of_evolvers(gap):
+    # Coming inward under `chip` (state carried, 2 um/px) the flat part is where the force is
+    # below a tenth of the interior force: its outer end (the onset, met first) and its
+    # width within 10 um of Surface Evolver's inward path (level 1, sampled every 10 um: its
+    # ends are known to lie between two rows, and each is held to that bracket). Measured:
+    # 730/50 364-412 um (48 um) against ends in (360, 370] and [400, 410) (30-50 um);
+    # 730/100 340-438 um (98 um) against (340, 350] and [420, 430) (70-90 um): the onset and
+    # the width 8 um beyond their brackets' far sides, 2 um to spare (and Surface Evolver's
+    # level 1 is not converged there, validation/FOURPAD_INWARD.md).
+    s = fourpad(gap, res=2.0, dispense="chip")
+    fp = build_footprint_planes(s)
+    xs = np.arange(500.0, 298.0, -2.0)
+    f, _ = _branch_forces(fp, xs, np.zeros(4, bool))
+    gamma = s.materials.surface_tension_N_m
+    interior = abs(s.delta_gamma_N_m) * (730 - gap) * 1e-6
+    flat = xs[(np.abs(f) < 0.1 * interior) & (xs < 470)]
+    lo, hi = float(flat.min()), float(flat.max())
+    assert np.all(np.abs(f[(xs > lo) & (xs < hi)]) < 0.1 * interior)  # one stretch
+    se = _evolver_rows("evolver_fourpad_inward.csv", f"x_730_{gap}_inward", level="1")
+    rows = sorted(x for x in se if 300 <= x <= 470)
+    se_flat = [x for x in rows if abs(float(se[x]["force_x_N"])) * gamma / 0.072 < 0.1 * interior]
+    i0, i1 = rows.index(se_flat[0]), rows.index(se_flat[-1])
+    assert se_flat == rows[i0 : i1 + 1]  # one stretch of rows
+    inner = (rows[i0 - 1], rows[i0])  # Surface Evolver's inner end lies between these rows
+    outer = (rows[i1], rows[i1 + 1])  # and its outer end (the onset) between these
+    assert outer[0] - 10 <= hi <= outer[1] + 10, (hi, outer)
+    assert inner[0] - 10 <= lo <= inner[1] + 10, (lo, inner)
+    width = (outer[0] - inner[1], outer[1] - inner[0])
+    assert width[0] - 10 <= hi - lo <= width[1] + 10, (hi - lo, width)
+
+
+@pytest.mark.parametrize("gap", [50, 100])
 def test_pattern_dispense_follows_the_evolver_outward_branch(gap):
     # Outward from alignment with all four pads wet (Surface Evolver's outward path,
     # validation/FOURPAD.md): the force while the far pads stay wet is the interior force, as
