@@ -121,11 +121,14 @@ def released(gap: int, receding: float | None, x: float, y: float):
 def test_bench_free_runs_are_draining_and_the_held_runs_keep_the_far_pads():
     free = [r for r in BENCH if r["variant"] == "free"]
     held = [r for r in BENCH if r["variant"] == "held"]
-    assert len(free) == 5 and len(held) == 14
+    # level 1 at every pose of both gaps (x = 400-600 um and (300, -300) um), free and held
+    poses = {(r["gap_um"], r["x_um"], r["y_um"]) for r in free if r["level"] == "1"}
+    assert len(free) == len(poses) == 12 and len(held) == 14
+    assert poses == {(r["gap_um"], r["x_um"], r["y_um"]) for r in held if r["level"] == "1"}
     for r in free:  # the line left the far pads' outer edge, and the energy still fell
         assert float(r["far_wet_frac"]) < 0.6 and float(r["xmin_y0_um"]) > -365 + 100, r
     falling = [float(r["pre_last_dE"]) for r in free if r["pre_last_dE"]]  # where recorded
-    assert len(falling) == 4 and max(falling) < -100  # gamma um^2 per round, still draining
+    assert len(falling) == 11 and max(falling) < -100  # gamma um^2 per round, still draining
     for r in held:  # held at the outer edge: every far pad stays wet
         assert float(r["far_wet_frac"]) == pytest.approx(1.0) and r["far_pads_wet"] == "True"
 
@@ -149,6 +152,80 @@ def test_without_hysteresis_the_far_pads_dry_where_evolver_lets_them_go(gap):
             assert bool(wet[far].any()) == (se == {"True"}), x
         else:
             assert not wet[far].any(), x
+
+
+# ------------------------------------------------------------------ relaxed without hysteresis
+LONG = [r for r in BENCH if r["variant"] == "free-long"]
+#: um: a free vertex further below the substrate is a touch-down the Evolver run cannot make
+#: (validation/evolver_fourpad_bench.py, TOUCH_TOL_UM): that row is not a valid state
+TOUCH_TOL_UM = 1.0
+
+
+def _pose(r: dict[str, str]) -> tuple[int, float, float]:
+    return int(float(r["gap_um"])), float(r["x_um"]), float(r["y_um"])
+
+
+def _valid(r: dict[str, str]) -> bool:
+    return float(r["z_min_free_um"]) >= -TOUCH_TOL_UM
+
+
+def test_relaxed_free_runs_keep_the_far_pads_wet_where_the_model_does():
+    # Surface Evolver's bench protocol without hysteresis, relaxed to equilibrium (free-long:
+    # the pre-relaxation ran until a round lowered E by less than 1 gamma um^2, 132-297
+    # rounds, at all twelve poses of both gaps). Six of them are valid states: in the other
+    # six the free surface passed 1.4-52 um through the substrate, where a real liquid would
+    # have touched down. In the six, the far pads keep more than 1 % of their region wet
+    # exactly where the model's released state keeps them wet: 730/50 at 400 um (3.1 %, the
+    # inner corners) and on the diagonal (17.7 %); dry at 730/50 450 and 500 um and 730/100
+    # 550 and 600 um (a residue of 0.04 % on 730/100).
+    assert sorted(_pose(r) for r in LONG) == sorted(
+        (g, x, y)
+        for g in (50, 100)
+        for x, y in [(400, 0), (450, 0), (500, 0), (550, 0), (600, 0), (300, -300)]
+    )
+    valid = [r for r in LONG if _valid(r)]
+    assert {_pose(r) for r in valid} == {
+        (50, 400.0, 0.0),
+        (50, 450.0, 0.0),
+        (50, 500.0, 0.0),
+        (50, 300.0, -300.0),
+        (100, 550.0, 0.0),
+        (100, 600.0, 0.0),
+    }
+    wet_se = set()
+    for r in LONG:
+        assert abs(float(r["pre_last_dE"])) < 1.0 and r["level"] == "1", r  # relaxed
+    for r in valid:
+        g, x, y = _pose(r)
+        wet, far, _, _ = released(g, None, x, y)
+        assert bool(wet[far].any()) == (float(r["far_wet_frac"]) > 0.01), (g, x, y)
+        if float(r["far_wet_frac"]) > 0.01:
+            wet_se.add((g, x, y))
+    assert wet_se == {(50, 400.0, 0.0), (50, 300.0, -300.0)}
+
+
+def test_relaxed_free_runs_force_within_10_percent_but_at_three_poses():
+    # The valid runs' force on the chip along x (their envelope and finite-difference forces
+    # agree to 3 %) against the model's released without hysteresis: within 10 % at 730/50
+    # 450 um (+8.4 %), 500 um (-3.4 %) and on the diagonal (+0.1 %, and F_y -6 %); the
+    # misses, stated here: 730/50 at 400 um, +25 % (the model's far pads pull the whole
+    # interior force, Surface Evolver's 3 % left wet do not: the dip of
+    # validation/FOURPAD.md), and 730/100 at 550 and 600 um, -16 % (Surface Evolver pulls
+    # 19.8 uN, above the interior force |dgamma| (L - g) = 16.6 uN that the model and the
+    # outward continuation give).
+    misses, checked = set(), 0
+    for r in LONG:
+        if not _valid(r):
+            continue
+        g, x, y = _pose(r)
+        f, fd = abs(float(r["force_x_N"])), abs(float(r["force_x_fd_N"]))
+        assert abs(f - fd) <= 0.03 * fd, (g, x, y)
+        _, _, fx, _ = released(g, None, x, y)
+        checked += 1
+        if abs(abs(fx) - f) > 0.10 * f:
+            misses.add((g, x, y))
+    assert checked == 6
+    assert misses == {(50, 400.0, 0.0), (100, 550.0, 0.0), (100, 600.0, 0.0)}
 
 
 # ------------------------------------------------------------------ between the bounds
