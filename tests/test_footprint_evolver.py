@@ -155,7 +155,7 @@ def test_without_hysteresis_the_far_pads_dry_where_evolver_lets_them_go(gap):
 
 
 # ------------------------------------------------------------------ relaxed without hysteresis
-LONG = [r for r in BENCH if r["variant"] == "free-long"]
+LONG = [r for r in BENCH if r["variant"] == "free-long" and r["level"] == "1"]
 #: um: a free vertex further below the substrate is a touch-down the Evolver run cannot make
 #: (validation/evolver_fourpad_bench.py, TOUCH_TOL_UM): that row is not a valid state
 TOUCH_TOL_UM = 1.0
@@ -226,6 +226,14 @@ def test_relaxed_free_runs_force_within_10_percent_but_at_three_poses():
             misses.add((g, x, y))
     assert checked == 6
     assert misses == {(50, 400.0, 0.0), (100, 550.0, 0.0), (100, 600.0, 0.0)}
+    # two of them refined once more (level 2): the force moves by at most 1 %, the 19.8 uN of
+    # 730/100 at 550 um included, so the misses are not the mesh's
+    fine = [r for r in BENCH if r["variant"] == "free-long" and r["level"] == "2"]
+    assert {_pose(r) for r in fine} == {(50, 450.0, 0.0), (100, 550.0, 0.0)}
+    coarse = {_pose(r): r for r in LONG}
+    for r in fine:
+        f1, f2 = (abs(float(q["force_x_N"])) for q in (coarse[_pose(r)], r))
+        assert f2 == pytest.approx(f1, rel=0.01) and _valid(r), _pose(r)
 
 
 # ------------------------------------------------------------------ between the bounds
