@@ -5,6 +5,7 @@ term's force, runs that keep and lose their far pads, and the Surface Evolver br
 from __future__ import annotations
 
 import csv
+import functools
 import json
 import math
 from pathlib import Path
@@ -390,17 +391,25 @@ def _branch_forces(fp, xs, start_wet):
     return np.array(f), states
 
 
+@functools.cache
+def _chip_inward(gap: int):
+    """(scene, planes, xs, F_x, states): ``chip`` coming inward from 500 um along y = 0 at
+    2 um/px with the state carried pose by pose, and Surface Evolver's inward rows (level 1)."""
+    s = fourpad(gap, res=2.0, dispense="chip")
+    fp = build_footprint_planes(s)
+    xs = np.arange(500.0, 298.0, -2.0)
+    f, states = _branch_forces(fp, xs, np.zeros(4, bool))
+    se = _evolver_rows("evolver_fourpad_inward.csv", f"x_730_{gap}_inward", level="1")
+    return s, fp, xs, f, states, se
+
+
 @pytest.mark.parametrize("gap", [50, 100])
 def test_chip_dispense_follows_the_evolver_inward_branch(gap):
     # Coming inward from 500 um with the far pads dry (Surface Evolver's inward path, level 1:
     # validation/FOURPAD_INWARD.md), the far pads wet where Surface Evolver's do: the model's
     # snap at d_s puts the flat part's inner end within 10 um of Surface Evolver's (the
     # stateless footprint pulled them from d_p: 36 um early on 730/50)
-    s = fourpad(gap, res=2.0, dispense="chip")
-    fp = build_footprint_planes(s)
-    xs = np.arange(500.0, 298.0, -2.0)
-    f, states = _branch_forces(fp, xs, np.zeros(4, bool))
-    se = _evolver_rows("evolver_fourpad_inward.csv", f"x_730_{gap}_inward", level="1")
+    _, fp, xs, f, states, se = _chip_inward(gap)
     # Surface Evolver: the left pads wet at the first x (going in) where left_pads_wetted
     se_wet = max(x for x, r in se.items() if r["left_pads_wetted"] == "True" and x < 400)
     se_dry = min(x for x, r in se.items() if r["left_pads_wetted"] == "False")
@@ -421,16 +430,12 @@ def test_chip_dispense_flat_part_onset_and_width_within_10_um_of_evolvers(gap):
     # 730/100 340-438 um (98 um) against (340, 350] and [420, 430) (70-90 um): the onset and
     # the width 8 um beyond their brackets' far sides, 2 um to spare (and Surface Evolver's
     # level 1 is not converged there, validation/FOURPAD_INWARD.md).
-    s = fourpad(gap, res=2.0, dispense="chip")
-    fp = build_footprint_planes(s)
-    xs = np.arange(500.0, 298.0, -2.0)
-    f, _ = _branch_forces(fp, xs, np.zeros(4, bool))
+    s, _, xs, f, _, se = _chip_inward(gap)
     gamma = s.materials.surface_tension_N_m
     interior = abs(s.delta_gamma_N_m) * (730 - gap) * 1e-6
     flat = xs[(np.abs(f) < 0.1 * interior) & (xs < 470)]
     lo, hi = float(flat.min()), float(flat.max())
     assert np.all(np.abs(f[(xs > lo) & (xs < hi)]) < 0.1 * interior)  # one stretch
-    se = _evolver_rows("evolver_fourpad_inward.csv", f"x_730_{gap}_inward", level="1")
     rows = sorted(x for x in se if 300 <= x <= 470)
     se_flat = [x for x in rows if abs(float(se[x]["force_x_N"])) * gamma / 0.072 < 0.1 * interior]
     i0, i1 = rows.index(se_flat[0]), rows.index(se_flat[-1])
