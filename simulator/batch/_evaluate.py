@@ -124,6 +124,32 @@ def chip_size(scene: Scene) -> tuple[float, float]:
     return footprint_um(scene.chip)
 
 
+def _outward(values: np.ndarray, x0: float, floor) -> tuple[np.ndarray, list[np.ndarray]]:
+    """(arrived, [+ side, - side]) of a curve's samples ``values`` about ``x0``: which count as
+    arrived (within a hundredth of a step of x0, a refined minimum sitting a round-off away
+    from the samples through it, or on the flat ``floor`` [first, last] around it), and per
+    side the indices of that side's samples and the arrived ones, ordered outward (the
+    arrived first)."""
+    tiny = 0.01 * float(np.min(np.diff(values))) if len(values) > 1 else 0.0
+    arrived = np.abs(values - x0) <= tiny
+    if floor is not None:
+        arrived |= (values >= floor[0] - 1e-9) & (values <= floor[1] + 1e-9)
+    sides = []
+    for sign in (1, -1):
+        d = (values - x0) * sign
+        side = np.flatnonzero((d > tiny) | arrived)
+        sides.append(side[np.argsort(d[side], kind="stable")])
+    return arrived, sides
+
+
+def _stops(force: float, sign: int, energy: float, inner: float | None, floor_J: float) -> bool:
+    """Whether a chip at a sample stops there, moving towards the minimum on side ``sign``: its
+    force is zero or pushes away, or the next sample in (energy ``inner``, J; None: not
+    known) is not lower by more than the noise floor ``floor_J``, as the steppers see a flat
+    stretch one sample long, which the central-difference force straddles."""
+    return bool(force * sign >= 0 or (inner is not None and inner >= energy - floor_J))
+
+
 def max_bias_along(
     values: np.ndarray,
     force: np.ndarray,
@@ -137,34 +163,23 @@ def max_bias_along(
     ``floor``: [first, last] of a flat floor around x0 (a chip floating within free contact
     lines' reach): its samples count as arrived, whatever their force. ``energy`` (J, with
     the landscape's noise floor ``floor_J``): a sample also stops the chip where its
-    neighbour towards x0 is not lower by more than the noise floor, as the steppers see a
-    flat stretch one sample long, which the central-difference force straddles (730/50 at
-    5 um/px, free lines: the flat part's 405-410 um, where a greedy run released beyond
+    neighbour towards x0 is not lower by more than the noise floor (:func:`_stops`; 730/50
+    at 5 um/px, free lines: the flat part's 405-410 um, where a greedy run released beyond
     stops, read as a bias of 795 um without it).
     """
     values = np.asarray(values, float)
     force = np.asarray(force, float)
-    # Samples within a hundredth of a step of x0 are x0 itself (a refined minimum sits
-    # a round-off away from the samples through it).
-    tiny = 0.01 * float(np.min(np.diff(values))) if len(values) > 1 else 0.0
-    arrived = np.abs(values - x0) <= tiny
-    if floor is not None:
-        arrived |= (values >= floor[0] - 1e-9) & (values <= floor[1] + 1e-9)
+    arrived, sides = _outward(values, x0, floor)
     out = []
-    for sign in (1, -1):
-        d = (values - x0) * sign
-        side = np.flatnonzero((d > tiny) | arrived)
-        side = side[np.argsort(d[side], kind="stable")]  # outward, the arrived ones first
+    for sign, side in zip((1, -1), sides, strict=True):
         best = 0.0
         for p, i in enumerate(side):
             if arrived[i]:
                 continue
-            stuck = force[i] * sign >= 0  # zero force (plateau) or pushing away
-            if energy is not None and p > 0:
-                stuck |= bool(energy[side[p - 1]] >= energy[i] - floor_J)
-            if stuck:
+            inner = None if energy is None or p == 0 else float(energy[side[p - 1]])
+            if _stops(force[i], sign, 0.0 if energy is None else float(energy[i]), inner, floor_J):
                 break
-            best = float(d[i])
+            best = float((values[i] - x0) * sign)
         out.append(best)
     return out[0], out[1]
 
@@ -177,10 +192,9 @@ def released_max_bias(
     it takes its state there (:meth:`simulator.landscape.FootprintPlanes.next_state`) and
     walks the samples back to v0, its state passed on through each (a dry pad wets where it
     is reached, a wet one dries out of reach), moving on at every sample as
-    :func:`max_bias_along` asks of its state's landscape (the force points back, and the
-    next sample in is lower by more than the noise floor); every sample between v0 and the
-    bias must come back so. ``floor``: [first, last] of a flat floor around v0, whose
-    samples count as arrived.
+    :func:`max_bias_along` asks of its state's landscape (:func:`_stops`); every sample
+    between v0 and the bias must come back so. ``floor``: [first, last] of a flat floor
+    around v0, whose samples count as arrived.
 
     Not :func:`max_bias_along` on :meth:`~simulator.landscape.FootprintPlanes.released_curve`,
     whose samples are each a fresh release: a chip released just beyond where the far pads
@@ -193,9 +207,7 @@ def released_max_bias(
     v0 = float(through[k])
     poses = np.tile(np.asarray(through, float), (len(v), 1))
     poses[:, k] = v
-    arrived = np.abs(v - v0) <= 0.01 * (float(np.min(np.diff(v))) if len(v) > 1 else 0.0)
-    if floor is not None:
-        arrived |= (v >= floor[0] - 1e-9) & (v <= floor[1] + 1e-9)
+    arrived, sides = _outward(v, v0, floor)
     curves: dict[bytes, tuple] = {}  # each state's (energy, force, noise floor) along the curve
 
     def curve(state: np.ndarray) -> tuple:
@@ -207,10 +219,7 @@ def released_max_bias(
         return curves[key]
 
     out = []
-    for sign in (1, -1):
-        d = (v - v0) * sign
-        side = np.flatnonzero((d > 0) | arrived)
-        side = side[np.argsort(d[side], kind="stable")]  # outward, the arrived ones first
+    for sign, side in zip((1, -1), sides, strict=True):
         first = int(np.argmin(arrived[side])) if not arrived[side].all() else len(side)
         ahead = side[first:]
         inner = side[first - 1] if first > 0 else None  # where a walk back arrives
@@ -227,8 +236,8 @@ def released_max_bias(
                 seen.append(key)
                 e, f, noise = curve(state)
                 at, nxt = ahead[m], ahead[m - 1] if m > 0 else inner
-                if f[at] * sign >= 0 or (nxt is not None and e[nxt] >= e[at] - noise):
-                    ok = False  # zero force, pushing away, or the next sample in no lower
+                if _stops(f[at], sign, e[at], None if nxt is None else e[nxt], noise):
+                    ok = False
                     break
                 if m == 0:  # the next sample is v0 or the floor
                     ok = True
@@ -238,7 +247,7 @@ def released_max_bias(
             back.update(dict.fromkeys(seen, ok))
             if not ok:
                 break
-            best = float(d[i])
+            best = float((v[i] - v0) * sign)
         out.append(best)
     return out[0], out[1]
 
