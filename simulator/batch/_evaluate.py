@@ -201,8 +201,8 @@ def released_max_bias(
     dry pulls back on the dry pads' state, which is flat short of that point (on 730/50 at
     5 um/px, released at 410 um it stops there, where the curve's force points back at
     every sample: a bias of 795 um read off it)."""
-    c = planes.released_curve(dispensed, axis, through, start, stop)
-    v = np.asarray(c["values"], float)
+    # the curve's samples (as released_curve's); each state's curve is made once, below
+    v = np.asarray(planes.template.curve(axis, through, start, stop)["values"], float)
     k = {"x": 0, "y": 1, "twist": 2}[axis]
     v0 = float(through[k])
     poses = np.tile(np.asarray(through, float), (len(v), 1))
