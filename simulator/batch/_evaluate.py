@@ -177,7 +177,9 @@ def max_bias_along(
             if arrived[i]:
                 continue
             inner = None if energy is None or p == 0 else float(energy[side[p - 1]])
-            if _stops(force[i], sign, 0.0 if energy is None else float(energy[i]), inner, floor_J):
+            if _stops(
+                float(force[i]), sign, 0.0 if energy is None else float(energy[i]), inner, floor_J
+            ):
                 break
             best = float((values[i] - x0) * sign)
         out.append(best)
