@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from patterns.geometry import Mask, pad_labels
-from simulator.landscape import build_footprint_planes, build_landscape
+from simulator.landscape import _footprint as fp, build_footprint_planes, build_landscape
 from simulator.landscape._build import scene_extent
 from simulator.landscape._correlator import NOISE_FACTOR
 from simulator.landscape._footprint import _variant, footprint_pairs
@@ -311,3 +311,78 @@ def test_no_local_minimum_where_a_corner_reaches_the_far_pad():
     t = simulate(s, (180.0, -275.0, 36.0), "greedy")
     assert t.outcome == "aligned"
     assert abs(t.path[-1][2]) <= 3.0 + 1e-9
+
+
+def test_a_pattern_a_quarter_turn_takes_onto_itself_reuses_its_planes_turned(monkeypatch):
+    # The four-pad under a square chip: a quarter turn takes every pad onto the next, every
+    # pair onto another and each twist's chip onto itself (its rasters to their float64
+    # round-off, its sides shifted by one), so three pads' planes and three pairs in four are
+    # another's turned. The planes are those of a build that transforms every part, to the
+    # transforms' round-off (the bridged term weighs its counts by c: c times it), with a
+    # quarter of the pairs' transforms.
+    s = fourpad(12.0, twist=True)
+    calls = {"n": 0}
+    correlate = fp._Part.correlate
+
+    def counted(self, *args, **kwargs):
+        calls["n"] += 1
+        return correlate(self, *args, **kwargs)
+
+    monkeypatch.setattr(fp._Part, "correlate", counted)
+    turned = build_footprint_planes(s, twists=TWISTS)
+    n_turned = calls["n"]
+    calls["n"] = 0
+    monkeypatch.setattr(fp, "_pattern_turns", lambda *args: {})
+    direct = build_footprint_planes(s, twists=TWISTS)
+    n_direct = calls["n"]
+    assert 4 * n_turned == n_direct  # a quarter of the transforms, pads and pairs alike
+    rules = FootprintRules.of(s.wall_profile, s.materials.pad_receding_deg)
+    c = abs(rules.band_px - rules.f_inf) / STEP_PX
+    eps = float(np.finfo(s.dtype).eps)
+    scale = float(np.abs(direct.wet_energy).max())
+    diff = np.abs(turned.wet_energy - direct.wet_energy)
+    assert 0 < diff.max() <= 2 * (2 * c + 1) * NOISE_FACTOR * eps * scale  # turned, not copied
+    assert len(turned.pairs) == len(direct.pairs) >= 8
+    for p, q in zip(turned.pairs, direct.pairs, strict=True):
+        assert (p.near, p.far, p.axis, p.y0, p.x0) == (q.near, q.far, q.axis, q.y0, q.x0)
+        np.testing.assert_array_equal(p.twists, q.twists)
+        assert np.abs(p.energy - q.energy).max() <= 2 * NOISE_FACTOR * eps * scale
+    # and the state's energy is turned onto itself by a quarter turn, pairs and all
+    e = turned.energy(np.ones(turned.n_pads, bool))
+    assert np.abs(np.rot90(e, 1, axes=(1, 2)) - e).max() <= 2 * NOISE_FACTOR * eps * scale
+
+
+def test_the_sides_of_a_square_chip_turn_and_mirror_onto_one_another():
+    # A 41 px square on a 61 px canvas: each canvas pixel's side is the axis nearest its
+    # outward normal; a pixel on a corner's diagonal is a tie, half on each of its two sides.
+    # Outside the chip, a quarter turn shifts every side by one and keeps the ties, a mirror
+    # maps each side's weights onto the mirrored side's; every pixel's weights sum to 1.
+    from types import SimpleNamespace
+
+    from scipy.ndimage import distance_transform_edt
+
+    from simulator.landscape._footprint import _Sides, side_weights
+
+    chip = np.zeros((61, 61), bool)
+    chip[10:51, 10:51] = True
+    sdf = distance_transform_edt(~chip) - distance_transform_edt(chip)
+    sides = _Sides(SimpleNamespace(_sdf=sdf, shape=sdf.shape, _half=None))
+    bins, ties = sides.bins, sides.ties
+    rows, cols = np.mgrid[0:61, 0:61] - 30
+    diagonal = np.abs(rows) == np.abs(cols)
+    corner = (np.abs(rows) > 20) & (np.abs(cols) > 20)
+    assert not ties[~diagonal].any() and ties[diagonal & corner].all()
+    # a quarter turn counter-clockwise on the page (image rows run down) takes each pixel's
+    # side to where the next side counter-clockwise lies: the turned sides are one short
+    out = ~chip  # where the strips lie (inside, the centre's normal is undefined)
+    assert np.array_equal(np.rot90(bins)[out], ((bins - 1) % 4)[out])
+    assert np.array_equal(np.rot90(ties), ties)
+    w = np.stack([side_weights(bins, ties, k) for k in range(4)])
+    np.testing.assert_array_equal(w.sum(axis=0), 1.0)
+    assert set(np.unique(w[:, ties])) == {0.0, 0.5}
+    # the mirror y -> -y takes side k (normal at k * 90 deg) to side -k
+    for k in range(4):
+        np.testing.assert_array_equal(w[k][::-1][out], w[(-k) % 4][out])
+    # and x -> -x takes side k to side 2 - k
+    for k in range(4):
+        np.testing.assert_array_equal(w[k][:, ::-1][out], w[(2 - k) % 4][out])

@@ -16,11 +16,13 @@ from simulator.motion import (
     TIE_RANK,
     block,
     gradient,
+    interior,
     interpolate,
     lookup,
     make_field,
     neighbourhood,
     on_plateau,
+    padded_buffer,
 )
 
 T, NY, NX = 4, 5, 6
@@ -99,6 +101,49 @@ def test_lookup_and_neighbourhood_follow_the_boundary_rules_far_outside(wrap, cu
     offsets = list(itertools.product(range(-1, 3), repeat=3))
     want = [[reference(e, wrap, cut, *(p + np.array(o))) for o in offsets] for p in sample]
     np.testing.assert_array_equal(blk.reshape(len(sample), 64), np.array(want, np.float32))
+
+
+@pytest.mark.parametrize("wrap, cut", CASES)
+@pytest.mark.parametrize("n_t", [1, 2, PAD, 9])
+def test_a_padded_buffer_used_again_gives_the_field_of_its_new_landscape(wrap, cut, n_t):
+    # A batch's states, one after another in one padded array (the energy summed into its
+    # interior): the field of each is the one made from scratch, whatever the array held,
+    # on periodic twist axes shorter than the pad too (the pad then wraps more than once).
+    rng = np.random.default_rng(2)
+    shape = (n_t, NY, NX)
+    grid = PoseGrid.uniform(
+        shape,
+        wrap=wrap,
+        cut=cut,
+        um_per_px=1.0,
+        twist_step_deg=90.0 / n_t,
+        period_deg=90.0,
+        rg_px=3.0,
+    )
+    buf = padded_buffer(shape, np.float32, wrap, cut)
+    for _ in range(2):
+        e = -rng.uniform(1, 2, shape).astype(np.float32)
+        fresh = np.asarray(make_field(e, grid, 1e-9, [0, 0, 0]).padded)
+        interior(buf)[...] = e
+        reused = np.asarray(make_field(interior(buf), grid, 1e-9, [0, 0, 0], padded=buf).padded)
+        np.testing.assert_array_equal(reused, fresh)
+        # the pads written out: np.pad's rules (uncut 0, cut +inf, twist wrapped or +inf)
+        want = np.pad(e, ((0, 0), (PAD, PAD), (PAD, PAD)))
+        (_, _), (y_lo, y_hi), (x_lo, x_hi) = cut
+        for side, wall in zip(
+            (np.s_[:, :PAD], np.s_[:, -PAD:], np.s_[:, :, :PAD], np.s_[:, :, -PAD:]),
+            (y_lo, y_hi, x_lo, x_hi),
+            strict=True,
+        ):
+            if wall:
+                want[side] = np.inf
+        mode = {"mode": "wrap"} if wrap else {"constant_values": np.inf}
+        np.testing.assert_array_equal(fresh, np.pad(want, ((PAD, PAD), (0, 0), (0, 0)), **mode))
+        # what the states before left: their energies and, on a periodic axis, their wrapped
+        # twists (nothing of them may show through)
+        interior(buf)[...] = np.nan
+        if wrap:
+            buf[:PAD] = buf[-PAD:] = np.nan
 
 
 def test_on_plateau_sees_a_flat_direction_and_not_a_strict_minimum():

@@ -225,9 +225,11 @@ def _lanes_on(
         WINDOW_MARGIN_STEPS,
         Relay,
         error_limit,
-        field_and_grid,
         footprint_relay,
+        interior,
         is_stiff,
+        make_field,
+        padded_buffer,
         pin_lines,
         remaining_params,
         wet_bits,
@@ -250,6 +252,10 @@ def _lanes_on(
     scale = -e_min if e_min < 0 else None
     grid = reference.grid
     best = grid.to_index(np.asarray(opt.pose))
+    floor = reference.noise_floor_J  # every state's: the planes' energy scale
+    # one padded array for every state's field: fresh pages for each state cost more than
+    # summing its planes (0.15-0.5 s a state on the benchmark's 63 x 505 x 505 grid)
+    padded = padded_buffer(grid.shape, reference.energy.dtype, grid.wrap, grid.cut)
     # the twist indices a lane may stand on: clear of the window's sides by the margin
     # (a side at the axis's own end is a wall the whole axis has as well)
     n_t = grid.shape[0]
@@ -285,11 +291,20 @@ def _lanes_on(
         for g in range(len(states)):
             members = lanes[group.ravel() == g]
             state = wet[members[0]]
-            fld, _ = field_and_grid(
-                planes.landscape(state), pin=pin, align_tol=tol, scale=scale, lines=lines
+            # the state's landscape summed into the grid's one padded array: the field reads
+            # it in place (JAX on the CPU aliases it), and the group before has ended
+            fld = make_field(
+                planes.energy(state, out=interior(padded)),
+                grid,
+                floor,
+                best,
+                pin,
+                tol,
+                scale,
+                lines,
+                padded=padded,
             )
             fld = fld._replace(
-                best=jnp.asarray(best, fld.dtype),
                 relay=Relay(
                     reached,
                     within,

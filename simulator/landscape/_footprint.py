@@ -49,6 +49,13 @@ from ._symmetry import SAME_CHIP_TOL
 if TYPE_CHECKING:
     from simulator.physics import FootprintRules
 
+#: How far (relative to their largest value) two footprint rasters may differ and count as
+#: the same: a quarter turn of a square chip's float64 raster differs from it by round-off
+#: (at most 1.2e-14 measured on the benchmark's 730 um chip at 5 um/px, its rotated
+#: coordinates and profile rounded in another order), a pixel looked up on another pixel
+#: of the distance transform by a step of the profile (1e-3 and more).
+RASTER_REL_TOL = 1e-9
+
 
 def _variant(scene: Scene, pattern: Mask, profile) -> Scene:
     """``scene`` with another pattern and another chip footprint (the wall profile the builder
@@ -329,11 +336,13 @@ class FootprintPlanes:
             self._unpacked(self.within_bits[it, iy, ix]),
         )
 
-    def energy(self, wet) -> np.ndarray:
+    def energy(self, wet, out: np.ndarray | None = None) -> np.ndarray:
         """(T, Ny, Nx) J: the energy of the footprint state ``wet`` ((pads,) booleans), the wet
-        pads' planes and the corrections of the pairs of them (:attr:`pairs`)."""
+        pads' planes and the corrections of the pairs of them (:attr:`pairs`); ``out``: an
+        array of that shape and dtype to write it in (a batch's states, one after another)."""
         w = np.asarray(wet, bool)
-        e = np.zeros(self.template.energy.shape, self.template.energy.dtype)
+        e = np.empty(self.template.energy.shape, self.template.energy.dtype) if out is None else out
+        e[...] = 0
         for k in np.flatnonzero(w):
             e += self.wet_energy[k]
         for p in self.pairs:
@@ -392,6 +401,15 @@ class FootprintPlanes:
         return relay(wet, reached, within)
 
 
+def side_weights(sides: np.ndarray, ties: np.ndarray, side: int) -> np.ndarray:
+    """How much of each pixel lies on the chip's side ``side`` (float64): 1 on its own side,
+    half on each of a tie's two sides (``_Sides``: its bin and the side clockwise of it)."""
+    w = (sides == side).astype(np.float64)
+    w[ties] *= 0.5
+    w[ties & ((sides.astype(np.int16) - 1) % 4 == side)] = 0.5
+    return w
+
+
 class _Sides:
     """Which side of the chip each pixel of a rotator's canvas lies on: the direction of the
     signed distance's gradient (outward normal) rounded to one of the chip's four axes
@@ -402,13 +420,22 @@ class _Sides:
         sdf = rot._sdf
         gr, gc = np.gradient(sdf)
         phi = np.arctan2(-gr, gc)  # rows run down: y = -row
-        self.bins = (np.rint(phi / (np.pi / 2)).astype(np.int64) % 4).astype(np.int8)
+        # A pixel on a corner's diagonal (its normal exactly halfway between two axes) is a
+        # tie: it counts half on each of the two sides (:func:`side_weights`), its bin the
+        # one counter-clockwise. Every corner is then split alike, so a quarter turn or a
+        # mirror of a square chip takes its sides onto one another exactly (rounding half to
+        # even gave the diagonals to the x sides: a chip moving along x and one moving along
+        # y saw different corners).
+        quarter = phi / (np.pi / 2)
+        self.ties = quarter - np.floor(quarter) == 0.5
+        self.bins = (np.floor(quarter + 0.5).astype(np.int64) % 4).astype(np.int8)
         self.shape = rot.shape
         self.half = rot._half
         self._xy: tuple[np.ndarray, np.ndarray] | None = None  # the canvas's pixel centres
 
-    def __call__(self, twist_deg: float) -> np.ndarray:
-        """(H, W) int8 sides on the canvas at ``twist_deg``, y up (as the rotator's rasters)."""
+    def __call__(self, twist_deg: float) -> tuple[np.ndarray, np.ndarray]:
+        """(H, W) int8 sides on the canvas at ``twist_deg`` and (H, W) booleans, its ties, y
+        up (as the rotator's rasters)."""
         if self._xy is None:  # made on first use: the path engine reads ``bins`` alone
             ho, wo = self.shape
             self._xy = (
@@ -423,13 +450,14 @@ class _Sides:
         h, w = self.bins.shape
         r = np.clip(np.rint(-yi + (h / 2 - 0.5)), 0, h - 1).astype(np.intp)
         c = np.clip(np.rint(xi + (w / 2 - 0.5)), 0, w - 1).astype(np.intp)
-        return self.bins[r, c][::-1]
+        return self.bins[r, c][::-1], self.ties[r, c][::-1]
 
     def reach(self, side: int, from_px: float, upto_px: float, sdf: np.ndarray) -> np.ndarray:
         """(x, y) px (chip frame, about its centre) of the corners of the box holding the
         canvas pixels on ``side`` between ``from_px`` and ``upto_px`` from the outline."""
         h, w = sdf.shape
-        rr, cc = np.nonzero((self.bins == side) & (sdf > from_px) & (sdf <= upto_px))
+        on = side_weights(self.bins, self.ties, side) > 0
+        rr, cc = np.nonzero(on & (sdf > from_px) & (sdf <= upto_px))
         if rr.size == 0:
             return np.zeros((0, 2))
         xs = cc + 0.5 - w / 2
@@ -535,8 +563,11 @@ class _PairBox:
     of the shared grid: each made when first asked for and dropped when the build moves on
     (:meth:`keep`), all on the same box and work space."""
 
-    def __init__(self, scene, masks, data, key, profile, twists, extent, center, half, *rest):
+    def __init__(
+        self, scene, masks, data, key, profile, twists, extent, center, half, *rest, shadow
+    ):
         self._args = (scene, masks, data, key, profile, twists, extent, center, half, *rest)
+        self.shadow = shadow  # (a, b, axis, r) -> the part's pixels (:func:`_shadow_part`)
         self._parts: dict = {}
         self._like: dict | None = None
         first = self.part(None)
@@ -552,7 +583,7 @@ class _PairBox:
             scene, masks, data, (a, b, ax), profile, twists, extent, center, half, *rest = (
                 self._args
             )
-            part = _shadow_part(masks, a, b, ax, r) if r is not None else np.zeros(data.shape, bool)
+            part = self.shadow(a, b, ax, r) if r is not None else np.zeros(data.shape, bool)
             if r is None:
                 part[masks[a]] = True  # the near pad itself: the same box and sizes
             self._parts[r] = _Part(
@@ -575,6 +606,102 @@ class _PairBox:
         """Drop every part but those at ``residuals``."""
         for r in [r for r in self._parts if r not in {float(v) for v in residuals}]:
             del self._parts[r]
+
+
+def _turn(a: np.ndarray, m: int) -> np.ndarray:
+    """``a`` (..., rows y up, columns x) turned by ``m`` quarter turns clockwise about its
+    centre: the value at (x, y) moves to (y, -x) for m = 1 (a view)."""
+    return np.rot90(a, m, axes=(-2, -1))
+
+
+def _turn_image(a: np.ndarray, m: int) -> np.ndarray:
+    """As :func:`_turn` for an image whose rows run down (a pattern's masks)."""
+    return np.rot90(a[::-1], m)[::-1]
+
+
+def _same_turned(a: np.ndarray, b: np.ndarray, m: int) -> bool:
+    """Whether ``a`` turned by ``m`` (:func:`_turn`) is ``b``: booleans and integers exactly,
+    floats to their round-off (:data:`RASTER_REL_TOL`)."""
+    t = _turn(a, m)
+    if t.shape != b.shape:
+        return False
+    if not np.issubdtype(b.dtype, np.floating):
+        return bool(np.array_equal(t, b))
+    tol = RASTER_REL_TOL * float(np.abs(b).max(initial=0.0))
+    return bool(np.abs(t - b).max(initial=0.0) <= tol)
+
+
+def _pattern_turns(masks: list, data: np.ndarray, grid) -> dict[int, list[int]]:
+    """The quarter turns (m = 1, 2, 3 clockwise about the pattern's centre) that take every
+    pad onto a pad, its values with it, on a pose grid that the turn takes onto itself: for
+    each, the image of each pad (``images[m][j]`` = k: pad k is pad j turned)."""
+    _, ny, nx = grid.shape
+    centred = 2 * grid.x_first_px + nx - 1 == 0 and 2 * grid.y_first_px + ny - 1 == 0
+    if not centred:
+        return {}
+    valued = [np.where(mk, data, 0.0) for mk in masks]
+    turns: dict[int, list[int]] = {}
+    for m in (1, 2, 3):
+        if m % 2 and (ny != nx or data.shape[0] != data.shape[1]):
+            continue
+        image = []
+        for v in valued:
+            t = _turn_image(v, m)
+            hit = [k for k, w in enumerate(valued) if np.array_equal(t, w)]
+            if not hit:
+                break
+            image.append(hit[0])
+        else:
+            turns[m] = image
+    return turns
+
+
+def _grid_box_turned(box: tuple[int, int, int, int], m: int, shape) -> tuple[int, ...]:
+    """The box (y0, y1, x0, x1) of a (ny, nx) grid turned by :func:`_turn`'s ``m``."""
+    y0, y1, x0, x1 = box
+    ny, nx = shape
+    for _ in range(m % 4):  # one clockwise quarter turn: (row, col) -> (nx - 1 - col, row)
+        y0, y1, x0, x1 = nx - x1, nx - x0, y0, y1
+        ny, nx = nx, ny
+    return y0, y1, x0, x1
+
+
+def _pair_sides(at, ax: int, face, pos) -> list[int]:
+    """The chip's side (``_Sides``) whose strip a pair on the pattern's axis ``ax`` reads at
+    each twist of ``at`` ((position in the chunk, twist, raster, upside down) tuples): the
+    side facing the axis; for a mirror twin, the side of its partner's raster that the
+    flip puts there."""
+    sides = []
+    for _, i, k, flipped in at:
+        if flipped:  # the side facing the axis at -alpha, before the flip
+            fneg = (ax + (ax - int(face[pos[k]]))) % 4
+            sides.append((fneg + 2) % 4 if fneg % 2 == 1 else fneg)
+        else:
+            sides.append(int(face[i]))
+    return sides
+
+
+def _pair_chips(at, sides: list[int], side_of, tie_of, strip) -> np.ndarray:
+    """(len(at), H, W): the strip of the chip's side ``sides`` (:func:`_pair_sides`) at each
+    twist of ``at`` (:func:`side_weights`), zero on the other sides; a mirror twin's from its
+    partner's raster, upside down."""
+    chips = []
+    for (_, _, k, flipped), side in zip(at, sides, strict=True):
+        chip = strip[k] * side_weights(side_of[k], tie_of[k], side)
+        chips.append(chip[::-1] if flipped else chip)
+    return np.ascontiguousarray(np.stack(chips))
+
+
+def _side_shift(side_of: np.ndarray, tie_of: np.ndarray, strip: np.ndarray, m: int) -> int | None:
+    """The c for which the chip's sides turned by ``m`` (:func:`_turn`) are its sides plus c
+    (mod 4), and its ties its ties, at every pixel of its strips, at every twist of the
+    chunk; None if there is none (a pixel's side is decided another way after the turn)."""
+    on = strip != 0
+    if not np.array_equal(_turn(tie_of, m)[on], tie_of[on]):
+        return None
+    shift = (_turn(side_of, m).astype(np.int16) - side_of) % 4
+    values = np.unique(shift[on])
+    return int(values[0]) if len(values) == 1 else None
 
 
 def build_footprint_planes(
@@ -676,6 +803,14 @@ def build_footprint_planes(
     tw_rad = np.radians(twists_deg)
     strips = [sides.reach(side, rules.d_s - 5.0, upto, rotators["wall"]._sdf) for side in range(4)]
     pair_parts = []
+    shadows: dict = {}
+
+    def shadow(a: int, b: int, ax: int, r: float) -> np.ndarray:
+        """:func:`_shadow_part`, each made once (a turned pair's check reads its partner's)."""
+        if (a, b, ax, r) not in shadows:
+            shadows[(a, b, ax, r)] = _shadow_part(masks, a, b, ax, r)
+        return shadows[(a, b, ax, r)]
+
     for a, b, ax, boxes in _shadowed(masks, deep, _faces(twists_deg, 0)[1]):
         face, res = _faces(twists_deg, ax)
         on = np.array([i for i in range(n_t_all) if res[i] in boxes], np.intp)
@@ -697,6 +832,7 @@ def build_footprint_planes(
             backend,
             chunk,
             spaces,
+            shadow=shadow,
         )
         # the stored box: the ranges asked for, within the part's correlation box
         oy, ox = p.offset(grid)
@@ -710,6 +846,41 @@ def build_footprint_planes(
             continue
         pair_parts.append((a, b, ax, p, (cy0, cy1, cx0, cx1), on))
     near = {a for a, *_ in pair_parts}
+    # A pattern that a quarter or half turn takes onto itself (a four-pad's pads, a square
+    # pad's pairs) under a chip it leaves unchanged: a pad's planes are another's turned,
+    # where the chip's rasters are the same turned at every twist of a chunk (checked
+    # there, exactly) - a quarter of the transforms for a four-pad under a square chip.
+    turns = _pattern_turns(masks, data, grid)
+    pad_from: dict[int, tuple[int, int]] = {}  # pad k: (pad j < k, m) it is the turn of
+    for m, image in turns.items():
+        for j, k in enumerate(image):
+            needs = (deep[k] or k in near) == (deep[j] or j in near)
+            if j < k and k not in pad_from and needs:
+                pad_from[k] = (j, m)
+    pair_from: dict[int, tuple[int, int]] = {}  # pair j2: (pair j1 < j2, m), the same checks
+    stored = [
+        (
+            p.offset(grid)[0] + c[0],
+            p.offset(grid)[0] + c[1],
+            p.offset(grid)[1] + c[2],
+            p.offset(grid)[1] + c[3],
+        )
+        for *_, p, c, _on in pair_parts
+    ]
+    for j2, (a2, b2, ax2, _p, _c, on2) in enumerate(pair_parts):
+        for j1, (a1, b1, ax1, _p1, _c1, on1) in enumerate(pair_parts[:j2]):
+            hit = [
+                m
+                for m, image in turns.items()
+                if image[a1] == a2
+                and image[b1] == b2
+                and (ax1 - m) % 4 == ax2
+                and np.array_equal(on1, on2)
+                and _grid_box_turned(stored[j1], m, grid.shape[1:]) == stored[j2]
+            ]
+            if hit:
+                pair_from[j2] = (j1, hit[0])
+                break
     n_t, ny_full, nx_full = grid.shape
     if not progress:
         fft_px = sum(math.prod(pp[nm].fft) for pp in pads for nm in margins) + sum(
@@ -752,7 +923,28 @@ def build_footprint_planes(
         band += raster["band_out"] * w_out
         # which pads the chip covers at these twists, on the whole grid (the pairs read them)
         covered = np.zeros((n, len(idx), ny_full, nx_full), bool)
+        # the turns that leave every footprint's raster at these twists as it is (to its
+        # round-off; their mirror twins' then too)
+        fits: dict[int, bool] = {}
+        for m in sorted(turns):  # a quarter turn's fit holds for three, and one is three's
+            fits[m] = (
+                fits[1]
+                if m == 3 and 1 in fits
+                else (m == 2 and fits.get(1, False))
+                or all(_same_turned(raster[nm], raster[nm], m) for nm in names)
+            )
         for k, parts in enumerate(pads):
+            if k in pad_from and fits[pad_from[k][1]]:  # pad j's planes turned
+                j, m = pad_from[k]
+                wet_energy[k][idx] = _turn(wet_energy[j][idx], m)
+                for flags in (reached, within):
+                    block = flags[idx]
+                    bits_j = (block[..., j // 8] >> np.uint8(j % 8)) & np.uint8(1)
+                    block[..., k // 8] |= _turn(bits_j, m) << np.uint8(k % 8)
+                    flags[idx] = block
+                if deep[k] or k in near:
+                    covered[k] = _turn(covered[j], m)
+                continue
 
             def put(nm: str, chips, sc: float, parts=parts, pos=pos, neg=neg, zero=zero):
                 """The footprint ``nm``'s planes of pad k at these twists, and their slices."""
@@ -788,8 +980,12 @@ def build_footprint_planes(
         # of the near pad the one of each twist's residual.
         strip = 0.5 * (raster["band_in"] + raster["band_out"])
         strip -= raster["wall"]
-        side_of = np.stack([sides(twists_deg[i]) for i in pos])
-        for j, (a, _b, ax, p, (cy0, cy1, cx0, cx1), _) in enumerate(pair_parts):
+        looked = [sides(twists_deg[i]) for i in pos]
+        side_of, tie_of = np.stack([v[0] for v in looked]), np.stack([v[1] for v in looked])
+        del looked
+        # each turn's shift of the sides, where the rasters fit it (the strips then too)
+        shifts = {m: _side_shift(side_of, tie_of, strip, m) if fits[m] else None for m in turns}
+        for j, (a, b, ax, p, (cy0, cy1, cx0, cx1), _) in enumerate(pair_parts):
             face, res = _faces(twists_deg, ax)
             # (position in idx, twist, the chip raster at that twist, upside down or not)
             todo = [(k, i, k, False) for k, i in enumerate(pos) if i in pair_at[j]]
@@ -799,21 +995,36 @@ def build_footprint_planes(
             gsl = (slice(oy + cy0, oy + cy1), slice(ox + cx0, ox + cx1))
             for r in sorted({float(res[i]) for _, i, _, _ in todo}):
                 at = [t for t in todo if res[t[1]] == r]
-                chips = []
-                for _, i, k, flipped in at:
-                    if flipped:  # the side facing the axis at -alpha, before the flip
-                        fneg = (ax + (ax - int(face[pos[k]]))) % 4
-                        side = (fneg + 2) % 4 if fneg % 2 == 1 else fneg
-                        chips.append(np.where(side_of[k] == side, strip[k], 0.0)[::-1])
-                    else:
-                        chips.append(np.where(side_of[k] == face[i], strip[k], 0.0))
-                planes = p.part(r).correlate(
-                    np.ascontiguousarray(np.stack(chips)), range(len(at)), [], scale
-                )
-                c = planes[:, cy0:cy1, cx0:cx1]
+                sides_j = _pair_sides(at, ax, face, pos)
                 rows = [t[0] for t in at]
                 # only where the near pad is covered and the far one on its bridged term
                 keep = covered[a][(rows, *gsl)]
+                if j in pair_from and shifts[pair_from[j][1]] is not None:
+                    # another pair's planes turned, where all it reads is that pair's turned:
+                    # its chips (the strips turned, their sides shifted as the turn shifts
+                    # every side; a twin's the other way), the near pad's cover, its part
+                    j1, m = pair_from[j]
+                    a1, b1, ax1, p1, (dy0, dy1, dx0, dx1), _ = pair_parts[j1]
+                    oy1, ox1 = p1.offset(grid)
+                    gsl1 = (slice(oy1 + dy0, oy1 + dy1), slice(ox1 + dx0, ox1 + dx1))
+                    c1 = shifts[m]
+                    sides_1 = _pair_sides(at, ax1, _faces(twists_deg, ax1)[0], pos)
+                    if (
+                        all(
+                            s2 == (s1 + c1 if t[3] else s1 - c1) % 4
+                            for s1, s2, t in zip(sides_1, sides_j, at, strict=True)
+                        )
+                        and _same_turned(covered[a1][(rows, *gsl1)], keep, m)
+                        and np.array_equal(
+                            _turn_image(shadow(a1, b1, ax1, r), m), shadow(a, b, ax, r)
+                        )
+                    ):
+                        src = pair_energy[j1][[pair_at[j1][t[1]] for t in at]]
+                        pair_energy[j][[pair_at[j][t[1]] for t in at]] = _turn(src, m)
+                        continue
+                chips = _pair_chips(at, sides_j, side_of, tie_of, strip)
+                planes = p.part(r).correlate(chips, range(len(at)), [], scale)
+                c = planes[:, cy0:cy1, cx0:cx1]
                 c[~keep] = 0
                 pair_energy[j][[pair_at[j][t[1]] for t in at]] = c
                 p.keep(())  # one pair's part at a time: each is made again where needed

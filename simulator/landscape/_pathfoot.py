@@ -208,13 +208,14 @@ class FootprintPath:
         hi = max(self._rots[k].band_px[1] for k in names)
         return lo, hi
 
-    def _side_at(self, xi: np.ndarray, yi: np.ndarray) -> np.ndarray:
-        """The chip's side (``_Sides``) at points of the unrotated chip: its nearest pixel's."""
+    def _side_at(self, xi: np.ndarray, yi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The chip's side (``_Sides``) at points of the unrotated chip and whether it is a
+        tie: its nearest pixel's."""
         b = self._sides.bins
         h, w = b.shape
         r = np.clip(np.rint(-yi + (h / 2 - 0.5)), 0, h - 1).astype(np.intp)
         c = np.clip(np.rint(xi + (w / 2 - 0.5)), 0, w - 1).astype(np.intp)
-        return b[r, c]
+        return b[r, c], self._sides.ties[r, c]
 
     def outline(self, name: str, k: int) -> _Outline:
         """The footprint ``name`` at twist index ``k``, split for the path engine (kept)."""
@@ -243,9 +244,13 @@ class FootprintPath:
             side = int(name[len("strip") :])
             rot = rots["band_out"]
             span = self._span("wall", "band_in", "band_out")
-            bk, bl, f, sides = self._strips(k, tw, span)
-            on = sides == side
-            r, c, v, band = band_outline(rot, tw, bk[on], bl[on], f[on], self.dtype, span, 0.0)
+            bk, bl, f, (sides, ties) = self._strips(k, tw, span)
+            from ._footprint import side_weights
+
+            part = side_weights(sides, ties, side)  # half of a corner's tie on each side
+            on = part > 0
+            fo = (f[on] * part[on]).astype(f.dtype)
+            r, c, v, band = band_outline(rot, tw, bk[on], bl[on], fo, self.dtype, span, 0.0)
         oy, ox = self._offset(rot)
         order = np.argsort(r, kind="stable")
         o = _Outline(
@@ -285,7 +290,7 @@ class FootprintPath:
     def _strips(self, k: int, tw: float, span) -> tuple:
         """The shadow rule's ``N_b - f`` at every pixel of its band at twist index ``k``
         (``tw`` deg), with the chip's side each pixel lies on (``_Sides``): (rows, columns,
-        values, sides), evaluated once for the four strips of that twist (each keeps its
+        values, (sides, ties)), evaluated once for the four strips of that twist (each keeps its
         side's pixels; every value is the one a strip alone would evaluate there)."""
         kept = self._strip_samples
         if kept is not None and kept[0] == k:

@@ -32,10 +32,12 @@ from ._field import (
     block as block,
     field_and_grid as field_and_grid,
     gradient as gradient,
+    interior as interior,
     interpolate as interpolate,
     lookup as lookup,
     make_field as make_field,
     neighbourhood as neighbourhood,
+    padded_buffer as padded_buffer,
     relay_changes as relay_changes,
 )
 from ._footprint_run import (

@@ -200,26 +200,58 @@ def pinning_fields(pin: Sequence[float], align_tol: Sequence[float]) -> dict:
     }
 
 
-def pad_energy(energy: np.ndarray, wrap: bool, cut: tuple[tuple[bool, bool], ...]) -> np.ndarray:
+def pad_energy(
+    energy: np.ndarray,
+    wrap: bool,
+    cut: tuple[tuple[bool, bool], ...],
+    out: np.ndarray | None = None,
+) -> np.ndarray:
     """The landscape with PAD cells on every side holding what lies beyond it: past an
     uncut x/y side 0 (no contact); past a cut side, or the end of a non-periodic twist
     axis, +inf (a wall); a periodic twist axis wraps around. A corner is a wall when
     either of its sides is. Index clipping into the pad (:func:`lookup`) then gives the
-    energy anywhere, however far outside."""
+    energy anywhere, however far outside.
+
+    ``out``: a :func:`padded_buffer` of the same grid to write into (a run that makes many
+    fields of one grid reuses one, and fresh pages cost more than the copy here); when
+    ``energy`` is already its :func:`interior`, only the wrapped twists are written."""
     energy = np.asarray(energy)
-    out = np.pad(energy, ((0, 0), (PAD, PAD), (PAD, PAD)))
+    if out is None:
+        out = padded_buffer(energy.shape, energy.dtype, wrap, cut)
+    inner = interior(out)
+    if not np.shares_memory(inner, energy):
+        inner[...] = energy
+    if wrap:  # each side's pad holds the twists at the other end (their x/y pads too)
+        t = energy.shape[0]
+        out[:PAD] = out[PAD + np.arange(-PAD, 0) % t]
+        out[t + PAD :] = out[PAD + np.arange(t, t + PAD) % t]
+    return out
+
+
+def padded_buffer(
+    shape: tuple[int, ...], dtype: DTypeLike, wrap: bool, cut: tuple[tuple[bool, bool], ...]
+) -> np.ndarray:
+    """An array for :func:`pad_energy`'s result on a (T, Ny, Nx) grid: its pads past the x/y
+    sides and (on a non-periodic twist axis) past the twist axis's ends written, its
+    :func:`interior` left to fill."""
+    t, ny, nx = shape
+    out = np.empty((t + 2 * PAD, ny + 2 * PAD, nx + 2 * PAD), dtype)
     (_, _), (y_lo, y_hi), (x_lo, x_hi) = cut
-    if y_lo:
-        out[:, :PAD, :] = np.inf
-    if y_hi:
-        out[:, -PAD:, :] = np.inf
-    if x_lo:
-        out[:, :, :PAD] = np.inf
-    if x_hi:
-        out[:, :, -PAD:] = np.inf
-    if wrap:
-        return np.pad(out, ((PAD, PAD), (0, 0), (0, 0)), mode="wrap")
-    return np.pad(out, ((PAD, PAD), (0, 0), (0, 0)), constant_values=np.inf)
+    sides = (np.s_[:, :PAD, :], np.s_[:, -PAD:, :], np.s_[:, :, :PAD], np.s_[:, :, -PAD:])
+    for side in sides:
+        out[side] = 0
+    for side, wall in zip(sides, (y_lo, y_hi, x_lo, x_hi), strict=True):
+        if wall:  # the whole side, its corners too: a corner is a wall when either side is
+            out[side] = np.inf
+    if not wrap:
+        out[:PAD] = np.inf
+        out[-PAD:] = np.inf
+    return out
+
+
+def interior(padded: np.ndarray) -> np.ndarray:
+    """The view of a :func:`padded_buffer` that holds the grid's own (T, Ny, Nx) energies."""
+    return padded[PAD:-PAD, PAD:-PAD, PAD:-PAD]
 
 
 def make_field(
@@ -231,10 +263,13 @@ def make_field(
     align_tol: tuple[float, float] = (1.0, 1.0),
     scale: float | None = None,
     lines: PinLines | None = None,
+    padded: np.ndarray | None = None,
 ) -> Field:
     """A :class:`Field` from a (T, Ny, Nx) energy array (J) on ``grid``; ``scale``: its
     max |E| (default: the array's own; a box of a larger landscape passes the landscape's);
-    ``lines``: the per-pose pinning's :class:`simulator.motion.PinLines` (or None)."""
+    ``lines``: the per-pose pinning's :class:`simulator.motion.PinLines` (or None);
+    ``padded``: a :func:`padded_buffer` of the grid to pad ``energy`` in (:func:`pad_energy`),
+    ``energy`` its :func:`interior` or not."""
     enable_float64()
     energy = np.asarray(energy)
     dt = energy.dtype
@@ -248,7 +283,7 @@ def make_field(
             origin=jnp.asarray([grid.t0_deg, grid.y0_um, grid.x0_um], lines.origin.dtype),
         )
     return Field(
-        padded=jnp.asarray(pad_energy(energy, grid.wrap, grid.cut)),
+        padded=jnp.asarray(pad_energy(energy, grid.wrap, grid.cut, out=padded)),
         floor=jnp.asarray(floor, dt),
         best=jnp.asarray(best, dt),
         scale=jnp.asarray(scale, dt),
