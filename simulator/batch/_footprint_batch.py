@@ -279,117 +279,126 @@ def _lanes_on(
     time_s = np.full(n, np.nan)
     escaped = np.zeros(n, bool)
     active = np.ones(n, bool)
-    rounds = 0
+    passes = np.zeros(n, np.int64)  # how many times each lane ran: at most MAX_EVENTS + 1
     t1 = time.perf_counter()
-    for _ in range(MAX_EVENTS + 1):
-        lanes = np.flatnonzero(active)
+    while True:
+        # The lanes still to run, by state: the largest group runs first, and a lane whose
+        # state changes joins its new state's lanes, run in a later group (each state's
+        # landscape is made once for all the lanes on it then, not once per round of events).
+        lanes = np.flatnonzero(active & (passes <= MAX_EVENTS))
         if not lanes.size:
             break
-        rounds += 1
         keys = np.packbits(wet[lanes], axis=1, bitorder="little")
-        states, group = np.unique(keys, axis=0, return_inverse=True)
-        for g in range(len(states)):
-            members = lanes[group.ravel() == g]
-            state = wet[members[0]]
-            # the state's landscape summed into the grid's one padded array: the field reads
-            # it in place (JAX on the CPU aliases it), and the group before has ended
-            fld = make_field(
-                planes.energy(state, out=interior(padded)),
-                grid,
-                floor,
-                best,
-                pin,
-                tol,
-                scale,
-                lines,
-                padded=padded,
-            )
-            fld = fld._replace(
-                relay=Relay(
-                    reached,
-                    within,
-                    jnp.asarray(wet_bits(state)),
-                    None if span is None else jnp.asarray(span),
-                ),
-            )
-            stiff = bool(is_stiff(method, fld, grid, dynamics)) if dynamic else False
-            params, per_lane = None, False
-            if dynamic:
-                # each lane has the time left to its own run (its stretches' sum)
-                left = [remaining_params(dynamics, float(t)) for t in t_off[members]]
-                params = type(dynamics)(
-                    *(
-                        np.asarray([getattr(p, f) for p in left], np.float64)
-                        for f in (
-                            "mass_kg",
-                            "inertia_kg_m2",
-                            "damping_N_s_m",
-                            "rot_damping_N_m_s",
-                            "t_max_s",
-                        )
+        _, group, sizes = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
+        members = lanes[group.ravel() == int(np.argmax(sizes))]
+        passes[members] += 1
+        state = wet[members[0]]
+        # the state's landscape summed into the grid's one padded array: the field reads
+        # it in place (JAX on the CPU aliases it), and the group before has ended; every
+        # pad wet is the reference's, summed already
+        inner = interior(padded)
+        if state.all():
+            inner[...] = reference.energy
+        else:
+            planes.energy(state, out=inner)
+        fld = make_field(
+            inner,
+            grid,
+            floor,
+            best,
+            pin,
+            tol,
+            scale,
+            lines,
+            padded=padded,
+        )
+        fld = fld._replace(
+            relay=Relay(
+                reached,
+                within,
+                jnp.asarray(wet_bits(state)),
+                None if span is None else jnp.asarray(span),
+            ),
+        )
+        stiff = bool(is_stiff(method, fld, grid, dynamics)) if dynamic else False
+        params, per_lane = None, False
+        if dynamic:
+            # each lane has the time left to its own run (its stretches' sum)
+            left = [remaining_params(dynamics, float(t)) for t in t_off[members]]
+            params = type(dynamics)(
+                *(
+                    np.asarray([getattr(p, f) for p in left], np.float64)
+                    for f in (
+                        "mass_kg",
+                        "inertia_kg_m2",
+                        "damping_N_s_m",
+                        "rot_damping_N_m_s",
+                        "t_max_s",
                     )
                 )
-                per_lane = True
-            order = _run_order(q[members], np.asarray(best), grid)
-            run = members[order]
-            # a group's lanes padded to a power of two (at least 32, at most a chunk):
-            # the rounds' shrinking groups share a few compiled shapes instead of
-            # compiling one per group size (each compile takes about a second)
-            lanes_min = min(chunk, max(32, 1 << (len(run) - 1).bit_length()))
-            got = run_lanes(
-                fld,
-                grid,
-                params,
-                q[run],
-                method,
-                max_steps,
-                stiff,
-                chunk,
-                workers,
-                None,
-                per_lane,
-                lanes_min,
             )
-            q_end, st, status, out, e, ts = got
-            steps[run] += st
-            energy[run] = e  # a lane's energy where its latest stretch ended
-            moved = status == EVENT
-            if span is not None:  # stopped at the window's margin: run again on a wider one
-                it_end = np.round(q_end[:, 0])
-                away = moved & ((it_end < span[0]) | (it_end > span[1]))
-                escaped[run[away]] = True
-                active[run[away]] = False
-                moved &= ~away
-            else:
-                away = np.zeros(len(run), bool)
-            new = _next_states(planes, wet[run], q_end, grid)
-            changed = moved & (new != wet[run]).any(axis=1)
-            t_end = t_off[run] + (ts if dynamic else 0.0)
-            # an event: the lane goes on from that pose, from rest, on its new state
-            ev = run[changed]
-            events[ev] += 1
-            wet[ev] = new[changed]
-            q[ev] = np.round(q_end[changed]) if method == "greedy" else q_end[changed]
-            t_off[ev] = t_end[changed]
-            # an event with no change (the host's node and the device's disagree on a
-            # half-integer index): the lane goes on from there on the same state
-            same = run[moved & ~changed]
-            q[same] = (
-                np.round(q_end[moved & ~changed]) if method == "greedy" else q_end[moved & ~changed]
-            )
-            t_off[same] = t_end[moved & ~changed]
-            done = ~moved & ~away
-            if dynamic:  # a run whose time is up at an event ends there
-                up = moved & (t_end >= float(dynamics.t_max_s))
-                done |= up
-                out = np.where(up, 4, out)
-            end = run[done]
-            final_q[end], outcome[end] = q_end[done], out[done]
-            if dynamic:
-                time_s[end] = np.minimum(t_end[done], float(dynamics.t_max_s))
-            active[end] = False
-            bar.update(int(done.sum()))
+            per_lane = True
+        order = _run_order(q[members], np.asarray(best), grid)
+        run = members[order]
+        # a group's lanes padded to a power of two (at least 32, at most a chunk):
+        # the rounds' shrinking groups share a few compiled shapes instead of
+        # compiling one per group size (each compile takes about a second)
+        lanes_min = min(chunk, max(32, 1 << (len(run) - 1).bit_length()))
+        got = run_lanes(
+            fld,
+            grid,
+            params,
+            q[run],
+            method,
+            max_steps,
+            stiff,
+            chunk,
+            workers,
+            None,
+            per_lane,
+            lanes_min,
+        )
+        q_end, st, status, out, e, ts = got
+        steps[run] += st
+        energy[run] = e  # a lane's energy where its latest stretch ended
+        moved = status == EVENT
+        if span is not None:  # stopped at the window's margin: run again on a wider one
+            it_end = np.round(q_end[:, 0])
+            away = moved & ((it_end < span[0]) | (it_end > span[1]))
+            escaped[run[away]] = True
+            active[run[away]] = False
+            moved &= ~away
+        else:
+            away = np.zeros(len(run), bool)
+        new = _next_states(planes, wet[run], q_end, grid)
+        changed = moved & (new != wet[run]).any(axis=1)
+        t_end = t_off[run] + (ts if dynamic else 0.0)
+        # an event: the lane goes on from that pose, from rest, on its new state
+        ev = run[changed]
+        events[ev] += 1
+        wet[ev] = new[changed]
+        q[ev] = np.round(q_end[changed]) if method == "greedy" else q_end[changed]
+        t_off[ev] = t_end[changed]
+        # an event with no change (the host's node and the device's disagree on a
+        # half-integer index): the lane goes on from there on the same state
+        same = run[moved & ~changed]
+        q[same] = (
+            np.round(q_end[moved & ~changed]) if method == "greedy" else q_end[moved & ~changed]
+        )
+        t_off[same] = t_end[moved & ~changed]
+        done = ~moved & ~away
+        if dynamic:  # a run whose time is up at an event ends there
+            up = moved & (t_end >= float(dynamics.t_max_s))
+            done |= up
+            out = np.where(up, 4, out)
+        end = run[done]
+        final_q[end], outcome[end] = q_end[done], out[done]
+        if dynamic:
+            time_s[end] = np.minimum(t_end[done], float(dynamics.t_max_s))
+        active[end] = False
+        bar.update(int(done.sum()))
     left = np.flatnonzero(active)  # still changing state after MAX_EVENTS: ran out
+    rounds = int(passes.max(initial=0))  # each lane's passes are its rounds of events
     if left.size:
         final_q[left], outcome[left] = q[left], 4
         bar.update(int(left.size))

@@ -857,6 +857,20 @@ def build_footprint_planes(
             needs = (deep[k] or k in near) == (deep[j] or j in near)
             if j < k and k not in pad_from and needs:
                 pad_from[k] = (j, m)
+    # each pad's box of the grid: every part's box (its planes, flags and cover lie within)
+    pad_box = []
+    for parts in pads:
+        boxes = [(*p.offset(grid), *p.shape) for p in parts.values()]
+        pad_box.append(
+            (
+                min(b[0] for b in boxes),
+                max(b[0] + b[2] for b in boxes),
+                min(b[1] for b in boxes),
+                max(b[1] + b[3] for b in boxes),
+            )
+        )
+    for k, (j, m) in sorted(pad_from.items()):  # a turned pad's: its source's, turned
+        pad_box[k] = _grid_box_turned(pad_box[j], m, grid.shape[1:])
     pair_from: dict[int, tuple[int, int]] = {}  # pair j2: (pair j1 < j2, m), the same checks
     stored = [
         (
@@ -936,14 +950,19 @@ def build_footprint_planes(
         for k, parts in enumerate(pads):
             if k in pad_from and fits[pad_from[k][1]]:  # pad j's planes turned
                 j, m = pad_from[k]
-                wet_energy[k][idx] = _turn(wet_energy[j][idx], m)
-                for flags in (reached, within):
-                    block = flags[idx]
-                    bits_j = (block[..., j // 8] >> np.uint8(j % 8)) & np.uint8(1)
-                    block[..., k // 8] |= _turn(bits_j, m) << np.uint8(k % 8)
-                    flags[idx] = block
+                # on pad j's box (nothing of it is written beyond) and its turned image
+                y0, y1, x0, x1 = pad_box[j]
+                src = np.s_[y0:y1, x0:x1]
+                ty0, ty1, tx0, tx1 = _grid_box_turned(pad_box[j], m, grid.shape[1:])
+                dst = np.s_[ty0:ty1, tx0:tx1]
+                shift_j, shift_k = np.uint8(j % 8), np.uint8(k % 8)
+                for t in idx:
+                    wet_energy[k][t][dst] = _turn(wet_energy[j][t][src], m)
+                    for flags in (reached, within):
+                        bits_j = (flags[t][src][..., j // 8] >> shift_j) & np.uint8(1)
+                        flags[t][dst][..., k // 8] |= _turn(bits_j, m) << shift_k
                 if deep[k] or k in near:
-                    covered[k] = _turn(covered[j], m)
+                    covered[k][(slice(None), *dst)] = _turn(covered[j][(slice(None), *src)], m)
                 continue
 
             def put(nm: str, chips, sc: float, parts=parts, pos=pos, neg=neg, zero=zero):
@@ -1019,8 +1038,10 @@ def build_footprint_planes(
                             _turn_image(shadow(a1, b1, ax1, r), m), shadow(a, b, ax, r)
                         )
                     ):
-                        src = pair_energy[j1][[pair_at[j1][t[1]] for t in at]]
-                        pair_energy[j][[pair_at[j][t[1]] for t in at]] = _turn(src, m)
+                        for t in at:
+                            pair_energy[j][pair_at[j][t[1]]] = _turn(
+                                pair_energy[j1][pair_at[j1][t[1]]], m
+                            )
                         continue
                 chips = _pair_chips(at, sides_j, side_of, tie_of, strip)
                 planes = p.part(r).correlate(chips, range(len(at)), [], scale)
