@@ -2,19 +2,22 @@
 
 Every lane carries its own footprint state (which pads are wet), as a single run does
 (:mod:`simulator.motion`, the footprint run; docs/physics.md §3.5): the lanes start from
-the state the process leaves, passed through the relay at their start pose, and run in
-rounds. In a round, the lanes that share a state run together, vmapped, on that state's
-landscape (summed from the pads' planes, :class:`simulator.landscape.FootprintPlanes`)
-with the state's relay in the field: a lane stops at the first pose where its state
-changes (status EVENT), takes the new state, and goes on from that pose, from rest, in
-the next round; every other lane has ended. The steppers, the relay test, the stretch's
-step budget and the time left to a dynamic run are those of the single run, so each
-lane's end equals ``simulate(scene, start, method)``'s start by start (tested).
+the state the process leaves, passed through the relay at their start pose. The lanes
+that share a state run together, vmapped, on that state's landscape (summed from the pads'
+planes, :class:`simulator.landscape.FootprintPlanes`) with the state's relay in the field:
+a lane stops at the first pose where its state changes (status EVENT), takes the new
+state, and goes on from that pose, from rest, with the lanes of its new state; every other
+lane has ended. The largest group runs first, so the lanes an event moves join their new
+state's group instead of a round of their own (each state's landscape is summed once for
+them all). The steppers, the relay test, the stretch's step budget and the time left to a
+dynamic run are those of the single run, so each lane's end equals
+``simulate(scene, start, method)``'s start by start (tested), in whatever order the
+groups run.
 
-States are few (a pad wets or dries a few times a run), so a round runs a handful of
-compiled batches, each on a landscape summed once; rounds end when no lane changed
-state, or after :data:`simulator.motion.MAX_EVENTS` (a lane still changing then ran out
-of steps: chattering on a relay's threshold).
+States are few (a pad wets or dries a few times a run), so a batch runs a handful of
+compiled groups; it ends when no lane is left, a lane running at most
+:data:`simulator.motion.MAX_EVENTS` + 1 times (one still changing then ran out of steps:
+chattering on a relay's threshold). ``footprint_rounds`` is the most times a lane ran.
 """
 
 from __future__ import annotations
