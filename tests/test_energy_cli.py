@@ -144,6 +144,7 @@ def test_curve_reports_plateau(fourpad_png, tmp_path):
     assert len(cur["values_um"]) == 151 and len(cur["energy_J"]) == 151
     ((start, end),) = cur["plateaus_um"]
     assert abs(start - 90) <= 1 and abs(end - 110) <= 1
+    assert cur["flat_steps_um"] == []  # the plateau's own ties are not repeated as steps
 
 
 @pytest.mark.fft

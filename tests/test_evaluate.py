@@ -152,3 +152,28 @@ def test_a_flat_stretch_one_sample_long_ends_the_max_bias():
     assert max_bias_along(c["values"], c["force"], 0.0, floor) == (795.0, 795.0)  # force alone
     ends = [simulate(scene, (b, 0.0, 0.0), "greedy", landscape=ls).outcome for b in (405, 410)]
     assert ends == ["aligned", "plateau"]
+    # the curve lists that step as flat on both sides (no plateau: the force is not zero),
+    # beside the floor's plateau, which its own ties do not repeat
+    assert c["flat_steps"] == [[-410.0, -405.0], [405.0, 410.0]]
+    assert c["plateaus"] == [[-15.0, 15.0]]
+
+
+def test_flat_steps_are_neighbours_within_the_noise_floor_away_from_plateaus():
+    # Samples 0..9 (um): a tie between 3, 4 and 5 (two flat steps in a row: one range), a
+    # plateau at 7-9 whose own ties are not repeated, one comparison not allowed (another
+    # state on a released curve), and no contact at 0 (no step reaches it).
+    from simulator.landscape._landscape import curve_of
+
+    floor = 1e-12
+    v = np.arange(10.0)
+    e = -np.array([0.0, 10, 9, 8, 8, 8, 7, 6, 6, 6]) * 1e-9
+    e[4] += 0.5 * floor  # within the floor of its neighbours
+    force = np.array([1, 1, 1, 0.5, 0.5, 0.5, 1, 0, 0, 0]) * 1e-6
+    c = curve_of("x", v, e, force, floor)
+    assert c["plateaus"] == [[7.0, 9.0]]
+    assert c["flat_steps"] == [[3.0, 5.0]]
+    assert c["no_contact"] == []
+    linked = np.ones(9, bool)
+    linked[3] = False  # samples 3 and 4 on different states
+    assert curve_of("x", v, e, force, floor, linked)["flat_steps"] == [[4.0, 5.0]]
+    assert curve_of("x", v, e * 0 - 1e-9 * v, force, floor)["flat_steps"] == []  # a slope

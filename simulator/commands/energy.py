@@ -175,6 +175,7 @@ def run(args: argparse.Namespace) -> int:
             "overlap_um2": ls.overlap_um2(cur["energy_J"]).tolist(),
             f"force_{funit}": cur["force"].tolist(),
             f"plateaus_{unit}": cur["plateaus"],
+            f"flat_steps_{unit}": cur["flat_steps"],
             f"no_contact_{unit}": cur["no_contact"],
         } | ({"wet_pads": cur["wet"]} if "wet" in cur else {})
         print(
@@ -193,6 +194,12 @@ def run(args: argparse.Namespace) -> int:
             )
         else:
             print("plateaus: none")
+        if cur["flat_steps"]:
+            print(
+                "flat steps (the energy changes below the noise floor from one sample to the "
+                "next: a chip moving through stops there): "
+                + ", ".join(f"[{a:g}, {b:g}] {unit}" for a, b in cur["flat_steps"])
+            )
         if cur["no_contact"]:
             print(
                 "no contact (chip off the pattern): "

@@ -391,7 +391,10 @@ class FootprintPlanes:
             sel = np.array([s == st for s in states])
             e[sel], force[sel] = c["energy_J"][sel], c["force"][sel]
             floor = ls.noise_floor_J
-        return curve_of(axis, v, e, force, floor) | {"wet": [list(map(int, s)) for s in states]}
+        same = np.array([a == b for a, b in zip(states[:-1], states[1:], strict=True)], bool)
+        return curve_of(axis, v, e, force, floor, linked=same) | {
+            "wet": [list(map(int, s)) for s in states]
+        }
 
     def next_state(self, wet, pose) -> np.ndarray:
         """The pads' state once the chip, with the footprint ``wet``, is at ``pose``."""
@@ -851,27 +854,31 @@ def build_footprint_planes(
     # where the chip's rasters are the same turned at every twist of a chunk (checked
     # there, exactly) - a quarter of the transforms for a four-pad under a square chip.
     turns = _pattern_turns(masks, data, grid)
-    pad_from: dict[int, tuple[int, int]] = {}  # pad k: (pad j < k, m) it is the turn of
+    # pad k: the (pad j < k, m) it is the turn of (a chunk takes the first its rasters fit:
+    # a rectangular chip fits a half turn only)
+    pad_from: dict[int, list[tuple[int, int]]] = {}
     for m, image in turns.items():
         for j, k in enumerate(image):
-            needs = (deep[k] or k in near) == (deep[j] or j in near)
-            if j < k and k not in pad_from and needs:
-                pad_from[k] = (j, m)
-    # each pad's box of the grid: every part's box (its planes, flags and cover lie within)
+            if j < k and (deep[k] or k in near) == (deep[j] or j in near):
+                pad_from.setdefault(k, []).append((j, m))
+    # each pad's box of the grid: every part's box and every source's turned (its planes,
+    # flags and cover lie within, made or turned)
     pad_box = []
-    for parts in pads:
-        boxes = [(*p.offset(grid), *p.shape) for p in parts.values()]
+    for k, parts in enumerate(pads):
+        boxes = [
+            (oy, oy + h, ox, ox + w)
+            for (oy, ox), (h, w) in ((p.offset(grid), p.shape) for p in parts.values())
+        ]
+        boxes += [_grid_box_turned(pad_box[j], m, grid.shape[1:]) for j, m in pad_from.get(k, [])]
         pad_box.append(
             (
                 min(b[0] for b in boxes),
-                max(b[0] + b[2] for b in boxes),
-                min(b[1] for b in boxes),
-                max(b[1] + b[3] for b in boxes),
+                max(b[1] for b in boxes),
+                min(b[2] for b in boxes),
+                max(b[3] for b in boxes),
             )
         )
-    for k, (j, m) in sorted(pad_from.items()):  # a turned pad's: its source's, turned
-        pad_box[k] = _grid_box_turned(pad_box[j], m, grid.shape[1:])
-    pair_from: dict[int, tuple[int, int]] = {}  # pair j2: (pair j1 < j2, m), the same checks
+    pair_from: dict[int, list[tuple[int, int]]] = {}  # pair j2: its (pair j1 < j2, m)
     stored = [
         (
             p.offset(grid)[0] + c[0],
@@ -892,9 +899,32 @@ def build_footprint_planes(
                 and np.array_equal(on1, on2)
                 and _grid_box_turned(stored[j1], m, grid.shape[1:]) == stored[j2]
             ]
-            if hit:
-                pair_from[j2] = (j1, hit[0])
-                break
+            pair_from.setdefault(j2, []).extend((j1, m) for m in hit)
+
+    def turn_pair(j, j1, m, r, at, sides_j, keep, pos, covered, c1) -> bool:
+        """Pair j's planes at the twists ``at`` (residual ``r``) made as pair j1's turned by
+        ``m``, where every input of pair j is pair j1's turned: its chips (the strips turned,
+        their sides shifted by ``c1`` as the turn shifts every side; a twin's the other
+        way), the near pad's cover ``keep`` and its part of the pattern. False (nothing
+        made) where one is not."""
+        a, b, ax = pair_parts[j][:3]
+        a1, b1, ax1, p1, (dy0, dy1, dx0, dx1), _ = pair_parts[j1]
+        oy1, ox1 = p1.offset(grid)
+        gsl1 = (slice(oy1 + dy0, oy1 + dy1), slice(ox1 + dx0, ox1 + dx1))
+        sides_1 = _pair_sides(at, ax1, _faces(twists_deg, ax1)[0], pos)
+        if not (
+            all(
+                s2 == (s1 + c1 if t[3] else s1 - c1) % 4
+                for s1, s2, t in zip(sides_1, sides_j, at, strict=True)
+            )
+            and _same_turned(covered[a1][([t[0] for t in at], *gsl1)], keep, m)
+            and np.array_equal(_turn_image(shadow(a1, b1, ax1, r), m), shadow(a, b, ax, r))
+        ):
+            return False
+        for t in at:
+            pair_energy[j][pair_at[j][t[1]]] = _turn(pair_energy[j1][pair_at[j1][t[1]]], m)
+        return True
+
     n_t, ny_full, nx_full = grid.shape
     if not progress:
         fft_px = sum(math.prod(pp[nm].fft) for pp in pads for nm in margins) + sum(
@@ -948,8 +978,9 @@ def build_footprint_planes(
                 or all(_same_turned(raster[nm], raster[nm], m) for nm in names)
             )
         for k, parts in enumerate(pads):
-            if k in pad_from and fits[pad_from[k][1]]:  # pad j's planes turned
-                j, m = pad_from[k]
+            turned_from = next(((j, m) for j, m in pad_from.get(k, []) if fits[m]), None)
+            if turned_from is not None:  # pad j's planes turned
+                j, m = turned_from
                 # on pad j's box (nothing of it is written beyond) and its turned image
                 y0, y1, x0, x1 = pad_box[j]
                 src = np.s_[y0:y1, x0:x1]
@@ -1004,7 +1035,7 @@ def build_footprint_planes(
         del looked
         # each turn's shift of the sides, where the rasters fit it (the strips then too)
         shifts = {m: _side_shift(side_of, tie_of, strip, m) if fits[m] else None for m in turns}
-        for j, (a, b, ax, p, (cy0, cy1, cx0, cx1), _) in enumerate(pair_parts):
+        for j, (a, _b, ax, p, (cy0, cy1, cx0, cx1), _) in enumerate(pair_parts):
             face, res = _faces(twists_deg, ax)
             # (position in idx, twist, the chip raster at that twist, upside down or not)
             todo = [(k, i, k, False) for k, i in enumerate(pos) if i in pair_at[j]]
@@ -1018,31 +1049,13 @@ def build_footprint_planes(
                 rows = [t[0] for t in at]
                 # only where the near pad is covered and the far one on its bridged term
                 keep = covered[a][(rows, *gsl)]
-                if j in pair_from and shifts[pair_from[j][1]] is not None:
-                    # another pair's planes turned, where all it reads is that pair's turned:
-                    # its chips (the strips turned, their sides shifted as the turn shifts
-                    # every side; a twin's the other way), the near pad's cover, its part
-                    j1, m = pair_from[j]
-                    a1, b1, ax1, p1, (dy0, dy1, dx0, dx1), _ = pair_parts[j1]
-                    oy1, ox1 = p1.offset(grid)
-                    gsl1 = (slice(oy1 + dy0, oy1 + dy1), slice(ox1 + dx0, ox1 + dx1))
-                    c1 = shifts[m]
-                    sides_1 = _pair_sides(at, ax1, _faces(twists_deg, ax1)[0], pos)
-                    if (
-                        all(
-                            s2 == (s1 + c1 if t[3] else s1 - c1) % 4
-                            for s1, s2, t in zip(sides_1, sides_j, at, strict=True)
-                        )
-                        and _same_turned(covered[a1][(rows, *gsl1)], keep, m)
-                        and np.array_equal(
-                            _turn_image(shadow(a1, b1, ax1, r), m), shadow(a, b, ax, r)
-                        )
-                    ):
-                        for t in at:
-                            pair_energy[j][pair_at[j][t[1]]] = _turn(
-                                pair_energy[j1][pair_at[j1][t[1]]], m
-                            )
-                        continue
+                # another pair's planes turned, where all it reads is that pair's turned
+                if any(
+                    turn_pair(j, j1, m, r, at, sides_j, keep, pos, covered, shifts[m])
+                    for j1, m in pair_from.get(j, [])
+                    if shifts[m] is not None
+                ):
+                    continue
                 chips = _pair_chips(at, sides_j, side_of, tie_of, strip)
                 planes = p.part(r).correlate(chips, range(len(at)), [], scale)
                 c = planes[:, cy0:cy1, cx0:cx1]

@@ -342,18 +342,49 @@ def nominal_order(
     return np.lexsort((x, y, t, np.abs(t), d2, ts, r))
 
 
-def curve_of(axis: str, values, energy_J, force, floor_J: float) -> dict:
-    """A curve's samples with their plateaus (zero force in contact) and the stretches out of
-    contact (``|E|`` at or below the noise floor ``floor_J``), as :meth:`Landscape.curve`."""
+def curve_of(axis: str, values, energy_J, force, floor_J: float, linked=None) -> dict:
+    """A curve's samples with their plateaus (zero force in contact), their flat steps
+    (:func:`flat_steps`) and the stretches out of contact (``|E|`` at or below the noise
+    floor ``floor_J``), as :meth:`Landscape.curve`. ``linked``: which neighbouring samples'
+    energies may be compared (default all; a released curve's on one state only)."""
     detached = np.abs(energy_J) <= floor_J  # the chip no longer touches the pattern
+    plateaus = runs(values, (force == 0) & ~detached)
     return {
         "axis": axis,
         "values": values,
         "energy_J": energy_J,
         "force": force,
-        "plateaus": runs(values, (force == 0) & ~detached),
+        "plateaus": plateaus,
+        "flat_steps": flat_steps(values, energy_J, floor_J, ~detached, plateaus, linked),
         "no_contact": runs(values, detached),
     }
+
+
+def flat_steps(values, energy_J, floor_J: float, contact, plateaus, linked=None) -> list:
+    """[start, end] ranges of neighbouring samples in contact whose energies differ by no
+    more than the noise floor ``floor_J``, away from the ``plateaus``: flat to a stepper,
+    which stops there (its moves must lower the energy by more than the floor), though the
+    central-difference force across them is not zero (a flat part one sample long: 730/50
+    at 5 um/px with free lines, 405-410 um). ``linked``: (n - 1,) booleans, which neighbours
+    may be compared (default all)."""
+    e = np.asarray(energy_J, float)
+    contact = np.asarray(contact, bool)
+    tie = (np.abs(np.diff(e)) <= floor_J) & contact[:-1] & contact[1:]
+    if linked is not None:
+        tie &= np.asarray(linked, bool)
+    out, i = [], 0
+    while i < len(tie):
+        if not tie[i]:
+            i += 1
+            continue
+        j = i
+        while j + 1 < len(tie) and tie[j + 1]:
+            j += 1
+        a, b = float(values[i]), float(values[j + 1])
+        if not any(a <= p1 and p0 <= b for p0, p1 in plateaus):  # a plateau's own ties
+            out.append([a, b])
+        i = j + 1
+    return out
 
 
 def runs(values: np.ndarray, flat: np.ndarray, min_points: int = 3) -> list[list[float]]:
