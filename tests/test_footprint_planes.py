@@ -339,6 +339,7 @@ def test_a_pattern_a_quarter_turn_takes_onto_itself_reuses_its_planes_turned(
     direct = build_footprint_planes(s, twists=TWISTS)
     n_direct = calls["n"]
     assert share * n_turned == n_direct  # a quarter (a half) of the transforms
+    assert s.wall_profile is not None
     rules = FootprintRules.of(s.wall_profile, s.materials.pad_receding_deg)
     c = abs(rules.band_px - rules.f_inf) / STEP_PX
     eps = float(np.finfo(s.dtype).eps)
