@@ -391,3 +391,51 @@ def test_the_sides_of_a_square_chip_turn_and_mirror_onto_one_another():
     # and x -> -x takes side k to side 2 - k
     for k in range(4):
         np.testing.assert_array_equal(w[k][:, ::-1][out], w[(2 - k) % 4][out])
+
+
+def test_the_pattern_turns_are_those_of_comparing_every_pad_with_every_pad():
+    # _pattern_turns compares a pad only with the pads whose box is its box turned: on 300
+    # small random patterns (a pad, some of its turned images, sometimes a stray pixel, some
+    # not square) it finds what comparing every pad's whole image with every other's finds.
+    from types import SimpleNamespace
+
+    from scipy.ndimage import label
+
+    from simulator.landscape._footprint import _pattern_turns, _turn_image
+
+    def every_pair(masks, data):
+        valued = [np.where(mk, data, 0.0) for mk in masks]
+        out = {}
+        for m in (1, 2, 3):
+            if m % 2 and data.shape[0] != data.shape[1]:
+                continue
+            image = []
+            for v in valued:
+                hit = [k for k, w in enumerate(valued) if np.array_equal(_turn_image(v, m), w)]
+                if not hit:
+                    break
+                image.append(hit[0])
+            else:
+                out[m] = image
+        return out
+
+    rng = np.random.default_rng(0)
+    grid = SimpleNamespace(shape=(1, 11, 11), x_first_px=-5, y_first_px=-5)
+    found = 0
+    for _ in range(300):
+        h = int(rng.integers(6, 14))
+        w = h if rng.random() < 0.7 else int(rng.integers(6, 14))
+        a = np.zeros((h, w))
+        r0, c0 = rng.integers(0, h // 2), rng.integers(0, w // 2)
+        a[r0 : r0 + 2, c0 : c0 + 3] = rng.choice([1.0, 0.5])
+        for m in rng.choice([0, 1, 2, 3], size=int(rng.integers(0, 4))):
+            if m and (m % 2 == 0 or h == w):
+                a = np.maximum(a, _turn_image(a, int(m)))
+        if rng.random() < 0.2:
+            a[rng.integers(0, h), rng.integers(0, w)] = 1.0
+        lab, n = label(a > 0)
+        masks = [lab == k for k in range(1, n + 1)]
+        want = every_pair(masks, a)
+        assert _pattern_turns(masks, a, grid) == want
+        found += bool(want)
+    assert found >= 50  # the symmetric ones are there to be found

@@ -637,20 +637,38 @@ def _same_turned(a: np.ndarray, b: np.ndarray, m: int) -> bool:
 def _pattern_turns(masks: list, data: np.ndarray, grid) -> dict[int, list[int]]:
     """The quarter turns (m = 1, 2, 3 clockwise about the pattern's centre) that take every
     pad onto a pad, its values with it, on a pose grid that the turn takes onto itself: for
-    each, the image of each pad (``images[m][j]`` = k: pad k is pad j turned)."""
+    each, the image of each pad (``images[m][j]`` = k: pad k is pad j turned). A pad is
+    compared only with the pads whose box is its box turned, on that box (many pads of a
+    large pattern cost their boxes, not a pattern each)."""
     _, ny, nx = grid.shape
     centred = 2 * grid.x_first_px + nx - 1 == 0 and 2 * grid.y_first_px + ny - 1 == 0
-    if not centred:
+    if not centred or not masks:
         return {}
-    valued = [np.where(mk, data, 0.0) for mk in masks]
+    h, w = data.shape
+    boxes = []  # (r0, r1, c0, c1) of each pad, image rows
+    for mk in masks:
+        rows, cols = np.flatnonzero(mk.any(axis=1)), np.flatnonzero(mk.any(axis=0))
+        boxes.append((int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1))
+    by_box: dict[tuple, list[int]] = {}
+    for k, b in enumerate(boxes):
+        by_box.setdefault(b, []).append(k)
+
+    def crop(k: int, box) -> np.ndarray:
+        r0, r1, c0, c1 = box
+        return np.where(masks[k][r0:r1, c0:c1], data[r0:r1, c0:c1], 0.0)
+
     turns: dict[int, list[int]] = {}
     for m in (1, 2, 3):
-        if m % 2 and (ny != nx or data.shape[0] != data.shape[1]):
+        if m % 2 and (ny != nx or h != w):
             continue
+        hh = w if m % 2 else h
         image = []
-        for v in valued:
-            t = _turn_image(v, m)
-            hit = [k for k, w in enumerate(valued) if np.array_equal(t, w)]
+        for j, (r0, r1, c0, c1) in enumerate(boxes):
+            # the box turned: to rows y up, turned as the grid's, back to image rows
+            y0, y1, x0, x1 = _grid_box_turned((h - r1, h - r0, c0, c1), m, (h, w))
+            box = (hh - y1, hh - y0, x0, x1)
+            t = _turn_image(crop(j, boxes[j]), m)
+            hit = [k for k in by_box.get(box, []) if np.array_equal(t, crop(k, box))]
             if not hit:
                 break
             image.append(hit[0])
