@@ -906,18 +906,17 @@ def build_footprint_planes(
         )
         for *_, p, c, _on in pair_parts
     ]
-    for j2, (a2, b2, ax2, _p, _c, on2) in enumerate(pair_parts):
-        for j1, (a1, b1, ax1, _p1, _c1, on1) in enumerate(pair_parts[:j2]):
-            hit = [
-                m
-                for m, image in turns.items()
-                if image[a1] == a2
-                and image[b1] == b2
-                and (ax1 - m) % 4 == ax2
-                and np.array_equal(on1, on2)
+    index = {(a, b, ax): j for j, (a, b, ax, *_) in enumerate(pair_parts)}
+    for j1, (a1, b1, ax1, _p, _c, on1) in enumerate(pair_parts):
+        for m, image in turns.items():  # the pair this one turns onto, if it is a later one
+            j2 = index.get((image[a1], image[b1], (ax1 - m) % 4))
+            if (
+                j2 is not None
+                and j2 > j1
+                and np.array_equal(on1, pair_parts[j2][5])
                 and _grid_box_turned(stored[j1], m, grid.shape[1:]) == stored[j2]
-            ]
-            pair_from.setdefault(j2, []).extend((j1, m) for m in hit)
+            ):
+                pair_from.setdefault(j2, []).append((j1, m))
 
     def turn_pair(j, j1, m, r, at, sides_j, keep, pos, covered, c1) -> bool:
         """Pair j's planes at the twists ``at`` (residual ``r``) made as pair j1's turned by
