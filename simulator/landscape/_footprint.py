@@ -19,6 +19,10 @@ bounding box grown by the chip's reach and the footprint's margin; elsewhere the
 energy is zero), and each pair over the poses where the side of the chip facing it can;
 the planes are reduced to what the state needs a chunk of twists at a time (no full-grid
 temporary), and the parts whose transforms have the same sizes share their work arrays.
+A pattern that a quarter or half turn takes onto itself, under a chip the turn leaves as
+it is, has some pads' and pairs' planes made as others' turned (:func:`_pattern_turns`,
+checked chunk by chunk on everything they read: a quarter of the transforms for a four-pad
+under a square chip).
 """
 
 from __future__ import annotations
@@ -439,7 +443,7 @@ class _Sides:
     def __call__(self, twist_deg: float) -> tuple[np.ndarray, np.ndarray]:
         """(H, W) int8 sides on the canvas at ``twist_deg`` and (H, W) booleans, its ties, y
         up (as the rotator's rasters)."""
-        if self._xy is None:  # made on first use: the path engine reads ``bins`` alone
+        if self._xy is None:  # made on first use: the path engine reads ``bins`` and ``ties``
             ho, wo = self.shape
             self._xy = (
                 np.arange(wo, dtype=float)[None, :] - (wo / 2 - 0.5),
