@@ -873,8 +873,9 @@ def build_footprint_planes(
     near = {a for a, *_ in pair_parts}
     # A pattern that a quarter or half turn takes onto itself (a four-pad's pads, a square
     # pad's pairs) under a chip it leaves unchanged: a pad's planes are another's turned,
-    # where the chip's rasters are the same turned at every twist of a chunk (checked
-    # there, exactly) - a quarter of the transforms for a four-pad under a square chip.
+    # where the chip's rasters are the same turned at every twist of a chunk (checked there,
+    # to their round-off; the sides, parts and cover exactly) - a quarter of the transforms
+    # for a four-pad under a square chip.
     turns = _pattern_turns(masks, data, grid)
     # pad k: the (pad j < k, m) it is the turn of (a chunk takes the first its rasters fit:
     # a rectangular chip fits a half turn only)
