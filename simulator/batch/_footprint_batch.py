@@ -38,6 +38,14 @@ from simulator.batch._stats import BatchResult
 #: build cost more than the first's 20 extra twists.
 BATCH_WINDOW_DEG = 20.0
 
+#: The most lanes a footprint batch's group runs at once (a larger ``chunk`` is cut to it;
+#: a smaller group is padded to it): every group, large or small, in one compiled shape.
+#: On the benchmark (``benchmarks/footprint.py --batch``: groups of 1,976, 17, 14, 8, 7
+#: and 1 lanes) the lanes took 1.8 s in chunks of 128 against 2.4 s in one chunk of up to
+#: 2,048 with the small groups in chunks of 32 (a second compile, 0.4 s), and 2.0 s in
+#: chunks of 64 or 256, 2.2 s of 512; the ends are the same (lanes are independent).
+FOOTPRINT_CHUNK = 128
+
 
 def _nodes(grid, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The grid nodes of fractional indices q (N, 3), as the steppers' relay test takes them
@@ -176,7 +184,7 @@ def run_footprint_batch(
             "run_s": run_s,
             "starts_per_s": n / run_s,
             "steps_per_s": float(steps.sum()) / run_s,
-            "chunk": chunk,
+            "chunk": min(chunk, FOOTPRINT_CHUNK),  # a stiff run's groups: up to ``chunk``
             "landscape_shape": shape,  # the last window's: every twist a lane stood on
             "stiff": False,
             "footprint_events": int(events.sum()),
@@ -343,10 +351,13 @@ def _lanes_on(
             per_lane = True
         order = _run_order(q[members], np.asarray(best), grid)
         run = members[order]
-        # a group's lanes padded to a power of two (at least 32, at most a chunk):
-        # the rounds' shrinking groups share a few compiled shapes instead of
-        # compiling one per group size (each compile takes about a second)
-        lanes_min = min(chunk, max(32, 1 << (len(run) - 1).bit_length()))
+        # every group in chunks of one compiled shape (FOOTPRINT_CHUNK lanes at most, a
+        # small group padded to it): one compile for the batch, not one per group size; a
+        # stiff run maps its lanes one after another (a padded lane costs a whole run), so
+        # its groups are padded to a power of two only, from 32 (a few compiled shapes)
+        lanes_min = min(chunk, FOOTPRINT_CHUNK)
+        if stiff:
+            lanes_min = min(chunk, max(32, 1 << (len(run) - 1).bit_length()))
         got = run_lanes(
             fld,
             grid,
@@ -355,7 +366,7 @@ def _lanes_on(
             method,
             max_steps,
             stiff,
-            chunk,
+            lanes_min,
             workers,
             None,
             per_lane,
