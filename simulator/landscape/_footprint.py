@@ -53,6 +53,8 @@ from ._symmetry import SAME_CHIP_TOL
 if TYPE_CHECKING:
     from simulator.physics import FootprintRules
 
+    from ._correlator import Correlator
+
 #: How far (relative to their largest value) two footprint rasters may differ and count as
 #: the same: a quarter turn of a square chip's float64 raster differs from it by round-off
 #: (at most 1.2e-14 measured on the benchmark's 730 um chip at 5 um/px, its rotated
@@ -506,8 +508,6 @@ class _Part:
         spaces,
         like: dict | None = None,
     ):
-        from ._correlator import Correlator
-
         if like is None:
             s = _variant(scene, Mask(data, scene.um_per_px), profile)
             lay = _layout(s, twists, center, half, check_budget=True, extent=extent)
@@ -518,7 +518,8 @@ class _Part:
         self.grid = lay["grid"]
         win = lay["window"]
         assert lay["pad"] == 0, "the chip carries the footprint"
-        self.cor = Correlator(lay["pattern_up"], lay["canvas"], win, scene.dtype, backend)
+        self._cor_args = (lay["pattern_up"], lay["canvas"], win, scene.dtype, backend)
+        self._cor: Correlator | None = None  # made when first used (a turned part never is)
         self.shape = (2 * win.ry + 1, 2 * win.rx + 1)
         self.fft = _fft_of(lay)
         # A part mirror-symmetric about y = 0 on a box centred there (a pad on the axis of a
@@ -529,15 +530,27 @@ class _Part:
             and self.grid.y_first_px + win.ry == 0
             and bool(np.abs(data - data[::-1]).max() <= SAME_CHIP_TOL)
         )
-        # The threads' work arrays, shared by the parts whose transforms have the same sizes
-        # (``spaces``; the calls run one after another): a part's own are never touched.
-        mirror = bool(twins) and not self.flip
-        self.work = self.cor.workspace(chunk, mirror=mirror)
-        key = (self.cor.backend, self.cor.ny, self.cor.nx, self.shape[0], mirror)
-        if key in spaces:
-            self.work = self.work._replace(slots=spaces[key])
-        else:
-            spaces[key] = self.work.slots
+        self._mirror = bool(twins) and not self.flip
+        self._chunk, self._spaces = chunk, spaces
+
+    @property
+    def cor(self) -> Correlator:
+        """The part's correlator, made on first use with its work arrays (:attr:`work`)."""
+        if self._cor is None:
+            from ._correlator import Correlator
+
+            cor = Correlator(*self._cor_args)
+            # The threads' work arrays, shared by the parts whose transforms have the same
+            # sizes (``spaces``; the calls run one after another): a part's own are never
+            # touched.
+            self.work = cor.workspace(self._chunk, mirror=self._mirror)
+            key = (cor.backend, cor.ny, cor.nx, self.shape[0], self._mirror)
+            if key in self._spaces:
+                self.work = self.work._replace(slots=self._spaces[key])
+            else:
+                self._spaces[key] = self.work.slots
+            self._cor = cor
+        return self._cor
 
     def offset(self, full) -> tuple[int, int]:
         """(y, x) of this box's first node in the grid ``full``."""
@@ -552,9 +565,10 @@ class _Part:
         (or, for a symmetric part, :attr:`flip`, the planes upside down); ``at_zero``: the
         positions in ``pos`` of twist 0 (their planes made symmetric when the part is)."""
         n = len(pos)
-        out = np.empty((n + len(neg), *self.shape), self.cor.dtype)
+        cor = self.cor
+        out = np.empty((n + len(neg), *self.shape), cor.dtype)
         mirror = out[n:] if neg and not self.flip else None
-        self.cor(stack, out=out[:n], scale=scale, mirror_out=mirror, work=self.work)
+        cor(stack, out=out[:n], scale=scale, mirror_out=mirror, work=self.work)
         if self.flip:
             if neg:
                 out[n:] = out[:n, ::-1]
