@@ -511,3 +511,31 @@ def test_fft_backend_env_forces_the_default_and_refuses_an_unknown_name(monkeypa
     monkeypatch.setenv("SELFALIGN_FFT_BACKEND", "cufft")
     with pytest.raises(InputError, match="SELFALIGN_FFT_BACKEND='cufft'.*scipy, opencv, jax"):
         Correlator(pat, (3, 3), win, "float32")
+
+
+def test_the_floor_is_the_minimums_connected_ties_labelled_on_their_box():
+    # floor_extent labels the low poses on their bounding box only: on 200 random small
+    # landscapes with many ties (energies rounded to whole units, several separate low
+    # patches) it finds the same floor as labelling the whole grid.
+    from scipy import ndimage
+
+    from simulator.landscape import Landscape, PoseGrid
+
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        shape = tuple(int(v) for v in rng.integers(2, 9, size=3))
+        e = -np.round(rng.uniform(0, 3, shape)).astype(np.float32) * 1e-9
+        grid = PoseGrid.uniform(
+            shape,
+            wrap=False,
+            cut=((False, False),) * 3,
+            um_per_px=1.0,
+            twist_step_deg=1.0,
+            period_deg=90.0,
+            rg_px=1.0,
+        )
+        ls = Landscape(energy=e, grid=grid, delta_gamma=-0.01, energy_scale_J=3e-9)
+        it, iy, ix = ls.minimum_index()
+        lab, _ = ndimage.label(e <= float(e[it, iy, ix]) + ls.noise_floor_J)
+        sel = np.nonzero(lab == lab[it, iy, ix])
+        assert ls.floor_extent() == tuple((int(a.min()), int(a.max())) for a in sel)

@@ -281,10 +281,14 @@ class PairPlane:
     energy: np.ndarray
     twists: np.ndarray
 
-    def box(self) -> tuple[np.ndarray, slice, slice]:
-        """The indices of the grid (twists, y slice, x slice) that :attr:`energy` covers."""
+    def box(self) -> tuple[np.ndarray | slice, slice, slice]:
+        """The indices of the grid (twists, y slice, x slice) that :attr:`energy` covers (the
+        twists as a slice where they run in a row: a state's sum adds in place)."""
         _, ny, nx = self.energy.shape
-        return self.twists, slice(self.y0, self.y0 + ny), slice(self.x0, self.x0 + nx)
+        t = np.asarray(self.twists)
+        run = len(t) > 0 and bool(np.all(np.diff(t) == 1))
+        twists = slice(int(t[0]), int(t[-1]) + 1) if run else t
+        return twists, slice(self.y0, self.y0 + ny), slice(self.x0, self.x0 + nx)
 
 
 @dataclass(frozen=True, eq=False)

@@ -245,9 +245,14 @@ class Landscape:
         it, iy, ix = self.minimum_index()
         e = self.energy
         low = e <= float(e[it, iy, ix]) + self.noise_floor_J
-        lab, _ = ndimage.label(low)
-        sel = np.nonzero(lab == lab[it, iy, ix])
-        return tuple((int(a.min()), int(a.max())) for a in sel)  # type: ignore[return-value]
+        # labelled on the box of every low pose (the floor is one of them: its connections
+        # all lie inside), not the whole grid
+        box = tuple(slice(int(a.min()), int(a.max()) + 1) for a in np.nonzero(low))
+        lab, _ = ndimage.label(low[box])
+        sel = np.nonzero(lab == lab[it - box[0].start, iy - box[1].start, ix - box[2].start])
+        return tuple(  # type: ignore[return-value]
+            (int(a.min()) + b.start, int(a.max()) + b.start) for a, b in zip(sel, box, strict=True)
+        )
 
     def floor_range(self) -> dict:
         """The floor of :meth:`floor_extent` in physical units: ``x_um``, ``y_um`` and

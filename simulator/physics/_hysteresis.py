@@ -397,8 +397,9 @@ def align_tolerance(
 
 
 def _hysteresis_tolerance(ls, pin: tuple[float, float, float]) -> tuple[float, float]:
-    """:func:`align_tolerance` from the pinning alone."""
-    e = np.asarray(ls.energy, np.float64)
+    """:func:`align_tolerance` from the pinning alone (the curvature from three energies
+    per axis, each read as float64: not the whole landscape converted)."""
+    e = ls.energy
     it, iy, ix = ls.minimum_index()
     nt, ny, nx = e.shape
     d = []
@@ -416,7 +417,7 @@ def _hysteresis_tolerance(ls, pin: tuple[float, float, float]) -> tuple[float, f
         vals = []
         for j in (lo, i, hi):
             idx[k] = j
-            vals.append(e[tuple(idx)])
+            vals.append(float(e[tuple(idx)]))
         c = vals[0] + vals[2] - 2 * vals[1]
         d.append(pin[k] / c if c > 0 else 0.0)
     return max(1.0, ALIGN_MARGIN * d[0]), max(1.0, ALIGN_MARGIN * max(d[1], d[2]))
