@@ -528,7 +528,7 @@ def test_the_floor_is_the_minimums_connected_ties_labelled_on_their_box():
         grid = PoseGrid.uniform(
             shape,
             wrap=False,
-            cut=((False, False),) * 3,
+            cut=((False, False), (False, False), (False, False)),
             um_per_px=1.0,
             twist_step_deg=1.0,
             period_deg=90.0,
