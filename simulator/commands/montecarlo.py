@@ -88,7 +88,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     r.add_argument(
         "--chunk",
         type=int,
-        help=f"starts per compiled batch (default {DEFAULT_CHUNK}, dynamics {DEFAULT_DYNAMICS_CHUNK}); "
+        help=f"starts per compiled batch (default {DEFAULT_CHUNK}, dynamics {DEFAULT_DYNAMICS_CHUNK}; "
+        "with --dispense pattern|chip at most 128, each footprint state's group in one shape); "
         "results do not depend on it",
     )
     r.add_argument("--quiet", action="store_true", help="no progress bars")
