@@ -89,7 +89,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--chunk",
         type=int,
         help=f"starts per compiled batch (default {DEFAULT_CHUNK}, dynamics {DEFAULT_DYNAMICS_CHUNK}; "
-        "with --dispense pattern|chip at most 128, each footprint state's group in one shape); "
+        "a batch with the footprint state, --dispense pattern or chip: at most 128); "
         "results do not depend on it",
     )
     r.add_argument("--quiet", action="store_true", help="no progress bars")
