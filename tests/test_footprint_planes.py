@@ -321,8 +321,10 @@ def test_a_pattern_a_quarter_turn_takes_onto_itself_reuses_its_planes_turned(
     # pair onto another and each twist's chip onto itself (its rasters to their float64
     # round-off, its sides shifted by one), so three pads' planes and three pairs in four are
     # another's turned; under a 730 x 500 um chip only a half turn leaves the chip as it is,
-    # and half of them are. The planes are those of a build that transforms every part, to
-    # the transforms' round-off (the bridged term weighs its counts by c: c times it).
+    # and half of them are. The mirror y -> -y (then a turn) takes a pair at a twist onto
+    # another at the opposite twist: fewer pairs still are transformed. Every build's planes
+    # are those of a build that transforms every part, to the transforms' round-off (the
+    # bridged term weighs its counts by c: c times it).
     s = fourpad(12.0, twist=True, chip_um=chip_um)
     calls = {"n": 0}
     correlate = fp._Part.correlate
@@ -331,14 +333,23 @@ def test_a_pattern_a_quarter_turn_takes_onto_itself_reuses_its_planes_turned(
         calls["n"] += 1
         return correlate(self, *args, **kwargs)
 
+    turns, mirror = fp._pattern_turns, fp._pattern_mirror
+
+    def build(with_turns: bool, with_mirror: bool):
+        monkeypatch.setattr(fp, "_pattern_turns", turns if with_turns else lambda *a: {})
+        monkeypatch.setattr(fp, "_pattern_mirror", mirror if with_mirror else lambda *a: None)
+        calls["n"] = 0
+        planes = build_footprint_planes(s, twists=TWISTS)
+        return planes, calls["n"]
+
     monkeypatch.setattr(fp._Part, "correlate", counted)
-    turned = build_footprint_planes(s, twists=TWISTS)
-    n_turned = calls["n"]
-    calls["n"] = 0
-    monkeypatch.setattr(fp, "_pattern_turns", lambda *args: {})
-    direct = build_footprint_planes(s, twists=TWISTS)
-    n_direct = calls["n"]
+    direct, n_direct = build(False, False)
+    turned, n_turned = build(True, False)
+    mirrored, n_mirrored = build(False, True)
+    both, n_both = build(True, True)
     assert share * n_turned == n_direct  # a quarter (a half) of the transforms
+    # the mirror saves pairs' transforms (the 730 x 500 um chip has no pairs at these twists)
+    assert not direct.pairs or (n_mirrored < n_direct and n_both < n_turned)
     assert s.wall_profile is not None
     rules = FootprintRules.of(s.wall_profile, s.materials.pad_receding_deg)
     c = abs(rules.band_px - rules.f_inf) / STEP_PX
@@ -346,14 +357,18 @@ def test_a_pattern_a_quarter_turn_takes_onto_itself_reuses_its_planes_turned(
     scale = float(np.abs(direct.wet_energy).max())
     diff = np.abs(turned.wet_energy - direct.wet_energy)
     assert 0 < diff.max() <= 2 * (2 * c + 1) * NOISE_FACTOR * eps * scale  # turned, not copied
-    assert len(turned.pairs) == len(direct.pairs)
     assert share == 2 or len(turned.pairs) >= 8  # the square chip's pairs are there to test
-    for p, q in zip(turned.pairs, direct.pairs, strict=True):
-        assert (p.near, p.far, p.axis, p.y0, p.x0) == (q.near, q.far, q.axis, q.y0, q.x0)
-        np.testing.assert_array_equal(p.twists, q.twists)
-        assert np.abs(p.energy - q.energy).max() <= 2 * NOISE_FACTOR * eps * scale
+    # the mirror makes pairs only: the pads' planes are the direct or the turned ones exactly
+    np.testing.assert_array_equal(mirrored.wet_energy, direct.wet_energy)
+    np.testing.assert_array_equal(both.wet_energy, turned.wet_energy)
+    for planes in (turned, mirrored, both):
+        assert len(planes.pairs) == len(direct.pairs)
+        for p, q in zip(planes.pairs, direct.pairs, strict=True):
+            assert (p.near, p.far, p.axis, p.y0, p.x0) == (q.near, q.far, q.axis, q.y0, q.x0)
+            np.testing.assert_array_equal(p.twists, q.twists)
+            assert np.abs(p.energy - q.energy).max() <= 2 * NOISE_FACTOR * eps * scale
     # and the state's energy is turned onto itself by a quarter (a half) turn, pairs and all
-    e = turned.energy(np.ones(turned.n_pads, bool))
+    e = both.energy(np.ones(both.n_pads, bool))
     assert np.abs(np.rot90(e, 4 // share, axes=(1, 2)) - e).max() <= 2 * NOISE_FACTOR * eps * scale
 
 
@@ -394,14 +409,15 @@ def test_the_sides_of_a_square_chip_turn_and_mirror_onto_one_another():
 
 
 def test_the_pattern_turns_are_those_of_comparing_every_pad_with_every_pad():
-    # _pattern_turns compares a pad only with the pads whose box is its box turned: on 300
-    # small random patterns (a pad, some of its turned images, sometimes a stray pixel, some
-    # not square) it finds what comparing every pad's whole image with every other's finds.
+    # _pattern_turns compares a pad only with the pads whose box is its box turned, and
+    # _pattern_mirror with those on its box upside down: on 300 small random patterns (a pad,
+    # some of its turned images, sometimes a stray pixel, some not square) they find what
+    # comparing every pad's whole image with every other's finds.
     from types import SimpleNamespace
 
     from scipy.ndimage import label
 
-    from simulator.landscape._footprint import _pattern_turns, _turn_image
+    from simulator.landscape._footprint import _pattern_mirror, _pattern_turns, _turn_image
 
     def every_pair(masks, data):
         valued = [np.where(mk, data, 0.0) for mk in masks]
@@ -421,7 +437,7 @@ def test_the_pattern_turns_are_those_of_comparing_every_pad_with_every_pad():
 
     rng = np.random.default_rng(0)
     grid = SimpleNamespace(shape=(1, 11, 11), x_first_px=-5, y_first_px=-5)
-    found = 0
+    found = mirrors = 0
     for _ in range(300):
         h = int(rng.integers(6, 14))
         w = h if rng.random() < 0.7 else int(rng.integers(6, 14))
@@ -438,4 +454,10 @@ def test_the_pattern_turns_are_those_of_comparing_every_pad_with_every_pad():
         want = every_pair(masks, a)
         assert _pattern_turns(masks, a, grid) == want
         found += bool(want)
-    assert found >= 50  # the symmetric ones are there to be found
+        # and the mirror y -> -y likewise: each pad's whole image upside down against all
+        valued = [np.where(mk, a, 0.0) for mk in masks]
+        upside = [[k for k, w in enumerate(valued) if np.array_equal(v[::-1], w)] for v in valued]
+        mirror_want = [h[0] for h in upside] if all(upside) else None
+        assert _pattern_mirror(masks, a, grid) == mirror_want
+        mirrors += mirror_want is not None
+    assert found >= 50 and mirrors >= 20  # the symmetric ones are there to be found

@@ -699,6 +699,38 @@ def _pattern_turns(masks: list, data: np.ndarray, grid) -> dict[int, list[int]]:
     return turns
 
 
+def _pattern_mirror(masks: list, data: np.ndarray, grid) -> list[int] | None:
+    """The image of each pad under the mirror y -> -y about the pattern's centre
+    (``image[j]`` = k: pad k is pad j upside down, its values with it), where the mirror
+    takes every pad onto a pad and the pose grid onto itself; else None. As
+    :func:`_pattern_turns`, a pad is compared only with the pads on its mirrored box."""
+    _, ny, _ = grid.shape
+    if 2 * grid.y_first_px + ny - 1 != 0 or not masks:
+        return None
+    h = data.shape[0]
+    boxes = []
+    for mk in masks:
+        rows, cols = np.flatnonzero(mk.any(axis=1)), np.flatnonzero(mk.any(axis=0))
+        boxes.append((int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1))
+    by_box: dict[tuple, list[int]] = {}
+    for k, b in enumerate(boxes):
+        by_box.setdefault(b, []).append(k)
+
+    def crop(k: int, box) -> np.ndarray:
+        r0, r1, c0, c1 = box
+        return np.where(masks[k][r0:r1, c0:c1], data[r0:r1, c0:c1], 0.0)
+
+    image = []
+    for j, (r0, r1, c0, c1) in enumerate(boxes):
+        box = (h - r1, h - r0, c0, c1)
+        t = crop(j, boxes[j])[::-1]
+        hit = [k for k in by_box.get(box, []) if np.array_equal(t, crop(k, box))]
+        if not hit:
+            return None
+        image.append(hit[0])
+    return image
+
+
 def _grid_box_turned(box: tuple[int, int, int, int], m: int, shape) -> tuple[int, ...]:
     """The box (y0, y1, x0, x1) of a (ny, nx) grid turned by :func:`_turn`'s ``m``."""
     y0, y1, x0, x1 = box
@@ -940,6 +972,63 @@ def build_footprint_planes(
                 and _grid_box_turned(stored[j1], m, grid.shape[1:]) == stored[j2]
             ):
                 pair_from.setdefault(j2, []).append((j1, m))
+    # Under the mirror y -> -y (a pattern symmetric about its x axis, a chip whose mirror
+    # twins are exact), then a quarter turn or none: pair j2's planes at a twist are pair
+    # j1's at the opposite twist upside down, turned (:func:`mirror_pair`), the twin in the
+    # same chunk.
+    mirrored = _pattern_mirror(masks, data, grid) if twins else None
+    mirror_from: dict[int, list[tuple[int, int]]] = {}  # pair j2: its (pair j1 < j2, m)
+    if mirrored is not None:
+        tw_key = np.round(twists_deg, 9)
+        for j1, (a1, b1, ax1, _p, _c, on1) in enumerate(pair_parts):
+            y0, y1, x0, x1 = stored[j1]
+            flipped_box = (grid.shape[1] - y1, grid.shape[1] - y0, x0, x1)
+            for m in (0, *turns):
+                image = turns[m] if m else list(range(n))
+                j2 = index.get((image[mirrored[a1]], image[mirrored[b1]], (-ax1 - m) % 4))
+                if (
+                    j2 is not None
+                    and j2 > j1
+                    and sorted(-tw_key[on1]) == sorted(tw_key[pair_parts[j2][5]])
+                    and _grid_box_turned(flipped_box, m, grid.shape[1:]) == stored[j2]
+                ):
+                    mirror_from.setdefault(j2, []).append((j1, m))
+
+    def mirror_pair(j, j1, m, r, at, sides_j, keep, pos, neg, covered, c1) -> bool:
+        """Pair j's planes at the twists ``at`` (residual ``r``) made as pair j1's at the
+        opposite twists (each one's mirror twin, in this chunk) upside down and turned by
+        ``m`` (0: not turned), where every input of pair j is pair j1's mirrored and turned:
+        its chips (the twin's raster is its partner's upside down; the sides shifted by
+        ``c1`` as the turn shifts them, a twin's the other way), the near pad's cover and
+        its part of the pattern. False (nothing made) where one is not."""
+        a, b, ax = pair_parts[j][:3]
+        a1, b1, ax1, p1, (dy0, dy1, dx0, dx1), _ = pair_parts[j1]
+        face1, res1 = _faces(twists_deg, ax1)
+        mates = []  # the mirror twin of each entry, as pair j1's entry there
+        for _, _i, k, flipped in at:
+            i2 = pos[k] if flipped else neg[k] if k < len(neg) else None
+            if i2 is None or i2 not in pair_at[j1]:
+                return False
+            mates.append((k if flipped else len(pos) + k, i2, k, not flipped))
+        if len({float(res1[t[1]]) for t in mates}) != 1:
+            return False
+        r1 = float(res1[mates[0][1]])
+        oy1, ox1 = p1.offset(grid)
+        gsl1 = (slice(oy1 + dy0, oy1 + dy1), slice(ox1 + dx0, ox1 + dx1))
+        sides_1 = _pair_sides(mates, ax1, face1, pos)
+        if not (
+            all(
+                s2 == (s1 + c1 if t[3] else s1 - c1) % 4
+                for s1, s2, t in zip(sides_1, sides_j, at, strict=True)
+            )
+            and np.array_equal(_turn(covered[a1][([t[0] for t in mates], *gsl1)][:, ::-1], m), keep)
+            and np.array_equal(_turn_image(shadow(a1, b1, ax1, r1)[::-1], m), shadow(a, b, ax, r))
+        ):
+            return False
+        for t, u in zip(at, mates, strict=True):
+            src = pair_energy[j1][pair_at[j1][u[1]]][::-1]
+            pair_energy[j][pair_at[j][t[1]]] = _turn(src, m)
+        return True
 
     def turn_pair(j, j1, m, r, at, sides_j, keep, pos, covered, c1) -> bool:
         """Pair j's planes at the twists ``at`` (residual ``r``) made as pair j1's turned by
@@ -1089,12 +1178,21 @@ def build_footprint_planes(
                 rows = [t[0] for t in at]
                 # only where the near pad is covered and the far one on its bridged term
                 keep = covered[a][(rows, *gsl)]
-                # another pair's planes turned, where all it reads is that pair's turned
-                if any(
+                # another pair's planes turned, where all it reads is that pair's turned,
+                # or mirrored from the opposite twists (and turned)
+                made = any(
                     turn_pair(j, j1, m, r, at, sides_j, keep, pos, covered, shifts[m])
                     for j1, m in pair_from.get(j, [])
                     if shifts[m] is not None
-                ):
+                )
+                for j1, m in [] if made else mirror_from.get(j, []):
+                    c1 = 0 if m == 0 else shifts[m]
+                    if c1 is not None and mirror_pair(
+                        j, j1, m, r, at, sides_j, keep, pos, neg, covered, c1
+                    ):
+                        made = True
+                        break
+                if made:
                     continue
                 chips = _pair_chips(at, sides_j, side_of, tie_of, strip)
                 planes = p.part(r).correlate(chips, range(len(at)), [], scale)
