@@ -55,13 +55,6 @@ if TYPE_CHECKING:
 
     from ._correlator import Correlator
 
-#: How far (relative to their largest value) two footprint rasters may differ and count as
-#: the same: a quarter turn of a square chip's float64 raster differs from it by round-off
-#: (at most 1.2e-14 measured on the benchmark's 730 um chip at 5 um/px, its rotated
-#: coordinates and profile rounded in another order), a pixel looked up on another pixel
-#: of the distance transform by a step of the profile (1e-3 and more).
-RASTER_REL_TOL = 1e-9
-
 
 def _variant(scene: Scene, pattern: Mask, profile) -> Scene:
     """``scene`` with another pattern and another chip footprint (the wall profile the builder
@@ -646,14 +639,16 @@ def _turn_image(a: np.ndarray, m: int) -> np.ndarray:
 
 def _same_turned(a: np.ndarray, b: np.ndarray, m: int) -> bool:
     """Whether ``a`` turned by ``m`` (:func:`_turn`) is ``b``: booleans and integers exactly,
-    floats to their round-off (:data:`RASTER_REL_TOL`)."""
+    float rasters within :data:`SAME_CHIP_TOL` per pixel, as the chip's own symmetries are
+    told (a square chip's raster turned differs from it by at most 1.2e-14 of its largest
+    value, 1, measured: its rotated coordinates are rounded in another order; a pixel read
+    elsewhere by 1e-3 and more)."""
     t = _turn(a, m)
     if t.shape != b.shape:
         return False
     if not np.issubdtype(b.dtype, np.floating):
         return bool(np.array_equal(t, b))
-    tol = RASTER_REL_TOL * float(np.abs(b).max(initial=0.0))
-    return bool(np.abs(t - b).max(initial=0.0) <= tol)
+    return bool(np.abs(t - b).max(initial=0.0) <= SAME_CHIP_TOL)
 
 
 def _pad_images(masks: list, data: np.ndarray, move_box, move) -> list[int] | None:
@@ -944,7 +939,9 @@ def build_footprint_planes(
                 max(b[3] for b in boxes),
             )
         )
-    pair_from: dict[int, list[tuple[int, int]]] = {}  # pair j2: its (pair j1 < j2, m)
+    # pair j2: the (pair j1 < j2, m, mirror) it is made from (:func:`made_from`), the turns'
+    # first
+    pair_from: dict[int, list[tuple[int, int, bool]]] = {}
     stored = [
         (
             p.offset(grid)[0] + c[0],
@@ -964,13 +961,11 @@ def build_footprint_planes(
                 and np.array_equal(on1, pair_parts[j2][5])
                 and _grid_box_turned(stored[j1], m, grid.shape[1:]) == stored[j2]
             ):
-                pair_from.setdefault(j2, []).append((j1, m))
+                pair_from.setdefault(j2, []).append((j1, m, False))
     # Under the mirror y -> -y (a pattern symmetric about its x axis, a chip whose mirror
     # twins are exact), then a quarter turn or none: pair j2's planes at a twist are pair
-    # j1's at the opposite twist upside down, turned (:func:`mirror_pair`), the twin in the
-    # same chunk.
+    # j1's at the opposite twist upside down, turned, the twin in the same chunk.
     mirrored = _pattern_mirror(masks, data, grid) if twins else None
-    mirror_from: dict[int, list[tuple[int, int]]] = {}  # pair j2: its (pair j1 < j2, m)
     if mirrored is not None:
         tw_key = np.round(twists_deg, 9)
         for j1, (a1, b1, ax1, _p, _c, on1) in enumerate(pair_parts):
@@ -985,27 +980,36 @@ def build_footprint_planes(
                     and sorted(-tw_key[on1]) == sorted(tw_key[pair_parts[j2][5]])
                     and _grid_box_turned(flipped_box, m, grid.shape[1:]) == stored[j2]
                 ):
-                    mirror_from.setdefault(j2, []).append((j1, m))
+                    pair_from.setdefault(j2, []).append((j1, m, True))
 
-    def mirror_pair(j, j1, m, r, at, sides_j, keep, pos, neg, covered, c1) -> bool:
-        """Pair j's planes at the twists ``at`` (residual ``r``) made as pair j1's at the
-        opposite twists (each one's mirror twin, in this chunk) upside down and turned by
-        ``m`` (0: not turned), where every input of pair j is pair j1's mirrored and turned:
-        its chips (the twin's raster is its partner's upside down; the sides shifted by
-        ``c1`` as the turn shifts them, a twin's the other way), the near pad's cover and
-        its part of the pattern. False (nothing made) where one is not."""
+    def made_from(j, j1, m, mirror, r, at, sides_j, keep, pos, neg, covered, c1) -> bool:
+        """Pair j's planes at the twists ``at`` (residual ``r``) made as pair j1's turned by
+        ``m`` (0: not turned), at the same twists, or with ``mirror`` at the opposite ones
+        (each entry's mirror twin, in this chunk) upside down first, where every input of
+        pair j is pair j1's moved so: its chips (the strips turned, their sides shifted by
+        ``c1`` as the turn shifts every side, a twin's the other way; a twin's raster is its
+        partner's upside down), the near pad's cover ``keep`` and its part of the pattern.
+        False (nothing made) where one is not."""
         a, b, ax = pair_parts[j][:3]
         a1, b1, ax1, p1, (dy0, dy1, dx0, dx1), _ = pair_parts[j1]
         face1, res1 = _faces(twists_deg, ax1)
-        mates = []  # the mirror twin of each entry, as pair j1's entry there
-        for _, _i, k, flipped in at:
-            i2 = pos[k] if flipped else neg[k] if k < len(neg) else None
-            if i2 is None or i2 not in pair_at[j1]:
+        mates = at  # pair j1's entries read: the same, or each one's mirror twin
+        if mirror:
+            mates = []
+            for _, _i, k, flipped in at:
+                i2 = pos[k] if flipped else neg[k] if k < len(neg) else None
+                if i2 is None or i2 not in pair_at[j1]:
+                    return False
+                mates.append((k if flipped else len(pos) + k, i2, k, not flipped))
+            if len({float(res1[t[1]]) for t in mates}) != 1:
                 return False
-            mates.append((k if flipped else len(pos) + k, i2, k, not flipped))
-        if len({float(res1[t[1]]) for t in mates}) != 1:
-            return False
         r1 = float(res1[mates[0][1]])
+
+        def moved(x: np.ndarray, image: bool = False) -> np.ndarray:
+            """``x`` (pair j1's, y up; ``image``: rows down) as pair j's."""
+            x = x[..., ::-1, :] if mirror else x
+            return _turn_image(x, m) if image else _turn(x, m)
+
         oy1, ox1 = p1.offset(grid)
         gsl1 = (slice(oy1 + dy0, oy1 + dy1), slice(ox1 + dx0, ox1 + dx1))
         sides_1 = _pair_sides(mates, ax1, face1, pos)
@@ -1014,37 +1018,12 @@ def build_footprint_planes(
                 s2 == (s1 + c1 if t[3] else s1 - c1) % 4
                 for s1, s2, t in zip(sides_1, sides_j, at, strict=True)
             )
-            and np.array_equal(_turn(covered[a1][([t[0] for t in mates], *gsl1)][:, ::-1], m), keep)
-            and np.array_equal(_turn_image(shadow(a1, b1, ax1, r1)[::-1], m), shadow(a, b, ax, r))
+            and np.array_equal(moved(covered[a1][([t[0] for t in mates], *gsl1)]), keep)
+            and np.array_equal(moved(shadow(a1, b1, ax1, r1), image=True), shadow(a, b, ax, r))
         ):
             return False
         for t, u in zip(at, mates, strict=True):
-            src = pair_energy[j1][pair_at[j1][u[1]]][::-1]
-            pair_energy[j][pair_at[j][t[1]]] = _turn(src, m)
-        return True
-
-    def turn_pair(j, j1, m, r, at, sides_j, keep, pos, covered, c1) -> bool:
-        """Pair j's planes at the twists ``at`` (residual ``r``) made as pair j1's turned by
-        ``m``, where every input of pair j is pair j1's turned: its chips (the strips turned,
-        their sides shifted by ``c1`` as the turn shifts every side; a twin's the other
-        way), the near pad's cover ``keep`` and its part of the pattern. False (nothing
-        made) where one is not."""
-        a, b, ax = pair_parts[j][:3]
-        a1, b1, ax1, p1, (dy0, dy1, dx0, dx1), _ = pair_parts[j1]
-        oy1, ox1 = p1.offset(grid)
-        gsl1 = (slice(oy1 + dy0, oy1 + dy1), slice(ox1 + dx0, ox1 + dx1))
-        sides_1 = _pair_sides(at, ax1, _faces(twists_deg, ax1)[0], pos)
-        if not (
-            all(
-                s2 == (s1 + c1 if t[3] else s1 - c1) % 4
-                for s1, s2, t in zip(sides_1, sides_j, at, strict=True)
-            )
-            and _same_turned(covered[a1][([t[0] for t in at], *gsl1)], keep, m)
-            and np.array_equal(_turn_image(shadow(a1, b1, ax1, r), m), shadow(a, b, ax, r))
-        ):
-            return False
-        for t in at:
-            pair_energy[j][pair_at[j][t[1]]] = _turn(pair_energy[j1][pair_at[j1][t[1]]], m)
+            pair_energy[j][pair_at[j][t[1]]] = moved(pair_energy[j1][pair_at[j1][u[1]]])
         return True
 
     n_t, ny_full, nx_full = grid.shape
@@ -1092,13 +1071,13 @@ def build_footprint_planes(
         # the turns that leave every footprint's raster at these twists as it is (to its
         # round-off; their mirror twins' then too)
         fits: dict[int, bool] = {}
-        for m in sorted(turns):  # a quarter turn's fit holds for three, and one is three's
-            fits[m] = (
-                fits[1]
-                if m == 3 and 1 in fits
-                else (m == 2 and fits.get(1, False))
-                or all(_same_turned(raster[nm], raster[nm], m) for nm in names)
-            )
+        for m in sorted(turns):
+            if m == 3 and 1 in fits:  # three quarter turns undo one
+                fits[m] = fits[1]
+            elif m == 2 and fits.get(1, False):  # two quarter turns
+                fits[m] = True
+            else:
+                fits[m] = all(_same_turned(raster[nm], raster[nm], m) for nm in names)
         for k, parts in enumerate(pads):
             turned_from = next(((j, m) for j, m in pad_from.get(k, []) if fits[m]), None)
             if turned_from is not None:  # pad j's planes turned
@@ -1173,19 +1152,11 @@ def build_footprint_planes(
                 keep = covered[a][(rows, *gsl)]
                 # another pair's planes turned, where all it reads is that pair's turned,
                 # or mirrored from the opposite twists (and turned)
-                made = any(
-                    turn_pair(j, j1, m, r, at, sides_j, keep, pos, covered, shifts[m])
-                    for j1, m in pair_from.get(j, [])
-                    if shifts[m] is not None
-                )
-                for j1, m in [] if made else mirror_from.get(j, []):
-                    c1 = 0 if m == 0 else shifts[m]
-                    if c1 is not None and mirror_pair(
-                        j, j1, m, r, at, sides_j, keep, pos, neg, covered, c1
-                    ):
-                        made = True
-                        break
-                if made:
+                if any(
+                    made_from(j, j1, m, mirror, r, at, sides_j, keep, pos, neg, covered, c1)
+                    for j1, m, mirror in pair_from.get(j, [])
+                    if (c1 := 0 if m == 0 else shifts[m]) is not None
+                ):
                     continue
                 chips = _pair_chips(at, sides_j, side_of, tie_of, strip)
                 planes = p.part(r).correlate(chips, range(len(at)), [], scale)

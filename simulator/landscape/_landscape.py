@@ -377,18 +377,11 @@ def flat_steps(values, energy_J, floor_J: float, contact, plateaus, linked=None)
     tie = (np.abs(np.diff(e)) <= floor_J) & contact[:-1] & contact[1:]
     if linked is not None:
         tie &= np.asarray(linked, bool)
-    out, i = [], 0
-    while i < len(tie):
-        if not tie[i]:
-            i += 1
-            continue
-        j = i
-        while j + 1 < len(tie) and tie[j + 1]:
-            j += 1
-        a, b = float(values[i]), float(values[j + 1])
+    out = []
+    for i, j in runs(np.arange(len(tie)), tie, min_points=1):  # runs of tied steps
+        a, b = float(values[int(i)]), float(values[int(j) + 1])
         if not any(a <= p1 and p0 <= b for p0, p1 in plateaus):  # a plateau's own ties
             out.append([a, b])
-        i = j + 1
     return out
 
 
