@@ -193,7 +193,28 @@ def _internal_error(command: str, err: BaseException) -> int:
     return 1
 
 
+#: NumPy's hugepage advice for the command's process (``NUMPY_MADVISE_HUGEPAGE``; a value
+#: the user set is kept). NumPy marks every array of 4 MB or more for transparent hugepages
+#: where the kernel leaves them to ``madvise`` (the default of most distributions); on the
+#: virtual machines measured (2-core x86-64, ``transparent_hugepage/enabled`` and
+#: ``defrag`` both ``madvise``) the first write to such an array cost about 1.3 s of kernel
+#: time per 0.5 GB against 0.1 s without the advice, later ones nothing either way
+#: (numpy/numpy#31590 describes the stall). A footprint run writes its pads' planes once:
+#: without the advice the benchmark's batch took 5.8-6.0 s instead of 5.7-6.8 s, its bench
+#: run 12.6-12.8 s instead of 14.4-14.7 s, a stateless run the same (docs/benchmarks.md).
+HUGEPAGE_ADVICE = "0"
+
+
+def _numpy_hugepages() -> None:
+    """Set :data:`HUGEPAGE_ADVICE` for NumPy, read when NumPy is first imported: only where
+    it is not imported yet (the command's own process, not a caller that imported it) and
+    the user set no value."""
+    if "numpy" not in sys.modules:
+        os.environ.setdefault("NUMPY_MADVISE_HUGEPAGE", HUGEPAGE_ADVICE)
+
+
 def main(argv: list[str] | None = None) -> int:
+    _numpy_hugepages()
     with _boundary():
         name = "command"
         try:

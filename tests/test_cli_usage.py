@@ -643,6 +643,39 @@ def test_help_and_pattern_do_not_import_jax_or_matplotlib(argv, tmp_path):
     assert json.loads(out.stdout.strip().splitlines()[-1]) == []
 
 
+HUGEPAGE_PROBE = """
+import json, os, sys
+from simulator.cli import main
+main(["pattern", "--list"])
+from numpy._core.multiarray import _get_madvise_hugepage
+print(json.dumps([os.environ.get("NUMPY_MADVISE_HUGEPAGE"), bool(_get_madvise_hugepage())]))
+"""
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="NumPy advises hugepages on Linux only")
+@pytest.mark.parametrize("user", [None, "1", "0"])
+def test_the_command_asks_numpy_for_no_hugepages_unless_the_user_says(user):
+    # simulator.cli.HUGEPAGE_ADVICE: the command's process sets NUMPY_MADVISE_HUGEPAGE=0 before
+    # NumPy is imported, and keeps a value the user set (1 turns the advice back on)
+    import os
+
+    env = {k: v for k, v in os.environ.items() if k != "NUMPY_MADVISE_HUGEPAGE"}
+    if user is not None:
+        env["NUMPY_MADVISE_HUGEPAGE"] = user
+    out = subprocess.run(
+        [sys.executable, "-c", HUGEPAGE_PROBE],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=ROOT,
+        env=env,
+    )
+    assert out.returncode == 0, out.stderr[-2000:]
+    value, advised = json.loads(out.stdout.strip().splitlines()[-1])
+    assert value == (user or "0")
+    assert advised == (value == "1")
+
+
 # ============================================================ 6. install
 def test_pyproject_lists_every_package_and_the_library_files():
     conf = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]

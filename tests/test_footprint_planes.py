@@ -282,6 +282,33 @@ def test_the_state_energy_is_mirror_symmetric_with_its_pairs():
         assert np.abs(pairs_only[j] - pairs_only[i][::-1]).max() <= 2 * NOISE_FACTOR * eps * scale
 
 
+@pytest.mark.parametrize("threads", ["1", "2", "4"])
+def test_a_state_summed_in_blocks_of_twists_is_the_plain_sum(monkeypatch, threads):
+    # FootprintPlanes.energy sums a state's planes in blocks of twists, one per thread: the
+    # same terms in the same order at every pose, so the same floats as one pass over the
+    # whole grid, for every state; blocks that cut a pair's twists, and a pair whose twists
+    # are not in a row (added through their indices)
+    monkeypatch.setenv("SELFALIGN_THREADS", threads)
+    s = fourpad(12.0, twist=True)
+    planes = build_footprint_planes(s, twists=TWISTS)
+    p0 = planes.pairs[0]
+    keep = np.arange(0, len(p0.twists), 2)  # every other twist: not a run
+    assert len(keep) > 1
+    scattered = dataclasses.replace(p0, energy=p0.energy[keep], twists=np.asarray(p0.twists)[keep])
+    assert not isinstance(scattered.box()[0], slice)
+    planes = dataclasses.replace(planes, pairs=(scattered, *planes.pairs[1:]))
+    n_pads = planes.n_pads
+    for bits in range(2**n_pads):
+        wet = np.array([(bits >> k) & 1 for k in range(n_pads)], bool)
+        plain = np.zeros(planes.template.energy.shape, planes.template.energy.dtype)
+        for k in np.flatnonzero(wet):
+            plain += planes.wet_energy[k]
+        for p in planes.pairs:
+            if wet[p.near] and wet[p.far]:
+                plain[p.box()] += p.energy
+        assert np.array_equal(planes.energy(wet), plain)
+
+
 def test_the_pairs_are_priced_before_they_are_made(bench):
     # footprint_pairs lays the pairs' boxes out from the chip's half-widths, no rotation: as
     # many pairs as the build makes, and at least the poses it keeps (the build's boxes come
