@@ -317,6 +317,11 @@ def test_a_wet_pad_the_chip_leaves_dries_during_the_run(method):
             tint = 255 * (1 - WET_RGBA[3]) + 255 * WET_RGBA[3] * np.asarray(WET_RGBA[:3])
             assert np.abs(before.astype(float) - tint).max() <= 2.0
             assert "wet: 1, 2" in anim.title_of(k - 1) and "wet: 1" in anim.title_of(k)
+            # the energy panel names the model: the wet pads' footprint under a meniscus, not
+            # the overlap area (the overlap model's title)
+            h = two_pads("pattern").meniscus_height_um
+            assert anim.energy_title.startswith("energy of the wet pads' footprint")
+            assert f"h = {h:.3g} µm" in anim.energy_title
         finally:
             anim.close()
 

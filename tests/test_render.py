@@ -140,6 +140,7 @@ def test_gif_frames_show_the_chip_at_the_start_and_final_poses(run, tmp_path):
     top = red[red[:, 0] <= red[:, 0].min() + 1]
     assert top[:, 1].mean() - (red[:, 1].min() + red[:, 1].max()) / 2 > 0.05 * np.ptp(red[:, 1])
     assert "step 0/" in anim.title_of(0) and anim.title_of(len(traj.path) - 1).endswith("aligned")
+    assert anim.energy_title.startswith("energy E = Δγ · overlap area")  # the overlap model
     anim.close()
 
 
@@ -155,6 +156,31 @@ def test_gif_of_dynamics_titles_time_and_holds_the_last_frame(run, tmp_path):
     anim = TrajectoryAnimation(scene, traj, max_frames=10)
     assert "t = 4.00 ms" in anim.title_of(29)
     anim.close()
+
+
+def test_the_energy_panel_of_a_meniscus_run_names_the_meniscus_not_the_overlap_area():
+    # the energy of a meniscus run is the footprint's (docs/physics.md §3), not Δγ times the
+    # overlap area: the panel's title says which, with the meniscus height
+    from simulator.physics import Liquid
+
+    scene = Scene.from_inputs(
+        SQUARE,
+        chip_size_um=200,
+        effects=Effects(meniscus=True),
+        liquid=Liquid(volume_nl=1.0, dispense="none"),
+    )
+    path = np.column_stack([np.linspace(30, 0, 5), np.zeros(5), np.zeros(5)])
+    traj = Trajectory("greedy", "aligned", path, np.linspace(-8e-10, -1e-9, 5), 4)
+    anim = TrajectoryAnimation(scene, traj, max_frames=5)
+    try:
+        h = scene.meniscus_height_um
+        assert h is not None and h > 0
+        assert (
+            anim.energy_title
+            == f"energy of the footprint, meniscus h = {h:.3g} µm (lower = better aligned)"
+        )
+    finally:
+        anim.close()
 
 
 def test_gif_of_a_run_that_never_moved_is_one_held_frame(run, tmp_path):

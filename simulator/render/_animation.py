@@ -241,7 +241,8 @@ class TrajectoryAnimation:
             a.set_ylim(lo - pad, hi + pad)
         ax_e.tick_params(labelbottom=False)
         ax_t.set_xlabel(xlabel)
-        ax_e.set_title("energy E = Δγ · overlap area (lower = better aligned)", fontsize=9)
+        self.energy_title = _energy_title(scene, traj)
+        ax_e.set_title(self.energy_title, fontsize=9)
         self.title = fig.text(0.5, 0.955, "", ha="center", va="center", fontsize=12, animated=True)
         fig.text(
             0.5,
@@ -433,6 +434,15 @@ def _pattern_cmap():
 
 def _substrate_rgb() -> tuple[float, float, float]:
     return (0.62, 0.63, 0.66)
+
+
+def _energy_title(scene, traj) -> str:
+    """The energy panel's title: the model the energy is of (docs/physics.md §2, §3, §3.5)."""
+    h = scene.meniscus_height_um
+    if h is None:
+        return "energy E = Δγ · overlap area (lower = better aligned)"
+    model = "the wet pads' footprint" if traj.footprint is not None else "the footprint"
+    return f"energy of {model}, meniscus h = {h:.3g} µm (lower = better aligned)"
 
 
 def _scene_caption(scene, traj) -> str:
