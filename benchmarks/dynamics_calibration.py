@@ -136,8 +136,8 @@ def main(argv: list[str] | None = None) -> None:
     )
     runs = {}
     table = [
-        "| start (um, um, deg) | model | outcome | final (um, um, deg) | on the floor after (ms) | largest twist (deg, at ms, at x um) |",
-        "|---|---|---|---|---:|---|",
+        "| start (um, um, deg) | model | outcome | final (um, um, deg) | ends at (ms) | on the floor after (ms) | largest twist (deg, at ms, at x um) |",
+        "|---|---|---|---|---:|---:|---|",
     ]
     print("\n".join(table))
     for start in starts:
@@ -147,10 +147,11 @@ def main(argv: list[str] | None = None) -> None:
             runs[start, method] = t
             ta = align_time_s(t, floor)
             k = int(np.argmax(np.abs(t.path[:, 2])))
-            f = ", ".join(f"{v:.1f}" for v in t.final)
+            f = f"{t.final[0]:.1f}, {t.final[1]:.1f}, {t.final[2]:.2f}"
             ta_txt = "never" if not np.isfinite(ta) else f"{ta * 1e3:.0f}"
             table.append(
-                f"| ({start[0]:g}, {start[1]:g}, {start[2]:g}) | {method} | {t.outcome} | ({f}) | {ta_txt} | "
+                f"| ({start[0]:g}, {start[1]:g}, {start[2]:g}) | {method} | {t.outcome} | ({f}) | "
+                f"{t.t_s[-1] * 1e3:.0f} | {ta_txt} | "
                 f"{t.path[k, 2]:.2f} at {t.t_s[k] * 1e3:.0f} ms, x {t.path[k, 0]:.0f} |"
             )
             print(table[-1], flush=True)
