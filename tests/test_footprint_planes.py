@@ -444,7 +444,7 @@ def test_the_pattern_turns_are_those_of_comparing_every_pad_with_every_pad():
 
     from scipy.ndimage import label
 
-    from simulator.landscape._footprint import _pattern_mirror, _pattern_turns, _turn_image
+    from simulator.landscape._turns import _pattern_mirror, _pattern_turns, _turn_image
 
     def every_pair(masks, data):
         valued = [np.where(mk, data, 0.0) for mk in masks]
