@@ -24,6 +24,7 @@ from simulator.motion import (
     on_plateau,
     padded_buffer,
 )
+from simulator.motion._field import ALIGN_BYTES
 
 T, NY, NX = 4, 5, 6
 
@@ -101,6 +102,24 @@ def test_lookup_and_neighbourhood_follow_the_boundary_rules_far_outside(wrap, cu
     offsets = list(itertools.product(range(-1, 3), repeat=3))
     want = [[reference(e, wrap, cut, *(p + np.array(o))) for o in offsets] for p in sample]
     np.testing.assert_array_equal(blk.reshape(len(sample), 64), np.array(want, np.float32))
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_the_field_holds_its_padded_buffer_without_a_copy(dtype):
+    # simulator.motion._field.ALIGN_BYTES: a padded buffer's data start on 64 bytes, which
+    # JAX on the CPU takes as they are (a copy of a batch's field cost 40-124 ms a state):
+    # the field's array is the buffer, and a state written into it is what the field reads
+    grid = PoseGrid.uniform((3, NY, NX), um_per_px=1.0, twist_step_deg=1.0, rg_px=3.0)
+    buf = padded_buffer(grid.shape, dtype, grid.wrap, grid.cut)
+    assert buf.ctypes.data % ALIGN_BYTES == 0 and buf.flags.c_contiguous
+    interior(buf)[...] = -1.0
+    field = make_field(interior(buf), grid, 1e-9, [0, 0, 0], padded=buf)
+    assert field.padded.dtype == dtype
+    np.testing.assert_array_equal(np.asarray(field.padded), buf)
+    if jax.default_backend() == "cpu":  # on a GPU the field is the buffer's copy on the device
+        assert field.padded.unsafe_buffer_pointer() == buf.ctypes.data
+        interior(buf)[1, 2, 3] = -7.0
+        assert float(lookup(field, grid, 1, 2, 3)) == -7.0
 
 
 @pytest.mark.parametrize("wrap, cut", CASES)
