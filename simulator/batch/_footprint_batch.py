@@ -29,6 +29,7 @@ import numpy as np
 
 from foundation import progress_bar
 from simulator.batch._stats import BatchResult
+from simulator.core import FOOTPRINT_CHUNK
 
 #: The first window's reach (degrees) beyond the starts' twists and the aligned pose's: twice
 #: a single run's (:data:`simulator.motion.WINDOW_DEG`). A batch's lanes share one window, so
@@ -37,14 +38,6 @@ from simulator.batch._stats import BatchResult
 #: reach's window (43 twists) and none into that of a 20 deg reach's (63), and the second
 #: build cost more than the first's 20 extra twists.
 BATCH_WINDOW_DEG = 20.0
-
-#: The most lanes a footprint batch's group runs at once (a larger ``chunk`` is cut to it;
-#: a smaller group is padded to it): every group, large or small, in one compiled shape.
-#: On the benchmark (``benchmarks/footprint.py --batch``: groups of 1,976, 17, 14, 8, 7
-#: and 1 lanes) the lanes took 1.8 s in chunks of 128 against 2.4 s in one chunk of up to
-#: 2,048 with the small groups in chunks of 32 (a second compile, 0.4 s), and 2.0 s in
-#: chunks of 64 or 256, 2.2 s of 512; the ends are the same (lanes are independent).
-FOOTPRINT_CHUNK = 128
 
 
 def _nodes(grid, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

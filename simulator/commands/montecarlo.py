@@ -24,6 +24,7 @@ from simulator.core import (
     DEFAULT_MAX_STEPS,
     DISTRIBUTIONS,
     DYNAMIC_METHODS,
+    FOOTPRINT_CHUNK,
     MAX_STARTS,
     MAX_STEPS_LIMIT,
 )
@@ -89,7 +90,7 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--chunk",
         type=int,
         help=f"starts per compiled batch (default {DEFAULT_CHUNK}, dynamics {DEFAULT_DYNAMICS_CHUNK}; "
-        "a batch with the footprint state, --dispense pattern or chip: at most 128); "
+        f"a batch with the footprint state, --dispense pattern or chip: at most {FOOTPRINT_CHUNK}); "
         "results do not depend on it",
     )
     r.add_argument("--quiet", action="store_true", help="no progress bars")

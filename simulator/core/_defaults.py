@@ -54,6 +54,14 @@ DEFAULT_CHUNK = 2048
 #: Starts per compiled batch of the dynamics (a vmapped solver runs until its slowest
 #: lane stops, and the bar advances per chunk; see docs/guide/montecarlo.md).
 DEFAULT_DYNAMICS_CHUNK = 64
+#: The most lanes a footprint batch's group runs at once (``--dispense pattern`` or
+#: ``chip``: a larger chunk is cut to it, a smaller group padded to it): every group,
+#: large or small, in one compiled shape. On the benchmark (``benchmarks/footprint.py
+#: --batch``: groups of 1,976, 17, 14, 8, 7 and 1 lanes) the lanes took 1.8 s in chunks of
+#: 128 against 2.4 s in one chunk of up to 2,048 with the small groups in chunks of 32 (a
+#: second compile, 0.4 s), and 2.0 s in chunks of 64 or 256, 2.2 s of 512; the ends are
+#: the same (lanes are independent).
+FOOTPRINT_CHUNK = 128
 #: Largest chunk of starts compiled together.
 MAX_CHUNK = 2**20
 #: ``evaluate``: landscapes above this (MB) are built at a coarser resolution unless the user chose one.
